@@ -1,0 +1,16 @@
+//! verdant — the asset pipeline step before an engine import.
+//!
+//! Heightmaps, density maps and L-system files go in; error-bounded terrain, vegetation with levels of
+//! detail and placement tables come out as glTF 2.0 and OBJ. One module per pipeline stage, plain data
+//! at its edges; every generator is paired with an analyzer that measures its error.
+//!
+//! Conventions every output relies on: metres, +Y up, right-handed; heightmap sample (column i, row j)
+//! lies at x = i·cell, z = j·cell; triangles wind counter-clockwise seen from their front (+Y for
+//! terrain); writes are atomic; same inputs give byte-identical outputs at any thread count.
+
+pub mod export;
+pub mod heightfield;
+pub mod mesh;
+pub mod synth;
+pub mod terrain;
+pub mod validate;

@@ -1,0 +1,305 @@
+//! The in-memory scene every stage produces and every writer consumes.
+//!
+//! Plain data: flat arrays of vertex attributes, `u32` indices (writers narrow to `u16` where they
+//! fit), materials and textures referenced by index. Units are metres, +Y up, right-handed, front
+//! faces counter-clockwise. Writers (`export`) and the re-import checks (`validate`) meet here.
+
+use serde_json::Value;
+
+/// One drawable piece with a single material: the unit of a glTF primitive or an OBJ group.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Primitive {
+    pub positions: Vec<[f32; 3]>,
+    /// Unit normals, one per position, or empty.
+    pub normals: Vec<[f32; 3]>,
+    /// Texture coordinates (glTF convention: v down from the image's top), one per position, or empty.
+    pub uvs: Vec<[f32; 2]>,
+    /// Linear RGBA vertex colours in 0..1, one per position, or empty.
+    pub colors: Vec<[f32; 4]>,
+    /// Triangle list; every three indices are one triangle, counter-clockwise seen from its front.
+    pub indices: Vec<u32>,
+    /// Index into [`Scene::materials`].
+    pub material: Option<usize>,
+}
+
+/// A named mesh made of one or more primitives.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Mesh {
+    pub name: String,
+    pub primitives: Vec<Primitive>,
+    pub extras: Option<Value>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum AlphaMode {
+    #[default]
+    Opaque,
+    /// Alpha test: fragments with alpha below `cutoff` are discarded (no sorting needed).
+    Mask { cutoff: f32 },
+    Blend,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// Linear RGBA multiplier.
+    pub base_color: [f32; 4],
+    /// Index into [`Scene::textures`].
+    pub base_color_texture: Option<usize>,
+    pub metallic: f32,
+    pub roughness: f32,
+    pub alpha_mode: AlphaMode,
+    pub double_sided: bool,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material {
+            name: String::new(),
+            base_color: [1.0, 1.0, 1.0, 1.0],
+            base_color_texture: None,
+            metallic: 0.0,
+            roughness: 1.0,
+            alpha_mode: AlphaMode::Opaque,
+            double_sided: false,
+        }
+    }
+}
+
+/// An image stored inside the output (PNG bytes), sampled with repeat wrapping and linear filtering.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Texture {
+    pub name: String,
+    pub png: Vec<u8>,
+}
+
+/// Per-instance transforms for EXT_mesh_gpu_instancing (all three arrays have the same length,
+/// or are empty to mean identity).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Instances {
+    pub translations: Vec<[f32; 3]>,
+    /// Unit quaternions (x, y, z, w).
+    pub rotations: Vec<[f32; 4]>,
+    pub scales: Vec<[f32; 3]>,
+}
+
+impl Instances {
+    pub fn len(&self) -> usize {
+        self.translations.len().max(self.rotations.len()).max(self.scales.len())
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// A node of the scene graph.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Node {
+    pub name: String,
+    /// Index into [`Scene::meshes`].
+    pub mesh: Option<usize>,
+    pub translation: [f32; 3],
+    /// Unit quaternion (x, y, z, w).
+    pub rotation: [f32; 4],
+    pub scale: [f32; 3],
+    /// Indices into [`Scene::nodes`].
+    pub children: Vec<usize>,
+    pub extras: Option<Value>,
+    /// GPU instancing of `mesh` (EXT_mesh_gpu_instancing).
+    pub instances: Option<Instances>,
+    /// Coarser levels of detail of this node (MSFT_lod): indices into [`Scene::nodes`], finest first,
+    /// with the screen coverage at which each level switches.
+    pub lods: Vec<usize>,
+    pub lod_screen_coverage: Vec<f32>,
+}
+
+impl Default for Node {
+    fn default() -> Self {
+        Node {
+            name: String::new(),
+            mesh: None,
+            translation: [0.0; 3],
+            rotation: [0.0, 0.0, 0.0, 1.0],
+            scale: [1.0; 3],
+            children: Vec::new(),
+            extras: None,
+            instances: None,
+            lods: Vec::new(),
+            lod_screen_coverage: Vec::new(),
+        }
+    }
+}
+
+/// Everything one output file holds.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Scene {
+    pub name: String,
+    pub nodes: Vec<Node>,
+    /// Indices into `nodes` of the scene's root nodes.
+    pub roots: Vec<usize>,
+    pub meshes: Vec<Mesh>,
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    pub extras: Option<Value>,
+}
+
+/// Axis-aligned bounds of a set of points.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bounds {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+impl Bounds {
+    /// Bounds of `points`, or `None` for an empty set.
+    pub fn of(points: &[[f32; 3]]) -> Option<Bounds> {
+        let first = *points.first()?;
+        let mut b = Bounds { min: first, max: first };
+        for p in &points[1..] {
+            for k in 0..3 {
+                b.min[k] = b.min[k].min(p[k]);
+                b.max[k] = b.max[k].max(p[k]);
+            }
+        }
+        Some(b)
+    }
+}
+
+impl Primitive {
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    pub fn bounds(&self) -> Option<Bounds> {
+        Bounds::of(&self.positions)
+    }
+
+    /// Twice the area vector of triangle `t`: (b − a) × (c − a), in f64.
+    pub fn triangle_cross(&self, t: usize) -> [f64; 3] {
+        let p = |k: usize| {
+            let v = self.positions[self.indices[3 * t + k] as usize];
+            [v[0] as f64, v[1] as f64, v[2] as f64]
+        };
+        cross3(sub3(p(1), p(0)), sub3(p(2), p(0)))
+    }
+
+    /// Reorders triangles and vertices for the GPU's post-transform cache and then for vertex fetch
+    /// (meshoptimizer). Triangles keep their winding; the set of triangles is unchanged.
+    pub fn optimize_for_gpu(&mut self) {
+        if self.indices.is_empty() || self.positions.is_empty() {
+            return;
+        }
+        let vertex_count = self.positions.len();
+        let cache = meshopt::optimize_vertex_cache(&self.indices, vertex_count);
+        let mut indices = cache;
+        let remap = meshopt::optimize_vertex_fetch_remap(&indices, vertex_count);
+        // `remap[old] = new` or u32::MAX for vertices no triangle uses (dropped).
+        let new_count = remap.iter().filter(|&&r| r != u32::MAX).count();
+        for i in indices.iter_mut() {
+            *i = remap[*i as usize];
+        }
+        fn apply<T: Copy + Default>(v: &mut Vec<T>, remap: &[u32], n: usize) {
+            if v.is_empty() {
+                return;
+            }
+            let mut out = vec![T::default(); n];
+            for (old, &new) in remap.iter().enumerate() {
+                if new != u32::MAX {
+                    out[new as usize] = v[old];
+                }
+            }
+            *v = out;
+        }
+        apply(&mut self.positions, &remap, new_count);
+        apply(&mut self.normals, &remap, new_count);
+        apply(&mut self.uvs, &remap, new_count);
+        apply(&mut self.colors, &remap, new_count);
+        self.indices = indices;
+    }
+}
+
+impl Mesh {
+    pub fn triangle_count(&self) -> usize {
+        self.primitives.iter().map(Primitive::triangle_count).sum()
+    }
+    pub fn vertex_count(&self) -> usize {
+        self.primitives.iter().map(|p| p.positions.len()).sum()
+    }
+}
+
+impl Scene {
+    /// Adds a mesh and a root node showing it; returns the node index.
+    pub fn add_mesh_node(&mut self, mesh: Mesh) -> usize {
+        let name = mesh.name.clone();
+        self.meshes.push(mesh);
+        self.nodes.push(Node { name, mesh: Some(self.meshes.len() - 1), ..Node::default() });
+        let n = self.nodes.len() - 1;
+        self.roots.push(n);
+        n
+    }
+}
+
+pub fn sub3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+pub fn cross3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bounds_of_points() {
+        assert_eq!(Bounds::of(&[]), None);
+        let b = Bounds::of(&[[1.0, -2.0, 3.0], [-1.0, 5.0, 0.5]]).unwrap();
+        assert_eq!(b.min, [-1.0, -2.0, 0.5]);
+        assert_eq!(b.max, [1.0, 5.0, 3.0]);
+    }
+
+    #[test]
+    fn gpu_optimisation_keeps_triangles_and_winding() {
+        // A 3x3 grid of vertices, 8 triangles, with an unused vertex at the end.
+        let mut p = Primitive::default();
+        for j in 0..3 {
+            for i in 0..3 {
+                p.positions.push([i as f32, 0.0, j as f32]);
+                p.uvs.push([i as f32 / 2.0, j as f32 / 2.0]);
+            }
+        }
+        p.positions.push([9.0, 9.0, 9.0]);
+        p.uvs.push([0.0, 0.0]);
+        for j in 0..2u32 {
+            for i in 0..2u32 {
+                let a = j * 3 + i;
+                p.indices.extend_from_slice(&[a, a + 3, a + 1, a + 1, a + 3, a + 4]);
+            }
+        }
+        let tri_set = |p: &Primitive| {
+            let mut v: Vec<[[i32; 3]; 3]> = (0..p.triangle_count())
+                .map(|t| {
+                    let c = |k: usize| {
+                        let q = p.positions[p.indices[3 * t + k] as usize];
+                        [q[0] as i32, q[1] as i32, q[2] as i32]
+                    };
+                    // rotate so the smallest corner is first; keeps winding
+                    let tri = [c(0), c(1), c(2)];
+                    let m = (0..3).min_by_key(|&k| tri[k]).unwrap();
+                    [tri[m], tri[(m + 1) % 3], tri[(m + 2) % 3]]
+                })
+                .collect();
+            v.sort();
+            v
+        };
+        let before = tri_set(&p);
+        p.optimize_for_gpu();
+        assert_eq!(p.positions.len(), 9, "unused vertex dropped");
+        assert_eq!(p.uvs.len(), 9);
+        assert_eq!(tri_set(&p), before);
+        for (q, uv) in p.positions.iter().zip(&p.uvs) {
+            assert_eq!([q[0] / 2.0, q[2] / 2.0], *uv, "attributes moved together");
+        }
+    }
+}
