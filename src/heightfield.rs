@@ -1,4 +1,13 @@
 //! Heightmaps decoded into metres, and sampling of them.
+//!
+//! Encodings: 8/16-bit gray PNG/TIFF (also gray stored as RGB with R = G = B), 32-bit float TIFF
+//! (metres), Mapbox Terrain-RGB, Mapzen Terrarium, SRTM `.hgt` (big-endian int16 with voids) and raw
+//! little-endian 16-bit `.r16`/`.raw`. Every decoder checks the sample count against an explicit
+//! limit before it allocates, and every error names the file and what to do.
+
+use std::fmt;
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
 
 /// A regular grid of heights in metres. Sample (i, j) — column i, row j — lies at
 /// x = i·cell_size_m, z = j·cell_size_m, y = `heights[j * width + i]`.
@@ -21,10 +30,425 @@ impl Heightfield {
     /// World position of sample (i, j), the one place the axis contract is written down.
     #[inline]
     pub fn position(&self, i: usize, j: usize) -> [f32; 3] {
-        [
-            (i as f64 * self.cell_size_m) as f32,
-            self.at(i, j),
-            (j as f64 * self.cell_size_m) as f32,
-        ]
+        [(i as f64 * self.cell_size_m) as f32, self.at(i, j), (j as f64 * self.cell_size_m) as f32]
+    }
+
+    /// Lowest and highest height, or `None` when empty.
+    pub fn height_range(&self) -> Option<(f32, f32)> {
+        let first = *self.heights.first()?;
+        Some(self.heights.iter().fold((first, first), |(lo, hi), &h| (lo.min(h), hi.max(h))))
     }
 }
+
+/// How the pixel values of a heightmap file map to metres.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Encoding {
+    /// Decide by file extension and channels.
+    Auto,
+    /// 8/16-bit gray (or RGB with R = G = B): y = offset + v / vmax · scale.
+    Gray,
+    /// Mapbox Terrain-RGB: y = (R·65536 + G·256 + B) · 0.1 − 10000 m.
+    TerrainRgb,
+    /// Mapzen/AWS Terrarium: y = R·256 + G + B/256 − 32768 m.
+    Terrarium,
+    /// SRTM .hgt: big-endian int16 metres, square, −32768 = void.
+    Hgt,
+    /// Raw little-endian unsigned 16-bit (.r16/.raw), needs --size: scaled like 16-bit gray.
+    R16,
+    /// 32-bit float TIFF, metres.
+    Float,
+}
+
+impl fmt::Display for Encoding {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Encoding::Auto => "auto",
+            Encoding::Gray => "gray",
+            Encoding::TerrainRgb => "terrain-rgb",
+            Encoding::Terrarium => "terrarium",
+            Encoding::Hgt => "hgt",
+            Encoding::R16 => "r16",
+            Encoding::Float => "float",
+        })
+    }
+}
+
+/// Default limit on width × height: 8193 × 8193 samples (about 6 GiB of peak working memory
+/// for a fine TIN). Raise it with `--max-samples` on a machine that has the memory.
+pub const DEFAULT_MAX_SAMPLES: usize = 8193 * 8193;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct DecodeOptions {
+    pub encoding: Encoding,
+    /// Width × height for raw files (`.r16`/`.raw`).
+    pub size: Option<(usize, usize)>,
+    pub cell_size_m: f64,
+    /// Gray and r16: metres spanned by the full value range (0..vmax).
+    pub height_scale_m: f64,
+    /// Gray and r16: metres added to every height.
+    pub height_offset_m: f64,
+    pub max_samples: usize,
+}
+
+impl Default for DecodeOptions {
+    fn default() -> Self {
+        DecodeOptions {
+            encoding: Encoding::Auto,
+            size: None,
+            cell_size_m: 1.0,
+            height_scale_m: 100.0,
+            height_offset_m: 0.0,
+            max_samples: DEFAULT_MAX_SAMPLES,
+        }
+    }
+}
+
+/// A decoded heightmap and what the decoder found out about it.
+#[derive(Debug, Clone)]
+pub struct Decoded {
+    pub heightfield: Heightfield,
+    /// The encoding actually used (never `Auto`).
+    pub encoding: Encoding,
+    /// Void samples (SRTM −32768) filled from their valid neighbours.
+    pub voids_filled: usize,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum HeightfieldError {
+    #[error("{path}: cannot read the file: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: the file is empty; expected a heightmap (PNG, TIFF, .hgt, .r16/.raw)")]
+    Empty { path: PathBuf },
+    #[error("{path}: cannot decode the image: {message}. Is the file complete and really a PNG/TIFF? Re-export it, or pick --encoding hgt/r16 for raw data")]
+    Image { path: PathBuf, message: String },
+    #[error("{path}: {width}×{height} = {samples} samples exceeds the limit of {limit}; downsample the map, split it into tiles, or raise --max-samples if this machine has the memory")]
+    TooLarge { path: PathBuf, width: usize, height: usize, samples: u128, limit: usize },
+    #[error("{path}: {message}")]
+    Format { path: PathBuf, message: String },
+    #[error("{path}: invalid option: {message}")]
+    Options { path: PathBuf, message: String },
+}
+
+impl HeightfieldError {
+    fn format(path: &Path, message: impl Into<String>) -> Self {
+        HeightfieldError::Format { path: path.to_owned(), message: message.into() }
+    }
+}
+
+/// Reads and decodes the heightmap at `path` into metres.
+pub fn load(path: &Path, opts: &DecodeOptions) -> Result<Decoded, HeightfieldError> {
+    if !(opts.cell_size_m.is_finite() && opts.cell_size_m > 0.0) {
+        return Err(HeightfieldError::Options {
+            path: path.to_owned(),
+            message: format!("--cell-size must be a positive number of metres, got {}", opts.cell_size_m),
+        });
+    }
+    if !(opts.height_scale_m.is_finite() && opts.height_offset_m.is_finite()) {
+        return Err(HeightfieldError::Options {
+            path: path.to_owned(),
+            message: "--height-scale and --height-offset must be finite".into(),
+        });
+    }
+    let bytes = std::fs::read(path).map_err(|source| HeightfieldError::Io { path: path.to_owned(), source })?;
+    decode(path, &bytes, opts)
+}
+
+/// Decodes heightmap `bytes`; `path` names the source in messages and decides `auto` by extension.
+pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded, HeightfieldError> {
+    if bytes.is_empty() {
+        return Err(HeightfieldError::Empty { path: path.to_owned() });
+    }
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let encoding = match opts.encoding {
+        Encoding::Auto => match ext.as_str() {
+            "hgt" => Encoding::Hgt,
+            "r16" | "raw" => Encoding::R16,
+            _ => Encoding::Auto, // decided from the image's channels below
+        },
+        e => e,
+    };
+    let mut decoded = match encoding {
+        Encoding::Hgt => decode_hgt(path, bytes, opts)?,
+        Encoding::R16 => decode_r16(path, bytes, opts)?,
+        _ => decode_image(path, bytes, encoding, opts)?,
+    };
+    decoded.heightfield.cell_size_m = opts.cell_size_m;
+    if let Some(k) = decoded.heightfield.heights.iter().position(|h| !h.is_finite()) {
+        let w = decoded.heightfield.width;
+        return Err(HeightfieldError::format(
+            path,
+            format!("sample (column {}, row {}) is not a finite height; fix or fill the map before meshing", k % w, k / w),
+        ));
+    }
+    Ok(decoded)
+}
+
+fn check_size(path: &Path, width: usize, height: usize, opts: &DecodeOptions) -> Result<(), HeightfieldError> {
+    let samples = width as u128 * height as u128;
+    if samples > opts.max_samples as u128 {
+        return Err(HeightfieldError::TooLarge { path: path.to_owned(), width, height, samples, limit: opts.max_samples });
+    }
+    if width == 0 || height == 0 {
+        return Err(HeightfieldError::format(path, format!("the map has no samples ({width}×{height})")));
+    }
+    Ok(())
+}
+
+fn heightfield(width: usize, height: usize, heights: Vec<f32>) -> Heightfield {
+    Heightfield { width, height, heights, cell_size_m: 1.0 }
+}
+
+/// SRTM .hgt: a square of big-endian int16 metres; −32768 marks a void.
+fn decode_hgt(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded, HeightfieldError> {
+    if bytes.len() % 2 != 0 {
+        return Err(HeightfieldError::format(path, format!("a .hgt file holds 16-bit samples, but its size ({} bytes) is odd; the file is truncated or not SRTM", bytes.len())));
+    }
+    let n = bytes.len() / 2;
+    let side = (n as f64).sqrt().round() as usize;
+    if side * side != n {
+        return Err(HeightfieldError::format(
+            path,
+            format!("a .hgt file is a square of 16-bit samples (1201² for SRTM3, 3601² for SRTM1), but {} samples is not a square; the file is truncated or not SRTM", n),
+        ));
+    }
+    check_size(path, side, side, opts)?;
+    const VOID: i16 = -32768;
+    let raw: Vec<i16> = bytes.chunks_exact(2).map(|c| i16::from_be_bytes([c[0], c[1]])).collect();
+    let valid: Vec<bool> = raw.iter().map(|&v| v != VOID).collect();
+    let mut heights: Vec<f32> = raw.iter().map(|&v| v as f32).collect();
+    let voids_filled = fill_voids(side, side, &mut heights, valid).map_err(|_| {
+        HeightfieldError::format(path, "every sample is a void (−32768); there is no height data to mesh")
+    })?;
+    Ok(Decoded { heightfield: heightfield(side, side, heights), encoding: Encoding::Hgt, voids_filled })
+}
+
+/// Fills samples with `valid == false` from their valid neighbours: breadth-first from the valid
+/// region, each void takes the mean of its already-known 4-neighbours (deterministic, one pass per
+/// ring). Returns the number filled, or Err if nothing is valid.
+pub fn fill_voids(width: usize, height: usize, heights: &mut [f32], mut known: Vec<bool>) -> Result<usize, ()> {
+    let total_void = known.iter().filter(|&&k| !k).count();
+    if total_void == 0 {
+        return Ok(0);
+    }
+    if total_void == known.len() {
+        return Err(());
+    }
+    let neighbours = |k: usize| {
+        let (i, j) = (k % width, k / width);
+        let mut out = [usize::MAX; 4];
+        if i > 0 {
+            out[0] = k - 1;
+        }
+        if i + 1 < width {
+            out[1] = k + 1;
+        }
+        if j > 0 {
+            out[2] = k - width;
+        }
+        if j + 1 < height {
+            out[3] = k + width;
+        }
+        out
+    };
+    // first ring: voids touching a valid sample
+    let mut ring: Vec<usize> = (0..known.len())
+        .filter(|&k| !known[k] && neighbours(k).iter().any(|&n| n != usize::MAX && known[n]))
+        .collect();
+    let mut in_ring = vec![false; known.len()];
+    for &k in &ring {
+        in_ring[k] = true;
+    }
+    while !ring.is_empty() {
+        // values of this ring from previously known samples only, so the order within a ring is irrelevant
+        let values: Vec<f32> = ring
+            .iter()
+            .map(|&k| {
+                let (sum, count) = neighbours(k)
+                    .iter()
+                    .filter(|&&n| n != usize::MAX && known[n])
+                    .fold((0.0f64, 0u32), |(s, c), &n| (s + heights[n] as f64, c + 1));
+                (sum / count as f64) as f32
+            })
+            .collect();
+        for (&k, v) in ring.iter().zip(values) {
+            heights[k] = v;
+            known[k] = true;
+        }
+        let mut next = Vec::new();
+        for &k in &ring {
+            for n in neighbours(k) {
+                if n != usize::MAX && !known[n] && !in_ring[n] {
+                    in_ring[n] = true;
+                    next.push(n);
+                }
+            }
+        }
+        next.sort_unstable();
+        ring = next;
+    }
+    Ok(total_void)
+}
+
+/// Raw little-endian unsigned 16-bit samples, row-major, size given by `--size WxH` (a square is
+/// inferred when the size is omitted and the sample count is a perfect square).
+fn decode_r16(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded, HeightfieldError> {
+    let n = bytes.len() / 2;
+    let (width, height) = match opts.size {
+        Some(s) => s,
+        None => {
+            let side = (n as f64).sqrt().round() as usize;
+            if side * side != n || bytes.len() % 2 != 0 {
+                return Err(HeightfieldError::format(
+                    path,
+                    format!("a raw 16-bit heightmap needs its size: pass --size WIDTHxHEIGHT ({} bytes is not a square of 16-bit samples)", bytes.len()),
+                ));
+            }
+            (side, side)
+        }
+    };
+    check_size(path, width, height, opts)?;
+    let expected = width as u128 * height as u128 * 2;
+    if bytes.len() as u128 != expected {
+        return Err(HeightfieldError::format(
+            path,
+            format!("--size {width}x{height} needs {expected} bytes of little-endian 16-bit samples, but the file has {}; check --size and the byte order", bytes.len()),
+        ));
+    }
+    let (scale, offset) = (opts.height_scale_m, opts.height_offset_m);
+    let heights = bytes
+        .chunks_exact(2)
+        .map(|c| (offset + u16::from_le_bytes([c[0], c[1]]) as f64 / 65535.0 * scale) as f32)
+        .collect();
+    Ok(Decoded { heightfield: heightfield(width, height, heights), encoding: Encoding::R16, voids_filled: 0 })
+}
+
+fn image_error(path: &Path, e: impl fmt::Display) -> HeightfieldError {
+    HeightfieldError::Image { path: path.to_owned(), message: e.to_string() }
+}
+
+/// PNG / TIFF (and anything else the `image` crate reads) by encoding.
+fn decode_image(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOptions) -> Result<Decoded, HeightfieldError> {
+    let is_tiff = bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*");
+    if is_tiff {
+        if let Some(decoded) = decode_float_tiff(path, bytes, encoding, opts)? {
+            return Ok(decoded);
+        }
+    }
+    if encoding == Encoding::Float {
+        return Err(HeightfieldError::format(path, "--encoding float needs a 32-bit float TIFF; this file is not one (for 8/16-bit images use gray, terrain-rgb or terrarium)"));
+    }
+    let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| image_error(path, e))?;
+    if reader.format().is_none() {
+        return Err(HeightfieldError::Image {
+            path: path.to_owned(),
+            message: "the content is not a recognised image format (PNG or TIFF expected)".into(),
+        });
+    }
+    let (width, height) = reader.into_dimensions().map_err(|e| image_error(path, e))?;
+    check_size(path, width as usize, height as usize, opts)?;
+    let mut reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| image_error(path, e))?;
+    reader.no_limits(); // the size was checked against our own limit above
+    let img = reader.decode().map_err(|e| image_error(path, e))?;
+    let (w, h) = (width as usize, height as usize);
+    use image::DynamicImage as D;
+    let gray_scale = |v: f64, vmax: f64| (opts.height_offset_m + v / vmax * opts.height_scale_m) as f32;
+    let channels_differ = |rgb: &dyn Fn(usize) -> [u32; 3]| {
+        (0..w * h).map(rgb).position(|p| p[0] != p[1] || p[1] != p[2])
+    };
+    // RGB(A) 8-bit and 16-bit pixels as u32 triples; None for gray images
+    let rgb8 = match &img {
+        D::ImageRgb8(_) | D::ImageRgba8(_) => Some(img.to_rgb8()),
+        _ => None,
+    };
+    let rgb16 = match &img {
+        D::ImageRgb16(_) | D::ImageRgba16(_) => Some(img.to_rgb16()),
+        _ => None,
+    };
+    let (encoding, heights) = match (&img, encoding) {
+        (D::ImageLuma8(_) | D::ImageLumaA8(_), Encoding::Auto | Encoding::Gray) => {
+            let g = img.to_luma8();
+            (Encoding::Gray, g.as_raw().iter().map(|&v| gray_scale(v as f64, 255.0)).collect())
+        }
+        (D::ImageLuma16(_) | D::ImageLumaA16(_), Encoding::Auto | Encoding::Gray) => {
+            let g = img.to_luma16();
+            (Encoding::Gray, g.as_raw().iter().map(|&v| gray_scale(v as f64, 65535.0)).collect())
+        }
+        (D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageLuma16(_) | D::ImageLumaA16(_), e) => {
+            return Err(HeightfieldError::format(path, format!("--encoding {e} needs an RGB image, but this one is grayscale; use --encoding gray (or auto)")));
+        }
+        (_, Encoding::Auto | Encoding::Gray) if rgb8.is_some() || rgb16.is_some() => {
+            let (vmax, px): (f64, Box<dyn Fn(usize) -> [u32; 3]>) = if let Some(rgb) = &rgb8 {
+                let raw = rgb.as_raw();
+                (255.0, Box::new(move |k| [raw[3 * k] as u32, raw[3 * k + 1] as u32, raw[3 * k + 2] as u32]))
+            } else {
+                let raw = rgb16.as_ref().map(|r| r.as_raw().as_slice()).unwrap_or(&[]);
+                (65535.0, Box::new(move |k| [raw[3 * k] as u32, raw[3 * k + 1] as u32, raw[3 * k + 2] as u32]))
+            };
+            if encoding == Encoding::Auto {
+                if let Some(k) = channels_differ(&*px) {
+                    let p = px(k);
+                    return Err(HeightfieldError::format(
+                        path,
+                        format!(
+                            "an RGB image whose channels differ (pixel column {}, row {} is R={} G={} B={}) is not a gray heightmap; choose how to read it: --encoding terrain-rgb (Mapbox), --encoding terrarium (Mapzen), or --encoding gray (uses the mean of R, G, B)",
+                            k % w, k / w, p[0], p[1], p[2]
+                        ),
+                    ));
+                }
+            }
+            // gray stored as RGB: the mean of the channels (equal to each channel when R = G = B)
+            (Encoding::Gray, (0..w * h).map(|k| { let p = px(k); gray_scale((p[0] + p[1] + p[2]) as f64 / 3.0, vmax) }).collect())
+        }
+        (_, Encoding::TerrainRgb | Encoding::Terrarium) => {
+            let Some(rgb) = &rgb8 else {
+                return Err(HeightfieldError::format(path, format!("--encoding {encoding} needs an 8-bit RGB or RGBA image")));
+            };
+            let raw = rgb.as_raw();
+            let decode_px: fn(f64, f64, f64) -> f64 = if encoding == Encoding::TerrainRgb {
+                |r, g, b| (r * 65536.0 + g * 256.0 + b) * 0.1 - 10000.0
+            } else {
+                |r, g, b| r * 256.0 + g + b / 256.0 - 32768.0
+            };
+            (encoding, raw.chunks_exact(3).map(|c| decode_px(c[0] as f64, c[1] as f64, c[2] as f64) as f32).collect())
+        }
+        (_, e) => {
+            return Err(HeightfieldError::format(
+                path,
+                format!("unsupported pixel format {:?} for --encoding {e}; use an 8/16-bit gray or RGB PNG/TIFF, or a 32-bit float TIFF", img.color()),
+            ));
+        }
+    };
+    Ok(Decoded { heightfield: heightfield(w, h, heights), encoding, voids_filled: 0 })
+}
+
+/// 32-bit float single-channel TIFF in metres. Returns Ok(None) for TIFFs of other sample types,
+/// which the `image` crate then decodes.
+fn decode_float_tiff(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOptions) -> Result<Option<Decoded>, HeightfieldError> {
+    use tiff::decoder::{Decoder, DecodingResult, Limits};
+    let tiff_err = |e: tiff::TiffError| image_error(path, e);
+    let mut dec = Decoder::new(Cursor::new(bytes)).map_err(tiff_err)?;
+    let color = dec.colortype().map_err(tiff_err)?;
+    let is_float_gray = matches!(color, tiff::ColorType::Gray(32)) && {
+        let fmt = dec.find_tag(tiff::tags::Tag::SampleFormat).ok().flatten();
+        matches!(fmt.and_then(|v| v.into_u16().ok()), Some(3))
+    };
+    if !is_float_gray {
+        return Ok(None);
+    }
+    if !matches!(encoding, Encoding::Auto | Encoding::Float) {
+        return Err(HeightfieldError::format(path, format!("this is a 32-bit float TIFF (metres); use --encoding float or auto, not {encoding}")));
+    }
+    let (w, h) = dec.dimensions().map_err(tiff_err)?;
+    check_size(path, w as usize, h as usize, opts)?;
+    dec = dec.with_limits(Limits::unlimited());
+    let heights = match dec.read_image().map_err(tiff_err)? {
+        DecodingResult::F32(v) => v,
+        _ => return Ok(None),
+    };
+    if heights.len() != w as usize * h as usize {
+        return Err(HeightfieldError::format(path, "the TIFF's pixel data does not match its size; the file is damaged"));
+    }
+    Ok(Some(Decoded { heightfield: heightfield(w as usize, h as usize, heights), encoding: Encoding::Float, voids_filled: 0 }))
+}
+
