@@ -1,1 +1,258 @@
-fn main(){}
+//! The `verdant` command line: parses arguments and calls the library. No pipeline logic here.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+use verdant::heightfield::{DecodeOptions, Encoding, DEFAULT_MAX_SAMPLES};
+use verdant::terrain::build::BuildOptions;
+use verdant::terrain::job::{self, MeshMode, Source, TerrainJob};
+use verdant::validate::{validate_file, ValidateOptions};
+
+#[derive(Parser)]
+#[command(
+    name = "verdant",
+    version,
+    about = "Asset pipeline for games: heightmaps in, error-bounded terrain meshes out as glTF 2.0 / OBJ",
+    long_about = "Asset pipeline for games and real-time scenes: heightmaps in, error-bounded terrain meshes out \
+                  as glTF 2.0 (.glb, .gltf + .bin) or OBJ + MTL, with the measured error of every output.\n\n\
+                  Conventions: metres, +Y up; heightmap column i, row j lies at x = i·cell, z = j·cell.\n\
+                  Exit codes: 0 ok, 1 build or validation failure, 2 bad input or usage."
+)]
+struct Cli {
+    /// Worker threads (default: all cores). Outputs are identical for any thread count.
+    #[arg(long, global = true, value_name = "N")]
+    threads: Option<usize>,
+    /// Print nothing but errors.
+    #[arg(long, short, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Heightmap → terrain mesh within a vertical error bound, written as glTF or OBJ.
+    ///
+    /// Example: verdant terrain fuji.png --encoding terrain-rgb --cell-size 30 --max-error 5 -o out/fuji.glb --report out/fuji.json
+    Terrain(TerrainArgs),
+    /// Re-import .glb/.gltf/.obj files and check them: indices in range, finite values, no
+    /// degenerate triangles, unit normals, bounds equal to accessor min/max.
+    ///
+    /// Example: verdant validate out/fuji.glb --up-facing
+    Validate(ValidateArgs),
+}
+
+#[derive(Args)]
+struct TerrainArgs {
+    /// Heightmap file: PNG or TIFF (gray 8/16-bit, Terrain-RGB, Terrarium, 32-bit float), SRTM .hgt, raw .r16/.raw.
+    #[arg(value_name = "HEIGHTMAP", required_unless_present = "demo", conflicts_with = "demo")]
+    input: Option<PathBuf>,
+    /// Use the embedded procedural heightmap (257×257 samples, 4 m apart, up to 300 m relief) instead of a file.
+    #[arg(long)]
+    demo: bool,
+    /// How pixel values map to metres. auto: .hgt → hgt, .r16/.raw → r16, float TIFF → float, gray or
+    /// R=G=B images → gray; colour RGB images must be given terrain-rgb or terrarium explicitly.
+    #[arg(long, value_enum, default_value_t = Encoding::Auto)]
+    encoding: Encoding,
+    /// Size of a raw .r16/.raw file as WIDTHxHEIGHT in samples (a square is inferred when omitted).
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    size: Option<(usize, usize)>,
+    /// Distance between neighbouring samples in metres.
+    #[arg(long, value_name = "METRES", default_value_t = 1.0)]
+    cell_size: f64,
+    /// Gray and r16 only: metres spanned by the full value range, y = offset + v / vmax · scale
+    /// (vmax = 255 or 65535).
+    #[arg(long, value_name = "METRES", default_value_t = 100.0)]
+    height_scale: f64,
+    /// Gray and r16 only: metres added to every height.
+    #[arg(long, value_name = "METRES", default_value_t = 0.0)]
+    height_offset: f64,
+    /// Refuse maps with more samples than this (checked before decoding, so a huge file is a clear
+    /// error instead of an out-of-memory kill).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_SAMPLES)]
+    max_samples: usize,
+    /// tin: adaptive triangulation within --max-error; grid: every --grid-step samples.
+    #[arg(long, value_enum, default_value_t = MeshMode::Tin)]
+    mode: MeshMode,
+    /// tin: largest allowed vertical distance in metres between the mesh and any heightmap sample.
+    #[arg(long, value_name = "METRES", default_value_t = 1.0)]
+    max_error: f64,
+    /// tin: stop refining at this many triangles; the error then achieved is reported.
+    #[arg(long, value_name = "N")]
+    max_triangles: Option<usize>,
+    /// grid: take every N-th sample (1 reproduces the heightmap exactly; the last row and column are always kept).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    grid_step: usize,
+    /// Split the mesh into chunks of N×N samples, one named node and mesh each (no cracks between them).
+    #[arg(long, value_name = "N")]
+    chunk: Option<usize>,
+    /// Add skirts hanging DEPTH metres down along every chunk border (hides cracks between chunk LoDs).
+    #[arg(long, value_name = "METRES")]
+    skirt: Option<f64>,
+    /// Close the mesh into a watertight solid whose bottom lies DEPTH metres below the lowest sample.
+    #[arg(long, value_name = "METRES")]
+    base: Option<f64>,
+    /// Output file: .glb, .gltf (+ .bin) or .obj (+ .mtl). Default: out/<input name>.glb.
+    #[arg(short, long, value_name = "FILE")]
+    output: Option<PathBuf>,
+    /// Write a JSON report: sizes, measured max and RMS error, counts and seconds per step.
+    #[arg(long, value_name = "FILE.json")]
+    report: Option<PathBuf>,
+    /// Instead of one mesh, print the speed/error curve: comma-separated thresholds in metres,
+    /// e.g. 100,30,10,3,1 (writes no mesh; --report then holds the table).
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    sweep: Option<Vec<f64>>,
+}
+
+#[derive(Args)]
+struct ValidateArgs {
+    /// Files to check (.glb, .gltf, .obj).
+    #[arg(required = true, value_name = "FILE")]
+    files: Vec<PathBuf>,
+    /// Also require every triangle to face up (+Y), as terrain surfaces do.
+    #[arg(long)]
+    up_facing: bool,
+}
+
+fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT such as 1025x1025, got {s:?}"))?;
+    let parse = |v: &str| v.trim().parse::<usize>().map_err(|_| format!("expected WIDTHxHEIGHT such as 1025x1025, got {s:?}"));
+    Ok((parse(w)?, parse(h)?))
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    if let Some(n) = cli.threads {
+        if n == 0 {
+            eprintln!("error: --threads must be at least 1");
+            return ExitCode::from(2);
+        }
+        if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n).build_global() {
+            eprintln!("error: cannot start {n} threads: {e}");
+            return ExitCode::from(1);
+        }
+    }
+    let code = match cli.command {
+        Command::Terrain(args) => terrain(args, cli.quiet),
+        Command::Validate(args) => validate(args, cli.quiet),
+    };
+    ExitCode::from(code as u8)
+}
+
+fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
+    let source = match &a.input {
+        Some(p) => Source::File(p.clone()),
+        None => Source::Demo,
+    };
+    let name = match &a.input {
+        Some(p) => p.file_stem().and_then(|s| s.to_str()).unwrap_or("terrain").to_string(),
+        None => "demo".to_string(),
+    };
+    let job = TerrainJob {
+        source,
+        decode: DecodeOptions {
+            encoding: a.encoding,
+            size: a.size,
+            cell_size_m: a.cell_size,
+            height_scale_m: a.height_scale,
+            height_offset_m: a.height_offset,
+            max_samples: a.max_samples,
+        },
+        mode: a.mode,
+        grid_step: a.grid_step,
+        max_error_m: a.max_error,
+        max_triangles: a.max_triangles,
+        build: BuildOptions {
+            chunk_samples: a.chunk,
+            skirt_depth_m: a.skirt,
+            base_depth_m: a.base,
+            name: name.clone(),
+        },
+    };
+    if let Some(thresholds) = &a.sweep {
+        return match job::sweep(&job, thresholds) {
+            Ok((decoded, rows)) => {
+                if !quiet {
+                    let hf = &decoded.heightfield;
+                    println!("{}: {}×{} samples, encoding {}", job.source.label(), hf.width, hf.height, decoded.encoding);
+                    print!("{}", job::sweep_table(&rows));
+                }
+                match &a.report {
+                    Some(path) => match job::write_json(path, &rows) {
+                        Ok(()) => 0,
+                        Err(e) => fail(&e.to_string(), e.exit_code()),
+                    },
+                    None => 0,
+                }
+            }
+            Err(e) => fail(&e.to_string(), e.exit_code()),
+        };
+    }
+    let output = a.output.clone().unwrap_or_else(|| PathBuf::from("out").join(format!("{name}.glb")));
+    match job::run(&job, Some(&output)) {
+        Ok((report, _scene)) => {
+            if let Some(path) = &a.report {
+                if let Err(e) = job::write_json(path, &report) {
+                    return fail(&e.to_string(), e.exit_code());
+                }
+            }
+            if !quiet {
+                let out = report.output.as_ref();
+                println!(
+                    "{}: {}×{} samples ({}) → {} triangles ({:.2}% of the full grid), max error {:.3} m (requested {}), rms {:.3} m, {:.2} s",
+                    report.input,
+                    report.width,
+                    report.height,
+                    report.encoding,
+                    report.triangles,
+                    100.0 * report.triangles as f64 / report.full_grid_triangles.max(1) as f64,
+                    report.max_error,
+                    report.max_error_requested.map_or("—".to_string(), |e| format!("{e} m")),
+                    report.rms_error,
+                    report.seconds.total
+                );
+                if report.hit_triangle_limit {
+                    println!("  stopped at --max-triangles; the achieved max error is {:.3} m", report.max_error);
+                }
+                if report.voids_filled > 0 {
+                    println!("  filled {} void samples from their neighbours", report.voids_filled);
+                }
+                for f in out.map(|o| o.files.as_slice()).unwrap_or(&[]) {
+                    println!("  wrote {f}");
+                }
+            }
+            0
+        }
+        Err(e) => fail(&e.to_string(), e.exit_code()),
+    }
+}
+
+fn validate(a: ValidateArgs, quiet: bool) -> i32 {
+    let opts = ValidateOptions { up_facing: a.up_facing };
+    let mut worst = 0;
+    for file in &a.files {
+        match validate_file(file, &opts) {
+            Ok(report) => {
+                if !report.ok() {
+                    worst = worst.max(1);
+                    eprintln!("{report}");
+                } else if !quiet {
+                    println!("{report}");
+                }
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                worst = 2;
+            }
+        }
+    }
+    worst
+}
+
+fn fail(message: &str, code: i32) -> i32 {
+    eprintln!("error: {message}");
+    code
+}

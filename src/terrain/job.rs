@@ -1,0 +1,325 @@
+//! One terrain job end to end: decode → mesh (grid or TIN) → measure → build scene → write,
+//! with the timings and the analyzer's figures collected into a report.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::export::{self, ExportError};
+use crate::heightfield::{self, DecodeOptions, Decoded, Encoding, Heightfield, HeightfieldError};
+use crate::mesh::{Bounds, Scene};
+use crate::terrain::build::{build_scene, BuildError, BuildOptions};
+use crate::terrain::error::{measure, ErrorStats};
+use crate::terrain::grid::grid;
+use crate::terrain::tin::{tin, TinOptions};
+use crate::terrain::{SampleMesh, TerrainError};
+
+/// Where the heights come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Source {
+    File(PathBuf),
+    /// The embedded procedural map ([`crate::synth::demo`]).
+    Demo,
+}
+
+impl Source {
+    pub fn label(&self) -> String {
+        match self {
+            Source::File(p) => p.display().to_string(),
+            Source::Demo => "demo (embedded procedural map)".into(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum MeshMode {
+    /// Greedy-insertion Delaunay TIN, bounded by --max-error.
+    Tin,
+    /// Regular grid of every --grid-step samples.
+    Grid,
+}
+
+#[derive(Debug, Clone)]
+pub struct TerrainJob {
+    pub source: Source,
+    pub decode: DecodeOptions,
+    pub mode: MeshMode,
+    pub grid_step: usize,
+    pub max_error_m: f64,
+    pub max_triangles: Option<usize>,
+    pub build: BuildOptions,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    #[error(transparent)]
+    Input(#[from] HeightfieldError),
+    #[error("{source_label}: {error}")]
+    Terrain { source_label: String, error: TerrainError },
+    #[error(transparent)]
+    Build(#[from] BuildError),
+    #[error(transparent)]
+    Export(#[from] ExportError),
+    #[error("invalid option: {0}")]
+    Options(String),
+}
+
+impl JobError {
+    /// Process exit code: 2 for bad input or usage, 1 for a failure while building or writing.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            JobError::Export(_) => 1,
+            _ => 2,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct Seconds {
+    pub decode: f64,
+    pub mesh: f64,
+    pub analyze: f64,
+    pub build: f64,
+    pub export: f64,
+    pub total: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct OutputSummary {
+    pub files: Vec<String>,
+    pub meshes: usize,
+    pub vertices: usize,
+    pub triangles: usize,
+    pub bounds: Option<BoundsJson>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct BoundsJson {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+/// What `--report` writes: the analyzer's measurements and the time each step took.
+#[derive(Debug, Clone, Serialize)]
+pub struct TerrainReport {
+    pub input: String,
+    pub width: usize,
+    pub height: usize,
+    pub encoding: Encoding,
+    pub cell_size_m: f64,
+    pub voids_filled: usize,
+    pub mode: MeshMode,
+    pub grid_step: Option<usize>,
+    /// Requested bound in metres (TIN mode).
+    pub max_error_requested: Option<f64>,
+    pub max_triangles: Option<usize>,
+    pub hit_triangle_limit: bool,
+    /// Largest vertical error over every sample, measured by the analyzer (metres).
+    pub max_error: f64,
+    pub worst_sample: [u32; 2],
+    pub rms_error: f64,
+    /// Terrain surface triangulation (before skirts and base).
+    pub vertices: usize,
+    pub triangles: usize,
+    /// Triangles of the full grid (2·(w−1)·(h−1)), for the reduction ratio.
+    pub full_grid_triangles: usize,
+    pub output: Option<OutputSummary>,
+    pub seconds: Seconds,
+}
+
+/// The heights of a job's source, decoded.
+pub fn load_source(job: &TerrainJob) -> Result<Decoded, JobError> {
+    Ok(match &job.source {
+        Source::File(path) => heightfield::load(path, &job.decode)?,
+        Source::Demo => {
+            let mut hf = crate::synth::demo();
+            if job.decode.cell_size_m != DecodeOptions::default().cell_size_m {
+                hf.cell_size_m = job.decode.cell_size_m;
+            }
+            Decoded { heightfield: hf, encoding: Encoding::Float, voids_filled: 0 }
+        }
+    })
+}
+
+/// Meshes `hf` as the job asks and measures the result. Returns the mesh, the TIN's
+/// triangle-limit flag and the analyzer's statistics.
+pub fn mesh_heightfield(job: &TerrainJob, hf: &Heightfield, max_error_m: f64) -> Result<(SampleMesh, bool), JobError> {
+    let wrap = |error| JobError::Terrain { source_label: job.source.label(), error };
+    match job.mode {
+        MeshMode::Grid => Ok((grid(hf, job.grid_step).map_err(wrap)?, false)),
+        MeshMode::Tin => {
+            let r = tin(hf, &TinOptions { max_error_m, max_triangles: job.max_triangles }).map_err(wrap)?;
+            Ok((r.mesh, r.hit_triangle_limit))
+        }
+    }
+}
+
+fn check_options(job: &TerrainJob) -> Result<(), JobError> {
+    if job.mode == MeshMode::Tin && !(job.max_error_m.is_finite() && job.max_error_m >= 0.0) {
+        return Err(JobError::Options(format!("--max-error must be a finite number of metres ≥ 0, got {}", job.max_error_m)));
+    }
+    if job.mode == MeshMode::Grid && job.grid_step == 0 {
+        return Err(JobError::Options("--grid-step must be at least 1 sample".into()));
+    }
+    if job.max_triangles == Some(0) {
+        return Err(JobError::Options("--max-triangles must be at least 2 (the two corner triangles)".into()));
+    }
+    Ok(())
+}
+
+/// Runs the job; writes the scene to `output` when given.
+pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Scene), JobError> {
+    check_options(job)?;
+    let t0 = Instant::now();
+    let decoded = load_source(job)?;
+    let hf = &decoded.heightfield;
+    let t_decode = t0.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let (mesh, hit_limit) = mesh_heightfield(job, hf, job.max_error_m)?;
+    let t_mesh = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let stats: ErrorStats = measure(hf, &mesh);
+    let t_analyze = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let scene = build_scene(hf, &mesh, &job.build)?;
+    let t_build = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let output_summary = match output {
+        Some(path) => {
+            let files = export::write_scene(&scene, path)?;
+            Some(summarize(&scene, files.iter().map(|f| f.display().to_string()).collect()))
+        }
+        None => None,
+    };
+    let t_export = t.elapsed().as_secs_f64();
+
+    let report = TerrainReport {
+        input: job.source.label(),
+        width: hf.width,
+        height: hf.height,
+        encoding: decoded.encoding,
+        cell_size_m: hf.cell_size_m,
+        voids_filled: decoded.voids_filled,
+        mode: job.mode,
+        grid_step: (job.mode == MeshMode::Grid).then_some(job.grid_step),
+        max_error_requested: (job.mode == MeshMode::Tin).then_some(job.max_error_m),
+        max_triangles: job.max_triangles,
+        hit_triangle_limit: hit_limit,
+        max_error: stats.max_error_m,
+        worst_sample: stats.worst_sample,
+        rms_error: stats.rms_error_m,
+        vertices: mesh.vertices.len(),
+        triangles: mesh.triangles.len(),
+        full_grid_triangles: 2 * (hf.width - 1) * (hf.height - 1),
+        output: output_summary,
+        seconds: Seconds {
+            decode: t_decode,
+            mesh: t_mesh,
+            analyze: t_analyze,
+            build: t_build,
+            export: t_export,
+            total: t0.elapsed().as_secs_f64(),
+        },
+    };
+    Ok((report, scene))
+}
+
+/// Counts and bounds of everything in `scene` (all primitives, in world space for terrain, whose
+/// nodes carry no transform).
+pub fn summarize(scene: &Scene, files: Vec<String>) -> OutputSummary {
+    let mut bounds: Option<Bounds> = None;
+    let (mut vertices, mut triangles) = (0, 0);
+    for m in &scene.meshes {
+        for p in &m.primitives {
+            vertices += p.positions.len();
+            triangles += p.triangle_count();
+            if let Some(b) = p.bounds() {
+                bounds = Some(match bounds {
+                    None => b,
+                    Some(a) => Bounds::of(&[a.min, a.max, b.min, b.max]).unwrap_or(a),
+                });
+            }
+        }
+    }
+    OutputSummary {
+        files,
+        meshes: scene.meshes.len(),
+        vertices,
+        triangles,
+        bounds: bounds.map(|b| BoundsJson { min: b.min, max: b.max }),
+    }
+}
+
+/// One row of the speed/error curve.
+#[derive(Debug, Clone, Serialize)]
+pub struct SweepRow {
+    pub max_error_requested: f64,
+    pub triangles: usize,
+    pub vertices: usize,
+    pub max_error: f64,
+    pub rms_error: f64,
+    pub hit_triangle_limit: bool,
+    pub seconds: f64,
+}
+
+/// Meshes the job's source at each threshold: the speed/error curve of that input.
+pub fn sweep(job: &TerrainJob, thresholds_m: &[f64]) -> Result<(Decoded, Vec<SweepRow>), JobError> {
+    check_options(job)?;
+    if let Some(bad) = thresholds_m.iter().find(|t| !(t.is_finite() && **t >= 0.0)) {
+        return Err(JobError::Options(format!("--sweep thresholds must be finite metres ≥ 0, got {bad}")));
+    }
+    let decoded = load_source(job)?;
+    let hf = &decoded.heightfield;
+    let mut rows = Vec::with_capacity(thresholds_m.len());
+    for &max_error_m in thresholds_m {
+        let t = Instant::now();
+        let (mesh, hit_triangle_limit) = mesh_heightfield(job, hf, max_error_m)?;
+        let seconds = t.elapsed().as_secs_f64();
+        let stats = measure(hf, &mesh);
+        rows.push(SweepRow {
+            max_error_requested: max_error_m,
+            triangles: mesh.triangles.len(),
+            vertices: mesh.vertices.len(),
+            max_error: stats.max_error_m,
+            rms_error: stats.rms_error_m,
+            hit_triangle_limit,
+            seconds,
+        });
+    }
+    Ok((decoded, rows))
+}
+
+/// The sweep as a fixed-width table.
+pub fn sweep_table(rows: &[SweepRow]) -> String {
+    let mut s = format!(
+        "{:>12} {:>12} {:>12} {:>14} {:>12} {:>10}\n",
+        "max_error_m", "triangles", "vertices", "measured_max_m", "rms_m", "seconds"
+    );
+    for r in rows {
+        s += &format!(
+            "{:>12} {:>12} {:>12} {:>14.4} {:>12.4} {:>10.3}{}\n",
+            r.max_error_requested,
+            r.triangles,
+            r.vertices,
+            r.max_error,
+            r.rms_error,
+            r.seconds,
+            if r.hit_triangle_limit { "  (triangle limit reached)" } else { "" }
+        );
+    }
+    s
+}
+
+/// Writes `value` as pretty JSON, atomically.
+pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), JobError> {
+    let mut text = serde_json::to_string_pretty(value).map_err(|e| JobError::Options(e.to_string()))?;
+    text.push('\n');
+    export::write_atomic(path, text.as_bytes())?;
+    Ok(())
+}
