@@ -1,0 +1,197 @@
+//! The hard cases of the terrain issue, each end to end through the library: a heightmap file is
+//! decoded, meshed, measured, written, re-imported and compared with what was in memory.
+
+use std::path::{Path, PathBuf};
+
+use image::{ImageBuffer, Luma};
+use verdant::heightfield::{DecodeOptions, Encoding};
+use verdant::mesh::Scene;
+use verdant::terrain::build::BuildOptions;
+use verdant::terrain::job::{self, JobError, MeshMode, Source, TerrainJob, TerrainReport};
+use verdant::validate::{read_scene, validate_file, ValidateOptions};
+
+fn write_png(dir: &Path, name: &str, w: u32, h: u32, f: impl Fn(u32, u32) -> u16) -> PathBuf {
+    let path = dir.join(name);
+    ImageBuffer::from_fn(w, h, |i, j| Luma([f(i, j)])).save(&path).unwrap();
+    path
+}
+
+fn job_for(path: &Path, max_error_m: f64) -> TerrainJob {
+    TerrainJob {
+        source: Source::File(path.to_owned()),
+        decode: DecodeOptions { encoding: Encoding::Auto, height_scale_m: 65535.0, ..DecodeOptions::default() },
+        mode: MeshMode::Tin,
+        grid_step: 1,
+        max_error_m,
+        max_triangles: None,
+        build: BuildOptions { chunk_samples: None, skirt_depth_m: None, base_depth_m: None, name: "t".into() },
+    }
+}
+
+/// Runs the job to a .glb, checks the error bound, validates and re-imports the file.
+fn run_checked(job: &TerrainJob, dir: &Path, ext: &str) -> (TerrainReport, Scene) {
+    let out = dir.join(format!("out.{ext}"));
+    let (report, scene) = job::run(job, Some(&out)).unwrap();
+    if !report.hit_triangle_limit {
+        assert!(report.max_error <= job.max_error_m, "bound broken: {} > {}", report.max_error, job.max_error_m);
+    }
+    let up = job.build.base_depth_m.is_none() && job.build.skirt_depth_m.is_none();
+    let v = validate_file(&out, &ValidateOptions { up_facing: up }).unwrap();
+    assert!(v.ok(), "{v}");
+    let back = read_scene(&out).unwrap();
+    assert_eq!(back.meshes.len(), scene.meshes.len());
+    for (a, b) in scene.meshes.iter().zip(&back.meshes) {
+        assert_eq!(a.name, b.name);
+        assert_eq!(a.primitives.len(), b.primitives.len());
+        for (pa, pb) in a.primitives.iter().zip(&b.primitives) {
+            assert_eq!(pa.positions, pb.positions, "positions re-imported equal");
+            assert_eq!(pa.normals, pb.normals);
+            assert_eq!(pa.uvs, pb.uvs);
+            assert_eq!(pa.indices, pb.indices);
+        }
+    }
+    (report, scene)
+}
+
+#[test]
+fn constant_map_gives_two_triangles() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "c.png", 65, 40, |_, _| 1234);
+    let (r, _) = run_checked(&job_for(&path, 0.0), dir.path(), "glb");
+    assert_eq!((r.triangles, r.max_error), (2, 0.0));
+}
+
+#[test]
+fn planar_map_gives_two_triangles() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "p.png", 50, 33, |i, j| (100 + 7 * i + 3 * j) as u16);
+    let (r, _) = run_checked(&job_for(&path, 0.0), dir.path(), "glb");
+    assert_eq!(r.triangles, 2);
+    assert!(r.max_error < 1e-3, "{}", r.max_error);
+}
+
+#[test]
+fn single_spikes_in_the_middle_and_on_the_border() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, si, sj) in [("mid.png", 20, 15), ("border.png", 0, 9), ("edge.png", 17, 29)] {
+        let path = write_png(dir.path(), name, 41, 30, |i, j| if (i, j) == (si, sj) { 5000 } else { 10 });
+        let (r, scene) = run_checked(&job_for(&path, 0.5), dir.path(), "glb");
+        assert_eq!(r.max_error, 0.0, "{name}: a spike is met exactly");
+        let spike = [si as f32, 5000.0, sj as f32];
+        assert!(scene.meshes[0].primitives[0].positions.contains(&spike), "{name}: spike vertex present");
+    }
+}
+
+#[test]
+fn vertical_cliff() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "cliff.png", 64, 64, |i, _| if i < 31 { 0 } else { 60000 });
+    let (r, _) = run_checked(&job_for(&path, 1.0), dir.path(), "glb");
+    assert!(r.triangles < 2 * 63 * 63 / 10, "a straight cliff needs few triangles: {}", r.triangles);
+}
+
+#[test]
+fn white_noise_keeps_the_bound() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "noise.png", 48, 48, |i, j| (verdant::synth::mix64((i * 48 + j) as u64) >> 48) as u16);
+    let (r, _) = run_checked(&job_for(&path, 100.0), dir.path(), "glb");
+    assert!(r.triangles as f64 > 0.8 * r.full_grid_triangles as f64, "noise approaches the full grid: {}", r.triangles);
+}
+
+#[test]
+fn checkerboard() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "check.png", 24, 24, |i, j| if (i + j) % 2 == 0 { 0 } else { 1000 });
+    let (r, _) = run_checked(&job_for(&path, 0.1), dir.path(), "glb");
+    assert!(r.max_error <= 0.1);
+}
+
+#[test]
+fn non_square_301_by_17_as_gltf_and_obj() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "wide.png", 301, 17, |i, j| ((i * 37 + j * 1009) % 4000) as u16);
+    let (r, _) = run_checked(&job_for(&path, 2.0), dir.path(), "gltf");
+    assert_eq!((r.width, r.height), (301, 17));
+    let out = dir.path().join("wide.obj");
+    job::run(&job_for(&path, 2.0), Some(&out)).unwrap();
+    assert!(validate_file(&out, &ValidateOptions { up_facing: true }).unwrap().ok());
+}
+
+#[test]
+fn two_by_two_and_zero_area_maps() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "tiny.png", 2, 2, |i, j| (i * 10 + j * 20) as u16);
+    let (r, _) = run_checked(&job_for(&path, 0.0), dir.path(), "glb");
+    assert_eq!(r.triangles, 2);
+    for (w, h) in [(1, 9), (9, 1), (1, 1)] {
+        let path = write_png(dir.path(), &format!("z{w}x{h}.png"), w, h, |_, _| 5);
+        let out = dir.path().join(format!("z{w}x{h}.glb"));
+        let e = job::run(&job_for(&path, 1.0), Some(&out)).unwrap_err();
+        assert!(matches!(e, JobError::Terrain { .. }), "{e}");
+        assert_eq!(e.exit_code(), 2);
+        assert!(e.to_string().contains(&format!("z{w}x{h}.png")), "{e}");
+        assert!(!out.exists());
+    }
+}
+
+#[test]
+fn sixteen_bit_full_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "full.png", 33, 33, |i, j| if (i, j) == (16, 16) { 65535 } else if i == 0 { 0 } else { ((i * 2000) % 65536) as u16 });
+    let (r, scene) = run_checked(&job_for(&path, 0.5), dir.path(), "glb");
+    let ys: Vec<f32> = scene.meshes[0].primitives[0].positions.iter().map(|p| p[1]).collect();
+    assert!(ys.contains(&65535.0) && ys.contains(&0.0));
+    assert!(r.max_error <= 0.5);
+}
+
+#[test]
+fn hgt_with_voids() {
+    let dir = tempfile::tempdir().unwrap();
+    let side = 121usize;
+    let mut bytes = Vec::new();
+    for j in 0..side {
+        for i in 0..side {
+            let v: i16 = if (40..45).contains(&i) && (60..62).contains(&j) { -32768 } else { (i * 3 + j * 2) as i16 };
+            bytes.extend_from_slice(&v.to_be_bytes());
+        }
+    }
+    let path = dir.path().join("N10E010.hgt");
+    std::fs::write(&path, bytes).unwrap();
+    let mut job = job_for(&path, 0.5);
+    job.decode.cell_size_m = 90.0;
+    let (r, _) = run_checked(&job, dir.path(), "glb");
+    assert_eq!(r.voids_filled, 10);
+    assert_eq!(r.encoding, Encoding::Hgt);
+}
+
+#[test]
+fn triangle_limit_reports_the_achieved_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "f.png", 65, 65, |i, j| (verdant::synth::mix64((i * 65 + j) as u64) >> 52) as u16);
+    let mut job = job_for(&path, 0.0);
+    job.max_triangles = Some(200);
+    let (r, _) = run_checked(&job, dir.path(), "glb");
+    assert!(r.hit_triangle_limit);
+    assert!(r.triangles <= 200, "{}", r.triangles);
+    assert!(r.max_error > 0.0);
+}
+
+#[test]
+fn chunks_skirts_and_base_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "hill.png", 70, 50, |i, j| (((i as f64 / 10.0).sin() * (j as f64 / 7.0).cos() + 1.0) * 2000.0) as u16);
+    let mut job = job_for(&path, 1.0);
+    job.build.chunk_samples = Some(32);
+    let (r, scene) = run_checked(&job, dir.path(), "glb");
+    assert_eq!(scene.meshes.len(), 3 * 2, "70×50 samples in 32-sample chunks");
+    assert_eq!(r.output.as_ref().unwrap().triangles, r.triangles, "chunking keeps every triangle");
+    job.build.skirt_depth_m = Some(5.0);
+    let (r, _) = run_checked(&job, dir.path(), "gltf");
+    assert!(r.output.as_ref().unwrap().triangles > r.triangles);
+    job.build.skirt_depth_m = None;
+    job.build.chunk_samples = None;
+    job.build.base_depth_m = Some(10.0);
+    let (r, _) = run_checked(&job, dir.path(), "glb");
+    let b = r.output.unwrap().bounds.unwrap();
+    assert!(b.min[1] <= -10.0 + 1e-3, "base {} below the lowest sample", b.min[1]);
+}
