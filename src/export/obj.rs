@@ -6,7 +6,8 @@
 //! MSFT_lod levels that are not in the hierarchy are not written (they have their own
 //! `_LOD<n>` files). Each primitive gets a `usemtl`; primitives of one node that share a material
 //! merge on re-import, as OBJ has no primitive boundary. Vertex colours go on `v` lines as
-//! `v x y z r g b` (alpha is dropped). `vt` is (u, 1 − v): OBJ's v runs up from the bottom.
+//! `v x y z r g b` (alpha is dropped); readers index colours like positions, so when any primitive
+//! has colours every `v` line gets one (white for primitives without). `vt` is (u, 1 − v): OBJ's v runs up from the bottom.
 //!
 //! Numbers use Rust's shortest round-trip formatting, so every f32 (positions of identity-
 //! transformed nodes, normals, u) reads back bit-exact; v reads back as 1 − (1 − v), exact for
@@ -93,20 +94,22 @@ pub fn to_obj(scene: &Scene, stem: &str) -> Result<ObjOutput, SceneProblem> {
         let _ = writeln!(s, "mtllib {stem}.mtl");
     }
     let mut base = [1usize; 3]; // next v, vt, vn number (OBJ counts from 1)
+    let with_colors = scene.meshes.iter().flat_map(|m| &m.primitives).any(|p| !p.colors.is_empty());
+    let names = Names { materials: &material_names, with_colors };
     let mut stack: Vec<(usize, DMat4)> = scene.roots.iter().rev().map(|&r| (r, DMat4::IDENTITY)).collect();
     while let Some((ni, parent)) = stack.pop() {
         let node = &scene.nodes[ni];
         let world = parent * local(node);
         if let Some(mi) = node.mesh {
             match node.instances.as_ref().filter(|i| !i.is_empty()) {
-                None => write_object(&mut s, scene, mi, &node_names[ni], world, &material_names, &mut base),
+                None => write_object(&mut s, scene, mi, &node_names[ni], world, &names, &mut base),
                 Some(inst) => {
                     for k in 0..inst.len() {
                         let t = inst.translations.get(k).copied().unwrap_or([0.0; 3]);
                         let r = inst.rotations.get(k).copied().unwrap_or([0.0, 0.0, 0.0, 1.0]);
                         let sc = inst.scales.get(k).copied().unwrap_or([1.0; 3]);
                         let name = format!("{}_{k}", node_names[ni]);
-                        write_object(&mut s, scene, mi, &name, world * trs(t, r, sc), &material_names, &mut base);
+                        write_object(&mut s, scene, mi, &name, world * trs(t, r, sc), &names, &mut base);
                     }
                 }
             }
@@ -118,6 +121,13 @@ pub fn to_obj(scene: &Scene, stem: &str) -> Result<ObjOutput, SceneProblem> {
     Ok(ObjOutput { obj: s.into_bytes(), mtl, textures })
 }
 
+/// What every object of one export shares.
+struct Names<'a> {
+    materials: &'a [String],
+    /// Some primitive has vertex colours, so every `v` line carries one.
+    with_colors: bool,
+}
+
 /// Writes mesh `mi` as object `name`, transformed by `world`.
 fn write_object(
     s: &mut String,
@@ -125,7 +135,7 @@ fn write_object(
     mi: usize,
     name: &str,
     world: DMat4,
-    material_names: &[String],
+    names: &Names,
     base: &mut [usize; 3],
 ) {
     let identity = world == DMat4::IDENTITY;
@@ -139,9 +149,10 @@ fn write_object(
             } else {
                 world.transform_point3(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)).as_vec3().to_array()
             };
-            match p.colors.get(k) {
-                Some(c) => _ = writeln!(s, "v {} {} {} {} {} {}", v[0], v[1], v[2], c[0], c[1], c[2]),
-                None => _ = writeln!(s, "v {} {} {}", v[0], v[1], v[2]),
+            match (p.colors.get(k), names.with_colors) {
+                (Some(c), _) => _ = writeln!(s, "v {} {} {} {} {} {}", v[0], v[1], v[2], c[0], c[1], c[2]),
+                (None, true) => _ = writeln!(s, "v {} {} {} 1 1 1", v[0], v[1], v[2]),
+                (None, false) => _ = writeln!(s, "v {} {} {}", v[0], v[1], v[2]),
             }
         }
         for uv in &p.uvs {
@@ -158,7 +169,7 @@ fn write_object(
         }
         // faces
         if let Some(m) = p.material {
-            let _ = writeln!(s, "usemtl {}", material_names[m]);
+            let _ = writeln!(s, "usemtl {}", names.materials[m]);
         }
         // a mirroring transform flips winding; swap two corners to keep the front face
         let flip = world.determinant() < 0.0;
