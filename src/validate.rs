@@ -559,6 +559,9 @@ fn load_obj(path: &Path) -> Result<Loaded, ValidateError> {
     }
     for model in models {
         let m = &model.mesh;
+        if m.positions.is_empty() && m.indices.is_empty() {
+            continue; // tobj's placeholder for a file without faces
+        }
         let n = m.positions.len() / 3;
         let prim = Primitive {
             positions: m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
@@ -712,7 +715,7 @@ fn length(v: &[f32]) -> f64 {
 
 fn check_primitive(p: &Primitive, loc: &str, issues: &mut Vec<Issue>) {
     let n = p.positions.len();
-    if p.indices.len() % 3 != 0 {
+    if !p.indices.len().is_multiple_of(3) {
         issues.push(issue(Severity::Error, loc, format!("{} indices is not a whole number of triangles", p.indices.len())));
     }
     {
@@ -777,7 +780,7 @@ fn triangle_is_flat(p: &Primitive, t: usize) -> bool {
     let (a, b, cc) = (corner(0), corner(1), corner(2));
     let scale = (b - a).length_squared().max((cc - a).length_squared()).max((cc - b).length_squared());
     let area2 = DVec3::from(c).length();
-    !(area2 > 1e-12 * scale) && area2.is_finite()
+    area2.is_finite() && area2 <= 1e-12 * scale
 }
 
 /// World matrix of every node reachable from the roots (None for the others).

@@ -169,6 +169,8 @@ fn opt_name(name: &str) -> Option<String> {
 }
 
 /// Builds the glTF document and its binary buffer (`bin_uri`: None for GLB).
+// `..Default::default()` on the node extension: gltf-json adds a field with KHR_lights_punctual.
+#[allow(clippy::needless_update)]
 fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), SceneProblem> {
     use json::accessor::{ComponentType, Type};
     check_scene(scene)?;
@@ -334,13 +336,17 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
     }
 
     // scene, buffer, extension lists
-    root.scenes.push(json::Scene {
-        extensions: None,
-        extras: scene.extras.as_ref().map(raw_json).transpose()?,
-        name: opt_name(&scene.name),
-        nodes: scene.roots.iter().map(|&r| Index::new(r as u32)).collect(),
-    });
-    root.scene = Some(Index::new(0));
+    // A scene without nodes is valid glTF, but the gltf crate (and so `verdant validate`) cannot
+    // read one; a scene with no roots has nothing to show, so it is left out with its name/extras.
+    if !scene.roots.is_empty() {
+        root.scenes.push(json::Scene {
+            extensions: None,
+            extras: scene.extras.as_ref().map(raw_json).transpose()?,
+            name: opt_name(&scene.name),
+            nodes: scene.roots.iter().map(|&r| Index::new(r as u32)).collect(),
+        });
+        root.scene = Some(Index::new(0));
+    }
     bin.data.resize(bin.data.len().next_multiple_of(4), 0);
     if !bin.data.is_empty() {
         root.buffers.push(json::Buffer {

@@ -206,7 +206,7 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneProblem> {
             if n == 0 || p.indices.is_empty() {
                 return bad(format!("{what} is empty (no vertices or no triangles); drop it before export"));
             }
-            if p.indices.len() % 3 != 0 {
+            if !p.indices.len().is_multiple_of(3) {
                 return bad(format!("{what} has {} indices, not a multiple of 3", p.indices.len()));
             }
             if n > u32::MAX as usize - 1 {
