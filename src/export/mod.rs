@@ -21,8 +21,9 @@ use crate::mesh::{AlphaMode, Scene};
 /// Extensions [`write_scene`] understands, for messages.
 pub const SUPPORTED_EXTENSIONS: &str = ".glb, .gltf (+ .bin), .obj (+ .mtl, .png)";
 
-/// A normal or quaternion counts as unit length when its length is within this of 1. The Khronos
-/// validator's own tolerance is about this size; stages renormalise in f32 and stay far inside it.
+/// A normal or quaternion counts as unit length when its length is within this of 1. Stricter
+/// than the Khronos validator (2.0.0-dev.3.10 accepts normals of length 1.006, rejects 1.01);
+/// stages renormalise in f32 and stay far inside it.
 pub const UNIT_LENGTH_TOLERANCE: f32 = 5e-4;
 
 #[derive(Debug, Error)]
@@ -174,6 +175,8 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneProblem> {
         let len = v.iter().map(|&x| (x as f64) * (x as f64)).sum::<f64>().sqrt();
         (len - 1.0).abs() <= UNIT_LENGTH_TOLERANCE as f64
     };
+    // glTF also bounds every rotation component to -1..1 (VALUE_NOT_IN_RANGE otherwise)
+    let unit_quat = |q: &[f32; 4]| unit(q) && q.iter().all(|c| c.abs() <= 1.0);
     for (ti, t) in scene.textures.iter().enumerate() {
         if !t.png.starts_with(b"\x89PNG\r\n\x1a\n") {
             return bad(format!("texture {ti} ({:?}) is not PNG data", t.name));
@@ -251,7 +254,7 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneProblem> {
         if !finite(&node.translation) || !finite(&node.rotation) || !finite(&node.scale) {
             return bad(format!("{what} has a non-finite translation, rotation or scale"));
         }
-        if !unit(&node.rotation) {
+        if !unit_quat(&node.rotation) {
             return bad(format!("{what} has rotation {:?}, not a unit quaternion", node.rotation));
         }
         for &c in &node.children {
@@ -278,7 +281,7 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneProblem> {
             if !all_finite {
                 return bad(format!("{what} has a non-finite instance transform"));
             }
-            if let Some(k) = inst.rotations.iter().position(|r| !unit(r)) {
+            if let Some(k) = inst.rotations.iter().position(|r| !unit_quat(r)) {
                 return bad(format!("{what}: instance {k} rotation {:?} is not a unit quaternion", inst.rotations[k]));
             }
         }
@@ -395,11 +398,18 @@ mod tests {
         s.meshes[0].primitives[0].normals = vec![[0.0, 2.0, 0.0]; 3];
         assert!(check_scene(&s).unwrap_err().0.contains("unit"));
         let mut s = scene.clone();
+        s.nodes[0].rotation = [0.0, 0.0, 0.0, 1.0003]; // unit within tolerance, but w > 1
+        assert!(check_scene(&s).unwrap_err().0.contains("rotation"));
+        let mut s = scene.clone();
         s.nodes[0].children = vec![0];
         assert!(check_scene(&s).is_err(), "self-parent");
         let mut s = scene.clone();
         s.nodes.push(Node { children: vec![0], ..Node::default() });
         s.nodes[0].children = vec![1];
-        assert!(check_scene(&s).unwrap_err().0.contains("child") || check_scene(&s).is_err());
+        assert!(check_scene(&s).unwrap_err().0.contains("root node 0 is also a child"));
+        let mut s = scene.clone();
+        s.nodes.push(Node { children: vec![2], ..Node::default() });
+        s.nodes.push(Node { children: vec![1], ..Node::default() });
+        assert!(check_scene(&s).unwrap_err().0.contains("cycle"));
     }
 }
