@@ -1,0 +1,411 @@
+//! glTF 2.0 writer (Khronos glTF 2.0 specification; GLB container, EXT_mesh_gpu_instancing, MSFT_lod).
+//!
+//! Layout of the binary buffer: one tightly packed bufferView per attribute, index list, instance
+//! array and image, each starting on a 4-byte boundary, in scene order (meshes, then instanced
+//! nodes, then textures). POSITION accessors carry min/max computed from the f32 values exactly as
+//! written. Indices are UNSIGNED_SHORT when the largest is ≤ 65534 (65535 is the primitive restart
+//! value of some APIs), else UNSIGNED_INT. No hash maps anywhere: the same scene gives the same bytes.
+
+use std::collections::BTreeSet;
+
+use gltf_json as json;
+use json::validation::Checked::Valid;
+use json::validation::USize64;
+use json::Index;
+use serde_json::{Map, Value};
+
+use super::{check_scene, SceneProblem};
+use crate::mesh::{AlphaMode, Scene};
+
+/// `asset.generator` of every file written.
+pub const GENERATOR: &str = concat!("verdant ", env!("CARGO_PKG_VERSION"));
+pub const EXT_INSTANCING: &str = "EXT_mesh_gpu_instancing";
+pub const EXT_LOD: &str = "MSFT_lod";
+/// Key in a LoD node's extras holding the screen coverage of each level (MSFT_lod convention).
+pub const LOD_COVERAGE_KEY: &str = "MSFT_screencoverage";
+
+/// Largest index written as UNSIGNED_SHORT.
+pub const MAX_U16_INDEX: u32 = 65534;
+
+const ARRAY_BUFFER: json::buffer::Target = json::buffer::Target::ArrayBuffer;
+const ELEMENT_ARRAY_BUFFER: json::buffer::Target = json::buffer::Target::ElementArrayBuffer;
+
+/// The scene as one GLB file.
+pub fn to_glb(scene: &Scene) -> Result<Vec<u8>, SceneProblem> {
+    let (root, bin) = build(scene, None)?;
+    let json = root.to_vec().map_err(|e| SceneProblem(format!("cannot serialise the glTF JSON: {e}")))?;
+    glb_container(&json, &bin)
+}
+
+/// The scene as `.gltf` JSON (pretty-printed) and the contents of the `.bin` file it refers to as
+/// `bin_name` (a file name in the same folder). The bin is empty, and not referenced, when the
+/// scene holds no data.
+pub fn to_gltf(scene: &Scene, bin_name: &str) -> Result<(Vec<u8>, Vec<u8>), SceneProblem> {
+    let (root, bin) = build(scene, Some(&uri_encode(bin_name)))?;
+    let mut json =
+        root.to_vec_pretty().map_err(|e| SceneProblem(format!("cannot serialise the glTF JSON: {e}")))?;
+    json.push(b'\n');
+    Ok((json, bin))
+}
+
+/// Wraps JSON and binary chunks in the GLB container: 12-byte header, JSON chunk padded with
+/// spaces, BIN chunk (omitted when empty) padded with zeros.
+fn glb_container(json: &[u8], bin: &[u8]) -> Result<Vec<u8>, SceneProblem> {
+    let json_len = json.len().next_multiple_of(4);
+    let bin_len = bin.len().next_multiple_of(4);
+    let total = 12 + 8 + json_len + if bin.is_empty() { 0 } else { 8 + bin_len };
+    let total32 = u32::try_from(total)
+        .map_err(|_| SceneProblem(format!("the GLB would be {total} bytes, over the format's 4 GiB limit; split the scene")))?;
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&total32.to_le_bytes());
+    out.extend_from_slice(&(json_len as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(json);
+    out.resize(20 + json_len, b' ');
+    if !bin.is_empty() {
+        out.extend_from_slice(&(bin_len as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(bin);
+        out.resize(total, 0);
+    }
+    Ok(out)
+}
+
+/// Percent-encodes everything but RFC 3986 unreserved characters (a relative URI for a file name).
+fn uri_encode(name: &str) -> String {
+    let mut s = String::new();
+    for b in name.bytes() {
+        if b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.' | b'~') {
+            s.push(b as char);
+        } else {
+            s.push_str(&format!("%{b:02X}"));
+        }
+    }
+    s
+}
+
+/// The binary buffer under construction and its views.
+struct Bin {
+    data: Vec<u8>,
+    views: Vec<json::buffer::View>,
+}
+
+impl Bin {
+    fn push_view(&mut self, bytes: &[u8], target: Option<json::buffer::Target>) -> Index<json::buffer::View> {
+        self.data.resize(self.data.len().next_multiple_of(4), 0);
+        let offset = self.data.len();
+        self.data.extend_from_slice(bytes);
+        self.views.push(json::buffer::View {
+            buffer: Index::new(0),
+            byte_length: USize64::from(bytes.len()),
+            byte_offset: if offset == 0 { None } else { Some(USize64::from(offset)) },
+            byte_stride: None,
+            name: None,
+            target: target.map(Valid),
+            extensions: None,
+            extras: None,
+        });
+        Index::new(self.views.len() as u32 - 1)
+    }
+}
+
+fn f32_bytes<const N: usize>(values: &[[f32; N]]) -> Vec<u8> {
+    values.iter().flatten().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+fn accessor(
+    view: Index<json::buffer::View>,
+    count: usize,
+    component: json::accessor::ComponentType,
+    type_: json::accessor::Type,
+) -> json::Accessor {
+    json::Accessor {
+        buffer_view: Some(view),
+        byte_offset: None,
+        count: USize64::from(count),
+        component_type: Valid(json::accessor::GenericComponentType(component)),
+        extensions: None,
+        extras: None,
+        type_: Valid(type_),
+        min: None,
+        max: None,
+        name: None,
+        normalized: false,
+        sparse: None,
+    }
+}
+
+/// A float accessor over its own new bufferView.
+fn float_accessor<const N: usize>(
+    root: &mut json::Root,
+    bin: &mut Bin,
+    values: &[[f32; N]],
+    target: Option<json::buffer::Target>,
+) -> Index<json::Accessor> {
+    use json::accessor::Type;
+    let type_ = match N {
+        2 => Type::Vec2,
+        3 => Type::Vec3,
+        4 => Type::Vec4,
+        _ => Type::Scalar,
+    };
+    let view = bin.push_view(&f32_bytes(values), target);
+    root.push(accessor(view, values.len(), json::accessor::ComponentType::F32, type_))
+}
+
+/// Exact JSON for an f32: its f64 value, so readers in either precision get the same number back.
+fn exact(x: f32) -> Value {
+    Value::from(x as f64)
+}
+
+fn raw_json(v: &Value) -> Result<Box<json::extras::RawValue>, SceneProblem> {
+    serde_json::value::to_raw_value(v).map_err(|e| SceneProblem(format!("cannot serialise extras: {e}")))
+}
+
+fn opt_name(name: &str) -> Option<String> {
+    (!name.is_empty()).then(|| name.to_string())
+}
+
+/// Builds the glTF document and its binary buffer (`bin_uri`: None for GLB).
+// `..Default::default()` on the node extension: gltf-json adds a field with KHR_lights_punctual.
+#[allow(clippy::needless_update)]
+fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), SceneProblem> {
+    use json::accessor::{ComponentType, Type};
+    check_scene(scene)?;
+    let mut root = json::Root {
+        asset: json::Asset { generator: Some(GENERATOR.to_string()), version: "2.0".into(), ..Default::default() },
+        ..Default::default()
+    };
+    let mut bin = Bin { data: Vec::new(), views: Vec::new() };
+    let mut extensions_used = BTreeSet::new();
+
+    // meshes: one view per attribute and per index list
+    for mesh in &scene.meshes {
+        let mut primitives = Vec::with_capacity(mesh.primitives.len());
+        for p in &mesh.primitives {
+            let mut attributes = std::collections::BTreeMap::new();
+            let pos = float_accessor(&mut root, &mut bin, &p.positions, Some(ARRAY_BUFFER));
+            let bounds = p.bounds().ok_or_else(|| SceneProblem("a primitive has no positions".into()))?;
+            let acc = &mut root.accessors[pos.value()];
+            acc.min = Some(Value::Array(bounds.min.iter().map(|&x| exact(x)).collect()));
+            acc.max = Some(Value::Array(bounds.max.iter().map(|&x| exact(x)).collect()));
+            attributes.insert(Valid(json::mesh::Semantic::Positions), pos);
+            if !p.normals.is_empty() {
+                let a = float_accessor(&mut root, &mut bin, &p.normals, Some(ARRAY_BUFFER));
+                attributes.insert(Valid(json::mesh::Semantic::Normals), a);
+            }
+            if !p.uvs.is_empty() {
+                let a = float_accessor(&mut root, &mut bin, &p.uvs, Some(ARRAY_BUFFER));
+                attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), a);
+            }
+            if !p.colors.is_empty() {
+                let a = float_accessor(&mut root, &mut bin, &p.colors, Some(ARRAY_BUFFER));
+                attributes.insert(Valid(json::mesh::Semantic::Colors(0)), a);
+            }
+            let max_index = p.indices.iter().copied().max().unwrap_or(0);
+            let (bytes, component): (Vec<u8>, _) = if max_index <= MAX_U16_INDEX {
+                (p.indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect(), ComponentType::U16)
+            } else {
+                (p.indices.iter().flat_map(|&i| i.to_le_bytes()).collect(), ComponentType::U32)
+            };
+            let view = bin.push_view(&bytes, Some(ELEMENT_ARRAY_BUFFER));
+            let indices = root.push(accessor(view, p.indices.len(), component, Type::Scalar));
+            primitives.push(json::mesh::Primitive {
+                attributes,
+                extensions: None,
+                extras: None,
+                indices: Some(indices),
+                material: p.material.map(|m| Index::new(m as u32)),
+                mode: Valid(json::mesh::Mode::Triangles),
+                targets: None,
+            });
+        }
+        let extras = mesh.extras.as_ref().map(raw_json).transpose()?;
+        root.push(json::Mesh { extensions: None, extras, name: opt_name(&mesh.name), primitives, weights: None });
+    }
+
+    // materials
+    for m in &scene.materials {
+        let (alpha_mode, alpha_cutoff) = match m.alpha_mode {
+            AlphaMode::Opaque => (json::material::AlphaMode::Opaque, None),
+            AlphaMode::Mask { cutoff } => (json::material::AlphaMode::Mask, Some(json::material::AlphaCutoff(cutoff))),
+            AlphaMode::Blend => (json::material::AlphaMode::Blend, None),
+        };
+        let base_color_texture = m.base_color_texture.map(|t| json::texture::Info {
+            index: Index::new(t as u32),
+            tex_coord: 0,
+            extensions: None,
+            extras: None,
+        });
+        root.push(json::Material {
+            alpha_cutoff,
+            alpha_mode: Valid(alpha_mode),
+            double_sided: m.double_sided,
+            name: opt_name(&m.name),
+            pbr_metallic_roughness: json::material::PbrMetallicRoughness {
+                base_color_factor: json::material::PbrBaseColorFactor(m.base_color),
+                base_color_texture,
+                metallic_factor: json::material::StrengthFactor(m.metallic),
+                roughness_factor: json::material::StrengthFactor(m.roughness),
+                metallic_roughness_texture: None,
+                extensions: None,
+                extras: None,
+            },
+            ..Default::default()
+        });
+    }
+
+    // nodes, with instancing accessors appended after the mesh data
+    for node in &scene.nodes {
+        let mut ext = Map::new();
+        if let Some(inst) = node.instances.as_ref().filter(|i| !i.is_empty()) {
+            let mut attributes = Map::new();
+            if !inst.translations.is_empty() {
+                let a = float_accessor(&mut root, &mut bin, &inst.translations, None);
+                attributes.insert("TRANSLATION".into(), Value::from(a.value()));
+            }
+            if !inst.rotations.is_empty() {
+                let a = float_accessor(&mut root, &mut bin, &inst.rotations, None);
+                attributes.insert("ROTATION".into(), Value::from(a.value()));
+            }
+            if !inst.scales.is_empty() {
+                let a = float_accessor(&mut root, &mut bin, &inst.scales, None);
+                attributes.insert("SCALE".into(), Value::from(a.value()));
+            }
+            ext.insert(EXT_INSTANCING.into(), serde_json::json!({ "attributes": attributes }));
+            extensions_used.insert(EXT_INSTANCING);
+        }
+        let mut extras = node.extras.clone();
+        if !node.lods.is_empty() {
+            ext.insert(EXT_LOD.into(), serde_json::json!({ "ids": node.lods }));
+            extensions_used.insert(EXT_LOD);
+            if !node.lod_screen_coverage.is_empty() {
+                let coverage = Value::Array(node.lod_screen_coverage.iter().map(|&c| Value::from(c)).collect());
+                let mut map = match extras {
+                    Some(Value::Object(map)) => map,
+                    _ => Map::new(), // check_scene allows only objects or nothing here
+                };
+                map.insert(LOD_COVERAGE_KEY.into(), coverage);
+                extras = Some(Value::Object(map));
+            }
+        }
+        let is = |v: &[f32], identity: &[f32]| v == identity;
+        root.push(json::Node {
+            children: (!node.children.is_empty())
+                .then(|| node.children.iter().map(|&c| Index::new(c as u32)).collect()),
+            extensions: (!ext.is_empty()).then(|| json::extensions::scene::Node { others: ext, ..Default::default() }),
+            extras: extras.as_ref().map(raw_json).transpose()?,
+            mesh: node.mesh.map(|m| Index::new(m as u32)),
+            name: opt_name(&node.name),
+            rotation: (!is(&node.rotation, &[0.0, 0.0, 0.0, 1.0])).then_some(json::scene::UnitQuaternion(node.rotation)),
+            scale: (!is(&node.scale, &[1.0; 3])).then_some(node.scale),
+            translation: (!is(&node.translation, &[0.0; 3])).then_some(node.translation),
+            ..Default::default()
+        });
+    }
+
+    // textures: PNG bytes in views without target; one shared sampler
+    if !scene.textures.is_empty() {
+        let sampler = root.push(json::texture::Sampler {
+            mag_filter: Some(Valid(json::texture::MagFilter::Linear)),
+            min_filter: Some(Valid(json::texture::MinFilter::LinearMipmapLinear)),
+            wrap_s: Valid(json::texture::WrappingMode::Repeat),
+            wrap_t: Valid(json::texture::WrappingMode::Repeat),
+            ..Default::default()
+        });
+        for t in &scene.textures {
+            let view = bin.push_view(&t.png, None);
+            let image = root.push(json::Image {
+                buffer_view: Some(view),
+                mime_type: Some(json::image::MimeType("image/png".into())),
+                name: opt_name(&t.name),
+                uri: None,
+                extensions: None,
+                extras: None,
+            });
+            root.push(json::Texture {
+                name: opt_name(&t.name),
+                sampler: Some(sampler),
+                source: image,
+                extensions: None,
+                extras: None,
+            });
+        }
+    }
+
+    // scene, buffer, extension lists
+    // A scene without nodes is valid glTF, but the gltf crate (and so `verdant validate`) cannot
+    // read one; a scene with no roots has nothing to show, so it is left out with its name/extras.
+    if !scene.roots.is_empty() {
+        root.scenes.push(json::Scene {
+            extensions: None,
+            extras: scene.extras.as_ref().map(raw_json).transpose()?,
+            name: opt_name(&scene.name),
+            nodes: scene.roots.iter().map(|&r| Index::new(r as u32)).collect(),
+        });
+        root.scene = Some(Index::new(0));
+    }
+    bin.data.resize(bin.data.len().next_multiple_of(4), 0);
+    if !bin.data.is_empty() {
+        root.buffers.push(json::Buffer {
+            byte_length: USize64::from(bin.data.len()),
+            name: None,
+            uri: bin_uri.map(str::to_string),
+            extensions: None,
+            extras: None,
+        });
+    }
+    root.buffer_views = bin.views;
+    root.extensions_used = extensions_used.into_iter().map(str::to_string).collect();
+    Ok((root, bin.data))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::{Mesh, Primitive};
+
+    fn triangle_scene(max_index: u32) -> Scene {
+        let n = max_index as usize + 1;
+        let positions: Vec<[f32; 3]> = (0..n).map(|i| [i as f32, 0.0, (i % 7) as f32]).collect();
+        let mut scene = Scene::default();
+        let prim = Primitive { positions, indices: vec![0, max_index, 1], ..Primitive::default() };
+        scene.add_mesh_node(Mesh { name: "m".into(), primitives: vec![prim], extras: None });
+        scene
+    }
+
+    fn index_component(scene: &Scene) -> json::accessor::ComponentType {
+        let (root, _) = build(scene, None).unwrap();
+        let acc = root.meshes[0].primitives[0].indices.unwrap();
+        match root.accessors[acc.value()].component_type {
+            Valid(t) => t.0,
+            _ => unreachable!(),
+        }
+    }
+
+    #[test]
+    fn index_width_switches_above_65534() {
+        assert_eq!(index_component(&triangle_scene(65534)), json::accessor::ComponentType::U16);
+        assert_eq!(index_component(&triangle_scene(65535)), json::accessor::ComponentType::U32);
+    }
+
+    #[test]
+    fn glb_chunks_are_padded_and_aligned() {
+        let glb = to_glb(&triangle_scene(2)).unwrap();
+        assert_eq!(&glb[0..4], b"glTF");
+        assert_eq!(u32::from_le_bytes(glb[8..12].try_into().unwrap()) as usize, glb.len());
+        let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+        assert_eq!(json_len % 4, 0);
+        assert_eq!(&glb[20 + json_len + 4..20 + json_len + 8], b"BIN\0");
+        assert_eq!(glb.len() % 4, 0);
+        let json = std::str::from_utf8(&glb[20..20 + json_len]).unwrap();
+        assert!(json.contains(GENERATOR));
+    }
+
+    #[test]
+    fn uri_encoding() {
+        assert_eq!(uri_encode("my tile #1.bin"), "my%20tile%20%231.bin");
+    }
+}
