@@ -60,9 +60,13 @@ pub enum BuildError {
     DepthNotRepresentable { option: &'static str, depth_m: f64, height_m: f32 },
     #[error("a skirt and a base were both asked for: the base already closes the sides, and skirts would add open flaps inside the solid; use --base for a solid or --skirt for engine chunks, not both")]
     SkirtWithBase,
-    #[error("the heightfield is {width}×{height} samples: a terrain needs at least 2×2 samples; use a larger heightmap")]
+    #[error(
+        "the heightfield is {width}×{height} samples: a terrain needs at least 2×2 samples; use a larger heightmap"
+    )]
     HeightfieldTooSmall { width: usize, height: usize },
-    #[error("the heightfield holds {len} heights but is {width}×{height} samples; this is a decoder bug, please report it")]
+    #[error(
+        "the heightfield holds {len} heights but is {width}×{height} samples; this is a decoder bug, please report it"
+    )]
     HeightfieldShape { width: usize, height: usize, len: usize },
     #[error("the cell size is {0} m: it must be a positive, finite number of metres; pass a cell size like 1.0")]
     InvalidCellSize(f64),
@@ -292,8 +296,11 @@ fn surface(
         Some(depth_m) => {
             let edges: Vec<[u32; 2]> =
                 boundary_edges(triangles, subset).iter().map(|e| e.map(|v| slots[v as usize])).collect();
-            add_skirt(&mut prim, &edges, depth_m)
-                .map_err(|height_m| BuildError::DepthNotRepresentable { option: "skirt depth", depth_m, height_m })
+            add_skirt(&mut prim, &edges, depth_m).map_err(|height_m| BuildError::DepthNotRepresentable {
+                option: "skirt depth",
+                depth_m,
+                height_m,
+            })
         }
         None => Ok(()),
     };
@@ -304,11 +311,20 @@ fn surface(
 }
 
 /// Walls and bottom under the whole triangulation, `depth_m` below its lowest sample.
-fn base(hf: &Heightfield, mesh: &SampleMesh, triangles: &[[u32; 3]], all: &[usize], depth_m: f64) -> Result<Primitive, BuildError> {
+fn base(
+    hf: &Heightfield,
+    mesh: &SampleMesh,
+    triangles: &[[u32; 3]],
+    all: &[usize],
+    depth_m: f64,
+) -> Result<Primitive, BuildError> {
     // the lowest sample of the map, not just of the mesh: a TIN's surface never dips below it
     let lowest = hf.heights.iter().copied().fold(f32::INFINITY, f32::min);
-    let base_y = lowered(lowest, depth_m)
-        .ok_or(BuildError::DepthNotRepresentable { option: "base depth", depth_m, height_m: lowest })?;
+    let base_y = lowered(lowest, depth_m).ok_or(BuildError::DepthNotRepresentable {
+        option: "base depth",
+        depth_m,
+        height_m: lowest,
+    })?;
     let border: Vec<[[u32; 2]; 2]> =
         boundary_edges(triangles, all).iter().map(|e| e.map(|v| mesh.vertices[v as usize])).collect();
     base_primitive(hf, &border, base_y).map_err(|[from, to]| BuildError::BorderNotOnRectangle { from, to })
@@ -654,7 +670,11 @@ mod tests {
         m.triangles
             .iter()
             .map(|&t| {
-                let mean = t.iter().map(|&v| hf.at(m.vertices[v as usize][0] as usize, m.vertices[v as usize][1] as usize) as f64).sum::<f64>() / 3.0;
+                let mean = t
+                    .iter()
+                    .map(|&v| hf.at(m.vertices[v as usize][0] as usize, m.vertices[v as usize][1] as usize) as f64)
+                    .sum::<f64>()
+                    / 3.0;
                 cross_y(m, t) as f64 / 2.0 * cell2 * (mean - base_y as f64)
             })
             .sum()
@@ -690,7 +710,10 @@ mod tests {
         assert_eq!(scene.materials.len(), 1);
         let mat = &scene.materials[0];
         assert_eq!(mat.name, "terrain");
-        assert_eq!((mat.metallic, mat.roughness, mat.alpha_mode, mat.double_sided), (0.0, 1.0, AlphaMode::Opaque, false));
+        assert_eq!(
+            (mat.metallic, mat.roughness, mat.alpha_mode, mat.double_sided),
+            (0.0, 1.0, AlphaMode::Opaque, false)
+        );
         let [r, g, b, a] = mat.base_color;
         assert!(g > r && g > b && r > 0.1 && a == 1.0, "grey-green, opaque");
         assert!(scene.meshes.iter().flat_map(|m| &m.primitives).all(|p| p.material == Some(0)));
@@ -744,7 +767,10 @@ mod tests {
                     let s = tri.map(|q| samples[&[q[0].to_bits(), q[2].to_bits()]]);
                     let centroid = [(s[0].0 + s[1].0 + s[2].0) as f64 / 3.0, (s[0].1 + s[1].1 + s[2].1) as f64 / 3.0];
                     for k in 0..2 {
-                        assert!(lo[k] <= centroid[k] && centroid[k] <= hi[k], "centroid {centroid:?} outside {lo:?}..{hi:?}");
+                        assert!(
+                            lo[k] <= centroid[k] && centroid[k] <= hi[k],
+                            "centroid {centroid:?} outside {lo:?}..{hi:?}"
+                        );
                     }
                 }
                 total += p.triangle_count();
@@ -758,7 +784,9 @@ mod tests {
     #[test]
     fn skirts_hang_from_every_boundary_edge_facing_out() {
         let hf = bumpy(29, 19);
-        for (m, chunk) in [(grid_mesh(29, 19, 2), None), (grid_mesh(29, 19, 1), Some(8)), (tin_mesh(&hf, 1.0), Some(10))] {
+        for (m, chunk) in
+            [(grid_mesh(29, 19, 2), None), (grid_mesh(29, 19, 1), Some(8)), (tin_mesh(&hf, 1.0), Some(10))]
+        {
             let scene = build_scene(&hf, &m, &opts(chunk, Some(7.5), None)).unwrap();
             check_skirts(&scene, 7.5);
             check_surface_vertices(&hf, &scene, Some(7.5));
@@ -863,12 +891,17 @@ mod tests {
         let mut m = good.clone();
         m.vertices.push(m.vertices[6]);
         let last = m.vertices.len() as u32 - 1;
+        // half of the triangles around sample 6 use the copy: their shared edges must still match
+        let mut uses = 0;
         for t in m.triangles.iter_mut() {
-            for v in t.iter_mut().filter(|v| **v == 6) {
-                *v = last;
-                break;
+            if let Some(v) = t.iter_mut().find(|v| **v == 6) {
+                if uses % 2 == 1 {
+                    *v = last;
+                }
+                uses += 1;
             }
         }
+        assert!(uses >= 4);
         let scene = build_scene(&hf, &m, &o).unwrap();
         assert_eq!(check_crack_free(&hf, &scene), m.triangles.len());
 
@@ -901,9 +934,9 @@ mod tests {
             if let Some(d) = o.skirt_depth_m {
                 check_skirts(&scene, d);
             }
-            if o.base_depth_m.is_some() {
+            if let Some(depth) = o.base_depth_m {
                 let v = check_watertight(&scene);
-                let base_y = 1.0 - o.base_depth_m.unwrap() as f32;
+                let base_y = 1.0 - depth as f32;
                 assert!((v - volume_under(&hf, &m, base_y)).abs() < 1e-12);
                 check_base_normals(&scene);
             }
@@ -945,6 +978,33 @@ mod tests {
                     assert!((n[k] - e[k]).abs() < 1e-12);
                 }
             }
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+
+        /// Any map size, mesh (grid of any step, or a TIN of any tolerance) and chunk size: chunks keep
+        /// every triangle without cracks, skirts cover every chunk boundary, the base is watertight.
+        #[test]
+        fn invariants_hold_for_any_size_and_chunking(
+            w in 2usize..24, h in 2usize..24, step in 1usize..6, tin_error in proptest::option::of(0.2f64..8.0),
+            pitch in 2usize..10, seed in 0u64..1000,
+        ) {
+            let hf = fractal(w, h, 1.5, 30.0, 0.5, seed);
+            let m = match tin_error {
+                Some(e) => tin_mesh(&hf, e),
+                None => grid_mesh(w, h, step),
+            };
+            let chunked = build_scene(&hf, &m, &opts(Some(pitch), Some(2.0), None)).unwrap();
+            proptest::prop_assert_eq!(check_crack_free(&hf, &chunked), m.triangles.len());
+            check_skirts(&chunked, 2.0);
+            check_surface_vertices(&hf, &chunked, Some(2.0));
+            let solid = build_scene(&hf, &m, &opts(Some(pitch), None, Some(2.0))).unwrap();
+            let lowest = hf.heights.iter().copied().fold(f32::INFINITY, f32::min);
+            let expected = volume_under(&hf, &m, lowered(lowest, 2.0).unwrap());
+            let volume = check_watertight(&solid);
+            proptest::prop_assert!((volume - expected).abs() <= 1e-9 * expected);
         }
     }
 }

@@ -112,7 +112,8 @@ pub fn base_primitive(hf: &Heightfield, border: &[[[u32; 2]; 2]], base_y: f32) -
         prim.uvs.push(uv);
         (prim.positions.len() - 1) as u32
     };
-    let centre = [((w - 1) as f64 * hf.cell_size_m / 2.0) as f32, base_y, ((h - 1) as f64 * hf.cell_size_m / 2.0) as f32];
+    let centre =
+        [((w - 1) as f64 * hf.cell_size_m / 2.0) as f32, base_y, ((h - 1) as f64 * hf.cell_size_m / 2.0) as f32];
     let centre_index = push(&mut prim, centre, [0.0, -1.0, 0.0], [0.5, 0.5]);
     for &[a, b] in border {
         let side = border_side(a, b, w, h).ok_or([a, b])?;
@@ -125,7 +126,8 @@ pub fn base_primitive(hf: &Heightfield, border: &[[[u32; 2]; 2]], base_y: f32) -
                 push(prim, p, SIDE_NORMALS[side], planar_uv(hf, s[0] as usize, s[1] as usize))
             })
         };
-        let (ta, tb, la, lb) = (wall(&mut prim, a, false), wall(&mut prim, b, false), wall(&mut prim, a, true), wall(&mut prim, b, true));
+        let (ta, tb, la, lb) =
+            (wall(&mut prim, a, false), wall(&mut prim, b, false), wall(&mut prim, a, true), wall(&mut prim, b, true));
         prim.indices.extend_from_slice(&[tb, ta, la, tb, la, lb]);
         let mut bottom = |prim: &mut Primitive, s: [u32; 2]| -> u32 {
             *floor.entry(sample_key(s)).or_insert_with(|| {
