@@ -16,8 +16,6 @@
 //! The base closes the whole terrain, not each chunk: walls along the map's rectangle border and one
 //! flat bottom, so the union of all primitives is one solid, watertight by vertex position.
 
-use std::collections::{HashMap, HashSet};
-
 use serde_json::json;
 
 use crate::heightfield::Heightfield;
@@ -96,14 +94,14 @@ pub enum BuildError {
 pub fn build_scene(hf: &Heightfield, mesh: &SampleMesh, opts: &BuildOptions) -> Result<Scene, BuildError> {
     check_options(opts)?;
     check_heightfield(hf)?;
-    let triangles = check_mesh(hf, mesh)?;
+    let (triangles, edges) = check_mesh(hf, mesh)?;
 
     let mut scene = Scene { name: opts.name.clone(), materials: vec![terrain_material()], ..Scene::default() };
     // reusable map from vertex id to index in the primitive being built (u32::MAX: not yet in it)
     let mut slots = vec![u32::MAX; mesh.vertices.len()];
     let all: Vec<usize> = (0..triangles.len()).collect();
     let base = match opts.base_depth_m {
-        Some(depth) => Some(base(hf, mesh, &triangles, &all, depth)?),
+        Some(depth) => Some(base(hf, mesh, &triangles, &edges, depth)?),
         None => None,
     };
 
@@ -213,25 +211,82 @@ fn check_heightfield(hf: &Heightfield) -> Result<(), BuildError> {
     Ok(())
 }
 
+/// Directed edges of a triangulation bucketed by start vertex (compressed rows, as meshoptimizer
+/// builds its adjacency: fill counts, fill offset table, fill targets), targets sorted per bucket.
+struct EdgeIndex {
+    offsets: Vec<usize>,
+    targets: Vec<u32>,
+}
+
+impl EdgeIndex {
+    fn new(vertex_count: usize, triangles: &[[u32; 3]]) -> EdgeIndex {
+        let mut offsets = vec![0usize; vertex_count + 1];
+        for tri in triangles {
+            for &v in tri {
+                offsets[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..vertex_count {
+            offsets[v + 1] += offsets[v];
+        }
+        let mut fill = offsets.clone();
+        let mut targets = vec![0u32; triangles.len() * 3];
+        for tri in triangles {
+            for k in 0..3 {
+                let a = tri[k] as usize;
+                targets[fill[a]] = tri[(k + 1) % 3];
+                fill[a] += 1;
+            }
+        }
+        for v in 0..vertex_count {
+            targets[offsets[v]..offsets[v + 1]].sort_unstable();
+        }
+        EdgeIndex { offsets, targets }
+    }
+
+    fn targets(&self, a: u32) -> &[u32] {
+        &self.targets[self.offsets[a as usize]..self.offsets[a as usize + 1]]
+    }
+
+    fn has(&self, a: u32, b: u32) -> bool {
+        self.targets(a).binary_search(&b).is_ok()
+    }
+
+    /// First edge (a, b) present twice, if any.
+    fn repeated(&self) -> Option<(u32, u32)> {
+        (0..self.offsets.len() - 1).find_map(|a| {
+            let t = self.targets(a as u32);
+            t.windows(2).find(|w| w[0] == w[1]).map(|w| (a as u32, w[0]))
+        })
+    }
+}
+
 /// Checks the [`SampleMesh`] contract and returns its triangles with duplicate vertices (two ids at
-/// the same sample) folded onto the first id, so edges can be matched by vertex id.
-fn check_mesh(hf: &Heightfield, mesh: &SampleMesh) -> Result<Vec<[u32; 3]>, BuildError> {
+/// the same sample) folded onto the first id, so edges can be matched by vertex id, and the index
+/// of their directed edges.
+fn check_mesh(hf: &Heightfield, mesh: &SampleMesh) -> Result<(Vec<[u32; 3]>, EdgeIndex), BuildError> {
     if mesh.triangles.is_empty() {
         return Err(BuildError::EmptyMesh);
     }
     let (w, h) = (hf.width, hf.height);
-    // fold duplicates: first vertex id at each sample
-    let mut first_at: HashMap<u64, u32> = HashMap::with_capacity(mesh.vertices.len());
-    let mut canonical = Vec::with_capacity(mesh.vertices.len());
+    // fold duplicates: sort ids by sample, the first (smallest) id of each run stands for the run
+    let mut by_sample = Vec::with_capacity(mesh.vertices.len());
     for (vertex, &sample) in mesh.vertices.iter().enumerate() {
         if sample[0] as usize >= w || sample[1] as usize >= h {
             return Err(BuildError::VertexOutOfRange { vertex, sample, width: w, height: h });
         }
-        let key = sample[1] as u64 * w as u64 + sample[0] as u64;
-        canonical.push(*first_at.entry(key).or_insert(vertex as u32));
+        by_sample.push((sample[1] as u64 * w as u64 + sample[0] as u64, vertex as u32));
+    }
+    by_sample.sort_unstable();
+    let mut canonical = vec![0u32; mesh.vertices.len()];
+    let mut run = (u64::MAX, 0u32);
+    for &(key, vertex) in &by_sample {
+        if key != run.0 {
+            run = (key, vertex);
+        }
+        canonical[vertex as usize] = run.1;
     }
     let mut triangles = Vec::with_capacity(mesh.triangles.len());
-    let mut directed: HashSet<(u32, u32)> = HashSet::with_capacity(mesh.triangles.len() * 3);
     let mut covered2: u128 = 0;
     for (t, tri) in mesh.triangles.iter().enumerate() {
         for &index in tri {
@@ -248,19 +303,18 @@ fn check_mesh(hf: &Heightfield, mesh: &SampleMesh) -> Result<Vec<[u32; 3]>, Buil
             return Err(BuildError::NotCounterClockwise { triangle: t, samples });
         }
         covered2 += cross_y as u128;
-        for (a, b) in [(tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])] {
-            if !directed.insert((a, b)) {
-                let (from, to) = (mesh.vertices[a as usize], mesh.vertices[b as usize]);
-                return Err(BuildError::NonManifoldEdge { from, to });
-            }
-        }
         triangles.push(tri);
+    }
+    // edge-manifold and consistently oriented: no directed edge twice
+    let edges = EdgeIndex::new(mesh.vertices.len(), &triangles);
+    if let Some((a, b)) = edges.repeated() {
+        return Err(BuildError::NonManifoldEdge { from: mesh.vertices[a as usize], to: mesh.vertices[b as usize] });
     }
     let expected2 = 2 * (w as u128 - 1) * (h as u128 - 1);
     if covered2 != expected2 {
         return Err(BuildError::DoesNotCover { covered_cells2: covered2, expected_cells2: expected2 });
     }
-    Ok(triangles)
+    Ok((triangles, edges))
 }
 
 /// The surface primitive of the triangles `subset`: each used sample once (in order of first use,
@@ -315,7 +369,7 @@ fn base(
     hf: &Heightfield,
     mesh: &SampleMesh,
     triangles: &[[u32; 3]],
-    all: &[usize],
+    edges: &EdgeIndex,
     depth_m: f64,
 ) -> Result<Primitive, BuildError> {
     // the lowest sample of the map, not just of the mesh: a TIN's surface never dips below it
@@ -325,8 +379,16 @@ fn base(
         depth_m,
         height_m: lowest,
     })?;
-    let border: Vec<[[u32; 2]; 2]> =
-        boundary_edges(triangles, all).iter().map(|e| e.map(|v| mesh.vertices[v as usize])).collect();
+    // the outer border: edges whose reverse no triangle has, in triangle order
+    let mut border = Vec::new();
+    for tri in triangles {
+        for k in 0..3 {
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            if !edges.has(b, a) {
+                border.push([mesh.vertices[a as usize], mesh.vertices[b as usize]]);
+            }
+        }
+    }
     base_primitive(hf, &border, base_y).map_err(|[from, to]| BuildError::BorderNotOnRectangle { from, to })
 }
 
@@ -345,6 +407,7 @@ fn finish(name: String, mut primitives: Vec<Primitive>) -> Result<Mesh, BuildErr
 mod tests {
     use super::*;
     use crate::synth::fractal;
+    use std::collections::{HashMap, HashSet};
 
     // ---- fixtures -------------------------------------------------------------------------------
 

@@ -3,6 +3,37 @@
 //! hang and the solid base's walls start).
 
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// A hash map keyed by integers, hashed with a SplitMix64 finaliser instead of SipHash: keys are
+/// our own vertex and edge ids (nothing untrusted to defend against) and SipHash was the larger part
+/// of building a 1025² grid. Used for look-ups only, never iterated, so output order does not
+/// depend on it.
+pub type IdMap<K, V> = HashMap<K, V, BuildHasherDefault<IdHasher>>;
+
+/// Hasher for [`IdMap`]: mixes each integer written into the state with `synth::mix64`.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct IdHasher(u64);
+
+impl Hasher for IdHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u32(&mut self, n: u32) {
+        self.write_u64(n as u64);
+    }
+    fn write_u64(&mut self, n: u64) {
+        self.0 = crate::synth::mix64(self.0.rotate_left(32) ^ n);
+    }
+    fn write_usize(&mut self, n: usize) {
+        self.write_u64(n as u64);
+    }
+}
 
 /// Square chunks of `pitch` cells over a `width` × `height` sample map.
 ///
@@ -81,7 +112,8 @@ pub fn boundary_edges(triangles: &[[u32; 3]], subset: &[usize]) -> Vec<[u32; 2]>
         return Vec::new();
     }
     // count each undirected edge (a map used for counting only, never iterated)
-    let mut uses: HashMap<(u32, u32), u32> = HashMap::with_capacity(subset.len() * 2);
+    let mut uses: IdMap<(u32, u32), u32> = IdMap::default();
+    uses.reserve(subset.len() * 2);
     let key = |a: u32, b: u32| (a.min(b), a.max(b));
     for &t in subset {
         let [a, b, c] = triangles[t];

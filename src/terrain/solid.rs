@@ -3,12 +3,11 @@
 //! terrain, Ulrich 2002). Base: walls from the map's outer border down to a flat bottom, making the
 //! terrain a watertight solid (for printing, dioramas, volume queries).
 
-use std::collections::HashMap;
-
 use crate::heightfield::Heightfield;
 use crate::mesh::Primitive;
 
 use super::build::planar_uv;
+use super::chunks::IdMap;
 
 /// `y` lowered by `depth_m`, or `None` when f32 cannot hold a finite value strictly below `y`
 /// (a depth far too small for the height's precision, or absurdly large).
@@ -104,8 +103,8 @@ pub fn base_primitive(hf: &Heightfield, border: &[[[u32; 2]; 2]], base_y: f32) -
     let (w, h) = (hf.width, hf.height);
     let sample_key = |s: [u32; 2]| s[1] as u64 * w as u64 + s[0] as u64;
     // vertices are created on first use and found again through these keys (never iterated)
-    let mut walls: HashMap<(u64, usize, bool), u32> = HashMap::new();
-    let mut floor: HashMap<u64, u32> = HashMap::new();
+    let mut walls: IdMap<(u64, usize, bool), u32> = IdMap::default();
+    let mut floor: IdMap<u64, u32> = IdMap::default();
     let push = |prim: &mut Primitive, p: [f32; 3], n: [f32; 3], uv: [f32; 2]| {
         prim.positions.push(p);
         prim.normals.push(n);
