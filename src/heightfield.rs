@@ -38,6 +38,28 @@ impl Heightfield {
         let first = *self.heights.first()?;
         Some(self.heights.iter().fold((first, first), |(lo, hi), &h| (lo.min(h), hi.max(h))))
     }
+
+    /// Unit surface normal at sample (i, j) from the heights alone, in f64: n ∝ (−∂h/∂x, 1, −∂h/∂z)
+    /// with central differences inside and one-sided differences on the border (a map one sample
+    /// wide has zero slope along that axis). Taken from the samples, not from any triangulation, so
+    /// shading does not show the mesh. Panics if (i, j) is out of range, like [`Heightfield::at`].
+    pub fn normal_at(&self, i: usize, j: usize) -> [f64; 3] {
+        // (lo, hi) neighbours along one axis, clamped to the map: central inside, one-sided at edges
+        let span = |k: usize, n: usize| (k.saturating_sub(1), (k + 1).min(n.saturating_sub(1)));
+        let (i0, i1) = span(i, self.width);
+        let (j0, j1) = span(j, self.height);
+        let slope = |a: f32, b: f32, steps: usize| {
+            if steps == 0 {
+                0.0
+            } else {
+                (b as f64 - a as f64) / (steps as f64 * self.cell_size_m)
+            }
+        };
+        let dhdx = slope(self.at(i0, j), self.at(i1, j), i1 - i0);
+        let dhdz = slope(self.at(i, j0), self.at(i, j1), j1 - j0);
+        let len = (dhdx * dhdx + 1.0 + dhdz * dhdz).sqrt();
+        [-dhdx / len, 1.0 / len, -dhdz / len]
+    }
 }
 
 /// How the pixel values of a heightmap file map to metres.

@@ -1,8 +1,11 @@
 //! Terrain: heightfield → triangulation of its samples (grid or greedy TIN) → measured error →
 //! engine-ready meshes (normals, UVs, chunks, skirts, base).
 
+pub mod build;
+pub mod chunks;
 pub mod error;
 pub mod grid;
+pub mod solid;
 pub mod tin;
 
 /// A triangulation whose vertices are heightmap samples: the plain data between the meshers
