@@ -30,7 +30,8 @@ done
 # PyOpenGL 3.1.0, which fails under EGL on these machines.
 PY_PKGS=(trimesh==5.2.0 pyrender==0.1.45 pygltflib==1.16.5 numpy==2.4.6 pillow==12.3.0 scipy==1.17.1 networkx==3.6.1)
 PY_PKGS_AFTER=(pyopengl==3.1.10)
-APT_PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri)
+# libopengl0 / libgl1 give PyOpenGL the desktop GL library it loads first (else it falls back to GLES).
+APT_PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgl1)
 
 export PYOPENGL_PLATFORM=egl
 VENV="$ROOT/.venv"
@@ -149,7 +150,9 @@ export_sample() {
   [ "$1" = "--" ] && shift
   local t=$SECONDS
   echo "\$ verdant $*"
-  if "$BIN" "$@"; then
+  local rc=0
+  "$BIN" "$@" || rc=$?
+  if [ "$rc" -eq 0 ]; then
     if [ -f "$OUT/$file" ] && [ -f "$OUT/$name.json" ]; then
       EXPORTED[$file]="ok $(elapsed "$t")"
       pass
@@ -159,7 +162,7 @@ export_sample() {
     fi
   else
     EXPORTED[$file]="FAIL"
-    fail "export of $file failed (exit $?)"
+    fail "export of $file failed (verdant exited with $rc)"
   fi
   FILES+=("$file")
   REPORT_OF[$file]="$OUT/$name.json"
