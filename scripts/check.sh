@@ -106,6 +106,9 @@ node -e 'const v=require(process.argv[1]); console.log("node tools: gltf-validat
   "$ROOT/scripts/node_modules/gltf-validator"
 echo "set-up took $(elapsed "$setup_start")"
 
+section "1b. Self-test of check_outputs.py (good samples pass, broken ones fail)"
+"$PY" scripts/check_outputs.py --self-test
+
 if ((SETUP_ONLY)); then exit 0; fi
 
 # ---------------------------------------------------------------------------------------------------------

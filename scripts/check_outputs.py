@@ -3,6 +3,7 @@
 JSON report the CLI wrote beside it; optionally check it is a closed solid and render a thumbnail.
 
   check_outputs.py FILE --report REPORT.json [--watertight] [--thumb THUMB.png] [--summary-tsv T.tsv]
+  check_outputs.py --self-test     check the checker on samples it makes itself (good and broken ones)
 
 Loaders: trimesh (force='scene', process=False) for every format; for glTF also pygltflib with our own
 accessor decoding, because trimesh 5.x ignores EXT_mesh_gpu_instancing / MSFT_lod and does not decode
@@ -422,7 +423,119 @@ def check_file(args) -> tuple[str, int, int]:
     return summary, geom.face_count, vertex_count
 
 
+# --------------------------------------------------------------------------------------------- self-test
+def self_test() -> int:
+    """Make small terrains in every format (plus a box, and an instanced, quantized glb that trimesh
+    cannot read right), write reports for them, and check that good files pass and broken ones fail."""
+    import tempfile
+    import pygltflib
+
+    def grid(n=17, cell=2.0, x0=0, z0=0) -> trimesh.Trimesh:
+        i, j = np.meshgrid(np.arange(n) + x0, np.arange(n) + z0, indexing="xy")
+        y = 10 * np.sin(i * cell / 9) * np.cos(j * cell / 7)
+        v = np.stack([(i * cell).ravel(), y.ravel(), (j * cell).ravel()], 1)
+        a = (np.arange(n - 1)[None, :] + n * np.arange(n - 1)[:, None]).ravel()
+        f = np.concatenate([np.stack([a, a + n, a + 1], 1), np.stack([a + 1, a + n, a + n + 1], 1)])
+        return trimesh.Trimesh(v, f, process=False)  # counter-clockwise seen from +Y
+
+    def write_report(path: Path, files, meshes, verts, tris, bounds, mode="tin", **extra) -> Path:
+        report = dict(input="self-test", width=17, height=17, encoding="gray16", mode=mode,
+                      max_error_requested=1.0, max_error=0.5, rms_error=0.1, vertices=17 * 17, triangles=12,
+                      seconds=dict(decode=0.0, mesh=0.0, export=0.0, total=0.0),
+                      output=dict(files=[str(f) for f in files], meshes=meshes, vertices=verts, triangles=tris,
+                                  bounds=dict(min=list(map(float, bounds[0])), max=list(map(float, bounds[1])))))
+        report.update(extra)
+        path.write_text(json.dumps(report))
+        return path
+
+    cases = []  # (name, file, report, watertight, thumb, expect_ok)
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        t = grid()
+        t.export(d / "t.glb")
+        good = write_report(d / "t.json", [d / "t.glb"], 1, len(t.vertices), len(t.faces), t.bounds)
+        cases.append(("glb", d / "t.glb", good, False, d / "t.png", True))
+        shifted = t.bounds.copy()
+        shifted[1][1] += 0.5
+        cases.append(("glb, wrong bounds", d / "t.glb", write_report(
+            d / "t_bad.json", [d / "t.glb"], 1, len(t.vertices), len(t.faces), shifted), False, None, False))
+        cases.append(("glb, wrong count", d / "t.glb", write_report(
+            d / "t_cnt.json", [d / "t.glb"], 1, len(t.vertices), len(t.faces) + 1, t.bounds), False, None, False))
+        cases.append(("glb, error over request", d / "t.glb", write_report(
+            d / "t_err.json", [d / "t.glb"], 1, len(t.vertices), len(t.faces), t.bounds, max_error=1.5),
+            False, None, False))
+        cases.append(("open surface as solid", d / "t.glb", good, True, None, False))
+        # chunks as .gltf + external .bin
+        scene = trimesh.Scene()
+        for k, (x0, z0) in enumerate([(0, 0), (8, 0), (0, 8), (8, 8)]):
+            scene.add_geometry(grid(9, 2.0, x0, z0), geom_name=f"chunk{k}")
+        for name, data in scene.export(file_type="gltf").items():
+            (d / ("c.gltf" if name.endswith(".gltf") else name)).write_bytes(data)
+        nv = sum(len(g.vertices) for g in scene.geometry.values())
+        nf = sum(len(g.faces) for g in scene.geometry.values())
+        cases.append(("gltf + bin", d / "c.gltf", write_report(
+            d / "c.json", [d / "c.gltf"], 4, nv, nf, scene.bounds), False, None, True))
+        # closed box
+        box = trimesh.creation.box(extents=[32, 10, 32])
+        box.export(d / "b.glb")
+        cases.append(("watertight box", d / "b.glb", write_report(
+            d / "b.json", [d / "b.glb"], 1, len(box.vertices), len(box.faces), box.bounds), True, None, True))
+        box.invert()
+        box.export(d / "inv.glb")
+        cases.append(("inside-out box", d / "inv.glb", write_report(
+            d / "inv.json", [d / "inv.glb"], 1, len(box.vertices), len(box.faces), box.bounds), True, None, False))
+        # obj
+        t.export(d / "g.obj")
+        cases.append(("obj", d / "g.obj", write_report(
+            d / "g.json", [d / "g.obj"], 1, len(t.vertices), len(t.faces), t.bounds, mode="grid",
+            max_error=2.0), False, d / "g.png", True))
+        # quad as normalized int16 positions (KHR_mesh_quantization), drawn 3 times by EXT_mesh_gpu_instancing
+        q = np.array([[-1, 0, -1, 0], [1, 0, -1, 0], [1, 0, 1, 0], [-1, 0, 1, 0]]) * 32767
+        idx = np.array([0, 3, 1, 1, 3, 2], dtype=np.uint16)
+        tr = np.array([[0, 0, 0], [3, 1, 0], [0, 0, 3]], dtype=np.float32)
+        blob = q.astype(np.int16).tobytes() + idx.tobytes() + b"\0" * 4 + tr.tobytes()
+        gl = pygltflib.GLTF2(
+            asset=pygltflib.Asset(version="2.0"), scene=0, scenes=[pygltflib.Scene(nodes=[0])],
+            extensionsUsed=["EXT_mesh_gpu_instancing", "KHR_mesh_quantization"],
+            extensionsRequired=["KHR_mesh_quantization"],
+            nodes=[pygltflib.Node(mesh=0, scale=[10, 10, 10], extensions={
+                "EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": 2}}})],
+            meshes=[pygltflib.Mesh(primitives=[pygltflib.Primitive(
+                attributes=pygltflib.Attributes(POSITION=0), indices=1)])],
+            buffers=[pygltflib.Buffer(byteLength=len(blob))],
+            bufferViews=[pygltflib.BufferView(buffer=0, byteOffset=0, byteLength=32, byteStride=8, target=34962),
+                         pygltflib.BufferView(buffer=0, byteOffset=32, byteLength=12, target=34963),
+                         pygltflib.BufferView(buffer=0, byteOffset=48, byteLength=36)],
+            accessors=[pygltflib.Accessor(bufferView=0, componentType=5122, normalized=True, count=4, type="VEC3",
+                                          min=[-32767, 0, -32767], max=[32767, 0, 32767]),
+                       pygltflib.Accessor(bufferView=1, componentType=5123, count=6, type="SCALAR", min=[0], max=[3]),
+                       pygltflib.Accessor(bufferView=2, componentType=5126, count=3, type="VEC3",
+                                          min=[0, 0, 0], max=[3, 1, 3])])
+        gl.set_binary_blob(blob)
+        gl.save_binary(str(d / "i.glb"))
+        # node scale 10 applies after the instance translation: instances at 0, (30,10,0), (0,0,30)
+        cases.append(("instanced + quantized", d / "i.glb", write_report(
+            d / "i.json", [d / "i.glb"], 1, 12, 6, [[-10, 0, -10], [40, 10, 40]], mode="grid", triangles=2), False, None, True))
+
+        wrong = 0
+        for name, file, report, watertight, thumb, expect_ok in cases:
+            args = argparse.Namespace(file=str(file), report=str(report), watertight=watertight,
+                                      thumb=str(thumb) if thumb else None)
+            try:
+                check_file(args)
+                ok, detail = True, "passed"
+            except CheckFailed as e:
+                ok, detail = False, f"failed: {e}"
+            right = ok == expect_ok
+            wrong += not right
+            print(f"{'ok  ' if right else 'BAD '} self-test {name}: {detail}")
+    print(f"self-test: {len(cases) - wrong} passed, {wrong} failed")
+    return 1 if wrong else 0
+
+
 def main() -> int:
+    if sys.argv[1:] == ["--self-test"]:
+        return self_test()
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("file", help="a .glb, .gltf or .obj written by verdant")
     parser.add_argument("--report", required=True, help="the JSON report written with --report")
