@@ -1,0 +1,262 @@
+#!/usr/bin/env bash
+# verdant end-to-end check: set up the checking tools, run the Rust tests, export sample terrains with the
+# CLI, and check every output three ways (verdant validate, trimesh/pyrender re-import + report cross-check,
+# Khronos glTF Validator). Exits non-zero on any failure.
+#
+#   bash scripts/check.sh               everything
+#   bash scripts/check.sh --setup-only  only install the tools (venv, npm, apt libs)
+#   bash scripts/check.sh --no-tests    skip `cargo test` (quick loop on the outputs)
+#
+# VERDANT_BIN=path/to/verdant uses that binary instead of building target/release/verdant.
+#
+# Everything it installs goes into git-ignored folders: .venv/ and scripts/node_modules/.
+set -euo pipefail
+
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+ROOT="$(pwd)"
+
+SETUP_ONLY=0
+RUN_TESTS=1
+for arg in "$@"; do
+  case "$arg" in
+    --setup-only) SETUP_ONLY=1 ;;
+    --no-tests) RUN_TESTS=0 ;;
+    -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
+    *) echo "check.sh: unknown argument '$arg' (try --help)" >&2; exit 2 ;;
+  esac
+done
+
+# Pinned checking tools. pyopengl is installed in a second step, after pyrender, because pyrender pins
+# PyOpenGL 3.1.0, which fails under EGL on these machines.
+PY_PKGS=(trimesh==5.2.0 pyrender==0.1.45 pygltflib==1.16.5 numpy==2.4.6 pillow==12.3.0 scipy==1.17.1 networkx==3.6.1)
+PY_PKGS_AFTER=(pyopengl==3.1.10)
+# libopengl0 / libgl1 give PyOpenGL the desktop GL library it loads first (else it falls back to GLES).
+APT_PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgl1)
+
+export PYOPENGL_PLATFORM=egl
+VENV="$ROOT/.venv"
+PY="$VENV/bin/python"
+OUT="$ROOT/out/check"
+SHARED="$ROOT/../shared"
+SCRIPT_START=$SECONDS
+
+section() { printf '\n========== %s ==========\n' "$*"; }
+elapsed() { echo "$(( SECONDS - $1 ))s"; }
+
+# ---------------------------------------------------------------------------------------------------------
+section "1. Set-up (apt libs, Python venv, npm gltf-validator)"
+setup_start=$SECONDS
+
+# apt: only when something is missing (a fresh CI machine may lack the EGL/Mesa libraries).
+missing_apt=()
+for pkg in "${APT_PKGS[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed'; then
+    missing_apt+=("$pkg")
+  fi
+done
+if ((${#missing_apt[@]})); then
+  echo "apt: installing ${missing_apt[*]}"
+  SUDO=()
+  if [ "$(id -u)" -ne 0 ]; then SUDO=(sudo); fi
+  "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -q
+  "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing_apt[@]}"
+else
+  echo "apt: ${APT_PKGS[*]} already installed"
+fi
+
+# Python venv: reinstall only when the pinned list changed (stamp file inside the venv).
+py_stamp="$VENV/.verdant-check-deps"
+py_want="${PY_PKGS[*]} | ${PY_PKGS_AFTER[*]}"
+if [ -x "$PY" ] && [ -f "$py_stamp" ] && [ "$(cat "$py_stamp")" = "$py_want" ]; then
+  echo "venv: up to date ($VENV)"
+else
+  t=$SECONDS
+  if [ ! -x "$PY" ]; then
+    echo "venv: creating $VENV"
+    python3 -m venv "$VENV"
+  fi
+  echo "pip: installing ${PY_PKGS[*]}"
+  "$PY" -m pip install -q --disable-pip-version-check "${PY_PKGS[@]}"
+  echo "pip: installing ${PY_PKGS_AFTER[*]} (after pyrender, which pins an older PyOpenGL)"
+  "$PY" -m pip install -q --disable-pip-version-check "${PY_PKGS_AFTER[@]}"
+  echo "(pip's note that pyrender requires PyOpenGL==3.1.0 is expected: 3.1.10 is the one that works with EGL)"
+  echo "$py_want" > "$py_stamp"
+  echo "venv: ready in $(elapsed "$t")"
+fi
+
+# npm: gltf-validator from the committed lock file; `npm ci` only when the lock changed.
+npm_stamp="$ROOT/scripts/node_modules/.verdant-check-lock"
+lock_sum="$(sha256sum "$ROOT/scripts/package-lock.json" | cut -d' ' -f1)"
+if [ -f "$npm_stamp" ] && [ "$(cat "$npm_stamp")" = "$lock_sum" ] \
+   && [ -f "$ROOT/scripts/node_modules/gltf-validator/package.json" ]; then
+  echo "npm: gltf-validator up to date (scripts/node_modules)"
+else
+  t=$SECONDS
+  echo "npm: npm ci in scripts/"
+  (cd "$ROOT/scripts" && npm ci --no-audit --no-fund --loglevel=error)
+  echo "$lock_sum" > "$npm_stamp"
+  echo "npm: ready in $(elapsed "$t")"
+fi
+
+# Smoke-test the tools, so a broken set-up fails here with a clear message rather than mid-check.
+"$PY" -c 'import trimesh, pygltflib, pyrender, OpenGL, numpy, PIL
+print(f"python tools: trimesh {trimesh.__version__}, pyrender {pyrender.__version__}, "
+      f"PyOpenGL {OpenGL.__version__}, numpy {numpy.__version__}")'
+node -e 'const v=require(process.argv[1]); console.log("node tools: gltf-validator " + v.version())' \
+  "$ROOT/scripts/node_modules/gltf-validator"
+echo "set-up took $(elapsed "$setup_start")"
+
+section "1b. Self-test of check_outputs.py (good samples pass, broken ones fail)"
+"$PY" scripts/check_outputs.py --self-test
+
+if ((SETUP_ONLY)); then exit 0; fi
+
+# ---------------------------------------------------------------------------------------------------------
+# Release for both: the tests then share compiled dependencies with the release build (one compile of
+# the dependency tree instead of two on 2 cores), and property tests and big maps run fast.
+if ((RUN_TESTS)); then
+  section "2. cargo test --release"
+  t=$SECONDS
+  cargo test --release
+  echo "cargo test took $(elapsed "$t")"
+else
+  section "2. cargo test (skipped: --no-tests)"
+fi
+
+# ---------------------------------------------------------------------------------------------------------
+section "3. Build and export samples into out/check/"
+if [ -n "${VERDANT_BIN:-}" ]; then
+  BIN="$VERDANT_BIN"
+  echo "using VERDANT_BIN=$BIN (no cargo build)"
+else
+  t=$SECONDS
+  cargo build --release
+  BIN="$ROOT/target/release/verdant"
+  echo "cargo build took $(elapsed "$t")"
+fi
+rm -rf "$OUT"
+mkdir -p "$OUT/thumbs"
+
+declare -A EXPORTED=() VALIDATED=() CHECKED=() KHRONOS=()
+FILES=()        # outputs to check, in order
+declare -A REPORT_OF=() WATERTIGHT=()
+PASSED=0
+FAILED=0
+pass() { PASSED=$((PASSED + 1)); }
+fail() { FAILED=$((FAILED + 1)); echo "!! $*" >&2; }
+
+# export NAME FILE [--watertight] -- CLI ARGS...: run the CLI, record the file for the checks below.
+export_sample() {
+  local name="$1" file="$2"; shift 2
+  local solid=0
+  if [ "$1" = "--watertight" ]; then solid=1; shift; fi
+  [ "$1" = "--" ] && shift
+  local t=$SECONDS
+  echo "\$ verdant $*"
+  local rc=0
+  "$BIN" "$@" || rc=$?
+  if [ "$rc" -eq 0 ]; then
+    if [ -f "$OUT/$file" ] && [ -f "$OUT/$name.json" ]; then
+      EXPORTED[$file]="ok $(elapsed "$t")"
+      pass
+    else
+      EXPORTED[$file]="FAIL"
+      fail "verdant exited 0 but did not write $OUT/$file and $OUT/$name.json"
+    fi
+  else
+    EXPORTED[$file]="FAIL"
+    fail "export of $file failed (verdant exited with $rc)"
+  fi
+  FILES+=("$file")
+  REPORT_OF[$file]="$OUT/$name.json"
+  WATERTIGHT[$file]=$solid
+}
+
+export_sample demo demo.glb -- \
+  terrain --demo -o out/check/demo.glb --report out/check/demo.json
+export_sample demo_chunks demo_chunks.gltf -- \
+  terrain --demo --max-error 2 --chunk 64 --skirt 5 -o out/check/demo_chunks.gltf --report out/check/demo_chunks.json
+export_sample demo_solid demo_solid.glb --watertight -- \
+  terrain --demo --base 20 -o out/check/demo_solid.glb --report out/check/demo_solid.json
+export_sample demo_grid demo_grid.obj -- \
+  terrain --demo --mode grid --grid-step 4 -o out/check/demo_grid.obj --report out/check/demo_grid.json
+FUJI="$SHARED/data/heightmaps/martini_fuji.png"
+if [ -f "$FUJI" ]; then
+  export_sample fuji fuji.glb -- \
+    terrain "$FUJI" --encoding terrain-rgb --cell-size 30 --max-error 5 -o out/check/fuji.glb --report out/check/fuji.json
+else
+  echo "skip: $FUJI not found (../shared missing?), no fuji.glb sample"
+fi
+for f in demo_chunks.gltf demo_grid.obj; do
+  companion="${f%.*}.$([ "${f##*.}" = gltf ] && echo bin || echo mtl)"
+  if [ "${EXPORTED[$f]%% *}" = ok ] && [ ! -f "$OUT/$companion" ]; then
+    EXPORTED[$f]="FAIL"; PASSED=$((PASSED - 1))
+    fail "$f was written without its companion $companion"
+  fi
+done
+
+# ---------------------------------------------------------------------------------------------------------
+section "4. verdant validate (re-import + invariants; --up-facing except for the solid)"
+for f in "${FILES[@]}"; do
+  if [ "${EXPORTED[$f]%% *}" != ok ]; then VALIDATED[$f]="-"; continue; fi
+  up=(--up-facing)
+  if [ "${WATERTIGHT[$f]}" = 1 ]; then up=(); fi  # walls and bottom of the solid face sideways/down
+  echo "\$ verdant validate out/check/$f ${up[*]}"
+  if "$BIN" validate "$OUT/$f" "${up[@]}"; then VALIDATED[$f]=ok; pass; else VALIDATED[$f]=FAIL; fail "verdant validate $f"; fi
+done
+
+# ---------------------------------------------------------------------------------------------------------
+section "5. check_outputs.py (trimesh/pygltflib re-import, report cross-check, thumbnails)"
+: > "$OUT/check_outputs.tsv"
+for f in "${FILES[@]}"; do
+  if [ "${EXPORTED[$f]%% *}" != ok ]; then CHECKED[$f]="-"; continue; fi
+  extra=()
+  if [ "${WATERTIGHT[$f]}" = 1 ]; then extra=(--watertight); fi
+  if "$PY" scripts/check_outputs.py "$OUT/$f" --report "${REPORT_OF[$f]}" "${extra[@]}" \
+       --thumb "$OUT/thumbs/${f%.*}.png" --summary-tsv "$OUT/check_outputs.tsv"; then
+    pass
+  else
+    fail "check_outputs.py $f"
+  fi
+done
+while IFS=$'\t' read -r name status tris verts; do
+  if [ "$status" = ok ]; then CHECKED[$name]="ok $tris tris $verts verts"; else CHECKED[$name]="FAIL"; fi
+done < "$OUT/check_outputs.tsv"
+
+# ---------------------------------------------------------------------------------------------------------
+section "6. Khronos glTF Validator (0 errors, 0 warnings; infos and hints allowed)"
+gltf_files=()
+for f in "${FILES[@]}"; do
+  case "$f" in
+    *.glb|*.gltf) if [ "${EXPORTED[$f]%% *}" = ok ]; then gltf_files+=("$OUT/$f"); else KHRONOS[$f]="-"; fi ;;
+    *) KHRONOS[$f]="n/a (obj)" ;;
+  esac
+done
+: > "$OUT/gltf_validate.tsv"
+if ((${#gltf_files[@]})); then
+  node scripts/gltf_validate.mjs --summary-tsv "$OUT/gltf_validate.tsv" "${gltf_files[@]}" || true
+  while IFS=$'\t' read -r name status counts; do
+    if [ "$status" = ok ]; then KHRONOS[$name]="ok E/W/I/H $counts"; pass
+    else KHRONOS[$name]="FAIL E/W/I/H $counts"; fail "gltf-validator $name"; fi
+  done < "$OUT/gltf_validate.tsv"
+  for f in "${gltf_files[@]}"; do
+    b="$(basename "$f")"
+    if [ -z "${KHRONOS[$b]:-}" ]; then KHRONOS[$b]="FAIL (no result)"; fail "gltf-validator gave no result for $b"; fi
+  done
+fi
+
+# ---------------------------------------------------------------------------------------------------------
+section "Summary"
+printf '%-18s | %-10s | %-16s | %-36s | %s\n' file export "verdant validate" "check_outputs" "gltf-validator"
+printf '%s\n' "-------------------+------------+------------------+--------------------------------------+---------------------"
+for f in "${FILES[@]}"; do
+  printf '%-18s | %-10s | %-16s | %-36s | %s\n' "$f" "${EXPORTED[$f]:--}" "${VALIDATED[$f]:--}" \
+    "${CHECKED[$f]:--}" "${KHRONOS[$f]:--}"
+done
+echo "thumbnails: out/check/thumbs/   total time: $(elapsed "$SCRIPT_START")"
+echo "outputs: $PASSED passed, $FAILED failed"
+if ((FAILED)); then
+  echo "check.sh: FAILED ($FAILED output checks failed; see the '!!' lines above)" >&2
+  exit 1
+fi
+echo "check.sh: all checks passed"

@@ -1,0 +1,565 @@
+#!/usr/bin/env python3
+"""Re-import a verdant output (glb / gltf / obj) with independent loaders and cross-check it against the
+JSON report the CLI wrote beside it; optionally check it is a closed solid and render a thumbnail.
+
+  check_outputs.py FILE --report REPORT.json [--watertight] [--thumb THUMB.png] [--summary-tsv T.tsv]
+  check_outputs.py --self-test     check the checker on samples it makes itself (good and broken ones)
+
+Loaders: trimesh (force='scene', process=False) for every format; for glTF also pygltflib with our own
+accessor decoding, because trimesh 5.x ignores EXT_mesh_gpu_instancing / MSFT_lod and does not decode
+normalized accessors. The two must agree unless the file uses one of those features, in which case the
+pygltflib reading is the one checked. Exit 0 when every check passes, 1 with a message when one fails,
+2 on bad usage.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+import numpy as np  # noqa: E402
+
+# pyrender 0.1.45 still uses np.infty, which numpy 2 removed.
+if not hasattr(np, "infty"):
+    np.infty = np.inf  # type: ignore[attr-defined]
+
+import trimesh  # noqa: E402
+
+BOUNDS_REL_TOL = 1e-4
+THUMB_SIZE = (512, 384)
+BACKGROUND = (0.93, 0.95, 0.98)
+REQUIRED_REPORT_KEYS = [
+    "input", "width", "height", "encoding", "mode", "max_error_requested", "max_error", "rms_error",
+    "vertices", "triangles", "seconds", "output",
+]
+REQUIRED_OUTPUT_KEYS = ["files", "meshes", "vertices", "triangles", "bounds"]
+
+
+class CheckFailed(Exception):
+    """One check did not hold; the message says which and with what numbers."""
+
+
+@dataclass
+class Geometry:
+    """World-space triangles of everything drawn by a file's default scene."""
+    positions: list[np.ndarray] = field(default_factory=list)  # (n, 3) float64 per drawn primitive
+    faces: list[np.ndarray] = field(default_factory=list)      # (m, 3) int64 per drawn primitive
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def vertex_count(self) -> int:
+        return int(sum(len(p) for p in self.positions))
+
+    @property
+    def face_count(self) -> int:
+        return int(sum(len(f) for f in self.faces))
+
+    def bounds(self) -> np.ndarray:
+        if not self.positions:
+            raise CheckFailed("the file draws no triangles")
+        stacked = np.concatenate(self.positions)
+        return np.array([stacked.min(axis=0), stacked.max(axis=0)])
+
+    def merged(self) -> trimesh.Trimesh:
+        offsets = np.cumsum([0] + [len(p) for p in self.positions[:-1]])
+        faces = np.concatenate([f + o for f, o in zip(self.faces, offsets)])
+        return trimesh.Trimesh(np.concatenate(self.positions), faces, process=False)
+
+
+# ----------------------------------------------------------------------------------------------- trimesh
+def load_with_trimesh(path: Path) -> Geometry:
+    scene = trimesh.load(str(path), force="scene", process=False)
+    geom = Geometry()
+    for node in scene.graph.nodes_geometry:
+        transform, geometry_name = scene.graph[node]
+        mesh = scene.geometry[geometry_name]
+        if not isinstance(mesh, trimesh.Trimesh):
+            geom.notes.append(f"trimesh: skipped non-triangle geometry {geometry_name!r}")
+            continue
+        positions = trimesh.transform_points(np.asarray(mesh.vertices, dtype=np.float64), transform)
+        geom.positions.append(positions)
+        geom.faces.append(np.asarray(mesh.faces, dtype=np.int64))
+    return geom
+
+
+# --------------------------------------------------------------------------------------------- pygltflib
+COMPONENT_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
+TYPE_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+UNDECODED_BY_TRIMESH = {"EXT_mesh_gpu_instancing", "MSFT_lod", "KHR_mesh_quantization"}
+
+
+def gltf_buffers(gltf, path: Path) -> list[bytes]:
+    import base64
+
+    out = []
+    for i, buf in enumerate(gltf.buffers):
+        if buf.uri is None:
+            blob = gltf.binary_blob()
+            if blob is None:
+                raise CheckFailed(f"buffer {i} has no uri and the file has no GLB binary chunk")
+            out.append(bytes(blob))
+        elif buf.uri.startswith("data:"):
+            out.append(base64.b64decode(buf.uri.split(",", 1)[1]))
+        else:
+            from urllib.parse import unquote
+
+            sibling = path.parent / unquote(buf.uri)
+            if not sibling.is_file():
+                raise CheckFailed(f"buffer {i} refers to {buf.uri!r}, but {sibling} does not exist")
+            out.append(sibling.read_bytes())
+        if len(out[-1]) < buf.byteLength:
+            raise CheckFailed(f"buffer {i} is {len(out[-1])} bytes, shorter than its byteLength {buf.byteLength}")
+    return out
+
+
+def read_accessor(gltf, buffers: list[bytes], index: int) -> np.ndarray:
+    """Decode accessor `index` to float64 (or int64 for integer data), applying stride, sparse and
+    normalization; returns shape (count, width)."""
+    acc = gltf.accessors[index]
+    dtype = np.dtype(COMPONENT_DTYPES[acc.componentType])
+    width = TYPE_WIDTHS[acc.type]
+    if acc.bufferView is None:
+        data = np.zeros((acc.count, width), dtype=dtype)
+    else:
+        view = gltf.bufferViews[acc.bufferView]
+        start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+        stride = view.byteStride or dtype.itemsize * width
+        needed = start + stride * (acc.count - 1) + dtype.itemsize * width if acc.count else start
+        if needed > len(buffers[view.buffer]):
+            raise CheckFailed(f"accessor {index} reads past the end of buffer {view.buffer}")
+        data = np.ndarray((acc.count, width), dtype=dtype, buffer=buffers[view.buffer], offset=start,
+                          strides=(stride, dtype.itemsize)).copy()
+    if acc.sparse is not None and acc.sparse.count:
+        sparse = acc.sparse
+        idx_view = gltf.bufferViews[sparse.indices.bufferView]
+        idx = np.frombuffer(buffers[idx_view.buffer], dtype=COMPONENT_DTYPES[sparse.indices.componentType],
+                            count=sparse.count,
+                            offset=(idx_view.byteOffset or 0) + (sparse.indices.byteOffset or 0))
+        val_view = gltf.bufferViews[sparse.values.bufferView]
+        vals = np.frombuffer(buffers[val_view.buffer], dtype=dtype, count=sparse.count * width,
+                             offset=(val_view.byteOffset or 0) + (sparse.values.byteOffset or 0))
+        data[idx.astype(np.int64)] = vals.reshape(-1, width)
+    if dtype.kind == "f":
+        return data.astype(np.float64)
+    if acc.normalized:
+        info = np.iinfo(dtype)
+        return np.maximum(data.astype(np.float64) / info.max, -1.0)
+    return data.astype(np.int64) if acc.type == "SCALAR" else data.astype(np.float64)
+
+
+def quat_to_matrix(q) -> np.ndarray:
+    x, y, z, w = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def trs_matrix(t=None, r=None, s=None) -> np.ndarray:
+    m = np.eye(4)
+    rot = quat_to_matrix(r) if r is not None else np.eye(3)
+    scale = np.asarray(s, dtype=np.float64) if s is not None else np.ones(3)
+    m[:3, :3] = rot * scale[None, :]
+    if t is not None:
+        m[:3, 3] = t
+    return m
+
+
+def node_matrix(node) -> np.ndarray:
+    if node.matrix is not None and list(node.matrix) != [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]:
+        return np.asarray(node.matrix, dtype=np.float64).reshape(4, 4).T  # glTF stores column-major
+    return trs_matrix(node.translation, node.rotation, node.scale)
+
+
+def triangles_of(mode: int, indices: np.ndarray) -> np.ndarray | None:
+    if mode == 4:
+        if len(indices) % 3:
+            raise CheckFailed(f"a TRIANGLES primitive has {len(indices)} indices, not a multiple of 3")
+        return indices.reshape(-1, 3)
+    if mode == 5:  # strip: alternate winding
+        tris = [(indices[i], indices[i + 1], indices[i + 2]) if i % 2 == 0 else
+                (indices[i + 1], indices[i], indices[i + 2]) for i in range(len(indices) - 2)]
+        return np.array(tris, dtype=np.int64).reshape(-1, 3)
+    if mode == 6:  # fan
+        tris = [(indices[0], indices[i], indices[i + 1]) for i in range(1, len(indices) - 1)]
+        return np.array(tris, dtype=np.int64).reshape(-1, 3)
+    return None  # points / lines: not triangles
+
+
+def load_with_pygltflib(path: Path) -> tuple[Geometry, set[str], object]:
+    import pygltflib
+
+    gltf = pygltflib.GLTF2().load(str(path))
+    buffers = gltf_buffers(gltf, path)
+    used = set(gltf.extensionsUsed or [])
+    geom = Geometry()
+    if not gltf.scenes:
+        raise CheckFailed("the glTF has no scenes, so nothing is drawn")
+    scene = gltf.scenes[gltf.scene if gltf.scene is not None else 0]
+
+    def instance_matrices(node) -> list[np.ndarray]:
+        ext = (node.extensions or {}).get("EXT_mesh_gpu_instancing")
+        if not ext:
+            return [np.eye(4)]
+        attrs = ext.get("attributes", {})
+        arrays = {k: read_accessor(gltf, buffers, v) for k, v in attrs.items()}
+        count = len(next(iter(arrays.values()))) if arrays else 0
+        return [trs_matrix(arrays["TRANSLATION"][i] if "TRANSLATION" in arrays else None,
+                           arrays["ROTATION"][i] if "ROTATION" in arrays else None,
+                           arrays["SCALE"][i] if "SCALE" in arrays else None) for i in range(count)]
+
+    def visit(node_index: int, parent: np.ndarray, depth: int) -> None:
+        if depth > 256:
+            raise CheckFailed("node hierarchy deeper than 256 (a cycle?)")
+        node = gltf.nodes[node_index]
+        world = parent @ node_matrix(node)
+        if node.mesh is not None:
+            for prim_index, prim in enumerate(gltf.meshes[node.mesh].primitives):
+                if prim.attributes.POSITION is None:
+                    raise CheckFailed(f"mesh {node.mesh} primitive {prim_index} has no POSITION")
+                local = read_accessor(gltf, buffers, prim.attributes.POSITION)
+                count = len(local)
+                indices = (read_accessor(gltf, buffers, prim.indices).reshape(-1).astype(np.int64)
+                           if prim.indices is not None else np.arange(count, dtype=np.int64))
+                if len(indices) and (indices.min() < 0 or indices.max() >= count):
+                    raise CheckFailed(f"mesh {node.mesh} primitive {prim_index}: index out of range "
+                                      f"(max {indices.max()}, {count} vertices)")
+                faces = triangles_of(prim.mode if prim.mode is not None else 4, indices)
+                if faces is None:
+                    geom.notes.append(f"mesh {node.mesh} primitive {prim_index}: mode {prim.mode} skipped")
+                    continue
+                homogeneous = np.hstack([local, np.ones((count, 1))])
+                for inst in instance_matrices(node):
+                    geom.positions.append((homogeneous @ (world @ inst).T)[:, :3])
+                    geom.faces.append(faces)
+        for child in node.children or []:
+            visit(child, world, depth + 1)
+
+    for root in scene.nodes or []:
+        visit(root, np.eye(4), 0)
+    return geom, used, gltf
+
+
+# ------------------------------------------------------------------------------------------------- checks
+def check_close(name: str, got, want, scale: float) -> None:
+    got = np.asarray(got, dtype=np.float64)
+    want = np.asarray(want, dtype=np.float64)
+    tol = BOUNDS_REL_TOL * max(scale, 1e-9)
+    if got.shape != want.shape or not np.all(np.abs(got - want) <= tol):
+        raise CheckFailed(f"{name}: file has {np.round(got, 6).tolist()}, report says "
+                          f"{np.round(want, 6).tolist()} (tolerance {tol:.3g})")
+
+
+def obj_vertex_count(path: Path) -> int:
+    with open(path, "rb") as f:
+        return sum(1 for line in f if line.startswith(b"v ") or line.startswith(b"v\t"))
+
+
+def check_report(report: dict, file_path: Path) -> list[str]:
+    missing = [k for k in REQUIRED_REPORT_KEYS if k not in report]
+    if missing:
+        raise CheckFailed(f"report lacks keys {missing}")
+    out = report["output"]
+    missing = [k for k in REQUIRED_OUTPUT_KEYS if k not in out]
+    if missing:
+        raise CheckFailed(f"report 'output' lacks keys {missing}")
+    facts = []
+    if not (report["width"] > 0 and report["height"] > 0):
+        raise CheckFailed(f"report size {report['width']}x{report['height']} is not positive")
+    if not report["triangles"] > 0 or not report["vertices"] > 0:
+        raise CheckFailed(f"report has {report['triangles']} triangles, {report['vertices']} vertices")
+    if out["triangles"] < report["triangles"]:
+        raise CheckFailed(f"output has {out['triangles']} triangles, fewer than the surface's {report['triangles']}")
+    for key in ("decode", "mesh", "export", "total"):
+        value = report["seconds"].get(key)
+        if not isinstance(value, (int, float)) or value < 0 or not math.isfinite(value):
+            raise CheckFailed(f"report seconds.{key} = {value!r} is not a non-negative number")
+    max_err, rms = report["max_error"], report["rms_error"]
+    if max_err is None or rms is None or not (0 <= rms <= max_err + 1e-9) or not math.isfinite(max_err):
+        raise CheckFailed(f"report errors look wrong: rms_error {rms}, max_error {max_err}")
+    requested = report["max_error_requested"]
+    if report["mode"] == "tin" and not report.get("hit_triangle_limit", False):
+        if requested is None:
+            raise CheckFailed("tin mode report has no max_error_requested")
+        if max_err > requested * (1 + 1e-9) + 1e-12:
+            raise CheckFailed(f"max_error {max_err} exceeds the requested {requested}")
+        facts.append(f"max_error {max_err:.4g} <= {requested:g}")
+    else:
+        facts.append(f"max_error {max_err:.4g} ({report['mode']}"
+                     f"{', hit triangle limit' if report.get('hit_triangle_limit') else ''})")
+    # the checked file must be one of the files the report lists, and all of those must exist
+    listed = [Path(p) for p in out["files"]]
+    if not any(p.name == file_path.name for p in listed):
+        raise CheckFailed(f"report output.files {out['files']} does not list {file_path.name}")
+    for p in listed:
+        if not (p.exists() or (file_path.parent / p.name).exists()):
+            raise CheckFailed(f"report lists {p}, which does not exist")
+    return facts
+
+
+def render_thumbnail(mesh: trimesh.Trimesh, bounds: np.ndarray, thumb: Path) -> float:
+    """Render `mesh` from above at an angle; return the fraction of pixels that are not background."""
+    import pyrender
+    from PIL import Image
+
+    lo, hi = bounds
+    center = (lo + hi) / 2
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6)
+    # colour by height: green lowlands to pale rock, so relief reads in the thumbnail
+    t = (mesh.vertices[:, 1] - lo[1]) / max(hi[1] - lo[1], 1e-9)
+    low, high = np.array([70, 120, 60]), np.array([215, 205, 190])
+    colors = (low[None, :] * (1 - t[:, None]) + high[None, :] * t[:, None]).astype(np.uint8)
+    mesh = mesh.copy()
+    mesh.visual = trimesh.visual.ColorVisuals(mesh, vertex_colors=colors)
+    scene = pyrender.Scene(bg_color=[*BACKGROUND, 1.0], ambient_light=[0.2, 0.2, 0.2])
+    scene.add(pyrender.Mesh.from_trimesh(mesh, smooth=False))
+
+    def look_from(direction, distance):
+        z = np.asarray(direction, dtype=np.float64)
+        z /= np.linalg.norm(z)
+        x = np.cross([0.0, 1.0, 0.0], z)
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)
+        pose = np.eye(4)
+        pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = x, y, z, center + z * distance
+        return pose
+
+    yfov = math.radians(45)
+    distance = radius / math.sin(yfov / 2) * 0.9  # terrains are flat: the bounding sphere is loose
+    camera = pyrender.PerspectiveCamera(yfov=yfov, aspectRatio=THUMB_SIZE[0] / THUMB_SIZE[1],
+                                        znear=max(distance - radius * 1.5, distance * 1e-3),
+                                        zfar=distance + radius * 1.5)
+    scene.add(camera, pose=look_from([0.55, 1.0, 0.85], distance))
+    scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=2.2), pose=look_from([-0.5, 1.0, 0.35], 1))
+    renderer = pyrender.OffscreenRenderer(*THUMB_SIZE)
+    try:
+        color, _ = renderer.render(scene)
+    finally:
+        renderer.delete()
+    thumb.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(color).save(thumb)
+    pixels = color.reshape(-1, 3).astype(np.int16)
+    if np.all(pixels == pixels[0]):
+        raise CheckFailed(f"thumbnail {thumb} is a single colour {pixels[0].tolist()}")
+    background = np.round(np.array(BACKGROUND) * 255).astype(np.int16)
+    coverage = float(np.mean(np.abs(pixels - background).max(axis=1) > 3))
+    if coverage < 0.01:
+        raise CheckFailed(f"thumbnail {thumb} shows almost nothing ({coverage:.2%} of pixels not background)")
+    return coverage
+
+
+def check_file(args) -> tuple[str, int, int]:
+    path = Path(args.file)
+    if not path.is_file():
+        raise CheckFailed(f"{path} does not exist")
+    report = json.loads(Path(args.report).read_text())
+    facts = check_report(report, path)
+    out = report["output"]
+    suffix = path.suffix.lower()
+
+    tm_geom = load_with_trimesh(path)
+    if suffix in (".glb", ".gltf"):
+        geom, used, gltf = load_with_pygltflib(path)
+        special = used & UNDECODED_BY_TRIMESH
+        if special:
+            facts.append(f"uses {sorted(special)}: pygltflib reading checked, trimesh's not")
+        elif (tm_geom.face_count, tm_geom.vertex_count) != (geom.face_count, geom.vertex_count):
+            raise CheckFailed(f"loaders disagree: trimesh {tm_geom.face_count} faces / {tm_geom.vertex_count} "
+                              f"vertices, pygltflib {geom.face_count} / {geom.vertex_count}")
+        elif tm_geom.positions:
+            check_close("trimesh vs pygltflib bounds", tm_geom.bounds(), geom.bounds(),
+                        float(np.abs(geom.bounds()).max()))
+        vertex_count = geom.vertex_count
+        mesh_counts = {len(gltf.meshes)}
+    elif suffix == ".obj":
+        geom = tm_geom
+        vertex_count = obj_vertex_count(path)  # trimesh splits vertices by uv/normal on OBJ load
+        mesh_counts = None
+    else:
+        raise CheckFailed(f"unsupported file type {suffix!r} (expected .glb, .gltf or .obj)")
+
+    if geom.face_count != out["triangles"]:
+        raise CheckFailed(f"file has {geom.face_count} triangles, report output.triangles says {out['triangles']}")
+    if vertex_count != out["vertices"]:
+        raise CheckFailed(f"file has {vertex_count} vertices, report output.vertices says {out['vertices']}")
+    if mesh_counts is not None and out["meshes"] not in mesh_counts and out["meshes"] != len(geom.positions):
+        raise CheckFailed(f"file has {sorted(mesh_counts)[0]} meshes ({len(geom.positions)} drawn primitives), "
+                          f"report output.meshes says {out['meshes']}")
+    for positions in geom.positions:
+        if not np.all(np.isfinite(positions)):
+            raise CheckFailed("some vertex positions are NaN or infinite")
+    bounds = geom.bounds()
+    want = np.array([out["bounds"]["min"], out["bounds"]["max"]], dtype=np.float64)
+    scale = max(float(np.abs(want).max()), float(np.max(want[1] - want[0])))
+    check_close("bounds", bounds, want, scale)
+
+    merged = geom.merged()
+    if args.watertight:
+        extent = max(float(np.max(bounds[1] - bounds[0])), 1e-9)
+        digits = max(0, math.ceil(-math.log10(extent * 1e-7)))
+        merged.merge_vertices(digits_vertex=digits)
+        if not merged.is_watertight:
+            edges = trimesh.grouping.group_rows(merged.edges_sorted, require_count=1)
+            raise CheckFailed(f"not watertight after merging by position: {len(edges)} open edges")
+        if not merged.is_winding_consistent:
+            raise CheckFailed("watertight but winding is inconsistent")
+        volume = float(merged.volume)
+        if not volume > 0:
+            raise CheckFailed(f"watertight but volume {volume:.6g} is not positive (faces point inward?)")
+        facts.append(f"watertight, volume {volume:.6g}")
+    if args.thumb:
+        coverage = render_thumbnail(merged, bounds, Path(args.thumb))
+        facts.append(f"thumb {args.thumb} ({coverage:.0%} covered)")
+    facts.extend(geom.notes)
+    summary = (f"{geom.face_count} tris, {vertex_count} verts, {out['meshes']} meshes, bounds "
+               f"{np.round(bounds[0], 3).tolist()}..{np.round(bounds[1], 3).tolist()}; " + "; ".join(facts))
+    return summary, geom.face_count, vertex_count
+
+
+# --------------------------------------------------------------------------------------------- self-test
+def self_test() -> int:
+    """Make small terrains in every format (plus a box, and an instanced, quantized glb that trimesh
+    cannot read right), write reports for them, and check that good files pass and broken ones fail."""
+    import tempfile
+    import pygltflib
+
+    def grid(n=17, cell=2.0, x0=0, z0=0) -> trimesh.Trimesh:
+        i, j = np.meshgrid(np.arange(n) + x0, np.arange(n) + z0, indexing="xy")
+        y = 10 * np.sin(i * cell / 9) * np.cos(j * cell / 7)
+        v = np.stack([(i * cell).ravel(), y.ravel(), (j * cell).ravel()], 1)
+        a = (np.arange(n - 1)[None, :] + n * np.arange(n - 1)[:, None]).ravel()
+        f = np.concatenate([np.stack([a, a + n, a + 1], 1), np.stack([a + 1, a + n, a + n + 1], 1)])
+        return trimesh.Trimesh(v, f, process=False)  # counter-clockwise seen from +Y
+
+    def write_report(path: Path, files, meshes, verts, tris, bounds, mode="tin", **extra) -> Path:
+        report = dict(input="self-test", width=17, height=17, encoding="gray16", mode=mode,
+                      max_error_requested=1.0, max_error=0.5, rms_error=0.1, vertices=17 * 17, triangles=12,
+                      seconds=dict(decode=0.0, mesh=0.0, export=0.0, total=0.0),
+                      output=dict(files=[str(f) for f in files], meshes=meshes, vertices=verts, triangles=tris,
+                                  bounds=dict(min=list(map(float, bounds[0])), max=list(map(float, bounds[1])))))
+        report.update(extra)
+        path.write_text(json.dumps(report))
+        return path
+
+    cases = []  # (name, file, report, watertight, thumb, expect_ok)
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        t = grid()
+        t.export(d / "t.glb")
+        good = write_report(d / "t.json", [d / "t.glb"], 1, len(t.vertices), len(t.faces), t.bounds)
+        cases.append(("glb", d / "t.glb", good, False, d / "t.png", True))
+        shifted = t.bounds.copy()
+        shifted[1][1] += 0.5
+        cases.append(("glb, wrong bounds", d / "t.glb", write_report(
+            d / "t_bad.json", [d / "t.glb"], 1, len(t.vertices), len(t.faces), shifted), False, None, False))
+        cases.append(("glb, wrong count", d / "t.glb", write_report(
+            d / "t_cnt.json", [d / "t.glb"], 1, len(t.vertices), len(t.faces) + 1, t.bounds), False, None, False))
+        cases.append(("glb, error over request", d / "t.glb", write_report(
+            d / "t_err.json", [d / "t.glb"], 1, len(t.vertices), len(t.faces), t.bounds, max_error=1.5),
+            False, None, False))
+        cases.append(("open surface as solid", d / "t.glb", good, True, None, False))
+        # chunks as .gltf + external .bin
+        scene = trimesh.Scene()
+        for k, (x0, z0) in enumerate([(0, 0), (8, 0), (0, 8), (8, 8)]):
+            scene.add_geometry(grid(9, 2.0, x0, z0), geom_name=f"chunk{k}")
+        for name, data in scene.export(file_type="gltf").items():
+            (d / ("c.gltf" if name.endswith(".gltf") else name)).write_bytes(data)
+        nv = sum(len(g.vertices) for g in scene.geometry.values())
+        nf = sum(len(g.faces) for g in scene.geometry.values())
+        cases.append(("gltf + bin", d / "c.gltf", write_report(
+            d / "c.json", [d / "c.gltf"], 4, nv, nf, scene.bounds), False, None, True))
+        # closed box
+        box = trimesh.creation.box(extents=[32, 10, 32])
+        box.export(d / "b.glb")
+        cases.append(("watertight box", d / "b.glb", write_report(
+            d / "b.json", [d / "b.glb"], 1, len(box.vertices), len(box.faces), box.bounds), True, None, True))
+        box.invert()
+        box.export(d / "inv.glb")
+        cases.append(("inside-out box", d / "inv.glb", write_report(
+            d / "inv.json", [d / "inv.glb"], 1, len(box.vertices), len(box.faces), box.bounds), True, None, False))
+        # obj
+        t.export(d / "g.obj")
+        cases.append(("obj", d / "g.obj", write_report(
+            d / "g.json", [d / "g.obj"], 1, len(t.vertices), len(t.faces), t.bounds, mode="grid",
+            max_error=2.0), False, d / "g.png", True))
+        # quad as normalized int16 positions (KHR_mesh_quantization), drawn 3 times by EXT_mesh_gpu_instancing
+        q = np.array([[-1, 0, -1, 0], [1, 0, -1, 0], [1, 0, 1, 0], [-1, 0, 1, 0]]) * 32767
+        idx = np.array([0, 3, 1, 1, 3, 2], dtype=np.uint16)
+        tr = np.array([[0, 0, 0], [3, 1, 0], [0, 0, 3]], dtype=np.float32)
+        blob = q.astype(np.int16).tobytes() + idx.tobytes() + b"\0" * 4 + tr.tobytes()
+        gl = pygltflib.GLTF2(
+            asset=pygltflib.Asset(version="2.0"), scene=0, scenes=[pygltflib.Scene(nodes=[0])],
+            extensionsUsed=["EXT_mesh_gpu_instancing", "KHR_mesh_quantization"],
+            extensionsRequired=["KHR_mesh_quantization"],
+            nodes=[pygltflib.Node(mesh=0, scale=[10, 10, 10], extensions={
+                "EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": 2}}})],
+            meshes=[pygltflib.Mesh(primitives=[pygltflib.Primitive(
+                attributes=pygltflib.Attributes(POSITION=0), indices=1)])],
+            buffers=[pygltflib.Buffer(byteLength=len(blob))],
+            bufferViews=[pygltflib.BufferView(buffer=0, byteOffset=0, byteLength=32, byteStride=8, target=34962),
+                         pygltflib.BufferView(buffer=0, byteOffset=32, byteLength=12, target=34963),
+                         pygltflib.BufferView(buffer=0, byteOffset=48, byteLength=36)],
+            accessors=[pygltflib.Accessor(bufferView=0, componentType=5122, normalized=True, count=4, type="VEC3",
+                                          min=[-32767, 0, -32767], max=[32767, 0, 32767]),
+                       pygltflib.Accessor(bufferView=1, componentType=5123, count=6, type="SCALAR", min=[0], max=[3]),
+                       pygltflib.Accessor(bufferView=2, componentType=5126, count=3, type="VEC3",
+                                          min=[0, 0, 0], max=[3, 1, 3])])
+        gl.set_binary_blob(blob)
+        gl.save_binary(str(d / "i.glb"))
+        # node scale 10 applies after the instance translation: instances at 0, (30,10,0), (0,0,30)
+        cases.append(("instanced + quantized", d / "i.glb", write_report(
+            d / "i.json", [d / "i.glb"], 1, 12, 6, [[-10, 0, -10], [40, 10, 40]], mode="grid", triangles=2), False, None, True))
+
+        wrong = 0
+        for name, file, report, watertight, thumb, expect_ok in cases:
+            args = argparse.Namespace(file=str(file), report=str(report), watertight=watertight,
+                                      thumb=str(thumb) if thumb else None)
+            try:
+                check_file(args)
+                ok, detail = True, "passed"
+            except CheckFailed as e:
+                ok, detail = False, f"failed: {e}"
+            right = ok == expect_ok
+            wrong += not right
+            print(f"{'ok  ' if right else 'BAD '} self-test {name}: {detail}")
+    print(f"self-test: {len(cases) - wrong} passed, {wrong} failed")
+    return 1 if wrong else 0
+
+
+def main() -> int:
+    if sys.argv[1:] == ["--self-test"]:
+        return self_test()
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("file", help="a .glb, .gltf or .obj written by verdant")
+    parser.add_argument("--report", required=True, help="the JSON report written with --report")
+    parser.add_argument("--watertight", action="store_true", help="require a closed solid of positive volume")
+    parser.add_argument("--thumb", help="render a 512x384 thumbnail PNG here and check it is not empty")
+    parser.add_argument("--summary-tsv", help="append 'file<TAB>status<TAB>tris<TAB>verts' to this file")
+    args = parser.parse_args()
+    name = Path(args.file).name
+    tris = verts = "-"
+    try:
+        summary, tris, verts = check_file(args)
+        status, code = "ok", 0
+        print(f"OK    {name}: {summary}")
+    except CheckFailed as e:
+        status, code = "FAIL", 1
+        print(f"FAIL  {name}: {e}", file=sys.stderr)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        status, code = "FAIL", 1
+        print(f"FAIL  {name}: could not read/check ({type(e).__name__}: {e})", file=sys.stderr)
+    if args.summary_tsv:
+        with open(args.summary_tsv, "a") as f:
+            f.write(f"{name}\t{status}\t{tris}\t{verts}\n")
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
