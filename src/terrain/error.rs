@@ -30,7 +30,7 @@ pub enum TerrainError {
     ZeroArea { width: usize, height: usize },
     #[error(
         "heightfield of {width}×{height} samples is too large: at most {max} samples per side are \
-         supported; split the map into tiles"
+         supported, and 2^32 in all; split the map into tiles"
     )]
     TooLarge { width: usize, height: usize, max: usize },
     #[error("heightfield claims {width}×{height} samples but holds {len} heights")]
@@ -54,7 +54,8 @@ pub(crate) fn check_heightfield(hf: &Heightfield) -> Result<(), TerrainError> {
     if width < 2 || height < 2 {
         return Err(TerrainError::ZeroArea { width, height });
     }
-    if width > MAX_SIDE_SAMPLES || height > MAX_SIDE_SAMPLES {
+    // Sample indices are stored as u32 by the TIN mesher.
+    if width > MAX_SIDE_SAMPLES || height > MAX_SIDE_SAMPLES || width.saturating_mul(height) > u32::MAX as usize {
         return Err(TerrainError::TooLarge { width, height, max: MAX_SIDE_SAMPLES });
     }
     if width.checked_mul(height) != Some(hf.heights.len()) {

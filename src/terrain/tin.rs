@@ -44,125 +44,126 @@ pub struct TinResult {
     pub hit_triangle_limit: bool,
 }
 
-/// No candidate / not in the heap.
+/// Not in the heap.
 const NONE: u32 = u32::MAX;
 
-/// The worst-approximated sample of one face.
+/// A face whose candidate is worse than the bound: the heap's element, with its sort key inline so
+/// sifting never chases a pointer.
 #[derive(Debug, Clone, Copy)]
-struct Candidate {
-    /// Vertical error at the sample in metres; 0 when the face has no sample off its plane.
+struct Entry {
+    /// Vertical error at the candidate sample, metres.
     err: f64,
-    /// Sample (column, row); `i == NONE` when there is no candidate.
-    i: u32,
-    j: u32,
-    /// One of the face's vertices: a walk start next to the candidate when inserting it.
+    /// Candidate sample, row-major index.
+    sample: u32,
+    face: u32,
+}
+
+/// Heap order: larger error first; ties go to the lower sample index, then the lower face index, so
+/// the output depends on nothing but the input.
+#[inline]
+fn before(a: &Entry, b: &Entry) -> bool {
+    if a.err != b.err {
+        return a.err > b.err;
+    }
+    (a.sample, a.face) < (b.sample, b.face)
+}
+
+/// Max-heap of the faces whose error exceeds the bound, with each face's heap slot recorded so its key
+/// can be changed or removed in place: no stale entries, and faces already within the bound cost
+/// nothing, so the heap stays far smaller than the triangulation.
+#[derive(Default)]
+struct FaceHeap {
+    heap: Vec<Entry>,
+    /// Per face index: its position in `heap` (or NONE) and a vertex of it to start locating from.
+    faces: Vec<FaceSlot>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct FaceSlot {
+    pos: u32,
     hint: u32,
 }
 
-const NO_CANDIDATE: Candidate = Candidate { err: 0.0, i: NONE, j: NONE, hint: 0 };
-
-/// Max-heap of face indices ordered by candidate error, with each face's heap slot recorded so a
-/// face's key can be changed or removed in place (no lazy deletion, so the heap never outgrows the
-/// number of faces).
-struct FaceHeap {
-    heap: Vec<u32>,
-    /// Position of each face in `heap`, or NONE.
-    slot: Vec<u32>,
-}
-
-/// Heap order: larger error first; ties go to the lower sample index (row-major), then the lower face
-/// index, so the output never depends on anything but the input.
-#[inline]
-fn before(c: &[Candidate], a: u32, b: u32, width: u64) -> bool {
-    let (x, y) = (&c[a as usize], &c[b as usize]);
-    if x.err != y.err {
-        return x.err > y.err;
-    }
-    let kx = x.j as u64 * width + x.i as u64;
-    let ky = y.j as u64 * width + y.i as u64;
-    if kx != ky {
-        return kx < ky;
-    }
-    a < b
-}
-
 impl FaceHeap {
-    fn peek(&self) -> Option<u32> {
+    fn peek(&self) -> Option<Entry> {
         self.heap.first().copied()
     }
 
-    /// Inserts, moves or removes `face` after its candidate changed.
-    fn update(&mut self, c: &[Candidate], face: u32, width: u64) {
-        if self.slot.len() <= face as usize {
-            self.slot.resize(face as usize + 1, NONE);
+    /// Puts `face` in the heap with `entry`, moves it, or (entry = None) takes it out.
+    fn set(&mut self, face: u32, hint: u32, entry: Option<Entry>) {
+        let f = face as usize;
+        if self.faces.len() <= f {
+            self.faces.resize(f + 1, FaceSlot { pos: NONE, hint: 0 });
         }
-        let pos = self.slot[face as usize];
-        let has = c[face as usize].i != NONE;
-        match (pos != NONE, has) {
-            (false, false) => {}
-            (false, true) => {
-                self.heap.push(face);
-                let p = self.heap.len() - 1;
-                self.slot[face as usize] = p as u32;
-                self.sift_up(c, p, width);
+        self.faces[f].hint = hint;
+        let pos = self.faces[f].pos;
+        match (pos != NONE, entry) {
+            (false, None) => {}
+            (false, Some(e)) => {
+                self.heap.push(e);
+                self.sift_up(self.heap.len() - 1);
             }
-            (true, false) => self.remove_at(c, pos as usize, width),
-            (true, true) => {
-                let p = self.sift_up(c, pos as usize, width);
-                self.sift_down(c, p, width);
+            (true, None) => self.remove_at(pos as usize),
+            (true, Some(e)) => {
+                self.heap[pos as usize] = e;
+                let p = self.sift_up(pos as usize);
+                self.sift_down(p);
             }
         }
     }
 
-    fn remove_at(&mut self, c: &[Candidate], p: usize, width: u64) {
-        let last = self.heap.len() - 1;
-        self.heap.swap(p, last);
-        let gone = self.heap.pop().unwrap_or(0);
-        self.slot[gone as usize] = NONE;
+    fn hint(&self, face: u32) -> u32 {
+        self.faces.get(face as usize).map_or(0, |s| s.hint)
+    }
+
+    fn remove_at(&mut self, p: usize) {
+        let removed = self.heap[p].face;
+        self.faces[removed as usize].pos = NONE;
+        let Some(last) = self.heap.pop() else { return };
         if p < self.heap.len() {
-            self.slot[self.heap[p] as usize] = p as u32;
-            let q = self.sift_up(c, p, width);
-            self.sift_down(c, q, width);
+            self.heap[p] = last;
+            let q = self.sift_up(p);
+            self.sift_down(q);
         }
     }
 
-    fn sift_up(&mut self, c: &[Candidate], mut p: usize, width: u64) -> usize {
-        let f = self.heap[p];
+    fn sift_up(&mut self, mut p: usize) -> usize {
+        let e = self.heap[p];
         while p > 0 {
             let parent = (p - 1) / 2;
             let g = self.heap[parent];
-            if !before(c, f, g, width) {
+            if !before(&e, &g) {
                 break;
             }
             self.heap[p] = g;
-            self.slot[g as usize] = p as u32;
+            self.faces[g.face as usize].pos = p as u32;
             p = parent;
         }
-        self.heap[p] = f;
-        self.slot[f as usize] = p as u32;
+        self.heap[p] = e;
+        self.faces[e.face as usize].pos = p as u32;
         p
     }
 
-    fn sift_down(&mut self, c: &[Candidate], mut p: usize, width: u64) -> usize {
+    fn sift_down(&mut self, mut p: usize) -> usize {
         let n = self.heap.len();
-        let f = self.heap[p];
+        let e = self.heap[p];
         loop {
             let l = 2 * p + 1;
             if l >= n {
                 break;
             }
             let r = l + 1;
-            let m = if r < n && before(c, self.heap[r], self.heap[l], width) { r } else { l };
+            let m = if r < n && before(&self.heap[r], &self.heap[l]) { r } else { l };
             let g = self.heap[m];
-            if !before(c, g, f, width) {
+            if !before(&g, &e) {
                 break;
             }
             self.heap[p] = g;
-            self.slot[g as usize] = p as u32;
+            self.faces[g.face as usize].pos = p as u32;
             p = m;
         }
-        self.heap[p] = f;
-        self.slot[f as usize] = p as u32;
+        self.heap[p] = e;
+        self.faces[e.face as usize].pos = p as u32;
         p
     }
 }
@@ -173,11 +174,41 @@ fn orient(a: [i64; 2], b: [i64; 2], p: [i64; 2]) -> i64 {
     (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
 }
 
-/// Finds the sample of the closed triangle `c` farthest from the triangle's plane, scanning it row by
-/// row: each row's span comes from the three edge functions (exact integer ceil/floor), and the
-/// barycentric weights are stepped along the row by integer increments. Returns (error, i, j), or
-/// None if no sample other than the corners lies off the plane.
-fn find_candidate(hf: &Heightfield, mut c: [[i64; 2]; 3]) -> Option<(f64, u32, u32)> {
+/// Smallest x ≥ `lo` with ax·x + r ≥ 0 (ax > 0), from a floating-point estimate corrected exactly.
+#[inline]
+fn span_start(ax: i64, r: i64, inv_ax: f64) -> i64 {
+    let mut x = (-(r as f64) * inv_ax).ceil() as i64;
+    while ax * x + r < 0 {
+        x += 1;
+    }
+    while ax * (x - 1) + r >= 0 {
+        x -= 1;
+    }
+    x
+}
+
+/// Largest x with ax·x + r ≥ 0 (ax < 0), from a floating-point estimate corrected exactly.
+#[inline]
+fn span_end(ax: i64, r: i64, inv_ax: f64) -> i64 {
+    let mut x = (-(r as f64) * inv_ax).floor() as i64;
+    while ax * x + r < 0 {
+        x -= 1;
+    }
+    while ax * (x + 1) + r >= 0 {
+        x += 1;
+    }
+    x
+}
+
+/// Finds the sample of the closed triangle `c` farthest from the triangle's plane, if its error
+/// exceeds `floor`; returns (error, i, j). The corners themselves are never candidates.
+///
+/// The triangle is scanned row by row; each row's span comes from the three edge functions (exact
+/// integers, so samples on edges are always included). Along a row the plane is stepped in f64, which
+/// is fast but not bit-exact; any sample whose fast error comes within `slack` of the best so far is
+/// re-evaluated with the canonical formula ([`plane_height`], exact integer weights), so the returned
+/// error is exactly what the analyzer computes and the bound it certifies is real.
+fn find_candidate(hf: &Heightfield, mut c: [[i64; 2]; 3], floor: f64) -> Option<(f64, u32, u32)> {
     // Canonical corner order (ascending sample index) so `plane_height` sums in the same order as the
     // analyzer does; also puts the rows in c[0].j ..= c[2].j.
     c.sort_unstable_by_key(|p| (p[1], p[0]));
@@ -188,20 +219,35 @@ fn find_candidate(hf: &Heightfield, mut c: [[i64; 2]; 3]) -> Option<(f64, u32, u
     let sign = signed.signum();
     let area = signed * sign;
     let hc = c.map(|p| hf.at(p[0] as usize, p[1] as usize) as f64);
-    // Weight k at (x, y) = ax[k]·x + by[k]·y + c0[k]; weight 0 belongs to the edge opposite corner 0.
+    // Weight k at (x, y) = ax[k]·x + by[k]·y + k0[k]; weight 0 belongs to the edge opposite corner 0.
     let edges = [(c[1], c[2]), (c[2], c[0]), (c[0], c[1])];
     let mut ax = [0i64; 3];
     let mut by = [0i64; 3];
     let mut k0 = [0i64; 3];
+    let mut inv_ax = [0f64; 3];
     for (k, &(a, b)) in edges.iter().enumerate() {
         ax[k] = -(b[1] - a[1]) * sign;
         by[k] = (b[0] - a[0]) * sign;
         k0[k] = orient(a, b, [0, 0]) * sign;
+        inv_ax[k] = if ax[k] != 0 { 1.0 / ax[k] as f64 } else { 0.0 };
     }
+    // Plane gradient relative to corner 0, for the fast path.
+    let inv_area = 1.0 / area as f64;
+    let gx = (ax[0] as f64 * hc[0] + ax[1] as f64 * hc[1] + ax[2] as f64 * hc[2]) * inv_area;
+    let gy = (by[0] as f64 * hc[0] + by[1] as f64 * hc[1] + by[2] as f64 * hc[2]) * inv_area;
     let xmin = c.iter().map(|p| p[0]).min().unwrap_or(0);
     let xmax = c.iter().map(|p| p[0]).max().unwrap_or(0);
+    let (x0, y0) = (c[0][0], c[0][1]);
+    // Bound on |z| anywhere in the triangle; the fast path's rounding error is below 1e-12 of it over
+    // any row (< 2^24 steps of relative error 2^-53 ≈ 1e-16 is < 2e-9), so 1e-6 of it is ample slack.
+    let magnitude = hc[0].abs().max(hc[1].abs()).max(hc[2].abs())
+        + gx.abs() * (xmax - xmin) as f64
+        + gy.abs() * (c[2][1] - c[0][1]) as f64;
+    let slack = 1e-6 * (1.0 + magnitude);
+
     let w = hf.width;
-    let mut best = 0.0f64;
+    let mut best = floor;
+    let mut threshold = best - slack;
     let mut found: Option<(u32, u32)> = None;
     for y in c[0][1]..=c[2][1] {
         let (mut lo, mut hi) = (xmin, xmax);
@@ -210,9 +256,9 @@ fn find_candidate(hf: &Heightfield, mut c: [[i64; 2]; 3]) -> Option<(f64, u32, u
             r[k] = by[k] * y + k0[k];
             // need ax·x + r ≥ 0
             if ax[k] > 0 {
-                lo = lo.max(-((r[k]).div_euclid(ax[k])));
+                lo = lo.max(span_start(ax[k], r[k], inv_ax[k]));
             } else if ax[k] < 0 {
-                hi = hi.min(r[k].div_euclid(-ax[k]));
+                hi = hi.min(span_end(ax[k], r[k], inv_ax[k]));
             } else if r[k] < 0 {
                 hi = lo - 1;
             }
@@ -220,17 +266,21 @@ fn find_candidate(hf: &Heightfield, mut c: [[i64; 2]; 3]) -> Option<(f64, u32, u
         if lo > hi {
             continue;
         }
-        let row = &hf.heights[y as usize * w..(y as usize + 1) * w];
-        let mut wt = [ax[0] * lo + r[0], ax[1] * lo + r[1], ax[2] * lo + r[2]];
-        for x in lo..=hi {
-            let err = (plane_height(wt, hc, area) - row[x as usize] as f64).abs();
+        let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi as usize];
+        let mut z = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
+        for (x, &h) in (lo..=hi).zip(row) {
+            let fast = (z - h as f64).abs();
+            z += gx;
+            if fast <= threshold {
+                continue;
+            }
+            let wt = [ax[0] * x + r[0], ax[1] * x + r[1], ax[2] * x + r[2]];
+            let err = (plane_height(wt, hc, area) - h as f64).abs();
             if err > best && !c.contains(&[x, y]) {
                 best = err;
+                threshold = best - slack;
                 found = Some((x as u32, y as u32));
             }
-            wt[0] += ax[0];
-            wt[1] += ax[1];
-            wt[2] += ax[2];
         }
     }
     found.map(|(i, j)| (best, i, j))
@@ -241,11 +291,11 @@ type Dt = DelaunayTriangulation<Point2<f64>>;
 /// One face of a star: (face index, corners as (i, j), one corner's vertex index).
 type StarFace = (u32, [[i64; 2]; 3], u32);
 
-/// Greedy-insertion state: the triangulation, one candidate per face slot, and the heap over them.
+/// Greedy-insertion state: the triangulation and the heap of faces still above the bound.
 struct Mesher<'a> {
     hf: &'a Heightfield,
+    max_error_m: f64,
     dt: Dt,
-    cand: Vec<Candidate>,
     heap: FaceHeap,
     /// Scratch list of faces to rescan, reused so an insertion allocates nothing.
     star: Vec<StarFace>,
@@ -261,9 +311,15 @@ impl Mesher<'_> {
     /// Rescans the faces around vertex `v` (all of them new or changed by its insertion).
     fn rescan_star(&mut self, v: FixedVertexHandle) {
         self.star.clear();
-        for e in self.dt.vertex(v).out_edges() {
+        let vh = self.dt.vertex(v);
+        let q = vh.position();
+        let pv = [q.x as i64, q.y as i64];
+        let hint = v.index() as u32;
+        for e in vh.out_edges() {
+            // The face left of v → a is (v, a, b) with b the end of the edge after v → a.
             if let Some(f) = e.face().as_inner() {
-                self.star.push(star_face(f));
+                let (a, b) = (e.to().position(), e.next().to().position());
+                self.star.push((f.fix().index() as u32, [pv, [a.x as i64, a.y as i64], [b.x as i64, b.y as i64]], hint));
             }
         }
         self.rescan();
@@ -271,18 +327,11 @@ impl Mesher<'_> {
 
     /// Recomputes the candidates of the faces in `self.star` and moves them in the heap.
     fn rescan(&mut self) {
-        let width = self.hf.width as u64;
+        let w = self.hf.width as u32;
         for &(face, corners, hint) in &self.star {
-            let cand = match find_candidate(self.hf, corners) {
-                Some((err, i, j)) => Candidate { err, i, j, hint },
-                None => NO_CANDIDATE,
-            };
-            let f = face as usize;
-            if self.cand.len() <= f {
-                self.cand.resize(f + 1, NO_CANDIDATE);
-            }
-            self.cand[f] = cand;
-            self.heap.update(&self.cand, face, width);
+            let entry = find_candidate(self.hf, corners, self.max_error_m)
+                .map(|(err, i, j)| Entry { err, sample: j * w + i, face });
+            self.heap.set(face, hint, entry);
         }
     }
 }
@@ -302,13 +351,7 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
     let (w, h) = (hf.width, hf.height);
     let internal = |i: u32, j: u32| TerrainError::Internal { i: i as usize, j: j as usize };
 
-    let mut m = Mesher {
-        hf,
-        dt: Dt::new(),
-        cand: Vec::new(),
-        heap: FaceHeap { heap: Vec::new(), slot: Vec::new() },
-        star: Vec::new(),
-    };
+    let mut m = Mesher { hf, max_error_m: opts.max_error_m, dt: Dt::new(), heap: FaceHeap::default(), star: Vec::new() };
     let (xm, ym) = ((w - 1) as f64, (h - 1) as f64);
     for (x, y) in [(0.0, 0.0), (xm, 0.0), (xm, ym), (0.0, ym)] {
         m.dt.insert(Point2::new(x, y)).map_err(|_| internal(x as u32, y as u32))?;
@@ -320,12 +363,9 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
     let mut triangles = 2usize;
     let mut hit_triangle_limit = false;
     while let Some(top) = m.heap.peek() {
-        let c = m.cand[top as usize];
-        if c.err <= opts.max_error_m {
-            break;
-        }
+        let (ci, cj) = (top.sample % w as u32, top.sample / w as u32);
         // Inserting on the rectangle's border splits one triangle, inside it splits (flips aside) two.
-        let on_border = c.i == 0 || c.j == 0 || c.i as usize == w - 1 || c.j as usize == h - 1;
+        let on_border = ci == 0 || cj == 0 || ci as usize == w - 1 || cj as usize == h - 1;
         let added = if on_border { 1 } else { 2 };
         if let Some(limit) = opts.max_triangles {
             if triangles + added > limit {
@@ -336,17 +376,24 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
         let before = m.dt.num_vertices();
         let v = m
             .dt
-            .insert_with_hint(Point2::new(c.i as f64, c.j as f64), FixedVertexHandle::from_index(c.hint as usize))
-            .map_err(|_| internal(c.i, c.j))?;
+            .insert_with_hint(Point2::new(ci as f64, cj as f64), FixedVertexHandle::from_index(m.heap.hint(top.face) as usize))
+            .map_err(|_| internal(ci, cj))?;
         if m.dt.num_vertices() != before + 1 {
             // The candidate was already a vertex: impossible for a valid triangulation (a closed face
             // holds no vertex but its corners); stop rather than loop forever.
-            return Err(internal(c.i, c.j));
+            return Err(internal(ci, cj));
         }
         triangles += added;
         m.rescan_star(v);
     }
-    let max_error_m = m.heap.peek().map(|f| m.cand[f as usize].err).unwrap_or(0.0);
+    // The achieved bound, measured over the final faces (those within the bound are not in the heap).
+    // One more pass over the map, cheap next to the build, and it re-checks the bound.
+    let mut max_error_m = 0.0f64;
+    for f in m.dt.inner_faces() {
+        if let Some((err, _, _)) = find_candidate(hf, star_face(f).1, max_error_m) {
+            max_error_m = err;
+        }
+    }
 
     let mut mesh = SampleMesh {
         vertices: m.dt.vertices().map(|v| [v.position().x as u32, v.position().y as u32]).collect(),
