@@ -1,0 +1,259 @@
+//! Vertical error of a terrain triangulation against its heightfield: the analyzer paired with the
+//! meshers (`grid`, `tin`). Every sample is located in the triangles covering it (closed triangles,
+//! so samples on edges count) and compared with the plane through the triangle's three samples.
+//!
+//! Deliberately independent of `tin`'s rasteriser: triangles are scanned over their bounding box with
+//! a direct integer inside test per sample, so a bug in the mesher's span arithmetic shows up here.
+//! Only the interpolation formula is shared by definition (see [`plane_height`]), so that the error
+//! the mesher reports and the error measured here agree to the last bit.
+//!
+//! Also home of [`TerrainError`], the one error type of the terrain module.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use rayon::prelude::*;
+
+use crate::heightfield::Heightfield;
+use crate::terrain::SampleMesh;
+
+/// Largest width or height the meshers accept: keeps every edge function (products of two sample
+/// coordinates) exact in `i64` and every coordinate exact in `f64`.
+pub const MAX_SIDE_SAMPLES: usize = 1 << 24;
+
+/// Everything that can go wrong when meshing a heightfield.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TerrainError {
+    #[error(
+        "heightfield of {width}×{height} samples has no area: a terrain needs at least 2×2 samples \
+         (check the heightmap's size or crop)"
+    )]
+    ZeroArea { width: usize, height: usize },
+    #[error(
+        "heightfield of {width}×{height} samples is too large: at most {max} samples per side are \
+         supported, and 2^32 in all; split the map into tiles"
+    )]
+    TooLarge { width: usize, height: usize, max: usize },
+    #[error("heightfield claims {width}×{height} samples but holds {len} heights")]
+    SizeMismatch { width: usize, height: usize, len: usize },
+    #[error("height at sample (column {i}, row {j}) is not a finite number; fix or mask the heightmap")]
+    NonFiniteHeight { i: usize, j: usize },
+    #[error("grid step must be at least 1 sample, got {step}")]
+    ZeroStep { step: usize },
+    #[error("maximum error must be a finite number of metres ≥ 0, got {value}")]
+    InvalidMaxError { value: f64 },
+    #[error("triangle limit {limit} is below 2: the two triangles of the corner rectangle are the coarsest terrain")]
+    TriangleLimitTooSmall { limit: usize },
+    #[error("internal error: the triangulation could not take sample (column {i}, row {j}); please report this with the heightmap")]
+    Internal { i: usize, j: usize },
+}
+
+/// Checks what every mesher relies on: at least 2×2 samples, a supported size, one finite height per
+/// sample.
+pub(crate) fn check_heightfield(hf: &Heightfield) -> Result<(), TerrainError> {
+    let (width, height) = (hf.width, hf.height);
+    if width < 2 || height < 2 {
+        return Err(TerrainError::ZeroArea { width, height });
+    }
+    // Sample indices are stored as u32 by the TIN mesher.
+    if width > MAX_SIDE_SAMPLES || height > MAX_SIDE_SAMPLES || width.saturating_mul(height) > u32::MAX as usize {
+        return Err(TerrainError::TooLarge { width, height, max: MAX_SIDE_SAMPLES });
+    }
+    if width.checked_mul(height) != Some(hf.heights.len()) {
+        return Err(TerrainError::SizeMismatch { width, height, len: hf.heights.len() });
+    }
+    if let Some(k) = hf.heights.iter().position(|h| !h.is_finite()) {
+        return Err(TerrainError::NonFiniteHeight { i: k % width, j: k / width });
+    }
+    Ok(())
+}
+
+/// The plane through three samples evaluated at a fourth, the one formula both the mesher and this
+/// analyzer use. `w` are the integer barycentric weights (twice the signed sub-triangle areas, all ≥ 0
+/// inside), `h` the corner heights and `area` = w[0] + w[1] + w[2] > 0. The corners must be given in
+/// ascending sample index order so that the floating-point sum is evaluated in one canonical order
+/// whichever way a triangle is stored; weights are exact integers, so the result is bit-identical
+/// between callers.
+#[inline(always)]
+pub(crate) fn plane_height(w: [i64; 3], h: [f64; 3], area: i64) -> f64 {
+    (w[0] as f64 * h[0] + w[1] as f64 * h[1] + w[2] as f64 * h[2]) / area as f64
+}
+
+/// What [`measure`] found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ErrorStats {
+    /// Largest |mesh height − sample height| over all covered samples, in metres.
+    pub max_error_m: f64,
+    /// Root mean square of the per-sample error over covered samples (each sample counted once).
+    pub rms_error_m: f64,
+    /// Sample (column, row) where `max_error_m` occurs (the lowest row-major index on ties).
+    pub worst_sample: [u32; 2],
+    /// Number of samples inside at least one triangle; `width·height` for a complete triangulation.
+    pub samples_covered: usize,
+}
+
+/// Triangles measured per parallel task: large enough to amortise scheduling, small enough to balance.
+const TRIANGLES_PER_TASK: usize = 4096;
+
+/// Measures the vertical error of `mesh` against `hf` at every sample.
+///
+/// A sample on an edge or vertex shared by several triangles takes the largest error among them.
+/// Triangles with vertex indices out of range, vertices outside the heightfield or zero area cover
+/// nothing (so they show as missing coverage rather than a panic). Deterministic at any thread count.
+pub fn measure(hf: &Heightfield, mesh: &SampleMesh) -> ErrorStats {
+    let empty = ErrorStats { max_error_m: 0.0, rms_error_m: 0.0, worst_sample: [0, 0], samples_covered: 0 };
+    let (w, h) = (hf.width, hf.height);
+    if w == 0 || h == 0 || w.checked_mul(h) != Some(hf.heights.len()) || w > MAX_SIDE_SAMPLES || h > MAX_SIDE_SAMPLES {
+        return empty;
+    }
+    // Per sample: 0 = not covered, else (bits of the error as f64) + 1. Non-negative f64 bit patterns
+    // order like the values, so an atomic max keeps the largest error whatever the thread order.
+    let slots: Vec<AtomicU64> = (0..w * h).map(|_| AtomicU64::new(0)).collect();
+
+    mesh.triangles.par_chunks(TRIANGLES_PER_TASK).for_each(|chunk| {
+        for tri in chunk {
+            let Some(corners) = triangle_corners(mesh, tri, w, h) else { continue };
+            scan_triangle(hf, corners, &slots);
+        }
+    });
+
+    // Reduce per row in parallel, then rows in order, so the RMS sum is the same at any thread count.
+    let rows: Vec<(f64, usize, f64, usize)> = (0..h)
+        .into_par_iter()
+        .map(|j| {
+            let (mut sum_sq, mut covered, mut max, mut worst) = (0.0f64, 0usize, -1.0f64, 0usize);
+            for i in 0..w {
+                let v = slots[j * w + i].load(Ordering::Relaxed);
+                if v == 0 {
+                    continue;
+                }
+                let err = f64::from_bits(v - 1);
+                covered += 1;
+                sum_sq += err * err;
+                if err > max {
+                    max = err;
+                    worst = j * w + i;
+                }
+            }
+            (sum_sq, covered, max, worst)
+        })
+        .collect();
+    let (mut sum_sq, mut covered, mut max, mut worst) = (0.0f64, 0usize, -1.0f64, 0usize);
+    for (s, c, m, k) in rows {
+        sum_sq += s;
+        covered += c;
+        if m > max {
+            max = m;
+            worst = k;
+        }
+    }
+    if covered == 0 {
+        return empty;
+    }
+    ErrorStats {
+        max_error_m: max,
+        rms_error_m: (sum_sq / covered as f64).sqrt(),
+        worst_sample: [(worst % w) as u32, (worst / w) as u32],
+        samples_covered: covered,
+    }
+}
+
+/// The triangle's corners as (i, j) in ascending sample index order, or `None` if it cannot cover
+/// anything (bad index, outside the map, zero area).
+fn triangle_corners(mesh: &SampleMesh, tri: &[u32; 3], w: usize, h: usize) -> Option<[[i64; 2]; 3]> {
+    let mut c = [[0i64; 2]; 3];
+    for k in 0..3 {
+        let v = mesh.vertices.get(tri[k] as usize)?;
+        if v[0] as usize >= w || v[1] as usize >= h {
+            return None;
+        }
+        c[k] = [v[0] as i64, v[1] as i64];
+    }
+    c.sort_by_key(|p| (p[1], p[0]));
+    if orient(c[0], c[1], c[2]) == 0 {
+        return None;
+    }
+    Some(c)
+}
+
+/// Twice the signed area of (a, b, p) in the (i, j) plane.
+#[inline]
+fn orient(a: [i64; 2], b: [i64; 2], p: [i64; 2]) -> i64 {
+    (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+}
+
+/// Visits every sample of the triangle's bounding box, keeps those inside the closed triangle and
+/// records their error.
+fn scan_triangle(hf: &Heightfield, c: [[i64; 2]; 3], slots: &[AtomicU64]) {
+    let w = hf.width;
+    let sign = orient(c[0], c[1], c[2]).signum();
+    let area = orient(c[0], c[1], c[2]) * sign;
+    let hc = c.map(|p| hf.at(p[0] as usize, p[1] as usize) as f64);
+    let (i0, i1) = (c.iter().map(|p| p[0]).min().unwrap_or(0), c.iter().map(|p| p[0]).max().unwrap_or(0));
+    let (j0, j1) = (c[0][1], c[2][1]);
+    for j in j0..=j1 {
+        for i in i0..=i1 {
+            let p = [i, j];
+            let wts = [orient(c[1], c[2], p) * sign, orient(c[2], c[0], p) * sign, orient(c[0], c[1], p) * sign];
+            if wts.iter().any(|&x| x < 0) {
+                continue;
+            }
+            let k = j as usize * w + i as usize;
+            let err = (plane_height(wts, hc, area) - hf.heights[k] as f64).abs();
+            slots[k].fetch_max(err.to_bits() + 1, Ordering::Relaxed);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hf(width: usize, height: usize, heights: Vec<f32>) -> Heightfield {
+        Heightfield { width, height, heights, cell_size_m: 1.0 }
+    }
+
+    #[test]
+    fn two_triangles_over_a_bump() {
+        // 3×3, centre raised by 2: the two corner triangles miss it by 2 (centre lies on the diagonal).
+        let mut heights = vec![0.0; 9];
+        heights[4] = 2.0;
+        let map = hf(3, 3, heights);
+        let mesh = SampleMesh {
+            vertices: vec![[0, 0], [2, 0], [0, 2], [2, 2]],
+            triangles: vec![[0, 2, 1], [1, 2, 3]],
+        };
+        let s = measure(&map, &mesh);
+        assert_eq!(s.samples_covered, 9);
+        assert_eq!(s.max_error_m, 2.0);
+        assert_eq!(s.worst_sample, [1, 1]);
+        assert!((s.rms_error_m - (4.0f64 / 9.0).sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_triangles_cover_nothing() {
+        let map = hf(2, 2, vec![0.0; 4]);
+        let mesh = SampleMesh {
+            vertices: vec![[0, 0], [1, 0], [0, 1], [5, 5]],
+            triangles: vec![[0, 1, 3], [0, 1, 9], [0, 0, 1]],
+        };
+        let s = measure(&map, &mesh);
+        assert_eq!(s.samples_covered, 0);
+        let s = measure(&hf(2, 2, vec![0.0; 3]), &mesh);
+        assert_eq!(s.samples_covered, 0);
+    }
+
+    #[test]
+    fn heightfield_checks() {
+        assert_eq!(check_heightfield(&hf(1, 5, vec![0.0; 5])), Err(TerrainError::ZeroArea { width: 1, height: 5 }));
+        assert_eq!(
+            check_heightfield(&hf(2, 2, vec![0.0; 3])),
+            Err(TerrainError::SizeMismatch { width: 2, height: 2, len: 3 })
+        );
+        assert_eq!(
+            check_heightfield(&hf(2, 2, vec![0.0, 0.0, f32::NAN, 0.0])),
+            Err(TerrainError::NonFiniteHeight { i: 0, j: 1 })
+        );
+        let msg = TerrainError::ZeroArea { width: 1, height: 1 }.to_string();
+        assert!(msg.contains("at least 2×2"), "{msg}");
+    }
+}

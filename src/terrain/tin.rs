@@ -1,0 +1,644 @@
+//! Error-bounded triangulated irregular network (TIN) by greedy insertion: Garland & Heckbert, "Fast
+//! polygonal approximation of terrains and height fields" (CMU-CS-95-181, 1995), algorithm III —
+//! Delaunay insertion of the worst-approximated sample, with per-triangle candidates in a heap.
+//!
+//! Start from the four corners (two triangles). Every triangle knows its candidate: the sample inside
+//! it (closed, so edges count) with the largest vertical distance to the triangle's plane. A max-heap
+//! indexed by face keeps the triangles ordered by candidate error; the worst candidate is inserted into
+//! the Delaunay triangulation (spade) until the worst error is within the bound or the triangle limit
+//! is reached. A Delaunay insertion only re-triangulates a star-shaped cavity around the new vertex, so
+//! only the faces incident to it are rescanned — spade reuses face slots for flipped triangles, and each
+//! of those is in the new vertex's star, so updating their heap keys in place leaves no stale entries.
+
+use spade::handles::FixedVertexHandle;
+use spade::{DelaunayTriangulation, Point2, Triangulation};
+
+use crate::heightfield::Heightfield;
+use crate::terrain::error::{check_heightfield, plane_height, TerrainError};
+use crate::terrain::SampleMesh;
+
+/// What to build.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TinOptions {
+    /// Largest allowed vertical distance between the mesh and any sample, in metres (≥ 0).
+    pub max_error_m: f64,
+    /// Stop refining before the triangle count would exceed this (≥ 2); the error then reached is
+    /// reported in [`TinResult::max_error_m`].
+    pub max_triangles: Option<usize>,
+}
+
+impl Default for TinOptions {
+    fn default() -> Self {
+        TinOptions { max_error_m: 1.0, max_triangles: None }
+    }
+}
+
+/// A TIN and the error it achieves.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TinResult {
+    pub mesh: SampleMesh,
+    /// Largest vertical error over all samples, measured while building (equal to what
+    /// [`crate::terrain::error::measure`] reports for `mesh`).
+    pub max_error_m: f64,
+    /// True if refinement stopped at `max_triangles` with the error still above `max_error_m`.
+    pub hit_triangle_limit: bool,
+}
+
+/// Not in the heap.
+const NONE: u32 = u32::MAX;
+
+/// A face whose candidate is worse than the bound: the heap's element, with its sort key inline so
+/// sifting never chases a pointer.
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    /// Vertical error at the candidate sample, metres.
+    err: f64,
+    /// Candidate sample, row-major index.
+    sample: u32,
+    face: u32,
+}
+
+/// Heap order: larger error first; ties go to the lower sample index, then the lower face index, so
+/// the output depends on nothing but the input.
+#[inline]
+fn before(a: &Entry, b: &Entry) -> bool {
+    if a.err != b.err {
+        return a.err > b.err;
+    }
+    (a.sample, a.face) < (b.sample, b.face)
+}
+
+/// Max-heap of the faces whose error exceeds the bound, with each face's heap slot recorded so its key
+/// can be changed or removed in place: no stale entries, and faces already within the bound cost
+/// nothing, so the heap stays far smaller than the triangulation.
+#[derive(Default)]
+struct FaceHeap {
+    heap: Vec<Entry>,
+    /// Per face index: its position in `heap` (or NONE) and a vertex of it to start locating from.
+    faces: Vec<FaceSlot>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct FaceSlot {
+    pos: u32,
+    hint: u32,
+}
+
+impl FaceHeap {
+    fn peek(&self) -> Option<Entry> {
+        self.heap.first().copied()
+    }
+
+    /// Puts `face` in the heap with `entry`, moves it, or (entry = None) takes it out.
+    fn set(&mut self, face: u32, hint: u32, entry: Option<Entry>) {
+        let f = face as usize;
+        if self.faces.len() <= f {
+            self.faces.resize(f + 1, FaceSlot { pos: NONE, hint: 0 });
+        }
+        self.faces[f].hint = hint;
+        let pos = self.faces[f].pos;
+        match (pos != NONE, entry) {
+            (false, None) => {}
+            (false, Some(e)) => {
+                self.heap.push(e);
+                self.sift_up(self.heap.len() - 1);
+            }
+            (true, None) => self.remove_at(pos as usize),
+            (true, Some(e)) => {
+                self.heap[pos as usize] = e;
+                let p = self.sift_up(pos as usize);
+                self.sift_down(p);
+            }
+        }
+    }
+
+    fn hint(&self, face: u32) -> u32 {
+        self.faces.get(face as usize).map_or(0, |s| s.hint)
+    }
+
+    fn remove_at(&mut self, p: usize) {
+        let removed = self.heap[p].face;
+        self.faces[removed as usize].pos = NONE;
+        let Some(last) = self.heap.pop() else { return };
+        if p < self.heap.len() {
+            self.heap[p] = last;
+            let q = self.sift_up(p);
+            self.sift_down(q);
+        }
+    }
+
+    fn sift_up(&mut self, mut p: usize) -> usize {
+        let e = self.heap[p];
+        while p > 0 {
+            let parent = (p - 1) / 2;
+            let g = self.heap[parent];
+            if !before(&e, &g) {
+                break;
+            }
+            self.heap[p] = g;
+            self.faces[g.face as usize].pos = p as u32;
+            p = parent;
+        }
+        self.heap[p] = e;
+        self.faces[e.face as usize].pos = p as u32;
+        p
+    }
+
+    fn sift_down(&mut self, mut p: usize) -> usize {
+        let n = self.heap.len();
+        let e = self.heap[p];
+        loop {
+            let l = 2 * p + 1;
+            if l >= n {
+                break;
+            }
+            let r = l + 1;
+            let m = if r < n && before(&self.heap[r], &self.heap[l]) { r } else { l };
+            let g = self.heap[m];
+            if !before(&g, &e) {
+                break;
+            }
+            self.heap[p] = g;
+            self.faces[g.face as usize].pos = p as u32;
+            p = m;
+        }
+        self.heap[p] = e;
+        self.faces[e.face as usize].pos = p as u32;
+        p
+    }
+}
+
+/// Twice the signed area of (a, b, p) in the (i, j) plane; exact for sides below 2^24.
+#[inline]
+fn orient(a: [i64; 2], b: [i64; 2], p: [i64; 2]) -> i64 {
+    (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+}
+
+/// Smallest x ≥ `lo` with ax·x + r ≥ 0 (ax > 0), from a floating-point estimate corrected exactly.
+#[inline]
+fn span_start(ax: i64, r: i64, inv_ax: f64) -> i64 {
+    let mut x = (-(r as f64) * inv_ax).ceil() as i64;
+    while ax * x + r < 0 {
+        x += 1;
+    }
+    while ax * (x - 1) + r >= 0 {
+        x -= 1;
+    }
+    x
+}
+
+/// Largest x with ax·x + r ≥ 0 (ax < 0), from a floating-point estimate corrected exactly.
+#[inline]
+fn span_end(ax: i64, r: i64, inv_ax: f64) -> i64 {
+    let mut x = (-(r as f64) * inv_ax).floor() as i64;
+    while ax * x + r < 0 {
+        x -= 1;
+    }
+    while ax * (x + 1) + r >= 0 {
+        x += 1;
+    }
+    x
+}
+
+/// Finds the sample of the closed triangle `c` farthest from the triangle's plane, if its error
+/// exceeds `floor`; returns (error, i, j). The corners themselves are never candidates.
+///
+/// The triangle is scanned row by row; each row's span comes from the three edge functions (exact
+/// integers, so samples on edges are always included). Along a row the plane is stepped in f64, which
+/// is fast but not bit-exact; any sample whose fast error comes within `slack` of the best so far is
+/// re-evaluated with the canonical formula ([`plane_height`], exact integer weights), so the returned
+/// error is exactly what the analyzer computes and the bound it certifies is real.
+fn find_candidate(hf: &Heightfield, mut c: [[i64; 2]; 3], floor: f64) -> Option<(f64, u32, u32)> {
+    // Canonical corner order (ascending sample index) so `plane_height` sums in the same order as the
+    // analyzer does; also puts the rows in c[0].j ..= c[2].j.
+    c.sort_unstable_by_key(|p| (p[1], p[0]));
+    let signed = orient(c[0], c[1], c[2]);
+    if signed == 0 {
+        return None;
+    }
+    let sign = signed.signum();
+    let area = signed * sign;
+    let hc = c.map(|p| hf.at(p[0] as usize, p[1] as usize) as f64);
+    // Weight k at (x, y) = ax[k]·x + by[k]·y + k0[k]; weight 0 belongs to the edge opposite corner 0.
+    let edges = [(c[1], c[2]), (c[2], c[0]), (c[0], c[1])];
+    let mut ax = [0i64; 3];
+    let mut by = [0i64; 3];
+    let mut k0 = [0i64; 3];
+    let mut inv_ax = [0f64; 3];
+    for (k, &(a, b)) in edges.iter().enumerate() {
+        ax[k] = -(b[1] - a[1]) * sign;
+        by[k] = (b[0] - a[0]) * sign;
+        k0[k] = orient(a, b, [0, 0]) * sign;
+        inv_ax[k] = if ax[k] != 0 { 1.0 / ax[k] as f64 } else { 0.0 };
+    }
+    // Plane gradient relative to corner 0, for the fast path.
+    let inv_area = 1.0 / area as f64;
+    let gx = (ax[0] as f64 * hc[0] + ax[1] as f64 * hc[1] + ax[2] as f64 * hc[2]) * inv_area;
+    let gy = (by[0] as f64 * hc[0] + by[1] as f64 * hc[1] + by[2] as f64 * hc[2]) * inv_area;
+    let xmin = c.iter().map(|p| p[0]).min().unwrap_or(0);
+    let xmax = c.iter().map(|p| p[0]).max().unwrap_or(0);
+    let (x0, y0) = (c[0][0], c[0][1]);
+    // Bound on |z| anywhere in the triangle; the fast path's rounding error is below 1e-12 of it over
+    // any row (< 2^24 steps of relative error 2^-53 ≈ 1e-16 is < 2e-9), so 1e-6 of it is ample slack.
+    let magnitude = hc[0].abs().max(hc[1].abs()).max(hc[2].abs())
+        + gx.abs() * (xmax - xmin) as f64
+        + gy.abs() * (c[2][1] - c[0][1]) as f64;
+    let slack = 1e-6 * (1.0 + magnitude);
+
+    let w = hf.width;
+    let mut best = floor;
+    let mut threshold = best - slack;
+    let mut found: Option<(u32, u32)> = None;
+    for y in c[0][1]..=c[2][1] {
+        let (mut lo, mut hi) = (xmin, xmax);
+        let mut r = [0i64; 3];
+        for k in 0..3 {
+            r[k] = by[k] * y + k0[k];
+            // need ax·x + r ≥ 0
+            if ax[k] > 0 {
+                lo = lo.max(span_start(ax[k], r[k], inv_ax[k]));
+            } else if ax[k] < 0 {
+                hi = hi.min(span_end(ax[k], r[k], inv_ax[k]));
+            } else if r[k] < 0 {
+                hi = lo - 1;
+            }
+        }
+        if lo > hi {
+            continue;
+        }
+        let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi as usize];
+        let mut z = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
+        for (x, &h) in (lo..=hi).zip(row) {
+            let fast = (z - h as f64).abs();
+            z += gx;
+            if fast <= threshold {
+                continue;
+            }
+            let wt = [ax[0] * x + r[0], ax[1] * x + r[1], ax[2] * x + r[2]];
+            let err = (plane_height(wt, hc, area) - h as f64).abs();
+            if err > best && !c.contains(&[x, y]) {
+                best = err;
+                threshold = best - slack;
+                found = Some((x as u32, y as u32));
+            }
+        }
+    }
+    found.map(|(i, j)| (best, i, j))
+}
+
+type Dt = DelaunayTriangulation<Point2<f64>>;
+
+/// One face of a star: (face index, corners as (i, j), one corner's vertex index).
+type StarFace = (u32, [[i64; 2]; 3], u32);
+
+/// Greedy-insertion state: the triangulation and the heap of faces still above the bound.
+struct Mesher<'a> {
+    hf: &'a Heightfield,
+    max_error_m: f64,
+    dt: Dt,
+    heap: FaceHeap,
+    /// Scratch list of faces to rescan, reused so an insertion allocates nothing.
+    star: Vec<StarFace>,
+}
+
+fn star_face(f: spade::handles::FaceHandle<'_, spade::handles::InnerTag, Point2<f64>, (), (), ()>) -> StarFace {
+    let [a, b, c] = f.vertices();
+    let p = |q: Point2<f64>| [q.x as i64, q.y as i64];
+    (f.fix().index() as u32, [p(a.position()), p(b.position()), p(c.position())], a.fix().index() as u32)
+}
+
+impl Mesher<'_> {
+    /// Rescans the faces around vertex `v` (all of them new or changed by its insertion).
+    fn rescan_star(&mut self, v: FixedVertexHandle) {
+        self.star.clear();
+        let vh = self.dt.vertex(v);
+        let q = vh.position();
+        let pv = [q.x as i64, q.y as i64];
+        let hint = v.index() as u32;
+        for e in vh.out_edges() {
+            // The face left of v → a is (v, a, b) with b the end of the edge after v → a.
+            if let Some(f) = e.face().as_inner() {
+                let (a, b) = (e.to().position(), e.next().to().position());
+                self.star.push((f.fix().index() as u32, [pv, [a.x as i64, a.y as i64], [b.x as i64, b.y as i64]], hint));
+            }
+        }
+        self.rescan();
+    }
+
+    /// Recomputes the candidates of the faces in `self.star` and moves them in the heap.
+    fn rescan(&mut self) {
+        let w = self.hf.width as u32;
+        for &(face, corners, hint) in &self.star {
+            let entry = find_candidate(self.hf, corners, self.max_error_m)
+                .map(|(err, i, j)| Entry { err, sample: j * w + i, face });
+            self.heap.set(face, hint, entry);
+        }
+    }
+}
+
+/// Builds a TIN of `hf` whose vertical error at every sample is at most `opts.max_error_m` (unless
+/// `opts.max_triangles` stops it first). Deterministic; heights are only read.
+pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainError> {
+    check_heightfield(hf)?;
+    if !opts.max_error_m.is_finite() || opts.max_error_m < 0.0 {
+        return Err(TerrainError::InvalidMaxError { value: opts.max_error_m });
+    }
+    if let Some(limit) = opts.max_triangles {
+        if limit < 2 {
+            return Err(TerrainError::TriangleLimitTooSmall { limit });
+        }
+    }
+    let (w, h) = (hf.width, hf.height);
+    let internal = |i: u32, j: u32| TerrainError::Internal { i: i as usize, j: j as usize };
+
+    let mut m = Mesher { hf, max_error_m: opts.max_error_m, dt: Dt::new(), heap: FaceHeap::default(), star: Vec::new() };
+    let (xm, ym) = ((w - 1) as f64, (h - 1) as f64);
+    for (x, y) in [(0.0, 0.0), (xm, 0.0), (xm, ym), (0.0, ym)] {
+        m.dt.insert(Point2::new(x, y)).map_err(|_| internal(x as u32, y as u32))?;
+    }
+    // The two corner triangles (the last corner is not necessarily in both).
+    m.star = m.dt.inner_faces().map(star_face).collect();
+    m.rescan();
+
+    let mut triangles = 2usize;
+    let mut hit_triangle_limit = false;
+    while let Some(top) = m.heap.peek() {
+        let (ci, cj) = (top.sample % w as u32, top.sample / w as u32);
+        // Inserting on the rectangle's border splits one triangle, inside it splits (flips aside) two.
+        let on_border = ci == 0 || cj == 0 || ci as usize == w - 1 || cj as usize == h - 1;
+        let added = if on_border { 1 } else { 2 };
+        if let Some(limit) = opts.max_triangles {
+            if triangles + added > limit {
+                hit_triangle_limit = true;
+                break;
+            }
+        }
+        let before = m.dt.num_vertices();
+        let v = m
+            .dt
+            .insert_with_hint(Point2::new(ci as f64, cj as f64), FixedVertexHandle::from_index(m.heap.hint(top.face) as usize))
+            .map_err(|_| internal(ci, cj))?;
+        if m.dt.num_vertices() != before + 1 {
+            // The candidate was already a vertex: impossible for a valid triangulation (a closed face
+            // holds no vertex but its corners); stop rather than loop forever.
+            return Err(internal(ci, cj));
+        }
+        triangles += added;
+        m.rescan_star(v);
+    }
+    // The achieved bound, measured over the final faces (those within the bound are not in the heap).
+    // One more pass over the map, cheap next to the build, and it re-checks the bound.
+    let mut max_error_m = 0.0f64;
+    for f in m.dt.inner_faces() {
+        if let Some((err, _, _)) = find_candidate(hf, star_face(f).1, max_error_m) {
+            max_error_m = err;
+        }
+    }
+
+    let mut mesh = SampleMesh {
+        vertices: m.dt.vertices().map(|v| [v.position().x as u32, v.position().y as u32]).collect(),
+        triangles: Vec::with_capacity(m.dt.num_inner_faces()),
+    };
+    for f in m.dt.inner_faces() {
+        let [a, b, c] = f.vertices().map(|v| v.fix().index() as u32);
+        // spade's faces are counter-clockwise in (x = i, y = j), which is clockwise seen from +Y.
+        mesh.triangles.push([a, c, b]);
+    }
+    Ok(TinResult { mesh, max_error_m, hit_triangle_limit })
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::terrain::error::measure;
+    use proptest::prelude::*;
+    use std::collections::{HashMap, HashSet};
+
+    /// Asserts that `mesh` is a valid triangulation of the whole sample rectangle of `hf`: vertices
+    /// in range and distinct, corners present, every triangle non-degenerate and counter-clockwise
+    /// seen from +Y, every interior edge shared by exactly two triangles in opposite directions and
+    /// every other edge on the border, areas summing to the rectangle's, every sample covered.
+    pub(crate) fn check_mesh(hf: &Heightfield, mesh: &SampleMesh) {
+        let (w, h) = (hf.width as i64, hf.height as i64);
+        let mut seen = HashSet::new();
+        for v in &mesh.vertices {
+            assert!((v[0] as i64) < w && (v[1] as i64) < h, "vertex {v:?} outside {w}×{h}");
+            assert!(seen.insert(*v), "duplicate vertex {v:?}");
+        }
+        for corner in [[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]] {
+            assert!(seen.contains(&[corner[0] as u32, corner[1] as u32]), "corner {corner:?} missing");
+        }
+        let mut twice_area = 0i64;
+        let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+        for t in &mesh.triangles {
+            let p = t.map(|k| {
+                let v = mesh.vertices[k as usize];
+                [v[0] as i64, v[1] as i64]
+            });
+            // With x = i, z = j the +Y component of (b − a) × (c − a) is −orient(a, b, c).
+            let up = -orient(p[0], p[1], p[2]);
+            assert!(up > 0, "triangle {t:?} = {p:?} is degenerate or clockwise from +Y");
+            twice_area += up;
+            for k in 0..3 {
+                *edges.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
+            }
+        }
+        assert_eq!(twice_area, 2 * (w - 1) * (h - 1), "triangle areas do not sum to the rectangle");
+        for (&(a, b), &n) in &edges {
+            assert_eq!(n, 1, "directed edge {a}->{b} used {n} times");
+            if !edges.contains_key(&(b, a)) {
+                let (p, q) = (mesh.vertices[a as usize], mesh.vertices[b as usize]);
+                let on_border = (p[0] == q[0] && (p[0] == 0 || p[0] as i64 == w - 1))
+                    || (p[1] == q[1] && (p[1] == 0 || p[1] as i64 == h - 1));
+                assert!(on_border, "unmatched edge {p:?}->{q:?} is not on the border");
+            }
+        }
+        assert_eq!(measure(hf, mesh).samples_covered, hf.width * hf.height, "not every sample covered");
+    }
+
+    fn map(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> Heightfield {
+        let mut heights = Vec::with_capacity(w * h);
+        for j in 0..h {
+            for i in 0..w {
+                heights.push(f(i, j));
+            }
+        }
+        Heightfield { width: w, height: h, heights, cell_size_m: 1.0 }
+    }
+
+    fn noise(w: usize, h: usize, seed: u64, range: u64, scale: f32) -> Heightfield {
+        map(w, h, |i, j| (crate::synth::mix64(seed ^ ((j * w + i) as u64)) % range) as f32 * scale)
+    }
+
+    /// Builds a TIN and checks everything the contract promises.
+    fn checked(hf: &Heightfield, max_error_m: f64, max_triangles: Option<usize>) -> TinResult {
+        let before = hf.clone();
+        let r = tin(hf, &TinOptions { max_error_m, max_triangles }).expect("tin");
+        assert_eq!(*hf, before, "heights modified");
+        check_mesh(hf, &r.mesh);
+        let s = measure(hf, &r.mesh);
+        assert_eq!(s.max_error_m, r.max_error_m, "reported and measured max error differ");
+        if !r.hit_triangle_limit {
+            assert!(s.max_error_m <= max_error_m, "error {} above bound {max_error_m}", s.max_error_m);
+        }
+        if let Some(limit) = max_triangles {
+            assert!(r.mesh.triangles.len() <= limit);
+        }
+        r
+    }
+
+    #[test]
+    fn constant_map_is_two_triangles() {
+        let r = checked(&map(50, 30, |_, _| 123.4), 0.0, None);
+        assert_eq!(r.mesh.triangles.len(), 2);
+        assert_eq!(r.max_error_m, 0.0);
+    }
+
+    #[test]
+    fn planar_map_is_two_triangles() {
+        let r = checked(&map(65, 40, |i, j| 0.5 * i as f32 - 0.25 * j as f32 + 10.0), 0.0, None);
+        assert_eq!(r.mesh.triangles.len(), 2);
+        let r = checked(&map(37, 23, |i, j| 0.3 * i as f32 + 0.7 * j as f32), 1e-3, None);
+        assert_eq!(r.mesh.triangles.len(), 2);
+    }
+
+    #[test]
+    fn single_spike_in_the_middle() {
+        let r = checked(&map(33, 33, |i, j| if (i, j) == (16, 16) { 100.0 } else { 0.0 }), 0.5, None);
+        assert!(r.mesh.vertices.contains(&[16, 16]));
+    }
+
+    #[test]
+    fn single_spike_on_the_border() {
+        for spike in [(0, 10), (20, 32), (32, 5), (7, 0)] {
+            let r = checked(&map(33, 33, |i, j| if (i, j) == spike { -50.0 } else { 5.0 }), 0.5, None);
+            assert!(r.mesh.vertices.contains(&[spike.0 as u32, spike.1 as u32]), "{spike:?}");
+        }
+    }
+
+    #[test]
+    fn vertical_cliff() {
+        let r = checked(&map(40, 30, |i, _| if i < 17 { 0.0 } else { 500.0 }), 0.5, None);
+        assert!(r.mesh.triangles.len() < 2 * 39 * 29);
+        checked(&map(40, 30, |i, j| if i + j < 35 { 0.0 } else { 500.0 }), 1.0, None);
+    }
+
+    #[test]
+    fn white_noise() {
+        let hf = noise(40, 35, 1, 1000, 0.1);
+        let r = checked(&hf, 0.0, None);
+        // Every sample off the plane of its neighbours: the full grid's triangle count.
+        assert_eq!(r.mesh.vertices.len(), 40 * 35);
+        assert_eq!(r.mesh.triangles.len(), 2 * 39 * 34);
+        let r = checked(&hf, 5.0, None);
+        assert!(r.mesh.triangles.len() > 2 * 39 * 34 / 2, "{}", r.mesh.triangles.len());
+    }
+
+    #[test]
+    fn checkerboard() {
+        let r = checked(&map(25, 25, |i, j| if (i + j) % 2 == 0 { 0.0 } else { 10.0 }), 1.0, None);
+        assert_eq!(r.mesh.vertices.len(), 25 * 25);
+    }
+
+    #[test]
+    fn non_square_301_by_17() {
+        let hf = crate::synth::fractal(301, 17, 1.0, 200.0, 0.6, 3);
+        for e in [0.0, 0.5, 5.0, 50.0] {
+            checked(&hf, e, None);
+        }
+        let tall = crate::synth::fractal(9, 120, 1.0, 200.0, 0.6, 4);
+        checked(&tall, 2.0, None);
+    }
+
+    #[test]
+    fn two_by_two() {
+        let r = checked(&map(2, 2, |i, j| (i * 7 + j * 3) as f32), 0.0, None);
+        assert_eq!(r.mesh.triangles.len(), 2);
+        assert_eq!(r.mesh.vertices.len(), 4);
+    }
+
+    #[test]
+    fn degenerate_sizes_are_clear_errors() {
+        for (w, h) in [(1, 10), (10, 1), (1, 1), (0, 0)] {
+            let e = tin(&map(w, h, |_, _| 0.0), &TinOptions::default()).unwrap_err();
+            assert_eq!(e, TerrainError::ZeroArea { width: w, height: h });
+            assert!(e.to_string().contains("at least 2×2"));
+        }
+    }
+
+    #[test]
+    fn bad_options_are_errors() {
+        let hf = map(4, 4, |_, _| 0.0);
+        for bad in [-1.0, f64::NAN, f64::INFINITY] {
+            assert!(matches!(
+                tin(&hf, &TinOptions { max_error_m: bad, max_triangles: None }),
+                Err(TerrainError::InvalidMaxError { .. })
+            ));
+        }
+        assert_eq!(
+            tin(&hf, &TinOptions { max_error_m: 1.0, max_triangles: Some(1) }),
+            Err(TerrainError::TriangleLimitTooSmall { limit: 1 })
+        );
+        let mut nan = hf.clone();
+        nan.heights[6] = f32::NAN;
+        assert_eq!(tin(&nan, &TinOptions::default()), Err(TerrainError::NonFiniteHeight { i: 2, j: 1 }));
+    }
+
+    #[test]
+    fn sixteen_bit_full_range() {
+        // Raw 16-bit values 0..=65535 at 0.1 m, plus the extremes side by side.
+        let hf = map(64, 48, |i, j| {
+            let v = match (i, j) {
+                (10, 10) => 65535,
+                (11, 10) => 0,
+                _ => crate::synth::mix64((j * 64 + i) as u64 / 7) % 65536,
+            };
+            v as f32 * 0.1
+        });
+        for e in [0.0, 10.0, 1000.0] {
+            checked(&hf, e, None);
+        }
+    }
+
+    #[test]
+    fn triangle_limit_is_honoured() {
+        let hf = crate::synth::fractal(65, 65, 1.0, 300.0, 0.55, 9);
+        let free = checked(&hf, 0.5, None);
+        for limit in [2, 3, 10, 101, 500] {
+            let r = checked(&hf, 0.5, Some(limit));
+            assert!(r.hit_triangle_limit);
+            assert!(r.mesh.triangles.len() <= limit && r.mesh.triangles.len() + 2 > limit);
+            assert!(r.max_error_m > 0.5);
+        }
+        let r = checked(&hf, 0.5, Some(free.mesh.triangles.len()));
+        assert!(!r.hit_triangle_limit);
+        assert_eq!(r, free);
+    }
+
+    #[test]
+    fn deterministic() {
+        let hf = crate::synth::fractal(129, 97, 1.0, 300.0, 0.55, 5);
+        let a = checked(&hf, 1.0, None);
+        let b = tin(&hf, &TinOptions { max_error_m: 1.0, max_triangles: None }).unwrap();
+        assert_eq!(a, b);
+        // Looser bounds give fewer triangles.
+        let c = checked(&hf, 10.0, None);
+        assert!(c.mesh.triangles.len() < a.mesh.triangles.len());
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+        #[test]
+        fn bound_holds_on_random_maps(
+            w in 2usize..20,
+            h in 2usize..20,
+            seed in any::<u64>(),
+            levels in 1u64..50,
+            max_error_m in 0.0f64..20.0,
+        ) {
+            // Few distinct levels make ties and exactly planar patches likely.
+            let hf = noise(w, h, seed, levels, 0.5);
+            checked(&hf, max_error_m, None);
+        }
+    }
+}

@@ -1,0 +1,193 @@
+//! Terrain benchmark: greedy-insertion TIN (`verdant::terrain::tin`) against the `delatin` crate on the
+//! Puget Sound heightmap and a 2049² fractal, with the error of each output measured by
+//! `verdant::terrain::error::measure`.
+//!
+//! Every case runs in a child process of this binary (`--case <input> <max_error_m> <impl>`) so the
+//! peak memory of one build can be read from that process's VmHWM (reset after loading the input via
+//! /proc/self/clear_refs). Plain `main`, no harness: `cargo bench --bench terrain` or
+//! `scripts/bench_terrain.sh`.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use verdant::heightfield::Heightfield;
+use verdant::terrain::error::measure;
+use verdant::terrain::tin::{tin, TinOptions};
+use verdant::terrain::SampleMesh;
+
+const PUGET: &str = "heightmaps/diligent_ps_height_1k.png";
+const FRACTAL_SEED: u64 = 0x7665_7264;
+/// Reference triangle counts (reference C++ greedy-insertion mesher, PROVENANCE.md of the data set).
+const PUGET_REFERENCE: &[(f64, usize)] = &[(10.0, 833_139), (50.0, 156_425), (1.0, 1_696_371)];
+const RUNS: usize = 3;
+
+fn data_dir() -> PathBuf {
+    std::env::var_os("VERDANT_DATA").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared/data"))
+}
+
+/// Loads the 16-bit Puget Sound map: value · 0.1 m, 160 m between samples.
+fn load_puget(dir: &Path) -> Result<Heightfield, String> {
+    let path = dir.join(PUGET);
+    let img = image::open(&path).map_err(|e| format!("{}: {e}", path.display()))?.into_luma16();
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    Ok(Heightfield { width: w, height: h, heights: img.into_raw().iter().map(|&v| v as f32 * 0.1).collect(), cell_size_m: 160.0 })
+}
+
+fn load(input: &str) -> Result<Heightfield, String> {
+    match input {
+        "puget" => load_puget(&data_dir()),
+        "fractal2049" => Ok(verdant::synth::fractal(2049, 2049, 1.0, 1000.0, 0.55, FRACTAL_SEED)),
+        other => Err(format!("unknown input {other}")),
+    }
+}
+
+/// (VmRSS, VmHWM) of this process in bytes.
+fn memory() -> (u64, u64) {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let field = |name: &str| {
+        status
+            .lines()
+            .find(|l| l.starts_with(name))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse::<u64>().ok())
+            .map_or(0, |kb| kb * 1024)
+    };
+    (field("VmRSS:"), field("VmHWM:"))
+}
+
+fn delatin_mesh(hf: &Heightfield, heights: &[f64], max_error_m: f64) -> SampleMesh {
+    let (points, triangles) =
+        delatin::triangulate(heights, (hf.width, hf.height), delatin::Error(max_error_m)).expect("delatin");
+    SampleMesh {
+        vertices: points.iter().map(|&(i, j)| [i as u32, j as u32]).collect(),
+        triangles: triangles.iter().map(|&(a, b, c)| [a as u32, b as u32, c as u32]).collect(),
+    }
+}
+
+/// Child: builds one case RUNS times, prints `triangles measured_max_error best_seconds peak_bytes
+/// build_bytes` on one line.
+fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
+    let hf = load(input)?;
+    // delatin takes f64 heights: converting them is input preparation, not part of its build.
+    let heights64: Vec<f64> = if which == "delatin" { hf.heights.iter().map(|&h| h as f64).collect() } else { Vec::new() };
+    // Reset the high-water mark so it covers the builds only (plus what is already resident).
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+    let (rss_before, _) = memory();
+    let mut best = f64::INFINITY;
+    let mut mesh = SampleMesh::default();
+    for _ in 0..RUNS {
+        drop(std::mem::take(&mut mesh));
+        let t = Instant::now();
+        mesh = match which {
+            "verdant" => tin(&hf, &TinOptions { max_error_m, max_triangles: None }).map_err(|e| e.to_string())?.mesh,
+            "delatin" => delatin_mesh(&hf, &heights64, max_error_m),
+            other => return Err(format!("unknown implementation {other}")),
+        };
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    let (_, peak) = memory();
+    let stats = measure(&hf, &mesh);
+    if stats.samples_covered != hf.width * hf.height {
+        eprintln!("warning: {which} covers {} of {} samples", stats.samples_covered, hf.width * hf.height);
+    }
+    println!("{} {} {} {} {}", mesh.triangles.len(), stats.max_error_m, best, peak, peak.saturating_sub(rss_before));
+    Ok(())
+}
+
+struct Row {
+    triangles: usize,
+    measured: f64,
+    seconds: f64,
+    peak: u64,
+    build: u64,
+}
+
+fn spawn_case(input: &str, max_error_m: f64, which: &str) -> Result<Row, String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let out = Command::new(exe)
+        .args(["--case", input, &max_error_m.to_string(), which])
+        .output()
+        .map_err(|e| e.to_string())?;
+    if !out.status.success() {
+        return Err(String::from_utf8_lossy(&out.stderr).into_owned());
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let f: Vec<&str> = text.split_whitespace().collect();
+    let parse = |k: usize| f.get(k).and_then(|s| s.parse::<f64>().ok()).ok_or_else(|| format!("bad child output: {text}"));
+    Ok(Row { triangles: parse(0)? as usize, measured: parse(1)?, seconds: parse(2)?, peak: parse(3)? as u64, build: parse(4)? as u64 })
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).filter(|a| a != "--bench").collect();
+    if args.first().map(String::as_str) == Some("--case") {
+        let (input, err, which) = (&args[1], &args[2], &args[3]);
+        let max_error_m: f64 = err.parse().unwrap_or(1.0);
+        if let Err(e) = run_case(input, max_error_m, which) {
+            eprintln!("{e}");
+            std::process::exit(1);
+        }
+        return;
+    }
+    // Optional filter: only cases whose input name contains the first argument; `--no-delatin` skips
+    // the peer.
+    let filter = args.iter().find(|a| !a.starts_with("--")).cloned().unwrap_or_default();
+    let with_peer = !args.iter().any(|a| a == "--no-delatin");
+
+    let mut cases: Vec<(&str, f64, usize)> = Vec::new();
+    if data_dir().join(PUGET).exists() {
+        cases.push(("puget", 10.0, 1025 * 1025));
+        cases.push(("puget", 50.0, 1025 * 1025));
+    } else {
+        println!("skipping Puget Sound: {} not found (set VERDANT_DATA)", data_dir().join(PUGET).display());
+    }
+    cases.push(("fractal2049", 1.0, 2049 * 2049));
+    cases.push(("fractal2049", 5.0, 2049 * 2049));
+    cases.retain(|c| c.0.contains(&filter));
+
+    println!("best of {RUNS} runs per case, one process per case; peak = VmHWM during the builds, build = peak − RSS before");
+    println!(
+        "{:<12} {:>7} {:<8} {:>10} {:>10} {:>8} {:>9} {:>9} {:>9}",
+        "input", "max_err", "impl", "triangles", "measured", "seconds", "peak MB", "build MB", "B/sample"
+    );
+    for (input, err, samples) in cases {
+        let mut rows = Vec::new();
+        let impls: &[&str] = if with_peer { &["verdant", "delatin"] } else { &["verdant"] };
+        for &which in impls {
+            match spawn_case(input, err, which) {
+                Ok(r) => {
+                    println!(
+                        "{:<12} {:>7} {:<8} {:>10} {:>10.4} {:>8.3} {:>9.1} {:>9.1} {:>9.1}",
+                        input,
+                        err,
+                        which,
+                        r.triangles,
+                        r.measured,
+                        r.seconds,
+                        r.peak as f64 / 1048576.0,
+                        r.build as f64 / 1048576.0,
+                        r.build as f64 / samples as f64
+                    );
+                    rows.push(r);
+                }
+                Err(e) => println!("{input:<12} {err:>7} {which:<8} failed: {}", e.trim()),
+            }
+        }
+        if let [ours, peer] = rows.as_slice() {
+            println!(
+                "{:<12} {:>7} {:<8} time verdant/delatin = {:.2}, triangles verdant/delatin = {:.3}",
+                "", "", "ratio", ours.seconds / peer.seconds, ours.triangles as f64 / peer.triangles as f64
+            );
+        }
+        if input == "puget" {
+            if let (Some(ours), Some(&(_, reference))) = (rows.first(), PUGET_REFERENCE.iter().find(|r| r.0 == err)) {
+                println!(
+                    "{:<12} {:>7} {:<8} reference {} triangles; verdant {:+.2} %",
+                    "", "", "ref",
+                    reference,
+                    (ours.triangles as f64 / reference as f64 - 1.0) * 100.0
+                );
+            }
+        }
+    }
+}
