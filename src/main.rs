@@ -35,6 +35,7 @@ enum Command {
     /// Heightmap → terrain mesh within a vertical error bound, written as glTF or OBJ.
     ///
     /// Example: verdant terrain fuji.png --encoding terrain-rgb --cell-size 30 --max-error 5 -o out/fuji.glb --report out/fuji.json
+    #[command(allow_negative_numbers = true)]
     Terrain(TerrainArgs),
     /// Re-import .glb/.gltf/.obj files and check them: indices in range, finite values, no
     /// degenerate triangles, unit normals, bounds equal to accessor min/max.

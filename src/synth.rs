@@ -99,7 +99,7 @@ pub fn fractal(width: usize, height: usize, cell_size_m: f64, relief_m: f64, rou
 
 /// The embedded default terrain of `verdant terrain --demo`: 257 × 257 samples, 4 m apart, up to 300 m.
 pub fn demo() -> Heightfield {
-    fractal(257, 257, 4.0, 300.0, 0.55, 0x7665_7264_616e_74)
+    fractal(257, 257, 4.0, 300.0, 0.45, 0x7665_7264_616e_74)
 }
 
 #[cfg(test)]

@@ -5,8 +5,11 @@ pub mod build;
 pub mod chunks;
 pub mod error;
 pub mod grid;
+pub mod job;
 pub mod solid;
 pub mod tin;
+
+pub use error::TerrainError;
 
 /// A triangulation whose vertices are heightmap samples: the plain data between the meshers
 /// (`grid`, `tin`), the error analyzer (`error`) and mesh building.
