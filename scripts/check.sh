@@ -139,7 +139,7 @@ mkdir -p "$OUT/thumbs"
 
 declare -A EXPORTED=() VALIDATED=() CHECKED=() KHRONOS=()
 FILES=()        # outputs to check, in order
-declare -A REPORT_OF=() WATERTIGHT=()
+declare -A REPORT_OF=() WATERTIGHT=() SIDES=()
 PASSED=0
 FAILED=0
 pass() { PASSED=$((PASSED + 1)); }
@@ -170,6 +170,8 @@ export_sample() {
   FILES+=("$file")
   REPORT_OF[$file]="$OUT/$name.json"
   WATERTIGHT[$file]=$solid
+  # skirts and the solid's walls/bottom are not terrain surface: they face sideways or down
+  case " $* " in *" --skirt "*|*" --base "*) SIDES[$file]=1 ;; *) SIDES[$file]=0 ;; esac
 }
 
 export_sample demo demo.glb -- \
@@ -196,11 +198,11 @@ for f in demo_chunks.gltf demo_grid.obj; do
 done
 
 # ---------------------------------------------------------------------------------------------------------
-section "4. verdant validate (re-import + invariants; --up-facing except for the solid)"
+section "4. verdant validate (re-import + invariants; --up-facing except with skirts or a base)"
 for f in "${FILES[@]}"; do
   if [ "${EXPORTED[$f]%% *}" != ok ]; then VALIDATED[$f]="-"; continue; fi
   up=(--up-facing)
-  if [ "${WATERTIGHT[$f]}" = 1 ]; then up=(); fi  # walls and bottom of the solid face sideways/down
+  if [ "${SIDES[$f]}" = 1 ]; then up=(); fi  # skirts, walls and bottom face sideways/down
   echo "\$ verdant validate out/check/$f ${up[*]}"
   if "$BIN" validate "$OUT/$f" "${up[@]}"; then VALIDATED[$f]=ok; pass; else VALIDATED[$f]=FAIL; fail "verdant validate $f"; fi
 done
