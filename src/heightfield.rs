@@ -100,7 +100,7 @@ impl fmt::Display for Encoding {
 /// for a fine TIN). Raise it with `--max-samples` on a machine that has the memory.
 pub const DEFAULT_MAX_SAMPLES: usize = 8193 * 8193;
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DecodeOptions {
     pub encoding: Encoding,
     /// Width × height for raw files (`.r16`/`.raw`).

@@ -11,6 +11,7 @@
 pub mod export;
 pub mod heightfield;
 pub mod mesh;
+pub mod scene;
 pub mod synth;
 pub mod terrain;
 pub mod validate;
