@@ -143,17 +143,28 @@ pub fn load_source(job: &TerrainJob) -> Result<Decoded, JobError> {
     })
 }
 
-/// Meshes `hf` as the job asks and measures the result. Returns the mesh, the TIN's
-/// triangle-limit flag and the analyzer's statistics.
-pub fn mesh_heightfield(job: &TerrainJob, hf: &Heightfield, max_error_m: f64) -> Result<(SampleMesh, bool), JobError> {
-    let wrap = |error| JobError::Terrain { source_label: job.source.label(), error };
-    match job.mode {
-        MeshMode::Grid => Ok((grid(hf, job.grid_step).map_err(wrap)?, false)),
+/// Meshes `hf` by `mode`: a grid of every `grid_step` samples, or a TIN within `max_error_m`
+/// (stopping at `max_triangles`). Returns the mesh and whether the triangle limit stopped it.
+pub fn mesh_samples(
+    hf: &Heightfield,
+    mode: MeshMode,
+    grid_step: usize,
+    max_error_m: f64,
+    max_triangles: Option<usize>,
+) -> Result<(SampleMesh, bool), TerrainError> {
+    match mode {
+        MeshMode::Grid => Ok((grid(hf, grid_step)?, false)),
         MeshMode::Tin => {
-            let r = tin(hf, &TinOptions { max_error_m, max_triangles: job.max_triangles }).map_err(wrap)?;
+            let r = tin(hf, &TinOptions { max_error_m, max_triangles })?;
             Ok((r.mesh, r.hit_triangle_limit))
         }
     }
+}
+
+/// Meshes `hf` as the job asks, at `max_error_m`.
+pub fn mesh_heightfield(job: &TerrainJob, hf: &Heightfield, max_error_m: f64) -> Result<(SampleMesh, bool), JobError> {
+    mesh_samples(hf, job.mode, job.grid_step, max_error_m, job.max_triangles)
+        .map_err(|error| JobError::Terrain { source_label: job.source.label(), error })
 }
 
 fn check_options(job: &TerrainJob) -> Result<(), JobError> {
