@@ -517,8 +517,12 @@ where
     let colors = (prim.colors.len() == n).then_some(&prim.colors[..]);
     let mut written = 0u64;
     for &t in tris {
-        let Some(tri) = setup.tris.get(t as usize) else { continue };
-        let Some((ry0, ry1)) = tri.pixel_rows(y1) else { continue };
+        let Some(tri) = setup.tris.get(t as usize) else {
+            continue;
+        };
+        let Some((ry0, ry1)) = tri.pixel_rows(y1) else {
+            continue;
+        };
         let (ry0, ry1) = (ry0.max(y0), ry1);
         if ry0 >= ry1 {
             continue;
@@ -549,9 +553,8 @@ where
                     let k = row + x as usize;
                     if !opts.depth_test || z < depth[k] {
                         let lf = l.map(|v| v as f32);
-                        let mix3 = |v: [[f32; 3]; 3]| {
-                            [0, 1, 2].map(|d| lf[0] * v[0][d] + lf[1] * v[1][d] + lf[2] * v[2][d])
-                        };
+                        let mix3 =
+                            |v: [[f32; 3]; 3]| [0, 1, 2].map(|d| lf[0] * v[0][d] + lf[1] * v[1][d] + lf[2] * v[2][d]);
                         let p = &prim.positions;
                         let frag = Fragment {
                             x: x as u32,
@@ -563,8 +566,7 @@ where
                                 [0, 1].map(|d| lf[0] * u[vi[0]][d] + lf[1] * u[vi[1]][d] + lf[2] * u[vi[2]][d])
                             }),
                             color: colors.map_or([1.0; 4], |cl| {
-                                [0, 1, 2, 3]
-                                    .map(|d| lf[0] * cl[vi[0]][d] + lf[1] * cl[vi[1]][d] + lf[2] * cl[vi[2]][d])
+                                [0, 1, 2, 3].map(|d| lf[0] * cl[vi[0]][d] + lf[1] * cl[vi[1]][d] + lf[2] * cl[vi[2]][d])
                             }),
                             // Report weights in the triangle's index order.
                             bary: if tri.swapped { [lf[0], lf[2], lf[1]] } else { lf },
@@ -790,9 +792,10 @@ mod tests {
 
     #[test]
     fn bad_input_is_skipped_not_panicked() {
-        let p = prim(vec![[0.0, 0.0, 0.0], [f32::NAN, 1.0, 0.0], [3.0, 3.0, 0.0], [1e30, 0.0, 0.0]], vec![
-            0, 1, 2, 0, 2, 9, 0, 2, 3, 0, 0, 2, 7,
-        ]);
+        let p = prim(
+            vec![[0.0, 0.0, 0.0], [f32::NAN, 1.0, 0.0], [3.0, 3.0, 0.0], [1e30, 0.0, 0.0]],
+            vec![0, 1, 2, 0, 2, 9, 0, 2, 3, 0, 0, 2, 7],
+        );
         let mut c = Canvas::new(4, 4, [0.0; 4]).unwrap();
         let s = c.draw(&identity(), &p, &DrawOptions::default(), |_| Some([1.0; 4]));
         assert_eq!((s.triangles, s.culled, s.skipped, s.fragments), (0, 1, 3, 0));
