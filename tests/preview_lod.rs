@@ -129,3 +129,14 @@ fn preview_of_a_million_triangles_timing() {
         rayon::current_num_threads()
     );
 }
+
+#[test]
+#[ignore = "writes $VERDANT_PREVIEW_OUT/preview_demo.png to look at"]
+fn write_demo_preview() {
+    let Ok(dir) = std::env::var("VERDANT_PREVIEW_OUT") else { return };
+    let hf = verdant::synth::demo();
+    let mesh = tin(&hf, &TinOptions::default()).unwrap().mesh;
+    let opts = BuildOptions { chunk_samples: Some(64), ..BuildOptions::default() };
+    let scene = build_scene(&hf, &mesh, &opts).unwrap();
+    write_png(&terrain_preview(&scene, 512), &std::path::Path::new(&dir).join("preview_demo.png")).unwrap();
+}

@@ -1,8 +1,9 @@
 //! `preview.png`: a shaded relief of what was built, drawn from the meshes (not the heightmap) with
 //! the software rasteriser, seen straight from above. Deferred shading in two passes: the surface
-//! pass stores height and interpolated normal per pixel (the canvas's four channels as a G-buffer),
-//! then every covered pixel is shaded with Lambert from the north-west at 45° times a hypsometric
-//! tint over the *visible* height range (so skirts and a base do not stretch the colour ramp).
+//! pass stores height, interpolated normal and chunk per pixel (the canvas's four channels as a
+//! G-buffer), then every covered pixel is shaded with Lambert from the north-west at 45° times a hypsometric
+//! tint over the *visible* height range (so skirts and a base do not stretch the colour ramp), and
+//! pixels on a border between two chunk nodes are darkened.
 //!
 //! Orientation is the heightmap image's: x to the right, z down the image (north, −z, up), the long
 //! side `size_px` pixels, the aspect kept. Later stages can draw into the same picture with
@@ -98,18 +99,16 @@ fn transformed(p: &Primitive, m: &Affine) -> Primitive {
 }
 
 /// Every primitive reachable from the scene's roots, in world space, in traversal order (roots in
-/// order, children depth first). Instanced nodes are left out (their stage draws its placements)
-/// and so are MSFT_lod's coarser levels (only referenced, not children). Also returns the world
-/// rectangles (min x, max x, min z, max z) of chunk nodes (extras with a `chunk` key).
-fn collect(scene: &Scene) -> (Vec<WorldPrim<'_>>, Vec<[f64; 4]>) {
+/// order, children depth first), each with the ordinal of its chunk node (extras with a `chunk`
+/// key) or −1. Instanced nodes are left out (their stage draws its placements) and so are
+/// MSFT_lod's coarser levels (only referenced, not children).
+fn collect(scene: &Scene) -> Vec<(WorldPrim<'_>, f32)> {
     let mut prims = Vec::new();
-    let mut chunks = Vec::new();
+    let mut chunk_count = 0u32;
     let mut stack: Vec<(usize, Affine, usize)> = scene.roots.iter().rev().map(|&r| (r, IDENTITY, 0)).collect();
     while let Some((n, parent, depth)) = stack.pop() {
         // A malformed graph (cycle, bad index) must not hang or panic.
-        let Some(node) = scene.nodes.get(n) else {
-            continue;
-        };
+        let Some(node) = scene.nodes.get(n) else { continue };
         if depth > 64 {
             continue;
         }
@@ -118,21 +117,13 @@ fn collect(scene: &Scene) -> (Vec<WorldPrim<'_>>, Vec<[f64; 4]>) {
         let identity = m == IDENTITY;
         if let (Some(mi), None) = (node.mesh, &node.instances) {
             if let Some(mesh) = scene.meshes.get(mi) {
-                let mut rect: Option<[f64; 4]> = None;
+                let is_chunk = node.extras.as_ref().is_some_and(|e| e.get("chunk").is_some());
+                // Ordinals stay exact in f32 up to 2^24 chunks.
+                let id = if is_chunk { chunk_count as f32 } else { -1.0 };
+                chunk_count += is_chunk as u32;
                 for p in &mesh.primitives {
                     let wp = if identity { WorldPrim::Borrowed(p) } else { WorldPrim::Owned(transformed(p, &m)) };
-                    if let Some(b) = wp.get().bounds() {
-                        let r = [b.min[0] as f64, b.max[0] as f64, b.min[2] as f64, b.max[2] as f64];
-                        rect = Some(match rect {
-                            None => r,
-                            Some(q) => [q[0].min(r[0]), q[1].max(r[1]), q[2].min(r[2]), q[3].max(r[3])],
-                        });
-                    }
-                    prims.push(wp);
-                }
-                let is_chunk = node.extras.as_ref().is_some_and(|e| e.get("chunk").is_some());
-                if let (true, Some(r)) = (is_chunk, rect) {
-                    chunks.push(r);
+                    prims.push((wp, id));
                 }
             }
         }
@@ -140,13 +131,13 @@ fn collect(scene: &Scene) -> (Vec<WorldPrim<'_>>, Vec<[f64; 4]>) {
             stack.push((c, m, depth + 1));
         }
     }
-    (prims, chunks)
+    prims
 }
 
 /// World bounds of the drawable primitives: (min x, max x, min z, max z, max y), if any point.
-fn extent(prims: &[WorldPrim<'_>]) -> Option<[f64; 5]> {
+fn extent(prims: &[(WorldPrim<'_>, f32)]) -> Option<[f64; 5]> {
     let mut e: Option<[f64; 5]> = None;
-    for p in prims {
+    for (p, _) in prims {
         for v in &p.get().positions {
             if !v.iter().all(|c| c.is_finite()) {
                 continue;
@@ -164,7 +155,7 @@ fn extent(prims: &[WorldPrim<'_>]) -> Option<[f64; 5]> {
 /// The view [`terrain_preview`] draws with: top-down, fit to the scene's x/z bounds, the long side
 /// `size_px` (clamped to 1..=16384). `None` for a scene with nothing to draw.
 pub fn preview_view(scene: &Scene, size_px: u32) -> Option<OrthoView> {
-    let (prims, _) = collect(scene);
+    let prims = collect(scene);
     let e = extent(&prims)?;
     // Depth measured from just above the highest point, so every depth is positive.
     Some(OrthoView::top_down(e[0], e[1], e[2], e[3], e[4] + 1.0, size_px))
@@ -175,22 +166,25 @@ pub fn preview_view(scene: &Scene, size_px: u32) -> Option<OrthoView> {
 /// transparent `size_px`² canvas.
 pub fn terrain_preview(scene: &Scene, size_px: u32) -> Canvas {
     let size_px = size_px.clamp(1, MAX_CANVAS_SIDE);
-    let (prims, chunks) = collect(scene);
+    let prims = collect(scene);
     let blank = || blank_canvas(size_px, size_px);
-    let Some(e) = extent(&prims) else {
-        return blank();
-    };
+    let Some(e) = extent(&prims) else { return blank() };
     let view = OrthoView::top_down(e[0], e[1], e[2], e[3], e[4] + 1.0, size_px);
-    let Ok(mut canvas) = view.canvas(BACKGROUND) else {
-        return blank();
-    };
+    let Ok(mut canvas) = view.canvas(BACKGROUND) else { return blank() };
 
-    // Surface pass: G-buffer of (height, normal). Back faces (base bottom) are culled; vertical
-    // skirts and walls have no area from above.
+    // Surface pass, into a G-buffer: (height, unit normal's x and z, chunk ordinal). The normal's y
+    // is recovered as ≥ 0: back faces are culled, so what is seen faces up. Vertical skirts and
+    // walls have no area from above; the base's bottom faces down.
     let proj = view.projection();
     let opts = DrawOptions { cull: Cull::Back, depth_test: true, depth_write: true };
-    for p in &prims {
-        canvas.draw_par(&proj, p.get(), &opts, |f| Some([f.position[1], f.normal[0], f.normal[1], f.normal[2]]));
+    for (p, id) in &prims {
+        canvas.draw_par(&proj, p.get(), &opts, |f| {
+            let [nx, ny, nz] = f.normal;
+            let len = (nx * nx + ny * ny + nz * nz).sqrt();
+            // A primitive without normals reads as facing straight up.
+            let (nx, nz) = if len > 1e-12 && len.is_finite() { (nx / len, nz / len) } else { (0.0, 0.0) };
+            Some([f.position[1], nx, nz, *id])
+        });
     }
 
     // Visible height range for the tint.
@@ -204,23 +198,21 @@ pub fn terrain_preview(scene: &Scene, size_px: u32) -> Canvas {
     }
     let span = if hi > lo { hi - lo } else { 1.0 };
 
-    // Chunk borders: mark the pixel column/row each border line falls in (shared borders once).
+    // Chunk borders as the chunks really are (a TIN's chunks follow its triangles, not the chunk
+    // grid's lines): a pixel whose right or lower neighbour belongs to another chunk.
     let (w, h) = (canvas.width as usize, canvas.height as usize);
-    let mut outline = vec![false; w * h];
-    for r in &chunks {
-        let a = view.to_pixel([r[0], 0.0, r[2]]);
-        let b = view.to_pixel([r[1], 0.0, r[3]]);
-        let px = |v: f64, n: usize| (v.floor().max(0.0) as usize).min(n - 1);
-        let (x0, x1, y0, y1) = (px(a[0], w), px(b[0], w), px(a[1], h), px(b[1], h));
-        for x in x0..=x1 {
-            outline[y0 * w + x] = true;
-            outline[y1 * w + x] = true;
-        }
-        for y in y0..=y1 {
-            outline[y * w + x0] = true;
-            outline[y * w + x1] = true;
-        }
-    }
+    let chunk = |k: usize| if covered(k) { canvas.color[k][3] } else { -1.0 };
+    let outline: Vec<bool> = (0..w * h)
+        .map(|k| {
+            let (x, y) = (k % w, k / w);
+            let id = chunk(k);
+            let differs = |n: usize| {
+                let other = chunk(n);
+                id >= 0.0 && other >= 0.0 && other != id
+            };
+            (x + 1 < w && differs(k + 1)) || (y + 1 < h && differs(k + w))
+        })
+        .collect();
 
     // Shading pass.
     for k in 0..w * h {
@@ -228,13 +220,11 @@ pub fn terrain_preview(scene: &Scene, size_px: u32) -> Canvas {
             canvas.color[k] = BACKGROUND;
             continue;
         }
-        let [height, nx, ny, nz] = canvas.color[k];
+        let [height, nx, nz, _] = canvas.color[k];
         let t = if height.is_finite() { (height - lo) / span } else { 0.0 };
         let tint = hypsometric_tint(t);
-        let len = (nx * nx + ny * ny + nz * nz).sqrt();
-        // A primitive without normals reads as facing straight up.
-        let n = if len > 1e-12 && len.is_finite() { [nx / len, ny / len, nz / len] } else { [0.0, 1.0, 0.0] };
-        let lambert = (n[0] * LIGHT[0] + n[1] * LIGHT[1] + n[2] * LIGHT[2]).max(0.0);
+        let ny = (1.0 - nx * nx - nz * nz).max(0.0).sqrt();
+        let lambert = (nx * LIGHT[0] + ny * LIGHT[1] + nz * LIGHT[2]).max(0.0);
         let mut shade = AMBIENT + (1.0 - AMBIENT) * lambert;
         if outline[k] {
             shade *= OUTLINE_FACTOR;
@@ -331,8 +321,8 @@ mod tests {
                     assert!((b[0] - a[0] * OUTLINE_FACTOR).abs() < 1e-4, "{a:?} {b:?}");
                 }
             }
-            // borders at samples 0, 16, 32 → three rows and three columns of the 64² picture
-            assert!(differing > 64 * 4 && differing < 64 * 7, "{differing}");
+            // one inner border row and column of the 64² picture (grid: chunks follow its lines)
+            assert!(differing > 64 && differing < 64 * 3, "{differing}");
         }
     }
 
