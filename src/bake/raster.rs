@@ -692,6 +692,52 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+        /// Random jittered triangulations of a rectangle (sub-pixel vertices, random diagonals and
+        /// windings): every pixel centre of the rectangle is written exactly once, nothing else.
+        #[test]
+        fn random_triangulations_cover_each_pixel_once(
+            jitter in proptest::collection::vec((-300i32..=300, -300i32..=300), 64),
+            flips in proptest::collection::vec(0u8..4, 49),
+        ) {
+            let (n, s) = (7usize, 5.0f32);
+            let mut pos = Vec::new();
+            for j in 0..=n {
+                for i in 0..=n {
+                    let inner = i > 0 && i < n && j > 0 && j < n;
+                    let (dx, dy) = if inner { jitter[j * 8 + i] } else { (0, 0) };
+                    // jitter up to ±1.17 px in 1/256 steps (cells stay convex, so either diagonal is a valid
+                    // split): vertices land on centres, on edges, anywhere
+                    pos.push([0.5 + i as f32 * s + dx as f32 / 256.0, 0.5 + j as f32 * s + dy as f32 / 256.0, 0.0]);
+                }
+            }
+            let mut idx = Vec::new();
+            for j in 0..n as u32 {
+                for i in 0..n as u32 {
+                    let a = j * (n as u32 + 1) + i;
+                    let (b, c, d) = (a + 1, a + n as u32 + 1, a + n as u32 + 2);
+                    let f = flips[j as usize * n + i as usize];
+                    let mut two = if f & 1 == 0 { [a, b, d, a, d, c] } else { [a, b, c, b, d, c] };
+                    if f & 2 != 0 {
+                        two.swap(1, 2);
+                    }
+                    idx.extend_from_slice(&two);
+                }
+            }
+            let p = prim(pos, idx);
+            let side = (n as f32 * s + 2.0) as u32;
+            let mut c = Canvas::new(side, side, [0.0; 4]).unwrap();
+            let counts = coverage(&mut c, &p, &NO_DEPTH);
+            let last = (n as f32 * s) as usize;
+            for y in 0..side as usize {
+                for x in 0..side as usize {
+                    proptest::prop_assert_eq!(counts[y * side as usize + x], (x < last && y < last) as u32, "pixel ({}, {})", x, y);
+                }
+            }
+        }
+    }
+
     #[test]
     fn fan_around_a_pixel_centre_owns_it_once() {
         // Eight triangles around the centre of pixel (8, 8), with diagonal and axis edges.

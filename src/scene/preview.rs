@@ -105,11 +105,12 @@ fn transformed(p: &Primitive, m: &Affine) -> Primitive {
 fn collect(scene: &Scene) -> Vec<(WorldPrim<'_>, f32)> {
     let mut prims = Vec::new();
     let mut chunk_count = 0u32;
-    let mut stack: Vec<(usize, Affine, usize)> = scene.roots.iter().rev().map(|&r| (r, IDENTITY, 0)).collect();
-    while let Some((n, parent, depth)) = stack.pop() {
-        // A malformed graph (cycle, bad index) must not hang or panic.
+    let mut stack: Vec<(usize, Affine)> = scene.roots.iter().rev().map(|&r| (r, IDENTITY)).collect();
+    // A malformed graph (cycle, shared child, bad index) must not hang or panic: each node once.
+    let mut seen = vec![false; scene.nodes.len()];
+    while let Some((n, parent)) = stack.pop() {
         let Some(node) = scene.nodes.get(n) else { continue };
-        if depth > 64 {
+        if std::mem::replace(&mut seen[n], true) {
             continue;
         }
         let local = node_matrix(node.translation, node.rotation, node.scale);
@@ -128,7 +129,7 @@ fn collect(scene: &Scene) -> Vec<(WorldPrim<'_>, f32)> {
             }
         }
         for &c in node.children.iter().rev() {
-            stack.push((c, m, depth + 1));
+            stack.push((c, m));
         }
     }
     prims
@@ -215,21 +216,21 @@ pub fn terrain_preview(scene: &Scene, size_px: u32) -> Canvas {
         .collect();
 
     // Shading pass.
-    for k in 0..w * h {
-        if !covered(k) {
-            canvas.color[k] = BACKGROUND;
+    for ((c, d), &edge) in canvas.color.iter_mut().zip(&canvas.depth).zip(&outline) {
+        if !d.is_finite() {
+            *c = BACKGROUND;
             continue;
         }
-        let [height, nx, nz, _] = canvas.color[k];
+        let [height, nx, nz, _] = *c;
         let t = if height.is_finite() { (height - lo) / span } else { 0.0 };
         let tint = hypsometric_tint(t);
         let ny = (1.0 - nx * nx - nz * nz).max(0.0).sqrt();
         let lambert = (nx * LIGHT[0] + ny * LIGHT[1] + nz * LIGHT[2]).max(0.0);
         let mut shade = AMBIENT + (1.0 - AMBIENT) * lambert;
-        if outline[k] {
+        if edge {
             shade *= OUTLINE_FACTOR;
         }
-        canvas.color[k] = [tint[0] * shade, tint[1] * shade, tint[2] * shade, 1.0];
+        *c = [tint[0] * shade, tint[1] * shade, tint[2] * shade, 1.0];
     }
     canvas
 }
@@ -337,6 +338,17 @@ mod tests {
         assert_eq!((v.width, v.height), (80, 40));
         let c = terrain_preview(&scene, 80);
         assert_eq!((c.width, c.height), (80, 40));
+        assert!(c.color.iter().all(|p| p[3] == 1.0));
+    }
+
+    #[test]
+    fn malformed_graphs_do_not_hang() {
+        let hf = hill(5);
+        let mut scene = build_scene(&hf, &grid(&hf, 1).unwrap(), &BuildOptions::default()).unwrap();
+        let root = scene.roots[0];
+        scene.nodes[root].children = vec![root, root, 99];
+        scene.roots.push(root);
+        let c = terrain_preview(&scene, 16);
         assert!(c.color.iter().all(|p| p[3] == 1.0));
     }
 
