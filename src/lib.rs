@@ -8,8 +8,10 @@
 //! lies at x = i·cell, z = j·cell; triangles wind counter-clockwise seen from their front (+Y for
 //! terrain); writes are atomic; same inputs give byte-identical outputs at any thread count.
 
+pub mod bake;
 pub mod export;
 pub mod heightfield;
+pub mod lod;
 pub mod mesh;
 pub mod scene;
 pub mod synth;

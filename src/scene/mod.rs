@@ -4,6 +4,8 @@
 //! The types here are the resolved settings every stage reads; they are written into the manifest
 //! as they are, so a build can be reproduced from its manifest alone.
 
+pub mod preview;
+
 use std::path::PathBuf;
 
 use serde::Serialize;

@@ -1,0 +1,254 @@
+//! Levels of detail with switch distances from *measured* geometric error: each level is an
+//! error-bounded TIN (greedy insertion, `terrain::tin`), measured by the analyzer (`terrain::error`),
+//! and switched where its error projects below a pixel tolerance (the screen-space error metric of
+//! Lindstrom & Pascucci and of chunked LOD, Ulrich 2002: ρ = ε · H / (2 d tan(fov/2))).
+//!
+//! Convention for a chain of levels 0..n (0 the finest): level k is used from distance `d_k` on, up
+//! to (not including) `d_{k+1}`; the last level is used from its distance to infinity. `d_0 = 0`
+//! always (the finest level is what there is close up), and for k ≥ 1
+//! `d_k = ε_k · screen_height_px / (2 · tan(fov_y/2) · max_screen_error_px)` with ε_k the level's
+//! measured max error: from `d_k` on, level k's error covers at most `max_screen_error_px` pixels.
+//! Distances are to the nearest point of the geometry (the error can be anywhere on it).
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use crate::heightfield::Heightfield;
+use crate::terrain::error::{measure, ErrorStats};
+use crate::terrain::tin::{tin, TinOptions};
+use crate::terrain::{SampleMesh, TerrainError};
+
+/// The viewer the switch distances are computed for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LodView {
+    /// Height of the screen (or render target) in pixels.
+    pub screen_height_px: f64,
+    /// Vertical field of view in degrees (0 < fov < 180).
+    pub fov_y_deg: f64,
+    /// Largest geometric error allowed on screen, in pixels (> 0).
+    pub max_screen_error_px: f64,
+    /// Screen width / height; only the screen-coverage form ([`lod_screen_coverage`]) needs it.
+    pub aspect: f64,
+}
+
+impl Default for LodView {
+    fn default() -> Self {
+        LodView { screen_height_px: 1080.0, fov_y_deg: 60.0, max_screen_error_px: 1.0, aspect: 16.0 / 9.0 }
+    }
+}
+
+impl LodView {
+    /// Pixels per metre at distance 1 m: H / (2 tan(fov/2)).
+    fn pixels_per_metre_at_1m(&self) -> f64 {
+        self.screen_height_px / (2.0 * (self.fov_y_deg.to_radians() * 0.5).tan())
+    }
+
+    /// Distance (metres) beyond which an error of `error_m` projects to less than
+    /// `max_screen_error_px` pixels: d = ε · H / (2 tan(fov/2) · τ).
+    pub fn switch_distance(&self, error_m: f64) -> f64 {
+        error_m * self.pixels_per_metre_at_1m() / self.max_screen_error_px
+    }
+
+    /// Pixels an error of `error_m` covers at `distance_m` (the inverse of [`LodView::switch_distance`]).
+    pub fn projected_error_px(&self, error_m: f64, distance_m: f64) -> f64 {
+        error_m * self.pixels_per_metre_at_1m() / distance_m
+    }
+
+    fn check(&self) -> Result<(), LodError> {
+        let ok = self.screen_height_px.is_finite()
+            && self.screen_height_px > 0.0
+            && self.fov_y_deg.is_finite()
+            && self.fov_y_deg > 0.0
+            && self.fov_y_deg < 180.0
+            && self.max_screen_error_px.is_finite()
+            && self.max_screen_error_px > 0.0
+            && self.aspect.is_finite()
+            && self.aspect > 0.0;
+        if ok {
+            Ok(())
+        } else {
+            Err(LodError::InvalidView { view: *self })
+        }
+    }
+}
+
+/// One level of a terrain LoD chain.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LodLevel {
+    /// 0 is the finest.
+    pub level: usize,
+    pub max_error_requested_m: f64,
+    pub mesh: SampleMesh,
+    /// What the analyzer measured for `mesh` (over every sample).
+    pub stats: ErrorStats,
+    /// Use this level from this distance on (see the module docs); 0 for level 0.
+    pub switch_distance_m: f64,
+    /// True if the triangle limit stopped refinement before the requested error was reached (the
+    /// measured error in `stats` is then above `max_error_requested_m`).
+    pub hit_triangle_limit: bool,
+    /// Time to mesh and measure this level.
+    pub seconds: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LodError {
+    #[error("a LoD chain needs at least one max error (e.g. lods = [1, 4, 16])")]
+    NoLevels,
+    #[error("LoD max error #{index} is {value}: each must be a finite number of metres ≥ 0")]
+    InvalidError { index: usize, value: f64 },
+    #[error(
+        "LoD max errors must be strictly increasing, finest first: #{index} is {value} m after {previous} m \
+         (e.g. lods = [1, 4, 16])"
+    )]
+    NotIncreasing { index: usize, previous: f64, value: f64 },
+    #[error(
+        "invalid LoD view {view:?}: screen height, pixel tolerance and aspect must be > 0 and the field of \
+         view between 0 and 180 degrees"
+    )]
+    InvalidView { view: LodView },
+    #[error("LoD level {level}: {error}")]
+    Terrain { level: usize, error: TerrainError },
+}
+
+/// Checks that `max_errors_m` is a usable chain: not empty, finite, ≥ 0, strictly increasing.
+pub fn check_max_errors(max_errors_m: &[f64]) -> Result<(), LodError> {
+    if max_errors_m.is_empty() {
+        return Err(LodError::NoLevels);
+    }
+    for (index, &value) in max_errors_m.iter().enumerate() {
+        if !value.is_finite() || value < 0.0 {
+            return Err(LodError::InvalidError { index, value });
+        }
+        if index > 0 && value <= max_errors_m[index - 1] {
+            return Err(LodError::NotIncreasing { index, previous: max_errors_m[index - 1], value });
+        }
+    }
+    Ok(())
+}
+
+/// Builds one TIN per requested max error (finest first), measures each with the analyzer and
+/// assigns switch distances from the measured errors (module docs give the convention).
+///
+/// Greedy insertion inserts samples in an order that does not depend on the bound, so each coarser
+/// level is a prefix of the finer one's insertions: triangle counts never increase along the chain
+/// and measured errors never decrease. Distances are made non-decreasing regardless (each is at
+/// least the previous one), which only matters when a triangle limit cuts levels short.
+/// Levels are meshed in parallel; the result is the same at any thread count.
+pub fn terrain_lod_chain(
+    hf: &Heightfield,
+    max_errors_m: &[f64],
+    max_triangles: Option<usize>,
+    view: &LodView,
+) -> Result<Vec<LodLevel>, LodError> {
+    check_max_errors(max_errors_m)?;
+    view.check()?;
+    let built: Vec<Result<LodLevel, LodError>> = max_errors_m
+        .par_iter()
+        .enumerate()
+        .map(|(level, &max_error_m)| {
+            let start = Instant::now();
+            let r = tin(hf, &TinOptions { max_error_m, max_triangles })
+                .map_err(|error| LodError::Terrain { level, error })?;
+            let stats = measure(hf, &r.mesh);
+            Ok(LodLevel {
+                level,
+                max_error_requested_m: max_error_m,
+                mesh: r.mesh,
+                stats,
+                switch_distance_m: 0.0,
+                hit_triangle_limit: r.hit_triangle_limit,
+                seconds: start.elapsed().as_secs_f64(),
+            })
+        })
+        .collect();
+    let mut levels = built.into_iter().collect::<Result<Vec<_>, _>>()?;
+    let mut previous = 0.0f64;
+    for l in levels.iter_mut().skip(1) {
+        l.switch_distance_m = view.switch_distance(l.stats.max_error_m).max(previous);
+        previous = l.switch_distance_m;
+    }
+    Ok(levels)
+}
+
+/// Screen coverage as Babylon.js computes it for MSFT_lod (`Mesh.getLOD` with screen coverage):
+/// the area of the bounding sphere's projected disc over the screen's area,
+/// π r² / (aspect · (2 D tan(fov/2))²), D the distance from the camera to the sphere's *centre*.
+///
+/// `nearest_distance_m` is a switch distance in this module's sense (to the nearest point of the
+/// object), so D = nearest_distance_m + radius_m: when the viewer is D from the centre it is at least
+/// `nearest_distance_m` from every point of the object, so the switch keeps the pixel-error bound.
+/// Capped at 1 (the object fills the screen).
+pub fn lod_screen_coverage(radius_m: f64, nearest_distance_m: f64, view: &LodView) -> f64 {
+    let centre = nearest_distance_m.max(0.0) + radius_m.max(0.0);
+    if centre <= 0.0 {
+        return 1.0;
+    }
+    let screen_h = 2.0 * centre * (view.fov_y_deg.to_radians() * 0.5).tan();
+    let c = std::f64::consts::PI * radius_m * radius_m / (view.aspect * screen_h * screen_h);
+    if c.is_finite() {
+        c.clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// The node `extras.MSFT_screencoverage` array for a chain: one value per level, finest first;
+/// value k is the smallest coverage at which level k is shown (the coverage at `d_{k+1}`, where
+/// level k+1 takes over), and the last is 0 so the coarsest level is never culled.
+/// `radius_m` is the bounding-sphere radius of the object (e.g. of one terrain chunk).
+pub fn msft_screen_coverage(levels: &[LodLevel], radius_m: f64, view: &LodView) -> Vec<f32> {
+    let mut out: Vec<f32> =
+        levels.iter().skip(1).map(|next| lod_screen_coverage(radius_m, next.switch_distance_m, view) as f32).collect();
+    if !levels.is_empty() {
+        out.push(0.0);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formula_matches_the_definition() {
+        let v = LodView::default();
+        // 1080 px, 60°: H / (2 tan 30°) = 1080 / 1.1547 = 935.3 px per metre at 1 m.
+        let d = v.switch_distance(1.0);
+        assert!((d - 1080.0 / (2.0 * (30.0f64).to_radians().tan())).abs() < 1e-9);
+        assert!((d - 935.307).abs() < 1e-3, "{d}");
+        assert!((v.projected_error_px(1.0, d) - 1.0).abs() < 1e-12);
+        let v2 = LodView { max_screen_error_px: 2.0, ..v };
+        assert!((v2.switch_distance(1.0) - d / 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn bad_errors_are_refused() {
+        assert_eq!(check_max_errors(&[]), Err(LodError::NoLevels));
+        assert!(matches!(check_max_errors(&[1.0, 1.0]), Err(LodError::NotIncreasing { index: 1, .. })));
+        assert!(matches!(check_max_errors(&[2.0, 1.0]), Err(LodError::NotIncreasing { .. })));
+        assert!(matches!(check_max_errors(&[f64::NAN]), Err(LodError::InvalidError { index: 0, .. })));
+        assert!(matches!(check_max_errors(&[-1.0]), Err(LodError::InvalidError { .. })));
+        assert_eq!(check_max_errors(&[0.0, 0.5, 4.0]), Ok(()));
+        let hf = crate::synth::fractal(9, 9, 1.0, 10.0, 0.5, 1);
+        let bad_view = LodView { fov_y_deg: 180.0, ..LodView::default() };
+        assert!(matches!(terrain_lod_chain(&hf, &[1.0], None, &bad_view), Err(LodError::InvalidView { .. })));
+        let tiny = Heightfield { width: 1, height: 1, heights: vec![0.0], cell_size_m: 1.0 };
+        assert!(matches!(
+            terrain_lod_chain(&tiny, &[1.0], None, &LodView::default()),
+            Err(LodError::Terrain { level: 0, .. })
+        ));
+    }
+
+    #[test]
+    fn coverage_is_babylons_disc_over_screen() {
+        let v = LodView { aspect: 1.0, fov_y_deg: 90.0, ..LodView::default() };
+        // r = 1 at centre distance 1 with tan(45°) = 1: π / 4.
+        let c = lod_screen_coverage(1.0, 0.0, &v);
+        assert!((c - std::f64::consts::PI / 4.0).abs() < 1e-12);
+        // farther: falls with the square of the centre distance
+        let c3 = lod_screen_coverage(1.0, 2.0, &v);
+        assert!((c3 - c / 9.0).abs() < 1e-12);
+        assert_eq!(lod_screen_coverage(0.0, 0.0, &v), 1.0);
+    }
+}
