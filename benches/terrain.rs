@@ -20,7 +20,10 @@ const PUGET: &str = "heightmaps/diligent_ps_height_1k.png";
 const FRACTAL_SEED: u64 = 0x7665_7264;
 /// Reference triangle counts (reference C++ greedy-insertion mesher, PROVENANCE.md of the data set).
 const PUGET_REFERENCE: &[(f64, usize)] = &[(10.0, 833_139), (50.0, 156_425), (1.0, 1_696_371)];
-const RUNS: usize = 3;
+/// Runs per case (best time kept); `VERDANT_BENCH_RUNS` overrides.
+fn runs() -> usize {
+    std::env::var("VERDANT_BENCH_RUNS").ok().and_then(|v| v.parse().ok()).unwrap_or(3)
+}
 
 fn data_dir() -> PathBuf {
     std::env::var_os("VERDANT_DATA").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared/data"))
@@ -76,7 +79,7 @@ fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
     let (rss_before, _) = memory();
     let mut best = f64::INFINITY;
     let mut mesh = SampleMesh::default();
-    for _ in 0..RUNS {
+    for _ in 0..runs() {
         drop(std::mem::take(&mut mesh));
         let t = Instant::now();
         mesh = match which {
@@ -145,7 +148,7 @@ fn main() {
     cases.push(("fractal2049", 5.0, 2049 * 2049));
     cases.retain(|c| c.0.contains(&filter));
 
-    println!("best of {RUNS} runs per case, one process per case; peak = VmHWM during the builds, build = peak − RSS before");
+    println!("best of {} runs per case, one process per case; peak = VmHWM during the builds, build = peak − RSS before", runs());
     println!(
         "{:<12} {:>7} {:<8} {:>10} {:>10} {:>8} {:>9} {:>9} {:>9}",
         "input", "max_err", "impl", "triangles", "measured", "seconds", "peak MB", "build MB", "B/sample"
