@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use verdant::heightfield::Heightfield;
 use verdant::terrain::error::measure;
-use verdant::terrain::tin::{tin, TinOptions};
+use verdant::terrain::tin::{tin, tin_spade, TinOptions};
 use verdant::terrain::SampleMesh;
 
 const PUGET: &str = "heightmaps/diligent_ps_height_1k.png";
@@ -84,6 +84,7 @@ fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
         let t = Instant::now();
         mesh = match which {
             "verdant" => tin(&hf, &TinOptions { max_error_m, max_triangles: None }).map_err(|e| e.to_string())?.mesh,
+            "spade" => tin_spade(&hf, &TinOptions { max_error_m, max_triangles: None }).map_err(|e| e.to_string())?.mesh,
             "delatin" => delatin_mesh(&hf, &heights64, max_error_m),
             other => return Err(format!("unknown implementation {other}")),
         };
