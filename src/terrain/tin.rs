@@ -52,8 +52,6 @@ struct Entry {
     /// Candidate sample, row-major index.
     sample: u32,
     face: u32,
-    /// The face's generation when queued; a rescan of the face bumps it, leaving this entry stale.
-    generation: u32,
 }
 
 /// Heap order: larger error first; ties go to the lower sample index, then the lower face index, so
@@ -66,16 +64,44 @@ fn before(a: &Entry, b: &Entry) -> bool {
     (a.sample, a.face) < (b.sample, b.face)
 }
 
-/// What the mesher keeps per face slot (spade reuses slots when it flips edges).
-#[derive(Debug, Clone, Copy, Default)]
+/// What the mesher keeps per face slot (slots are reused when edges flip).
+#[derive(Debug, Clone, Copy)]
 struct FaceSlot {
-    /// Bumped at every rescan; queue entries carrying an older value are stale.
-    generation: u32,
-    /// A vertex of the face: where locating its candidate starts.
-    hint: u32,
+    /// The face's queued candidate (error, sample), or sample NONE. A queue entry that does not
+    /// match it is stale: the face was rescanned since.
+    err: f64,
+    sample: u32,
     /// Upper bound on the face's vertical error (all samples, rounded up): lets the final error be
     /// found without rescanning every face.
     upper: f32,
+}
+
+/// No queued candidate.
+const NONE: u32 = u32::MAX;
+
+impl Default for FaceSlot {
+    fn default() -> Self {
+        FaceSlot { err: 0.0, sample: NONE, upper: 0.0 }
+    }
+}
+
+/// Records a face's fresh scan and queues its candidate if it is above the bound.
+fn record_scan(faces: &mut Vec<FaceSlot>, queue: &mut FaceQueue, face: u32, scan: &Scan, width: u32) {
+    let f = face as usize;
+    if faces.len() <= f {
+        faces.resize(f + 1, FaceSlot::default());
+    }
+    let slot = &mut faces[f];
+    // Rounded up so it stays an upper bound in f32.
+    slot.upper = (scan.upper as f32).next_up();
+    match scan.candidate {
+        Some((err, i, j)) => {
+            let sample = j * width + i;
+            (slot.err, slot.sample) = (err, sample);
+            queue.push(Entry { err, sample, face });
+        }
+        None => (slot.err, slot.sample) = (0.0, NONE),
+    }
 }
 
 /// Max-heap (4-ary) of faces above the bound, keys inline, with lazy deletion: a rescanned face just
@@ -92,7 +118,8 @@ impl FaceQueue {
     /// The worst valid entry, after dropping stale ones from the top.
     fn peek(&mut self, faces: &[FaceSlot]) -> Option<Entry> {
         while let Some(&top) = self.heap.first() {
-            if faces.get(top.face as usize).is_some_and(|f| f.generation == top.generation) {
+            let current = faces.get(top.face as usize);
+            if current.is_some_and(|f| f.sample == top.sample && f.err.to_bits() == top.err.to_bits()) {
                 return Some(top);
             }
             self.pop();
@@ -180,8 +207,8 @@ fn span_end(ax: i64, r: i64, inv_ax: f64) -> i64 {
 /// error of every sample from above.
 ///
 /// The triangle is scanned row by row; each row's span comes from the three edge functions (exact
-/// integers, so samples on edges are always included). Along a row the plane is stepped in f64, which
-/// is fast but not bit-exact; any sample whose fast error comes within `slack` of the best so far is
+/// integers, so samples on edges are always included). Along a row the plane is evaluated in f64 from
+/// the row start, which is fast but not bit-exact; any sample whose fast error comes within `slack` of the best so far is
 /// re-evaluated with the canonical formula ([`plane_height`], exact integer weights), so the returned
 /// error is exactly what the analyzer computes and the bound it certifies is real.
 fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Scan {
@@ -216,8 +243,8 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
     let xmin = c.iter().map(|p| p[0]).min().unwrap_or(0);
     let xmax = c.iter().map(|p| p[0]).max().unwrap_or(0);
     let (x0, y0) = (c[0][0], c[0][1]);
-    // Bound on |z| anywhere in the triangle; the fast path's rounding error is below 1e-12 of it over
-    // any row (< 2^24 steps of relative error 2^-53 ≈ 1e-16 is < 2e-9), so 1e-6 of it is ample slack.
+    // Bound on |z| anywhere in the triangle (and on every term of the fast evaluation); the fast
+    // path's rounding error is a few ulps of it, so 1e-6 of it is ample slack.
     let magnitude = hc[0].abs().max(hc[1].abs()).max(hc[2].abs())
         + gx.abs() * (xmax - xmin) as f64
         + gy.abs() * (c[2][1] - c[0][1]) as f64;
@@ -246,20 +273,47 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
             continue;
         }
         let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi as usize];
-        let mut z = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
-        for (x, &h) in (lo..=hi).zip(row) {
-            let fast = (z - h as f64).abs();
-            z += gx;
-            fast_max = fast_max.max(fast);
-            if fast <= threshold {
-                continue;
-            }
+        let z0 = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
+        // Exact re-check of one sample whose fast error came close to the best.
+        let mut check = |k: usize, best: &mut f64, threshold: &mut f64| {
+            let x = lo + k as i64;
+            let h = row[k] as f64;
             let wt = [ax[0] * x + r[0], ax[1] * x + r[1], ax[2] * x + r[2]];
-            let err = (plane_height(wt, hc, area) - h as f64).abs();
-            if err > best && !c.contains(&[x, y]) {
-                best = err;
-                threshold = best - slack;
+            let err = (plane_height(wt, hc, area) - h).abs();
+            if err > *best && !c.contains(&[x, y]) {
+                *best = err;
+                *threshold = err - slack;
                 found = Some((x as u32, y as u32));
+            }
+        };
+        // Four samples at a time with the plane evaluated from the row start (no loop-carried
+        // addition), and the threshold tested once per group: this is the innermost loop of the run.
+        let mut chunks = row.chunks_exact(4);
+        let mut k = 0usize;
+        for q in &mut chunks {
+            let kf = k as f64;
+            let f = [
+                (z0 + gx * kf - q[0] as f64).abs(),
+                (z0 + gx * (kf + 1.0) - q[1] as f64).abs(),
+                (z0 + gx * (kf + 2.0) - q[2] as f64).abs(),
+                (z0 + gx * (kf + 3.0) - q[3] as f64).abs(),
+            ];
+            let m = f[0].max(f[1]).max(f[2].max(f[3]));
+            fast_max = fast_max.max(m);
+            if m > threshold {
+                for (d, &fd) in f.iter().enumerate() {
+                    if fd > threshold {
+                        check(k + d, &mut best, &mut threshold);
+                    }
+                }
+            }
+            k += 4;
+        }
+        for (d, &h) in chunks.remainder().iter().enumerate() {
+            let fd = (z0 + gx * (k + d) as f64 - h as f64).abs();
+            fast_max = fast_max.max(fd);
+            if fd > threshold {
+                check(k + d, &mut best, &mut threshold);
             }
         }
     }
@@ -316,6 +370,8 @@ struct Mesher<'a> {
     max_error_m: f64,
     dt: Dt,
     faces: Vec<FaceSlot>,
+    /// Per face: one of its vertices, where locating its candidate starts.
+    hints: Vec<u32>,
     queue: FaceQueue,
     /// Scratch lists for a star (faces, neighbours), reused so an insertion allocates nothing.
     star: Vec<StarFace>,
@@ -350,18 +406,11 @@ impl Mesher<'_> {
         let w = self.hf.width as u32;
         for &(face, corners, hint) in &self.star {
             let scan = find_candidate(self.hf, corners, self.max_error_m);
-            let f = face as usize;
-            if self.faces.len() <= f {
-                self.faces.resize(f + 1, FaceSlot::default());
+            record_scan(&mut self.faces, &mut self.queue, face, &scan, w);
+            if self.hints.len() <= face as usize {
+                self.hints.resize(face as usize + 1, 0);
             }
-            let slot = &mut self.faces[f];
-            slot.generation = slot.generation.wrapping_add(1);
-            slot.hint = hint;
-            // Rounded up so it stays an upper bound in f32.
-            slot.upper = (scan.upper as f32).next_up();
-            if let Some((err, i, j)) = scan.candidate {
-                self.queue.push(Entry { err, sample: j * w + i, face, generation: slot.generation });
-            }
+            self.hints[face as usize] = hint;
         }
     }
 }
@@ -485,6 +534,7 @@ pub fn tin_spade(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, Terra
         max_error_m: opts.max_error_m,
         dt: Dt::new(),
         faces: Vec::new(),
+        hints: Vec::new(),
         queue: FaceQueue::default(),
         star: Vec::new(),
         ring: Vec::new(),
@@ -522,7 +572,7 @@ pub fn tin_spade(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, Terra
         let before = m.dt.num_vertices();
         let v = m
             .dt
-            .insert_with_hint(vertex(ci, cj), FixedVertexHandle::from_index(m.faces[top.face as usize].hint as usize))
+            .insert_with_hint(vertex(ci, cj), FixedVertexHandle::from_index(m.hints[top.face as usize] as usize))
             .map_err(|_| internal(ci, cj))?;
         if m.dt.num_vertices() != before + 1 {
             // The candidate was already a vertex: impossible for a valid triangulation (a closed face
@@ -757,16 +807,7 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
         let e = 3 * t as usize;
         let corners = [corner(dt.tri[e], dt), corner(dt.tri[e + 1], dt), corner(dt.tri[e + 2], dt)];
         let scan = find_candidate(hf, corners, opts.max_error_m);
-        if faces.len() <= t as usize {
-            faces.resize(t as usize + 1, FaceSlot::default());
-        }
-        let slot = &mut faces[t as usize];
-        slot.generation = slot.generation.wrapping_add(1);
-        // Rounded up so it stays an upper bound in f32.
-        slot.upper = (scan.upper as f32).next_up();
-        if let Some((err, i, j)) = scan.candidate {
-            queue.push(Entry { err, sample: j * w as u32 + i, face: t, generation: slot.generation });
-        }
+        record_scan(faces, queue, t, &scan, w as u32);
     };
     for t in 0..2 {
         rescan(&dt, &mut faces, &mut queue, t);
