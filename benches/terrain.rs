@@ -1,5 +1,6 @@
-//! Terrain benchmark: greedy-insertion TIN (`verdant::terrain::tin`) against the `delatin` crate on the
-//! Puget Sound heightmap and a 2049² fractal, with the error of each output measured by
+//! Terrain benchmark: greedy-insertion TIN (`verdant::terrain::tin`), the same algorithm on spade
+//! (`tin_spade`, the reference for the choice of triangulation) and the `delatin` crate as an outside
+//! peer, on the Puget Sound heightmap and a 2049² fractal, with the error of every output measured by
 //! `verdant::terrain::error::measure`.
 //!
 //! Every case runs in a child process of this binary (`--case <input> <max_error_m> <impl>`) so the
