@@ -1,5 +1,6 @@
-//! Terrain benchmark: greedy-insertion TIN (`verdant::terrain::tin`) against the `delatin` crate on the
-//! Puget Sound heightmap and a 2049² fractal, with the error of each output measured by
+//! Terrain benchmark: greedy-insertion TIN (`verdant::terrain::tin`), the same algorithm on spade
+//! (`tin_spade`, the reference for the choice of triangulation) and the `delatin` crate as an outside
+//! peer, on the Puget Sound heightmap and a 2049² fractal, with the error of every output measured by
 //! `verdant::terrain::error::measure`.
 //!
 //! Every case runs in a child process of this binary (`--case <input> <max_error_m> <impl>`) so the
@@ -13,14 +14,17 @@ use std::time::Instant;
 
 use verdant::heightfield::Heightfield;
 use verdant::terrain::error::measure;
-use verdant::terrain::tin::{tin, TinOptions};
+use verdant::terrain::tin::{tin, tin_spade, TinOptions};
 use verdant::terrain::SampleMesh;
 
 const PUGET: &str = "heightmaps/diligent_ps_height_1k.png";
 const FRACTAL_SEED: u64 = 0x7665_7264;
 /// Reference triangle counts (reference C++ greedy-insertion mesher, PROVENANCE.md of the data set).
 const PUGET_REFERENCE: &[(f64, usize)] = &[(10.0, 833_139), (50.0, 156_425), (1.0, 1_696_371)];
-const RUNS: usize = 3;
+/// Runs per case (best time kept); `VERDANT_BENCH_RUNS` overrides.
+fn runs() -> usize {
+    std::env::var("VERDANT_BENCH_RUNS").ok().and_then(|v| v.parse().ok()).unwrap_or(3)
+}
 
 fn data_dir() -> PathBuf {
     std::env::var_os("VERDANT_DATA").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared/data"))
@@ -65,8 +69,21 @@ fn delatin_mesh(hf: &Heightfield, heights: &[f64], max_error_m: f64) -> SampleMe
     }
 }
 
-/// Child: builds one case RUNS times, prints `triangles measured_max_error best_seconds peak_bytes
-/// build_bytes` on one line.
+/// CPU time (user + system) of this thread so far, in seconds, from /proc (10 ms resolution): on a
+/// shared machine wall time includes waiting for a core, CPU time does not.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap_or_default();
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+    let rest = stat.rsplit_once(')').map_or("", |r| r.1);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    match (f.get(11).and_then(|v| v.parse::<u64>().ok()), f.get(12).and_then(|v| v.parse::<u64>().ok())) {
+        (Some(u), Some(s)) => (u + s) as f64 / 100.0,
+        _ => f64::NAN,
+    }
+}
+
+/// Child: builds one case several times, prints `triangles measured_max_error best_seconds
+/// best_cpu_seconds peak_bytes build_bytes` on one line.
 fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
     let hf = load(input)?;
     // delatin takes f64 heights: converting them is input preparation, not part of its build.
@@ -75,23 +92,31 @@ fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
     let _ = std::fs::write("/proc/self/clear_refs", "5");
     let (rss_before, _) = memory();
     let mut best = f64::INFINITY;
+    let mut best_cpu = f64::INFINITY;
+    let mut peak = 0;
     let mut mesh = SampleMesh::default();
-    for _ in 0..RUNS {
+    for _ in 0..runs() {
         drop(std::mem::take(&mut mesh));
         let t = Instant::now();
+        let c = cpu_seconds();
         mesh = match which {
             "verdant" => tin(&hf, &TinOptions { max_error_m, max_triangles: None }).map_err(|e| e.to_string())?.mesh,
+            "spade" => tin_spade(&hf, &TinOptions { max_error_m, max_triangles: None }).map_err(|e| e.to_string())?.mesh,
             "delatin" => delatin_mesh(&hf, &heights64, max_error_m),
             other => return Err(format!("unknown implementation {other}")),
         };
         best = best.min(t.elapsed().as_secs_f64());
+        best_cpu = best_cpu.min(cpu_seconds() - c);
+        // Peak of the first build only: later runs can only add allocator fragmentation.
+        if peak == 0 {
+            peak = memory().1;
+        }
     }
-    let (_, peak) = memory();
     let stats = measure(&hf, &mesh);
     if stats.samples_covered != hf.width * hf.height {
         eprintln!("warning: {which} covers {} of {} samples", stats.samples_covered, hf.width * hf.height);
     }
-    println!("{} {} {} {} {}", mesh.triangles.len(), stats.max_error_m, best, peak, peak.saturating_sub(rss_before));
+    println!("{} {} {} {} {} {}", mesh.triangles.len(), stats.max_error_m, best, best_cpu, peak, peak.saturating_sub(rss_before));
     Ok(())
 }
 
@@ -99,6 +124,7 @@ struct Row {
     triangles: usize,
     measured: f64,
     seconds: f64,
+    cpu: f64,
     peak: u64,
     build: u64,
 }
@@ -115,7 +141,14 @@ fn spawn_case(input: &str, max_error_m: f64, which: &str) -> Result<Row, String>
     let text = String::from_utf8_lossy(&out.stdout);
     let f: Vec<&str> = text.split_whitespace().collect();
     let parse = |k: usize| f.get(k).and_then(|s| s.parse::<f64>().ok()).ok_or_else(|| format!("bad child output: {text}"));
-    Ok(Row { triangles: parse(0)? as usize, measured: parse(1)?, seconds: parse(2)?, peak: parse(3)? as u64, build: parse(4)? as u64 })
+    Ok(Row {
+        triangles: parse(0)? as usize,
+        measured: parse(1)?,
+        seconds: parse(2)?,
+        cpu: parse(3)?,
+        peak: parse(4)? as u64,
+        build: parse(5)? as u64,
+    })
 }
 
 fn main() {
@@ -141,29 +174,34 @@ fn main() {
     } else {
         println!("skipping Puget Sound: {} not found (set VERDANT_DATA)", data_dir().join(PUGET).display());
     }
-    cases.push(("fractal2049", 1.0, 2049 * 2049));
     cases.push(("fractal2049", 5.0, 2049 * 2049));
+    cases.push(("fractal2049", 20.0, 2049 * 2049));
     cases.retain(|c| c.0.contains(&filter));
 
-    println!("best of {RUNS} runs per case, one process per case; peak = VmHWM during the builds, build = peak − RSS before");
     println!(
-        "{:<12} {:>7} {:<8} {:>10} {:>10} {:>8} {:>9} {:>9} {:>9}",
-        "input", "max_err", "impl", "triangles", "measured", "seconds", "peak MB", "build MB", "B/sample"
+        "best of {} runs per case, one process per case; seconds = wall, cpu = CPU seconds of the build \
+         (10 ms resolution); peak = VmHWM during the first build (input included), build = peak − RSS before",
+        runs()
+    );
+    println!(
+        "{:<12} {:>7} {:<8} {:>10} {:>10} {:>8} {:>6} {:>8} {:>9} {:>9}",
+        "input", "max_err", "impl", "triangles", "measured", "seconds", "cpu", "peak MB", "build MB", "B/sample"
     );
     for (input, err, samples) in cases {
-        let mut rows = Vec::new();
-        let impls: &[&str] = if with_peer { &["verdant", "delatin"] } else { &["verdant"] };
+        let mut rows: Vec<Row> = Vec::new();
+        let impls: &[&str] = if with_peer { &["verdant", "spade", "delatin"] } else { &["verdant"] };
         for &which in impls {
             match spawn_case(input, err, which) {
                 Ok(r) => {
                     println!(
-                        "{:<12} {:>7} {:<8} {:>10} {:>10.4} {:>8.3} {:>9.1} {:>9.1} {:>9.1}",
+                        "{:<12} {:>7} {:<8} {:>10} {:>10.4} {:>8.3} {:>6.2} {:>8.1} {:>9.1} {:>9.1}",
                         input,
                         err,
                         which,
                         r.triangles,
                         r.measured,
                         r.seconds,
+                        r.cpu,
                         r.peak as f64 / 1048576.0,
                         r.build as f64 / 1048576.0,
                         r.build as f64 / samples as f64
@@ -173,10 +211,15 @@ fn main() {
                 Err(e) => println!("{input:<12} {err:>7} {which:<8} failed: {}", e.trim()),
             }
         }
-        if let [ours, peer] = rows.as_slice() {
+        if let (Some(ours), Some(peer)) = (rows.first(), rows.last().filter(|_| rows.len() == 3)) {
             println!(
-                "{:<12} {:>7} {:<8} time verdant/delatin = {:.2}, triangles verdant/delatin = {:.3}",
-                "", "", "ratio", ours.seconds / peer.seconds, ours.triangles as f64 / peer.triangles as f64
+                "{:<12} {:>7} {:<8} verdant/delatin: time {:.2} (cpu {:.2}), triangles {:.4}",
+                "",
+                "",
+                "ratio",
+                ours.seconds / peer.seconds,
+                ours.cpu / peer.cpu,
+                ours.triangles as f64 / peer.triangles as f64
             );
         }
         if input == "puget" {
