@@ -59,7 +59,7 @@ pub fn fractal(width: usize, height: usize, cell_size_m: f64, relief_m: f64, rou
         }
         // square step: edge midpoints, averaging the neighbours that exist
         for y in (0..side).step_by(half) {
-            let x0 = if (y / half) % 2 == 0 { half } else { 0 };
+            let x0 = if (y / half).is_multiple_of(2) { half } else { 0 };
             for x in (x0..side).step_by(step) {
                 let mut sum = 0.0;
                 let mut count = 0.0;
@@ -232,7 +232,7 @@ pub fn ridged(size: usize, cell_size_m: f64, relief_m: f64, seed: u64) -> Height
 
 /// The embedded default terrain of `verdant terrain --demo`: 257 × 257 samples, 4 m apart, up to 300 m.
 pub fn demo() -> Heightfield {
-    fractal(257, 257, 4.0, 300.0, 0.45, 0x7665_7264_616e_74)
+    fractal(257, 257, 4.0, 300.0, 0.45, 0x0076_6572_6461_6e74)
 }
 
 #[cfg(test)]

@@ -106,7 +106,7 @@ pub fn demo_preset() -> Preset {
         terrain: Some(TerrainSettings {
             source: TerrainSource::Fbm {
                 size: 513,
-                seed: 0x7665_7264_616e_74,
+                seed: 0x0076_6572_6461_6e74,
                 relief_m: 300.0,
                 cell_size_m: 4.0,
                 noise: NoiseKind::Fbm,
@@ -450,7 +450,12 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
     let root = DeTable::parse(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
         let message = e.message().trim().trim_end_matches('.').to_string();
-        ctx.at(&span, format!("TOML syntax: {message}"), "fix the syntax here (see docs/presets.md for an example)")
+        let remedy = if message.contains("duplicate") {
+            "each key and section may appear only once: remove or merge the repeated one"
+        } else {
+            "fix the syntax here (see docs/presets.md for an example)"
+        };
+        ctx.at(&span, format!("TOML syntax: {message}"), remedy)
     })?;
     let root = root.get_ref();
 
