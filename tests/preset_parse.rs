@@ -415,3 +415,16 @@ proptest! {
         let _ = parse_preset(&text, Path::new("t.toml"));
     }
 }
+
+#[test]
+fn docs_examples_parse() {
+    let docs = std::fs::read_to_string(manifest_dir().join("docs/presets.md")).unwrap();
+    let mut parsed = 0;
+    for block in docs.split("```toml\n").skip(1) {
+        let block = block.split("```").next().unwrap();
+        let text = if block.contains("[scene]") { block.to_string() } else { format!("{MINIMAL}{block}") };
+        parse_preset(&text, Path::new("docs/example.toml")).unwrap_or_else(|e| panic!("{e}\n{text}"));
+        parsed += 1;
+    }
+    assert!(parsed >= 2);
+}
