@@ -2,8 +2,12 @@
 //! test fixtures), so nothing third-party has to ship with it.
 //!
 //! Fractal terrain by the diamond-square midpoint displacement of Fournier, Fussell & Carpenter
-//! (1982). Each random offset is a hash of (seed, x, y), so the map does not depend on evaluation
-//! order or thread count.
+//! (1982), and fractional Brownian motion of gradient noise (Perlin 1985/2002) with Musgrave's
+//! ridged multifractal variant ("Texturing & Modeling", ch. 16). Each random value is a hash of
+//! (seed, lattice point), so a map does not depend on evaluation order or thread count.
+
+use rayon::prelude::*;
+use serde::Serialize;
 
 use crate::heightfield::Heightfield;
 
@@ -55,7 +59,7 @@ pub fn fractal(width: usize, height: usize, cell_size_m: f64, relief_m: f64, rou
         }
         // square step: edge midpoints, averaging the neighbours that exist
         for y in (0..side).step_by(half) {
-            let x0 = if (y / half) % 2 == 0 { half } else { 0 };
+            let x0 = if (y / half).is_multiple_of(2) { half } else { 0 };
             for x in (x0..side).step_by(step) {
                 let mut sum = 0.0;
                 let mut count = 0.0;
@@ -97,9 +101,138 @@ pub fn fractal(width: usize, height: usize, cell_size_m: f64, relief_m: f64, rou
     }
 }
 
+/// Which fractal sum of gradient noise [`noise_map`] builds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NoiseKind {
+    /// Fractional Brownian motion: rolling hills, rounded ridges and valleys alike.
+    #[default]
+    Fbm,
+    /// Ridged multifractal: sharp crests, smoother valley floors (each octave weighted by the
+    /// previous one, so detail gathers on the ridges) — alpine terrain.
+    Ridged,
+}
+
+/// Octaves summed at most; finer ones than 2 samples per wavelength are skipped (they would only alias).
+pub const NOISE_OCTAVES: u32 = 8;
+const LACUNARITY: f64 = 2.0;
+const GAIN: f64 = 0.5;
+
+/// Eight unit gradient directions, 45° apart.
+const GRADIENTS: [(f64, f64); 8] = [
+    (1.0, 0.0),
+    (std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2),
+    (0.0, 1.0),
+    (-std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2),
+    (-1.0, 0.0),
+    (-std::f64::consts::FRAC_1_SQRT_2, -std::f64::consts::FRAC_1_SQRT_2),
+    (0.0, -1.0),
+    (std::f64::consts::FRAC_1_SQRT_2, -std::f64::consts::FRAC_1_SQRT_2),
+];
+
+/// Quintic fade 6t⁵ − 15t⁴ + 10t³ (Perlin 2002): C² continuous across lattice cells.
+#[inline]
+fn fade(t: f64) -> f64 {
+    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+}
+
+/// Gradient noise at (x, y) in lattice units, roughly in [−1, 1]; zero at lattice points.
+#[inline]
+fn gradient_noise(octave_seed: u64, x: f64, y: f64) -> f64 {
+    let (xf, yf) = (x.floor(), y.floor());
+    let (ix, iy) = (xf as i64, yf as i64);
+    let (fx, fy) = (x - xf, y - yf);
+    let corner = |cx: i64, cy: i64, dx: f64, dy: f64| {
+        let h = mix64(octave_seed ^ mix64((cx as u64) << 32 ^ (cy as u64 & 0xFFFF_FFFF)));
+        let (gx, gy) = GRADIENTS[(h >> 61) as usize];
+        gx * dx + gy * dy
+    };
+    let n00 = corner(ix, iy, fx, fy);
+    let n10 = corner(ix + 1, iy, fx - 1.0, fy);
+    let n01 = corner(ix, iy + 1, fx, fy - 1.0);
+    let n11 = corner(ix + 1, iy + 1, fx - 1.0, fy - 1.0);
+    let (u, v) = (fade(fx), fade(fy));
+    let a = n00 + u * (n10 - n00);
+    let b = n01 + u * (n11 - n01);
+    // 2-D gradient noise peaks at ±√2/2; scale to about ±1
+    (a + v * (b - a)) * std::f64::consts::SQRT_2
+}
+
+/// One octave's seed and lattice offset (so octaves do not share their zero at the origin).
+fn octave_params(seed: u64, octave: u32) -> (u64, f64, f64) {
+    let s = mix64(seed ^ mix64(0x6f63_7461_7665 ^ octave as u64));
+    let ox = (mix64(s ^ 1) >> 11) as f64 / (1u64 << 53) as f64 * 1024.0;
+    let oy = (mix64(s ^ 2) >> 11) as f64 / (1u64 << 53) as f64 * 1024.0;
+    (s, ox, oy)
+}
+
+/// A `size` × `size` fractal map, heights in metres normalised to [0, `relief_m`]. The widest
+/// octave spans half the map; each next one has twice the frequency (lacunarity 2) and half the
+/// amplitude (gain 0.5), up to [`NOISE_OCTAVES`]. Rows are computed in parallel, each sample from
+/// its own coordinates only, so the map is byte-identical for a seed at any thread count.
+pub fn noise_map(kind: NoiseKind, size: usize, cell_size_m: f64, relief_m: f64, seed: u64) -> Heightfield {
+    let side = size.max(1);
+    let base_wavelength = ((side - 1) as f64 / 2.0).max(1.0);
+    // octave table: (seed, offset x, offset y, frequency, amplitude)
+    let mut octaves = Vec::new();
+    let (mut frequency, mut amplitude) = (1.0 / base_wavelength, 1.0);
+    for o in 0..NOISE_OCTAVES {
+        if o > 0 && frequency > 0.5 {
+            break;
+        }
+        let (s, ox, oy) = octave_params(seed, o);
+        octaves.push((s, ox, oy, frequency, amplitude));
+        frequency *= LACUNARITY;
+        amplitude *= GAIN;
+    }
+    let sample = |i: usize, j: usize| -> f64 {
+        let (x, y) = (i as f64, j as f64);
+        match kind {
+            NoiseKind::Fbm => octaves.iter().map(|&(s, ox, oy, f, a)| a * gradient_noise(s, x * f + ox, y * f + oy)).sum(),
+            NoiseKind::Ridged => {
+                // Musgrave's ridged multifractal: signal = (1 − |n|)², weighted by the previous octave
+                let mut sum = 0.0;
+                let mut weight = 1.0f64;
+                for &(s, ox, oy, f, a) in &octaves {
+                    let r = 1.0 - gradient_noise(s, x * f + ox, y * f + oy).abs();
+                    let signal = r * r * weight;
+                    weight = (signal * 2.0).clamp(0.0, 1.0);
+                    sum += signal * a;
+                }
+                sum
+            }
+        }
+    };
+    let mut raw = vec![0.0f64; side * side];
+    raw.par_chunks_mut(side).enumerate().for_each(|(j, row)| {
+        for (i, v) in row.iter_mut().enumerate() {
+            *v = sample(i, j);
+        }
+    });
+    let lo = raw.iter().cloned().fold(f64::INFINITY, f64::min);
+    let hi = raw.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let scale = if hi > lo { relief_m / (hi - lo) } else { 0.0 };
+    Heightfield {
+        width: side,
+        height: side,
+        heights: raw.iter().map(|&v| (((v - lo) * scale) as f32).clamp(0.0, relief_m as f32)).collect(),
+        cell_size_m,
+    }
+}
+
+/// Fractional Brownian motion of gradient noise: a `size` × `size` map in [0, `relief_m`] metres.
+pub fn fbm(size: usize, cell_size_m: f64, relief_m: f64, seed: u64) -> Heightfield {
+    noise_map(NoiseKind::Fbm, size, cell_size_m, relief_m, seed)
+}
+
+/// Ridged multifractal gradient noise: a `size` × `size` map in [0, `relief_m`] metres.
+pub fn ridged(size: usize, cell_size_m: f64, relief_m: f64, seed: u64) -> Heightfield {
+    noise_map(NoiseKind::Ridged, size, cell_size_m, relief_m, seed)
+}
+
 /// The embedded default terrain of `verdant terrain --demo`: 257 × 257 samples, 4 m apart, up to 300 m.
 pub fn demo() -> Heightfield {
-    fractal(257, 257, 4.0, 300.0, 0.45, 0x7665_7264_616e_74)
+    fractal(257, 257, 4.0, 300.0, 0.45, 0x0076_6572_6461_6e74)
 }
 
 #[cfg(test)]
@@ -124,5 +257,38 @@ mod tests {
         let d = demo();
         assert_eq!((d.width, d.height), (257, 257));
         assert!(d.heights.iter().all(|h| h.is_finite()));
+    }
+
+    #[test]
+    fn fbm_is_deterministic_in_range_and_seeded() {
+        for kind in [NoiseKind::Fbm, NoiseKind::Ridged] {
+            let a = noise_map(kind, 129, 2.0, 400.0, 7);
+            let b = noise_map(kind, 129, 2.0, 400.0, 7);
+            let c = noise_map(kind, 129, 2.0, 400.0, 8);
+            assert_eq!(a, b);
+            assert_ne!(a, c);
+            assert_eq!((a.width, a.height, a.heights.len()), (129, 129, 129 * 129));
+            assert_eq!(a.cell_size_m, 2.0);
+            let lo = a.heights.iter().cloned().fold(f32::INFINITY, f32::min);
+            let hi = a.heights.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+            assert!(a.heights.iter().all(|h| h.is_finite()));
+            assert!(lo == 0.0 && (hi - 400.0).abs() < 1e-3, "{kind:?}: {lo}..{hi}");
+        }
+    }
+
+    #[test]
+    fn fbm_is_independent_of_thread_count() {
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let a = one.install(|| fbm(257, 1.0, 100.0, 42));
+        let b = fbm(257, 1.0, 100.0, 42);
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn fbm_tiny_sizes_do_not_panic() {
+        for size in [0, 1, 2, 3] {
+            let hf = ridged(size, 1.0, 10.0, 1);
+            assert!(hf.heights.iter().all(|h| h.is_finite() && (0.0..=10.0).contains(h)));
+        }
     }
 }

@@ -11,7 +11,10 @@ use std::path::PathBuf;
 use serde::Serialize;
 
 use crate::heightfield::DecodeOptions;
+use crate::synth::NoiseKind;
 use crate::terrain::job::MeshMode;
+
+pub mod preset;
 
 /// Output formats of a scene's meshes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
@@ -49,8 +52,9 @@ pub struct SceneSettings {
 pub enum TerrainSource {
     /// A heightmap file (path resolved relative to the preset file) and how to decode it.
     Heightmap { path: PathBuf, decode: DecodeOptions },
-    /// `procedural = { kind = "fbm", size, seed, relief }`: a generated square map.
-    Fbm { size: usize, seed: u64, relief_m: f64, cell_size_m: f64 },
+    /// `procedural = { kind = "fbm", size, seed, relief }`: a generated square map. `noise` is
+    /// the TOML `kind` (`fbm` or `ridged`); generate it with [`preset::procedural_heightfield`].
+    Fbm { size: usize, seed: u64, relief_m: f64, cell_size_m: f64, noise: NoiseKind },
 }
 
 /// `[terrain]`

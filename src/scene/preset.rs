@@ -1,0 +1,782 @@
+//! Presets: a scene's settings in TOML (`presets/*.toml`, documented key by key in
+//! `docs/presets.md`), resolved into the plain types of [`crate::scene`].
+//!
+//! The document is parsed with spans (`toml::de::DeTable`) and walked by hand rather than through
+//! serde derive, so every problem — a syntax error, an unknown or misspelled key, a wrong type, a
+//! value out of range, a missing input file — is reported as `file:line:column: problem; remedy`.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use clap::ValueEnum;
+use toml::de::{DeTable, DeValue};
+use toml::Spanned;
+
+use super::{Format, Preset, SceneSettings, TerrainSettings, TerrainSource};
+use crate::heightfield::{DecodeOptions, Encoding, Heightfield, DEFAULT_MAX_SAMPLES};
+use crate::synth::{self, NoiseKind};
+use crate::terrain::job::MeshMode;
+
+/// The sections a preset may have, in the order the docs list them.
+pub const SECTIONS: &[&str] = &["scene", "terrain"];
+/// Keys of `[scene]`.
+pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats"];
+/// Keys of `[terrain]`.
+pub const TERRAIN_KEYS: &[&str] = &[
+    "heightmap",
+    "encoding",
+    "size",
+    "cell_size",
+    "height_scale",
+    "height_offset",
+    "max_samples",
+    "procedural",
+    "mode",
+    "max_error",
+    "max_triangles",
+    "grid_step",
+    "chunk",
+    "skirt",
+    "base",
+    "lods",
+];
+/// Keys of `[terrain] procedural = { … }`.
+pub const PROCEDURAL_KEYS: &[&str] = &["kind", "size", "seed", "relief"];
+/// `[terrain]` keys that only mean something for a heightmap file.
+const HEIGHTMAP_ONLY_KEYS: &[&str] = &["encoding", "size", "height_scale", "height_offset", "max_samples"];
+/// Sizes a procedural map may have (samples per side).
+pub const PROCEDURAL_SIZES: std::ops::RangeInclusive<u64> = 2..=8193;
+/// Longest scene name (it becomes a folder name).
+pub const MAX_NAME_CHARS: usize = 64;
+
+/// Everything that can be wrong with a preset. Exit code 2 (bad input) for all of them.
+#[derive(Debug, thiserror::Error)]
+pub enum PresetError {
+    /// The preset file itself could not be read.
+    #[error("{}: cannot read the preset: {source}; check the path", file.display())]
+    Read { file: PathBuf, source: std::io::Error },
+    /// A problem at a place in the preset (syntax, unknown key, wrong type or value).
+    #[error("{}:{line}:{column}: {problem}; {remedy}", file.display())]
+    At { file: PathBuf, line: usize, column: usize, problem: String, remedy: String },
+    /// An input file the preset names does not exist (`input` is the resolved path).
+    #[error(
+        "{}:{line}:{column}: {what} `{}` not found; paths are relative to the preset's folder — fix the path or create the file",
+        file.display(),
+        input.display()
+    )]
+    MissingInput { file: PathBuf, line: usize, column: usize, what: &'static str, input: PathBuf },
+}
+
+impl PresetError {
+    /// Process exit code: 2, bad input.
+    pub fn exit_code(&self) -> i32 {
+        2
+    }
+
+    /// Line and column (1-based, columns in characters) of the problem, where known.
+    pub fn position(&self) -> Option<(usize, usize)> {
+        match self {
+            PresetError::Read { .. } => None,
+            PresetError::At { line, column, .. } | PresetError::MissingInput { line, column, .. } => {
+                Some((*line, *column))
+            }
+        }
+    }
+}
+
+/// Reads, parses and resolves the preset at `path`, and checks that the input files it names exist.
+pub fn load_preset(path: &Path) -> Result<Preset, PresetError> {
+    let text = std::fs::read_to_string(path).map_err(|source| PresetError::Read { file: path.to_path_buf(), source })?;
+    parse(&text, path, true)
+}
+
+/// Parses and resolves preset `text`. `path` is where it came from: it names the file in messages
+/// and relative input paths are resolved against its folder. Input files are not checked here
+/// ([`load_preset`] does).
+pub fn parse_preset(text: &str, path: &Path) -> Result<Preset, PresetError> {
+    parse(text, path, false)
+}
+
+/// The embedded default of `verdant build` without a preset: a 513² fBm map generated in memory,
+/// 4 m cells, 300 m relief, TIN within 1 m in 128² chunks with skirts and a three-level LoD chain.
+pub fn demo_preset() -> Preset {
+    Preset {
+        path: None,
+        scene: SceneSettings { name: "demo".into(), seed: 0, formats: vec![Format::Glb] },
+        terrain: Some(TerrainSettings {
+            source: TerrainSource::Fbm {
+                size: 513,
+                seed: 0x0076_6572_6461_6e74,
+                relief_m: 300.0,
+                cell_size_m: 4.0,
+                noise: NoiseKind::Fbm,
+            },
+            mode: MeshMode::Tin,
+            max_error_m: 1.0,
+            max_triangles: None,
+            grid_step: 1,
+            chunk: Some(128),
+            skirt_m: Some(4.0),
+            base_m: None,
+            lods: vec![1.0, 4.0, 16.0],
+        }),
+    }
+}
+
+/// Generates the heights of a procedural source; `None` for a heightmap file.
+pub fn procedural_heightfield(source: &TerrainSource) -> Option<Heightfield> {
+    match *source {
+        TerrainSource::Heightmap { .. } => None,
+        TerrainSource::Fbm { size, seed, relief_m, cell_size_m, noise } => {
+            Some(synth::noise_map(noise, size, cell_size_m, relief_m, seed))
+        }
+    }
+}
+
+/// Whether `name` may be a scene name: 1 to 64 ASCII letters, digits, `-` and `_` (a folder name
+/// on every platform). The error says what is wrong.
+pub fn check_scene_name(name: &str) -> Result<(), String> {
+    if name.is_empty() {
+        return Err("the scene name is empty".into());
+    }
+    if name.chars().count() > MAX_NAME_CHARS {
+        return Err(format!("the scene name is longer than {MAX_NAME_CHARS} characters"));
+    }
+    if let Some(c) = name.chars().find(|c| !(c.is_ascii_alphanumeric() || *c == '-' || *c == '_')) {
+        return Err(format!("scene name `{name}` contains {c:?}, which is not safe in a folder name"));
+    }
+    Ok(())
+}
+
+/// `verdant preset new NAME`: a fully commented preset that parses as it is (a procedural
+/// terrain, so it builds without any input file). `name` should pass [`check_scene_name`].
+pub fn template(name: &str) -> String {
+    let escaped: String = name
+        .chars()
+        .flat_map(|c| match c {
+            '"' => vec!['\\', '"'],
+            '\\' => vec!['\\', '\\'],
+            c if c.is_control() => vec!['_'],
+            c => vec![c],
+        })
+        .collect();
+    TEMPLATE.replace("{NAME}", &escaped)
+}
+
+const TEMPLATE: &str = r#"# verdant preset — every key is documented in docs/presets.md.
+# Check it with `verdant preset check FILE`, build it with `verdant build FILE`.
+# Paths are relative to this file's folder. Lengths are in metres.
+
+[scene]
+# Output folder name under out/: letters, digits, `-` and `_` only.
+name = "{NAME}"
+# Global seed: every random choice of the build derives from it (same seed, same files).
+seed = 0
+# Mesh formats written, first = primary: "glb", "gltf" (+ .bin), "obj" (+ .mtl).
+formats = ["glb"]
+
+[terrain]
+# Heights come from EITHER a heightmap file OR a procedural map (exactly one of the two).
+#
+# A heightmap file and how to decode it (the meanings of `verdant terrain`'s options):
+# heightmap = "heights/valley.png"
+# encoding = "auto"          # auto, gray, terrain-rgb, terrarium, hgt, r16, float
+# size = [1025, 1025]        # width, height of a raw .r16/.raw file (square if omitted)
+# height_scale = 100.0       # gray / r16: metres spanned by the full value range
+# height_offset = 0.0        # gray / r16: metres added to every height
+# max_samples = 67125249     # refuse larger maps (8193²)
+#
+# A generated square map: kind "fbm" (rolling) or "ridged" (sharp crests), `size` samples a
+# side (2..=8193), heights normalised to 0..`relief` metres; `seed` defaults to [scene] seed.
+procedural = { kind = "fbm", size = 513, seed = 7, relief = 200.0 }
+# Metres between neighbouring samples (both sources).
+cell_size = 2.0
+
+# Meshing: "tin" (adaptive, every sample within max_error) or "grid" (every grid_step-th sample).
+mode = "tin"
+max_error = 1.0              # tin: largest vertical error allowed at any sample, metres
+# max_triangles = 200000     # tin: stop early at this many triangles (achieved error reported)
+# grid_step = 1              # grid: keep every N-th sample
+
+# Split into chunk×chunk-sample tiles (crack-free), one mesh each.
+chunk = 128
+# Skirts this deep along every chunk border hide cracks between neighbouring LoDs.
+skirt = 2.0
+# base = 20.0                # close into a watertight solid this far below the lowest sample
+# A LoD chain per chunk: the max error of each level, finest first, strictly increasing.
+lods = [1.0, 4.0, 16.0]
+"#;
+
+// ---------------------------------------------------------------------------------------------
+// parsing
+
+/// Type of a value as a message says it ("a string", "an integer", …).
+fn type_name(value: &DeValue<'_>) -> &'static str {
+    match value {
+        DeValue::String(_) => "a string",
+        DeValue::Integer(_) => "an integer",
+        DeValue::Float(_) => "a float",
+        DeValue::Boolean(_) => "a boolean",
+        DeValue::Datetime(_) => "a date-time",
+        DeValue::Array(_) => "an array",
+        DeValue::Table(_) => "a table",
+    }
+}
+
+/// 1-based line and column (in characters) of byte `offset` in `text`.
+pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let mut offset = offset.min(text.len());
+    while !text.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    (line, before[line_start..].chars().count() + 1)
+}
+
+/// The closest of `candidates` to `word`, if it is close enough to be a likely misspelling.
+pub fn did_you_mean<'a>(word: &str, candidates: &[&'a str]) -> Option<&'a str> {
+    let w = word.to_lowercase().replace('-', "_");
+    let (distance, best) = candidates
+        .iter()
+        .map(|c| (strsim::damerau_levenshtein(&w, c), *c))
+        .min_by_key(|(d, _)| *d)?;
+    if distance <= (best.chars().count() / 3).max(1) {
+        return Some(best);
+    }
+    // a fragment of a longer key (`error` → `max_error`)
+    candidates.iter().find(|c| w.chars().count() >= 4 && c.contains(w.as_str())).copied()
+}
+
+fn backticked(items: &[&str]) -> String {
+    items.iter().map(|k| format!("`{k}`")).collect::<Vec<_>>().join(", ")
+}
+
+/// The text being parsed and where it came from.
+struct Ctx<'a> {
+    file: &'a Path,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn at(&self, span: &Range<usize>, problem: impl Into<String>, remedy: impl Into<String>) -> PresetError {
+        let (line, column) = line_column(self.text, span.start);
+        PresetError::At { file: self.file.to_path_buf(), line, column, problem: problem.into(), remedy: remedy.into() }
+    }
+}
+
+type Entry<'a, 'i> = (&'a Spanned<std::borrow::Cow<'i, str>>, &'a Spanned<DeValue<'i>>);
+
+/// A table of the document being read: `[scene]`, `[terrain]` or the procedural inline table.
+struct Table<'a, 'i> {
+    ctx: &'a Ctx<'a>,
+    /// How messages name it: "[terrain]", "`procedural`".
+    label: &'static str,
+    /// Where "missing key" problems point: the table's name.
+    span: Range<usize>,
+    table: &'a DeTable<'i>,
+}
+
+impl<'a, 'i> Table<'a, 'i> {
+    /// Entries in the order they appear in the file.
+    fn entries(&self) -> Vec<Entry<'a, 'i>> {
+        let mut entries: Vec<Entry<'a, 'i>> = self.table.iter().collect();
+        entries.sort_by_key(|(k, _)| k.span().start);
+        entries
+    }
+
+    /// Every key must be one of `known`; `elsewhere` lists other tables' keys for "belongs in".
+    fn check_keys(&self, known: &[&str], elsewhere: &[(&str, &[&str])]) -> Result<(), PresetError> {
+        for (key, _) in self.entries() {
+            let name: &str = key.get_ref();
+            if known.contains(&name) {
+                continue;
+            }
+            let problem = format!("unknown key `{name}` in {}", self.label);
+            let homes: Vec<&str> = elsewhere.iter().filter(|(_, keys)| keys.contains(&name)).map(|(t, _)| *t).collect();
+            let remedy = if let Some(suggestion) = did_you_mean(name, known) {
+                format!("did you mean `{suggestion}`?")
+            } else if !homes.is_empty() {
+                format!("`{name}` belongs in {}", homes.join(" or "))
+            } else {
+                format!("the keys of {} are {}", self.label, backticked(known))
+            };
+            return Err(self.ctx.at(&key.span(), problem, remedy));
+        }
+        Ok(())
+    }
+
+    fn get(&self, key: &str) -> Option<Entry<'a, 'i>> {
+        self.table.iter().find(|(k, _)| k.get_ref() == key)
+    }
+
+    fn wrong_type(&self, key: &str, value: &Spanned<DeValue<'_>>, expected: &str, example: &str) -> PresetError {
+        self.ctx.at(
+            &value.span(),
+            format!("`{key}` must be {expected}, found {}", type_name(value.get_ref())),
+            format!("write it like `{example}`"),
+        )
+    }
+
+    fn missing(&self, key: &str, example: &str) -> PresetError {
+        self.ctx.at(&self.span, format!("{} has no `{key}`", self.label), format!("add `{example}`"))
+    }
+
+    fn string(&self, key: &str, example: &str) -> Result<Option<(&'a str, Range<usize>)>, PresetError> {
+        match self.get(key) {
+            None => Ok(None),
+            Some((_, v)) => match v.get_ref() {
+                DeValue::String(s) => Ok(Some((s.as_ref(), v.span()))),
+                _ => Err(self.wrong_type(key, v, "a string", example)),
+            },
+        }
+    }
+
+    /// An integer in `range` (inclusive), as u64.
+    fn integer(
+        &self,
+        key: &str,
+        range: std::ops::RangeInclusive<u64>,
+        example: &str,
+    ) -> Result<Option<(u64, Range<usize>)>, PresetError> {
+        match self.get(key) {
+            None => Ok(None),
+            Some((_, v)) => integer_value(self, key, v, range, example).map(|n| Some((n, v.span()))),
+        }
+    }
+
+    /// A number (integer or float), finite, checked by `valid` (which says what is wrong).
+    fn number(
+        &self,
+        key: &str,
+        example: &str,
+        valid: impl Fn(f64) -> Result<(), String>,
+    ) -> Result<Option<(f64, Range<usize>)>, PresetError> {
+        match self.get(key) {
+            None => Ok(None),
+            Some((_, v)) => number_value(self, key, v, example, &valid).map(|x| Some((x, v.span()))),
+        }
+    }
+}
+
+fn integer_value(
+    t: &Table<'_, '_>,
+    key: &str,
+    v: &Spanned<DeValue<'_>>,
+    range: std::ops::RangeInclusive<u64>,
+    example: &str,
+) -> Result<u64, PresetError> {
+    let DeValue::Integer(i) = v.get_ref() else {
+        return Err(t.wrong_type(key, v, "an integer", example));
+    };
+    let n = i64::from_str_radix(i.as_str(), i.radix())
+        .map_err(|_| t.ctx.at(&v.span(), format!("`{key}` = {i} is out of range"), format!("use a value in {range:?}")))?;
+    match u64::try_from(n) {
+        Ok(n) if range.contains(&n) => Ok(n),
+        _ => Err(t.ctx.at(
+            &v.span(),
+            format!("`{key}` must be between {} and {}, got {n}", range.start(), range.end()),
+            format!("write it like `{example}`"),
+        )),
+    }
+}
+
+fn number_value(
+    t: &Table<'_, '_>,
+    key: &str,
+    v: &Spanned<DeValue<'_>>,
+    example: &str,
+    valid: &dyn Fn(f64) -> Result<(), String>,
+) -> Result<f64, PresetError> {
+    let x = match v.get_ref() {
+        DeValue::Integer(i) => i64::from_str_radix(i.as_str(), i.radix()).ok().map(|n| n as f64),
+        DeValue::Float(f) => f.as_str().parse::<f64>().ok(),
+        _ => return Err(t.wrong_type(key, v, "a number", example)),
+    };
+    let x = x.ok_or_else(|| t.ctx.at(&v.span(), format!("`{key}` is not a number TOML can hold"), format!("write it like `{example}`")))?;
+    if !x.is_finite() {
+        return Err(t.ctx.at(&v.span(), format!("`{key}` must be a finite number, got {x}"), format!("write it like `{example}`")));
+    }
+    valid(x).map_err(|why| t.ctx.at(&v.span(), format!("`{key}` {why}, got {x}"), format!("write it like `{example}`")))?;
+    Ok(x)
+}
+
+fn positive(x: f64) -> Result<(), String> {
+    if x > 0.0 {
+        Ok(())
+    } else {
+        Err("must be greater than 0".into())
+    }
+}
+
+fn non_negative(x: f64) -> Result<(), String> {
+    if x >= 0.0 {
+        Ok(())
+    } else {
+        Err("must be 0 or more".into())
+    }
+}
+
+fn any_finite(_: f64) -> Result<(), String> {
+    Ok(())
+}
+
+/// The CLI's name of a clap value (`terrain-rgb`, `tin`).
+fn value_name<T: ValueEnum>(v: &T) -> String {
+    v.to_possible_value().map(|p| p.get_name().to_string()).unwrap_or_default()
+}
+
+/// Picks the variant of `T` named `s` (the CLI's spelling), or explains the allowed ones.
+fn choice<T: ValueEnum + Copy>(t: &Table<'_, '_>, key: &str, s: &str, span: &Range<usize>) -> Result<T, PresetError> {
+    if let Some(v) = T::value_variants().iter().find(|v| value_name(*v) == s) {
+        return Ok(*v);
+    }
+    let names: Vec<String> = T::value_variants().iter().map(value_name).collect();
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    Err(unknown_value(t, key, s, &names, span))
+}
+
+fn unknown_value(t: &Table<'_, '_>, key: &str, s: &str, allowed: &[&str], span: &Range<usize>) -> PresetError {
+    let remedy = match did_you_mean(s, allowed) {
+        Some(m) => format!("did you mean \"{m}\"? (allowed: {})", allowed.join(", ")),
+        None => format!("allowed values are {}", allowed.join(", ")),
+    };
+    t.ctx.at(span, format!("unknown `{key}` value \"{s}\""), remedy)
+}
+
+fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetError> {
+    let ctx = Ctx { file: path, text };
+    let root = DeTable::parse(text).map_err(|e| {
+        let span = e.span().unwrap_or(0..0);
+        let message = e.message().trim().trim_end_matches('.').to_string();
+        let remedy = if message.contains("duplicate") {
+            "each key and section may appear only once: remove or merge the repeated one"
+        } else {
+            "fix the syntax here (see docs/presets.md for an example)"
+        };
+        ctx.at(&span, format!("TOML syntax: {message}"), remedy)
+    })?;
+    let root = root.get_ref();
+
+    // sections, in file order: known names holding tables only
+    let mut entries: Vec<Entry<'_, '_>> = root.iter().collect();
+    entries.sort_by_key(|(k, _)| k.span().start);
+    let mut scene = None;
+    let mut terrain = None;
+    for (key, value) in entries {
+        let name: &str = key.get_ref();
+        let table = match value.get_ref() {
+            DeValue::Table(t) => t,
+            other => {
+                let problem = if SECTIONS.contains(&name) {
+                    format!("`{name}` must be a section `[{name}]`, found {}", type_name(other))
+                } else {
+                    format!("key `{name}` is outside any section")
+                };
+                let home = [("[scene]", SCENE_KEYS), ("[terrain]", TERRAIN_KEYS)]
+                    .iter()
+                    .find(|(_, keys)| keys.contains(&name))
+                    .map(|(s, _)| *s);
+                let remedy = match home {
+                    Some(s) if !SECTIONS.contains(&name) => format!("move it under {s}"),
+                    _ => format!("keys go under one of the sections {}", sections_list()),
+                };
+                return Err(ctx.at(&key.span(), problem, remedy));
+            }
+        };
+        match name {
+            "scene" => scene = Some((key.span(), table)),
+            "terrain" => terrain = Some((key.span(), table)),
+            _ => {
+                let remedy = match did_you_mean(name, SECTIONS) {
+                    Some(s) => format!("did you mean `[{s}]`? (known sections: {})", sections_list()),
+                    None => format!("known sections are {} (see docs/presets.md)", sections_list()),
+                };
+                return Err(ctx.at(&key.span(), format!("unknown section `[{name}]`"), remedy));
+            }
+        }
+    }
+
+    let Some((scene_span, scene_table)) = scene else {
+        return Err(ctx.at(&(0..0), "the preset has no [scene] section", "add `[scene]` with `name = \"my-scene\"`"));
+    };
+    let scene = parse_scene(&Table { ctx: &ctx, label: "[scene]", span: scene_span, table: scene_table })?;
+    let terrain = match terrain {
+        None => None,
+        Some((span, table)) => {
+            let t = Table { ctx: &ctx, label: "[terrain]", span, table };
+            Some(parse_terrain(&t, scene.seed, check_inputs)?)
+        }
+    };
+    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain })
+}
+
+fn sections_list() -> String {
+    SECTIONS.iter().map(|s| format!("`[{s}]`")).collect::<Vec<_>>().join(", ")
+}
+
+fn parse_scene(t: &Table<'_, '_>) -> Result<SceneSettings, PresetError> {
+    t.check_keys(SCENE_KEYS, &[("[terrain]", TERRAIN_KEYS), ("`procedural`", PROCEDURAL_KEYS)])?;
+    let (name, name_span) = t.string("name", "name = \"alpine-valley\"")?.ok_or_else(|| t.missing("name", "name = \"my-scene\""))?;
+    check_scene_name(name).map_err(|why| t.ctx.at(&name_span, why, "use only letters, digits, `-` and `_`, e.g. `name = \"alpine-valley\"`"))?;
+    let seed = t.integer("seed", 0..=i64::MAX as u64, "seed = 42")?.map_or(0, |(s, _)| s);
+
+    let mut formats = Vec::new();
+    if let Some((_, v)) = t.get("formats") {
+        let DeValue::Array(items) = v.get_ref() else {
+            return Err(t.wrong_type("formats", v, "an array of strings", "formats = [\"glb\", \"obj\"]"));
+        };
+        if items.is_empty() {
+            return Err(t.ctx.at(&v.span(), "`formats` is empty", "list at least one of \"glb\", \"gltf\", \"obj\""));
+        }
+        for item in items.iter() {
+            let DeValue::String(s) = item.get_ref() else {
+                return Err(t.wrong_type("formats", item, "an array of strings", "formats = [\"glb\", \"obj\"]"));
+            };
+            let format = match s.as_ref() {
+                "glb" => Format::Glb,
+                "gltf" => Format::Gltf,
+                "obj" => Format::Obj,
+                other => return Err(unknown_value(t, "formats", other, &["glb", "gltf", "obj"], &item.span())),
+            };
+            if formats.contains(&format) {
+                return Err(t.ctx.at(&item.span(), format!("format \"{s}\" is listed twice"), "list each format once"));
+            }
+            formats.push(format);
+        }
+    } else {
+        formats.push(Format::Glb);
+    }
+    Ok(SceneSettings { name: name.to_string(), seed, formats })
+}
+
+fn parse_terrain(t: &Table<'_, '_>, scene_seed: u64, check_inputs: bool) -> Result<TerrainSettings, PresetError> {
+    t.check_keys(TERRAIN_KEYS, &[("[scene]", SCENE_KEYS), ("`procedural = { … }`", PROCEDURAL_KEYS)])?;
+    let cell_size_m = t.number("cell_size", "cell_size = 10.0", positive)?.map_or(1.0, |(x, _)| x);
+
+    let source = match (t.get("heightmap"), t.get("procedural")) {
+        (Some((hk, _)), Some((pk, _))) => {
+            let later = if hk.span().start > pk.span().start { hk } else { pk };
+            return Err(t.ctx.at(
+                &later.span(),
+                "[terrain] has both `heightmap` and `procedural`",
+                "keep one of them: a heightmap file or a generated map",
+            ));
+        }
+        (None, None) => {
+            return Err(t.ctx.at(
+                &t.span,
+                "[terrain] has neither `heightmap` nor `procedural`",
+                "add `heightmap = \"heights.png\"` or `procedural = { kind = \"fbm\", size = 513, relief = 200.0 }`",
+            ));
+        }
+        (None, Some((_, v))) => {
+            // keys that only a file has
+            for key in HEIGHTMAP_ONLY_KEYS {
+                if let Some((k, _)) = t.get(key) {
+                    return Err(t.ctx.at(
+                        &k.span(),
+                        format!("`{key}` applies to a heightmap file, not to a procedural map"),
+                        "remove it",
+                    ));
+                }
+            }
+            parse_procedural(t, v, cell_size_m, scene_seed)?
+        }
+        (Some((_, v)), None) => parse_heightmap(t, v, cell_size_m, check_inputs)?,
+    };
+
+    let mode = match t.string("mode", "mode = \"tin\"")? {
+        None => MeshMode::Tin,
+        Some((s, span)) => choice::<MeshMode>(t, "mode", s, &span)?,
+    };
+    let max_error_m = t.number("max_error", "max_error = 1.0", non_negative)?.map_or(1.0, |(x, _)| x);
+    let max_triangles = t.integer("max_triangles", 2..=u32::MAX as u64, "max_triangles = 200000")?.map(|(n, _)| n as usize);
+    let grid_step = t.integer("grid_step", 1..=1 << 20, "grid_step = 2")?.map_or(1, |(n, _)| n as usize);
+    let chunk = t.integer("chunk", 2..=1 << 20, "chunk = 256")?.map(|(n, _)| n as usize);
+    let skirt_m = t.number("skirt", "skirt = 10.0", positive)?.map(|(x, _)| x);
+    let base_m = t.number("base", "base = 20.0", positive)?.map(|(x, _)| x);
+
+    let mut lods = Vec::new();
+    if let Some((key, v)) = t.get("lods") {
+        let DeValue::Array(items) = v.get_ref() else {
+            return Err(t.wrong_type("lods", v, "an array of numbers", "lods = [2.0, 8.0, 32.0]"));
+        };
+        for item in items.iter() {
+            let x = number_value(t, "lods", item, "lods = [2.0, 8.0, 32.0]", &positive)?;
+            if let Some(&previous) = lods.last() {
+                if x <= previous {
+                    return Err(t.ctx.at(
+                        &item.span(),
+                        format!("`lods` must increase strictly (finest level first), but {x} follows {previous}"),
+                        "list each level's max error in metres, smallest first, e.g. `lods = [2.0, 8.0, 32.0]`",
+                    ));
+                }
+            }
+            lods.push(x);
+        }
+        if !lods.is_empty() && mode == MeshMode::Grid {
+            return Err(t.ctx.at(
+                &key.span(),
+                "`lods` needs mode = \"tin\" (levels are max errors of TIN meshes)",
+                "set `mode = \"tin\"` or remove `lods`",
+            ));
+        }
+    }
+
+    Ok(TerrainSettings { source, mode, max_error_m, max_triangles, grid_step, chunk, skirt_m, base_m, lods })
+}
+
+fn parse_procedural(
+    terrain: &Table<'_, '_>,
+    value: &Spanned<DeValue<'_>>,
+    cell_size_m: f64,
+    scene_seed: u64,
+) -> Result<TerrainSource, PresetError> {
+    let example = "procedural = { kind = \"fbm\", size = 513, seed = 7, relief = 200.0 }";
+    let DeValue::Table(table) = value.get_ref() else {
+        return Err(terrain.wrong_type("procedural", value, "a table", example));
+    };
+    let t = Table { ctx: terrain.ctx, label: "`procedural`", span: value.span(), table };
+    t.check_keys(PROCEDURAL_KEYS, &[("[terrain]", TERRAIN_KEYS), ("[scene]", SCENE_KEYS)])?;
+    let noise = match t.string("kind", "kind = \"fbm\"")? {
+        None => NoiseKind::Fbm,
+        Some(("fbm", _)) => NoiseKind::Fbm,
+        Some(("ridged", _)) => NoiseKind::Ridged,
+        Some((other, span)) => return Err(unknown_value(&t, "kind", other, &["fbm", "ridged"], &span)),
+    };
+    let size = t.integer("size", PROCEDURAL_SIZES, "size = 513")?.ok_or_else(|| t.missing("size", "size = 513"))?.0 as usize;
+    let seed = t.integer("seed", 0..=i64::MAX as u64, "seed = 7")?.map_or(scene_seed, |(s, _)| s);
+    let relief_m = t.number("relief", "relief = 200.0", positive)?.ok_or_else(|| t.missing("relief", "relief = 200.0"))?.0;
+    Ok(TerrainSource::Fbm { size, seed, relief_m, cell_size_m, noise })
+}
+
+fn parse_heightmap(
+    t: &Table<'_, '_>,
+    value: &Spanned<DeValue<'_>>,
+    cell_size_m: f64,
+    check_inputs: bool,
+) -> Result<TerrainSource, PresetError> {
+    let DeValue::String(relative) = value.get_ref() else {
+        return Err(t.wrong_type("heightmap", value, "a path (a string)", "heightmap = \"heights/valley.png\""));
+    };
+    if relative.is_empty() {
+        return Err(t.ctx.at(&value.span(), "`heightmap` is empty", "name the heightmap file, relative to this preset"));
+    }
+    let path = resolve(t.ctx.file, Path::new(relative.as_ref()));
+    let mut decode = DecodeOptions { cell_size_m, ..DecodeOptions::default() };
+    if let Some((s, span)) = t.string("encoding", "encoding = \"gray\"")? {
+        decode.encoding = choice::<Encoding>(t, "encoding", s, &span)?;
+    }
+    if let Some((_, v)) = t.get("size") {
+        let example = "size = [1025, 1025]";
+        match v.get_ref() {
+            DeValue::Array(items) if items.len() == 2 => {
+                let w = integer_value(t, "size", &items[0], 1..=1 << 20, example)? as usize;
+                let h = integer_value(t, "size", &items[1], 1..=1 << 20, example)? as usize;
+                decode.size = Some((w, h));
+            }
+            _ => return Err(t.wrong_type("size", v, "an array of two integers [width, height]", example)),
+        }
+    }
+    if let Some((x, _)) = t.number("height_scale", "height_scale = 100.0", any_finite)? {
+        decode.height_scale_m = x;
+    }
+    if let Some((x, _)) = t.number("height_offset", "height_offset = 0.0", any_finite)? {
+        decode.height_offset_m = x;
+    }
+    decode.max_samples = t
+        .integer("max_samples", 1..=i64::MAX as u64, "max_samples = 67125249")?
+        .map_or(DEFAULT_MAX_SAMPLES, |(n, _)| n as usize);
+
+    if check_inputs {
+        let (line, column) = line_column(t.ctx.text, value.span().start);
+        if !path.exists() {
+            return Err(PresetError::MissingInput {
+                file: t.ctx.file.to_path_buf(),
+                line,
+                column,
+                what: "heightmap",
+                input: path,
+            });
+        }
+        if !path.is_file() {
+            return Err(t.ctx.at(
+                &value.span(),
+                format!("heightmap `{}` is not a file", path.display()),
+                "name the heightmap file itself, not its folder",
+            ));
+        }
+    }
+    Ok(TerrainSource::Heightmap { path, decode })
+}
+
+/// `relative` as seen from the folder of the preset file `preset` (absolute paths stay as they are).
+pub fn resolve(preset: &Path, relative: &Path) -> PathBuf {
+    match preset.parent() {
+        Some(dir) if relative.is_relative() && !dir.as_os_str().is_empty() => dir.join(relative),
+        _ => relative.to_path_buf(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_column_counts_characters() {
+        let text = "a\nbé = 1\n";
+        assert_eq!(line_column(text, 0), (1, 1));
+        assert_eq!(line_column(text, 2), (2, 1));
+        assert_eq!(line_column(text, 5), (2, 3)); // after 'b' and 'é' (2 bytes)
+        assert_eq!(line_column(text, 4), (2, 2)); // inside 'é': backs off to its start
+        assert_eq!(line_column(text, 1000), (3, 1));
+    }
+
+    #[test]
+    fn did_you_mean_finds_near_misses_only() {
+        assert_eq!(did_you_mean("max_eror", TERRAIN_KEYS), Some("max_error"));
+        assert_eq!(did_you_mean("Max-Error", TERRAIN_KEYS), Some("max_error"));
+        assert_eq!(did_you_mean("lod", TERRAIN_KEYS), Some("lods"));
+        assert_eq!(did_you_mean("skirts", TERRAIN_KEYS), Some("skirt"));
+        assert_eq!(did_you_mean("terain", SECTIONS), Some("terrain"));
+        assert_eq!(did_you_mean("species", SECTIONS), None);
+        assert_eq!(did_you_mean("zzz", TERRAIN_KEYS), None);
+    }
+
+    #[test]
+    fn scene_names() {
+        assert!(check_scene_name("alpine-valley_2").is_ok());
+        for bad in ["", "a b", "../x", "a/b", "é", "a.b", &"x".repeat(65)] {
+            assert!(check_scene_name(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn demo_is_procedural_chunked_with_lods() {
+        let d = demo_preset();
+        assert_eq!(d.scene.name, "demo");
+        assert_eq!(d.scene.formats, vec![Format::Glb]);
+        let t = d.terrain.as_ref().unwrap();
+        assert!(t.chunk.is_some() && t.lods.len() >= 2);
+        let hf = procedural_heightfield(&t.source).unwrap();
+        assert_eq!((hf.width, hf.height, hf.cell_size_m), (513, 513, 4.0));
+    }
+
+    #[test]
+    fn template_escapes_the_name() {
+        let t = template("a\"b");
+        assert!(t.contains("name = \"a\\\"b\""));
+        // parses (the name itself is then refused as unsafe, with its position)
+        let e = parse_preset(&t, Path::new("x.toml")).unwrap_err();
+        assert!(e.to_string().contains("x.toml:7:8:"), "{e}");
+    }
+
+    #[test]
+    fn resolve_is_relative_to_the_preset_folder() {
+        assert_eq!(resolve(Path::new("presets/a.toml"), Path::new("h.png")), PathBuf::from("presets/h.png"));
+        assert_eq!(resolve(Path::new("a.toml"), Path::new("h.png")), PathBuf::from("h.png"));
+        assert_eq!(resolve(Path::new("presets/a.toml"), Path::new("/abs/h.png")), PathBuf::from("/abs/h.png"));
+    }
+}
