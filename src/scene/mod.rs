@@ -4,6 +4,11 @@
 //! The types here are the resolved settings every stage reads; they are written into the manifest
 //! as they are, so a build can be reproduced from its manifest alone.
 
+pub mod build;
+pub mod cache;
+pub mod manifest;
+pub mod stages;
+
 use std::path::PathBuf;
 
 use serde::Serialize;
