@@ -5,6 +5,9 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 use verdant::heightfield::{DecodeOptions, Encoding, DEFAULT_MAX_SAMPLES};
+use verdant::scene::build::{self as scene_build, BuildSettings, PresetSource};
+use verdant::scene::preset;
+use verdant::scene::stages::Stage;
 use verdant::terrain::build::BuildOptions;
 use verdant::terrain::job::{self, MeshMode, Source, TerrainJob};
 use verdant::validate::{validate_file, ValidateOptions};
@@ -42,6 +45,57 @@ enum Command {
     ///
     /// Example: verdant validate out/fuji.glb --up-facing
     Validate(ValidateArgs),
+    /// Build scenes from preset files into out/<scene>/ (meshes, manifest.json, report.json/.md,
+    /// preview.png). With no preset, builds the embedded demo scene.
+    ///
+    /// Example: verdant build presets/*.toml --jobs 2
+    Build(BuildArgs),
+    /// Check a preset without building, or write a commented template.
+    #[command(subcommand)]
+    Preset(PresetCommand),
+}
+
+#[derive(Args)]
+struct BuildArgs {
+    /// Preset files (.toml). None: the embedded demo scene, generated in memory.
+    #[arg(value_name = "PRESET")]
+    presets: Vec<PathBuf>,
+    /// Presets built at the same time (each also uses the worker threads of --threads).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    jobs: usize,
+    /// Build only these stages (comma-separated). Stages not built are absent from the output.
+    #[arg(long, value_enum, value_delimiter = ',', value_name = "STAGE,...")]
+    only: Vec<Stage>,
+    /// Build all stages but these (comma-separated).
+    #[arg(long, value_enum, value_delimiter = ',', value_name = "STAGE,...")]
+    skip: Vec<Stage>,
+    /// Output folder; each scene goes to <DIR>/<scene>/, the stage cache to <DIR>/.cache/.
+    #[arg(long, value_name = "DIR", default_value = "out")]
+    out: PathBuf,
+    /// Ignore the cache and recompute every stage.
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Subcommand)]
+enum PresetCommand {
+    /// Parse and check presets (keys, types, values, input files) without building.
+    ///
+    /// Example: verdant preset check presets/alpine.toml
+    Check {
+        #[arg(required = true, value_name = "PRESET")]
+        files: Vec<PathBuf>,
+    },
+    /// Write a commented preset template to presets/<NAME>.toml (or --output).
+    ///
+    /// Example: verdant preset new canyon
+    New {
+        /// Scene name: letters, digits, - and _.
+        name: String,
+        /// Where to write the template (default presets/<NAME>.toml); an existing file is not overwritten.
+        #[arg(short, long, value_name = "FILE")]
+        output: Option<PathBuf>,
+    },
 }
 
 #[derive(Args)]
@@ -139,6 +193,8 @@ fn main() -> ExitCode {
     let code = match cli.command {
         Command::Terrain(args) => terrain(args, cli.quiet),
         Command::Validate(args) => validate(args, cli.quiet),
+        Command::Build(args) => build(args, cli.quiet),
+        Command::Preset(cmd) => preset(cmd, cli.quiet),
     };
     ExitCode::from(code as u8)
 }
@@ -256,4 +312,70 @@ fn validate(a: ValidateArgs, quiet: bool) -> i32 {
 fn fail(message: &str, code: i32) -> i32 {
     eprintln!("error: {message}");
     code
+}
+
+fn build(a: BuildArgs, quiet: bool) -> i32 {
+    let mut stages: Vec<Stage> = if a.only.is_empty() { Stage::ALL.to_vec() } else { a.only.clone() };
+    stages.retain(|s| !a.skip.contains(s));
+    if stages.is_empty() {
+        return fail("--only/--skip leave no stage to build", 2);
+    }
+    let sources: Vec<PresetSource> = if a.presets.is_empty() {
+        vec![PresetSource::Resolved(Box::new(preset::demo_preset()))]
+    } else {
+        a.presets.iter().cloned().map(PresetSource::File).collect()
+    };
+    let settings = BuildSettings { out_dir: a.out.clone(), stages, force: a.force };
+    let progress = scene_build::ProgressView::new(quiet);
+    let outcomes = scene_build::build_batch(&sources, &settings, a.jobs, &|scene: &str, msg: &str| progress.update(scene, msg));
+    progress.finish();
+    let table = scene_build::summary_table(&outcomes);
+    let failed = outcomes.iter().any(|o| o.error.is_some());
+    if failed {
+        eprint!("{table}");
+    } else if !quiet {
+        print!("{table}");
+    }
+    i32::from(failed)
+}
+
+fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
+    match cmd {
+        PresetCommand::Check { files } => {
+            let mut code = 0;
+            for f in &files {
+                match preset::load_preset(f) {
+                    Ok(p) => {
+                        if !quiet {
+                            println!("{}: ok (scene `{}`)", f.display(), p.scene.name);
+                        }
+                    }
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        code = e.exit_code();
+                    }
+                }
+            }
+            code
+        }
+        PresetCommand::New { name, output } => {
+            let path = output.unwrap_or_else(|| PathBuf::from("presets").join(format!("{name}.toml")));
+            if path.exists() {
+                return fail(&format!("{} exists; choose another name or --output, it is not overwritten", path.display()), 2);
+            }
+            let text = preset::template(&name);
+            if let Err(e) = preset::parse_preset(&text, &path) {
+                return fail(&format!("cannot make a template named `{name}`: {e}"), 2);
+            }
+            match verdant::export::write_atomic(&path, text.as_bytes()) {
+                Ok(()) => {
+                    if !quiet {
+                        println!("wrote {}", path.display());
+                    }
+                    0
+                }
+                Err(e) => fail(&e.to_string(), 1),
+            }
+        }
+    }
 }

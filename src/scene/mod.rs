@@ -5,6 +5,10 @@
 //! as they are, so a build can be reproduced from its manifest alone.
 
 pub mod preview;
+pub mod build;
+pub mod cache;
+pub mod manifest;
+pub mod stages;
 
 use std::path::PathBuf;
 

@@ -1,0 +1,349 @@
+//! Building scenes from presets: each scene is built stage by stage into a temporary folder beside
+//! its destination and renamed into place only when every stage succeeded, so a failed build
+//! leaves the previous `out/<scene>/` untouched. Several presets build in parallel (`--jobs`);
+//! one failing does not stop the others.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::scene::cache::{Cache, KeyBuilder};
+use crate::scene::manifest::{write_manifest_and_report, StageRun};
+use crate::scene::preset::{load_preset, PresetError};
+use crate::scene::stages::{self, PreviewStageReport, Stage, TerrainStageReport};
+use crate::scene::Preset;
+use crate::validate::read_scene;
+
+/// How to build: where, which stages, whether to ignore the cache.
+#[derive(Debug, Clone)]
+pub struct BuildSettings {
+    pub out_dir: PathBuf,
+    pub stages: Vec<Stage>,
+    pub force: bool,
+}
+
+impl Default for BuildSettings {
+    fn default() -> Self {
+        BuildSettings { out_dir: PathBuf::from("out"), stages: Stage::ALL.to_vec(), force: false }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SceneBuildError {
+    #[error(transparent)]
+    Preset(#[from] PresetError),
+    #[error(transparent)]
+    Stage(#[from] stages::StageError),
+    #[error("{path}: {message}")]
+    Io { path: PathBuf, message: String },
+    #[error("{0}")]
+    Usage(String),
+}
+
+fn io_err(path: &Path) -> impl Fn(std::io::Error) -> SceneBuildError + '_ {
+    move |e| SceneBuildError::Io { path: path.to_owned(), message: e.to_string() }
+}
+
+/// The outcome of one scene, a row of the summary table.
+#[derive(Debug, Clone, Serialize)]
+pub struct SceneOutcome {
+    /// The preset file, or "(embedded demo)".
+    pub preset: String,
+    pub scene: String,
+    /// `None` when the scene was built; the error message otherwise.
+    pub error: Option<String>,
+    pub dir: Option<PathBuf>,
+    pub files: usize,
+    pub triangles: usize,
+    pub cached_stages: Vec<Stage>,
+    pub seconds: f64,
+}
+
+/// Reports progress lines: (scene, message).
+pub type Progress<'a> = &'a (dyn Fn(&str, &str) + Sync);
+
+/// Builds one preset into `settings.out_dir/<scene>/`.
+pub fn build_preset(preset: &Preset, settings: &BuildSettings, progress: Progress) -> Result<SceneOutcome, SceneBuildError> {
+    let t0 = Instant::now();
+    let name = &preset.scene.name;
+    let out = &settings.out_dir;
+    if settings.stages.contains(&Stage::Preview) && !settings.stages.contains(&Stage::Terrain) && preset.terrain.is_some() {
+        return Err(SceneBuildError::Usage("the preview stage draws the terrain: select both (--only terrain,preview)".into()));
+    }
+    fs::create_dir_all(out).map_err(io_err(out))?;
+    let final_dir = out.join(name);
+    let tmp_dir = out.join(format!(".{name}.building-{}", std::process::id()));
+    let _ = fs::remove_dir_all(&tmp_dir);
+    fs::create_dir_all(&tmp_dir).map_err(io_err(&tmp_dir))?;
+    let result = build_into(preset, settings, &tmp_dir, progress);
+    match result {
+        Ok(mut outcome) => {
+            swap_into_place(&tmp_dir, &final_dir)?;
+            outcome.dir = Some(final_dir);
+            outcome.seconds = t0.elapsed().as_secs_f64();
+            Ok(outcome)
+        }
+        Err(e) => {
+            let _ = fs::remove_dir_all(&tmp_dir);
+            Err(e)
+        }
+    }
+}
+
+/// Replaces `final_dir` by `tmp_dir`: the old folder is moved aside first and removed only after
+/// the new one is in place.
+fn swap_into_place(tmp_dir: &Path, final_dir: &Path) -> Result<(), SceneBuildError> {
+    let old = final_dir.with_file_name(format!(
+        ".{}.old-{}",
+        final_dir.file_name().and_then(|n| n.to_str()).unwrap_or("scene"),
+        std::process::id()
+    ));
+    let had_old = final_dir.exists();
+    if had_old {
+        let _ = fs::remove_dir_all(&old);
+        fs::rename(final_dir, &old).map_err(io_err(final_dir))?;
+    }
+    if let Err(e) = fs::rename(tmp_dir, final_dir) {
+        if had_old {
+            let _ = fs::rename(&old, final_dir);
+        }
+        let _ = fs::remove_dir_all(tmp_dir);
+        return Err(io_err(final_dir)(e));
+    }
+    if had_old {
+        let _ = fs::remove_dir_all(&old);
+    }
+    Ok(())
+}
+
+fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: Progress) -> Result<SceneOutcome, SceneBuildError> {
+    let name = &preset.scene.name;
+    let cache = Cache::new(&settings.out_dir);
+    let mut runs: Vec<StageRun> = Vec::new();
+    let mut terrain_scene = None;
+    let mut terrain_key = None;
+
+    if let (true, Some(t)) = (settings.stages.contains(&Stage::Terrain), &preset.terrain) {
+        let t0 = Instant::now();
+        let key = stages::terrain_key(preset, t)?;
+        let cached = if settings.force { None } else { cache.lookup("terrain", &key) };
+        let (report, hit) = match cached.and_then(|(json, entry)| Some((serde_json::from_str::<TerrainStageReport>(&json).ok()?, entry))) {
+            Some((report, entry)) => {
+                progress(name, "terrain: cached");
+                Cache::restore(&entry, dir, &stages::terrain_files(&report)).map_err(io_err(&entry))?;
+                (report, true)
+            }
+            None => {
+                progress(name, "terrain: meshing");
+                let (report, scene) = stages::run_terrain(preset, t, dir)?;
+                let json = serde_json::to_string_pretty(&report).unwrap_or_default();
+                if let Err(e) = cache.store("terrain", &key, dir, &stages::terrain_files(&report), &json) {
+                    progress(name, &format!("terrain: could not store the cache entry ({e}); continuing"));
+                }
+                terrain_scene = Some(scene);
+                (report, false)
+            }
+        };
+        if settings.stages.contains(&Stage::Preview) && terrain_scene.is_none() {
+            // cached terrain: re-import the primary file (also checks that what was cached reads back)
+            if let Some(main) = report.files.first() {
+                let path = dir.join(main);
+                terrain_scene = Some(read_scene(&path).map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })?);
+            }
+        }
+        terrain_key = Some(key);
+        runs.push(StageRun::Terrain { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+    }
+
+    if settings.stages.contains(&Stage::Preview) {
+        if let (Some(scene), Some(tkey)) = (&terrain_scene, &terrain_key) {
+            let t0 = Instant::now();
+            let mut k = KeyBuilder::new("preview");
+            k.add(tkey.as_bytes()).add(&stages::PREVIEW_SIZE_PX.to_le_bytes());
+            let key = k.finish();
+            let cached = if settings.force { None } else { cache.lookup("preview", &key) };
+            let (report, hit) = match cached.and_then(|(json, entry)| Some((serde_json::from_str::<PreviewStageReport>(&json).ok()?, entry))) {
+                Some((report, entry)) => {
+                    progress(name, "preview: cached");
+                    Cache::restore(&entry, dir, std::slice::from_ref(&report.file)).map_err(io_err(&entry))?;
+                    (report, true)
+                }
+                None => {
+                    progress(name, "preview: drawing");
+                    let report = stages::run_preview(scene, dir)?;
+                    let json = serde_json::to_string_pretty(&report).unwrap_or_default();
+                    let _ = cache.store("preview", &key, dir, std::slice::from_ref(&report.file), &json);
+                    (report, false)
+                }
+            };
+            runs.push(StageRun::Preview { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+        }
+    }
+
+    progress(name, "manifest and report");
+    let files = write_manifest_and_report(preset, dir, &runs)?;
+    let triangles = runs
+        .iter()
+        .map(|r| match r {
+            StageRun::Terrain { report, .. } => report.output_triangles,
+            _ => 0,
+        })
+        .sum();
+    Ok(SceneOutcome {
+        preset: preset_label(preset),
+        scene: name.clone(),
+        error: None,
+        dir: None,
+        files,
+        triangles,
+        cached_stages: runs.iter().filter(|r| r.cached()).map(StageRun::stage).collect(),
+        seconds: 0.0,
+    })
+}
+
+pub fn preset_label(preset: &Preset) -> String {
+    preset.path.as_ref().map_or("(embedded demo)".to_string(), |p| p.display().to_string())
+}
+
+/// What to build in a batch: a preset file, or an already resolved preset (the embedded demo).
+#[derive(Debug, Clone)]
+pub enum PresetSource {
+    File(PathBuf),
+    Resolved(Box<Preset>),
+}
+
+/// Builds every preset, `jobs` at a time; returns one outcome per preset, in the given order.
+pub fn build_batch(sources: &[PresetSource], settings: &BuildSettings, jobs: usize, progress: Progress) -> Vec<SceneOutcome> {
+    // load first, so two presets naming the same scene are caught before anything is built
+    let loaded: Vec<(String, Result<Preset, SceneBuildError>)> = sources
+        .iter()
+        .map(|s| match s {
+            PresetSource::File(p) => (p.display().to_string(), load_preset(p).map_err(SceneBuildError::from)),
+            PresetSource::Resolved(p) => (preset_label(p), Ok((**p).clone())),
+        })
+        .collect();
+    let mut seen: Vec<(String, String)> = Vec::new();
+    let loaded: Vec<(String, Result<Preset, SceneBuildError>)> = loaded
+        .into_iter()
+        .map(|(label, r)| match r {
+            Ok(p) => {
+                if let Some((_, first)) = seen.iter().find(|(n, _)| *n == p.scene.name) {
+                    let msg = format!("{label}: scene name `{}` is already built by {first} in this batch; give one of them another [scene] name", p.scene.name);
+                    (label, Err(SceneBuildError::Usage(msg)))
+                } else {
+                    seen.push((p.scene.name.clone(), label.clone()));
+                    (label, Ok(p))
+                }
+            }
+            Err(e) => (label, Err(e)),
+        })
+        .collect();
+
+    let run_one = |(label, r): &(String, Result<Preset, SceneBuildError>)| -> SceneOutcome {
+        let t0 = Instant::now();
+        let failed = |scene: String, e: &SceneBuildError| SceneOutcome {
+            preset: label.clone(),
+            scene,
+            error: Some(e.to_string()),
+            dir: None,
+            files: 0,
+            triangles: 0,
+            cached_stages: Vec::new(),
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        match r {
+            Err(e) => failed("—".into(), e),
+            Ok(p) => build_preset(p, settings, progress).unwrap_or_else(|e| failed(p.scene.name.clone(), &e)),
+        }
+    };
+    let jobs = jobs.max(1);
+    if jobs == 1 {
+        return loaded.iter().map(run_one).collect();
+    }
+    match rayon::ThreadPoolBuilder::new().num_threads(jobs).build() {
+        Ok(pool) => pool.install(|| loaded.par_iter().map(run_one).collect()),
+        Err(_) => loaded.iter().map(run_one).collect(),
+    }
+}
+
+/// The end-of-batch table: scene, status, files, triangles, seconds.
+pub fn summary_table(outcomes: &[SceneOutcome]) -> String {
+    let mut s = format!("{:<16} {:<8} {:>6} {:>11} {:>8}  {}\n", "scene", "status", "files", "triangles", "seconds", "preset");
+    for o in outcomes {
+        let status = match (&o.error, o.cached_stages.is_empty()) {
+            (Some(_), _) => "FAILED",
+            (None, true) => "built",
+            (None, false) => "built*",
+        };
+        s += &format!("{:<16} {:<8} {:>6} {:>11} {:>8.2}  {}\n", o.scene, status, o.files, o.triangles, o.seconds, o.preset);
+    }
+    if outcomes.iter().any(|o| o.error.is_none() && !o.cached_stages.is_empty()) {
+        s += "built* = some stages reused from the cache (--force rebuilds them)\n";
+    }
+    for o in outcomes {
+        if let Some(e) = &o.error {
+            s += &format!("error: {e}\n");
+        }
+    }
+    s
+}
+
+/// Progress display: a spinner line per scene (indicatif) on a terminal, plain lines on stderr
+/// otherwise, nothing with `--quiet`.
+pub struct ProgressView {
+    quiet: bool,
+    bars: Option<(indicatif::MultiProgress, Mutex<Vec<(String, indicatif::ProgressBar)>>)>,
+    lines: Mutex<()>,
+}
+
+impl ProgressView {
+    pub fn new(quiet: bool) -> Self {
+        use std::io::IsTerminal;
+        let bars = (!quiet && std::io::stderr().is_terminal()).then(|| (indicatif::MultiProgress::new(), Mutex::new(Vec::new())));
+        ProgressView { quiet, bars, lines: Mutex::new(()) }
+    }
+
+    pub fn update(&self, scene: &str, message: &str) {
+        if self.quiet {
+            return;
+        }
+        match &self.bars {
+            Some((multi, bars)) => {
+                let Ok(mut bars) = bars.lock() else { return };
+                let bar = match bars.iter().find(|(n, _)| n == scene) {
+                    Some((_, b)) => b.clone(),
+                    None => {
+                        let b = multi.add(indicatif::ProgressBar::new_spinner());
+                        b.set_style(
+                            indicatif::ProgressStyle::with_template("{spinner} {prefix:<16} {wide_msg} {elapsed}")
+                                .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+                        );
+                        b.set_prefix(scene.to_string());
+                        b.enable_steady_tick(std::time::Duration::from_millis(120));
+                        bars.push((scene.to_string(), b.clone()));
+                        b
+                    }
+                };
+                bar.set_message(message.to_string());
+            }
+            None => {
+                let _guard = self.lines.lock();
+                eprintln!("[{scene}] {message}");
+            }
+        }
+    }
+
+    pub fn finish(&self) {
+        if let Some((_, bars)) = &self.bars {
+            if let Ok(bars) = bars.lock() {
+                for (_, b) in bars.iter() {
+                    b.finish_and_clear();
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,143 @@
+//! Content-hash cache of stage results: a stage whose inputs and settings hash to a key it has
+//! seen before copies its files from `<out>/.cache/<stage>-<key>/` instead of recomputing them.
+//!
+//! An entry is a folder holding the stage's files under their scene-relative paths plus
+//! `stage.json` (what the stage reported). Entries are written to a temporary folder and renamed
+//! into place, so a half-written entry is never read.
+
+use std::fs;
+use std::io;
+use std::path::{Path, PathBuf};
+
+use sha2::{Digest, Sha256};
+
+/// Hex SHA-256 of `bytes`.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    hex(&Sha256::digest(bytes))
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Incremental key: feed every input and setting a stage depends on.
+#[derive(Default)]
+pub struct KeyBuilder(Sha256);
+
+impl KeyBuilder {
+    pub fn new(stage: &str) -> Self {
+        let mut k = KeyBuilder(Sha256::new());
+        k.add(stage.as_bytes());
+        k.add(env!("CARGO_PKG_VERSION").as_bytes());
+        k
+    }
+    /// Adds a length-prefixed field, so ("ab", "c") and ("a", "bc") differ.
+    pub fn add(&mut self, bytes: &[u8]) -> &mut Self {
+        self.0.update((bytes.len() as u64).to_le_bytes());
+        self.0.update(bytes);
+        self
+    }
+    pub fn finish(self) -> String {
+        hex(&self.0.finalize())[..32].to_string()
+    }
+}
+
+pub struct Cache {
+    pub root: PathBuf,
+}
+
+impl Cache {
+    pub fn new(out_dir: &Path) -> Self {
+        Cache { root: out_dir.join(".cache") }
+    }
+
+    fn entry(&self, stage: &str, key: &str) -> PathBuf {
+        self.root.join(format!("{stage}-{key}"))
+    }
+
+    /// The stored `stage.json` text and the entry folder, when present.
+    pub fn lookup(&self, stage: &str, key: &str) -> Option<(String, PathBuf)> {
+        let dir = self.entry(stage, key);
+        let text = fs::read_to_string(dir.join("stage.json")).ok()?;
+        Some((text, dir))
+    }
+
+    /// Stores `files` (scene-relative paths, read from `scene_dir`) and the stage report.
+    pub fn store(&self, stage: &str, key: &str, scene_dir: &Path, files: &[PathBuf], stage_json: &str) -> io::Result<()> {
+        let dir = self.entry(stage, key);
+        if dir.exists() {
+            return Ok(());
+        }
+        fs::create_dir_all(&self.root)?;
+        let tmp = self.root.join(format!(".{stage}-{key}.tmp-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&tmp);
+        let result = (|| {
+            for rel in files {
+                let dst = tmp.join(rel);
+                if let Some(parent) = dst.parent() {
+                    fs::create_dir_all(parent)?;
+                }
+                fs::copy(scene_dir.join(rel), dst)?;
+            }
+            fs::write(tmp.join("stage.json"), stage_json)?;
+            fs::rename(&tmp, &dir)
+        })();
+        if result.is_err() {
+            let _ = fs::remove_dir_all(&tmp);
+        }
+        // another process may have stored the same entry meanwhile: that is fine
+        if dir.exists() {
+            return Ok(());
+        }
+        result
+    }
+
+    /// Copies an entry's files into `scene_dir`.
+    pub fn restore(entry: &Path, scene_dir: &Path, files: &[PathBuf]) -> io::Result<()> {
+        for rel in files {
+            let dst = scene_dir.join(rel);
+            if let Some(parent) = dst.parent() {
+                fs::create_dir_all(parent)?;
+            }
+            fs::copy(entry.join(rel), dst)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_separate_fields_and_stages() {
+        let key = |stage: &str, parts: &[&str]| {
+            let mut k = KeyBuilder::new(stage);
+            for p in parts {
+                k.add(p.as_bytes());
+            }
+            k.finish()
+        };
+        assert_eq!(key("terrain", &["ab", "c"]), key("terrain", &["ab", "c"]));
+        assert_ne!(key("terrain", &["ab", "c"]), key("terrain", &["a", "bc"]));
+        assert_ne!(key("terrain", &["x"]), key("preview", &["x"]));
+        assert_eq!(sha256_hex(b"abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+    }
+
+    #[test]
+    fn store_then_restore() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = dir.path().join("scene");
+        fs::create_dir_all(scene.join("terrain")).unwrap();
+        fs::write(scene.join("terrain/a.glb"), b"glb").unwrap();
+        let cache = Cache::new(dir.path());
+        assert!(cache.lookup("terrain", "k1").is_none());
+        let files = vec![PathBuf::from("terrain/a.glb")];
+        cache.store("terrain", "k1", &scene, &files, "{\"x\":1}").unwrap();
+        let (json, entry) = cache.lookup("terrain", "k1").unwrap();
+        assert_eq!(json, "{\"x\":1}");
+        let other = dir.path().join("other");
+        Cache::restore(&entry, &other, &files).unwrap();
+        assert_eq!(fs::read(other.join("terrain/a.glb")).unwrap(), b"glb");
+    }
+}

@@ -1,0 +1,214 @@
+//! `manifest.json` (every file with size and sha256, counts, bounds, chunks, LoD switch distances,
+//! the resolved preset and the verdant version — byte-identical for the same preset and seed) and
+//! `report.json` / `report.md` (the figures each stage measured, then a separate timing section).
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use crate::export::write_atomic;
+use crate::scene::build::SceneBuildError;
+use crate::scene::cache::sha256_hex;
+use crate::scene::stages::{PreviewStageReport, Stage, TerrainStageReport};
+use crate::scene::Preset;
+
+/// One stage's result in this build.
+#[derive(Debug, Clone)]
+pub enum StageRun {
+    Terrain { report: TerrainStageReport, cached: bool, seconds: f64 },
+    Preview { report: PreviewStageReport, cached: bool, seconds: f64 },
+}
+
+impl StageRun {
+    pub fn stage(&self) -> Stage {
+        match self {
+            StageRun::Terrain { .. } => Stage::Terrain,
+            StageRun::Preview { .. } => Stage::Preview,
+        }
+    }
+    pub fn cached(&self) -> bool {
+        match self {
+            StageRun::Terrain { cached, .. } | StageRun::Preview { cached, .. } => *cached,
+        }
+    }
+    pub fn seconds(&self) -> f64 {
+        match self {
+            StageRun::Terrain { seconds, .. } | StageRun::Preview { seconds, .. } => *seconds,
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct FileEntry {
+    path: String,
+    bytes: u64,
+    sha256: String,
+}
+
+#[derive(Serialize)]
+struct Manifest<'a> {
+    verdant_version: &'static str,
+    scene: &'a str,
+    files: Vec<FileEntry>,
+    terrain: Option<TerrainManifest<'a>>,
+    preview: Option<String>,
+    settings: &'a Preset,
+}
+
+#[derive(Serialize)]
+struct TerrainManifest<'a> {
+    files: Vec<String>,
+    width: usize,
+    height: usize,
+    cell_size_m: f64,
+    vertices: usize,
+    triangles: usize,
+    output_triangles: usize,
+    max_error_m: f64,
+    bounds: &'a Option<crate::scene::stages::BoundsJson>,
+    chunks: &'a [crate::scene::stages::ChunkInfo],
+    lods: &'a [crate::scene::stages::LodInfo],
+}
+
+/// Scene-relative paths of every file under `dir`, sorted, with `/` separators.
+fn list_files(dir: &Path) -> std::io::Result<Vec<String>> {
+    fn walk(root: &Path, dir: &Path, out: &mut Vec<String>) -> std::io::Result<()> {
+        for entry in fs::read_dir(dir)? {
+            let path = entry?.path();
+            if path.is_dir() {
+                walk(root, &path, out)?;
+            } else if let Ok(rel) = path.strip_prefix(root) {
+                out.push(rel.components().map(|c| c.as_os_str().to_string_lossy()).collect::<Vec<_>>().join("/"));
+            }
+        }
+        Ok(())
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out)?;
+    out.sort();
+    Ok(out)
+}
+
+fn rel_strings(files: &[PathBuf]) -> Vec<String> {
+    files.iter().map(|p| p.to_string_lossy().replace('\\', "/")).collect()
+}
+
+/// Writes manifest.json, report.json and report.md into `dir`; returns the number of files in
+/// the scene folder (these three included).
+pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun]) -> Result<usize, SceneBuildError> {
+    let io = |path: &Path, e: String| SceneBuildError::Io { path: path.to_owned(), message: e };
+    let mut files = Vec::new();
+    for rel in list_files(dir).map_err(|e| io(dir, e.to_string()))? {
+        let bytes = fs::read(dir.join(&rel)).map_err(|e| io(&dir.join(&rel), e.to_string()))?;
+        files.push(FileEntry { path: rel, bytes: bytes.len() as u64, sha256: sha256_hex(&bytes) });
+    }
+    let terrain = runs.iter().find_map(|r| match r {
+        StageRun::Terrain { report, .. } => Some(report),
+        _ => None,
+    });
+    let preview = runs.iter().find_map(|r| match r {
+        StageRun::Preview { report, .. } => Some(report),
+        _ => None,
+    });
+    let manifest = Manifest {
+        verdant_version: env!("CARGO_PKG_VERSION"),
+        scene: &preset.scene.name,
+        files,
+        terrain: terrain.map(|t| TerrainManifest {
+            files: rel_strings(&t.files),
+            width: t.width,
+            height: t.height,
+            cell_size_m: t.cell_size_m,
+            vertices: t.vertices,
+            triangles: t.triangles,
+            output_triangles: t.output_triangles,
+            max_error_m: t.max_error_m,
+            bounds: &t.bounds,
+            chunks: &t.chunks,
+            lods: &t.lods,
+        }),
+        preview: preview.map(|p| p.file.to_string_lossy().replace('\\', "/")),
+        settings: preset,
+    };
+    let n_files = manifest.files.len() + 3;
+    write_atomic(&dir.join("manifest.json"), pretty(&manifest).as_bytes()).map_err(|e| io(dir, e.to_string()))?;
+    let report = report_json(preset, runs);
+    write_atomic(&dir.join("report.json"), report.as_bytes()).map_err(|e| io(dir, e.to_string()))?;
+    write_atomic(&dir.join("report.md"), report_md(preset, runs).as_bytes()).map_err(|e| io(dir, e.to_string()))?;
+    Ok(n_files)
+}
+
+fn pretty<T: Serialize>(v: &T) -> String {
+    let mut s = serde_json::to_string_pretty(v).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));
+    s.push('\n');
+    s
+}
+
+/// report.json: measured figures per stage, then `timing` (the only part that varies run to run).
+fn report_json(preset: &Preset, runs: &[StageRun]) -> String {
+    use serde_json::{json, Map, Value};
+    let mut stages = Map::new();
+    let mut timing = Map::new();
+    for r in runs {
+        let (name, mut value, cached, seconds) = match r {
+            StageRun::Terrain { report, cached, seconds } => ("terrain", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
+            StageRun::Preview { report, cached, seconds } => ("preview", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
+        };
+        // the stage's own seconds are from the run that computed it: timing, not results
+        let computed = value.as_object_mut().and_then(|o| o.remove("seconds")).unwrap_or(Value::Null);
+        stages.insert(name.into(), value);
+        timing.insert(name.into(), json!({ "cached": cached, "seconds": seconds, "computed_in": computed }));
+    }
+    let total: f64 = runs.iter().map(StageRun::seconds).sum();
+    timing.insert("total_seconds".into(), json!(total));
+    let v = json!({
+        "scene": preset.scene.name,
+        "verdant_version": env!("CARGO_PKG_VERSION"),
+        "stages": stages,
+        "timing": timing,
+    });
+    pretty(&v)
+}
+
+/// report.md: the same figures for people.
+fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
+    let mut s = format!("# {} — build report\n\nverdant {}\n\n", preset.scene.name, env!("CARGO_PKG_VERSION"));
+    for r in runs {
+        match r {
+            StageRun::Terrain { report: t, .. } => {
+                s += "## Terrain\n\n";
+                s += &format!("{}×{} samples, {} m apart", t.width, t.height, t.cell_size_m);
+                if t.voids_filled > 0 {
+                    s += &format!(", {} voids filled", t.voids_filled);
+                }
+                s += "\n\n| level | max error requested (m) | measured max (m) | RMS (m) | triangles | switch distance (m) |\n|---|---|---|---|---|---|\n";
+                s += &format!(
+                    "| main | {} | {:.4} | {:.4} | {} | — |\n",
+                    t.max_error_requested_m.map_or("grid".into(), |e| e.to_string()),
+                    t.max_error_m,
+                    t.rms_error_m,
+                    t.triangles
+                );
+                for l in &t.lods {
+                    s += &format!(
+                        "| LOD{} | {} | {:.4} | {:.4} | {} | {:.1} |\n",
+                        l.level, l.max_error_requested_m, l.max_error_m, l.rms_error_m, l.triangles, l.switch_distance_m
+                    );
+                }
+                if !t.chunks.is_empty() {
+                    s += &format!("\n{} chunks; {} triangles written in all (skirts and base included)\n", t.chunks.len(), t.output_triangles);
+                }
+                s += "\n";
+            }
+            StageRun::Preview { report: p, .. } => {
+                s += &format!("## Preview\n\n`{}`, {}×{} px, shaded relief drawn from the terrain mesh\n\n", p.file.display(), p.width_px, p.height_px);
+            }
+        }
+    }
+    s += "## Timing\n\n| stage | cached | seconds |\n|---|---|---|\n";
+    for r in runs {
+        s += &format!("| {} | {} | {:.3} |\n", r.stage().name(), if r.cached() { "yes" } else { "no" }, r.seconds());
+    }
+    s
+}

@@ -1,0 +1,281 @@
+//! The stages of a scene build. Each takes the resolved preset, writes its files into the scene's
+//! (temporary) folder and returns what it measured; the build caches both by a content key.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::export;
+use crate::heightfield::{self, Heightfield};
+use crate::lod::{terrain_lod_chain, LodView};
+use crate::mesh::{Bounds, Scene};
+use crate::scene::cache::{sha256_hex, KeyBuilder};
+use crate::scene::preset::procedural_heightfield;
+use crate::scene::{Preset, TerrainSettings, TerrainSource};
+use crate::terrain::build::{build_scene, BuildOptions};
+use crate::terrain::error::measure;
+use crate::terrain::job::{mesh_samples, MeshMode};
+use crate::terrain::SampleMesh;
+
+/// The stages in build order. Later issues add scatter, grass, trees and snow.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Stage {
+    /// Heightmap → terrain meshes (+ LoD chain).
+    Terrain,
+    /// preview.png: a shaded relief drawn from the terrain mesh.
+    Preview,
+}
+
+impl Stage {
+    pub const ALL: [Stage; 2] = [Stage::Terrain, Stage::Preview];
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Terrain => "terrain",
+            Stage::Preview => "preview",
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum StageError {
+    #[error("{stage} stage: {message}")]
+    Failed { stage: &'static str, message: String },
+}
+
+fn fail(stage: Stage) -> impl Fn(String) -> StageError {
+    move |message| StageError::Failed { stage: stage.name(), message }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct BoundsJson {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+impl From<Bounds> for BoundsJson {
+    fn from(b: Bounds) -> Self {
+        BoundsJson { min: b.min, max: b.max }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ChunkInfo {
+    pub name: String,
+    pub triangles: usize,
+    pub bounds: BoundsJson,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct LodInfo {
+    pub level: usize,
+    pub files: Vec<PathBuf>,
+    pub max_error_requested_m: f64,
+    pub max_error_m: f64,
+    pub rms_error_m: f64,
+    pub triangles: usize,
+    /// Use this level from this camera distance on (metres), until the next level's distance.
+    pub switch_distance_m: f64,
+}
+
+/// What the terrain stage measured. Deterministic fields only; timings live in `seconds`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct TerrainStageReport {
+    pub width: usize,
+    pub height: usize,
+    pub cell_size_m: f64,
+    pub voids_filled: usize,
+    pub input_sha256: Option<String>,
+    pub mode: MeshMode,
+    pub max_error_requested_m: Option<f64>,
+    pub max_error_m: f64,
+    pub rms_error_m: f64,
+    pub worst_sample: [u32; 2],
+    pub hit_triangle_limit: bool,
+    pub vertices: usize,
+    pub triangles: usize,
+    pub output_triangles: usize,
+    pub bounds: Option<BoundsJson>,
+    pub files: Vec<PathBuf>,
+    pub chunks: Vec<ChunkInfo>,
+    pub lods: Vec<LodInfo>,
+    /// Seconds of the run that computed these results (a cached build reports the original run).
+    pub seconds: StageSeconds,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
+pub struct StageSeconds {
+    pub decode: f64,
+    pub mesh: f64,
+    pub analyze: f64,
+    pub build: f64,
+    pub export: f64,
+    pub lods: f64,
+    pub total: f64,
+}
+
+/// The terrain's heights, from a file or generated; with the file's hash when it came from one.
+pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Option<String>), StageError> {
+    let f = fail(Stage::Terrain);
+    match &t.source {
+        TerrainSource::Heightmap { path, decode } => {
+            let bytes = std::fs::read(path).map_err(|e| f(format!("{}: cannot read the heightmap: {e}", path.display())))?;
+            let d = heightfield::decode(path, &bytes, decode).map_err(|e| f(e.to_string()))?;
+            Ok((d.heightfield, d.voids_filled, Some(sha256_hex(&bytes))))
+        }
+        source => {
+            let hf = procedural_heightfield(source).ok_or_else(|| f("the procedural terrain could not be generated".into()))?;
+            Ok((hf, 0, None))
+        }
+    }
+}
+
+/// Cache key of the terrain stage: its settings, the formats, the input's content.
+pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageError> {
+    let mut k = KeyBuilder::new("terrain");
+    k.add(serde_json::to_string(t).unwrap_or_default().as_bytes());
+    k.add(serde_json::to_string(&preset.scene.formats).unwrap_or_default().as_bytes());
+    if let TerrainSource::Heightmap { path, .. } = &t.source {
+        let bytes = std::fs::read(path)
+            .map_err(|e| fail(Stage::Terrain)(format!("{}: cannot read the heightmap: {e}", path.display())))?;
+        k.add(sha256_hex(&bytes).as_bytes());
+    }
+    Ok(k.finish())
+}
+
+fn mesh_at(t: &TerrainSettings, hf: &Heightfield, max_error_m: f64) -> Result<(SampleMesh, bool), StageError> {
+    mesh_samples(hf, t.mode, t.grid_step, max_error_m, t.max_triangles).map_err(|e| fail(Stage::Terrain)(e.to_string()))
+}
+
+fn write_formats(preset: &Preset, scene: &Scene, scene_dir: &Path, stem: &str) -> Result<Vec<PathBuf>, StageError> {
+    let mut files = Vec::new();
+    for fmt in &preset.scene.formats {
+        let rel = PathBuf::from("terrain").join(format!("{stem}.{}", fmt.extension()));
+        let written = export::write_scene(scene, &scene_dir.join(&rel)).map_err(|e| fail(Stage::Terrain)(e.to_string()))?;
+        for w in written {
+            let rel = w.strip_prefix(scene_dir).map(Path::to_path_buf).unwrap_or(w);
+            files.push(rel);
+        }
+    }
+    Ok(files)
+}
+
+/// Runs the terrain stage into `scene_dir`; returns its report and the main scene (for the preview).
+pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Result<(TerrainStageReport, Scene), StageError> {
+    let f = fail(Stage::Terrain);
+    let t0 = Instant::now();
+    let (hf, voids_filled, input_sha256) = terrain_heights(t)?;
+    let decode_s = t0.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let (mesh, hit_triangle_limit) = mesh_at(t, &hf, t.max_error_m)?;
+    let mesh_s = t1.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let stats = measure(&hf, &mesh);
+    let analyze_s = t1.elapsed().as_secs_f64();
+
+    let build_opts = |name: String| BuildOptions { chunk_samples: t.chunk, skirt_depth_m: t.skirt_m, base_depth_m: t.base_m, name };
+    let t1 = Instant::now();
+    let scene = build_scene(&hf, &mesh, &build_opts("terrain".into())).map_err(|e| f(e.to_string()))?;
+    let build_s = t1.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let files = write_formats(preset, &scene, scene_dir, "terrain")?;
+    let export_s = t1.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let mut lods = Vec::new();
+    if !t.lods.is_empty() {
+        let chain = terrain_lod_chain(&hf, &t.lods, t.max_triangles, &LodView::default()).map_err(|e| f(e.to_string()))?;
+        for level in chain {
+            let stem = format!("terrain_LOD{}", level.level);
+            let lod_scene = build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| f(e.to_string()))?;
+            let files = write_formats(preset, &lod_scene, scene_dir, &stem)?;
+            lods.push(LodInfo {
+                level: level.level,
+                files,
+                max_error_requested_m: level.max_error_requested_m,
+                max_error_m: level.stats.max_error_m,
+                rms_error_m: level.stats.rms_error_m,
+                triangles: level.mesh.triangles.len(),
+                switch_distance_m: level.switch_distance_m,
+            });
+        }
+    }
+    let lods_s = t1.elapsed().as_secs_f64();
+
+    let summary = crate::terrain::job::summarize(&scene, Vec::new());
+    let chunks = if t.chunk.is_some() {
+        scene
+            .meshes
+            .iter()
+            .filter_map(|m| {
+                let b = Bounds::of(&m.primitives.iter().flat_map(|p| p.positions.iter().copied()).collect::<Vec<_>>())?;
+                Some(ChunkInfo { name: m.name.clone(), triangles: m.triangle_count(), bounds: b.into() })
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let report = TerrainStageReport {
+        width: hf.width,
+        height: hf.height,
+        cell_size_m: hf.cell_size_m,
+        voids_filled,
+        input_sha256,
+        mode: t.mode,
+        max_error_requested_m: (t.mode == MeshMode::Tin).then_some(t.max_error_m),
+        max_error_m: stats.max_error_m,
+        rms_error_m: stats.rms_error_m,
+        worst_sample: stats.worst_sample,
+        hit_triangle_limit,
+        vertices: mesh.vertices.len(),
+        triangles: mesh.triangles.len(),
+        output_triangles: summary.triangles,
+        bounds: summary.bounds.map(|b| BoundsJson { min: b.min, max: b.max }),
+        files,
+        chunks,
+        lods,
+        seconds: StageSeconds {
+            decode: decode_s,
+            mesh: mesh_s,
+            analyze: analyze_s,
+            build: build_s,
+            export: export_s,
+            lods: lods_s,
+            total: t0.elapsed().as_secs_f64(),
+        },
+    };
+    Ok((report, scene))
+}
+
+/// Every file the terrain stage wrote, LoD levels included (scene-relative).
+pub fn terrain_files(r: &TerrainStageReport) -> Vec<PathBuf> {
+    let mut files = r.files.clone();
+    for l in &r.lods {
+        files.extend(l.files.iter().cloned());
+    }
+    files
+}
+
+/// What the preview stage produced.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct PreviewStageReport {
+    pub file: PathBuf,
+    pub width_px: u32,
+    pub height_px: u32,
+    pub seconds: f64,
+}
+
+pub const PREVIEW_SIZE_PX: u32 = 1024;
+
+/// Draws preview.png from the terrain scene.
+pub fn run_preview(terrain: &Scene, scene_dir: &Path) -> Result<PreviewStageReport, StageError> {
+    let t0 = Instant::now();
+    let canvas = crate::scene::preview::terrain_preview(terrain, PREVIEW_SIZE_PX);
+    let file = PathBuf::from("preview.png");
+    crate::scene::preview::write_png(&canvas, &scene_dir.join(&file)).map_err(|e| fail(Stage::Preview)(e.to_string()))?;
+    Ok(PreviewStageReport { file, width_px: canvas.width as u32, height_px: canvas.height as u32, seconds: t0.elapsed().as_secs_f64() })
+}
