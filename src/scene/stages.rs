@@ -168,13 +168,30 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
     let (hf, voids_filled, input_sha256) = terrain_heights(t)?;
     let decode_s = t0.elapsed().as_secs_f64();
 
+    // The LoD chain meshes its levels in parallel; when one of them is the main mesh's bound,
+    // the main mesh is taken from the chain instead of being computed twice.
     let t1 = Instant::now();
-    let (mesh, hit_triangle_limit) = mesh_at(t, &hf, t.max_error_m)?;
-    let mesh_s = t1.elapsed().as_secs_f64();
-
-    let t1 = Instant::now();
-    let stats = measure(&hf, &mesh);
-    let analyze_s = t1.elapsed().as_secs_f64();
+    let chain = if t.lods.is_empty() {
+        Vec::new()
+    } else {
+        terrain_lod_chain(&hf, &t.lods, t.max_triangles, &LodView::default()).map_err(|e| f(e.to_string()))?
+    };
+    let chain_s = t1.elapsed().as_secs_f64();
+    let shared = chain.iter().find(|l| t.mode == MeshMode::Tin && l.max_error_requested_m == t.max_error_m);
+    // (a shared level's meshing and measuring time is counted under `lods`)
+    let (mut mesh_s, mut analyze_s) = (0.0, 0.0);
+    let (mesh, hit_triangle_limit, stats) = match shared {
+        Some(l) => (l.mesh.clone(), l.hit_triangle_limit, l.stats.clone()),
+        None => {
+            let t1 = Instant::now();
+            let (mesh, hit) = mesh_at(t, &hf, t.max_error_m)?;
+            mesh_s = t1.elapsed().as_secs_f64();
+            let t1 = Instant::now();
+            let stats = measure(&hf, &mesh);
+            analyze_s = t1.elapsed().as_secs_f64();
+            (mesh, hit, stats)
+        }
+    };
 
     let build_opts = |name: String| BuildOptions { chunk_samples: t.chunk, skirt_depth_m: t.skirt_m, base_depth_m: t.base_m, name };
     let t1 = Instant::now();
@@ -187,24 +204,21 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
 
     let t1 = Instant::now();
     let mut lods = Vec::new();
-    if !t.lods.is_empty() {
-        let chain = terrain_lod_chain(&hf, &t.lods, t.max_triangles, &LodView::default()).map_err(|e| f(e.to_string()))?;
-        for level in chain {
-            let stem = format!("terrain_LOD{}", level.level);
-            let lod_scene = build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| f(e.to_string()))?;
-            let files = write_formats(preset, &lod_scene, scene_dir, &stem)?;
-            lods.push(LodInfo {
-                level: level.level,
-                files,
-                max_error_requested_m: level.max_error_requested_m,
-                max_error_m: level.stats.max_error_m,
-                rms_error_m: level.stats.rms_error_m,
-                triangles: level.mesh.triangles.len(),
-                switch_distance_m: level.switch_distance_m,
-            });
-        }
+    for level in chain {
+        let stem = format!("terrain_LOD{}", level.level);
+        let lod_scene = build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| f(e.to_string()))?;
+        let files = write_formats(preset, &lod_scene, scene_dir, &stem)?;
+        lods.push(LodInfo {
+            level: level.level,
+            files,
+            max_error_requested_m: level.max_error_requested_m,
+            max_error_m: level.stats.max_error_m,
+            rms_error_m: level.stats.rms_error_m,
+            triangles: level.mesh.triangles.len(),
+            switch_distance_m: level.switch_distance_m,
+        });
     }
-    let lods_s = t1.elapsed().as_secs_f64();
+    let lods_s = chain_s + t1.elapsed().as_secs_f64();
 
     let summary = crate::terrain::job::summarize(&scene, Vec::new());
     let chunks = if t.chunk.is_some() {
