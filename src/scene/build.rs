@@ -131,10 +131,15 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         let t0 = Instant::now();
         let key = stages::terrain_key(preset, t)?;
         let cached = if settings.force { None } else { cache.lookup("terrain", &key) };
-        let (report, hit) = match cached.and_then(|(json, entry)| Some((serde_json::from_str::<TerrainStageReport>(&json).ok()?, entry))) {
-            Some((report, entry)) => {
+        // an entry that cannot be read or restored completely is recomputed
+        let restored = cached.and_then(|(json, entry)| {
+            let report: TerrainStageReport = serde_json::from_str(&json).ok()?;
+            Cache::restore(&entry, dir, &stages::terrain_files(&report)).ok()?;
+            Some(report)
+        });
+        let (report, hit) = match restored {
+            Some(report) => {
                 progress(name, "terrain: cached");
-                Cache::restore(&entry, dir, &stages::terrain_files(&report)).map_err(io_err(&entry))?;
                 (report, true)
             }
             None => {
@@ -166,10 +171,14 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             k.add(tkey.as_bytes()).add(&stages::PREVIEW_SIZE_PX.to_le_bytes());
             let key = k.finish();
             let cached = if settings.force { None } else { cache.lookup("preview", &key) };
-            let (report, hit) = match cached.and_then(|(json, entry)| Some((serde_json::from_str::<PreviewStageReport>(&json).ok()?, entry))) {
-                Some((report, entry)) => {
+            let restored = cached.and_then(|(json, entry)| {
+                let report: PreviewStageReport = serde_json::from_str(&json).ok()?;
+                Cache::restore(&entry, dir, std::slice::from_ref(&report.file)).ok()?;
+                Some(report)
+            });
+            let (report, hit) = match restored {
+                Some(report) => {
                     progress(name, "preview: cached");
-                    Cache::restore(&entry, dir, std::slice::from_ref(&report.file)).map_err(io_err(&entry))?;
                     (report, true)
                 }
                 None => {

@@ -62,12 +62,10 @@ impl Cache {
         Some((text, dir))
     }
 
-    /// Stores `files` (scene-relative paths, read from `scene_dir`) and the stage report.
+    /// Stores `files` (scene-relative paths, read from `scene_dir`) and the stage report,
+    /// replacing an entry of the same key (which a failed lookup showed to be damaged).
     pub fn store(&self, stage: &str, key: &str, scene_dir: &Path, files: &[PathBuf], stage_json: &str) -> io::Result<()> {
         let dir = self.entry(stage, key);
-        if dir.exists() {
-            return Ok(());
-        }
         fs::create_dir_all(&self.root)?;
         let tmp = self.root.join(format!(".{stage}-{key}.tmp-{}", std::process::id()));
         let _ = fs::remove_dir_all(&tmp);
@@ -80,6 +78,10 @@ impl Cache {
                 fs::copy(scene_dir.join(rel), dst)?;
             }
             fs::write(tmp.join("stage.json"), stage_json)?;
+            // a store follows a failed lookup: an entry already there is damaged, replace it
+            if dir.exists() {
+                fs::remove_dir_all(&dir)?;
+            }
             fs::rename(&tmp, &dir)
         })();
         if result.is_err() {
@@ -139,5 +141,23 @@ mod tests {
         let other = dir.path().join("other");
         Cache::restore(&entry, &other, &files).unwrap();
         assert_eq!(fs::read(other.join("terrain/a.glb")).unwrap(), b"glb");
+    }
+
+    #[test]
+    fn a_damaged_entry_is_replaced_by_the_next_store() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = dir.path().join("scene");
+        fs::create_dir_all(&scene).unwrap();
+        fs::write(scene.join("a.png"), b"png").unwrap();
+        let cache = Cache::new(dir.path());
+        let files = vec![PathBuf::from("a.png")];
+        cache.store("preview", "k", &scene, &files, "{}").unwrap();
+        let (_, entry) = cache.lookup("preview", "k").unwrap();
+        fs::remove_file(entry.join("a.png")).unwrap();
+        assert!(Cache::restore(&entry, &dir.path().join("x"), &files).is_err());
+        cache.store("preview", "k", &scene, &files, "{}").unwrap();
+        let (_, entry) = cache.lookup("preview", "k").unwrap();
+        Cache::restore(&entry, &dir.path().join("y"), &files).unwrap();
+        assert_eq!(fs::read(dir.path().join("y/a.png")).unwrap(), b"png");
     }
 }
