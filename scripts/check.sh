@@ -207,7 +207,7 @@ declare -A SCENE_BUILT=() SCENE_SECONDS=() SCENE_CHECKED=()
 build_scenes() {   # build_scenes LABEL ARGS...: run `verdant build ARGS --out $BUILD_OUT`
   local label="$1"; shift
   local t=$SECONDS rc=0
-  echo "\$ verdant build $* --out out/check/build"
+  echo "\$ verdant build${*:+ $*} --out out/check/build"
   "$BIN" build "$@" --out "$BUILD_OUT" || rc=$?
   echo "($label: exit $rc, $(elapsed "$t"))"
   return "$rc"
