@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # verdant end-to-end check: set up the checking tools, run the Rust tests, export sample terrains with the
-# CLI, and check every output three ways (verdant validate, trimesh/pyrender re-import + report cross-check,
+# CLI, build the embedded demo and presets/*.toml with `verdant build` into out/check/build/, and check
+# every output three ways (verdant validate, trimesh/pyrender re-import + report cross-check,
 # Khronos glTF Validator). Exits non-zero on any failure.
 #
 #   bash scripts/check.sh               everything
@@ -21,7 +22,7 @@ for arg in "$@"; do
   case "$arg" in
     --setup-only) SETUP_ONLY=1 ;;
     --no-tests) RUN_TESTS=0 ;;
-    -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,13p' "$0"; exit 0 ;;
     *) echo "check.sh: unknown argument '$arg' (try --help)" >&2; exit 2 ;;
   esac
 done
@@ -198,6 +199,52 @@ for f in demo_chunks.gltf demo_grid.obj; do
 done
 
 # ---------------------------------------------------------------------------------------------------------
+section "3b. verdant build: the embedded demo and presets/*.toml into out/check/build/"
+BUILD_OUT="$OUT/build"
+declare -A IS_BUILD=() SCENE_OF=()
+SCENES=()          # scene folders under $BUILD_OUT, in order
+declare -A SCENE_BUILT=() SCENE_SECONDS=() SCENE_CHECKED=()
+build_scenes() {   # build_scenes LABEL ARGS...: run `verdant build ARGS --out $BUILD_OUT`
+  local label="$1"; shift
+  local t=$SECONDS rc=0
+  echo "\$ verdant build${*:+ $*} --out out/check/build"
+  "$BIN" build "$@" --out "$BUILD_OUT" || rc=$?
+  echo "($label: exit $rc, $(elapsed "$t"))"
+  return "$rc"
+}
+build_rc=0
+build_scenes "demo" || build_rc=$?
+presets=(presets/*.toml)
+t=$SECONDS
+build_scenes "presets" "${presets[@]}" --jobs 2 || build_rc=$?
+presets_seconds="$(elapsed "$t")"
+if [ "$build_rc" -ne 0 ]; then fail "verdant build exited with $build_rc"; else pass; fi
+# scene names: the demo is `demo`, each preset's [scene] name is read from its manifest
+for dir in "$BUILD_OUT"/*/; do
+  [ -f "$dir/manifest.json" ] || continue
+  scene="$(basename "$dir")"
+  SCENES+=("$scene")
+  SCENE_BUILT[$scene]=ok
+  while IFS= read -r -d '' f; do
+    rel="${f#"$OUT"/}"
+    FILES+=("$rel")
+    IS_BUILD[$rel]=1
+    SCENE_OF[$rel]="$scene"
+    EXPORTED[$rel]="ok build"
+    SIDES[$rel]=1       # chunk skirts face sideways: no --up-facing
+    WATERTIGHT[$rel]=0
+  done < <(find "$dir" -type f \( -name '*.glb' -o -name '*.gltf' -o -name '*.obj' \) -print0 | sort -z)
+done
+expected_scenes=$((1 + ${#presets[@]}))
+if [ "${#SCENES[@]}" -ne "$expected_scenes" ]; then
+  fail "verdant build produced ${#SCENES[@]} scene folders (${SCENES[*]:-none}), expected $expected_scenes"
+fi
+if find "$BUILD_OUT" -maxdepth 1 -name '.*.building-*' | grep -q .; then
+  fail "temporary .NAME.building-* folders left in $BUILD_OUT"
+fi
+echo "built ${#SCENES[@]} scenes (${SCENES[*]}); presets took $presets_seconds"
+
+# ---------------------------------------------------------------------------------------------------------
 section "4. verdant validate (re-import + invariants; --up-facing except with skirts or a base)"
 for f in "${FILES[@]}"; do
   if [ "${EXPORTED[$f]%% *}" != ok ]; then VALIDATED[$f]="-"; continue; fi
@@ -211,6 +258,7 @@ done
 section "5. check_outputs.py (trimesh/pygltflib re-import, report cross-check, thumbnails)"
 : > "$OUT/check_outputs.tsv"
 for f in "${FILES[@]}"; do
+  if [ -n "${IS_BUILD[$f]:-}" ]; then continue; fi   # scene outputs: checked per scene below
   if [ "${EXPORTED[$f]%% *}" != ok ]; then CHECKED[$f]="-"; continue; fi
   extra=()
   if [ "${WATERTIGHT[$f]}" = 1 ]; then extra=(--watertight); fi
@@ -225,10 +273,32 @@ while IFS=$'\t' read -r name status tris verts; do
   if [ "$status" = ok ]; then CHECKED[$name]="ok $tris tris $verts verts"; else CHECKED[$name]="FAIL"; fi
 done < "$OUT/check_outputs.tsv"
 
+section "5b. check_outputs.py --scene (manifest sha256/sizes, triangle counts, bounds, LoDs, thumbnail, preview)"
+: > "$OUT/check_scenes.tsv"
+for scene in "${SCENES[@]}"; do
+  if "$PY" scripts/check_outputs.py --scene "$BUILD_OUT/$scene" --thumb "$OUT/thumbs/build_$scene.png" \
+       --summary-tsv "$OUT/check_scenes.tsv"; then pass; else fail "check_outputs.py --scene $scene"; fi
+done
+while IFS=$'\t' read -r name status tris verts; do
+  if [ "$status" = ok ]; then SCENE_CHECKED[$name]="ok $tris tris $verts verts"; else SCENE_CHECKED[$name]="FAIL"; fi
+done < "$OUT/check_scenes.tsv"
+for f in "${FILES[@]}"; do
+  if [ -z "${IS_BUILD[$f]:-}" ]; then continue; fi
+  scene="${SCENE_OF[$f]}"
+  case "${SCENE_CHECKED[$scene]:-FAIL}" in
+    FAIL) CHECKED[$f]="FAIL (scene $scene)" ;;
+    *) case "$f" in
+         */terrain_LOD*) CHECKED[$f]="ok (LoD, scene check)" ;;
+         *) CHECKED[$f]="ok (scene) ${SCENE_CHECKED[$scene]#ok }" ;;
+       esac ;;
+  esac
+done
+
 # ---------------------------------------------------------------------------------------------------------
 section "6. Khronos glTF Validator (0 errors, 0 warnings; infos and hints allowed)"
 gltf_files=()
 for f in "${FILES[@]}"; do
+  if [ -n "${IS_BUILD[$f]:-}" ]; then continue; fi   # per scene below (basenames repeat across scenes)
   case "$f" in
     *.glb|*.gltf) if [ "${EXPORTED[$f]%% *}" = ok ]; then gltf_files+=("$OUT/$f"); else KHRONOS[$f]="-"; fi ;;
     *) KHRONOS[$f]="n/a (obj)" ;;
@@ -247,13 +317,41 @@ if ((${#gltf_files[@]})); then
   done
 fi
 
+# the scene outputs, one validator run per scene (file names are unique within a scene)
+for scene in "${SCENES[@]}"; do
+  scene_gltf=()
+  for f in "${FILES[@]}"; do
+    [ "${SCENE_OF[$f]:-}" = "$scene" ] || continue
+    case "$f" in *.glb|*.gltf) scene_gltf+=("$OUT/$f") ;; *) KHRONOS[$f]="n/a (obj)" ;; esac
+  done
+  ((${#scene_gltf[@]})) || continue
+  tsv="$OUT/gltf_validate_$scene.tsv"
+  : > "$tsv"
+  node scripts/gltf_validate.mjs --summary-tsv "$tsv" "${scene_gltf[@]}" || true
+  while IFS=$'\t' read -r name status counts; do
+    f="$(printf '%s\n' "${scene_gltf[@]}" | grep -F "/$name" | head -1)"
+    f="${f#"$OUT"/}"
+    if [ "$status" = ok ]; then KHRONOS[$f]="ok E/W/I/H $counts"; pass
+    else KHRONOS[$f]="FAIL E/W/I/H $counts"; fail "gltf-validator $f"; fi
+  done < "$tsv"
+  for f in "${scene_gltf[@]}"; do
+    rel="${f#"$OUT"/}"
+    if [ -z "${KHRONOS[$rel]:-}" ]; then KHRONOS[$rel]="FAIL (no result)"; fail "gltf-validator gave no result for $rel"; fi
+  done
+done
+
 # ---------------------------------------------------------------------------------------------------------
 section "Summary"
-printf '%-18s | %-10s | %-16s | %-36s | %s\n' file export "verdant validate" "check_outputs" "gltf-validator"
-printf '%s\n' "-------------------+------------+------------------+--------------------------------------+---------------------"
+printf '%-38s | %-10s | %-16s | %-40s | %s\n' file export "verdant validate" "check_outputs" "gltf-validator"
+printf '%s\n' "---------------------------------------+------------+------------------+------------------------------------------+---------------------"
 for f in "${FILES[@]}"; do
-  printf '%-18s | %-10s | %-16s | %-36s | %s\n' "$f" "${EXPORTED[$f]:--}" "${VALIDATED[$f]:--}" \
+  printf '%-38s | %-10s | %-16s | %-40s | %s\n' "$f" "${EXPORTED[$f]:--}" "${VALIDATED[$f]:--}" \
     "${CHECKED[$f]:--}" "${KHRONOS[$f]:--}"
+done
+echo
+printf '%-12s | %-6s | %s\n' scene build "check_outputs --scene (manifest, sha256, counts, bounds, LoDs, preview)"
+for scene in "${SCENES[@]}"; do
+  printf '%-12s | %-6s | %s\n' "$scene" "${SCENE_BUILT[$scene]:--}" "${SCENE_CHECKED[$scene]:--}"
 done
 echo "thumbnails: out/check/thumbs/   total time: $(elapsed "$SCRIPT_START")"
 echo "outputs: $PASSED passed, $FAILED failed"

@@ -3,7 +3,14 @@
 JSON report the CLI wrote beside it; optionally check it is a closed solid and render a thumbnail.
 
   check_outputs.py FILE --report REPORT.json [--watertight] [--thumb THUMB.png] [--summary-tsv T.tsv]
+  check_outputs.py --scene DIR [--thumb THUMB.png] [--summary-tsv T.tsv]
   check_outputs.py --self-test     check the checker on samples it makes itself (good and broken ones)
+
+--scene checks a folder written by `verdant build` (out/<scene>/) against its manifest.json instead:
+every file's size and sha256 (and that the manifest lists every file but manifest/report), each main
+terrain file's triangle count (= terrain.output_triangles) and bounds, each LoD file (triangles >= the
+level's surface triangles, bounds inside the terrain's, errors within the request, switch distances
+increasing), a rendered thumbnail of the primary terrain file, and that preview.png is not blank.
 
 Loaders: trimesh (force='scene', process=False) for every format; for glTF also pygltflib with our own
 accessor decoding, because trimesh 5.x ignores EXT_mesh_gpu_instancing / MSFT_lod and does not decode
@@ -533,9 +540,173 @@ def self_test() -> int:
     return 1 if wrong else 0
 
 
+# ------------------------------------------------------------------------------------------ scene mode
+MESH_SUFFIXES = (".glb", ".gltf", ".obj")
+SCENE_OWN_FILES = {"manifest.json", "report.json", "report.md"}
+
+
+def load_geometry(path: Path) -> Geometry:
+    """pygltflib for glTF (it decodes everything verdant may write), trimesh for OBJ."""
+    if path.suffix.lower() in (".glb", ".gltf"):
+        return load_with_pygltflib(path)[0]
+    return load_with_trimesh(path)
+
+
+def check_preview(png: Path, want_size) -> str:
+    from PIL import Image
+
+    with Image.open(png) as im:
+        size = im.size
+        pixels = np.asarray(im.convert("RGB")).reshape(-1, 3)
+    if want_size is not None and tuple(size) != tuple(want_size):
+        raise CheckFailed(f"{png.name} is {size[0]}x{size[1]} px, report says {want_size[0]}x{want_size[1]}")
+    colours, counts = np.unique(pixels, axis=0, return_counts=True)
+    if len(colours) < 16:
+        raise CheckFailed(f"{png.name} has only {len(colours)} distinct colours: blank?")
+    if counts.max() > 0.9 * len(pixels):
+        raise CheckFailed(f"{png.name}: one colour {colours[counts.argmax()].tolist()} covers "
+                          f"{counts.max() / len(pixels):.0%} of the pixels")
+    return f"preview {size[0]}x{size[1]}, {len(colours)} colours"
+
+
+def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int]:
+    import hashlib
+
+    manifest_path = scene_dir / "manifest.json"
+    if not manifest_path.is_file():
+        raise CheckFailed(f"{manifest_path} does not exist")
+    manifest = json.loads(manifest_path.read_text())
+    report_path = scene_dir / "report.json"
+    report = json.loads(report_path.read_text()) if report_path.is_file() else None
+    if report is None:
+        raise CheckFailed(f"{report_path} does not exist")
+    facts = []
+
+    # every file: listed once, size and sha256 as on disk; nothing on disk unlisted
+    listed = {}
+    for entry in manifest.get("files", []):
+        rel = entry["path"]
+        if rel in listed:
+            raise CheckFailed(f"manifest lists {rel} twice")
+        listed[rel] = entry
+        f = scene_dir / rel
+        if not f.is_file():
+            raise CheckFailed(f"manifest lists {rel}, which does not exist")
+        data = f.read_bytes()
+        if len(data) != entry["bytes"]:
+            raise CheckFailed(f"{rel} is {len(data)} bytes, manifest says {entry['bytes']}")
+        digest = hashlib.sha256(data).hexdigest()
+        if digest != entry["sha256"]:
+            raise CheckFailed(f"{rel} has sha256 {digest[:16]}…, manifest says {entry['sha256'][:16]}…")
+    on_disk = {p.relative_to(scene_dir).as_posix() for p in scene_dir.rglob("*") if p.is_file()}
+    unlisted = sorted(on_disk - set(listed) - SCENE_OWN_FILES)
+    if unlisted:
+        raise CheckFailed(f"files on disk the manifest does not list: {unlisted}")
+    missing_own = sorted(SCENE_OWN_FILES - on_disk)
+    if missing_own:
+        raise CheckFailed(f"the scene folder lacks {missing_own}")
+    facts.append(f"{len(listed)} files match their sha256")
+
+    terrain = manifest.get("terrain")
+    tris = verts = 0
+    if terrain:
+        want = np.array([terrain["bounds"]["min"], terrain["bounds"]["max"]], dtype=np.float64)
+        scale = max(float(np.abs(want).max()), float(np.max(want[1] - want[0])))
+        mains = [scene_dir / f for f in terrain["files"] if f.lower().endswith(MESH_SUFFIXES)]
+        if not mains:
+            raise CheckFailed(f"terrain.files {terrain['files']} has no mesh file")
+        primary_geom = None
+        for path in mains:
+            geom = load_geometry(path)
+            if geom.face_count != terrain["output_triangles"]:
+                raise CheckFailed(f"{path.name} has {geom.face_count} triangles, manifest terrain.output_triangles "
+                                  f"says {terrain['output_triangles']}")
+            for positions in geom.positions:
+                if not np.all(np.isfinite(positions)):
+                    raise CheckFailed(f"{path.name}: some vertex positions are NaN or infinite")
+            check_close(f"{path.name} bounds", geom.bounds(), want, scale)
+            if primary_geom is None:
+                primary_geom = geom
+                tris, verts = geom.face_count, geom.vertex_count
+        facts.append(f"{len(mains)} main file(s) with {terrain['output_triangles']} triangles")
+        if terrain["width"] and terrain["cell_size_m"]:
+            extent = (terrain["width"] - 1) * terrain["cell_size_m"]
+            if abs((want[1][0] - want[0][0]) - extent) > 1e-4 * max(extent, 1):
+                raise CheckFailed(f"terrain spans {want[1][0] - want[0][0]} m in x, expected {extent} m")
+        skirt = (manifest.get("settings", {}).get("terrain") or {}).get("skirt_m") or 0.0
+        last_distance = -math.inf
+        for lod in terrain.get("lods", []):
+            n = lod["level"]
+            if not lod["max_error_m"] <= lod["max_error_requested_m"] + 1e-9:
+                raise CheckFailed(f"LOD{n}: measured max error {lod['max_error_m']} > requested "
+                                  f"{lod['max_error_requested_m']}")
+            if not lod["switch_distance_m"] > last_distance:
+                raise CheckFailed(f"LOD{n}: switch distance {lod['switch_distance_m']} does not increase")
+            last_distance = lod["switch_distance_m"]
+            lod_meshes = [f for f in lod["files"] if f.lower().endswith(MESH_SUFFIXES)]
+            if not lod_meshes:
+                raise CheckFailed(f"LOD{n} lists no mesh file: {lod['files']}")
+            for rel in lod_meshes:
+                if Path(rel).stem != f"terrain_LOD{n}":
+                    raise CheckFailed(f"LOD{n} file {rel} is not named terrain_LOD{n}.*")
+                geom = load_geometry(scene_dir / rel)
+                # the level's count is of the surface; skirts come on top
+                if geom.face_count < lod["triangles"]:
+                    raise CheckFailed(f"{rel} has {geom.face_count} triangles, fewer than the level's "
+                                      f"{lod['triangles']} surface triangles")
+                # x/z: the same extent; y: a coarser level's vertices and skirts may lie up to its error
+                # (plus the skirt depth below) outside the finest mesh's range
+                b = geom.bounds()
+                tol = BOUNDS_REL_TOL * scale
+                check_close(f"{rel} x/z bounds", b[:, [0, 2]], want[:, [0, 2]], scale)
+                slack = lod["max_error_requested_m"] + tol
+                if b[0][1] < want[0][1] - skirt - slack or b[1][1] > want[1][1] + slack:
+                    raise CheckFailed(f"{rel} heights {b[0][1]:.3f}..{b[1][1]:.3f} reach further than LOD{n}'s error "
+                                      f"{lod['max_error_requested_m']} (skirt {skirt}) from the terrain's "
+                                      f"{want[0][1]:.3f}..{want[1][1]:.3f}")
+        if terrain.get("lods"):
+            facts.append(f"{len(terrain['lods'])} LoDs ok")
+        if thumb is not None and primary_geom is not None:
+            coverage = render_thumbnail(primary_geom.merged(), primary_geom.bounds(), thumb)
+            facts.append(f"thumb {thumb} ({coverage:.0%} covered)")
+
+    preview = manifest.get("preview")
+    if preview:
+        stage = report.get("stages", {}).get("preview", {})
+        size = (stage["width_px"], stage["height_px"]) if "width_px" in stage else None
+        facts.append(check_preview(scene_dir / preview, size))
+    return f"{manifest.get('scene')}: " + "; ".join(facts), tris, verts
+
+
+def scene_main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(description="check a scene folder written by `verdant build`")
+    parser.add_argument("--scene", required=True, help="the scene folder (holding manifest.json)")
+    parser.add_argument("--thumb", help="render a thumbnail of the primary terrain file here")
+    parser.add_argument("--summary-tsv", help="append 'scene<TAB>status<TAB>tris<TAB>verts' to this file")
+    args = parser.parse_args(argv)
+    name = Path(args.scene).name
+    tris = verts = "-"
+    try:
+        summary, tris, verts = check_scene(Path(args.scene), Path(args.thumb) if args.thumb else None)
+        status, code = "ok", 0
+        print(f"OK    {summary}")
+    except CheckFailed as e:
+        status, code = "FAIL", 1
+        print(f"FAIL  {name}: {e}", file=sys.stderr)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        status, code = "FAIL", 1
+        print(f"FAIL  {name}: could not read/check ({type(e).__name__}: {e})", file=sys.stderr)
+    if args.summary_tsv:
+        with open(args.summary_tsv, "a") as f:
+            f.write(f"{name}\t{status}\t{tris}\t{verts}\n")
+    return code
+
+
 def main() -> int:
     if sys.argv[1:] == ["--self-test"]:
         return self_test()
+    if "--scene" in sys.argv[1:]:
+        return scene_main(sys.argv[1:])
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("file", help="a .glb, .gltf or .obj written by verdant")
     parser.add_argument("--report", required=True, help="the JSON report written with --report")
