@@ -60,7 +60,8 @@ struct BuildArgs {
     /// Preset files (.toml). None: the embedded demo scene, generated in memory.
     #[arg(value_name = "PRESET")]
     presets: Vec<PathBuf>,
-    /// Presets built at the same time (each also uses the worker threads of --threads).
+    /// Presets built at the same time. The stages inside share a pool of max(N, --threads) worker
+    /// threads; outputs are identical for any N.
     #[arg(long, value_name = "N", default_value_t = 1)]
     jobs: usize,
     /// Build only these stages (comma-separated). Stages not built are absent from the output.

@@ -418,9 +418,6 @@ const FLOAT_ROUNDTRIP_BUG: &[&str] = &["manifest.json", "report.json", "report.m
 /// A build whose stages all come from the cache writes the same manifest and report as the build
 /// that computed them.
 #[test]
-#[ignore = "bug: stage reports are cached as JSON (src/scene/build.rs:143-144, cache.store) and read back (build.rs:134/169) with \
-            serde_json without its `float_roundtrip` feature, so f64 figures (max_error_m, rms_error_m) come \
-            back 1 ulp off and manifest.json/report.json of a cached build differ from a fresh one"]
 fn cached_rebuild_manifest_is_byte_identical() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
@@ -457,8 +454,6 @@ fn preview_after_a_cached_terrain_is_the_same_glb_first() {
 
 /// Same, with OBJ or glTF (+ .bin) as the primary format.
 #[test]
-#[ignore = "bug: src/scene/build.rs:153 re-imports report.files.first() for the preview of a cached terrain, \
-            which is terrain.mtl (obj) or terrain.bin (gltf) when the first format is obj/gltf: the build fails"]
 fn preview_after_a_cached_terrain_works_for_obj_and_gltf_first() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
@@ -476,8 +471,6 @@ fn preview_after_a_cached_terrain_works_for_obj_and_gltf_first() {
 
 /// A cache entry that lost a file is a miss, not a failed build.
 #[test]
-#[ignore = "bug: src/scene/build.rs:137/172 (Cache::restore error, `?`) fails the build when a cache entry lost a file; \
-            it should recompute the stage (and replace the entry)"]
 fn a_damaged_cache_entry_is_recomputed() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
@@ -725,9 +718,6 @@ fn library_batch_keeps_order_and_reports_failures() {
 /// Both use the temporary folder `.cache/.terrain-KEY.tmp-PID` (the same PID), so one can delete
 /// the other's half-copied files and rename an incomplete entry into place.
 #[test]
-#[ignore = "bug: src/scene/cache.rs:72-73 Cache::store names its temporary folder `.STAGE-KEY.tmp-PID`, the same for \
-            two threads of one batch storing one key; the second removes the first's half-copied files and an \
-            incomplete entry is renamed into place, so later builds fail in Cache::restore"]
 fn concurrent_stores_of_one_cache_entry_stay_complete() {
     use verdant::scene::cache::Cache;
     let dir = tempfile::tempdir().unwrap();

@@ -11,7 +11,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::scene::cache::{Cache, KeyBuilder};
+use crate::scene::cache::{Cache, FileHashes, KeyBuilder};
 use crate::scene::manifest::{write_manifest_and_report, StageRun};
 use crate::scene::preset::{load_preset, PresetError};
 use crate::scene::stages::{self, PreviewStageReport, Stage, TerrainStageReport};
@@ -126,6 +126,8 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
     let mut runs: Vec<StageRun> = Vec::new();
     let mut terrain_scene = None;
     let mut terrain_key = None;
+    // sizes and hashes of stage files already known from the cache, so the manifest need not re-read them
+    let mut known = FileHashes::new();
 
     if let (true, Some(t)) = (settings.stages.contains(&Stage::Terrain), &preset.terrain) {
         let t0 = Instant::now();
@@ -134,7 +136,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         // an entry that cannot be read or restored completely is recomputed
         let restored = cached.and_then(|(json, entry)| {
             let report: TerrainStageReport = serde_json::from_str(&json).ok()?;
-            Cache::restore(&entry, dir, &stages::terrain_files(&report)).ok()?;
+            known.extend(Cache::restore(&entry, dir, &stages::terrain_files(&report)).ok()?);
             Some(report)
         });
         let (report, hit) = match restored {
@@ -146,16 +148,18 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
                 progress(name, "terrain: meshing");
                 let (report, scene) = stages::run_terrain(preset, t, dir)?;
                 let json = serde_json::to_string_pretty(&report).unwrap_or_default();
-                if let Err(e) = cache.store("terrain", &key, dir, &stages::terrain_files(&report), &json) {
-                    progress(name, &format!("terrain: could not store the cache entry ({e}); continuing"));
+                match cache.store("terrain", &key, dir, &stages::terrain_files(&report), &json) {
+                    Ok(hashes) => known.extend(hashes),
+                    Err(e) => progress(name, &format!("terrain: could not store the cache entry ({e}); continuing")),
                 }
                 terrain_scene = Some(scene);
                 (report, false)
             }
         };
         if settings.stages.contains(&Stage::Preview) && terrain_scene.is_none() {
-            // cached terrain: re-import the primary file (also checks that what was cached reads back)
-            if let Some(main) = report.files.first() {
+            // cached terrain: re-import the first mesh file (also checks that what was cached reads back)
+            let is_mesh = |p: &&PathBuf| matches!(p.extension().and_then(|e| e.to_str()), Some("glb" | "gltf" | "obj"));
+            if let Some(main) = report.files.iter().find(is_mesh) {
                 let path = dir.join(main);
                 terrain_scene = Some(read_scene(&path).map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })?);
             }
@@ -173,7 +177,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             let cached = if settings.force { None } else { cache.lookup("preview", &key) };
             let restored = cached.and_then(|(json, entry)| {
                 let report: PreviewStageReport = serde_json::from_str(&json).ok()?;
-                Cache::restore(&entry, dir, std::slice::from_ref(&report.file)).ok()?;
+                known.extend(Cache::restore(&entry, dir, std::slice::from_ref(&report.file)).ok()?);
                 Some(report)
             });
             let (report, hit) = match restored {
@@ -185,7 +189,9 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
                     progress(name, "preview: drawing");
                     let report = stages::run_preview(scene, dir)?;
                     let json = serde_json::to_string_pretty(&report).unwrap_or_default();
-                    let _ = cache.store("preview", &key, dir, std::slice::from_ref(&report.file), &json);
+                    if let Ok(hashes) = cache.store("preview", &key, dir, std::slice::from_ref(&report.file), &json) {
+                        known.extend(hashes);
+                    }
                     (report, false)
                 }
             };
@@ -194,7 +200,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
     }
 
     progress(name, "manifest and report");
-    let files = write_manifest_and_report(preset, dir, &runs)?;
+    let files = write_manifest_and_report(preset, dir, &runs, &known)?;
     let triangles = runs
         .iter()
         .map(|r| match r {
@@ -269,14 +275,25 @@ pub fn build_batch(sources: &[PresetSource], settings: &BuildSettings, jobs: usi
             Ok(p) => build_preset(p, settings, progress).unwrap_or_else(|e| failed(p.scene.name.clone(), &e)),
         }
     };
-    let jobs = jobs.max(1);
+    let jobs = jobs.clamp(1, loaded.len().max(1));
     if jobs == 1 {
         return loaded.iter().map(run_one).collect();
     }
-    match rayon::ThreadPoolBuilder::new().num_threads(jobs).build() {
-        Ok(pool) => pool.install(|| loaded.par_iter().map(run_one).collect()),
-        Err(_) => loaded.iter().map(run_one).collect(),
-    }
+    // `jobs` workers take presets w, w + jobs, …; the pool keeps at least the --threads workers
+    // for the stages inside, so both settings mean what they say
+    let threads = jobs.max(rayon::current_num_threads());
+    let Ok(pool) = rayon::ThreadPoolBuilder::new().num_threads(threads).build() else {
+        return loaded.iter().map(run_one).collect();
+    };
+    let mut per_worker: Vec<Vec<(usize, SceneOutcome)>> = pool.install(|| {
+        (0..jobs)
+            .into_par_iter()
+            .map(|w| (w..loaded.len()).step_by(jobs).map(|k| (k, run_one(&loaded[k]))).collect())
+            .collect()
+    });
+    let mut outcomes: Vec<(usize, SceneOutcome)> = per_worker.drain(..).flatten().collect();
+    outcomes.sort_by_key(|(k, _)| *k);
+    outcomes.into_iter().map(|(_, o)| o).collect()
 }
 
 /// The end-of-batch table: scene, status, files, triangles, seconds.

@@ -2,12 +2,15 @@
 //! seen before copies its files from `<out>/.cache/<stage>-<key>/` instead of recomputing them.
 //!
 //! An entry is a folder holding the stage's files under their scene-relative paths plus
-//! `stage.json` (what the stage reported). Entries are written to a temporary folder and renamed
-//! into place, so a half-written entry is never read.
+//! `stage.json` (what the stage reported) and `files.json` (each file's size and sha256, so a
+//! cached build need not hash them again for its manifest). Entries are written to a uniquely
+//! named temporary folder and renamed into place, so a half-written entry is never read.
 
+use std::collections::BTreeMap;
 use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use sha2::{Digest, Sha256};
 
@@ -42,6 +45,14 @@ impl KeyBuilder {
     }
 }
 
+/// Size and sha256 of files, by scene-relative path with `/` separators.
+pub type FileHashes = BTreeMap<String, (u64, String)>;
+
+/// The `/`-separated form of a scene-relative path, as manifests and hash tables name files.
+pub fn rel_key(rel: &Path) -> String {
+    rel.components().map(|c| c.as_os_str().to_string_lossy()).collect::<Vec<_>>().join("/")
+}
+
 pub struct Cache {
     pub root: PathBuf,
 }
@@ -64,19 +75,26 @@ impl Cache {
 
     /// Stores `files` (scene-relative paths, read from `scene_dir`) and the stage report,
     /// replacing an entry of the same key (which a failed lookup showed to be damaged).
-    pub fn store(&self, stage: &str, key: &str, scene_dir: &Path, files: &[PathBuf], stage_json: &str) -> io::Result<()> {
+    /// Returns the files' sizes and hashes.
+    pub fn store(&self, stage: &str, key: &str, scene_dir: &Path, files: &[PathBuf], stage_json: &str) -> io::Result<FileHashes> {
+        static SERIAL: AtomicU64 = AtomicU64::new(0);
         let dir = self.entry(stage, key);
         fs::create_dir_all(&self.root)?;
-        let tmp = self.root.join(format!(".{stage}-{key}.tmp-{}", std::process::id()));
-        let _ = fs::remove_dir_all(&tmp);
+        // unique per process and call: threads of one batch may store the same key at once
+        let tmp = self.root.join(format!(".{stage}-{key}.tmp-{}-{}", std::process::id(), SERIAL.fetch_add(1, Ordering::Relaxed)));
+        let mut hashes = FileHashes::new();
         let result = (|| {
             for rel in files {
+                let bytes = fs::read(scene_dir.join(rel))?;
                 let dst = tmp.join(rel);
                 if let Some(parent) = dst.parent() {
                     fs::create_dir_all(parent)?;
                 }
-                fs::copy(scene_dir.join(rel), dst)?;
+                fs::write(dst, &bytes)?;
+                hashes.insert(rel_key(rel), (bytes.len() as u64, sha256_hex(&bytes)));
             }
+            let table = serde_json::to_string(&hashes).map_err(io::Error::other)?;
+            fs::write(tmp.join("files.json"), table)?;
             fs::write(tmp.join("stage.json"), stage_json)?;
             // a store follows a failed lookup: an entry already there is damaged, replace it
             if dir.exists() {
@@ -87,23 +105,33 @@ impl Cache {
         if result.is_err() {
             let _ = fs::remove_dir_all(&tmp);
         }
-        // another process may have stored the same entry meanwhile: that is fine
-        if dir.exists() {
-            return Ok(());
+        // another thread may have put an equal entry in place meanwhile: that is fine
+        match result {
+            Ok(()) => Ok(hashes),
+            Err(_) if dir.join("stage.json").exists() => Ok(hashes),
+            Err(e) => Err(e),
         }
-        result
     }
 
-    /// Copies an entry's files into `scene_dir`.
-    pub fn restore(entry: &Path, scene_dir: &Path, files: &[PathBuf]) -> io::Result<()> {
+    /// Copies an entry's files into `scene_dir`; returns their recorded sizes and hashes. Fails
+    /// when a file is missing or its size differs from the record (a damaged entry).
+    pub fn restore(entry: &Path, scene_dir: &Path, files: &[PathBuf]) -> io::Result<FileHashes> {
+        let table: FileHashes = serde_json::from_str(&fs::read_to_string(entry.join("files.json"))?).map_err(io::Error::other)?;
+        let mut hashes = FileHashes::new();
         for rel in files {
+            let key = rel_key(rel);
+            let recorded = table.get(&key).ok_or_else(|| io::Error::other(format!("{key} is not recorded in the entry")))?;
             let dst = scene_dir.join(rel);
             if let Some(parent) = dst.parent() {
                 fs::create_dir_all(parent)?;
             }
-            fs::copy(entry.join(rel), dst)?;
+            let copied = fs::copy(entry.join(rel), &dst)?;
+            if copied != recorded.0 {
+                return Err(io::Error::other(format!("{key} has {copied} bytes, the entry recorded {}", recorded.0)));
+            }
+            hashes.insert(key, recorded.clone());
         }
-        Ok(())
+        Ok(hashes)
     }
 }
 

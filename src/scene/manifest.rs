@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use crate::export::write_atomic;
 use crate::scene::build::SceneBuildError;
-use crate::scene::cache::sha256_hex;
+use crate::scene::cache::{sha256_hex, FileHashes};
 use crate::scene::stages::{PreviewStageReport, Stage, TerrainStageReport};
 use crate::scene::Preset;
 
@@ -96,12 +96,20 @@ fn rel_strings(files: &[PathBuf]) -> Vec<String> {
 
 /// Writes manifest.json, report.json and report.md into `dir`; returns the number of files in
 /// the scene folder (these three included).
-pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun]) -> Result<usize, SceneBuildError> {
+/// `known` holds sizes and hashes already computed (by the cache) for some of the files; the
+/// others are read and hashed here.
+pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun], known: &FileHashes) -> Result<usize, SceneBuildError> {
     let io = |path: &Path, e: String| SceneBuildError::Io { path: path.to_owned(), message: e };
     let mut files = Vec::new();
     for rel in list_files(dir).map_err(|e| io(dir, e.to_string()))? {
-        let bytes = fs::read(dir.join(&rel)).map_err(|e| io(&dir.join(&rel), e.to_string()))?;
-        files.push(FileEntry { path: rel, bytes: bytes.len() as u64, sha256: sha256_hex(&bytes) });
+        let (bytes, sha256) = match known.get(&rel) {
+            Some((size, sha)) => (*size, sha.clone()),
+            None => {
+                let data = fs::read(dir.join(&rel)).map_err(|e| io(&dir.join(&rel), e.to_string()))?;
+                (data.len() as u64, sha256_hex(&data))
+            }
+        };
+        files.push(FileEntry { path: rel, bytes, sha256 });
     }
     let terrain = runs.iter().find_map(|r| match r {
         StageRun::Terrain { report, .. } => Some(report),
