@@ -109,20 +109,11 @@ fn without_timing(rel: &str, bytes: &[u8]) -> Vec<u8> {
 
 /// Asserts two scene trees are byte-identical, reports compared without their timing.
 fn assert_same_tree(a: &Path, b: &Path) {
-    assert_same_tree_but(a, b, &[]);
-}
-
-/// [`assert_same_tree`], but the files named in `skip` only have to exist in both.
-fn assert_same_tree_but(a: &Path, b: &Path, skip: &[&str]) {
-    let (mut ta, mut tb) = (tree(a), tree(b));
-    for s in skip {
-        ta.entry(s.to_string()).and_modify(|v| v.clear());
-        tb.entry(s.to_string()).and_modify(|v| v.clear());
-    }
+    let (ta, tb) = (tree(a), tree(b));
     assert_eq!(ta.keys().collect::<Vec<_>>(), tb.keys().collect::<Vec<_>>(), "{} and {} hold different files", a.display(), b.display());
     for (rel, bytes) in &ta {
         assert!(
-            (bytes.is_empty() && tb[rel].is_empty()) || without_timing(rel, bytes) == without_timing(rel, &tb[rel]),
+            without_timing(rel, bytes) == without_timing(rel, &tb[rel]),
             "{rel} differs between {} and {}",
             a.display(),
             b.display()
@@ -375,9 +366,7 @@ fn rebuilds_hit_the_cache_and_changed_inputs_or_force_miss_it() {
     for (rel, bytes) in &first_proc {
         write_bytes(&d.join("first/proc").join(rel), bytes);
     }
-    // manifest.json and report.json of a cached build differ in the last digit of some floats:
-    // see cached_rebuild_manifest_is_byte_identical (ignored, a bug)
-    assert_same_tree_but(&d.join("first/proc"), &cached_proc, FLOAT_ROUNDTRIP_BUG);
+    assert_same_tree(&d.join("first/proc"), &cached_proc);
     assert_eq!(tree(&d.join("o/map"))["terrain/terrain.glb"], first_map["terrain/terrain.glb"]);
 
     // the heightmap's bytes change (same path, same settings): the map misses, proc still hits
@@ -401,7 +390,7 @@ fn rebuilds_hit_the_cache_and_changed_inputs_or_force_miss_it() {
     write(d, "p/proc.toml", &small_preset("proc", 3));
     let o = build(&[]);
     assert_eq!(summary_row(&o, "proc")[1], "built*", "{}", text(&o));
-    assert_same_tree_but(&d.join("first/proc"), &d.join("o/proc"), FLOAT_ROUNDTRIP_BUG);
+    assert_same_tree(&d.join("first/proc"), &d.join("o/proc"));
 
     // --force recomputes everything, and gives the same bytes
     let o = build(&["--force"]);
@@ -411,9 +400,6 @@ fn rebuilds_hit_the_cache_and_changed_inputs_or_force_miss_it() {
     }
     assert_same_tree(&d.join("first/proc"), &d.join("o/proc"));
 }
-
-/// Files whose bytes change when a stage comes from the cache (see the ignored test below).
-const FLOAT_ROUNDTRIP_BUG: &[&str] = &["manifest.json", "report.json", "report.md"];
 
 /// A build whose stages all come from the cache writes the same manifest and report as the build
 /// that computed them.
@@ -449,7 +435,7 @@ fn preview_after_a_cached_terrain_is_the_same_glb_first() {
     let o = verdant_in(d, &["build", "p/a.toml", "--out", "split"]);
     ok(&o);
     assert!(timing_cached(&d.join("split/a"), "terrain") && !timing_cached(&d.join("split/a"), "preview"));
-    assert_same_tree_but(&d.join("fresh/a"), &d.join("split/a"), FLOAT_ROUNDTRIP_BUG);
+    assert_same_tree(&d.join("fresh/a"), &d.join("split/a"));
 }
 
 /// Same, with OBJ or glTF (+ .bin) as the primary format.
