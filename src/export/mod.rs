@@ -113,9 +113,12 @@ pub fn write_scene(scene: &Scene, path: &Path) -> Result<Vec<PathBuf>, ExportErr
     Ok(written)
 }
 
-/// Writes `bytes` to `path` atomically: a temporary file in the same folder, flushed to disk, then
-/// renamed over `path`. Creates missing parent folders. On failure the temporary file is removed
-/// and whatever was at `path` before is left as it was.
+/// Writes `bytes` to `path` atomically: a temporary file in the same folder, then renamed over
+/// `path`, so a reader sees the old file or the new one, never a part. Creates missing parent
+/// folders. On failure the temporary file is removed and whatever was at `path` before is left as
+/// it was. No fsync: like other build tools we guard against failed and interrupted runs, not power
+/// loss, and on ext4 an fsync also flushes every other file written before it (a cached scene
+/// build spent most of its time there).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
     write_atomic_with(path, |w| w.write_all(bytes))
 }
@@ -149,18 +152,12 @@ where
         let file = fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
         let mut w = io::BufWriter::new(file);
         fill(&mut w)?;
-        let file = w.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        drop(file);
+        drop(w.into_inner().map_err(|e| e.into_error())?);
         fs::rename(&tmp, path)
     })();
     if let Err(e) = result {
         let _ = fs::remove_file(&tmp);
         return Err(io_err(e));
-    }
-    // Make the rename itself durable; not every platform lets a folder be opened, so best effort.
-    if let Ok(d) = fs::File::open(&dir) {
-        let _ = d.sync_all();
     }
     Ok(())
 }
