@@ -182,30 +182,46 @@ fn orient(a: [i64; 2], b: [i64; 2], p: [i64; 2]) -> i64 {
     (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
 }
 
-/// Smallest x ≥ `lo` with ax·x + r ≥ 0 (ax > 0), from a floating-point estimate corrected exactly.
-#[inline]
-fn span_start(ax: i64, r: i64, inv_ax: f64) -> i64 {
-    let mut x = (-(r as f64) * inv_ax).ceil() as i64;
-    while ax * x + r < 0 {
-        x += 1;
-    }
-    while ax * (x - 1) + r >= 0 {
-        x -= 1;
-    }
-    x
+/// One edge's bound on the row spans of a triangle, stepped exactly from row to row (integer DDA, no
+/// division per row). With the edge function e(x, y) = ax·x + r(y), r(y + 1) = r(y) + by, the samples
+/// of row y on the triangle's side of the edge are x ≥ `x` (a lower bound, ax > 0) or x ≤ `x` (an upper
+/// bound, ax < 0); `v` ∈ [0, `a`) is the edge function there and `a` = |ax|.
+#[derive(Clone, Copy)]
+struct EdgeStep {
+    x: i64,
+    v: i64,
+    a: i64,
+    /// Per row: x += dx, v += dv, and once more x += s, v −= a if v reached a.
+    dx: i64,
+    dv: i64,
+    s: i64,
 }
 
-/// Largest x with ax·x + r ≥ 0 (ax < 0), from a floating-point estimate corrected exactly.
-#[inline]
-fn span_end(ax: i64, r: i64, inv_ax: f64) -> i64 {
-    let mut x = (-(r as f64) * inv_ax).floor() as i64;
-    while ax * x + r < 0 {
-        x -= 1;
+impl EdgeStep {
+    /// The bound of edge ax·x + by·y + k0 ≥ 0 (ax ≠ 0) at row y.
+    #[inline]
+    fn new(ax: i64, by: i64, k0: i64, y: i64) -> EdgeStep {
+        let r = by * y + k0;
+        let a = ax.abs();
+        let (dq, dr) = (by.div_euclid(a), by.rem_euclid(a));
+        if ax > 0 {
+            // Smallest x with a·x + r ≥ 0.
+            EdgeStep { x: -r.div_euclid(a), v: r.rem_euclid(a), a, dx: -dq, dv: dr, s: -1 }
+        } else {
+            // Largest x with r − a·x ≥ 0.
+            EdgeStep { x: r.div_euclid(a), v: r.rem_euclid(a), a, dx: dq, dv: dr, s: 1 }
+        }
     }
-    while ax * (x + 1) + r >= 0 {
-        x += 1;
+
+    #[inline(always)]
+    fn step(&mut self) {
+        self.x += self.dx;
+        self.v += self.dv;
+        if self.v >= self.a {
+            self.v -= self.a;
+            self.x += self.s;
+        }
     }
-    x
 }
 
 /// Finds the sample of the closed triangle `c` farthest from the triangle's plane, if its error
@@ -235,12 +251,36 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
     let mut ax = [0i64; 3];
     let mut by = [0i64; 3];
     let mut k0 = [0i64; 3];
-    let mut inv_ax = [0f64; 3];
     for (k, &(a, b)) in edges.iter().enumerate() {
         ax[k] = -(b[1] - a[1]) * sign;
         by[k] = (b[0] - a[0]) * sign;
         k0[k] = orient(a, b, [0, 0]) * sign;
-        inv_ax[k] = if ax[k] != 0 { 1.0 / ax[k] as f64 } else { 0.0 };
+    }
+    // The span of row y is the intersection of the three edges' half-rows. A horizontal edge (ax = 0)
+    // bounds only the rows, which the loop already keeps to; every other edge bounds x from below or
+    // above, and a triangle has one or two of each. A missing second one repeats the first (the
+    // maximum or minimum is the same), so every row does the same work without branches.
+    let mut lower = [EdgeStep { x: 0, v: 0, a: 1, dx: 0, dv: 0, s: 0 }; 2];
+    let mut upper = lower;
+    let (mut nl, mut nu) = (0, 0);
+    for k in 0..3 {
+        if ax[k] > 0 {
+            lower[nl] = EdgeStep::new(ax[k], by[k], k0[k], c[0][1]);
+            nl += 1;
+        } else if ax[k] < 0 {
+            upper[nu] = EdgeStep::new(ax[k], by[k], k0[k], c[0][1]);
+            nu += 1;
+        }
+    }
+    if nl == 0 || nu == 0 {
+        // Impossible for a triangle of non-zero area; nothing to scan.
+        return Scan { candidate: None, upper: 0.0 };
+    }
+    if nl == 1 {
+        lower[1] = lower[0];
+    }
+    if nu == 1 {
+        upper[1] = upper[0];
     }
     // Plane gradient relative to corner 0, for the fast path.
     let inv_area = 1.0 / area as f64;
@@ -262,29 +302,22 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
     let mut found: Option<(u32, u32)> = None;
     let mut fast_max = 0.0f64;
     for y in c[0][1]..=c[2][1] {
-        let (mut lo, mut hi) = (xmin, xmax);
-        let mut r = [0i64; 3];
-        for k in 0..3 {
-            r[k] = by[k] * y + k0[k];
-            // need ax·x + r ≥ 0
-            if ax[k] > 0 {
-                lo = lo.max(span_start(ax[k], r[k], inv_ax[k]));
-            } else if ax[k] < 0 {
-                hi = hi.min(span_end(ax[k], r[k], inv_ax[k]));
-            } else if r[k] < 0 {
-                hi = lo - 1;
-            }
+        let lo = lower[0].x.max(lower[1].x);
+        let hi = upper[0].x.min(upper[1].x);
+        for e in lower.iter_mut().chain(upper.iter_mut()) {
+            e.step();
         }
         if lo > hi {
             continue;
         }
+        debug_assert!(xmin <= lo && hi <= xmax);
         let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi as usize];
         let z0 = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
         // Exact re-check of one sample whose fast error came close to the best.
         let mut check = |k: usize, best: &mut f64, threshold: &mut f64| {
             let x = lo + k as i64;
             let h = row[k] as f64;
-            let wt = [ax[0] * x + r[0], ax[1] * x + r[1], ax[2] * x + r[2]];
+            let wt = [0, 1, 2].map(|e| ax[e] * x + by[e] * y + k0[e]);
             let err = (plane_height(wt, hc, area) - h).abs();
             if err > *best && !c.contains(&[x, y]) {
                 *best = err;
