@@ -215,12 +215,11 @@ impl EdgeStep {
 
     #[inline(always)]
     fn step(&mut self) {
-        self.x += self.dx;
         self.v += self.dv;
-        if self.v >= self.a {
-            self.v -= self.a;
-            self.x += self.s;
-        }
+        // Branch-free: whether v wraps is data-dependent, so a branch would mispredict often.
+        let wrap = -((self.v >= self.a) as i64);
+        self.v -= self.a & wrap;
+        self.x += self.dx + (self.s & wrap);
     }
 }
 
@@ -256,32 +255,15 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
         by[k] = (b[0] - a[0]) * sign;
         k0[k] = orient(a, b, [0, 0]) * sign;
     }
-    // The span of row y is the intersection of the three edges' half-rows. A horizontal edge (ax = 0)
-    // bounds only the rows, which the loop already keeps to; every other edge bounds x from below or
-    // above, and a triangle has one or two of each. A missing second one repeats the first (the
-    // maximum or minimum is the same), so every row does the same work without branches.
-    let mut lower = [EdgeStep { x: 0, v: 0, a: 1, dx: 0, dv: 0, s: 0 }; 2];
-    let mut upper = lower;
-    let (mut nl, mut nu) = (0, 0);
-    for k in 0..3 {
-        if ax[k] > 0 {
-            lower[nl] = EdgeStep::new(ax[k], by[k], k0[k], c[0][1]);
-            nl += 1;
-        } else if ax[k] < 0 {
-            upper[nu] = EdgeStep::new(ax[k], by[k], k0[k], c[0][1]);
-            nu += 1;
-        }
-    }
-    if nl == 0 || nu == 0 {
-        // Impossible for a triangle of non-zero area; nothing to scan.
-        return Scan { candidate: None, upper: 0.0 };
-    }
-    if nl == 1 {
-        lower[1] = lower[0];
-    }
-    if nu == 1 {
-        upper[1] = upper[0];
-    }
+    // Rows c[0].y ..= c[2].y. The long edge c2–c0 (edge 1) bounds one side of every row; the other
+    // side is c0–c1 (edge 2) down to row c[1].y and c1–c2 (edge 0) from there (both pass through c1,
+    // so either gives that row's bound). A horizontal edge bounds no row and is never used.
+    let (ya, yb, yc) = (c[0][1], c[1][1], c[2][1]);
+    let edge = |k: usize, y: i64| EdgeStep::new(ax[k], by[k], k0[k], y);
+    let mut long = edge(1, ya);
+    let long_is_lower = ax[1] > 0;
+    let mut short = if yb > ya { edge(2, ya) } else { edge(0, ya) };
+    let switch_at = if yb > ya && yc > yb { yb } else { i64::MIN };
     // Plane gradient relative to corner 0, for the fast path.
     let inv_area = 1.0 / area as f64;
     let gx = (ax[0] as f64 * hc[0] + ax[1] as f64 * hc[1] + ax[2] as f64 * hc[2]) * inv_area;
@@ -301,12 +283,13 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
     let mut threshold = best - slack;
     let mut found: Option<(u32, u32)> = None;
     let mut fast_max = 0.0f64;
-    for y in c[0][1]..=c[2][1] {
-        let lo = lower[0].x.max(lower[1].x);
-        let hi = upper[0].x.min(upper[1].x);
-        for e in lower.iter_mut().chain(upper.iter_mut()) {
-            e.step();
+    for y in ya..=yc {
+        if y == switch_at {
+            short = edge(0, yb);
         }
+        let (lo, hi) = if long_is_lower { (long.x, short.x) } else { (short.x, long.x) };
+        long.step();
+        short.step();
         if lo > hi {
             continue;
         }
@@ -330,8 +313,11 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
         let row_max = row_fast_max(row, z0, gx);
         fast_max = fast_max.max(row_max);
         if row_max > threshold {
+            // Only the row's exact maximum can become the best, and it is the first sample to reach
+            // it; its fast error is within `slack` of it, which is within `slack` of `row_max`.
+            let t = threshold.max(row_max - 2.0 * slack);
             for (k, &h) in row.iter().enumerate() {
-                if (z0 + gx * k as f64 - h as f64).abs() > threshold {
+                if (z0 + gx * k as f64 - h as f64).abs() > t {
                     check(k, &mut best, &mut threshold);
                 }
             }
