@@ -280,8 +280,36 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
 
     let w = hf.width;
     let mut best = floor;
-    let mut threshold = best - slack;
     let mut found: Option<(u32, u32)> = None;
+    // Exact re-walk of one row, in order: only samples whose fast error comes within `slack` of the
+    // best (or of the row's fast maximum, since only the row's exact maximum can become the best and
+    // the first sample reaching it wins) get the canonical evaluation.
+    let mut rewalk = |&RowMax { y, lo, hi, max }: &RowMax, best: &mut f64| {
+        let (y, lo) = (y as i64, lo as i64);
+        let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi as usize];
+        let z0 = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
+        let t = max - 2.0 * slack;
+        for (k, &h) in row.iter().enumerate() {
+            if (z0 + gx * k as f64 - h as f64).abs() > t.max(*best - slack) {
+                let x = lo + k as i64;
+                let wt = [0, 1, 2].map(|e| ax[e] * x + by[e] * y + k0[e]);
+                let err = (plane_height(wt, hc, area) - h as f64).abs();
+                if err > *best && !c.contains(&[x, y]) {
+                    *best = err;
+                    found = Some((x as u32, y as u32));
+                }
+            }
+        }
+    };
+    // Pass 1 takes every row's largest fast error (the innermost loop of the run, no per-sample
+    // branch). Rows that may hold the worst sample are kept to be re-walked exactly, in order, once
+    // the fast maximum R of the whole face is known: a row whose fast maximum is below R − 3·slack has
+    // every exact error below that of the sample giving R, so it cannot hold the (first) worst
+    // sample; nor can a row whose fast maximum is at most floor − slack. If the buffer fills, the
+    // rows kept so far are re-walked at once (still in order, so the result is the same).
+    let mut kept = [RowMax { y: 0, lo: 0, hi: 0, max: 0.0 }; KEPT_ROWS];
+    let mut n_kept = 0;
+    let floor_cut = floor - slack;
     let mut fast_max = 0.0f64;
     for y in ya..=yc {
         if y == switch_at {
@@ -296,35 +324,50 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
         debug_assert!(xmin <= lo && hi <= xmax);
         let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi as usize];
         let z0 = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
-        // Exact re-check of one sample whose fast error came close to the best.
-        let mut check = |k: usize, best: &mut f64, threshold: &mut f64| {
-            let x = lo + k as i64;
-            let h = row[k] as f64;
-            let wt = [0, 1, 2].map(|e| ax[e] * x + by[e] * y + k0[e]);
-            let err = (plane_height(wt, hc, area) - h).abs();
-            if err > *best && !c.contains(&[x, y]) {
-                *best = err;
-                *threshold = err - slack;
-                found = Some((x as u32, y as u32));
-            }
-        };
-        // The row's largest fast error first (the innermost loop of the run, no per-sample branch);
-        // only a row that can hold a new best is walked again sample by sample, in order.
         let row_max = row_fast_max(row, z0, gx);
         fast_max = fast_max.max(row_max);
-        if row_max > threshold {
-            // Only the row's exact maximum can become the best, and it is the first sample to reach
-            // it; its fast error is within `slack` of it, which is within `slack` of `row_max`.
-            let t = threshold.max(row_max - 2.0 * slack);
-            for (k, &h) in row.iter().enumerate() {
-                if (z0 + gx * k as f64 - h as f64).abs() > t {
-                    check(k, &mut best, &mut threshold);
+        if row_max > floor_cut && row_max >= fast_max - 3.0 * slack {
+            if n_kept == KEPT_ROWS {
+                let cut = fast_max - 3.0 * slack;
+                let mut m = 0;
+                for k in 0..n_kept {
+                    if kept[k].max >= cut {
+                        kept[m] = kept[k];
+                        m += 1;
+                    }
+                }
+                n_kept = m;
+                if n_kept == KEPT_ROWS {
+                    for r in &kept {
+                        rewalk(r, &mut best);
+                    }
+                    n_kept = 0;
                 }
             }
+            kept[n_kept] = RowMax { y: y as u32, lo: lo as u32, hi: hi as usize, max: row_max };
+            n_kept += 1;
+        }
+    }
+    let cut = fast_max - 3.0 * slack;
+    for r in &kept[..n_kept] {
+        if r.max >= cut {
+            rewalk(r, &mut best);
         }
     }
     Scan { candidate: found.map(|(i, j)| (best, i, j)), upper: fast_max + slack }
 }
+
+/// A row kept for the exact re-walk: its span and its largest fast error.
+#[derive(Clone, Copy)]
+struct RowMax {
+    y: u32,
+    lo: u32,
+    hi: usize,
+    max: f64,
+}
+
+/// Rows kept for the exact re-walk before it is forced (a small stack buffer).
+const KEPT_ROWS: usize = 32;
 
 /// The largest fast error |z0 + gx·k − row[k]| over a row. The plane is stepped along the row (two
 /// f64 lanes per SSE2 register, four samples per step); the accumulated rounding is at most one ulp
