@@ -367,7 +367,7 @@ struct RowMax {
 }
 
 /// Rows kept for the exact re-walk before it is forced (a small stack buffer).
-const KEPT_ROWS: usize = 32;
+const KEPT_ROWS: usize = 8;
 
 /// The largest fast error |z0 + gx·k − row[k]| over a row. The plane is stepped along the row (two
 /// f64 lanes per SSE2 register, four samples per step); the accumulated rounding is at most one ulp
@@ -710,6 +710,19 @@ fn prev_edge(e: u32) -> u32 {
 /// Is `d` strictly inside the circumcircle of the counter-clockwise triangle (a, b, c)? Exact: with
 /// coordinates below 2^24 every product fits in i128.
 fn in_circle(a: [i64; 2], b: [i64; 2], c: [i64; 2], d: [i64; 2]) -> bool {
+    // Offsets below 2^14 (any map up to 16384 samples a side): every term stays below 2^60, so i64
+    // is exact and much cheaper than i128.
+    let spread = [a, b, c].iter().fold(0, |m, p| m | (p[0] - d[0]).abs() | (p[1] - d[1]).abs());
+    if spread < 1 << 14 {
+        let row = |p: [i64; 2]| {
+            let (x, y) = (p[0] - d[0], p[1] - d[1]);
+            (x, y, x * x + y * y)
+        };
+        let (ax, ay, a2) = row(a);
+        let (bx, by, b2) = row(b);
+        let (cx, cy, c2) = row(c);
+        return ax * (by * c2 - b2 * cy) - ay * (bx * c2 - b2 * cx) + a2 * (bx * cy - by * cx) > 0;
+    }
     let row = |p: [i64; 2]| {
         let (x, y) = ((p[0] - d[0]) as i128, (p[1] - d[1]) as i128);
         (x, y, x * x + y * y)
