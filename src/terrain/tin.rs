@@ -322,9 +322,8 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
             continue;
         }
         debug_assert!(xmin <= lo && hi <= xmax);
-        let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi as usize];
         let z0 = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
-        let row_max = row_fast_max(row, z0, gx);
+        let row_max = row_fast_max(&hf.heights, y as usize * w + lo as usize, (hi - lo + 1) as usize, z0, gx);
         fast_max = fast_max.max(row_max);
         if row_max > floor_cut && row_max >= fast_max - 3.0 * slack {
             if n_kept == KEPT_ROWS {
@@ -369,20 +368,19 @@ struct RowMax {
 /// Rows kept for the exact re-walk before it is forced (a small stack buffer).
 const KEPT_ROWS: usize = 8;
 
-/// The largest fast error |z0 + gx·k − row[k]| over a row. The plane is stepped along the row (two
-/// f64 lanes per SSE2 register, four samples per step); the accumulated rounding is at most one ulp
-/// of the plane's magnitude per step, far inside the caller's slack (1e-6 of it) for any row below
-/// 2^24 samples.
+/// The largest fast error |z0 + gx·k − h[k]| over the row h = heights[start..start + n] (n ≥ 1). The
+/// plane is stepped along the row (two f64 lanes per SSE2 register, four samples per step); the
+/// accumulated rounding is at most one ulp of the plane's magnitude per step, far inside the caller's
+/// slack (1e-6 of it) for any row below 2^24 samples. A last partial group reads past the row's end
+/// (when the heights go on) and masks those lanes out.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn row_fast_max(row: &[f32], z0: f64, gx: f64) -> f64 {
+fn row_fast_max(heights: &[f32], start: usize, n: usize, z0: f64, gx: f64) -> f64 {
     use std::arch::x86_64::*;
-    let n = row.len();
-    if n < 4 {
-        return row.iter().enumerate().fold(0.0f64, |m, (k, &h)| m.max((z0 + gx * k as f64 - h as f64).abs()));
-    }
+    let row = &heights[start..start + n];
     let p = row.as_ptr();
-    // SAFETY: SSE2 is part of x86_64; every load reads row[k..k + 4] with k + 4 ≤ n.
+    // SAFETY: SSE2 is part of x86_64; every load reads heights[start + k..start + k + 4], checked to
+    // be in bounds (k + 4 ≤ n, or start + k + 4 ≤ heights.len() for the last group).
     unsafe {
         let abs = _mm_castsi128_pd(_mm_set1_epi64x(i64::MAX));
         let step = _mm_set1_pd(4.0 * gx);
@@ -398,15 +396,24 @@ fn row_fast_max(row: &[f32], z0: f64, gx: f64) -> f64 {
             zb = _mm_add_pd(zb, step);
             k += 4;
         }
-        if k < n {
-            // The last four samples once more (overlapping those done: a maximum does not mind).
-            let k = n - 4;
-            let kf = k as f64;
-            let za = _mm_set_pd(z0 + gx * (kf + 1.0), z0 + gx * kf);
-            let zb = _mm_set_pd(z0 + gx * (kf + 3.0), z0 + gx * (kf + 2.0));
-            let h = _mm_loadu_ps(p.add(k));
-            ma = _mm_max_pd(ma, _mm_and_pd(_mm_sub_pd(za, _mm_cvtps_pd(h)), abs));
-            mb = _mm_max_pd(mb, _mm_and_pd(_mm_sub_pd(zb, _mm_cvtps_pd(_mm_movehl_ps(h, h))), abs));
+        let rest = n - k;
+        if rest > 0 {
+            if start + k + 4 <= heights.len() {
+                // Lanes k .. k + rest are the row's; the others are zeroed (errors are ≥ 0).
+                let keep_a = _mm_castsi128_pd(_mm_set_epi64x(-((rest >= 2) as i64), -1));
+                let keep_b = _mm_castsi128_pd(_mm_set_epi64x(0, -((rest >= 3) as i64)));
+                let h = _mm_loadu_ps(p.add(k));
+                let ea = _mm_and_pd(_mm_sub_pd(za, _mm_cvtps_pd(h)), abs);
+                let eb = _mm_and_pd(_mm_sub_pd(zb, _mm_cvtps_pd(_mm_movehl_ps(h, h))), abs);
+                ma = _mm_max_pd(ma, _mm_and_pd(ea, keep_a));
+                mb = _mm_max_pd(mb, _mm_and_pd(eb, keep_b));
+            } else {
+                // The very end of the heights: one sample at a time.
+                for (d, &h) in row[k..].iter().enumerate() {
+                    let e = (z0 + gx * (k + d) as f64 - h as f64).abs();
+                    ma = _mm_max_sd(ma, _mm_set_sd(e));
+                }
+            }
         }
         let m = _mm_max_pd(ma, mb);
         _mm_cvtsd_f64(_mm_max_sd(m, _mm_unpackhi_pd(m, m)))
@@ -415,8 +422,8 @@ fn row_fast_max(row: &[f32], z0: f64, gx: f64) -> f64 {
 
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-fn row_fast_max(row: &[f32], z0: f64, gx: f64) -> f64 {
-    row.iter().enumerate().fold(0.0f64, |m, (k, &h)| m.max((z0 + gx * k as f64 - h as f64).abs()))
+fn row_fast_max(heights: &[f32], start: usize, n: usize, z0: f64, gx: f64) -> f64 {
+    heights[start..start + n].iter().enumerate().fold(0.0f64, |m, (k, &h)| m.max((z0 + gx * k as f64 - h as f64).abs()))
 }
 
 /// Result of scanning one face.
