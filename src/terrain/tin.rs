@@ -227,11 +227,13 @@ impl EdgeStep {
 /// exceeds `floor`, as (error, i, j); the corners themselves are never candidates. Also bounds the
 /// error of every sample from above.
 ///
-/// The triangle is scanned row by row; each row's span comes from the three edge functions (exact
-/// integers, so samples on edges are always included). Along a row the plane is evaluated in f64 from
-/// the row start, which is fast but not bit-exact; any sample whose fast error comes within `slack` of the best so far is
-/// re-evaluated with the canonical formula ([`plane_height`], exact integer weights), so the returned
-/// error is exactly what the analyzer computes and the bound it certifies is real.
+/// The triangle is scanned row by row; each row's span comes from the edge functions, stepped from
+/// row to row in exact integers ([`EdgeStep`], so samples on edges are always included). Along a row
+/// the plane is stepped in f64 ([`row_fast_max`]), which is fast but not bit-exact; only rows that can
+/// hold the worst sample are walked again, and there any sample whose fast error comes within `slack`
+/// of the best so far is re-evaluated with the canonical formula ([`plane_height`], exact integer
+/// weights), so the returned error is exactly what the analyzer computes and the bound it certifies
+/// is real.
 fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Scan {
     // Canonical corner order (ascending sample index) so `plane_height` sums in the same order as the
     // analyzer does; also puts the rows in c[0].j ..= c[2].j.
@@ -286,7 +288,7 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
     // the first sample reaching it wins) get the canonical evaluation.
     let mut rewalk = |&RowMax { y, lo, hi, max }: &RowMax, best: &mut f64| {
         let (y, lo) = (y as i64, lo as i64);
-        let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi as usize];
+        let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi];
         let z0 = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
         let t = max - 2.0 * slack;
         for (k, &h) in row.iter().enumerate() {
