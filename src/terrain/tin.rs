@@ -182,41 +182,58 @@ fn orient(a: [i64; 2], b: [i64; 2], p: [i64; 2]) -> i64 {
     (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
 }
 
-/// Smallest x ≥ `lo` with ax·x + r ≥ 0 (ax > 0), from a floating-point estimate corrected exactly.
-#[inline]
-fn span_start(ax: i64, r: i64, inv_ax: f64) -> i64 {
-    let mut x = (-(r as f64) * inv_ax).ceil() as i64;
-    while ax * x + r < 0 {
-        x += 1;
-    }
-    while ax * (x - 1) + r >= 0 {
-        x -= 1;
-    }
-    x
+/// One edge's bound on the row spans of a triangle, stepped exactly from row to row (integer DDA, no
+/// division per row). With the edge function e(x, y) = ax·x + r(y), r(y + 1) = r(y) + by, the samples
+/// of row y on the triangle's side of the edge are x ≥ `x` (a lower bound, ax > 0) or x ≤ `x` (an upper
+/// bound, ax < 0); `v` ∈ [0, `a`) is the edge function there and `a` = |ax|.
+#[derive(Clone, Copy)]
+struct EdgeStep {
+    x: i64,
+    v: i64,
+    a: i64,
+    /// Per row: x += dx, v += dv, and once more x += s, v −= a if v reached a.
+    dx: i64,
+    dv: i64,
+    s: i64,
 }
 
-/// Largest x with ax·x + r ≥ 0 (ax < 0), from a floating-point estimate corrected exactly.
-#[inline]
-fn span_end(ax: i64, r: i64, inv_ax: f64) -> i64 {
-    let mut x = (-(r as f64) * inv_ax).floor() as i64;
-    while ax * x + r < 0 {
-        x -= 1;
+impl EdgeStep {
+    /// The bound of edge ax·x + by·y + k0 ≥ 0 (ax ≠ 0) at row y.
+    #[inline]
+    fn new(ax: i64, by: i64, k0: i64, y: i64) -> EdgeStep {
+        let r = by * y + k0;
+        let a = ax.abs();
+        let (dq, dr) = (by.div_euclid(a), by.rem_euclid(a));
+        if ax > 0 {
+            // Smallest x with a·x + r ≥ 0.
+            EdgeStep { x: -r.div_euclid(a), v: r.rem_euclid(a), a, dx: -dq, dv: dr, s: -1 }
+        } else {
+            // Largest x with r − a·x ≥ 0.
+            EdgeStep { x: r.div_euclid(a), v: r.rem_euclid(a), a, dx: dq, dv: dr, s: 1 }
+        }
     }
-    while ax * (x + 1) + r >= 0 {
-        x += 1;
+
+    #[inline(always)]
+    fn step(&mut self) {
+        self.v += self.dv;
+        // Branch-free: whether v wraps is data-dependent, so a branch would mispredict often.
+        let wrap = -((self.v >= self.a) as i64);
+        self.v -= self.a & wrap;
+        self.x += self.dx + (self.s & wrap);
     }
-    x
 }
 
 /// Finds the sample of the closed triangle `c` farthest from the triangle's plane, if its error
 /// exceeds `floor`, as (error, i, j); the corners themselves are never candidates. Also bounds the
 /// error of every sample from above.
 ///
-/// The triangle is scanned row by row; each row's span comes from the three edge functions (exact
-/// integers, so samples on edges are always included). Along a row the plane is evaluated in f64 from
-/// the row start, which is fast but not bit-exact; any sample whose fast error comes within `slack` of the best so far is
-/// re-evaluated with the canonical formula ([`plane_height`], exact integer weights), so the returned
-/// error is exactly what the analyzer computes and the bound it certifies is real.
+/// The triangle is scanned row by row; each row's span comes from the edge functions, stepped from
+/// row to row in exact integers ([`EdgeStep`], so samples on edges are always included). Along a row
+/// the plane is stepped in f64 ([`row_fast_max`]), which is fast but not bit-exact; only rows that can
+/// hold the worst sample are walked again, and there any sample whose fast error comes within `slack`
+/// of the best so far is re-evaluated with the canonical formula ([`plane_height`], exact integer
+/// weights), so the returned error is exactly what the analyzer computes and the bound it certifies
+/// is real.
 fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Scan {
     // Canonical corner order (ascending sample index) so `plane_height` sums in the same order as the
     // analyzer does; also puts the rows in c[0].j ..= c[2].j.
@@ -235,13 +252,20 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
     let mut ax = [0i64; 3];
     let mut by = [0i64; 3];
     let mut k0 = [0i64; 3];
-    let mut inv_ax = [0f64; 3];
     for (k, &(a, b)) in edges.iter().enumerate() {
         ax[k] = -(b[1] - a[1]) * sign;
         by[k] = (b[0] - a[0]) * sign;
         k0[k] = orient(a, b, [0, 0]) * sign;
-        inv_ax[k] = if ax[k] != 0 { 1.0 / ax[k] as f64 } else { 0.0 };
     }
+    // Rows c[0].y ..= c[2].y. The long edge c2–c0 (edge 1) bounds one side of every row; the other
+    // side is c0–c1 (edge 2) down to row c[1].y and c1–c2 (edge 0) from there (both pass through c1,
+    // so either gives that row's bound). A horizontal edge bounds no row and is never used.
+    let (ya, yb, yc) = (c[0][1], c[1][1], c[2][1]);
+    let edge = |k: usize, y: i64| EdgeStep::new(ax[k], by[k], k0[k], y);
+    let mut long = edge(1, ya);
+    let long_is_lower = ax[1] > 0;
+    let mut short = if yb > ya { edge(2, ya) } else { edge(0, ya) };
+    let switch_at = if yb > ya && yc > yb { yb } else { i64::MIN };
     // Plane gradient relative to corner 0, for the fast path.
     let inv_area = 1.0 / area as f64;
     let gx = (ax[0] as f64 * hc[0] + ax[1] as f64 * hc[1] + ax[2] as f64 * hc[2]) * inv_area;
@@ -258,72 +282,150 @@ fn find_candidate(hf: &Heightfield, mut corners: [Corner; 3], floor: f64) -> Sca
 
     let w = hf.width;
     let mut best = floor;
-    let mut threshold = best - slack;
     let mut found: Option<(u32, u32)> = None;
-    let mut fast_max = 0.0f64;
-    for y in c[0][1]..=c[2][1] {
-        let (mut lo, mut hi) = (xmin, xmax);
-        let mut r = [0i64; 3];
-        for k in 0..3 {
-            r[k] = by[k] * y + k0[k];
-            // need ax·x + r ≥ 0
-            if ax[k] > 0 {
-                lo = lo.max(span_start(ax[k], r[k], inv_ax[k]));
-            } else if ax[k] < 0 {
-                hi = hi.min(span_end(ax[k], r[k], inv_ax[k]));
-            } else if r[k] < 0 {
-                hi = lo - 1;
+    // Exact re-walk of one row, in order: only samples whose fast error comes within `slack` of the
+    // best (or of the row's fast maximum, since only the row's exact maximum can become the best and
+    // the first sample reaching it wins) get the canonical evaluation.
+    let mut rewalk = |&RowMax { y, lo, hi, max }: &RowMax, best: &mut f64| {
+        let (y, lo) = (y as i64, lo as i64);
+        let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi];
+        let z0 = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
+        let t = max - 2.0 * slack;
+        for (k, &h) in row.iter().enumerate() {
+            if (z0 + gx * k as f64 - h as f64).abs() > t.max(*best - slack) {
+                let x = lo + k as i64;
+                let wt = [0, 1, 2].map(|e| ax[e] * x + by[e] * y + k0[e]);
+                let err = (plane_height(wt, hc, area) - h as f64).abs();
+                if err > *best && !c.contains(&[x, y]) {
+                    *best = err;
+                    found = Some((x as u32, y as u32));
+                }
             }
         }
+    };
+    // Pass 1 takes every row's largest fast error (the innermost loop of the run, no per-sample
+    // branch). Rows that may hold the worst sample are kept to be re-walked exactly, in order, once
+    // the fast maximum R of the whole face is known: a row whose fast maximum is below R − 3·slack has
+    // every exact error below that of the sample giving R, so it cannot hold the (first) worst
+    // sample; nor can a row whose fast maximum is at most floor − slack. If the buffer fills, the
+    // rows kept so far are re-walked at once (still in order, so the result is the same).
+    let mut kept = [RowMax { y: 0, lo: 0, hi: 0, max: 0.0 }; KEPT_ROWS];
+    let mut n_kept = 0;
+    let floor_cut = floor - slack;
+    let mut fast_max = 0.0f64;
+    for y in ya..=yc {
+        if y == switch_at {
+            short = edge(0, yb);
+        }
+        let (lo, hi) = if long_is_lower { (long.x, short.x) } else { (short.x, long.x) };
+        long.step();
+        short.step();
         if lo > hi {
             continue;
         }
-        let row = &hf.heights[y as usize * w + lo as usize..=y as usize * w + hi as usize];
+        debug_assert!(xmin <= lo && hi <= xmax);
         let z0 = hc[0] + gx * (lo - x0) as f64 + gy * (y - y0) as f64;
-        // Exact re-check of one sample whose fast error came close to the best.
-        let mut check = |k: usize, best: &mut f64, threshold: &mut f64| {
-            let x = lo + k as i64;
-            let h = row[k] as f64;
-            let wt = [ax[0] * x + r[0], ax[1] * x + r[1], ax[2] * x + r[2]];
-            let err = (plane_height(wt, hc, area) - h).abs();
-            if err > *best && !c.contains(&[x, y]) {
-                *best = err;
-                *threshold = err - slack;
-                found = Some((x as u32, y as u32));
-            }
-        };
-        // Four samples at a time with the plane evaluated from the row start (no loop-carried
-        // addition), and the threshold tested once per group: this is the innermost loop of the run.
-        let mut chunks = row.chunks_exact(4);
-        let mut k = 0usize;
-        for q in &mut chunks {
-            let kf = k as f64;
-            let f = [
-                (z0 + gx * kf - q[0] as f64).abs(),
-                (z0 + gx * (kf + 1.0) - q[1] as f64).abs(),
-                (z0 + gx * (kf + 2.0) - q[2] as f64).abs(),
-                (z0 + gx * (kf + 3.0) - q[3] as f64).abs(),
-            ];
-            let m = f[0].max(f[1]).max(f[2].max(f[3]));
-            fast_max = fast_max.max(m);
-            if m > threshold {
-                for (d, &fd) in f.iter().enumerate() {
-                    if fd > threshold {
-                        check(k + d, &mut best, &mut threshold);
+        let row_max = row_fast_max(&hf.heights, y as usize * w + lo as usize, (hi - lo + 1) as usize, z0, gx);
+        fast_max = fast_max.max(row_max);
+        if row_max > floor_cut && row_max >= fast_max - 3.0 * slack {
+            if n_kept == KEPT_ROWS {
+                let cut = fast_max - 3.0 * slack;
+                let mut m = 0;
+                for k in 0..n_kept {
+                    if kept[k].max >= cut {
+                        kept[m] = kept[k];
+                        m += 1;
                     }
                 }
+                n_kept = m;
+                if n_kept == KEPT_ROWS {
+                    for r in &kept {
+                        rewalk(r, &mut best);
+                    }
+                    n_kept = 0;
+                }
             }
-            k += 4;
+            kept[n_kept] = RowMax { y: y as u32, lo: lo as u32, hi: hi as usize, max: row_max };
+            n_kept += 1;
         }
-        for (d, &h) in chunks.remainder().iter().enumerate() {
-            let fd = (z0 + gx * (k + d) as f64 - h as f64).abs();
-            fast_max = fast_max.max(fd);
-            if fd > threshold {
-                check(k + d, &mut best, &mut threshold);
-            }
+    }
+    let cut = fast_max - 3.0 * slack;
+    for r in &kept[..n_kept] {
+        if r.max >= cut {
+            rewalk(r, &mut best);
         }
     }
     Scan { candidate: found.map(|(i, j)| (best, i, j)), upper: fast_max + slack }
+}
+
+/// A row kept for the exact re-walk: its span and its largest fast error.
+#[derive(Clone, Copy)]
+struct RowMax {
+    y: u32,
+    lo: u32,
+    hi: usize,
+    max: f64,
+}
+
+/// Rows kept for the exact re-walk before it is forced (a small stack buffer).
+const KEPT_ROWS: usize = 8;
+
+/// The largest fast error |z0 + gx·k − h[k]| over the row h = heights[start..start + n] (n ≥ 1). The
+/// plane is stepped along the row (two f64 lanes per SSE2 register, four samples per step); the
+/// accumulated rounding is at most one ulp of the plane's magnitude per step, far inside the caller's
+/// slack (1e-6 of it) for any row below 2^24 samples. A last partial group reads past the row's end
+/// (when the heights go on) and masks those lanes out.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn row_fast_max(heights: &[f32], start: usize, n: usize, z0: f64, gx: f64) -> f64 {
+    use std::arch::x86_64::*;
+    let row = &heights[start..start + n];
+    let p = row.as_ptr();
+    // SAFETY: SSE2 is part of x86_64; every load reads heights[start + k..start + k + 4], checked to
+    // be in bounds (k + 4 ≤ n, or start + k + 4 ≤ heights.len() for the last group).
+    unsafe {
+        let abs = _mm_castsi128_pd(_mm_set1_epi64x(i64::MAX));
+        let step = _mm_set1_pd(4.0 * gx);
+        let mut za = _mm_set_pd(z0 + gx, z0);
+        let mut zb = _mm_set_pd(z0 + 3.0 * gx, z0 + 2.0 * gx);
+        let (mut ma, mut mb) = (_mm_setzero_pd(), _mm_setzero_pd());
+        let mut k = 0;
+        while k + 4 <= n {
+            let h = _mm_loadu_ps(p.add(k));
+            ma = _mm_max_pd(ma, _mm_and_pd(_mm_sub_pd(za, _mm_cvtps_pd(h)), abs));
+            mb = _mm_max_pd(mb, _mm_and_pd(_mm_sub_pd(zb, _mm_cvtps_pd(_mm_movehl_ps(h, h))), abs));
+            za = _mm_add_pd(za, step);
+            zb = _mm_add_pd(zb, step);
+            k += 4;
+        }
+        let rest = n - k;
+        if rest > 0 {
+            if start + k + 4 <= heights.len() {
+                // Lanes k .. k + rest are the row's; the others are zeroed (errors are ≥ 0).
+                let keep_a = _mm_castsi128_pd(_mm_set_epi64x(-((rest >= 2) as i64), -1));
+                let keep_b = _mm_castsi128_pd(_mm_set_epi64x(0, -((rest >= 3) as i64)));
+                let h = _mm_loadu_ps(p.add(k));
+                let ea = _mm_and_pd(_mm_sub_pd(za, _mm_cvtps_pd(h)), abs);
+                let eb = _mm_and_pd(_mm_sub_pd(zb, _mm_cvtps_pd(_mm_movehl_ps(h, h))), abs);
+                ma = _mm_max_pd(ma, _mm_and_pd(ea, keep_a));
+                mb = _mm_max_pd(mb, _mm_and_pd(eb, keep_b));
+            } else {
+                // The very end of the heights: one sample at a time.
+                for (d, &h) in row[k..].iter().enumerate() {
+                    let e = (z0 + gx * (k + d) as f64 - h as f64).abs();
+                    ma = _mm_max_sd(ma, _mm_set_sd(e));
+                }
+            }
+        }
+        let m = _mm_max_pd(ma, mb);
+        _mm_cvtsd_f64(_mm_max_sd(m, _mm_unpackhi_pd(m, m)))
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn row_fast_max(heights: &[f32], start: usize, n: usize, z0: f64, gx: f64) -> f64 {
+    heights[start..start + n].iter().enumerate().fold(0.0f64, |m, (k, &h)| m.max((z0 + gx * k as f64 - h as f64).abs()))
 }
 
 /// Result of scanning one face.
@@ -617,6 +719,19 @@ fn prev_edge(e: u32) -> u32 {
 /// Is `d` strictly inside the circumcircle of the counter-clockwise triangle (a, b, c)? Exact: with
 /// coordinates below 2^24 every product fits in i128.
 fn in_circle(a: [i64; 2], b: [i64; 2], c: [i64; 2], d: [i64; 2]) -> bool {
+    // Offsets below 2^14 (any map up to 16384 samples a side): every term stays below 2^60, so i64
+    // is exact and much cheaper than i128.
+    let spread = [a, b, c].iter().fold(0, |m, p| m | (p[0] - d[0]).abs() | (p[1] - d[1]).abs());
+    if spread < 1 << 14 {
+        let row = |p: [i64; 2]| {
+            let (x, y) = (p[0] - d[0], p[1] - d[1]);
+            (x, y, x * x + y * y)
+        };
+        let (ax, ay, a2) = row(a);
+        let (bx, by, b2) = row(b);
+        let (cx, cy, c2) = row(c);
+        return ax * (by * c2 - b2 * cy) - ay * (bx * c2 - b2 * cx) + a2 * (bx * cy - by * cx) > 0;
+    }
     let row = |p: [i64; 2]| {
         let (x, y) = ((p[0] - d[0]) as i128, (p[1] - d[1]) as i128);
         (x, y, x * x + y * y)
