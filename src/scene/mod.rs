@@ -84,4 +84,81 @@ pub struct Preset {
     pub path: Option<PathBuf>,
     pub scene: SceneSettings,
     pub terrain: Option<TerrainSettings>,
+    /// `[[species]]`, in file order (exclusions refer to species placed earlier).
+    pub species: Vec<SpeciesSettings>,
+    /// `[scatter]`
+    pub scatter: ScatterSettings,
+}
+
+/// `[scatter]`: how placement is split into tiles.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ScatterSettings {
+    /// Side of a placement tile in metres (instances are grouped per tile in tables and scene.glb).
+    pub tile_m: f64,
+}
+
+impl Default for ScatterSettings {
+    fn default() -> Self {
+        ScatterSettings { tile_m: 256.0 }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SpeciesKind {
+    Grass,
+    Flower,
+    Tree,
+    Mesh,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Placement {
+    /// Poisson-disk sampling thinned by density: spacing ≥ `min_spacing` everywhere.
+    Poisson,
+    /// One jittered candidate per grid cell, thinned by density: fast, for dense ground cover.
+    Jittered,
+}
+
+/// `exclusion = { species = "...", radius = m }`: keep at least `radius_m` from every instance
+/// of `species` (which must be placed earlier; naming the species itself keeps its own instances
+/// apart).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Exclusion {
+    pub species: String,
+    pub radius_m: f64,
+}
+
+/// `[[species]]`, resolved.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SpeciesSettings {
+    pub name: String,
+    pub kind: SpeciesKind,
+    /// Grayscale image stretched over the terrain extent (bilinear); value 0..1 scales
+    /// `max_density`. `None`: uniform.
+    pub density_map: Option<PathBuf>,
+    /// Grayscale image over the extent; nothing is placed where it is below 0.5.
+    pub mask: Option<PathBuf>,
+    /// Instances per square metre where the density map is 1.
+    pub max_density: f64,
+    pub placement: Placement,
+    /// Poisson radius in metres (minimum distance between two instances of this species).
+    pub min_spacing_m: f64,
+    /// Allowed terrain slope in degrees, [min, max].
+    pub slope_deg: [f64; 2],
+    /// Allowed altitude in metres, [min, max].
+    pub altitude_m: [f64; 2],
+    /// Nothing is placed below this height (metres).
+    pub water_level_m: Option<f64>,
+    /// Uniform scale range [min, max].
+    pub scale: [f64; 2],
+    pub random_yaw: bool,
+    /// 0: upright (+Y), 1: along the terrain normal; in between, a blend.
+    pub align_to_normal: f64,
+    pub exclusions: Vec<Exclusion>,
+    /// Offset added to the scene seed for this species.
+    pub seed: u64,
+    /// Explicit limit; exceeding it is an error naming the species and the remedy.
+    pub max_instances: usize,
 }

@@ -12,7 +12,7 @@ use clap::ValueEnum;
 use toml::de::{DeTable, DeValue};
 use toml::Spanned;
 
-use super::{Format, Preset, SceneSettings, TerrainSettings, TerrainSource};
+use super::{Format, Preset, ScatterSettings, SceneSettings, TerrainSettings, TerrainSource};
 use crate::heightfield::{DecodeOptions, Encoding, Heightfield, DEFAULT_MAX_SAMPLES};
 use crate::synth::{self, NoiseKind};
 use crate::terrain::job::MeshMode;
@@ -120,6 +120,8 @@ pub fn demo_preset() -> Preset {
             base_m: None,
             lods: vec![1.0, 4.0, 16.0],
         }),
+        species: Vec::new(),
+        scatter: ScatterSettings::default(),
     }
 }
 
@@ -509,7 +511,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             Some(parse_terrain(&t, scene.seed, check_inputs)?)
         }
     };
-    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain })
+    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain, species: Vec::new(), scatter: ScatterSettings::default() })
 }
 
 fn sections_list() -> String {
