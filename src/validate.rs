@@ -191,7 +191,25 @@ fn issue(severity: Severity, location: impl Into<String>, message: impl Into<Str
 fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
     let parse = |problem: String| ValidateError::Parse { path: path.to_path_buf(), problem };
     let bytes = fs::read(path).map_err(|source| ValidateError::Read { path: path.to_path_buf(), source })?;
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| parse(format!("not valid glTF: {e}")))?;
+    // the gltf crate refuses required extensions it does not implement; the ones verdant writes
+    // (EXT_mesh_gpu_instancing) are checked here instead, so validate with that one exception
+    let gltf = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| parse(format!("not valid glTF: {e}")))?;
+    {
+        use gltf::json::validation::{Error as JsonError, Validate};
+        let root = gltf.document.as_json();
+        let mut problems = Vec::new();
+        root.validate(root, gltf::json::Path::new, &mut |path, error| {
+            let at = path().to_string();
+            let ours = matches!(error, JsonError::Unsupported) && at.starts_with("extensionsRequired")
+                && root.extensions_required.iter().any(|e| e == EXT_INSTANCING && at.contains(EXT_INSTANCING));
+            if !ours {
+                problems.push(format!("{at}: {error}"));
+            }
+        });
+        if !problems.is_empty() {
+            return Err(parse(format!("not valid glTF: {}", problems.join("; "))));
+        }
+    }
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let doc = gltf.document;
     let buffers = gltf::import_buffers(&doc, Some(base), gltf.blob)

@@ -180,6 +180,8 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
     };
     let mut bin = Bin { data: Vec::new(), views: Vec::new() };
     let mut extensions_used = BTreeSet::new();
+    // an instanced node shown without instancing would be one wrong copy: loaders must support it
+    let mut extensions_required = BTreeSet::new();
 
     // meshes: one view per attribute and per index list
     for mesh in &scene.meshes {
@@ -276,6 +278,7 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
             }
             ext.insert(EXT_INSTANCING.into(), serde_json::json!({ "attributes": attributes }));
             extensions_used.insert(EXT_INSTANCING);
+            extensions_required.insert(EXT_INSTANCING);
         }
         let mut extras = node.extras.clone();
         if !node.lods.is_empty() {
@@ -359,6 +362,7 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
     }
     root.buffer_views = bin.views;
     root.extensions_used = extensions_used.into_iter().map(str::to_string).collect();
+    root.extensions_required = extensions_required.into_iter().map(str::to_string).collect();
     Ok((root, bin.data))
 }
 
