@@ -7,6 +7,7 @@
 
 pub mod gltf;
 pub mod obj;
+pub mod table;
 
 use std::ffi::OsStr;
 use std::fs;
