@@ -620,6 +620,12 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         }
         let table = match value.get_ref() {
             DeValue::Table(t) => t,
+            // `[[name]]` of an unknown array of tables
+            DeValue::Array(items)
+                if !SECTIONS.contains(&name) && !items.is_empty() && items.iter().all(|i| matches!(i.get_ref(), DeValue::Table(_))) =>
+            {
+                return Err(unknown_section(&ctx, &key.span(), &format!("[[{name}]]"), name));
+            }
             other => {
                 let problem = if SECTIONS.contains(&name) {
                     format!("`{name}` must be a section `[{name}]`, found {}", type_name(other))
@@ -646,13 +652,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             "scene" => scene = Some((key.span(), table)),
             "terrain" => terrain = Some((key.span(), table)),
             "scatter" => scatter = Some((key.span(), table)),
-            _ => {
-                let remedy = match did_you_mean(name, SECTIONS) {
-                    Some(s) => format!("did you mean `{}`? (known sections: {})", section_header(s), sections_list()),
-                    None => format!("known sections are {} (see docs/presets.md)", sections_list()),
-                };
-                return Err(ctx.at(&key.span(), format!("unknown section `[{name}]`"), remedy));
-            }
+            _ => return Err(unknown_section(&ctx, &key.span(), &format!("[{name}]"), name)),
         }
     }
 
@@ -705,6 +705,14 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         }
     }
     Ok(Preset { path: Some(path.to_path_buf()), scene, terrain, species, scatter })
+}
+
+fn unknown_section(ctx: &Ctx<'_>, span: &Range<usize>, header: &str, name: &str) -> PresetError {
+    let remedy = match did_you_mean(name, SECTIONS) {
+        Some(s) => format!("did you mean `{}`? (known sections: {})", section_header(s), sections_list()),
+        None => format!("known sections are {} (see docs/presets.md)", sections_list()),
+    };
+    ctx.at(span, format!("unknown section `{header}`"), remedy)
 }
 
 /// How a section's header is written: `[scene]`, `[[species]]`.
