@@ -6,9 +6,10 @@ use std::path::{Path, PathBuf};
 use proptest::prelude::*;
 use verdant::heightfield::{Encoding, DEFAULT_MAX_SAMPLES};
 use verdant::scene::preset::{
-    demo_preset, load_preset, parse_preset, procedural_heightfield, template, PresetError,
+    demo_preset, load_preset, parse_preset, procedural_heightfield, template, PresetError, DEFAULT_MAX_INSTANCES,
+    UNBOUNDED_ALTITUDE_M,
 };
-use verdant::scene::{Format, TerrainSource};
+use verdant::scene::{Exclusion, Format, Placement, SpeciesKind, TerrainSource};
 use verdant::synth::{self, NoiseKind};
 use verdant::terrain::job::MeshMode;
 
@@ -229,8 +230,13 @@ fn unknown_key_has_position_and_did_you_mean() {
 
 #[test]
 fn unknown_section_lists_the_known_ones() {
-    let e = error_of(&format!("{MINIMAL}\n[species]\noak = 1\n"));
-    assert!(e.starts_with("p.toml:4:2: unknown section `[species]`; known sections are `[scene]`, `[terrain]`"), "{e}");
+    let e = error_of(&format!("{MINIMAL}\n[snow]\nflakes = 1\n"));
+    assert!(
+        e.starts_with("p.toml:4:2: unknown section `[snow]`; known sections are `[scene]`, `[terrain]`, `[[species]]`, `[scatter]`"),
+        "{e}"
+    );
+    let e = error_of(&format!("{MINIMAL}\n[[specie]]\nname = \"a\"\n"));
+    assert!(e.starts_with("p.toml:4:3: unknown section `[[specie]]`; did you mean `[[species]]`?"), "{e}");
     let e = error_of(&format!("{MINIMAL}[terain]\n{PROC}\n"));
     assert!(e.starts_with("p.toml:3:2: unknown section `[terain]`; did you mean `[terrain]`?"), "{e}");
     let e = error_of("name = \"x\"\n[scene]\n");
@@ -390,6 +396,10 @@ proptest! {
                 Just("[scene]".to_string()),
                 Just("[terrain]".to_string()),
                 Just("[species]".to_string()),
+                Just("[[species]]".to_string()),
+                Just("[scatter]".to_string()),
+                "(kind|max_density|placement|min_spacing|slope|altitude|water_level|scale|random_yaw|align_to_normal|max_instances|tile|density_map) = (\"[a-z .]{0,6}\"|-?[0-9]{1,12}|-?[0-9]\\.[0-9]|\\[[0-9, .\"a-z-]{0,12}\\]|true|nan)",
+                "exclusion = (\\{ ?(species = \"[a-z]{0,3}\"|radius = -?[0-9]) ?\\}|\\[\\{ ?species = \"[a-z]{0,3}\" ?\\}\\]|[0-9])",
                 "(name|seed|formats|heightmap|procedural|chunk|lods|max_error|skirt|base|mode|size|relief|kind|cell_size|encoding) = (\"[a-z .]{0,6}\"|-?[0-9]{1,12}|-?[0-9]\\.[0-9]|\\[[0-9, .\"a-z]{0,12}\\]|\\{ ?(size|relief|kind) = [0-9]{1,5} ?\\}|nan|inf|true)",
                 "\\PC{0,20}",
             ],
@@ -422,9 +432,413 @@ fn docs_examples_parse() {
     let mut parsed = 0;
     for block in docs.split("```toml\n").skip(1) {
         let block = block.split("```").next().unwrap();
-        let text = if block.contains("[scene]") { block.to_string() } else { format!("{MINIMAL}{block}") };
+        let mut text = if block.contains("[scene]") { block.to_string() } else { format!("{MINIMAL}{block}") };
+        if text.contains("[[species]]") && !text.contains("[terrain]") {
+            text = format!("{text}\n[terrain]\n{PROC}\n");
+        }
         parse_preset(&text, Path::new("docs/example.toml")).unwrap_or_else(|e| panic!("{e}\n{text}"));
         parsed += 1;
     }
     assert!(parsed >= 2);
+}
+
+// ---------------------------------------------------------------------------------------------
+// [[species]] and [scatter]
+
+/// A preset with a small procedural terrain and `rest` after it.
+fn with_species(rest: &str) -> String {
+    format!("{MINIMAL}[terrain]\n{PROC}\n{rest}\n")
+}
+
+/// Line 5 is the first line of `rest` in [`with_species`].
+fn species_error(rest: &str) -> String {
+    error_of(&with_species(rest))
+}
+
+const TREE: &str = "[[species]]\nname = \"oak\"\nkind = \"tree\"\nmax_density = 0.01";
+
+#[test]
+fn species_every_key_parses() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(dir.path().join("maps")).unwrap();
+    std::fs::write(dir.path().join("maps/d.png"), b"x").unwrap();
+    std::fs::write(dir.path().join("maps/m.png"), b"x").unwrap();
+    let file = dir.path().join("s.toml");
+    let text = with_species(
+        "[scatter]\ntile = 64\n\
+         [[species]]\nname = \"oak\"\nkind = \"tree\"\nmax_density = 0.01\n\
+         [[species]]\nname = \"Grass_2\"\nkind = \"grass\"\ndensity_map = \"maps/d.png\"\nmask = \"maps/m.png\"\n\
+         max_density = 2\nplacement = \"poisson\"\nmin_spacing = 0.25\nslope = [5, 40.5]\naltitude = [-10.0, 300]\n\
+         water_level = 1.5\nscale = [0.5, 2.0]\nrandom_yaw = false\nalign_to_normal = 0.25\n\
+         exclusion = [{ species = \"oak\", radius = 1.5 }, { species = \"Grass_2\", radius = 0.1 }]\n\
+         seed = 9\nmax_instances = 1234",
+    );
+    std::fs::write(&file, &text).unwrap();
+    let p = load_preset(&file).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(p.scatter.tile_m, 64.0);
+    assert_eq!(p.species.len(), 2);
+    let g = &p.species[1];
+    assert_eq!((g.name.as_str(), g.kind), ("Grass_2", SpeciesKind::Grass));
+    assert_eq!(g.density_map.as_deref(), Some(dir.path().join("maps/d.png").as_path()));
+    assert_eq!(g.mask.as_deref(), Some(dir.path().join("maps/m.png").as_path()));
+    assert_eq!((g.max_density, g.placement, g.min_spacing_m), (2.0, Placement::Poisson, 0.25));
+    assert_eq!((g.slope_deg, g.altitude_m, g.water_level_m), ([5.0, 40.5], [-10.0, 300.0], Some(1.5)));
+    assert_eq!((g.scale, g.random_yaw, g.align_to_normal), ([0.5, 2.0], false, 0.25));
+    assert_eq!(
+        g.exclusions,
+        vec![
+            Exclusion { species: "oak".into(), radius_m: 1.5 },
+            Exclusion { species: "Grass_2".into(), radius_m: 0.1 }
+        ]
+    );
+    assert_eq!((g.seed, g.max_instances), (9, 1234));
+    // a single exclusion table; a single number for scale; an inline array of species tables
+    let p = parse_preset(
+        &with_species(&format!(
+            "{TREE}\n[[species]]\nname = \"g\"\nkind = \"grass\"\nmax_density = 1\nscale = 1.5\n\
+             exclusion = {{ species = \"oak\", radius = 2 }}"
+        )),
+        Path::new("p.toml"),
+    )
+    .unwrap();
+    assert_eq!(p.species[1].scale, [1.5, 1.5]);
+    assert_eq!(p.species[1].exclusions, vec![Exclusion { species: "oak".into(), radius_m: 2.0 }]);
+    let p = parse_preset(
+        &with_species("species = [{ name = \"a\", kind = \"mesh\", max_density = 0.1, min_spacing = 2.0, placement = \"poisson\" }]"),
+        Path::new("p.toml"),
+    );
+    // (an inline `species = [...]` at the root would sit inside [terrain]; TOML puts it there)
+    assert!(p.is_err());
+}
+
+#[test]
+fn species_defaults_follow_the_kind() {
+    let text = with_species(
+        "[[species]]\nname = \"t\"\nkind = \"tree\"\nmax_density = 0.01\n\
+         [[species]]\nname = \"g\"\nkind = \"grass\"\nmax_density = 1\n\
+         [[species]]\nname = \"f\"\nkind = \"flower\"\nmax_density = 1\n\
+         [[species]]\nname = \"m\"\nkind = \"mesh\"\nmax_density = 1",
+    );
+    let p = parse_preset(&text, Path::new("p.toml")).unwrap();
+    assert_eq!(p.scatter.tile_m, 256.0);
+    let [t, g, f, m] = &p.species[..] else { panic!("{:?}", p.species) };
+    assert_eq!((t.kind, t.placement, t.min_spacing_m, t.align_to_normal), (SpeciesKind::Tree, Placement::Poisson, 4.0, 0.0));
+    assert_eq!((g.kind, g.placement, g.min_spacing_m, g.align_to_normal), (SpeciesKind::Grass, Placement::Jittered, 0.0, 1.0));
+    assert_eq!((f.kind, f.placement, f.min_spacing_m, f.align_to_normal), (SpeciesKind::Flower, Placement::Jittered, 0.0, 1.0));
+    assert_eq!((m.kind, m.placement, m.min_spacing_m, m.align_to_normal), (SpeciesKind::Mesh, Placement::Jittered, 0.0, 0.0));
+    for s in &p.species {
+        assert_eq!((s.density_map.as_ref(), s.mask.as_ref(), s.water_level_m), (None, None, None));
+        assert_eq!((s.slope_deg, s.altitude_m, s.scale), ([0.0, 90.0], UNBOUNDED_ALTITUDE_M, [1.0, 1.0]));
+        assert!(s.random_yaw && s.exclusions.is_empty());
+        assert_eq!((s.seed, s.max_instances), (0, DEFAULT_MAX_INSTANCES));
+    }
+    // trees may be jittered; then the spacing defaults to 0
+    let p = parse_preset(&with_species(&format!("{TREE}\nplacement = \"jittered\"")), Path::new("p.toml")).unwrap();
+    assert_eq!((p.species[0].placement, p.species[0].min_spacing_m), (Placement::Jittered, 0.0));
+    // no species: empty list, default tile
+    let p = parse_preset(&with_terrain(PROC), Path::new("p.toml")).unwrap();
+    assert!(p.species.is_empty());
+    assert_eq!(p.scatter.tile_m, 256.0);
+}
+
+#[test]
+fn species_settings_serialise_to_clean_json() {
+    // the manifest is JSON: the unbounded altitude must stay a number (±∞ would become null)
+    let p = parse_preset(&with_species(TREE), Path::new("p.toml")).unwrap();
+    let json = serde_json::to_value(&p).unwrap();
+    let s = &json["species"][0];
+    assert_eq!(s["altitude_m"], serde_json::json!([-1e9, 1e9]));
+    assert_eq!((s["kind"].as_str(), s["placement"].as_str()), (Some("tree"), Some("poisson")));
+    assert_eq!(json["scatter"]["tile_m"], 256.0);
+    // absent water level: null (an Option), never NaN
+    assert!(s["water_level_m"].is_null());
+}
+
+#[test]
+fn species_invalid_values_are_refused_where_they_are() {
+    // (line, its position written as line 9, expected text)
+    let cases: &[(&str, &str, &str)] = &[
+        ("max_density = 0", "p.toml:9:15:", "`max_density` must be greater than 0, got 0"),
+        ("max_density = -1", "p.toml:9:15:", "`max_density` must be greater than 0"),
+        ("max_density = nan", "p.toml:9:15:", "`max_density` must be a finite number"),
+        ("max_density = inf", "p.toml:9:15:", "`max_density` must be a finite number"),
+        ("kind = \"bush\"", "p.toml:9:8:", "unknown `kind` value \"bush\"; allowed values are grass, flower, tree, mesh"),
+        ("placement = \"random\"", "p.toml:9:13:", "unknown `placement` value \"random\"; allowed values are poisson, jittered"),
+        ("placement = \"poison\"", "p.toml:9:13:", "did you mean \"poisson\"?"),
+        ("min_spacing = -1", "p.toml:9:15:", "`min_spacing` must be 0 or more"),
+        ("min_spacing = 0", "p.toml:9:15:", "`min_spacing` must be greater than 0 for placement = \"poisson\""),
+        ("slope = [0, 95]", "p.toml:9:13:", "`slope` must be between 0 and 90 degrees, got 95"),
+        ("slope = [-5, 30]", "p.toml:9:10:", "`slope` must be between 0 and 90 degrees, got -5"),
+        ("slope = [40, 10]", "p.toml:9:9:", "`slope` is [min, max], but 40 > 10; put the smaller value first"),
+        ("slope = [10]", "p.toml:9:9:", "`slope` must have two numbers [min, max], found 1"),
+        ("slope = 30", "p.toml:9:9:", "`slope` must be an array [min, max] in degrees, found an integer"),
+        ("slope = [0, \"30\"]", "p.toml:9:13:", "`slope` must be a number, found a string"),
+        ("altitude = [100, 50]", "p.toml:9:12:", "`altitude` is [min, max], but 100 > 50"),
+        ("altitude = [0, inf]", "p.toml:9:16:", "`altitude` must be a finite number"),
+        ("altitude = \"high\"", "p.toml:9:12:", "`altitude` must be an array [min, max] in metres, found a string"),
+        ("water_level = \"2\"", "p.toml:9:15:", "`water_level` must be a number, found a string"),
+        ("water_level = nan", "p.toml:9:15:", "`water_level` must be a finite number"),
+        ("scale = [0, 1]", "p.toml:9:10:", "`scale` must be greater than 0, got 0"),
+        ("scale = [2, 1]", "p.toml:9:9:", "`scale` is [min, max], but 2 > 1"),
+        ("scale = -1", "p.toml:9:9:", "`scale` must be greater than 0"),
+        ("scale = \"big\"", "p.toml:9:9:", "`scale` must be an array [min, max], found a string"),
+        ("random_yaw = 1", "p.toml:9:14:", "`random_yaw` must be a boolean, found an integer; write it like `random_yaw = false`"),
+        ("align_to_normal = 1.5", "p.toml:9:19:", "`align_to_normal` must be between 0 (upright) and 1 (along the terrain normal), got 1.5"),
+        ("align_to_normal = -0.1", "p.toml:9:19:", "`align_to_normal` must be between 0"),
+        ("seed = -1", "p.toml:9:8:", "`seed` must be between 0 and"),
+        ("seed = 1.5", "p.toml:9:8:", "`seed` must be an integer, found a float"),
+        ("max_instances = 0", "p.toml:9:17:", "`max_instances` must be between 1 and 4294967295, got 0"),
+        ("max_instances = 5e6", "p.toml:9:17:", "`max_instances` must be an integer, found a float"),
+        ("density_map = 3", "p.toml:9:15:", "`density_map` must be a path (a string), found an integer"),
+        ("density_map = \"\"", "p.toml:9:15:", "`density_map` is empty"),
+        ("mask = true", "p.toml:9:8:", "`mask` must be a path (a string), found a boolean"),
+        ("exclusion = { species = \"oak\", radius = 0 }", "p.toml:9:41:", "`radius` must be greater than 0, got 0"),
+        ("exclusion = { species = \"oak\" }", "p.toml:9:13:", "`exclusion` has no `radius`; add `radius = 1.5`"),
+        ("exclusion = { radius = 1 }", "p.toml:9:13:", "`exclusion` has no `species`; add `species = \"oak\"`"),
+        ("exclusion = \"oak\"", "p.toml:9:13:", "`exclusion` must be a table or an array of tables, found a string"),
+        ("exclusion = [1]", "p.toml:9:14:", "`exclusion` must be a table, found an integer"),
+        ("exclusion = { species = \"oak\", radius = 1, radias = 2 }", "p.toml:9:44:", "unknown key `radias` in `exclusion`; did you mean `radius`?"),
+        ("exclusion = [{ species = \"oak\", radius = 1 }, { species = \"oak\", radius = 2 }]", "p.toml:9:59:", "species `oak` is excluded twice in `oak`"),
+    ];
+    for (line, position, expected) in cases {
+        // the line under test comes right after the name (line 7); `kind` and `max_density` follow unless tested
+        let key = line.split(" = ").next().unwrap();
+        let mut body = format!("[[species]]\nname = \"oak\"\n{line}\n");
+        if key != "kind" {
+            body.push_str("kind = \"tree\"\n");
+        }
+        if key != "max_density" {
+            body.push_str("max_density = 0.01\n");
+        }
+        let e = species_error(&body);
+        let position = position.replace("p.toml:9:", "p.toml:7:");
+        assert!(e.starts_with(&position), "{line}: expected {position} in {e}");
+        assert!(e.contains(expected), "{line}: expected {expected:?} in {e}");
+        assert!(e.contains("; "), "{line}: no remedy in {e}");
+    }
+    // a duplicate key is a TOML error at the repeated key
+    let e = species_error(&format!("{TREE}\nmax_density = 0.5"));
+    assert!(e.starts_with("p.toml:9:") && e.contains("duplicate"), "{e}");
+}
+
+#[test]
+fn species_required_keys_and_names() {
+    let e = species_error("[[species]]\nkind = \"tree\"\nmax_density = 1");
+    assert_eq!(e, "p.toml:5:1: [[species]] has no `name`; add `name = \"oak\"`");
+    let e = species_error("[[species]]\nname = \"oak\"\nmax_density = 1");
+    assert_eq!(e, "p.toml:5:1: [[species]] `oak` has no `kind`; add `kind = \"grass\"` (or \"flower\", \"tree\", \"mesh\")");
+    let e = species_error("[[species]]\nname = \"oak\"\nkind = \"tree\"");
+    assert_eq!(e, "p.toml:5:1: [[species]] `oak` has no `max_density`; add `max_density = 0.5` (instances per square metre)");
+    let e = species_error("[[species]]\nname = \"rock\"\nkind = \"mesh\"\nmax_density = 1\nplacement = \"poisson\"");
+    assert!(e.starts_with("p.toml:5:1: [[species]] `rock` has no `min_spacing`, which placement = \"poisson\" needs"), "{e}");
+    assert!(e.contains("add `min_spacing = 1.0`"), "{e}");
+    for (name, expected) in [
+        ("\"\"", "the species name is empty"),
+        ("\"red oak\"", "species name `red oak` contains ' ', which is not safe in a file name"),
+        ("\"../oak\"", "species name `../oak` contains '.'"),
+        ("\"ök\"", "contains 'ö'"),
+        (&format!("\"{}\"", "x".repeat(65)), "longer than 64 characters"),
+    ] {
+        let e = species_error(&format!("[[species]]\nname = {name}\nkind = \"tree\"\nmax_density = 1"));
+        assert!(e.starts_with("p.toml:6:8: "), "{name}: {e}");
+        assert!(e.contains(expected), "{name}: {e}");
+        assert!(e.contains("use only letters, digits, `-` and `_`"), "{e}");
+    }
+    let e = species_error("[[species]]\nname = 3\nkind = \"tree\"\nmax_density = 1");
+    assert!(e.starts_with("p.toml:6:8: `name` must be a string, found an integer"), "{e}");
+}
+
+#[test]
+fn duplicate_species_names_are_refused() {
+    let e = species_error(&format!("{TREE}\n[[species]]\nname = \"oak\"\nkind = \"grass\"\nmax_density = 1"));
+    assert_eq!(e, "p.toml:10:8: species `oak` is declared twice; the first is at line 6; give each [[species]] its own name");
+    // names differing only in case would be one file on case-insensitive file systems
+    let e = species_error(&format!("{TREE}\n[[species]]\nname = \"Oak\"\nkind = \"grass\"\nmax_density = 1"));
+    assert!(e.starts_with("p.toml:10:8: species `Oak` is declared twice; the first is at line 6 as `oak`"), "{e}");
+}
+
+#[test]
+fn exclusions_name_earlier_species_or_themselves() {
+    let grass = |exclusion: &str| format!("[[species]]\nname = \"grass\"\nkind = \"grass\"\nmax_density = 1\nexclusion = {exclusion}");
+    // declared later: the remedy says to move it up
+    let e = species_error(&format!("{}\n{TREE}", grass("{ species = \"oak\", radius = 1 }")));
+    assert_eq!(
+        e,
+        "p.toml:9:25: exclusion names species `oak`, which is not declared before `grass`; declare `oak` in a [[species]] \
+         before `grass` (it is placed first), or name `grass` itself to keep its instances apart"
+    );
+    // not declared at all, with a near miss
+    let e = species_error(&format!("{TREE}\n{}", grass("{ species = \"oaks\", radius = 1 }")));
+    assert!(e.starts_with("p.toml:13:25: exclusion names species `oaks`, which is not declared before `grass`; did you mean `oak`?"), "{e}");
+    // not declared at all, nothing close: the declared ones are listed
+    let e = species_error(&format!("{TREE}\n{}", grass("[{ species = \"oak\", radius = 1 }, { species = \"birch\", radius = 1 }]")));
+    assert!(e.starts_with("p.toml:13:59: exclusion names species `birch`"), "{e}");
+    assert!(e.contains("species declared so far: `oak`, `grass`"), "{e}");
+    // earlier and itself are fine
+    let p = parse_preset(
+        &with_species(&format!("{TREE}\nexclusion = {{ species = \"oak\", radius = 8 }}\n{}", grass("[{ species = \"oak\", radius = 1 }, { species = \"grass\", radius = 0.2 }]"))),
+        Path::new("p.toml"),
+    )
+    .unwrap();
+    assert_eq!(p.species[0].exclusions, vec![Exclusion { species: "oak".into(), radius_m: 8.0 }]);
+    assert_eq!(p.species[1].exclusions.len(), 2);
+}
+
+#[test]
+fn species_unknown_keys_have_positions_and_did_you_mean() {
+    let e = species_error(&format!("{TREE}\ndensty_map = \"d.png\""));
+    assert_eq!(e, "p.toml:9:1: unknown key `densty_map` in [[species]] `oak`; did you mean `density_map`?");
+    let e = species_error(&format!("{TREE}\nmin-spacing = 3"));
+    assert_eq!(e, "p.toml:9:1: unknown key `min-spacing` in [[species]] `oak`; did you mean `min_spacing`?");
+    let e = species_error(&format!("{TREE}\nformats = [\"glb\"]"));
+    assert!(e.starts_with("p.toml:9:1: unknown key `formats` in [[species]] `oak`; `formats` belongs in [scene]"), "{e}");
+    let e = species_error(&format!("{TREE}\ntile = 64"));
+    assert!(e.starts_with("p.toml:9:1: unknown key `tile` in [[species]] `oak`; `tile` belongs in [scatter]"), "{e}");
+    let e = species_error(&format!("{TREE}\nzzz = 1"));
+    assert!(e.starts_with("p.toml:9:1: unknown key `zzz` in [[species]] `oak`; the keys of [[species]] `oak` are `name`, `kind`"), "{e}");
+    // [scatter]
+    let e = species_error("[scatter]\ntiles = 64");
+    assert_eq!(e, "p.toml:6:1: unknown key `tiles` in [scatter]; did you mean `tile`?");
+    let e = species_error("[scatter]\nmax_density = 1");
+    assert!(e.starts_with("p.toml:6:1: unknown key `max_density` in [scatter]; `max_density` belongs in [[species]]"), "{e}");
+    for (line, expected) in [
+        ("tile = 0", "p.toml:6:8: `tile` must be greater than 0, got 0"),
+        ("tile = -5", "p.toml:6:8: `tile` must be greater than 0"),
+        ("tile = \"big\"", "p.toml:6:8: `tile` must be a number, found a string"),
+        ("tile = nan", "p.toml:6:8: `tile` must be a finite number"),
+    ] {
+        let e = species_error(&format!("[scatter]\n{line}"));
+        assert!(e.starts_with(expected), "{line}: {e}");
+    }
+    // a species key at the top level
+    let e = error_of("max_density = 1\n[scene]\nname = \"x\"\n");
+    assert_eq!(e, "p.toml:1:1: key `max_density` is outside any section; move it under [[species]]");
+}
+
+#[test]
+fn species_section_shapes() {
+    // single brackets
+    let e = species_error("[species]\nname = \"oak\"");
+    assert!(e.starts_with("p.toml:5:2: `[species]` must be an array of tables, one per species; write the header with double brackets"), "{e}");
+    assert!(e.contains("`[scene]`, `[terrain]`, `[[species]]`, `[scatter]`"), "{e}");
+    // not a table at all
+    let e = error_of(&format!("species = 3\n{MINIMAL}"));
+    assert!(e.starts_with("p.toml:1:1: `species` must be an array of tables `[[species]]`, found an integer"), "{e}");
+    let e = error_of(&format!("species = [1]\n{MINIMAL}"));
+    assert!(e.starts_with("p.toml:1:1: `species` must be an array of tables `[[species]]`, found an array"), "{e}");
+    let e = error_of(&format!("scatter = 3\n{MINIMAL}"));
+    assert!(e.starts_with("p.toml:1:1: `scatter` must be a section `[scatter]`, found an integer"), "{e}");
+    // an inline array of tables at the top level is the same as [[species]] to TOML
+    let text = format!("species = [{{ name = \"a\", kind = \"grass\", max_density = 1 }}]\n{MINIMAL}[terrain]\n{PROC}\n");
+    let p = parse_preset(&text, Path::new("p.toml")).unwrap();
+    assert_eq!(p.species[0].name, "a");
+}
+
+#[test]
+fn species_need_a_terrain() {
+    let e = error_of(&format!("{MINIMAL}{TREE}\n"));
+    assert_eq!(
+        e,
+        "p.toml:3:3: [[species]] needs a terrain: instances are placed on the terrain surface; add a `[terrain]` section \
+         (e.g. `procedural = { kind = \"fbm\", size = 513, relief = 200.0 }`)"
+    );
+    // [scatter] alone is fine
+    assert!(parse_preset(&format!("{MINIMAL}[scatter]\ntile = 32\n"), Path::new("p.toml")).is_ok());
+    // [terrain] after the species is fine too (sections are not ordered)
+    let text = format!("{MINIMAL}{TREE}\n[terrain]\n{PROC}\n");
+    assert_eq!(parse_preset(&text, Path::new("p.toml")).unwrap().species.len(), 1);
+}
+
+#[test]
+fn missing_density_map_and_mask_are_named_with_their_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("forest.toml");
+    std::fs::write(&file, with_species(&format!("{TREE}\ndensity_map = \"maps/none.png\""))).unwrap();
+    let e = load_preset(&file).unwrap_err();
+    let resolved = dir.path().join("maps/none.png");
+    assert!(matches!(&e, PresetError::MissingInput { input, what: "density_map", .. } if input == &resolved), "{e:?}");
+    assert_eq!(e.position(), Some((9, 15)));
+    let s = e.to_string();
+    assert!(s.starts_with(&format!("{}:9:15: density_map `{}` not found; paths are relative", file.display(), resolved.display())), "{s}");
+    // parse_preset does not look at the disk, and resolves against the preset's folder
+    let p = parse_preset(&std::fs::read_to_string(&file).unwrap(), &file).unwrap();
+    assert_eq!(p.species[0].density_map.as_deref(), Some(resolved.as_path()));
+
+    std::fs::write(&file, with_species(&format!("{TREE}\nmask = \"m.png\""))).unwrap();
+    let e = load_preset(&file).unwrap_err();
+    assert!(e.to_string().starts_with(&format!("{}:9:8: mask `{}` not found", file.display(), dir.path().join("m.png").display())), "{e}");
+    // a folder is not an image
+    std::fs::create_dir_all(dir.path().join("m.png")).unwrap();
+    let e = load_preset(&file).unwrap_err();
+    assert!(e.to_string().contains("mask `") && e.to_string().contains("is not a file"), "{e}");
+}
+
+#[test]
+fn shipped_presets_have_the_species_they_promise() {
+    let p = load_preset(&manifest_dir().join("presets/meadow.toml")).unwrap();
+    let names: Vec<&str> = p.species.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["oak", "grass", "flowers"]);
+    let [oak, grass, flowers] = &p.species[..] else { panic!() };
+    assert_eq!((oak.kind, oak.placement), (SpeciesKind::Tree, Placement::Poisson));
+    assert!(oak.min_spacing_m > 0.0);
+    assert_eq!((grass.kind, grass.placement), (SpeciesKind::Grass, Placement::Jittered));
+    assert_eq!(grass.exclusions[0].species, "oak");
+    assert_eq!(flowers.kind, SpeciesKind::Flower);
+    assert!(p.species.iter().all(|s| s.density_map.is_none() && s.mask.is_none()), "no image files are shipped");
+
+    let p = load_preset(&manifest_dir().join("presets/alpine.toml")).unwrap();
+    let [conifer, grass] = &p.species[..] else { panic!("{:?}", p.species) };
+    assert_eq!((conifer.kind, conifer.placement, conifer.min_spacing_m), (SpeciesKind::Tree, Placement::Poisson, 6.0));
+    assert!(conifer.slope_deg[1] <= 35.0 && conifer.altitude_m[1] < 1500.0 && conifer.altitude_m[0] > 0.0);
+    assert_eq!(grass.kind, SpeciesKind::Grass);
+    assert_eq!(grass.exclusions[0].species, "conifer");
+}
+
+#[test]
+fn demo_species_stay_small() {
+    let d = demo_preset();
+    assert!(d.species.len() >= 2);
+    assert!(d.species.iter().any(|s| s.kind == SpeciesKind::Tree) && d.species.iter().any(|s| s.kind == SpeciesKind::Grass));
+    // an upper bound of the instance count: max_density over the whole 2048 m × 2048 m map
+    let area = 2048.0 * 2048.0;
+    let bound: f64 = d.species.iter().map(|s| s.max_density * area).sum();
+    assert!(bound <= 200_000.0, "{bound}");
+    // the same invariants the parser enforces
+    for (i, s) in d.species.iter().enumerate() {
+        assert!(s.placement != Placement::Poisson || s.min_spacing_m > 0.0);
+        for e in &s.exclusions {
+            assert!(d.species[..=i].iter().any(|o| o.name == e.species));
+        }
+    }
+    // it serialises without nulls in the ranges
+    let json = serde_json::to_value(&d).unwrap();
+    assert!(json["species"].as_array().unwrap().iter().all(|s| s["altitude_m"][0].is_number()));
+}
+
+#[test]
+fn template_species_example_parses_when_uncommented() {
+    let text = template("t");
+    let mut out = String::new();
+    let mut after_scatter = false;
+    for line in text.lines() {
+        after_scatter |= line.starts_with("# [scatter]");
+        let uncommented = match line.strip_prefix("# ") {
+            Some(rest) if after_scatter => {
+                let rest = rest.strip_prefix("# ").unwrap_or(rest);
+                let is_toml = rest.starts_with('[') || rest.split_once(" = ").is_some_and(|(k, _)| !k.contains(' '));
+                if is_toml { rest } else { line }
+            }
+            _ => line,
+        };
+        out.push_str(uncommented);
+        out.push('\n');
+    }
+    assert!(out.contains("\n[[species]]\n") && out.contains("\n[scatter]\n"), "{out}");
+    let p = parse_preset(&out, Path::new("presets/t.toml")).unwrap_or_else(|e| panic!("{e}\n{out}"));
+    let names: Vec<&str> = p.species.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["pine", "grass"]);
+    assert_eq!(p.species[0].density_map.as_deref(), Some(Path::new("presets/maps/forest.png")));
+    assert_eq!(p.species[1].exclusions[0].species, "pine");
+    // and as shipped (all commented out) it has none
+    assert!(parse_preset(&text, Path::new("t.toml")).unwrap().species.is_empty());
 }

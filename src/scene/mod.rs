@@ -144,10 +144,13 @@ pub struct SpeciesSettings {
     pub max_density: f64,
     pub placement: Placement,
     /// Poisson radius in metres (minimum distance between two instances of this species).
+    /// The parser guarantees > 0 for `Poisson`; 0 (no minimum) is the default for `Jittered`.
     pub min_spacing_m: f64,
     /// Allowed terrain slope in degrees, [min, max].
     pub slope_deg: [f64; 2],
-    /// Allowed altitude in metres, [min, max].
+    /// Allowed altitude in metres, [min, max]. Unbounded is ±1e9 m
+    /// ([`preset::UNBOUNDED_ALTITUDE_M`]), not ±∞: JSON has no infinity and this is written into
+    /// the manifest.
     pub altitude_m: [f64; 2],
     /// Nothing is placed below this height (metres).
     pub water_level_m: Option<f64>,

@@ -12,13 +12,17 @@ use clap::ValueEnum;
 use toml::de::{DeTable, DeValue};
 use toml::Spanned;
 
-use super::{Format, Preset, ScatterSettings, SceneSettings, TerrainSettings, TerrainSource};
+use super::{
+    Exclusion, Format, Placement, Preset, ScatterSettings, SceneSettings, SpeciesKind, SpeciesSettings, TerrainSettings,
+    TerrainSource,
+};
 use crate::heightfield::{DecodeOptions, Encoding, Heightfield, DEFAULT_MAX_SAMPLES};
 use crate::synth::{self, NoiseKind};
 use crate::terrain::job::MeshMode;
 
-/// The sections a preset may have, in the order the docs list them.
-pub const SECTIONS: &[&str] = &["scene", "terrain"];
+/// The sections a preset may have, in the order the docs list them (`species` is an array of
+/// tables, `[[species]]`).
+pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter"];
 /// Keys of `[scene]`.
 pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats"];
 /// Keys of `[terrain]`.
@@ -40,6 +44,41 @@ pub const TERRAIN_KEYS: &[&str] = &[
     "base",
     "lods",
 ];
+/// Keys of `[[species]]`.
+pub const SPECIES_KEYS: &[&str] = &[
+    "name",
+    "kind",
+    "density_map",
+    "mask",
+    "max_density",
+    "placement",
+    "min_spacing",
+    "slope",
+    "altitude",
+    "water_level",
+    "scale",
+    "random_yaw",
+    "align_to_normal",
+    "exclusion",
+    "seed",
+    "max_instances",
+];
+/// Keys of `[[species]] exclusion = { … }`.
+pub const EXCLUSION_KEYS: &[&str] = &["species", "radius"];
+/// Keys of `[scatter]`.
+pub const SCATTER_KEYS: &[&str] = &["tile"];
+/// Default `max_instances` of a species.
+pub const DEFAULT_MAX_INSTANCES: usize = 5_000_000;
+/// Largest `max_instances` a preset may ask for (a glTF accessor count is a u32).
+pub const MAX_MAX_INSTANCES: u64 = u32::MAX as u64;
+/// Default `min_spacing` (m) of a Poisson-placed tree: crowns of ordinary trees do not touch.
+pub const DEFAULT_TREE_SPACING_M: f64 = 4.0;
+/// `altitude` when absent: "unbounded", written as ±1e9 m rather than ±∞ because JSON has no
+/// infinity (serde_json writes `null`), and the manifest must reproduce the build. No terrain
+/// comes near 10⁶ km, so the band never excludes anything.
+pub const UNBOUNDED_ALTITUDE_M: [f64; 2] = [-1e9, 1e9];
+/// Default `[scatter] tile` (m).
+pub const DEFAULT_TILE_M: f64 = 256.0;
 /// Keys of `[terrain] procedural = { … }`.
 pub const PROCEDURAL_KEYS: &[&str] = &["kind", "size", "seed", "relief"];
 /// `[terrain]` keys that only mean something for a heightmap file.
@@ -98,7 +137,9 @@ pub fn parse_preset(text: &str, path: &Path) -> Result<Preset, PresetError> {
 }
 
 /// The embedded default of `verdant build` without a preset: a 513² fBm map generated in memory,
-/// 4 m cells, 300 m relief, TIN within 1 m in 128² chunks with skirts and a three-level LoD chain.
+/// 4 m cells (2 km across), 300 m relief, TIN within 1 m in 128² chunks with skirts and a
+/// three-level LoD chain; Poisson-spaced trees below 240 m and jittered grass that keeps clear of
+/// their trunks — about 130 000 instances in all, so the demo builds in seconds.
 pub fn demo_preset() -> Preset {
     Preset {
         path: None,
@@ -120,7 +161,46 @@ pub fn demo_preset() -> Preset {
             base_m: None,
             lods: vec![1.0, 4.0, 16.0],
         }),
-        species: Vec::new(),
+        species: vec![
+            // 58 % of the map is below 240 m with slopes under 30°: ≈ 2.4 km² × 0.002 ≈ 4 800 trees
+            SpeciesSettings {
+                name: "tree".into(),
+                kind: SpeciesKind::Tree,
+                density_map: None,
+                mask: None,
+                max_density: 0.002,
+                placement: Placement::Poisson,
+                min_spacing_m: 6.0,
+                slope_deg: [0.0, 30.0],
+                altitude_m: [0.0, 240.0],
+                water_level_m: None,
+                scale: [0.8, 1.25],
+                random_yaw: true,
+                align_to_normal: 0.0,
+                exclusions: Vec::new(),
+                seed: 0,
+                max_instances: DEFAULT_MAX_INSTANCES,
+            },
+            // 75 % of the map has slopes under 35°: ≈ 3.1 km² × 0.04 ≈ 125 000 clumps
+            SpeciesSettings {
+                name: "grass".into(),
+                kind: SpeciesKind::Grass,
+                density_map: None,
+                mask: None,
+                max_density: 0.04,
+                placement: Placement::Jittered,
+                min_spacing_m: 0.0,
+                slope_deg: [0.0, 35.0],
+                altitude_m: UNBOUNDED_ALTITUDE_M,
+                water_level_m: None,
+                scale: [0.7, 1.2],
+                random_yaw: true,
+                align_to_normal: 1.0,
+                exclusions: vec![Exclusion { species: "tree".into(), radius_m: 1.5 }],
+                seed: 0,
+                max_instances: DEFAULT_MAX_INSTANCES,
+            },
+        ],
         scatter: ScatterSettings::default(),
     }
 }
@@ -138,14 +218,24 @@ pub fn procedural_heightfield(source: &TerrainSource) -> Option<Heightfield> {
 /// Whether `name` may be a scene name: 1 to 64 ASCII letters, digits, `-` and `_` (a folder name
 /// on every platform). The error says what is wrong.
 pub fn check_scene_name(name: &str) -> Result<(), String> {
+    check_safe_name("scene", "folder", name)
+}
+
+/// Whether `name` may be a species name: the same rule as a scene name, since it names files
+/// (`placements/<name>.csv`, `species/<name>_LOD0.glb`).
+pub fn check_species_name(name: &str) -> Result<(), String> {
+    check_safe_name("species", "file", name)
+}
+
+fn check_safe_name(what: &str, used_as: &str, name: &str) -> Result<(), String> {
     if name.is_empty() {
-        return Err("the scene name is empty".into());
+        return Err(format!("the {what} name is empty"));
     }
     if name.chars().count() > MAX_NAME_CHARS {
-        return Err(format!("the scene name is longer than {MAX_NAME_CHARS} characters"));
+        return Err(format!("the {what} name is longer than {MAX_NAME_CHARS} characters"));
     }
     if let Some(c) = name.chars().find(|c| !(c.is_ascii_alphanumeric() || *c == '-' || *c == '_')) {
-        return Err(format!("scene name `{name}` contains {c:?}, which is not safe in a folder name"));
+        return Err(format!("{what} name `{name}` contains {c:?}, which is not safe in a {used_as} name"));
     }
     Ok(())
 }
@@ -207,6 +297,37 @@ skirt = 2.0
 # base = 20.0                # close into a watertight solid this far below the lowest sample
 # A LoD chain per chunk: the max error of each level, finest first, strictly increasing.
 lods = [1.0, 4.0, 16.0]
+
+# [scatter]
+# tile = 256.0               # side of a placement tile, metres
+
+# Vegetation: one [[species]] table per species, placed in file order; a species can keep clear
+# only of species declared above it (or of itself). Uncomment to scatter trees and grass.
+#
+# [[species]]
+# name = "pine"              # letters, digits, `-` and `_`; names placements/pine.csv
+# kind = "tree"              # "grass", "flower", "tree" or "mesh"
+# max_density = 0.005        # instances per m² where the density map is 1 (required)
+# # density_map = "maps/forest.png"  # grayscale over the terrain: 0..1 scales max_density
+# # mask = "maps/no-roads.png"       # grayscale: nothing where it is below 0.5
+# placement = "poisson"      # "poisson" (default for trees) or "jittered" (default otherwise)
+# min_spacing = 5.0          # metres between two instances (required > 0 for poisson; trees: 4)
+# slope = [0.0, 35.0]        # allowed slope, degrees (default [0, 90])
+# altitude = [0.0, 150.0]    # allowed height, metres (default: unbounded)
+# # water_level = 2.0        # nothing below this height, metres
+# scale = [0.8, 1.2]         # uniform scale range (default [1, 1])
+# random_yaw = true          # random turn about the vertical (default true)
+# align_to_normal = 0.0      # 0 upright … 1 along the ground normal (default: grass/flower 1, else 0)
+# seed = 0                   # offset added to the scene seed for this species
+# max_instances = 5000000    # more than this is an error naming the species
+#
+# [[species]]
+# name = "grass"
+# kind = "grass"
+# max_density = 0.2
+# slope = [0.0, 30.0]
+# # keep 1.5 m clear around every pine (an array of such tables lists several species)
+# exclusion = { species = "pine", radius = 1.5 }
 "#;
 
 // ---------------------------------------------------------------------------------------------
@@ -274,7 +395,7 @@ type Entry<'a, 'i> = (&'a Spanned<std::borrow::Cow<'i, str>>, &'a Spanned<DeValu
 struct Table<'a, 'i> {
     ctx: &'a Ctx<'a>,
     /// How messages name it: "[terrain]", "`procedural`".
-    label: &'static str,
+    label: String,
     /// Where "missing key" problems point: the table's name.
     span: Range<usize>,
     table: &'a DeTable<'i>,
@@ -466,20 +587,60 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
     entries.sort_by_key(|(k, _)| k.span().start);
     let mut scene = None;
     let mut terrain = None;
+    let mut species_tables = None;
+    let mut scatter = None;
     for (key, value) in entries {
         let name: &str = key.get_ref();
+        if name == "species" {
+            // `[[species]]`: an array of tables (inline `species = [{ … }]` is the same to TOML)
+            let species_example = "[[species]]\nname = \"oak\"\nkind = \"tree\"\nmax_density = 0.01";
+            match value.get_ref() {
+                DeValue::Array(items) if items.iter().all(|i| matches!(i.get_ref(), DeValue::Table(_))) => {
+                    species_tables = Some((key.span(), items));
+                    continue;
+                }
+                DeValue::Table(_) => {
+                    return Err(ctx.at(
+                        &key.span(),
+                        "`[species]` must be an array of tables, one per species",
+                        format!(
+                            "write the header with double brackets, `[[species]]`, once before each species (known sections: {})",
+                            sections_list()
+                        ),
+                    ));
+                }
+                other => {
+                    return Err(ctx.at(
+                        &key.span(),
+                        format!("`species` must be an array of tables `[[species]]`, found {}", type_name(other)),
+                        format!("write each species as a table, e.g. `{}`", species_example.replace('\n', "; ")),
+                    ));
+                }
+            }
+        }
         let table = match value.get_ref() {
             DeValue::Table(t) => t,
+            // `[[name]]` of an unknown array of tables
+            DeValue::Array(items)
+                if !SECTIONS.contains(&name) && !items.is_empty() && items.iter().all(|i| matches!(i.get_ref(), DeValue::Table(_))) =>
+            {
+                return Err(unknown_section(&ctx, &key.span(), &format!("[[{name}]]"), name));
+            }
             other => {
                 let problem = if SECTIONS.contains(&name) {
                     format!("`{name}` must be a section `[{name}]`, found {}", type_name(other))
                 } else {
                     format!("key `{name}` is outside any section")
                 };
-                let home = [("[scene]", SCENE_KEYS), ("[terrain]", TERRAIN_KEYS)]
-                    .iter()
-                    .find(|(_, keys)| keys.contains(&name))
-                    .map(|(s, _)| *s);
+                let home = [
+                    ("[scene]", SCENE_KEYS),
+                    ("[terrain]", TERRAIN_KEYS),
+                    ("[[species]]", SPECIES_KEYS),
+                    ("[scatter]", SCATTER_KEYS),
+                ]
+                .iter()
+                .find(|(_, keys)| keys.contains(&name))
+                .map(|(s, _)| *s);
                 let remedy = match home {
                     Some(s) if !SECTIONS.contains(&name) => format!("move it under {s}"),
                     _ => format!("keys go under one of the sections {}", sections_list()),
@@ -490,32 +651,81 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         match name {
             "scene" => scene = Some((key.span(), table)),
             "terrain" => terrain = Some((key.span(), table)),
-            _ => {
-                let remedy = match did_you_mean(name, SECTIONS) {
-                    Some(s) => format!("did you mean `[{s}]`? (known sections: {})", sections_list()),
-                    None => format!("known sections are {} (see docs/presets.md)", sections_list()),
-                };
-                return Err(ctx.at(&key.span(), format!("unknown section `[{name}]`"), remedy));
-            }
+            "scatter" => scatter = Some((key.span(), table)),
+            _ => return Err(unknown_section(&ctx, &key.span(), &format!("[{name}]"), name)),
         }
     }
 
     let Some((scene_span, scene_table)) = scene else {
         return Err(ctx.at(&(0..0), "the preset has no [scene] section", "add `[scene]` with `name = \"my-scene\"`"));
     };
-    let scene = parse_scene(&Table { ctx: &ctx, label: "[scene]", span: scene_span, table: scene_table })?;
+    let scene = parse_scene(&Table { ctx: &ctx, label: "[scene]".into(), span: scene_span, table: scene_table })?;
     let terrain = match terrain {
         None => None,
         Some((span, table)) => {
-            let t = Table { ctx: &ctx, label: "[terrain]", span, table };
+            let t = Table { ctx: &ctx, label: "[terrain]".into(), span, table };
             Some(parse_terrain(&t, scene.seed, check_inputs)?)
         }
     };
-    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain, species: Vec::new(), scatter: ScatterSettings::default() })
+    let scatter = match scatter {
+        None => ScatterSettings::default(),
+        Some((span, table)) => parse_scatter(&Table { ctx: &ctx, label: "[scatter]".into(), span, table })?,
+    };
+    let mut species: Vec<SpeciesSettings> = Vec::new();
+    if let Some((key_span, items)) = species_tables {
+        if terrain.is_none() {
+            return Err(ctx.at(
+                &key_span,
+                "[[species]] needs a terrain: instances are placed on the terrain surface",
+                "add a `[terrain]` section (e.g. `procedural = { kind = \"fbm\", size = 513, relief = 200.0 }`)",
+            ));
+        }
+        // line of each earlier species' name, for "declared twice" messages
+        let mut lines: Vec<usize> = Vec::new();
+        for item in items.iter() {
+            let DeValue::Table(table) = item.get_ref() else { continue };
+            let t = Table { ctx: &ctx, label: "[[species]]".into(), span: item.span(), table };
+            let (s, name_span) = parse_species(&t, &species, check_inputs)?;
+            // compared ignoring case: `Oak` and `oak` would be one file on some file systems
+            if let Some(i) = species.iter().position(|e| e.name.eq_ignore_ascii_case(&s.name)) {
+                let first = &species[i].name;
+                let case = if *first == s.name {
+                    String::new()
+                } else {
+                    format!(" as `{first}` (names that differ only in case are one file name on some systems)")
+                };
+                return Err(ctx.at(
+                    &name_span,
+                    format!("species `{}` is declared twice; the first is at line {}{case}", s.name, lines[i]),
+                    "give each [[species]] its own name",
+                ));
+            }
+            lines.push(line_column(text, name_span.start).0);
+            species.push(s);
+        }
+    }
+    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain, species, scatter })
+}
+
+fn unknown_section(ctx: &Ctx<'_>, span: &Range<usize>, header: &str, name: &str) -> PresetError {
+    let remedy = match did_you_mean(name, SECTIONS) {
+        Some(s) => format!("did you mean `{}`? (known sections: {})", section_header(s), sections_list()),
+        None => format!("known sections are {} (see docs/presets.md)", sections_list()),
+    };
+    ctx.at(span, format!("unknown section `{header}`"), remedy)
+}
+
+/// How a section's header is written: `[scene]`, `[[species]]`.
+fn section_header(name: &str) -> String {
+    if name == "species" {
+        "[[species]]".to_string()
+    } else {
+        format!("[{name}]")
+    }
 }
 
 fn sections_list() -> String {
-    SECTIONS.iter().map(|s| format!("`[{s}]`")).collect::<Vec<_>>().join(", ")
+    SECTIONS.iter().map(|s| format!("`{}`", section_header(s))).collect::<Vec<_>>().join(", ")
 }
 
 fn parse_scene(t: &Table<'_, '_>) -> Result<SceneSettings, PresetError> {
@@ -630,6 +840,297 @@ fn parse_terrain(t: &Table<'_, '_>, scene_seed: u64, check_inputs: bool) -> Resu
     Ok(TerrainSettings { source, mode, max_error_m, max_triangles, grid_step, chunk, skirt_m, base_m, lods })
 }
 
+fn parse_scatter(t: &Table<'_, '_>) -> Result<ScatterSettings, PresetError> {
+    t.check_keys(SCATTER_KEYS, &[("[[species]]", SPECIES_KEYS), ("[terrain]", TERRAIN_KEYS), ("[scene]", SCENE_KEYS)])?;
+    let tile_m = t.number("tile", "tile = 256.0", positive)?.map_or(DEFAULT_TILE_M, |(x, _)| x);
+    Ok(ScatterSettings { tile_m })
+}
+
+/// One `[[species]]` table; `earlier` are the species declared before it (in file order), which
+/// its exclusions may name. Returns the settings and the span of the `name` value.
+fn parse_species(
+    t: &Table<'_, '_>,
+    earlier: &[SpeciesSettings],
+    check_inputs: bool,
+) -> Result<(SpeciesSettings, Range<usize>), PresetError> {
+    let (name, name_span) = t.string("name", "name = \"oak\"")?.ok_or_else(|| t.missing("name", "name = \"oak\""))?;
+    check_species_name(name)
+        .map_err(|why| t.ctx.at(&name_span, why, "use only letters, digits, `-` and `_`, e.g. `name = \"scots-pine\"`"))?;
+    // from here on, messages name the species
+    let t = &Table { ctx: t.ctx, label: format!("[[species]] `{name}`"), span: t.span.clone(), table: t.table };
+    t.check_keys(
+        SPECIES_KEYS,
+        &[
+            ("`exclusion = { … }`", EXCLUSION_KEYS),
+            ("[scatter]", SCATTER_KEYS),
+            ("[terrain]", TERRAIN_KEYS),
+            ("[scene]", SCENE_KEYS),
+        ],
+    )?;
+
+    let kind = match t.string("kind", "kind = \"tree\"")? {
+        None => {
+            return Err(t.ctx.at(
+                &t.span,
+                format!("{} has no `kind`", t.label),
+                "add `kind = \"grass\"` (or \"flower\", \"tree\", \"mesh\")",
+            ))
+        }
+        Some(("grass", _)) => SpeciesKind::Grass,
+        Some(("flower", _)) => SpeciesKind::Flower,
+        Some(("tree", _)) => SpeciesKind::Tree,
+        Some(("mesh", _)) => SpeciesKind::Mesh,
+        Some((other, span)) => return Err(unknown_value(t, "kind", other, &["grass", "flower", "tree", "mesh"], &span)),
+    };
+    let density_map = input_path(t, "density_map", "density_map = \"maps/grass.png\"", check_inputs)?;
+    let mask = input_path(t, "mask", "mask = \"maps/meadow-mask.png\"", check_inputs)?;
+    let max_density = t
+        .number("max_density", "max_density = 0.5", positive)?
+        .ok_or_else(|| {
+            t.ctx.at(&t.span, format!("{} has no `max_density`", t.label), "add `max_density = 0.5` (instances per square metre)")
+        })?
+        .0;
+
+    let placement = match t.string("placement", "placement = \"poisson\"")? {
+        None if kind == SpeciesKind::Tree => Placement::Poisson,
+        None => Placement::Jittered,
+        Some(("poisson", _)) => Placement::Poisson,
+        Some(("jittered", _)) => Placement::Jittered,
+        Some((other, span)) => return Err(unknown_value(t, "placement", other, &["poisson", "jittered"], &span)),
+    };
+    let min_spacing = t.number("min_spacing", "min_spacing = 4.0", non_negative)?;
+    let min_spacing_m = match (placement, min_spacing) {
+        (Placement::Poisson, Some((x, span))) if x <= 0.0 => {
+            return Err(t.ctx.at(
+                &span,
+                "`min_spacing` must be greater than 0 for placement = \"poisson\" (it is the Poisson-disk radius)",
+                "give the smallest distance in metres between two instances, e.g. `min_spacing = 4.0`, or use `placement = \"jittered\"`",
+            ));
+        }
+        (_, Some((x, _))) => x,
+        (Placement::Poisson, None) if kind == SpeciesKind::Tree => DEFAULT_TREE_SPACING_M,
+        (Placement::Poisson, None) => {
+            return Err(t.ctx.at(
+                &t.span,
+                format!("{} has no `min_spacing`, which placement = \"poisson\" needs (only trees have a default)", t.label),
+                "add `min_spacing = 1.0` (metres between two instances) or use `placement = \"jittered\"`",
+            ));
+        }
+        (Placement::Jittered, None) => 0.0,
+    };
+
+    let slope_deg = pair(t, "slope", "slope = [0.0, 35.0]", "degrees", |x| {
+        if (0.0..=90.0).contains(&x) {
+            Ok(())
+        } else {
+            Err("must be between 0 and 90 degrees".into())
+        }
+    })?
+    .unwrap_or([0.0, 90.0]);
+    let altitude_m = pair(t, "altitude", "altitude = [200.0, 1800.0]", "metres", any_finite)?.unwrap_or(UNBOUNDED_ALTITUDE_M);
+    let water_level_m = t.number("water_level", "water_level = 2.0", any_finite)?.map(|(x, _)| x);
+    let scale = match t.get("scale") {
+        // a single number: every instance the same size
+        Some((_, v)) if matches!(v.get_ref(), DeValue::Integer(_) | DeValue::Float(_)) => {
+            let x = number_value(t, "scale", v, "scale = [0.8, 1.2]", &positive)?;
+            [x, x]
+        }
+        _ => pair(t, "scale", "scale = [0.8, 1.2]", "", positive)?.unwrap_or([1.0, 1.0]),
+    };
+    let random_yaw = match t.get("random_yaw") {
+        None => true,
+        Some((_, v)) => match v.get_ref() {
+            DeValue::Boolean(b) => *b,
+            _ => return Err(t.wrong_type("random_yaw", v, "a boolean", "random_yaw = false")),
+        },
+    };
+    let align_to_normal = t
+        .number("align_to_normal", "align_to_normal = 0.5", |x| {
+            if (0.0..=1.0).contains(&x) {
+                Ok(())
+            } else {
+                Err("must be between 0 (upright) and 1 (along the terrain normal)".into())
+            }
+        })?
+        .map_or(
+            match kind {
+                SpeciesKind::Grass | SpeciesKind::Flower => 1.0,
+                SpeciesKind::Tree | SpeciesKind::Mesh => 0.0,
+            },
+            |(x, _)| x,
+        );
+    let exclusions = match t.get("exclusion") {
+        None => Vec::new(),
+        Some((_, v)) => parse_exclusions(t, v, name, earlier)?,
+    };
+    let seed = t.integer("seed", 0..=i64::MAX as u64, "seed = 1")?.map_or(0, |(s, _)| s);
+    let max_instances = t
+        .integer("max_instances", 1..=MAX_MAX_INSTANCES, "max_instances = 5000000")?
+        .map_or(DEFAULT_MAX_INSTANCES, |(n, _)| n as usize);
+
+    let species = SpeciesSettings {
+        name: name.to_string(),
+        kind,
+        density_map,
+        mask,
+        max_density,
+        placement,
+        min_spacing_m,
+        slope_deg,
+        altitude_m,
+        water_level_m,
+        scale,
+        random_yaw,
+        align_to_normal,
+        exclusions,
+        seed,
+        max_instances,
+    };
+    Ok((species, name_span))
+}
+
+/// `exclusion = { species, radius }` or an array of such tables. The named species must be
+/// declared earlier (it is placed first) or be `this` species itself.
+fn parse_exclusions(
+    t: &Table<'_, '_>,
+    value: &Spanned<DeValue<'_>>,
+    this: &str,
+    earlier: &[SpeciesSettings],
+) -> Result<Vec<Exclusion>, PresetError> {
+    let example = "exclusion = { species = \"oak\", radius = 1.5 }";
+    let items: Vec<&Spanned<DeValue<'_>>> = match value.get_ref() {
+        DeValue::Table(_) => vec![value],
+        DeValue::Array(items) => items.iter().collect(),
+        _ => return Err(t.wrong_type("exclusion", value, "a table or an array of tables", example)),
+    };
+    let mut exclusions: Vec<Exclusion> = Vec::new();
+    for item in items {
+        let DeValue::Table(table) = item.get_ref() else {
+            return Err(t.wrong_type("exclusion", item, "a table", example));
+        };
+        let e = Table { ctx: t.ctx, label: "`exclusion`".into(), span: item.span(), table };
+        e.check_keys(EXCLUSION_KEYS, &[("[[species]]", SPECIES_KEYS)])?;
+        let (other, span) =
+            e.string("species", "species = \"oak\"")?.ok_or_else(|| e.missing("species", "species = \"oak\""))?;
+        let radius_m = e
+            .number("radius", "radius = 1.5", positive)?
+            .ok_or_else(|| e.missing("radius", "radius = 1.5"))?
+            .0;
+        if other != this && !earlier.iter().any(|s| s.name == other) {
+            let names: Vec<&str> = earlier.iter().map(|s| s.name.as_str()).chain([this]).collect();
+            let remedy = match did_you_mean(other, &names) {
+                Some(m) => format!("did you mean `{m}`?"),
+                None if earlier.is_empty() => format!(
+                    "declare `{other}` in a [[species]] before `{this}` (it is placed first), or name `{this}` itself to keep its instances apart"
+                ),
+                None => format!(
+                    "declare `{other}` in a [[species]] before `{this}` (it is placed first); species declared so far: {}",
+                    backticked(&names)
+                ),
+            };
+            return Err(t.ctx.at(
+                &span,
+                format!("exclusion names species `{other}`, which is not declared before `{this}`"),
+                remedy,
+            ));
+        }
+        if exclusions.iter().any(|x| x.species == other) {
+            return Err(t.ctx.at(
+                &span,
+                format!("species `{other}` is excluded twice in `{this}`"),
+                "keep one exclusion per species (the larger radius)",
+            ));
+        }
+        exclusions.push(Exclusion { species: other.to_string(), radius_m });
+    }
+    Ok(exclusions)
+}
+
+/// `key = [min, max]`: two numbers, each checked by `valid`, min ≤ max.
+fn pair(
+    t: &Table<'_, '_>,
+    key: &str,
+    example: &str,
+    unit: &str,
+    valid: impl Fn(f64) -> Result<(), String>,
+) -> Result<Option<[f64; 2]>, PresetError> {
+    let Some((_, v)) = t.get(key) else { return Ok(None) };
+    let expected = if unit.is_empty() { "an array [min, max]".to_string() } else { format!("an array [min, max] in {unit}") };
+    let DeValue::Array(items) = v.get_ref() else {
+        return Err(t.wrong_type(key, v, &expected, example));
+    };
+    if items.len() != 2 {
+        return Err(t.ctx.at(
+            &v.span(),
+            format!("`{key}` must have two numbers [min, max], found {}", items.len()),
+            format!("write it like `{example}`"),
+        ));
+    }
+    let min = number_value(t, key, &items[0], example, &valid)?;
+    let max = number_value(t, key, &items[1], example, &valid)?;
+    if min > max {
+        return Err(t.ctx.at(
+            &v.span(),
+            format!("`{key}` is [min, max], but {min} > {max}"),
+            format!("put the smaller value first, e.g. `{example}`"),
+        ));
+    }
+    Ok(Some([min, max]))
+}
+
+/// An optional input file (`density_map`, `mask`): resolved against the preset's folder; when
+/// `check_inputs`, it must exist and be a file.
+fn input_path(
+    t: &Table<'_, '_>,
+    key: &'static str,
+    example: &str,
+    check_inputs: bool,
+) -> Result<Option<PathBuf>, PresetError> {
+    let Some((_, value)) = t.get(key) else { return Ok(None) };
+    let DeValue::String(relative) = value.get_ref() else {
+        return Err(t.wrong_type(key, value, "a path (a string)", example));
+    };
+    if relative.is_empty() {
+        return Err(t.ctx.at(
+            &value.span(),
+            format!("`{key}` is empty"),
+            format!("name a grayscale image, relative to this preset, or remove `{key}`"),
+        ));
+    }
+    let path = resolve(t.ctx.file, Path::new(relative.as_ref()));
+    if check_inputs {
+        check_input_file(t, value, key, &path)?;
+    }
+    Ok(Some(path))
+}
+
+/// An input file named at `value` must exist and be a file.
+fn check_input_file(
+    t: &Table<'_, '_>,
+    value: &Spanned<DeValue<'_>>,
+    what: &'static str,
+    path: &Path,
+) -> Result<(), PresetError> {
+    if !path.exists() {
+        let (line, column) = line_column(t.ctx.text, value.span().start);
+        return Err(PresetError::MissingInput {
+            file: t.ctx.file.to_path_buf(),
+            line,
+            column,
+            what,
+            input: path.to_path_buf(),
+        });
+    }
+    if !path.is_file() {
+        return Err(t.ctx.at(
+            &value.span(),
+            format!("{what} `{}` is not a file", path.display()),
+            format!("name the {what} file itself, not its folder"),
+        ));
+    }
+    Ok(())
+}
+
 fn parse_procedural(
     terrain: &Table<'_, '_>,
     value: &Spanned<DeValue<'_>>,
@@ -640,7 +1141,7 @@ fn parse_procedural(
     let DeValue::Table(table) = value.get_ref() else {
         return Err(terrain.wrong_type("procedural", value, "a table", example));
     };
-    let t = Table { ctx: terrain.ctx, label: "`procedural`", span: value.span(), table };
+    let t = Table { ctx: terrain.ctx, label: "`procedural`".into(), span: value.span(), table };
     t.check_keys(PROCEDURAL_KEYS, &[("[terrain]", TERRAIN_KEYS), ("[scene]", SCENE_KEYS)])?;
     let noise = match t.string("kind", "kind = \"fbm\"")? {
         None => NoiseKind::Fbm,
@@ -693,23 +1194,7 @@ fn parse_heightmap(
         .map_or(DEFAULT_MAX_SAMPLES, |(n, _)| n as usize);
 
     if check_inputs {
-        let (line, column) = line_column(t.ctx.text, value.span().start);
-        if !path.exists() {
-            return Err(PresetError::MissingInput {
-                file: t.ctx.file.to_path_buf(),
-                line,
-                column,
-                what: "heightmap",
-                input: path,
-            });
-        }
-        if !path.is_file() {
-            return Err(t.ctx.at(
-                &value.span(),
-                format!("heightmap `{}` is not a file", path.display()),
-                "name the heightmap file itself, not its folder",
-            ));
-        }
+        check_input_file(t, value, "heightmap", &path)?;
     }
     Ok(TerrainSource::Heightmap { path, decode })
 }
@@ -743,7 +1228,9 @@ mod tests {
         assert_eq!(did_you_mean("lod", TERRAIN_KEYS), Some("lods"));
         assert_eq!(did_you_mean("skirts", TERRAIN_KEYS), Some("skirt"));
         assert_eq!(did_you_mean("terain", SECTIONS), Some("terrain"));
-        assert_eq!(did_you_mean("species", SECTIONS), None);
+        assert_eq!(did_you_mean("specie", SECTIONS), Some("species"));
+        assert_eq!(did_you_mean("densty_map", SPECIES_KEYS), Some("density_map"));
+        assert_eq!(did_you_mean("snow", SECTIONS), None);
         assert_eq!(did_you_mean("zzz", TERRAIN_KEYS), None);
     }
 
