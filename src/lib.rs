@@ -13,6 +13,7 @@ pub mod export;
 pub mod heightfield;
 pub mod lod;
 pub mod mesh;
+pub mod scatter;
 pub mod scene;
 pub mod synth;
 pub mod terrain;
