@@ -129,9 +129,9 @@ fn axis(u: f64, n: usize) -> (f32, usize, usize) {
     if p >= last {
         return (0.0, n - 1, n - 1);
     }
-    let k = p.floor();
-    let i = k as usize;
-    ((p - k) as f32, i, (i + 1).min(n - 1))
+    // p > 0 here, so truncation is the floor (and no libm call)
+    let i = p as usize;
+    ((p - i as f64) as f32, i, (i + 1).min(n - 1))
 }
 
 /// Gray values of an RGB(A) image whose channels agree; anything else is an error naming the pixel.

@@ -145,8 +145,9 @@ impl Tiling {
     /// Tile column and row of a point (clamped, so the far border joins the last tile).
     #[inline]
     pub fn tile_xz(&self, x: f64, z: f64) -> (u32, u32) {
-        let tx = ((x - self.extent[0]) / self.tile_m).floor().clamp(0.0, (self.tiles_x - 1) as f64) as u32;
-        let tz = ((z - self.extent[1]) / self.tile_m).floor().clamp(0.0, (self.tiles_z - 1) as f64) as u32;
+        // truncation is the floor here: negative values clamp to tile 0 either way
+        let tx = ((x - self.extent[0]) / self.tile_m).clamp(0.0, (self.tiles_x - 1) as f64) as u32;
+        let tz = ((z - self.extent[1]) / self.tile_m).clamp(0.0, (self.tiles_z - 1) as f64) as u32;
         (tx, tz)
     }
 
@@ -177,6 +178,29 @@ pub fn species_key(scene_seed: u64, species: &SpeciesSettings) -> u64 {
         h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
     }
     mix64(mix64(scene_seed.wrapping_add(species.seed)) ^ h)
+}
+
+/// ⌊v⌋ as an integer without a libm call (baseline x86-64 has no `roundsd`, so `f64::floor` is a
+/// function call in the hot loops); saturates for huge or NaN values like `as`.
+#[inline]
+pub(crate) fn floor_i64(v: f64) -> i64 {
+    let t = v as i64;
+    if (t as f64) > v {
+        t - 1
+    } else {
+        t
+    }
+}
+
+/// (sin x, cos x) for x in [0, π] by Taylor polynomials around π/2 (error < 4e-9): the yaw half
+/// angle, which only needs f32 accuracy, without libm's general `sincos`.
+#[inline]
+pub(crate) fn sin_cos_0_pi(x: f64) -> (f64, f64) {
+    let t = x - std::f64::consts::FRAC_PI_2; // in [−π/2, π/2]: sin x = cos t, cos x = −sin t
+    let t2 = t * t;
+    let sin_t = t * (1.0 + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0 + t2 * (1.0 / 362_880.0 + t2 * (-1.0 / 39_916_800.0 + t2 / 6_227_020_800.0))))));
+    let cos_t = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24.0 + t2 * (-1.0 / 720.0 + t2 * (1.0 / 40_320.0 + t2 * (-1.0 / 3_628_800.0 + t2 * (1.0 / 479_001_600.0 - t2 / 87_178_291_200.0))))));
+    (cos_t, -sin_t)
 }
 
 /// Uniform in [0, 1) from the top 53 bits of a hash.

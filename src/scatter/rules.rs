@@ -5,7 +5,7 @@
 use crate::scene::{Placement, SpeciesSettings};
 use crate::synth::mix64;
 
-use super::{poisson::POISSON_PACKING, species_key, unit, DensityMap, Instance, RuleCounts, ScatterError, SurfaceIndex, Tiling};
+use super::{poisson::POISSON_PACKING, sin_cos_0_pi, species_key, unit, DensityMap, Instance, RuleCounts, ScatterError, SurfaceIndex, Tiling};
 
 /// Everything one species' candidates are judged by, resolved once.
 pub struct Rules<'a> {
@@ -26,6 +26,8 @@ pub struct Rules<'a> {
     inv_w: f64,
     inv_h: f64,
     align: f64,
+    /// cos of the slope range's ends: slope ∈ [a, b] ⇔ n.y ∈ [cos b, cos a] (no acos per candidate)
+    cos_slope: [f64; 2],
 }
 
 impl<'a> Rules<'a> {
@@ -109,6 +111,7 @@ impl<'a> Rules<'a> {
             inv_w: 1.0 / (x1 - x0),
             inv_h: 1.0 / (z1 - z0),
             align: if species.align_to_normal.is_finite() { species.align_to_normal.clamp(0.0, 1.0) } else { 0.0 },
+            cos_slope: cos_range(species.slope_deg),
         })
     }
 
@@ -187,8 +190,7 @@ impl<'a> Rules<'a> {
         if !(y >= s.altitude_m[0] && y <= s.altitude_m[1]) {
             return Some(Reject::Altitude);
         }
-        let slope = n[1].clamp(-1.0, 1.0).acos().to_degrees();
-        if !(slope >= s.slope_deg[0] && slope <= s.slope_deg[1]) {
+        if !(n[1] >= self.cos_slope[0] && n[1] <= self.cos_slope[1]) {
             return Some(Reject::Slope);
         }
         None
@@ -215,10 +217,23 @@ impl<'a> Rules<'a> {
     fn instance(&self, position: [f64; 3], n: [f64; 3], attr: u64, tile: u32) -> Instance {
         let s = self.species;
         let h1 = mix64(attr);
-        let yaw_deg = if s.random_yaw { (unit(h1) * 360.0) as f32 } else { 0.0 };
+        let u = if s.random_yaw { unit(h1) } else { 0.0 };
         let scale = (s.scale[0] + (s.scale[1] - s.scale[0]) * unit(mix64(h1))) as f32;
-        Instance { position, rotation: orientation((yaw_deg as f64).to_radians(), n, self.align), scale: [scale; 3], yaw_deg, tile }
+        // the half angle π·u in [0, π): a polynomial sincos
+        let half = sin_cos_0_pi(std::f64::consts::PI * u);
+        Instance { position, rotation: orientation_half(half, n, self.align), scale: [scale; 3], yaw_deg: (u * 360.0) as f32, tile }
     }
+}
+
+/// [cos max, cos min] of a slope range in degrees, clamped to [0°, 180°]; NaN ends reject all.
+fn cos_range(deg: [f64; 2]) -> [f64; 2] {
+    let c = |d: f64| d.clamp(0.0, 180.0).to_radians().cos();
+    if deg[0].is_nan() || deg[1].is_nan() || deg[0] > deg[1] {
+        return [f64::INFINITY, f64::NEG_INFINITY];
+    }
+    // exact ends: 0° is n.y ≤ 1 (cos 0 = 1), 90° is n.y ≥ 0 even if cos(π/2) rounds to 6e-17
+    let lo = if deg[1] >= 90.0 && deg[1] < 90.0 + 1e-9 { 0.0 } else { c(deg[1]) };
+    [lo, c(deg[0])]
 }
 
 enum Reject {
@@ -230,15 +245,28 @@ enum Reject {
 /// Unit quaternion (x, y, z, w): yaw about +Y, then a tilt by `align` × the slope angle about the
 /// horizontal axis that turns +Y toward `n` (q = q_tilt ⊗ q_yaw, written out since q_yaw has only y).
 pub fn orientation(yaw_rad: f64, n: [f64; 3], align: f64) -> [f32; 4] {
-    let (ys, yw) = (0.5 * yaw_rad).sin_cos();
+    orientation_half((0.5 * yaw_rad).sin_cos(), n, align)
+}
+
+/// [`orientation`] from (sin, cos) of half the yaw.
+#[inline]
+fn orientation_half((ys, yw): (f64, f64), n: [f64; 3], align: f64) -> [f32; 4] {
     let (ax, az) = (n[2], -n[0]); // up × n
-    let len = (ax * ax + az * az).sqrt();
-    if align <= 0.0 || len < 1e-12 {
+    let len2 = ax * ax + az * az;
+    if align <= 0.0 || len2 < 1e-24 {
         return [0.0, ys as f32, 0.0, yw as f32];
     }
-    let phi = align * n[1].clamp(-1.0, 1.0).acos();
-    let (s, tw) = (0.5 * phi).sin_cos();
-    let (tx, tz) = (ax / len * s, az / len * s);
+    let (tx, tz, tw) = if align >= 1.0 {
+        // the shortest arc from +Y to n: (up × n, 1 + up·n), normalised — no trigonometry
+        let w = 1.0 + n[1];
+        let inv = 1.0 / (len2 + w * w).sqrt();
+        (ax * inv, az * inv, w * inv)
+    } else {
+        let phi = align * n[1].clamp(-1.0, 1.0).acos();
+        let (s, c) = (0.5 * phi).sin_cos();
+        let inv = s / len2.sqrt();
+        (ax * inv, az * inv, c)
+    };
     [(tx * yw - tz * ys) as f32, (tw * ys) as f32, (tz * yw + tx * ys) as f32, (tw * yw) as f32]
 }
 
@@ -314,8 +342,8 @@ impl ExclusionGrid {
     /// True if an instance lies closer than the radius to (x, z).
     #[inline]
     fn excludes(&self, x: f64, z: f64) -> bool {
-        let fi = ((x - self.origin[0]) * self.inv_cell).floor() as i64;
-        let fj = ((z - self.origin[1]) * self.inv_cell).floor() as i64;
+        let fi = super::floor_i64((x - self.origin[0]) * self.inv_cell);
+        let fj = super::floor_i64((z - self.origin[1]) * self.inv_cell);
         for j in (fj - 1).max(0)..=(fj + 1).min(self.dims[1] as i64 - 1) {
             let row = j as usize * self.dims[0];
             let (i0, i1) = ((fi - 1).max(0), (fi + 1).min(self.dims[0] as i64 - 1));
