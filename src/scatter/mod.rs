@@ -126,13 +126,13 @@ pub struct Tiling {
 impl Tiling {
     pub fn new(extent: [f64; 4], tile_m: f64) -> Result<Tiling, ScatterError> {
         let [x0, z0, x1, z1] = extent;
-        if !extent.iter().all(|v| v.is_finite()) || !(x1 > x0 && z1 > z0) {
+        if !(extent.iter().all(|v| v.is_finite()) && x1 > x0 && z1 > z0) {
             return Err(ScatterError::Extent { extent });
         }
         let nx = if tile_m > 0.0 && tile_m.is_finite() { ((x1 - x0) / tile_m).ceil().max(1.0) } else { f64::INFINITY };
         let nz = if tile_m > 0.0 && tile_m.is_finite() { ((z1 - z0) / tile_m).ceil().max(1.0) } else { f64::INFINITY };
         let tiles = nx * nz;
-        if !(tiles <= MAX_TILES as f64) {
+        if tiles.is_nan() || tiles > MAX_TILES as f64 {
             return Err(ScatterError::Tiles { tile_m, tiles: if tiles.is_finite() { tiles as u64 } else { u64::MAX }, limit: MAX_TILES });
         }
         Ok(Tiling { extent, tile_m, tiles_x: nx as u32, tiles_z: nz as u32 })

@@ -56,7 +56,7 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
         });
     }
     let blocks = Blocks { extent: tiling.extent, block_m, nbx, nbz, r };
-    let key = mix64(rules.key ^ 0x706f_6973_736f_6e); // "poisson"
+    let key = mix64(rules.key ^ 0x0070_6f69_7373_6f6e); // "poisson"
     let mut finished: Vec<Vec<[f64; 2]>> = vec![Vec::new(); nbx * nbz];
     for phase in 0..4 {
         let ids: Vec<usize> = (0..nbx * nbz).filter(|&b| (b % nbx) % 2 + 2 * ((b / nbx) % 2) == phase).collect();

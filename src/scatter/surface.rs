@@ -48,7 +48,7 @@ impl SurfaceIndex {
                 let n = cross(sub(b, a), sub(c, a));
                 let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
                 // upward-facing only: skirts are vertical (n.y = 0 exactly), the base faces down
-                if !(n[1] > 1e-12 * len) {
+                if n[1] <= 1e-12 * len {
                     continue;
                 }
                 tris.push(Tri { p: [a, b, c] });
@@ -82,7 +82,7 @@ impl SurfaceIndex {
         // about one triangle per bucket on average: a query then tests a handful of triangles
         let (w, h) = ((bounds[2] - bounds[0]).max(1e-9), (bounds[3] - bounds[1]).max(1e-9));
         let mut cell = (w * h / tris.len() as f64).sqrt() * 1.5;
-        if !(cell > 0.0) || !cell.is_finite() {
+        if cell <= 0.0 || !cell.is_finite() {
             cell = w.max(h);
         }
         // cap the bucket count (long thin meshes) at ~4 per triangle + 1024
