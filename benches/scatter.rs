@@ -203,8 +203,10 @@ fn main() {
         ("poisson trees, r = 4 m", species("trees", Placement::Poisson, 1.0, 4.0)),
         ("poisson trees, r = 3 m", species("trees", Placement::Poisson, 1.0, 3.0)),
     ];
-    let mut rows = Vec::new();
-    for (name, sp) in &cases {
+    // `--case k`: run case k only and print its row as numbers (the parent's child process), so
+    // VmHWM is this case's own peak and not memory the allocator kept from an earlier case
+    if let Some(k) = args.iter().position(|a| a == "--case").and_then(|p| args.get(p + 1)).and_then(|v| v.parse::<usize>().ok()) {
+        let (name, sp) = &cases[k];
         let mut best: Option<Row> = None;
         for _ in 0..runs() {
             reset_peak();
@@ -235,9 +237,32 @@ fn main() {
                 best = Some(row);
             }
         }
-        rows.push(best.expect("at least one run"));
+        let r = best.expect("at least one run");
+        let _ = std::fs::remove_file(&tmp);
+        println!("ROW {} {} {} {} {} {} {} {}", r.instances, r.candidates, r.generate_s, r.format_s, r.write_s, r.csv_bytes, r.peak_bytes, name);
+        return;
     }
-    let _ = std::fs::remove_file(&tmp);
+    let mut rows = Vec::new();
+    for k in 0..cases.len() {
+        let out = Command::new(std::env::current_exe().expect("own path")).args(["--case", &k.to_string()]).output().expect("child");
+        let text = String::from_utf8_lossy(&out.stdout);
+        let Some(line) = text.lines().find(|l| l.starts_with("ROW ")) else {
+            println!("case {k} failed: {}", String::from_utf8_lossy(&out.stderr));
+            continue;
+        };
+        let f: Vec<&str> = line.splitn(9, ' ').collect();
+        let num = |i: usize| f[i].parse::<f64>().unwrap_or(f64::NAN);
+        rows.push(Row {
+            case: f[8].to_string(),
+            instances: num(1) as usize,
+            candidates: num(2) as u64,
+            generate_s: num(3),
+            format_s: num(4),
+            write_s: num(5),
+            csv_bytes: num(6) as u64,
+            peak_bytes: num(7) as u64,
+        });
+    }
 
     println!();
     println!("| case | instances | candidates | generate s | CSV format s | file write s | M inst/s gen | M inst/s gen + format | M inst/s gen + format + write | CSV MB | peak B/inst |");
@@ -259,7 +284,10 @@ fn main() {
             r.peak_bytes as f64 / r.instances.max(1) as f64
         );
     }
-    println!("(Instance = {} bytes in memory; peak B/inst = VmHWM growth during generate + write, over instances)", std::mem::size_of::<Instance>());
+    println!(
+        "(Instance = {} bytes in memory; peak B/inst = growth of the peak RSS during generate + format + write, each case in its own process, over instances; the formatted CSV is held in memory before writing)",
+        std::mem::size_of::<Instance>()
+    );
 
     // the outside peer: scipy's Bridson on the same area and radius, unthinned (density 1)
     if no_scipy {

@@ -77,10 +77,12 @@ impl DensityMap {
     }
 
     /// Bilinear value at (u, v) in 0..1 over the extent (u along x, v along z); pixel centres at
-    /// (k + 0.5)/n, clamped at the borders, so a 1×1 map is a constant. An empty map reads 0.
+    /// (k + 0.5)/n, clamped at the borders, so a 1×1 map is a constant. An empty map (or one whose
+    /// `values` do not hold width × height entries) reads 0.
     #[inline]
     pub fn sample(&self, u: f64, v: f64) -> f32 {
-        if self.values.is_empty() || self.width == 0 || self.height == 0 {
+        // a hand-built map whose size does not match its values reads 0 instead of panicking
+        if self.values.len() != self.width * self.height || self.values.is_empty() {
             return 0.0;
         }
         let (fx, i0, i1) = axis(u, self.width);
@@ -98,7 +100,7 @@ impl DensityMap {
     /// Largest value over the pixels that can influence samples in [u0, u1] × [v0, v1] (one pixel of
     /// margin for the bilinear footprint): an upper bound used to skip empty tiles.
     pub fn max_over(&self, u0: f64, v0: f64, u1: f64, v1: f64) -> f32 {
-        if self.values.is_empty() {
+        if self.values.len() != self.width * self.height || self.values.is_empty() {
             return 0.0;
         }
         let range = |a: f64, b: f64, n: usize| {
