@@ -14,6 +14,7 @@ pub mod heightfield;
 pub mod lod;
 pub mod mesh;
 pub mod plants;
+pub mod scatter;
 pub mod scene;
 pub mod synth;
 pub mod terrain;

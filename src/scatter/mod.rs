@@ -1,0 +1,280 @@
+//! Scatter: density maps and terrain rules → instances sitting exactly on the exported terrain mesh.
+//!
+//! Plain data in, plain data out: a [`SurfaceIndex`] over the terrain's triangles, the resolved
+//! [`SpeciesSettings`], optional density/mask maps and the instances of species placed earlier go
+//! in; a `Vec<Instance>` comes out, sorted by tile and then by generation order. Two placements:
+//!
+//! - [`Placement::Jittered`] (`jitter.rs`): one candidate per cell of a global grid of side
+//!   1/√max_density, kept with probability density(x, z). Expected count = ∫ density · max_density.
+//! - [`Placement::Poisson`] (`poisson.rs`): a maximal Poisson-disk set of radius `min_spacing`
+//!   built tile by tile in four phases, then each point kept with probability
+//!   density(x, z) · min(1, max_density / ρ_pack), where ρ_pack = [`POISSON_PACKING`] / r² is the
+//!   density of the unthinned set. So for Poisson `max_density` is a cap: spacing sets the densest
+//!   packing, and a lower `max_density` thins it further. Expected count =
+//!   ∫ density · min(max_density, ρ_pack).
+//!
+//! Then the rules (`rules.rs`) drop candidates outside the mask, the slope/altitude ranges, below
+//! water or within an exclusion radius of an earlier species. Every random number is a hash
+//! (`synth::mix64`) of the seed, species, tile/cell and a counter, so the output does not depend on
+//! thread count or tile order. `stats.rs` is the paired analyzer.
+
+pub mod density;
+pub mod jitter;
+pub mod poisson;
+pub mod rules;
+pub mod stats;
+pub mod surface;
+
+use std::path::PathBuf;
+
+pub use density::DensityMap;
+pub use poisson::POISSON_PACKING;
+pub use stats::{analyze, RegionStat, SpeciesStats, TileStat};
+pub use surface::SurfaceIndex;
+
+use crate::scene::{Placement, SpeciesSettings};
+use crate::synth::mix64;
+
+/// One placed instance. `rotation` is a unit quaternion (x, y, z, w): yaw about +Y, then a tilt
+/// toward the terrain normal by `align_to_normal` of the slope angle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Instance {
+    pub position: [f64; 3],
+    pub rotation: [f32; 4],
+    pub scale: [f32; 3],
+    pub yaw_deg: f32,
+    /// Placement tile: `tz * tiles_x + tx` over the extent, tiles of `tile_m` from (min_x, min_z).
+    pub tile: u32,
+}
+
+/// Candidates examined and why they were dropped (for the report).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct RuleCounts {
+    /// Candidates generated (jittered: cells inside the extent; Poisson: the unthinned set).
+    pub candidates: u64,
+    pub density: u64,
+    pub mask: u64,
+    /// No terrain triangle under the candidate (holes, outside the mesh).
+    pub off_surface: u64,
+    pub water: u64,
+    pub altitude: u64,
+    pub slope: u64,
+    pub exclusion: u64,
+    pub placed: u64,
+}
+
+impl RuleCounts {
+    pub(crate) fn add(&mut self, o: &RuleCounts) {
+        self.candidates += o.candidates;
+        self.density += o.density;
+        self.mask += o.mask;
+        self.off_surface += o.off_surface;
+        self.water += o.water;
+        self.altitude += o.altitude;
+        self.slope += o.slope;
+        self.exclusion += o.exclusion;
+        self.placed += o.placed;
+    }
+}
+
+/// The instances of one species and the rule counts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scatter {
+    pub instances: Vec<Instance>,
+    pub counts: RuleCounts,
+    /// Estimated count before generation (∫ density · effective max density over the extent,
+    /// with mask and terrain rules sampled on a grid; exclusions not counted).
+    pub estimate: f64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ScatterError {
+    #[error("{}: {reason}", path.display())]
+    Map { path: PathBuf, reason: String },
+    #[error("species `{species}`: {reason}")]
+    Settings { species: String, reason: String },
+    #[error("species `{species}`: about {estimate:.0} instances expected, above max_instances = {limit}; lower max_density (or the density map), raise min_spacing, or raise max_instances")]
+    TooManyEstimated { species: String, estimate: f64, limit: usize },
+    #[error("species `{species}`: {count} instances placed, above max_instances = {limit}; lower max_density (or the density map), raise min_spacing, or raise max_instances")]
+    TooMany { species: String, count: usize, limit: usize },
+    #[error("species `{species}`: {work} candidate points to examine (limit {limit}); {remedy}")]
+    TooMuchWork { species: String, work: f64, limit: f64, remedy: String },
+    #[error("species `{species}`: exclusion names `{other}`, which is not placed before it; list `{other}` earlier in the preset")]
+    UnknownExclusion { species: String, other: String },
+    #[error("scatter extent {extent:?} is empty or not finite; pass [min_x, min_z, max_x, max_z] with max > min")]
+    Extent { extent: [f64; 4] },
+    #[error("tile size {tile_m} m gives {tiles} tiles over the extent (limit {limit}); use a larger [scatter] tile_m")]
+    Tiles { tile_m: f64, tiles: u64, limit: u64 },
+}
+
+/// Most tiles accepted over an extent.
+pub const MAX_TILES: u64 = 1 << 22;
+/// Most candidates a species may examine (jittered cells, Poisson points): bounds time and memory
+/// even where the density map is mostly 0.
+pub const MAX_CANDIDATES: f64 = 1.0e9;
+
+/// Tiles of `tile_m` metres over the extent, starting at (min_x, min_z); the last row/column may
+/// be partial. Points on the far border belong to the last tile.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tiling {
+    pub extent: [f64; 4],
+    pub tile_m: f64,
+    pub tiles_x: u32,
+    pub tiles_z: u32,
+}
+
+impl Tiling {
+    pub fn new(extent: [f64; 4], tile_m: f64) -> Result<Tiling, ScatterError> {
+        let [x0, z0, x1, z1] = extent;
+        if !(extent.iter().all(|v| v.is_finite()) && x1 > x0 && z1 > z0) {
+            return Err(ScatterError::Extent { extent });
+        }
+        let nx = if tile_m > 0.0 && tile_m.is_finite() { ((x1 - x0) / tile_m).ceil().max(1.0) } else { f64::INFINITY };
+        let nz = if tile_m > 0.0 && tile_m.is_finite() { ((z1 - z0) / tile_m).ceil().max(1.0) } else { f64::INFINITY };
+        let tiles = nx * nz;
+        if tiles.is_nan() || tiles > MAX_TILES as f64 {
+            return Err(ScatterError::Tiles { tile_m, tiles: if tiles.is_finite() { tiles as u64 } else { u64::MAX }, limit: MAX_TILES });
+        }
+        Ok(Tiling { extent, tile_m, tiles_x: nx as u32, tiles_z: nz as u32 })
+    }
+
+    pub fn count(&self) -> usize {
+        self.tiles_x as usize * self.tiles_z as usize
+    }
+
+    /// Tile column and row of a point (clamped, so the far border joins the last tile).
+    #[inline]
+    pub fn tile_xz(&self, x: f64, z: f64) -> (u32, u32) {
+        // truncation is the floor here: negative values clamp to tile 0 either way
+        let tx = ((x - self.extent[0]) / self.tile_m).clamp(0.0, (self.tiles_x - 1) as f64) as u32;
+        let tz = ((z - self.extent[1]) / self.tile_m).clamp(0.0, (self.tiles_z - 1) as f64) as u32;
+        (tx, tz)
+    }
+
+    #[inline]
+    pub fn tile_of(&self, x: f64, z: f64) -> u32 {
+        let (tx, tz) = self.tile_xz(x, z);
+        tz * self.tiles_x + tx
+    }
+
+    /// [min_x, min_z, max_x, max_z] of tile (tx, tz), cut to the extent.
+    pub fn rect(&self, tx: u32, tz: u32) -> [f64; 4] {
+        let [x0, z0, x1, z1] = self.extent;
+        [
+            x0 + tx as f64 * self.tile_m,
+            z0 + tz as f64 * self.tile_m,
+            (x0 + (tx + 1) as f64 * self.tile_m).min(x1),
+            (z0 + (tz + 1) as f64 * self.tile_m).min(z1),
+        ]
+    }
+}
+
+/// The key every random number of a species derives from: scene seed + species seed offset, mixed
+/// with the species name (two species with equal settings still differ).
+pub fn species_key(scene_seed: u64, species: &SpeciesSettings) -> u64 {
+    // FNV-1a of the name: stable across platforms and Rust versions (unlike std's hasher)
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in species.name.bytes() {
+        h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+    }
+    mix64(mix64(scene_seed.wrapping_add(species.seed)) ^ h)
+}
+
+/// ⌊v⌋ as an integer without a libm call (baseline x86-64 has no `roundsd`, so `f64::floor` is a
+/// function call in the hot loops); saturates for huge or NaN values like `as`.
+#[inline]
+pub(crate) fn floor_i64(v: f64) -> i64 {
+    let t = v as i64;
+    if (t as f64) > v {
+        t - 1
+    } else {
+        t
+    }
+}
+
+/// (sin x, cos x) for x in [0, π] by Taylor polynomials around π/2 (error < 4e-9): the yaw half
+/// angle, which only needs f32 accuracy, without libm's general `sincos`.
+#[inline]
+pub(crate) fn sin_cos_0_pi(x: f64) -> (f64, f64) {
+    let t = x - std::f64::consts::FRAC_PI_2; // in [−π/2, π/2]: sin x = cos t, cos x = −sin t
+    let t2 = t * t;
+    let sin_t = t * (1.0 + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0 + t2 * (1.0 / 362_880.0 + t2 * (-1.0 / 39_916_800.0 + t2 / 6_227_020_800.0))))));
+    let cos_t = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24.0 + t2 * (-1.0 / 720.0 + t2 * (1.0 / 40_320.0 + t2 * (-1.0 / 3_628_800.0 + t2 * (1.0 / 479_001_600.0 - t2 / 87_178_291_200.0))))));
+    (cos_t, -sin_t)
+}
+
+/// Uniform in [0, 1) from the top 53 bits of a hash.
+#[inline]
+pub(crate) fn unit(h: u64) -> f64 {
+    (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+/// Places one species; see the module docs. `earlier` holds the species placed before this one
+/// (by name), for exclusions. Fails before generating when the estimate is above
+/// `max_instances`, and after generating when the count is.
+#[allow(clippy::too_many_arguments)]
+pub fn scatter_species(
+    surface: &SurfaceIndex,
+    extent: [f64; 4],
+    species: &SpeciesSettings,
+    density: Option<&DensityMap>,
+    mask: Option<&DensityMap>,
+    earlier: &[(&str, &[Instance])],
+    tile_m: f64,
+    scene_seed: u64,
+) -> Result<Vec<Instance>, ScatterError> {
+    scatter_species_detailed(surface, extent, species, density, mask, earlier, tile_m, scene_seed).map(|s| s.instances)
+}
+
+/// [`scatter_species`] with the rule counts and the estimate.
+#[allow(clippy::too_many_arguments)]
+pub fn scatter_species_detailed(
+    surface: &SurfaceIndex,
+    extent: [f64; 4],
+    species: &SpeciesSettings,
+    density: Option<&DensityMap>,
+    mask: Option<&DensityMap>,
+    earlier: &[(&str, &[Instance])],
+    tile_m: f64,
+    scene_seed: u64,
+) -> Result<Scatter, ScatterError> {
+    let tiling = Tiling::new(extent, tile_m)?;
+    let ctx = rules::Rules::new(surface, tiling, species, density, mask, earlier, scene_seed)?;
+    let area = (extent[2] - extent[0]) * (extent[3] - extent[1]);
+    // fail fast: estimate from the density/mask/rules integral before allocating anything
+    let estimate = rules::estimate(&ctx, 128) * ctx.effective_max_density * area;
+    if estimate > species.max_instances as f64 * 1.02 + 8.0 {
+        return Err(ScatterError::TooManyEstimated { species: species.name.clone(), estimate, limit: species.max_instances });
+    }
+    let (instances, counts) = match species.placement {
+        Placement::Jittered => jitter::scatter(&ctx)?,
+        Placement::Poisson => poisson::scatter(&ctx)?,
+    };
+    if instances.len() > species.max_instances {
+        return Err(ScatterError::TooMany { species: species.name.clone(), count: instances.len(), limit: species.max_instances });
+    }
+    Ok(Scatter { instances, counts, estimate })
+}
+
+/// Expected count of a species over `[x0, z0, x1, z1]` (a region of the extent): the integral of
+/// density · mask · terrain rules (slope, altitude, water) times the effective max density, by the
+/// midpoint rule on `samples`² points. Exclusions are not counted. Used by the analyzer.
+#[allow(clippy::too_many_arguments)]
+pub fn expected_count(
+    surface: &SurfaceIndex,
+    extent: [f64; 4],
+    species: &SpeciesSettings,
+    density: Option<&DensityMap>,
+    mask: Option<&DensityMap>,
+    region: [f64; 4],
+    samples: usize,
+) -> Result<f64, ScatterError> {
+    let tiling = Tiling::new(extent, (extent[2] - extent[0]).max(extent[3] - extent[1]))?;
+    let ctx = rules::Rules::new(surface, tiling, species, density, mask, &[], 0).or_else(|e| match e {
+        // exclusions are ignored here, so unknown names do not matter
+        ScatterError::UnknownExclusion { .. } => rules::Rules::without_exclusions(surface, tiling, species, density, mask, 0),
+        e => Err(e),
+    })?;
+    let area = (region[2] - region[0]).max(0.0) * (region[3] - region[1]).max(0.0);
+    Ok(rules::estimate_region(&ctx, region, samples) * ctx.effective_max_density * area)
+}

@@ -1,0 +1,267 @@
+//! Height on the exported terrain mesh: point location in a uniform grid of buckets over x/z (each
+//! bucket lists the triangles whose bounding box overlaps it), then exact barycentric interpolation
+//! in the containing triangle (the grass thesis, formula 3.2), all in f64.
+
+/// One upward-facing triangle: corners as (x, y, z) in f64.
+#[derive(Debug, Clone, Copy)]
+struct Tri {
+    p: [[f64; 3]; 3],
+}
+
+/// Point location over the upward-facing triangles of a terrain mesh.
+#[derive(Debug, Clone)]
+pub struct SurfaceIndex {
+    tris: Vec<Tri>,
+    /// Bucket grid origin, cell size and dimensions.
+    origin: [f64; 2],
+    cell: f64,
+    inv_cell: f64,
+    dims: [usize; 2],
+    /// CSR: triangles of bucket b are `items[start[b]..start[b + 1]]`.
+    start: Vec<u32>,
+    items: Vec<u32>,
+    bounds: [f64; 4],
+}
+
+/// Relative tolerance of the inside test: a point this far outside a triangle (as a fraction of
+/// its doubled area) still counts, so points on shared edges never fall between two triangles.
+const EDGE_TOLERANCE: f64 = 1e-12;
+
+impl SurfaceIndex {
+    /// Index over one primitive's triangles (world-space positions, triangle list). Triangles whose
+    /// normal does not point up (skirts, the base) or that are degenerate or reference missing
+    /// vertices are skipped.
+    pub fn new(positions: &[[f32; 3]], indices: &[u32]) -> SurfaceIndex {
+        SurfaceIndex::from_parts(&[(positions, indices)])
+    }
+
+    /// Index over several primitives (e.g. the chunks of a chunked terrain, all in world space).
+    pub fn from_parts(parts: &[(&[[f32; 3]], &[u32])]) -> SurfaceIndex {
+        let mut tris = Vec::new();
+        for (positions, indices) in parts {
+            for t in indices.chunks_exact(3) {
+                let get = |k: usize| positions.get(t[k] as usize).map(|v| [v[0] as f64, v[1] as f64, v[2] as f64]);
+                let (Some(a), Some(b), Some(c)) = (get(0), get(1), get(2)) else { continue };
+                if !(a.iter().chain(&b).chain(&c)).all(|v| v.is_finite()) {
+                    continue;
+                }
+                let n = cross(sub(b, a), sub(c, a));
+                let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                // upward-facing only: skirts are vertical (n.y = 0 exactly), the base faces down
+                if n[1] <= 1e-12 * len {
+                    continue;
+                }
+                tris.push(Tri { p: [a, b, c] });
+            }
+        }
+        SurfaceIndex::build(tris)
+    }
+
+    fn build(tris: Vec<Tri>) -> SurfaceIndex {
+        let mut bounds = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for t in &tris {
+            for p in &t.p {
+                bounds[0] = bounds[0].min(p[0]);
+                bounds[1] = bounds[1].min(p[2]);
+                bounds[2] = bounds[2].max(p[0]);
+                bounds[3] = bounds[3].max(p[2]);
+            }
+        }
+        if tris.is_empty() {
+            return SurfaceIndex {
+                tris,
+                origin: [0.0; 2],
+                cell: 1.0,
+                inv_cell: 1.0,
+                dims: [0, 0],
+                start: vec![0],
+                items: Vec::new(),
+                bounds: [0.0; 4],
+            };
+        }
+        // about one triangle per bucket on average: a query then tests a handful of triangles
+        let (w, h) = ((bounds[2] - bounds[0]).max(1e-9), (bounds[3] - bounds[1]).max(1e-9));
+        let mut cell = (w * h / tris.len() as f64).sqrt() * 1.5;
+        if cell <= 0.0 || !cell.is_finite() {
+            cell = w.max(h);
+        }
+        // cap the bucket count (long thin meshes) at ~4 per triangle + 1024
+        let cap = (4 * tris.len() + 1024) as f64;
+        while (w / cell).ceil() * (h / cell).ceil() > cap {
+            cell *= 1.5;
+        }
+        let dims = [((w / cell).ceil() as usize).max(1), ((h / cell).ceil() as usize).max(1)];
+        let origin = [bounds[0], bounds[1]];
+        let inv_cell = 1.0 / cell;
+        let cell_range = |t: &Tri| {
+            let (mut x0, mut z0, mut x1, mut z1) = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+            for p in &t.p {
+                x0 = x0.min(p[0]);
+                x1 = x1.max(p[0]);
+                z0 = z0.min(p[2]);
+                z1 = z1.max(p[2]);
+            }
+            let c = |v: f64, o: f64, n: usize| (((v - o) * inv_cell).floor().max(0.0) as usize).min(n - 1);
+            (c(x0, origin[0], dims[0]), c(z0, origin[1], dims[1]), c(x1, origin[0], dims[0]), c(z1, origin[1], dims[1]))
+        };
+        // fill bucket counts
+        let mut start = vec![0u32; dims[0] * dims[1] + 1];
+        for t in &tris {
+            let (i0, j0, i1, j1) = cell_range(t);
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    start[j * dims[0] + i + 1] += 1;
+                }
+            }
+        }
+        // fill offset table
+        for k in 1..start.len() {
+            start[k] += start[k - 1];
+        }
+        let mut fill = start.clone();
+        let mut items = vec![0u32; *start.last().unwrap_or(&0) as usize];
+        for (ti, t) in tris.iter().enumerate() {
+            let (i0, j0, i1, j1) = cell_range(t);
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    let b = j * dims[0] + i;
+                    items[fill[b] as usize] = ti as u32;
+                    fill[b] += 1;
+                }
+            }
+        }
+        SurfaceIndex { tris, origin, cell, inv_cell, dims, start, items, bounds }
+    }
+
+    /// Number of indexed (upward-facing) triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.tris.len()
+    }
+
+    /// [min_x, min_z, max_x, max_z] of the indexed triangles (zeros when empty).
+    pub fn bounds(&self) -> [f64; 4] {
+        self.bounds
+    }
+
+    /// Side of a bucket in metres.
+    pub fn bucket_size(&self) -> f64 {
+        self.cell
+    }
+
+    /// Height of the mesh at (x, z) and the unit normal of the containing triangle, by barycentric
+    /// interpolation in f64; `None` outside the mesh (or over a hole).
+    #[inline]
+    pub fn height_at(&self, x: f64, z: f64) -> Option<(f64, [f64; 3])> {
+        let t = self.locate(x, z)?;
+        let tri = &self.tris[t];
+        let [a, b, c] = tri.p;
+        let (w0, w1, w2, d) = bary(tri, x, z);
+        let y = (w0 * a[1] + w1 * b[1] + w2 * c[1]) / d;
+        let n = cross(sub(b, a), sub(c, a));
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        Some((y, [n[0] / len, n[1] / len, n[2] / len]))
+    }
+
+    /// Index of a triangle containing (x, z): the first one that contains it exactly, else the
+    /// best within [`EDGE_TOLERANCE`] (a point on an edge, up to rounding).
+    #[inline]
+    fn locate(&self, x: f64, z: f64) -> Option<usize> {
+        if self.tris.is_empty() {
+            return None;
+        }
+        let fi = (x - self.origin[0]) * self.inv_cell;
+        let fj = (z - self.origin[1]) * self.inv_cell;
+        // a point a rounding error outside the bounds still looks in the border bucket
+        if !(fi > -1e-9 && fj > -1e-9 && fi < self.dims[0] as f64 + 1e-9 && fj < self.dims[1] as f64 + 1e-9) {
+            return None;
+        }
+        let i = (fi.max(0.0) as usize).min(self.dims[0] - 1);
+        let j = (fj.max(0.0) as usize).min(self.dims[1] - 1);
+        let b = j * self.dims[0] + i;
+        let (s, e) = (self.start[b] as usize, self.start[b + 1] as usize);
+        let mut best = None;
+        let mut best_score = -EDGE_TOLERANCE;
+        for &t in &self.items[s..e] {
+            let (w0, w1, w2, d) = bary(&self.tris[t as usize], x, z);
+            // all weights share the sign of d when inside; normalise so inside means ≥ 0
+            let m = w0.min(w1).min(w2) / d;
+            if m >= 0.0 {
+                return Some(t as usize);
+            }
+            if m >= best_score {
+                best_score = m;
+                best = Some(t as usize);
+            }
+        }
+        best
+    }
+}
+
+/// Unnormalised barycentric weights of (x, z) and their sum d (twice the signed area in x/z).
+#[inline]
+fn bary(t: &Tri, x: f64, z: f64) -> (f64, f64, f64, f64) {
+    let [a, b, c] = t.p;
+    let orient = |p: [f64; 3], q: [f64; 3], rx: f64, rz: f64| (q[0] - p[0]) * (rz - p[2]) - (q[2] - p[2]) * (rx - p[0]);
+    let w0 = orient(b, c, x, z);
+    let w1 = orient(c, a, x, z);
+    let w2 = orient(a, b, x, z);
+    let d = w0 + w1 + w2;
+    // d can be flipped in sign for either winding; divide by d and the sign cancels
+    let d = if d == 0.0 { f64::MIN_POSITIVE } else { d };
+    if d < 0.0 {
+        (-w0, -w1, -w2, -d)
+    } else {
+        (w0, w1, w2, d)
+    }
+}
+
+#[inline]
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+#[inline]
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 2×2 quad at heights 0, 1, 2, 3 split along its diagonal, counter-clockwise from +Y.
+    fn quad() -> SurfaceIndex {
+        let p = [[0.0, 0.0, 0.0], [2.0, 1.0, 0.0], [2.0, 3.0, 2.0], [0.0, 2.0, 2.0]];
+        // (b − a) × (c − a) must have +y: with x right and z "down" that is [0, 2, 1], [0, 3, 2]
+        SurfaceIndex::new(&p, &[0, 2, 1, 0, 3, 2])
+    }
+
+    #[test]
+    fn interpolates_exactly_and_resolves_edges() {
+        let s = quad();
+        assert_eq!(s.triangle_count(), 2);
+        // corners
+        assert_eq!(s.height_at(0.0, 0.0).unwrap().0, 0.0);
+        assert_eq!(s.height_at(2.0, 2.0).unwrap().0, 3.0);
+        // the shared diagonal: both triangles give the same height
+        let (y, _) = s.height_at(1.0, 1.0).unwrap();
+        assert!((y - 1.5).abs() < 1e-12);
+        // inside the triangle (0, 1, 2): plane y = x/2 + z
+        let (y, n) = s.height_at(1.5, 0.5).unwrap();
+        assert!((y - 1.25).abs() < 1e-12, "{y}");
+        assert!(n[1] > 0.0 && ((n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) - 1.0).abs() < 1e-12);
+        assert!(s.height_at(-0.1, 0.5).is_none());
+        assert!(s.height_at(f64::NAN, 0.5).is_none());
+    }
+
+    #[test]
+    fn skips_downward_vertical_and_bad_triangles() {
+        let p = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -5.0, 0.0]];
+        // downward (clockwise from +Y), vertical (skirt-like), out-of-range index
+        let s = SurfaceIndex::new(&p, &[0, 1, 2, 0, 1, 3, 0, 1, 9]);
+        assert_eq!(s.triangle_count(), 0);
+        assert!(s.height_at(0.2, 0.2).is_none());
+        let up = SurfaceIndex::new(&p, &[0, 2, 1]);
+        assert_eq!(up.triangle_count(), 1);
+    }
+}
