@@ -14,7 +14,10 @@ use serde::Serialize;
 use crate::scene::cache::{Cache, FileHashes, KeyBuilder};
 use crate::scene::manifest::{write_manifest_and_report, StageRun};
 use crate::scene::preset::{load_preset, PresetError};
-use crate::scene::stages::{self, PreviewStageReport, Stage, TerrainStageReport};
+use crate::mesh::Scene;
+use crate::plants::marker;
+use crate::scene::scatter_stage::{self, ScatterStageReport};
+use crate::scene::stages::{self, PreviewStageReport, Stage};
 use crate::scene::Preset;
 use crate::validate::read_scene;
 
@@ -71,8 +74,14 @@ pub fn build_preset(preset: &Preset, settings: &BuildSettings, progress: Progres
     let t0 = Instant::now();
     let name = &preset.scene.name;
     let out = &settings.out_dir;
-    if settings.stages.contains(&Stage::Preview) && !settings.stages.contains(&Stage::Terrain) && preset.terrain.is_some() {
-        return Err(SceneBuildError::Usage("the preview stage draws the terrain: select both (--only terrain,preview)".into()));
+    for stage in [Stage::Scatter, Stage::Preview] {
+        if settings.stages.contains(&stage) && !settings.stages.contains(&Stage::Terrain) && preset.terrain.is_some() {
+            return Err(SceneBuildError::Usage(format!(
+                "the {} stage needs the terrain: select it too (--only terrain,{})",
+                stage.name(),
+                stage.name()
+            )));
+        }
     }
     fs::create_dir_all(out).map_err(io_err(out))?;
     let final_dir = out.join(name);
@@ -120,83 +129,149 @@ fn swap_into_place(tmp_dir: &Path, final_dir: &Path) -> Result<(), SceneBuildErr
     Ok(())
 }
 
+/// Runs one cached stage: restores its files and report from the cache when `key` is there and
+/// the entry is whole, otherwise computes them (`compute` also returns in-memory results for later
+/// stages) and stores them. Returns the report, the in-memory results when computed, and whether
+/// the cache served it.
+#[allow(clippy::too_many_arguments)]
+fn cached_stage<R, X>(
+    cache: &Cache,
+    force: bool,
+    stage: &str,
+    key: &str,
+    dir: &Path,
+    known: &mut FileHashes,
+    files_of: impl Fn(&R) -> Vec<PathBuf>,
+    compute: impl FnOnce() -> Result<(R, X), SceneBuildError>,
+    progress: &dyn Fn(&str),
+) -> Result<(R, Option<X>, bool), SceneBuildError>
+where
+    R: Serialize + serde::de::DeserializeOwned,
+{
+    let cached = if force { None } else { cache.lookup(stage, key) };
+    // an entry that cannot be read or restored completely is recomputed (and replaced)
+    let restored = cached.and_then(|(json, entry)| {
+        let report: R = serde_json::from_str(&json).ok()?;
+        known.extend(Cache::restore(&entry, dir, &files_of(&report)).ok()?);
+        Some(report)
+    });
+    if let Some(report) = restored {
+        progress(&format!("{stage}: cached"));
+        return Ok((report, None, true));
+    }
+    progress(&format!("{stage}: running"));
+    let (report, extra) = compute()?;
+    let json = serde_json::to_string_pretty(&report).unwrap_or_default();
+    match cache.store(stage, key, dir, &files_of(&report), &json) {
+        Ok(hashes) => known.extend(hashes),
+        Err(e) => progress(&format!("{stage}: could not store the cache entry ({e}); continuing")),
+    }
+    Ok((report, Some(extra), false))
+}
+
+fn reimport(dir: &Path, rel: &Path) -> Result<Scene, SceneBuildError> {
+    let path = dir.join(rel);
+    read_scene(&path).map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })
+}
+
+/// Positions of the instanced nodes under each species root of a scene.glb (as f32, as stored).
+fn placements_from_scene(scene: &Scene, preset: &Preset) -> Vec<([f32; 4], Vec<[f64; 3]>)> {
+    preset
+        .species
+        .iter()
+        .enumerate()
+        .map(|(index, s)| {
+            let mut points = Vec::new();
+            if let Some(root) = scene.nodes.iter().find(|n| n.name == s.name && n.mesh.is_none()) {
+                for &c in &root.children {
+                    if let Some(inst) = scene.nodes.get(c).and_then(|n| n.instances.as_ref()) {
+                        points.extend(inst.translations.iter().map(|t| [t[0] as f64, t[1] as f64, t[2] as f64]));
+                    }
+                }
+            }
+            (marker::species_color(s.kind, index), points)
+        })
+        .collect()
+}
+
 fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: Progress) -> Result<SceneOutcome, SceneBuildError> {
     let name = &preset.scene.name;
+    let say = |m: &str| progress(name, m);
     let cache = Cache::new(&settings.out_dir);
+    let force = settings.force;
+    let wants = |s: Stage| settings.stages.contains(&s);
     let mut runs: Vec<StageRun> = Vec::new();
-    let mut terrain_scene = None;
-    let mut terrain_key = None;
     // sizes and hashes of stage files already known from the cache, so the manifest need not re-read them
     let mut known = FileHashes::new();
+    // what later stages need: the terrain scene and the placements (as stored: f32 positions)
+    let mut terrain: Option<(Scene, String)> = None;
+    let mut placements: Option<(Vec<([f32; 4], Vec<[f64; 3]>)>, String)> = None;
 
-    if let (true, Some(t)) = (settings.stages.contains(&Stage::Terrain), &preset.terrain) {
+    if let (true, Some(t)) = (wants(Stage::Terrain), &preset.terrain) {
         let t0 = Instant::now();
         let key = stages::terrain_key(preset, t)?;
-        let cached = if settings.force { None } else { cache.lookup("terrain", &key) };
-        // an entry that cannot be read or restored completely is recomputed
-        let restored = cached.and_then(|(json, entry)| {
-            let report: TerrainStageReport = serde_json::from_str(&json).ok()?;
-            known.extend(Cache::restore(&entry, dir, &stages::terrain_files(&report)).ok()?);
-            Some(report)
-        });
-        let (report, hit) = match restored {
-            Some(report) => {
-                progress(name, "terrain: cached");
-                (report, true)
-            }
-            None => {
-                progress(name, "terrain: meshing");
-                let (report, scene) = stages::run_terrain(preset, t, dir)?;
-                let json = serde_json::to_string_pretty(&report).unwrap_or_default();
-                match cache.store("terrain", &key, dir, &stages::terrain_files(&report), &json) {
-                    Ok(hashes) => known.extend(hashes),
-                    Err(e) => progress(name, &format!("terrain: could not store the cache entry ({e}); continuing")),
+        let (report, scene, hit) = cached_stage(
+            &cache, force, "terrain", &key, dir, &mut known,
+            stages::terrain_files,
+            || stages::run_terrain(preset, t, dir).map_err(SceneBuildError::from),
+            &say,
+        )?;
+        if wants(Stage::Scatter) || wants(Stage::Preview) {
+            let scene = match scene {
+                Some(scene) => scene,
+                None => {
+                    // cached terrain: re-import the first mesh file (also checks that what was cached reads back)
+                    let is_mesh = |p: &&PathBuf| matches!(p.extension().and_then(|e| e.to_str()), Some("glb" | "gltf" | "obj"));
+                    let main = report.files.iter().find(is_mesh).ok_or_else(|| SceneBuildError::Usage("the terrain stage wrote no mesh".into()))?;
+                    reimport(dir, main)?
                 }
-                terrain_scene = Some(scene);
-                (report, false)
-            }
-        };
-        if settings.stages.contains(&Stage::Preview) && terrain_scene.is_none() {
-            // cached terrain: re-import the first mesh file (also checks that what was cached reads back)
-            let is_mesh = |p: &&PathBuf| matches!(p.extension().and_then(|e| e.to_str()), Some("glb" | "gltf" | "obj"));
-            if let Some(main) = report.files.iter().find(is_mesh) {
-                let path = dir.join(main);
-                terrain_scene = Some(read_scene(&path).map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })?);
-            }
+            };
+            terrain = Some((scene, key));
         }
-        terrain_key = Some(key);
         runs.push(StageRun::Terrain { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
     }
 
-    if settings.stages.contains(&Stage::Preview) {
-        if let (Some(scene), Some(tkey)) = (&terrain_scene, &terrain_key) {
-            let t0 = Instant::now();
-            let mut k = KeyBuilder::new("preview");
-            k.add(tkey.as_bytes()).add(&stages::PREVIEW_SIZE_PX.to_le_bytes());
-            let key = k.finish();
-            let cached = if settings.force { None } else { cache.lookup("preview", &key) };
-            let restored = cached.and_then(|(json, entry)| {
-                let report: PreviewStageReport = serde_json::from_str(&json).ok()?;
-                known.extend(Cache::restore(&entry, dir, std::slice::from_ref(&report.file)).ok()?);
-                Some(report)
-            });
-            let (report, hit) = match restored {
-                Some(report) => {
-                    progress(name, "preview: cached");
-                    (report, true)
-                }
-                None => {
-                    progress(name, "preview: drawing");
-                    let report = stages::run_preview(scene, dir)?;
-                    let json = serde_json::to_string_pretty(&report).unwrap_or_default();
-                    if let Ok(hashes) = cache.store("preview", &key, dir, std::slice::from_ref(&report.file), &json) {
-                        known.extend(hashes);
-                    }
-                    (report, false)
-                }
+    if let (true, Some((scene, tkey)), false) = (wants(Stage::Scatter), &terrain, preset.species.is_empty()) {
+        let t0 = Instant::now();
+        let key = scatter_stage::scatter_key(preset, tkey)?;
+        let (report, placed, hit) = cached_stage(
+            &cache, force, "scatter", &key, dir, &mut known,
+            ScatterStageReport::files,
+            || scatter_stage::run_scatter(preset, scene, dir).map_err(SceneBuildError::from),
+            &say,
+        )?;
+        if wants(Stage::Preview) {
+            let layers = match placed {
+                Some(placed) => placed
+                    .iter()
+                    .map(|p| {
+                        let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
+                        (p.color, pts)
+                    })
+                    .collect(),
+                None => placements_from_scene(&reimport(dir, &report.scene_file)?, preset),
             };
-            runs.push(StageRun::Preview { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+            placements = Some((layers, key));
         }
+        runs.push(StageRun::Scatter { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+    }
+
+    if let (true, Some((scene, tkey))) = (wants(Stage::Preview), &terrain) {
+        let t0 = Instant::now();
+        let mut k = KeyBuilder::new("preview");
+        k.add(tkey.as_bytes()).add(&stages::PREVIEW_SIZE_PX.to_le_bytes());
+        if let Some((_, skey)) = &placements {
+            k.add(skey.as_bytes());
+        }
+        let key = k.finish();
+        let layers = placements.as_ref().map(|(l, _)| &l[..]).unwrap_or(&[]);
+        let (report, _, hit) = cached_stage(
+            &cache, force, "preview", &key, dir, &mut known,
+            |r: &PreviewStageReport| vec![r.file.clone()],
+            || Ok((stages::run_preview(scene, layers, dir)?, ())),
+            &say,
+        )?;
+        runs.push(StageRun::Preview { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
     }
 
     progress(name, "manifest and report");

@@ -10,6 +10,7 @@ use serde::Serialize;
 use crate::export::write_atomic;
 use crate::scene::build::SceneBuildError;
 use crate::scene::cache::{sha256_hex, FileHashes};
+use crate::scene::scatter_stage::ScatterStageReport;
 use crate::scene::stages::{PreviewStageReport, Stage, TerrainStageReport};
 use crate::scene::Preset;
 
@@ -17,6 +18,7 @@ use crate::scene::Preset;
 #[derive(Debug, Clone)]
 pub enum StageRun {
     Terrain { report: TerrainStageReport, cached: bool, seconds: f64 },
+    Scatter { report: ScatterStageReport, cached: bool, seconds: f64 },
     Preview { report: PreviewStageReport, cached: bool, seconds: f64 },
 }
 
@@ -24,17 +26,18 @@ impl StageRun {
     pub fn stage(&self) -> Stage {
         match self {
             StageRun::Terrain { .. } => Stage::Terrain,
+            StageRun::Scatter { .. } => Stage::Scatter,
             StageRun::Preview { .. } => Stage::Preview,
         }
     }
     pub fn cached(&self) -> bool {
         match self {
-            StageRun::Terrain { cached, .. } | StageRun::Preview { cached, .. } => *cached,
+            StageRun::Terrain { cached, .. } | StageRun::Scatter { cached, .. } | StageRun::Preview { cached, .. } => *cached,
         }
     }
     pub fn seconds(&self) -> f64 {
         match self {
-            StageRun::Terrain { seconds, .. } | StageRun::Preview { seconds, .. } => *seconds,
+            StageRun::Terrain { seconds, .. } | StageRun::Scatter { seconds, .. } | StageRun::Preview { seconds, .. } => *seconds,
         }
     }
 }
@@ -52,6 +55,7 @@ struct Manifest<'a> {
     scene: &'a str,
     files: Vec<FileEntry>,
     terrain: Option<TerrainManifest<'a>>,
+    scatter: Option<ScatterManifest>,
     preview: Option<String>,
     settings: &'a Preset,
 }
@@ -69,6 +73,22 @@ struct TerrainManifest<'a> {
     bounds: &'a Option<crate::scene::stages::BoundsJson>,
     chunks: &'a [crate::scene::stages::ChunkInfo],
     lods: &'a [crate::scene::stages::LodInfo],
+}
+
+#[derive(Serialize)]
+struct ScatterManifest {
+    scene: String,
+    tile_m: f64,
+    species: Vec<SpeciesManifest>,
+}
+
+#[derive(Serialize)]
+struct SpeciesManifest {
+    name: String,
+    count: usize,
+    table: String,
+    summary: String,
+    tiles: usize,
 }
 
 /// Scene-relative paths of every file under `dir`, sorted, with `/` separators.
@@ -115,6 +135,10 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
         StageRun::Terrain { report, .. } => Some(report),
         _ => None,
     });
+    let scatter = runs.iter().find_map(|r| match r {
+        StageRun::Scatter { report, .. } => Some(report),
+        _ => None,
+    });
     let preview = runs.iter().find_map(|r| match r {
         StageRun::Preview { report, .. } => Some(report),
         _ => None,
@@ -135,6 +159,21 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
             bounds: &t.bounds,
             chunks: &t.chunks,
             lods: &t.lods,
+        }),
+        scatter: scatter.map(|s| ScatterManifest {
+            scene: s.scene_file.to_string_lossy().replace('\\', "/"),
+            tile_m: s.tile_m,
+            species: s
+                .species
+                .iter()
+                .map(|sp| SpeciesManifest {
+                    name: sp.name.clone(),
+                    count: sp.count,
+                    table: sp.csv.to_string_lossy().replace('\\', "/"),
+                    summary: sp.csv.with_extension("json").to_string_lossy().replace('\\', "/"),
+                    tiles: sp.tiles.len(),
+                })
+                .collect(),
         }),
         preview: preview.map(|p| p.file.to_string_lossy().replace('\\', "/")),
         settings: preset,
@@ -161,6 +200,21 @@ fn report_json(preset: &Preset, runs: &[StageRun]) -> String {
     for r in runs {
         let (name, mut value, cached, seconds) = match r {
             StageRun::Terrain { report, cached, seconds } => ("terrain", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
+            StageRun::Scatter { report, cached, seconds } => {
+                let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
+                // per-species seconds are timing too
+                if let Some(list) = v.get_mut("species").and_then(Value::as_array_mut) {
+                    for sp in list {
+                        if let Some(o) = sp.as_object_mut() {
+                            o.remove("seconds");
+                            if let Some(st) = o.get_mut("stats").and_then(Value::as_object_mut) {
+                                st.remove("seconds");
+                            }
+                        }
+                    }
+                }
+                ("scatter", v, *cached, *seconds)
+            }
             StageRun::Preview { report, cached, seconds } => ("preview", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
         };
         // the stage's own seconds are from the run that computed it: timing, not results
@@ -206,6 +260,26 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
                 }
                 if !t.chunks.is_empty() {
                     s += &format!("\n{} chunks; {} triangles written in all (skirts and base included)\n", t.chunks.len(), t.output_triangles);
+                }
+                s += "\n";
+            }
+            StageRun::Scatter { report: sc, .. } => {
+                s += &format!("## Scatter\n\n`{}` (terrain + one instanced node per species per tile), tiles of {} m\n\n", sc.scene_file.display(), sc.tile_m);
+                s += "| species | kind | instances | expected | ratio | min pair distance (m) | min_spacing (m) | max \\|y − terrain\\| (m) | tiles |\n|---|---|---|---|---|---|---|---|---|\n";
+                for sp in &sc.species {
+                    let spacing = preset.species.iter().find(|x| x.name == sp.name).map_or(0.0, |x| x.min_spacing_m);
+                    s += &format!(
+                        "| {} | {:?} | {} | {:.0} | {:.3} | {} | {} | {:.2e} | {} |\n",
+                        sp.name,
+                        sp.kind,
+                        sp.count,
+                        sp.stats.expected,
+                        sp.stats.count_ratio,
+                        sp.stats.min_pair_distance_m.map_or("—".to_string(), |d| format!("{d:.3}")),
+                        spacing,
+                        sp.stats.max_height_error_m,
+                        sp.tiles.len()
+                    );
                 }
                 s += "\n";
             }

@@ -8,6 +8,7 @@ pub mod preview;
 pub mod build;
 pub mod cache;
 pub mod manifest;
+pub mod scatter_stage;
 pub mod stages;
 
 use std::path::PathBuf;

@@ -361,3 +361,37 @@ mod tests {
         assert_eq!(hypsometric_tint(f32::NAN), low);
     }
 }
+
+/// Draws placements over a preview made with `view`: per layer (colour, instance positions), the
+/// instances are counted per pixel and the colour is blended in with opacity 1 − exp(−count / 2),
+/// so sparse trees show as dots and dense ground cover as shading. Layers are drawn in order.
+pub fn draw_placements(canvas: &mut Canvas, view: &OrthoView, layers: &[([f32; 4], &[[f64; 3]])]) {
+    let (w, h) = (canvas.width as usize, canvas.height as usize);
+    if w == 0 || h == 0 || canvas.color.len() != w * h {
+        return;
+    }
+    let mut counts = vec![0u32; w * h];
+    for (color, points) in layers {
+        counts.iter_mut().for_each(|c| *c = 0);
+        for p in points.iter() {
+            let q = view.to_pixel(*p);
+            if !(q[0].is_finite() && q[1].is_finite()) || q[0] < 0.0 || q[1] < 0.0 {
+                continue;
+            }
+            let (x, y) = (q[0] as usize, q[1] as usize);
+            if x < w && y < h {
+                counts[y * w + x] = counts[y * w + x].saturating_add(1);
+            }
+        }
+        for (c, &n) in canvas.color.iter_mut().zip(&counts) {
+            if n == 0 {
+                continue;
+            }
+            let a = 1.0 - (-(n as f32) / 2.0).exp();
+            for k in 0..3 {
+                c[k] = c[k] * (1.0 - a) + color[k] * a;
+            }
+            c[3] = c[3].max(a);
+        }
+    }
+}

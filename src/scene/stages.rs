@@ -24,15 +24,18 @@ use crate::terrain::SampleMesh;
 pub enum Stage {
     /// Heightmap → terrain meshes (+ LoD chain).
     Terrain,
+    /// [[species]] → placements on the terrain: tables and scene.glb with GPU instancing.
+    Scatter,
     /// preview.png: a shaded relief drawn from the terrain mesh.
     Preview,
 }
 
 impl Stage {
-    pub const ALL: [Stage; 2] = [Stage::Terrain, Stage::Preview];
+    pub const ALL: [Stage; 3] = [Stage::Terrain, Stage::Scatter, Stage::Preview];
     pub fn name(self) -> &'static str {
         match self {
             Stage::Terrain => "terrain",
+            Stage::Scatter => "scatter",
             Stage::Preview => "preview",
         }
     }
@@ -285,10 +288,14 @@ pub struct PreviewStageReport {
 
 pub const PREVIEW_SIZE_PX: u32 = 1024;
 
-/// Draws preview.png from the terrain scene.
-pub fn run_preview(terrain: &Scene, scene_dir: &Path) -> Result<PreviewStageReport, StageError> {
+/// Draws preview.png: the terrain's shaded relief, then the placements (colour, positions) over it.
+pub fn run_preview(terrain: &Scene, placements: &[([f32; 4], Vec<[f64; 3]>)], scene_dir: &Path) -> Result<PreviewStageReport, StageError> {
     let t0 = Instant::now();
-    let canvas = crate::scene::preview::terrain_preview(terrain, PREVIEW_SIZE_PX);
+    let mut canvas = crate::scene::preview::terrain_preview(terrain, PREVIEW_SIZE_PX);
+    if let Some(view) = crate::scene::preview::preview_view(terrain, PREVIEW_SIZE_PX) {
+        let layers: Vec<([f32; 4], &[[f64; 3]])> = placements.iter().map(|(c, p)| (*c, &p[..])).collect();
+        crate::scene::preview::draw_placements(&mut canvas, &view, &layers);
+    }
     let file = PathBuf::from("preview.png");
     crate::scene::preview::write_png(&canvas, &scene_dir.join(&file)).map_err(|e| fail(Stage::Preview)(e.to_string()))?;
     Ok(PreviewStageReport { file, width_px: canvas.width as u32, height_px: canvas.height as u32, seconds: t0.elapsed().as_secs_f64() })

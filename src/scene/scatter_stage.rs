@@ -1,0 +1,230 @@
+//! The scatter stage: places every `[[species]]` on the exported terrain surface (in preset order,
+//! so exclusions see the species before them), writes `placements/<species>.csv` and `.json`, and
+//! `scene.glb`: the terrain plus one EXT_mesh_gpu_instancing node per species per tile.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::export::{self, table};
+use crate::mesh::{Instances, Mesh, Node, Scene};
+use crate::plants::marker;
+use crate::scatter::density::DensityMap;
+use crate::scatter::stats::{analyze, SpeciesStats};
+use crate::scatter::surface::SurfaceIndex;
+use crate::scatter::{scatter_species_detailed, Instance, RuleCounts};
+use crate::scene::cache::{sha256_hex, KeyBuilder};
+use crate::scene::stages::StageError;
+use crate::scene::{Preset, SpeciesSettings};
+
+fn fail(message: String) -> StageError {
+    StageError::Failed { stage: "scatter", message }
+}
+
+/// Per tile: count and bounds of the instances placed in it.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct TileSummary {
+    pub tile: u32,
+    pub count: usize,
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+/// What the scatter stage measured for one species (also written as placements/<species>.json).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct SpeciesReport {
+    pub name: String,
+    pub kind: crate::scene::SpeciesKind,
+    pub count: usize,
+    pub csv: PathBuf,
+    pub rules: RuleCounts,
+    pub stats: SpeciesStats,
+    pub tiles: Vec<TileSummary>,
+    pub seconds: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ScatterStageReport {
+    pub scene_file: PathBuf,
+    pub tile_m: f64,
+    pub species: Vec<SpeciesReport>,
+    pub seconds: f64,
+}
+
+impl ScatterStageReport {
+    pub fn files(&self) -> Vec<PathBuf> {
+        let mut files = vec![self.scene_file.clone()];
+        for s in &self.species {
+            files.push(s.csv.clone());
+            files.push(s.csv.with_extension("json"));
+        }
+        files
+    }
+}
+
+/// Cache key: the terrain's key, the species and scatter settings, the scene seed, the maps' bytes.
+pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageError> {
+    let mut k = KeyBuilder::new("scatter");
+    k.add(terrain_key.as_bytes());
+    k.add(&preset.scene.seed.to_le_bytes());
+    k.add(serde_json::to_string(&preset.scatter).unwrap_or_default().as_bytes());
+    for s in &preset.species {
+        k.add(serde_json::to_string(s).unwrap_or_default().as_bytes());
+        for map in [&s.density_map, &s.mask].into_iter().flatten() {
+            let bytes = std::fs::read(map).map_err(|e| fail(format!("{}: cannot read: {e}", map.display())))?;
+            k.add(sha256_hex(&bytes).as_bytes());
+        }
+    }
+    Ok(k.finish())
+}
+
+/// The terrain surface of a terrain scene: every primitive of every mesh (skirts and base are
+/// vertical or face down; the surface index skips those triangles).
+pub fn surface_of(terrain: &Scene) -> SurfaceIndex {
+    let parts: Vec<(&[[f32; 3]], &[u32])> =
+        terrain.meshes.iter().flat_map(|m| m.primitives.iter().map(|p| (&p.positions[..], &p.indices[..]))).collect();
+    SurfaceIndex::from_parts(&parts)
+}
+
+fn load_map(path: &Option<PathBuf>) -> Result<Option<DensityMap>, StageError> {
+    path.as_ref().map(|p| DensityMap::load(p).map_err(|e| fail(e.to_string()))).transpose()
+}
+
+fn tile_summaries(instances: &[Instance]) -> Vec<TileSummary> {
+    let mut tiles: BTreeMap<u32, TileSummary> = BTreeMap::new();
+    for i in instances {
+        let t = tiles.entry(i.tile).or_insert(TileSummary { tile: i.tile, count: 0, min: i.position, max: i.position });
+        t.count += 1;
+        for k in 0..3 {
+            t.min[k] = t.min[k].min(i.position[k]);
+            t.max[k] = t.max[k].max(i.position[k]);
+        }
+    }
+    tiles.into_values().collect()
+}
+
+fn rows(instances: &[Instance]) -> Vec<table::PlacementRow> {
+    instances
+        .iter()
+        .map(|i| table::PlacementRow { position: i.position, rotation: i.rotation, scale: i.scale, yaw_deg: i.yaw_deg, tile: i.tile })
+        .collect()
+}
+
+/// The placed instances of one species, for the preview.
+pub struct Placed {
+    pub species: SpeciesSettings,
+    pub color: [f32; 4],
+    pub instances: Vec<Instance>,
+}
+
+/// Runs the scatter stage into `scene_dir`.
+pub fn run_scatter(preset: &Preset, terrain: &Scene, scene_dir: &Path) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
+    let t0 = Instant::now();
+    let surface = surface_of(terrain);
+    let extent = surface.bounds();
+    let mut placed: Vec<Placed> = Vec::new();
+    let mut reports = Vec::new();
+    for (index, species) in preset.species.iter().enumerate() {
+        let t1 = Instant::now();
+        let density = load_map(&species.density_map)?;
+        let mask = load_map(&species.mask)?;
+        let earlier: Vec<(&str, &[Instance])> = placed.iter().map(|p| (p.species.name.as_str(), &p.instances[..])).collect();
+        let result = scatter_species_detailed(
+            &surface,
+            extent,
+            species,
+            density.as_ref(),
+            mask.as_ref(),
+            &earlier,
+            preset.scatter.tile_m,
+            preset.scene.seed,
+        )
+        .map_err(|e| fail(e.to_string()))?;
+        let stats = analyze(&surface, extent, species, density.as_ref(), mask.as_ref(), &result.instances, result.estimate)
+            .map_err(|e| fail(e.to_string()))?;
+        let csv = PathBuf::from("placements").join(format!("{}.csv", species.name));
+        table::write_placements_csv(&scene_dir.join(&csv), &rows(&result.instances)).map_err(|e| fail(e.to_string()))?;
+        let report = SpeciesReport {
+            name: species.name.clone(),
+            kind: species.kind,
+            count: result.instances.len(),
+            csv: csv.clone(),
+            rules: result.counts,
+            stats,
+            tiles: tile_summaries(&result.instances),
+            seconds: t1.elapsed().as_secs_f64(),
+        };
+        let mut json = serde_json::to_string_pretty(&SpeciesSummary::from(&report)).map_err(|e| fail(e.to_string()))?;
+        json.push('\n');
+        export::write_atomic(&scene_dir.join(csv.with_extension("json")), json.as_bytes()).map_err(|e| fail(e.to_string()))?;
+        reports.push(report);
+        placed.push(Placed { species: species.clone(), color: marker::species_color(species.kind, index), instances: result.instances });
+    }
+    let scene = instanced_scene(terrain, &placed);
+    let scene_file = PathBuf::from("scene.glb");
+    export::write_scene(&scene, &scene_dir.join(&scene_file)).map_err(|e| fail(e.to_string()))?;
+    let report = ScatterStageReport { scene_file, tile_m: preset.scatter.tile_m, species: reports, seconds: t0.elapsed().as_secs_f64() };
+    Ok((report, placed))
+}
+
+/// placements/<species>.json: count, per-tile counts and AABBs, and the analyzer's figures.
+#[derive(Serialize)]
+struct SpeciesSummary<'a> {
+    species: &'a str,
+    count: usize,
+    stats: &'a SpeciesStats,
+    tiles: &'a [TileSummary],
+}
+
+impl<'a> From<&'a SpeciesReport> for SpeciesSummary<'a> {
+    fn from(r: &'a SpeciesReport) -> Self {
+        SpeciesSummary { species: &r.name, count: r.count, stats: &r.stats, tiles: &r.tiles }
+    }
+}
+
+/// The terrain scene plus, per species, its marker mesh and one instanced node per tile (grouped
+/// under a node named after the species).
+pub fn instanced_scene(terrain: &Scene, placed: &[Placed]) -> Scene {
+    let mut scene = terrain.clone();
+    for p in placed {
+        let (mesh, materials) = marker::marker(p.species.kind, &p.species.name, p.color);
+        let material_base = scene.materials.len();
+        scene.materials.extend(materials);
+        let mesh = Mesh {
+            primitives: mesh
+                .primitives
+                .into_iter()
+                .map(|mut prim| {
+                    prim.material = prim.material.map(|m| m + material_base);
+                    prim
+                })
+                .collect(),
+            ..mesh
+        };
+        scene.meshes.push(mesh);
+        let mesh_index = scene.meshes.len() - 1;
+        let mut by_tile: BTreeMap<u32, Instances> = BTreeMap::new();
+        for i in &p.instances {
+            let inst = by_tile.entry(i.tile).or_default();
+            inst.translations.push([i.position[0] as f32, i.position[1] as f32, i.position[2] as f32]);
+            inst.rotations.push(i.rotation);
+            inst.scales.push(i.scale);
+        }
+        let mut children = Vec::new();
+        for (tile, instances) in by_tile {
+            scene.nodes.push(Node {
+                name: format!("{}_tile_{tile}", p.species.name),
+                mesh: Some(mesh_index),
+                instances: Some(instances),
+                extras: Some(serde_json::json!({ "species": p.species.name, "tile": tile })),
+                ..Node::default()
+            });
+            children.push(scene.nodes.len() - 1);
+        }
+        scene.nodes.push(Node { name: p.species.name.clone(), children, ..Node::default() });
+        scene.roots.push(scene.nodes.len() - 1);
+    }
+    scene
+}
