@@ -610,7 +610,7 @@ fn only_skip_and_out_select_what_is_built() {
     assert!(t.contains("terrain"), "{t}");
     assert!(!d.join("pv/a").exists());
     // nothing left to build at all: usage error
-    let o = verdant_in(d, &["build", "p/a.toml", "--skip", "terrain,preview", "--out", "none"]);
+    let o = verdant_in(d, &["build", "p/a.toml", "--skip", "terrain,scatter,preview", "--out", "none"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     let o = verdant_in(d, &["build", "p/a.toml", "--only", "grass"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
@@ -690,7 +690,7 @@ fn library_batch_keeps_order_and_reports_failures() {
         assert!(o.dir.as_ref().unwrap().join("manifest.json").is_file());
     }
     let lines = lines.into_inner().unwrap();
-    assert!(lines.iter().any(|l| l == "a: terrain: meshing"), "{lines:?}");
+    assert!(lines.iter().any(|l| l == "a: terrain: running"), "{lines:?}");
 
     // build_preset directly: the second time both stages come from the cache
     let p = load_preset(&good).unwrap();

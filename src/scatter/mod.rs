@@ -48,7 +48,7 @@ pub struct Instance {
 }
 
 /// Candidates examined and why they were dropped (for the report).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct RuleCounts {
     /// Candidates generated (jittered: cells inside the extent; Poisson: the unthinned set).
     pub candidates: u64,

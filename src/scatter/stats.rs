@@ -18,7 +18,7 @@ pub const REGIONS: usize = 8;
 /// Midpoint samples per side of each region for its expected count.
 const REGION_SAMPLES: usize = 48;
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct RegionStat {
     /// [min_x, min_z, max_x, max_z]
     pub region: [f64; 4],
@@ -28,7 +28,7 @@ pub struct RegionStat {
     pub ratio: Option<f64>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct TileStat {
     pub tile: u32,
     pub count: usize,
@@ -36,7 +36,7 @@ pub struct TileStat {
     pub aabb_max: [f64; 3],
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct SpeciesStats {
     pub species: String,
     pub count: usize,

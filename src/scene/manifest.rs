@@ -171,7 +171,7 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
                     count: sp.count,
                     table: sp.csv.to_string_lossy().replace('\\', "/"),
                     summary: sp.csv.with_extension("json").to_string_lossy().replace('\\', "/"),
-                    tiles: sp.tiles.len(),
+                    tiles: sp.stats.per_tile.len(),
                 })
                 .collect(),
         }),
@@ -209,6 +209,7 @@ fn report_json(preset: &Preset, runs: &[StageRun]) -> String {
                             o.remove("seconds");
                             if let Some(st) = o.get_mut("stats").and_then(Value::as_object_mut) {
                                 st.remove("seconds");
+                                st.remove("analyze_seconds");
                             }
                         }
                     }
@@ -274,11 +275,11 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
                         sp.kind,
                         sp.count,
                         sp.stats.expected,
-                        sp.stats.count_ratio,
+                        sp.stats.count_ratio.unwrap_or(f64::NAN),
                         sp.stats.min_pair_distance_m.map_or("—".to_string(), |d| format!("{d:.3}")),
                         spacing,
                         sp.stats.max_height_error_m,
-                        sp.tiles.len()
+                        sp.stats.per_tile.len()
                     );
                 }
                 s += "\n";

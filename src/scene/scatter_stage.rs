@@ -23,15 +23,6 @@ fn fail(message: String) -> StageError {
     StageError::Failed { stage: "scatter", message }
 }
 
-/// Per tile: count and bounds of the instances placed in it.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct TileSummary {
-    pub tile: u32,
-    pub count: usize,
-    pub min: [f64; 3],
-    pub max: [f64; 3],
-}
-
 /// What the scatter stage measured for one species (also written as placements/<species>.json).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct SpeciesReport {
@@ -41,7 +32,6 @@ pub struct SpeciesReport {
     pub csv: PathBuf,
     pub rules: RuleCounts,
     pub stats: SpeciesStats,
-    pub tiles: Vec<TileSummary>,
     pub seconds: f64,
 }
 
@@ -92,19 +82,6 @@ fn load_map(path: &Option<PathBuf>) -> Result<Option<DensityMap>, StageError> {
     path.as_ref().map(|p| DensityMap::load(p).map_err(|e| fail(e.to_string()))).transpose()
 }
 
-fn tile_summaries(instances: &[Instance]) -> Vec<TileSummary> {
-    let mut tiles: BTreeMap<u32, TileSummary> = BTreeMap::new();
-    for i in instances {
-        let t = tiles.entry(i.tile).or_insert(TileSummary { tile: i.tile, count: 0, min: i.position, max: i.position });
-        t.count += 1;
-        for k in 0..3 {
-            t.min[k] = t.min[k].min(i.position[k]);
-            t.max[k] = t.max[k].max(i.position[k]);
-        }
-    }
-    tiles.into_values().collect()
-}
-
 fn rows(instances: &[Instance]) -> Vec<table::PlacementRow> {
     instances
         .iter()
@@ -142,7 +119,8 @@ pub fn run_scatter(preset: &Preset, terrain: &Scene, scene_dir: &Path) -> Result
             preset.scene.seed,
         )
         .map_err(|e| fail(e.to_string()))?;
-        let stats = analyze(&surface, extent, species, density.as_ref(), mask.as_ref(), &result.instances, result.estimate)
+        let generate_s = t1.elapsed().as_secs_f64();
+        let stats = analyze(&surface, extent, species, density.as_ref(), mask.as_ref(), &result.instances, preset.scatter.tile_m, generate_s)
             .map_err(|e| fail(e.to_string()))?;
         let csv = PathBuf::from("placements").join(format!("{}.csv", species.name));
         table::write_placements_csv(&scene_dir.join(&csv), &rows(&result.instances)).map_err(|e| fail(e.to_string()))?;
@@ -153,10 +131,15 @@ pub fn run_scatter(preset: &Preset, terrain: &Scene, scene_dir: &Path) -> Result
             csv: csv.clone(),
             rules: result.counts,
             stats,
-            tiles: tile_summaries(&result.instances),
             seconds: t1.elapsed().as_secs_f64(),
         };
-        let mut json = serde_json::to_string_pretty(&SpeciesSummary::from(&report)).map_err(|e| fail(e.to_string()))?;
+        // timing stays out of the summary, so the file is byte-identical from run to run
+        let mut summary = serde_json::to_value(SpeciesSummary::from(&report)).map_err(|e| fail(e.to_string()))?;
+        if let Some(st) = summary.get_mut("stats").and_then(serde_json::Value::as_object_mut) {
+            st.remove("seconds");
+            st.remove("analyze_seconds");
+        }
+        let mut json = serde_json::to_string_pretty(&summary).map_err(|e| fail(e.to_string()))?;
         json.push('\n');
         export::write_atomic(&scene_dir.join(csv.with_extension("json")), json.as_bytes()).map_err(|e| fail(e.to_string()))?;
         reports.push(report);
@@ -169,18 +152,21 @@ pub fn run_scatter(preset: &Preset, terrain: &Scene, scene_dir: &Path) -> Result
     Ok((report, placed))
 }
 
-/// placements/<species>.json: count, per-tile counts and AABBs, and the analyzer's figures.
+/// placements/<species>.json: count, per-tile counts and AABBs (in `stats.per_tile`), and the
+/// analyzer's figures.
 #[derive(Serialize)]
 struct SpeciesSummary<'a> {
     species: &'a str,
+    kind: crate::scene::SpeciesKind,
     count: usize,
+    table: &'a Path,
+    rules: &'a RuleCounts,
     stats: &'a SpeciesStats,
-    tiles: &'a [TileSummary],
 }
 
 impl<'a> From<&'a SpeciesReport> for SpeciesSummary<'a> {
     fn from(r: &'a SpeciesReport) -> Self {
-        SpeciesSummary { species: &r.name, count: r.count, stats: &r.stats, tiles: &r.tiles }
+        SpeciesSummary { species: &r.name, kind: r.kind, count: r.count, table: &r.csv, rules: &r.rules, stats: &r.stats }
     }
 }
 
