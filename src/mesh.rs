@@ -143,8 +143,8 @@ pub struct Scene {
     pub extras: Option<Value>,
 }
 
-/// Axis-aligned bounds of a set of points.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Axis-aligned bounds of a set of points (serialised as `{"min": [x, y, z], "max": [x, y, z]}`).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Bounds {
     pub min: [f32; 3],
     pub max: [f32; 3],

@@ -70,7 +70,7 @@ struct TerrainManifest<'a> {
     triangles: usize,
     output_triangles: usize,
     max_error_m: f64,
-    bounds: &'a Option<crate::scene::stages::BoundsJson>,
+    bounds: &'a Option<crate::mesh::Bounds>,
     chunks: &'a [crate::scene::stages::ChunkInfo],
     lods: &'a [crate::scene::stages::LodInfo],
 }

@@ -52,22 +52,10 @@ fn fail(stage: Stage) -> impl Fn(String) -> StageError {
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct BoundsJson {
-    pub min: [f32; 3],
-    pub max: [f32; 3],
-}
-
-impl From<Bounds> for BoundsJson {
-    fn from(b: Bounds) -> Self {
-        BoundsJson { min: b.min, max: b.max }
-    }
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct ChunkInfo {
     pub name: String,
     pub triangles: usize,
-    pub bounds: BoundsJson,
+    pub bounds: Bounds,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -99,7 +87,7 @@ pub struct TerrainStageReport {
     pub vertices: usize,
     pub triangles: usize,
     pub output_triangles: usize,
-    pub bounds: Option<BoundsJson>,
+    pub bounds: Option<Bounds>,
     pub files: Vec<PathBuf>,
     pub chunks: Vec<ChunkInfo>,
     pub lods: Vec<LodInfo>,
@@ -230,7 +218,7 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
             .iter()
             .filter_map(|m| {
                 let b = Bounds::of(&m.primitives.iter().flat_map(|p| p.positions.iter().copied()).collect::<Vec<_>>())?;
-                Some(ChunkInfo { name: m.name.clone(), triangles: m.triangle_count(), bounds: b.into() })
+                Some(ChunkInfo { name: m.name.clone(), triangles: m.triangle_count(), bounds: b })
             })
             .collect()
     } else {
@@ -251,7 +239,7 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
         vertices: mesh.vertices.len(),
         triangles: mesh.triangles.len(),
         output_triangles: summary.triangles,
-        bounds: summary.bounds.map(|b| BoundsJson { min: b.min, max: b.max }),
+        bounds: summary.bounds,
         files,
         chunks,
         lods,

@@ -92,13 +92,7 @@ pub struct OutputSummary {
     pub meshes: usize,
     pub vertices: usize,
     pub triangles: usize,
-    pub bounds: Option<BoundsJson>,
-}
-
-#[derive(Debug, Clone, Serialize)]
-pub struct BoundsJson {
-    pub min: [f32; 3],
-    pub max: [f32; 3],
+    pub bounds: Option<Bounds>,
 }
 
 /// What `--report` writes: the analyzer's measurements and the time each step took.
@@ -263,7 +257,7 @@ pub fn summarize(scene: &Scene, files: Vec<String>) -> OutputSummary {
         meshes: scene.meshes.len(),
         vertices,
         triangles,
-        bounds: bounds.map(|b| BoundsJson { min: b.min, max: b.max }),
+        bounds,
     }
 }
 
