@@ -29,7 +29,8 @@ done
 
 # Pinned checking tools. pyopengl is installed in a second step, after pyrender, because pyrender pins
 # PyOpenGL 3.1.0, which fails under EGL on these machines.
-PY_PKGS=(trimesh==5.2.0 pyrender==0.1.45 pygltflib==1.16.5 numpy==2.4.6 pillow==12.3.0 scipy==1.17.1 networkx==3.6.1)
+# rtree: trimesh's pure-Python ray caster (trimesh.ray.ray_triangle) needs its R-tree of triangle bounds.
+PY_PKGS=(trimesh==5.2.0 pyrender==0.1.45 pygltflib==1.16.5 numpy==2.4.6 pillow==12.3.0 scipy==1.17.1 networkx==3.6.1 rtree==1.4.1)
 PY_PKGS_AFTER=(pyopengl==3.1.10)
 # libopengl0 / libgl1 give PyOpenGL the desktop GL library it loads first (else it falls back to GLES).
 APT_PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgl1)
@@ -100,7 +101,7 @@ else
 fi
 
 # Smoke-test the tools, so a broken set-up fails here with a clear message rather than mid-check.
-"$PY" -c 'import trimesh, pygltflib, pyrender, OpenGL, numpy, PIL
+"$PY" -c 'import trimesh, pygltflib, pyrender, OpenGL, numpy, PIL, scipy.spatial, rtree
 print(f"python tools: trimesh {trimesh.__version__}, pyrender {pyrender.__version__}, "
       f"PyOpenGL {OpenGL.__version__}, numpy {numpy.__version__}")'
 node -e 'const v=require(process.argv[1]); console.log("node tools: gltf-validator " + v.version())' \
@@ -203,7 +204,7 @@ section "3b. verdant build: the embedded demo and presets/*.toml into out/check/
 BUILD_OUT="$OUT/build"
 declare -A IS_BUILD=() SCENE_OF=()
 SCENES=()          # scene folders under $BUILD_OUT, in order
-declare -A SCENE_BUILT=() SCENE_SECONDS=() SCENE_CHECKED=()
+declare -A SCENE_BUILT=() SCENE_SECONDS=() SCENE_CHECKED=() SCENE_PLACEMENTS=()
 build_scenes() {   # build_scenes LABEL ARGS...: run `verdant build ARGS --out $BUILD_OUT`
   local label="$1"; shift
   local t=$SECONDS rc=0
@@ -234,6 +235,18 @@ for dir in "$BUILD_OUT"/*/; do
     SIDES[$rel]=1       # chunk skirts face sideways: no --up-facing
     WATERTIGHT[$rel]=0
   done < <(find "$dir" -type f \( -name '*.glb' -o -name '*.gltf' -o -name '*.obj' \) -print0 | sort -z)
+done
+# a scene with species must have written its instanced scene.glb and a placement table per species
+for scene in "${SCENES[@]}"; do
+  m="$BUILD_OUT/$scene/manifest.json"
+  if grep -q '"scatter"' "$m"; then
+    if [ -z "${IS_BUILD[build/$scene/scene.glb]:-}" ]; then
+      fail "$scene: the manifest has a scatter section but build/$scene/scene.glb was not written"
+    fi
+    SCENE_PLACEMENTS[$scene]="FAIL (not checked)"
+  else
+    SCENE_PLACEMENTS[$scene]="- (no species)"
+  fi
 done
 expected_scenes=$((1 + ${#presets[@]}))
 if [ "${#SCENES[@]}" -ne "$expected_scenes" ]; then
@@ -273,14 +286,19 @@ while IFS=$'\t' read -r name status tris verts; do
   if [ "$status" = ok ]; then CHECKED[$name]="ok $tris tris $verts verts"; else CHECKED[$name]="FAIL"; fi
 done < "$OUT/check_outputs.tsv"
 
-section "5b. check_outputs.py --scene (manifest sha256/sizes, triangle counts, bounds, LoDs, thumbnail, preview)"
+section "5b. check_outputs.py --scene (manifest sha256/sizes, triangle counts, bounds, LoDs, thumbnail, preview; placements vs scene.glb instancing, ray-cast onto the terrain, spacing)"
 : > "$OUT/check_scenes.tsv"
 for scene in "${SCENES[@]}"; do
   if "$PY" scripts/check_outputs.py --scene "$BUILD_OUT/$scene" --thumb "$OUT/thumbs/build_$scene.png" \
        --summary-tsv "$OUT/check_scenes.tsv"; then pass; else fail "check_outputs.py --scene $scene"; fi
 done
-while IFS=$'\t' read -r name status tris verts; do
+while IFS=$'\t' read -r name status tris verts placements; do
   if [ "$status" = ok ]; then SCENE_CHECKED[$name]="ok $tris tris $verts verts"; else SCENE_CHECKED[$name]="FAIL"; fi
+  if [ "${placements:--}" != "-" ]; then
+    if [ "$status" = ok ]; then SCENE_PLACEMENTS[$name]="ok $placements"; else SCENE_PLACEMENTS[$name]="FAIL"; fi
+  elif [ "$status" != ok ] && [ "${SCENE_PLACEMENTS[$name]:0:4}" = FAIL ]; then
+    SCENE_PLACEMENTS[$name]="FAIL (see the scene check)"
+  fi
 done < "$OUT/check_scenes.tsv"
 for f in "${FILES[@]}"; do
   if [ -z "${IS_BUILD[$f]:-}" ]; then continue; fi
@@ -289,6 +307,7 @@ for f in "${FILES[@]}"; do
     FAIL) CHECKED[$f]="FAIL (scene $scene)" ;;
     *) case "$f" in
          */terrain_LOD*) CHECKED[$f]="ok (LoD, scene check)" ;;
+         */scene.glb) CHECKED[$f]="ok (placements, scene check)" ;;
          *) CHECKED[$f]="ok (scene) ${SCENE_CHECKED[$scene]#ok }" ;;
        esac ;;
   esac
@@ -349,9 +368,11 @@ for f in "${FILES[@]}"; do
     "${CHECKED[$f]:--}" "${KHRONOS[$f]:--}"
 done
 echo
-printf '%-12s | %-6s | %s\n' scene build "check_outputs --scene (manifest, sha256, counts, bounds, LoDs, preview)"
+printf '%-12s | %-6s | %-40s | %s\n' scene build "check_outputs --scene (sha256, LoDs, ...)" \
+  "placements (glb instancing = CSV/JSON, ray-cast, spacing)"
 for scene in "${SCENES[@]}"; do
-  printf '%-12s | %-6s | %s\n' "$scene" "${SCENE_BUILT[$scene]:--}" "${SCENE_CHECKED[$scene]:--}"
+  printf '%-12s | %-6s | %-40s | %s\n' "$scene" "${SCENE_BUILT[$scene]:--}" "${SCENE_CHECKED[$scene]:--}" \
+    "${SCENE_PLACEMENTS[$scene]:--}"
 done
 echo "thumbnails: out/check/thumbs/   total time: $(elapsed "$SCRIPT_START")"
 echo "outputs: $PASSED passed, $FAILED failed"

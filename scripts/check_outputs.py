@@ -4,6 +4,7 @@ JSON report the CLI wrote beside it; optionally check it is a closed solid and r
 
   check_outputs.py FILE --report REPORT.json [--watertight] [--thumb THUMB.png] [--summary-tsv T.tsv]
   check_outputs.py --scene DIR [--thumb THUMB.png] [--summary-tsv T.tsv]
+  check_outputs.py --placements DIR   only the scatter check of a built scene (below)
   check_outputs.py --self-test     check the checker on samples it makes itself (good and broken ones)
 
 --scene checks a folder written by `verdant build` (out/<scene>/) against its manifest.json instead:
@@ -11,6 +12,15 @@ every file's size and sha256 (and that the manifest lists every file but manifes
 terrain file's triangle count (= terrain.output_triangles) and bounds, each LoD file (triangles >= the
 level's surface triangles, bounds inside the terrain's, errors within the request, switch distances
 increasing), a rendered thumbnail of the primary terrain file, and that preview.png is not blank.
+When the manifest has a scatter section it also runs the placements check (--placements alone runs
+only that): scene.glb's EXT_mesh_gpu_instancing nodes (FLOAT TRANSLATION/ROTATION/SCALE of equal
+count, unit quaternions, the extension in extensionsUsed and extensionsRequired, one `<species>_tile_<t>`
+child per tile under a root node named after the species) expanded with pygltflib and compared with
+placements/<species>.csv (translations = the CSV's f64 rounded to f32, rotations and scales equal, in
+tile order) and placements/<species>.json (count, per-tile counts and AABBs, min pair distance);
+up to 20,000 instances per species ray-cast straight down onto scene.glb's terrain with trimesh
+(|y - hit| <= 1e-3 m for the f32 glb, 1e-4 m for the f64 CSV); Poisson species at least min_spacing
+apart over all instances, and every exclusion radius kept (scipy cKDTree, x/z).
 
 Loaders: trimesh (force='scene', process=False) for every format; for glTF also pygltflib with our own
 accessor decoding, because trimesh 5.x ignores EXT_mesh_gpu_instancing / MSFT_lod and does not decode
@@ -536,6 +546,10 @@ def self_test() -> int:
             right = ok == expect_ok
             wrong += not right
             print(f"{'ok  ' if right else 'BAD '} self-test {name}: {detail}")
+        for name, right, detail in placement_self_test(d / "placements"):
+            cases.append((name,))
+            wrong += not right
+            print(f"{'ok  ' if right else 'BAD '} self-test {name}: {detail}")
     print(f"self-test: {len(cases) - wrong} passed, {wrong} failed")
     return 1 if wrong else 0
 
@@ -569,7 +583,7 @@ def check_preview(png: Path, want_size) -> str:
     return f"preview {size[0]}x{size[1]}, {len(colours)} colours"
 
 
-def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int]:
+def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int, str]:
     import hashlib
 
     manifest_path = scene_dir / "manifest.json"
@@ -670,24 +684,30 @@ def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int]:
             coverage = render_thumbnail(primary_geom.merged(), primary_geom.bounds(), thumb)
             facts.append(f"thumb {thumb} ({coverage:.0%} covered)")
 
+    placements = "-"
+    if manifest.get("scatter"):
+        facts.extend(check_placements(scene_dir, manifest, report))
+        sp = manifest["scatter"]["species"]
+        placements = f"{len(sp)} species, {sum(s['count'] for s in sp)} instances"
+
     preview = manifest.get("preview")
     if preview:
         stage = report.get("stages", {}).get("preview", {})
         size = (stage["width_px"], stage["height_px"]) if "width_px" in stage else None
         facts.append(check_preview(scene_dir / preview, size))
-    return f"{manifest.get('scene')}: " + "; ".join(facts), tris, verts
+    return f"{manifest.get('scene')}: " + "; ".join(facts), tris, verts, placements
 
 
 def scene_main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description="check a scene folder written by `verdant build`")
     parser.add_argument("--scene", required=True, help="the scene folder (holding manifest.json)")
     parser.add_argument("--thumb", help="render a thumbnail of the primary terrain file here")
-    parser.add_argument("--summary-tsv", help="append 'scene<TAB>status<TAB>tris<TAB>verts' to this file")
+    parser.add_argument("--summary-tsv", help="append 'scene<TAB>status<TAB>tris<TAB>verts<TAB>placements' to this file")
     args = parser.parse_args(argv)
     name = Path(args.scene).name
-    tris = verts = "-"
+    tris = verts = placements = "-"
     try:
-        summary, tris, verts = check_scene(Path(args.scene), Path(args.thumb) if args.thumb else None)
+        summary, tris, verts, placements = check_scene(Path(args.scene), Path(args.thumb) if args.thumb else None)
         status, code = "ok", 0
         print(f"OK    {summary}")
     except CheckFailed as e:
@@ -698,8 +718,444 @@ def scene_main(argv: list[str]) -> int:
         print(f"FAIL  {name}: could not read/check ({type(e).__name__}: {e})", file=sys.stderr)
     if args.summary_tsv:
         with open(args.summary_tsv, "a") as f:
-            f.write(f"{name}\t{status}\t{tris}\t{verts}\n")
+            f.write(f"{name}\t{status}\t{tris}\t{verts}\t{placements}\n")
     return code
+
+
+# ------------------------------------------------------------------------------------- placements mode
+INSTANCING = "EXT_mesh_gpu_instancing"
+PLACEMENT_HEADER = "x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile"
+RAY_SAMPLE = 20_000          # instances ray-cast per species (all of them below this)
+HEIGHT_TOL_GLB_M = 1e-3      # |y (f32, scene.glb) - terrain hit|
+HEIGHT_TOL_CSV_M = 1e-4      # |y (f64, CSV) - terrain hit| (issue 4: exact barycentric height)
+SPACING_REL_TOL = 1e-6
+INSTANCE_ACCESSORS = {"TRANSLATION": "VEC3", "ROTATION": "VEC4", "SCALE": "VEC3"}
+
+
+def read_placements_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 11) float64 (x..yaw_deg, parsed exactly) and (n,) int64 tiles; the header must be exact."""
+    text = path.read_text()
+    header, _, body = text.partition("\n")
+    if header != PLACEMENT_HEADER:
+        raise CheckFailed(f"{path.name}: header {header!r}, expected {PLACEMENT_HEADER!r}")
+    if not body.strip():
+        return np.zeros((0, 11)), np.zeros(0, dtype=np.int64)
+    if not body.endswith("\n"):
+        raise CheckFailed(f"{path.name}: the last row has no line end")
+    fields = body[:-1].replace("\n", ",").split(",")
+    rows = body.count("\n")
+    if len(fields) != rows * 12:
+        raise CheckFailed(f"{path.name}: {len(fields)} fields in {rows} rows, expected 12 a row")
+    cells = np.array(fields, dtype=object).reshape(rows, 12)
+    try:
+        values = cells[:, :11].astype(np.float64)
+        tiles = cells[:, 11].astype(np.int64)
+    except ValueError as e:
+        raise CheckFailed(f"{path.name}: a cell is not a number ({e})") from None
+    if not np.all(np.isfinite(values)):
+        raise CheckFailed(f"{path.name}: some values are NaN or infinite")
+    return values, tiles
+
+
+def terrain_of_scene(gltf, buffers) -> trimesh.Trimesh:
+    """The triangles of scene.glb's default scene without the instanced nodes (the terrain)."""
+    positions, faces = [], []
+
+    def visit(node_index: int, parent: np.ndarray, depth: int) -> None:
+        if depth > 256:
+            raise CheckFailed("node hierarchy deeper than 256 (a cycle?)")
+        node = gltf.nodes[node_index]
+        if INSTANCING in (node.extensions or {}):
+            return
+        world = parent @ node_matrix(node)
+        if node.mesh is not None:
+            for prim in gltf.meshes[node.mesh].primitives:
+                local = read_accessor(gltf, buffers, prim.attributes.POSITION)
+                idx = (read_accessor(gltf, buffers, prim.indices).reshape(-1).astype(np.int64)
+                       if prim.indices is not None else np.arange(len(local)))
+                tris = triangles_of(prim.mode if prim.mode is not None else 4, idx)
+                if tris is None:
+                    continue
+                positions.append((np.hstack([local, np.ones((len(local), 1))]) @ world.T)[:, :3])
+                faces.append(tris + sum(len(p) for p in positions[:-1]))
+        for child in node.children or []:
+            visit(child, world, depth + 1)
+
+    scene = gltf.scenes[gltf.scene if gltf.scene is not None else 0]
+    for root in scene.nodes or []:
+        visit(root, np.eye(4), 0)
+    if not positions:
+        raise CheckFailed("scene.glb has no terrain triangles (every mesh node is instanced)")
+    return trimesh.Trimesh(np.concatenate(positions), np.concatenate(faces), process=False)
+
+
+def ray_heights(terrain: trimesh.Trimesh, xz: np.ndarray) -> np.ndarray:
+    """Height of the first terrain triangle hit by a ray straight down at each (x, z); NaN on a miss.
+    Triangles seen edge-on from above (skirts, walls) or degenerate cannot be hit and are left out."""
+    from trimesh.ray.ray_triangle import RayMeshIntersector
+
+    tri = terrain.triangles
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area2 = np.linalg.norm(cross, axis=1)
+    keep = (area2 > 1e-12) & (np.abs(cross[:, 1]) > 1e-9 * np.maximum(area2, 1e-300))
+    surface = trimesh.Trimesh(terrain.vertices, terrain.faces[keep], process=False)
+    caster = RayMeshIntersector(surface)
+    top = float(terrain.bounds[1][1]) + 10.0
+    out = np.full(len(xz), np.nan)
+    for start in range(0, len(xz), 4096):
+        part = xz[start:start + 4096]
+        origins = np.column_stack([part[:, 0], np.full(len(part), top), part[:, 1]])
+        directions = np.tile([0.0, -1.0, 0.0], (len(part), 1))
+        _, ray, loc = caster.intersects_id(origins, directions, multiple_hits=False, return_locations=True)
+        out[start + np.asarray(ray, dtype=np.int64)] = loc[:, 1] if len(ray) else []
+    return out
+
+
+def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict | None = None,
+                     verbose: bool = True) -> list[str]:
+    """Check scene.glb's EXT_mesh_gpu_instancing nodes against placements/<species>.csv and .json,
+    ray-cast the instances onto the terrain, and check Poisson spacing and exclusions. Returns facts."""
+    import pygltflib
+    from scipy.spatial import cKDTree
+
+    if manifest is None:
+        manifest = json.loads((scene_dir / "manifest.json").read_text())
+    if report is None and (scene_dir / "report.json").is_file():
+        report = json.loads((scene_dir / "report.json").read_text())
+    scatter = manifest.get("scatter")
+    if not scatter:
+        raise CheckFailed("manifest.json has no scatter section")
+    settings = {s["name"]: s for s in manifest.get("settings", {}).get("species", [])}
+    listed = [s["name"] for s in scatter["species"]]
+    if listed != list(settings):
+        raise CheckFailed(f"manifest scatter species {listed} differ from settings.species {list(settings)}")
+    glb_path = scene_dir / scatter.get("scene", "scene.glb")
+    gltf = pygltflib.GLTF2().load(str(glb_path))
+    buffers = gltf_buffers(gltf, glb_path)
+
+    # the extension is declared used and required (a viewer without it would draw one instance)
+    used, required = set(gltf.extensionsUsed or []), set(gltf.extensionsRequired or [])
+    instanced = [i for i, n in enumerate(gltf.nodes) if INSTANCING in (n.extensions or {})]
+    if instanced and not (INSTANCING in used and INSTANCING in required):
+        raise CheckFailed(f"{glb_path.name}: {INSTANCING} is used by {len(instanced)} nodes but "
+                          f"extensionsUsed={sorted(used)}, extensionsRequired={sorted(required)}")
+
+    parent_of = {}
+    for i, n in enumerate(gltf.nodes):
+        for c in n.children or []:
+            parent_of[c] = i
+    scene = gltf.scenes[gltf.scene if gltf.scene is not None else 0]
+    roots = {gltf.nodes[r].name: r for r in scene.nodes or []}
+
+    # every instanced node: FLOAT accessors of equal count, unit quaternions, under its species root
+    instances = {}  # node index -> (translations, rotations, scales) as float32
+    for i in instanced:
+        node = gltf.nodes[i]
+        attrs = node.extensions[INSTANCING].get("attributes", {})
+        if set(attrs) != set(INSTANCE_ACCESSORS):
+            raise CheckFailed(f"node {node.name!r}: {INSTANCING} attributes {sorted(attrs)}, "
+                              f"expected {sorted(INSTANCE_ACCESSORS)}")
+        arrays = {}
+        for key, want_type in INSTANCE_ACCESSORS.items():
+            acc = gltf.accessors[attrs[key]]
+            if acc.componentType != 5126 or acc.type != want_type or acc.normalized:
+                raise CheckFailed(f"node {node.name!r} {key}: accessor {attrs[key]} is componentType "
+                                  f"{acc.componentType} {acc.type}, expected FLOAT (5126) {want_type}")
+            arrays[key] = read_accessor(gltf, buffers, attrs[key]).astype(np.float32)  # exact: f32 in, f32 out
+        counts = {k: len(v) for k, v in arrays.items()}
+        if len(set(counts.values())) != 1 or not counts["TRANSLATION"]:
+            raise CheckFailed(f"node {node.name!r}: instance accessor counts {counts} are not equal and > 0")
+        norms = np.linalg.norm(arrays["ROTATION"].astype(np.float64), axis=1)
+        if np.max(np.abs(norms - 1)) > 1e-5:
+            k = int(np.argmax(np.abs(norms - 1)))
+            raise CheckFailed(f"node {node.name!r} instance {k}: rotation {arrays['ROTATION'][k].tolist()} "
+                              f"has length {norms[k]:.7f}, not 1")
+        if node.mesh is None:
+            raise CheckFailed(f"node {node.name!r} has {INSTANCING} but no mesh")
+        instances[i] = (arrays["TRANSLATION"], arrays["ROTATION"], arrays["SCALE"])
+
+    terrain = terrain_of_scene(gltf, buffers)
+    want_tris = (manifest.get("terrain") or {}).get("output_triangles")
+    if want_tris is not None and len(terrain.faces) != want_tris:
+        raise CheckFailed(f"{glb_path.name}: the terrain has {len(terrain.faces)} triangles, manifest "
+                          f"terrain.output_triangles says {want_tris}")
+
+    facts, xz_of, claimed = [], {}, set()
+    report_species = {s["name"]: s for s in ((report or {}).get("stages", {}).get("scatter") or {}).get("species", [])}
+    for entry in scatter["species"]:
+        name = entry["name"]
+        spec = settings[name]
+        root = roots.get(name)
+        if root is None:
+            raise CheckFailed(f"{glb_path.name}: no root node named {name!r} (roots: {sorted(roots)})")
+        # tile children in ascending tile order, named <species>_tile_<t>, with identity transforms
+        tiles_glb, parts = [], []
+        for c in gltf.nodes[root].children or []:
+            child = gltf.nodes[c]
+            prefix = f"{name}_tile_"
+            if c not in instances or not child.name.startswith(prefix) or not child.name[len(prefix):].isdigit():
+                raise CheckFailed(f"{name}: child node {child.name!r} is not an instanced {prefix}<t> node")
+            tiles_glb.append(int(child.name[len(prefix):]))
+            parts.append(instances[c])
+            claimed.add(c)
+        if tiles_glb != sorted(set(tiles_glb)):
+            raise CheckFailed(f"{name}: tile nodes are not in ascending, unique tile order: {tiles_glb}")
+        for n in [root] + list(gltf.nodes[root].children or []):
+            if not np.allclose(node_matrix(gltf.nodes[n]), np.eye(4), atol=0):
+                raise CheckFailed(f"{name}: node {gltf.nodes[n].name!r} has a transform; instances are world positions")
+        if root in parent_of:
+            raise CheckFailed(f"{name}: species node is not a root node")
+        glb_t = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, 3), np.float32)
+        glb_r = np.concatenate([p[1] for p in parts]) if parts else np.zeros((0, 4), np.float32)
+        glb_s = np.concatenate([p[2] for p in parts]) if parts else np.zeros((0, 3), np.float32)
+        glb_tile = np.concatenate([np.full(len(p[0]), t) for t, p in zip(tiles_glb, parts)]) if parts else np.zeros(0, np.int64)
+
+        csv_path = scene_dir / entry.get("table", f"placements/{name}.csv")
+        values, tiles = read_placements_csv(csv_path)
+        n = len(values)
+        if len(glb_t) != n:
+            raise CheckFailed(f"{name}: scene.glb has {len(glb_t)} instances, {csv_path.name} has {n} rows")
+        # the writer groups a species' instances by tile (ascending) keeping the CSV order in a tile
+        order = np.argsort(tiles, kind="stable")
+        in_tile_order = bool(np.all(order == np.arange(n)))
+        v, t = values[order], tiles[order]
+        if not np.array_equal(glb_tile, t):
+            raise CheckFailed(f"{name}: the instances' tiles in scene.glb differ from the CSV's tile column")
+        for label, got, want in (("translation", glb_t, v[:, 0:3].astype(np.float32)),
+                                 ("rotation", glb_r, v[:, 3:7].astype(np.float32)),
+                                 ("scale", glb_s, v[:, 7:10].astype(np.float32))):
+            bad = np.nonzero(np.any(got != want, axis=1))[0]
+            if len(bad):
+                k = int(bad[0])
+                raise CheckFailed(f"{name}: {len(bad)} instances' {label} differ from the CSV rows (f32); first: "
+                                  f"glb {got[k].tolist()} vs CSV {want[k].tolist()} (tile {t[k]})")
+        if n and np.max(np.abs(np.linalg.norm(v[:, 3:7], axis=1) - 1)) > 1e-5:
+            raise CheckFailed(f"{name}: CSV quaternions are not unit length")
+        if n and (np.any(v[:, 7:10] <= 0)):
+            raise CheckFailed(f"{name}: CSV has non-positive scales")
+        lo_s, hi_s = spec["scale"]
+        if n and (v[:, 7:10].min() < np.float32(lo_s) * (1 - 1e-6) or v[:, 7:10].max() > np.float32(hi_s) * (1 + 1e-6)):
+            raise CheckFailed(f"{name}: scales {v[:, 7:10].min():.4g}..{v[:, 7:10].max():.4g} outside {spec['scale']}")
+
+        # the JSON summary: count, per-tile counts and AABBs
+        summary = json.loads((scene_dir / entry.get("summary", f"placements/{name}.json")).read_text())
+        if summary.get("count") != n or summary.get("stats", {}).get("count") != n or entry.get("count") != n:
+            raise CheckFailed(f"{name}: {n} CSV rows, but JSON count {summary.get('count')}, "
+                              f"stats.count {summary.get('stats', {}).get('count')}, manifest {entry.get('count')}")
+        csv_tiles, csv_counts = np.unique(tiles, return_counts=True)
+        per_tile = {int(p["tile"]): p for p in summary["stats"].get("per_tile", []) if p["count"]}
+        if sorted(per_tile) != csv_tiles.tolist() or any(per_tile[int(k)]["count"] != c for k, c in zip(csv_tiles, csv_counts)):
+            raise CheckFailed(f"{name}: JSON per-tile counts {[(k, p['count']) for k, p in sorted(per_tile.items())][:8]}… "
+                              f"differ from the CSV's {list(zip(csv_tiles.tolist(), csv_counts.tolist()))[:8]}…")
+        for k in csv_tiles:
+            rows = values[tiles == k][:, 0:3]
+            p = per_tile[int(k)]
+            if not (np.allclose(rows.min(axis=0), p["aabb_min"], rtol=0, atol=1e-9)
+                    and np.allclose(rows.max(axis=0), p["aabb_max"], rtol=0, atol=1e-9)):
+                raise CheckFailed(f"{name}: tile {k} AABB {p['aabb_min']}..{p['aabb_max']} in the JSON, "
+                                  f"{rows.min(axis=0).tolist()}..{rows.max(axis=0).tolist()} in the CSV")
+        if entry.get("tiles") is not None and entry["tiles"] < len(csv_tiles):
+            raise CheckFailed(f"{name}: manifest says {entry['tiles']} tiles, the CSV uses {len(csv_tiles)}")
+
+        # on the surface: a ray straight down at (x, z) hits the terrain at y
+        if n:
+            sample = np.unique(np.linspace(0, n - 1, min(n, RAY_SAMPLE)).round().astype(np.int64))
+            hits = ray_heights(terrain, v[sample][:, [0, 2]])
+            missed = np.isnan(hits)
+            if missed.any():
+                k = sample[np.argmax(missed)]
+                raise CheckFailed(f"{name}: {int(missed.sum())} of {len(sample)} sampled instances are not above the "
+                                  f"terrain, e.g. ({v[k, 0]:.3f}, {v[k, 2]:.3f})")
+            err_glb = float(np.max(np.abs(glb_t[sample][:, 1].astype(np.float64) - hits)))
+            err_csv = float(np.max(np.abs(v[sample][:, 1] - hits)))
+            if err_glb > HEIGHT_TOL_GLB_M or err_csv > HEIGHT_TOL_CSV_M:
+                k = sample[int(np.argmax(np.abs(v[sample][:, 1] - hits)))]
+                raise CheckFailed(f"{name}: instances are off the terrain: max |y - hit| {err_glb:.3g} m (glb, "
+                                  f"limit {HEIGHT_TOL_GLB_M:g}), {err_csv:.3g} m (CSV, limit {HEIGHT_TOL_CSV_M:g}); "
+                                  f"worst at ({v[k, 0]:.3f}, {v[k, 2]:.3f})")
+        else:
+            sample, err_glb, err_csv = np.zeros(0), 0.0, 0.0
+
+        # spacing: Poisson species at least min_spacing apart (x/z) over all instances, all tiles
+        xz = values[:, [0, 2]]
+        xz_of[name] = xz
+        min_pair = float(cKDTree(xz).query(xz, k=2)[0][:, 1].min()) if n >= 2 else math.inf
+        reported = summary["stats"].get("min_pair_distance_m")
+        if reported is not None and n >= 2 and abs(reported - min_pair) > 1e-9 * max(1.0, min_pair):
+            raise CheckFailed(f"{name}: JSON min_pair_distance_m {reported} but the CSV's is {min_pair}")
+        if spec["placement"] == "poisson" and min_pair < spec["min_spacing_m"] * (1 - SPACING_REL_TOL):
+            raise CheckFailed(f"{name}: two instances {min_pair:.6f} m apart, min_spacing is {spec['min_spacing_m']} m")
+        # exclusions: nothing within radius of the named (earlier, or the same) species
+        excl_facts = []
+        for ex in spec.get("exclusions", []):
+            other, radius = ex["species"], ex["radius_m"]
+            if other == name:
+                d = min_pair
+            else:
+                if other not in xz_of:
+                    raise CheckFailed(f"{name}: excludes {other!r}, which is not placed before it")
+                d = float(cKDTree(xz_of[other]).query(xz)[0].min()) if n and len(xz_of[other]) else math.inf
+            if d < radius * (1 - SPACING_REL_TOL):
+                raise CheckFailed(f"{name}: an instance {d:.6f} m from a {other!r}, exclusion radius {radius} m")
+            excl_facts.append(f"{d:.3f} m from {other} (>= {radius})")
+        rs = report_species.get(name)
+        if rs is not None and rs.get("count") != n:
+            raise CheckFailed(f"{name}: report.json count {rs.get('count')}, CSV {n}")
+        line = (f"{name}: {n} instances in {len(csv_tiles)} tiles = CSV (f32){'' if in_tile_order else ' (sorted by tile)'}; "
+                f"ray-cast {len(sample)}: max |dy| glb {err_glb:.2e} m, CSV {err_csv:.2e} m; "
+                f"min pair {min_pair:.4f} m" + (f" >= {spec['min_spacing_m']}" if spec["placement"] == "poisson" else "")
+                + (f"; exclusion {', '.join(excl_facts)}" if excl_facts else ""))
+        if verbose:
+            print(f"      {line}")
+        facts.append(line)
+    stray = sorted(set(instanced) - claimed)
+    if stray:
+        raise CheckFailed(f"{glb_path.name}: instanced nodes outside the species nodes: "
+                          f"{[gltf.nodes[i].name for i in stray][:5]}")
+    total = sum(len(x) for x in xz_of.values())
+    return [f"placements of {len(xz_of)} species ({total} instances) match scene.glb, on the terrain"]
+
+
+def write_instanced_scene(d: Path, species: list[dict], required: bool = True, json_delta: int = 0,
+                          glb_shift: float = 0.0) -> Path:
+    """A tiny scene folder as `verdant build` writes it (terrain on the plane y = 0.1 x + 0.05 z + 3,
+    scene.glb with one instanced node per species per tile, placements CSV/JSON, manifest) for the
+    self-test. `species`: dicts with name, placement, min_spacing_m, exclusions, rows ((n, 11) f64
+    x..yaw_deg), tiles ((n,) int). `glb_shift` moves the first instance in scene.glb only."""
+    import pygltflib
+
+    d.mkdir(parents=True, exist_ok=True)
+    (d / "placements").mkdir(exist_ok=True)
+    n_side, cell = 9, 4.0
+    i, j = np.meshgrid(np.arange(n_side), np.arange(n_side), indexing="xy")
+    x, z = (i * cell).ravel(), (j * cell).ravel()
+    verts = np.stack([x, 0.1 * x + 0.05 * z + 3, z], 1).astype(np.float32)
+    a = (np.arange(n_side - 1)[None, :] + n_side * np.arange(n_side - 1)[:, None]).ravel()
+    faces = np.concatenate([np.stack([a, a + n_side, a + 1], 1), np.stack([a + 1, a + n_side, a + n_side + 1], 1)])
+    blob = bytearray()
+    views, accessors = [], []
+
+    def add(array: np.ndarray, acc_type: str, component: int, target=None) -> int:
+        while len(blob) % 4:
+            blob.append(0)
+        views.append(pygltflib.BufferView(buffer=0, byteOffset=len(blob), byteLength=array.nbytes, target=target))
+        blob.extend(array.tobytes())
+        extra = {}
+        if acc_type == "VEC3" and component == 5126:
+            extra = dict(min=array.min(axis=0).tolist(), max=array.max(axis=0).tolist())
+        accessors.append(pygltflib.Accessor(bufferView=len(views) - 1, componentType=component, type=acc_type,
+                                            count=len(array), **extra))
+        return len(accessors) - 1
+
+    pos = add(verts, "VEC3", 5126, 34962)
+    idx = add(faces.astype(np.uint32).ravel(), "SCALAR", 5125, 34963)
+    meshes = [pygltflib.Mesh(primitives=[pygltflib.Primitive(attributes=pygltflib.Attributes(POSITION=pos), indices=idx)])]
+    marker = np.array([[0, 0, 0], [0.2, 0, 0], [0, 1, 0]], dtype=np.float32)
+    mpos = add(marker, "VEC3", 5126, 34962)
+    meshes.append(pygltflib.Mesh(primitives=[pygltflib.Primitive(attributes=pygltflib.Attributes(POSITION=mpos))]))
+    nodes = [pygltflib.Node(name="terrain", mesh=0)]
+    roots = [0]
+    scatter, settings = [], []
+    for sp in species:
+        rows, tiles = sp["rows"], sp["tiles"]
+        children = []
+        first = True
+        for t in sorted(set(tiles.tolist())):
+            sel = rows[tiles == t]
+            tr = sel[:, 0:3].astype(np.float32)
+            if first and glb_shift:
+                tr[0, 1] += glb_shift
+                first = False
+            ext = {"attributes": {"TRANSLATION": add(tr, "VEC3", 5126),
+                                  "ROTATION": add(sel[:, 3:7].astype(np.float32), "VEC4", 5126),
+                                  "SCALE": add(sel[:, 7:10].astype(np.float32), "VEC3", 5126)}}
+            nodes.append(pygltflib.Node(name=f"{sp['name']}_tile_{t}", mesh=1, extensions={INSTANCING: ext}))
+            children.append(len(nodes) - 1)
+        nodes.append(pygltflib.Node(name=sp["name"], children=children))
+        roots.append(len(nodes) - 1)
+        lines = [PLACEMENT_HEADER] + [",".join([*(repr(float(v)) for v in r), str(int(t))]) for r, t in zip(rows, tiles)]
+        (d / "placements" / f"{sp['name']}.csv").write_text("\n".join(lines) + "\n")
+        per_tile = [dict(tile=int(t), count=int((tiles == t).sum()),
+                         aabb_min=rows[tiles == t][:, 0:3].min(axis=0).tolist(),
+                         aabb_max=rows[tiles == t][:, 0:3].max(axis=0).tolist()) for t in sorted(set(tiles.tolist()))]
+        (d / "placements" / f"{sp['name']}.json").write_text(json.dumps(dict(
+            species=sp["name"], count=len(rows) + json_delta, stats=dict(count=len(rows) + json_delta, per_tile=per_tile))))
+        scatter.append(dict(name=sp["name"], count=len(rows), table=f"placements/{sp['name']}.csv",
+                            summary=f"placements/{sp['name']}.json", tiles=len(per_tile)))
+        settings.append(dict(name=sp["name"], placement=sp["placement"], min_spacing_m=sp["min_spacing_m"],
+                             scale=[0.5, 2.0], exclusions=sp.get("exclusions", [])))
+    gl = pygltflib.GLTF2(asset=pygltflib.Asset(version="2.0"), scene=0, scenes=[pygltflib.Scene(nodes=roots)],
+                         extensionsUsed=[INSTANCING], extensionsRequired=[INSTANCING] if required else [],
+                         nodes=nodes, meshes=meshes, buffers=[pygltflib.Buffer(byteLength=len(blob))],
+                         bufferViews=views, accessors=accessors)
+    gl.set_binary_blob(bytes(blob))
+    gl.save_binary(str(d / "scene.glb"))
+    (d / "manifest.json").write_text(json.dumps(dict(
+        scene=d.name, scatter=dict(scene="scene.glb", species=scatter), terrain=dict(output_triangles=len(faces)),
+        settings=dict(species=settings))))
+    return d
+
+
+def placement_self_test(d: Path) -> list[tuple[str, bool, str]]:
+    """The placements check on a synthetic scene: the good one passes, each broken one fails."""
+    def rows_at(xz: np.ndarray, dy: float = 0.0) -> np.ndarray:
+        yaw = np.linspace(0, 3, len(xz))
+        q = np.stack([np.zeros(len(xz)), np.sin(yaw / 2), np.zeros(len(xz)), np.cos(yaw / 2)], 1)
+        y = 0.1 * xz[:, 0] + 0.05 * xz[:, 1] + 3 + dy
+        s = np.full((len(xz), 3), 1.25)
+        return np.column_stack([xz[:, 0], y, xz[:, 1], q, s, np.degrees(yaw)])
+
+    trees_xz = np.array([[3.3, 4.1], [9.7, 5.2], [20.5, 21.25], [27.1, 9.9]])
+    grass_xz = np.array([[1.0, 1.0], [6.5, 6.5], [15.0, 3.0], [22.2, 30.0], [30.0, 30.0], [14.0, 25.0]])
+    tile_of = lambda xz: (xz[:, 0] >= 16).astype(np.int64) + 2 * (xz[:, 1] >= 16).astype(np.int64)  # noqa: E731
+
+    def species(trees=trees_xz, grass=grass_xz, tree_dy=0.0, shuffle=False):
+        g_rows, g_tiles = rows_at(grass), tile_of(grass)
+        if shuffle:  # CSV rows not in tile order: the writer's grouping (stable by tile) must still match
+            g_rows, g_tiles = g_rows[::-1].copy(), g_tiles[::-1].copy()
+        return [dict(name="tree", placement="poisson", min_spacing_m=5.0, rows=rows_at(trees, tree_dy), tiles=tile_of(trees)),
+                dict(name="grass", placement="jittered", min_spacing_m=0.0, rows=g_rows, tiles=g_tiles,
+                     exclusions=[dict(species="tree", radius_m=1.5)])]
+
+    close_trees = trees_xz.copy()
+    close_trees[1] = close_trees[0] + [3.0, 0.0]
+    grass_near_tree = grass_xz.copy()
+    grass_near_tree[1] = trees_xz[1] + [0.5, 0.5]
+    cases = [
+        ("placements good", write_instanced_scene(d / "good", species()), True),
+        ("placements good, CSV not in tile order", write_instanced_scene(d / "shuffled", species(shuffle=True)), True),
+        ("placements not required", write_instanced_scene(d / "notreq", species(), required=False), False),
+        ("placements glb != CSV", write_instanced_scene(d / "shift", species(), glb_shift=0.01), False),
+        ("placements off the terrain", write_instanced_scene(d / "off", species(tree_dy=0.01)), False),
+        ("placements poisson too close", write_instanced_scene(d / "close", species(trees=close_trees)), False),
+        ("placements exclusion broken", write_instanced_scene(d / "excl", species(grass=grass_near_tree)), False),
+        ("placements JSON count", write_instanced_scene(d / "count", species(), json_delta=1), False),
+    ]
+    out = []
+    for name, folder, expect_ok in cases:
+        try:
+            check_placements(folder, verbose=False)
+            ok, detail = True, "passed"
+        except CheckFailed as e:
+            ok, detail = False, f"failed: {e}"
+        out.append((name, ok == expect_ok, detail))
+    return out
+
+
+def placements_main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(description="check a built scene's placements against scene.glb and the terrain")
+    parser.add_argument("--placements", required=True, metavar="SCENE_DIR", help="the scene folder (out/<scene>/)")
+    args = parser.parse_args(argv)
+    name = Path(args.placements).name
+    try:
+        facts = check_placements(Path(args.placements))
+        print(f"OK    {name}: {'; '.join(facts)}")
+        return 0
+    except CheckFailed as e:
+        print(f"FAIL  {name}: {e}", file=sys.stderr)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        print(f"FAIL  {name}: could not read/check ({type(e).__name__}: {e})", file=sys.stderr)
+    return 1
 
 
 def main() -> int:
@@ -707,6 +1163,8 @@ def main() -> int:
         return self_test()
     if "--scene" in sys.argv[1:]:
         return scene_main(sys.argv[1:])
+    if "--placements" in sys.argv[1:]:
+        return placements_main(sys.argv[1:])
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("file", help="a .glb, .gltf or .obj written by verdant")
     parser.add_argument("--report", required=True, help="the JSON report written with --report")

@@ -1,0 +1,418 @@
+//! The scatter stage inside `verdant build` (issue 4), driven through the binary: placement tables and
+//! the instanced scene.glb are byte-identical across runs, `--threads` and `--jobs`; scene.glb's
+//! EXT_mesh_gpu_instancing nodes equal the CSV rows; the JSON summaries and report.json agree with
+//! the tables; spacing and exclusions hold; stage selection; the scatter cache (settings, density
+//! maps); `max_instances` fails the scene alone; a species no rule allows writes empty, valid files.
+//!
+//! Every test writes small procedural presets (129² samples, 2 m cells: 256 m across) into a
+//! temporary folder and runs the binary there with relative paths.
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use image::{ImageBuffer, Luma};
+use serde_json::Value;
+
+// ------------------------------------------------------------------------------------------ helpers
+
+fn verdant_in(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_verdant")).current_dir(cwd).args(args).output().expect("run verdant")
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+fn ok(o: &Output) {
+    assert_eq!(o.status.code(), Some(0), "verdant failed:\n{}", text(o));
+    assert!(!text(o).contains("panicked"), "{}", text(o));
+}
+
+fn write(dir: &Path, rel: &str, body: &str) -> PathBuf {
+    let path = dir.join(rel);
+    fs::create_dir_all(path.parent().unwrap()).unwrap();
+    fs::write(&path, body).unwrap();
+    path
+}
+
+fn read_json(path: &Path) -> Value {
+    let t = fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&t).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Every file under `dir` (relative path with `/` → bytes), hidden folders included.
+fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
+        for entry in fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                walk(root, &path, out);
+            } else {
+                let rel = path.strip_prefix(root).unwrap().to_string_lossy().replace('\\', "/");
+                out.insert(rel, fs::read(&path).unwrap());
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(dir, dir, &mut out);
+    out
+}
+
+/// The scatter outputs of a scene folder: placements/* and scene.glb.
+fn scatter_files(scene_dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    tree(scene_dir).into_iter().filter(|(k, _)| k.starts_with("placements/") || k == "scene.glb").collect()
+}
+
+fn summary_row(o: &Output, scene: &str) -> Vec<String> {
+    let t = text(o);
+    t.lines()
+        .find(|l| l.split_whitespace().next() == Some(scene))
+        .unwrap_or_else(|| panic!("no summary row for {scene}:\n{t}"))
+        .split_whitespace()
+        .map(str::to_string)
+        .collect()
+}
+
+fn timing_cached(scene_dir: &Path, stage: &str) -> bool {
+    let r = read_json(&scene_dir.join("report.json"));
+    r["timing"][stage]["cached"].as_bool().unwrap_or_else(|| panic!("report.json timing.{stage}.cached missing: {r}"))
+}
+
+const TREE: &str = "[[species]]\nname = \"tree\"\nkind = \"tree\"\nplacement = \"poisson\"\nmax_density = 0.01\n\
+                    min_spacing = 5.0\nscale = [0.8, 1.2]\n";
+const GRASS: &str = "[[species]]\nname = \"grass\"\nkind = \"grass\"\nplacement = \"jittered\"\nmax_density = 0.5\n\
+                     scale = [0.7, 1.1]\nexclusion = { species = \"tree\", radius = 1.5 }\n";
+
+/// fbm 129² with 2 m cells, 64² chunks with skirts, 64 m scatter tiles, and the given species tables.
+fn preset(name: &str, seed: u64, species: &str) -> String {
+    format!(
+        "[scene]\nname = \"{name}\"\nseed = {seed}\nformats = [\"glb\"]\n\n[terrain]\n\
+         procedural = {{ kind = \"fbm\", size = 129, seed = 3, relief = 50.0 }}\n\
+         cell_size = 2.0\nmax_error = 0.5\nchunk = 64\nskirt = 2.0\n\n[scatter]\ntile = 64.0\n\n{species}"
+    )
+}
+
+fn forest(name: &str, seed: u64) -> String {
+    preset(name, seed, &format!("{TREE}\n{GRASS}"))
+}
+
+/// One parsed placement table row.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Row {
+    pos: [f64; 3],
+    rot: [f32; 4],
+    scale: [f32; 3],
+    yaw: f32,
+    tile: u32,
+}
+
+const HEADER: &str = "x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile";
+
+fn read_csv(path: &Path) -> Vec<Row> {
+    let t = fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = t.lines();
+    assert_eq!(lines.next(), Some(HEADER), "{}: header", path.display());
+    assert!(t.ends_with('\n'), "{}: no final line end", path.display());
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            assert_eq!(f.len(), 12, "{}: row {l}", path.display());
+            let d = |k: usize| f[k].parse::<f64>().unwrap_or_else(|e| panic!("{l}: {e}"));
+            let s = |k: usize| f[k].parse::<f32>().unwrap_or_else(|e| panic!("{l}: {e}"));
+            Row { pos: [d(0), d(1), d(2)], rot: [s(3), s(4), s(5), s(6)], scale: [s(7), s(8), s(9)], yaw: s(10), tile: f[11].parse().unwrap() }
+        })
+        .collect()
+}
+
+fn dist_xz(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Smallest x/z distance from each of `a` to any of `b` (skipping identical indices when `same`),
+/// through a uniform grid of cell `cell` (only pairs closer than `cell` are looked at).
+fn min_distance(a: &[Row], b: &[Row], same: bool, cell: f64) -> f64 {
+    let mut grid: BTreeMap<(i64, i64), Vec<usize>> = BTreeMap::new();
+    let key = |p: [f64; 3]| ((p[0] / cell).floor() as i64, (p[2] / cell).floor() as i64);
+    for (i, r) in b.iter().enumerate() {
+        grid.entry(key(r.pos)).or_default().push(i);
+    }
+    let mut best = f64::INFINITY;
+    for (i, r) in a.iter().enumerate() {
+        let (cx, cz) = key(r.pos);
+        for dx in -1..=1 {
+            for dz in -1..=1 {
+                for &j in grid.get(&(cx + dx, cz + dz)).map(Vec::as_slice).unwrap_or(&[]) {
+                    if !(same && i == j) {
+                        best = best.min(dist_xz(r.pos, b[j].pos));
+                    }
+                }
+            }
+        }
+    }
+    best
+}
+
+/// A 16-bit gray PNG: left half `left`, right half `right` (0..1).
+fn write_density(path: &Path, left: f32, right: f32) {
+    fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let img = ImageBuffer::from_fn(32, 16, |i, _| Luma([((if i < 16 { left } else { right }) * 65535.0) as u16]));
+    img.save(path).unwrap();
+}
+
+// ------------------------------------------------------------------------------------- determinism
+
+#[test]
+fn placements_and_scene_glb_are_byte_identical_across_runs_threads_and_jobs() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/a.toml", &forest("a", 3));
+    write(d, "p/b.toml", &forest("b", 4));
+    let runs: [(&str, &str, &str); 4] = [("o1", "1", "1"), ("o2", "2", "2"), ("o3", "2", "1"), ("o4", "1", "2")];
+    for (out, jobs, threads) in runs {
+        ok(&verdant_in(d, &["--threads", threads, "build", "p/a.toml", "p/b.toml", "--jobs", jobs, "--out", out]));
+    }
+    // and once more like the first, with every stage recomputed
+    ok(&verdant_in(d, &["--threads", "1", "build", "p/a.toml", "p/b.toml", "--jobs", "1", "--out", "o1", "--force"]));
+    for scene in ["a", "b"] {
+        let first = scatter_files(&d.join("o1").join(scene));
+        assert_eq!(
+            first.keys().collect::<Vec<_>>(),
+            ["placements/grass.csv", "placements/grass.json", "placements/tree.csv", "placements/tree.json", "scene.glb"],
+            "{scene}: scatter files"
+        );
+        for (out, ..) in &runs[1..] {
+            let other = scatter_files(&d.join(out).join(scene));
+            for (rel, bytes) in &first {
+                assert!(*bytes == other[rel], "{scene}/{rel} differs between o1 and {out}");
+            }
+        }
+    }
+    // a different scene seed gives different placements on the same terrain
+    assert_ne!(fs::read(d.join("o1/a/placements/tree.csv")).unwrap(), fs::read(d.join("o1/b/placements/tree.csv")).unwrap());
+    assert_eq!(fs::read(d.join("o1/a/terrain/terrain.glb")).unwrap(), fs::read(d.join("o1/b/terrain/terrain.glb")).unwrap());
+}
+
+// ---------------------------------------------------------------------- scene.glb = tables = report
+
+#[test]
+fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/a.toml", &forest("a", 3));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    let s = d.join("o/a");
+    let scene = verdant::validate::read_scene(&s.join("scene.glb")).expect("scene.glb re-imports");
+    let report = read_json(&s.join("report.json"));
+    let manifest = read_json(&s.join("manifest.json"));
+    assert_eq!(manifest["scatter"]["scene"], "scene.glb");
+    let mut counts = BTreeMap::new();
+    for (k, species) in ["tree", "grass"].into_iter().enumerate() {
+        let rows = read_csv(&s.join(format!("placements/{species}.csv")));
+        assert!(rows.len() > if species == "tree" { 200 } else { 10_000 }, "{species}: only {} rows", rows.len());
+        counts.insert(species, rows.len());
+
+        // the species' root node and its tile children: translations are the CSV's f64 as f32,
+        // rotations and scales equal, grouped by tile in ascending order, CSV order within a tile
+        let root = scene.roots.iter().map(|&r| &scene.nodes[r]).find(|n| n.name == species).unwrap_or_else(|| panic!("no root node {species}"));
+        let mut by_tile: BTreeMap<u32, Vec<Row>> = BTreeMap::new();
+        for r in &rows {
+            by_tile.entry(r.tile).or_default().push(*r);
+        }
+        assert_eq!(root.children.len(), by_tile.len(), "{species}: one node per non-empty tile");
+        assert!(by_tile.len() > 4, "{species}: instances in only {} tiles", by_tile.len());
+        for (&c, (&tile, tile_rows)) in root.children.iter().zip(&by_tile) {
+            let node = &scene.nodes[c];
+            assert_eq!(node.name, format!("{species}_tile_{tile}"));
+            assert!(node.mesh.is_some(), "{}: no mesh", node.name);
+            let inst = node.instances.as_ref().unwrap_or_else(|| panic!("{} is not instanced", node.name));
+            assert_eq!((inst.translations.len(), inst.rotations.len(), inst.scales.len()), (tile_rows.len(), tile_rows.len(), tile_rows.len()));
+            for (i, r) in tile_rows.iter().enumerate() {
+                assert_eq!(inst.translations[i], [r.pos[0] as f32, r.pos[1] as f32, r.pos[2] as f32], "{} instance {i}", node.name);
+                assert_eq!(inst.rotations[i], r.rot, "{} instance {i}", node.name);
+                assert_eq!(inst.scales[i], r.scale, "{} instance {i}", node.name);
+            }
+        }
+        for r in &rows {
+            let n = r.rot.iter().map(|v| (*v as f64).powi(2)).sum::<f64>().sqrt();
+            assert!((n - 1.0).abs() < 1e-5, "{species}: rotation {:?} not unit", r.rot);
+            assert!(r.yaw.is_finite() && r.scale[0] == r.scale[1] && r.scale[1] == r.scale[2]);
+        }
+
+        // the JSON summary: count and per-tile counts
+        let json = read_json(&s.join(format!("placements/{species}.json")));
+        assert_eq!(json["count"].as_u64(), Some(rows.len() as u64), "{species}.json count");
+        let per_tile: BTreeMap<u64, u64> = json["stats"]["per_tile"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|t| t["count"].as_u64().unwrap() > 0)
+            .map(|t| (t["tile"].as_u64().unwrap(), t["count"].as_u64().unwrap()))
+            .collect();
+        let want: BTreeMap<u64, u64> = by_tile.iter().map(|(&t, r)| (t as u64, r.len() as u64)).collect();
+        assert_eq!(per_tile, want, "{species}.json per-tile counts");
+
+        // report.json: count, expected, min pair distance, max height error per species
+        let rs = &report["stages"]["scatter"]["species"][k];
+        assert_eq!(rs["name"], species);
+        assert_eq!(rs["count"].as_u64(), Some(rows.len() as u64));
+        let st = &rs["stats"];
+        assert_eq!(st["count"].as_u64(), Some(rows.len() as u64));
+        let expected = st["expected"].as_f64().unwrap_or_else(|| panic!("{species}: no expected count: {st}"));
+        assert!((rows.len() as f64 - expected).abs() < 0.1 * expected, "{species}: {} placed, {expected} expected", rows.len());
+        let max_err = st["max_height_error_m"].as_f64().unwrap_or_else(|| panic!("{species}: no max_height_error_m: {st}"));
+        assert!((0.0..=1e-4).contains(&max_err), "{species}: max height error {max_err}");
+        let min_pair = st["min_pair_distance_m"].as_f64().unwrap_or_else(|| panic!("{species}: no min_pair_distance_m: {st}"));
+        let ours = min_distance(&rows, &rows, true, 6.0);
+        if ours.is_finite() {
+            assert!((ours - min_pair).abs() <= 1e-9 * ours.max(1.0), "{species}: report min pair {min_pair}, CSV {ours}");
+        }
+        assert_eq!(manifest["scatter"]["species"][k]["count"].as_u64(), Some(rows.len() as u64));
+    }
+
+    // spacing: trees >= min_spacing apart over the whole scene (tile borders included); no grass
+    // within the 1.5 m exclusion radius of a tree (x/z)
+    let trees = read_csv(&s.join("placements/tree.csv"));
+    let grass = read_csv(&s.join("placements/grass.csv"));
+    let tree_pair = min_distance(&trees, &trees, true, 6.0);
+    assert!(tree_pair >= 5.0 * (1.0 - 1e-9), "two trees {tree_pair} m apart, min_spacing 5");
+    let clear = min_distance(&grass, &trees, false, 2.0);
+    assert!(clear >= 1.5 * (1.0 - 1e-9), "grass {clear} m from a tree, exclusion radius 1.5");
+    // instances lie inside the terrain (256 m) and carry the tile of their x/z (64 m tiles, 4 a row)
+    for r in trees.iter().chain(&grass) {
+        assert!((0.0..=256.0).contains(&r.pos[0]) && (0.0..=256.0).contains(&r.pos[2]), "{r:?}");
+        let tile = ((r.pos[2] / 64.0).floor().min(3.0) as u32) * 4 + (r.pos[0] / 64.0).floor().min(3.0) as u32;
+        assert_eq!(r.tile, tile, "{r:?}");
+    }
+    let v = verdant_in(d, &["validate", "o/a/scene.glb"]);
+    ok(&v);
+    let _ = counts;
+}
+
+// ---------------------------------------------------------------------------------- stage selection
+
+#[test]
+fn only_terrain_scatter_writes_placements_without_preview_and_scatter_alone_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/a.toml", &forest("a", 3));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--only", "terrain,scatter", "--out", "o"]));
+    let s = d.join("o/a");
+    for f in ["placements/tree.csv", "placements/grass.json", "scene.glb", "terrain/terrain.glb"] {
+        assert!(s.join(f).is_file(), "{f} missing");
+    }
+    assert!(!s.join("preview.png").exists());
+    let m = read_json(&s.join("manifest.json"));
+    assert!(m["preview"].is_null());
+    assert!(m["files"].as_array().unwrap().iter().any(|f| f["path"] == "placements/tree.csv"));
+
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "full"]));
+    for (rel, bytes) in scatter_files(&s) {
+        assert!(bytes == fs::read(d.join("full/a").join(&rel)).unwrap(), "{rel} differs with and without the preview");
+    }
+
+    let o = verdant_in(d, &["build", "p/a.toml", "--only", "scatter", "--out", "sc"]);
+    let t = text(&o);
+    assert!(matches!(o.status.code(), Some(1) | Some(2)), "{t}");
+    assert!(t.contains("terrain"), "the error does not name the terrain: {t}");
+    assert!(!t.contains("panicked"), "{t}");
+    assert!(!d.join("sc/a").exists());
+}
+
+// --------------------------------------------------------------------------------------------- cache
+
+#[test]
+fn scatter_cache_hits_on_rebuild_and_misses_on_species_or_density_map_changes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mapped = GRASS.replace("placement = \"jittered\"\n", "placement = \"jittered\"\ndensity_map = \"maps/grass.png\"\n");
+    write_density(&d.join("p/maps/grass.png"), 0.2, 0.8);
+    write(d, "p/a.toml", &preset("a", 3, &format!("{TREE}\n{mapped}")));
+    let build = || {
+        let o = verdant_in(d, &["build", "p/a.toml", "--out", "o"]);
+        ok(&o);
+        o
+    };
+    let s = d.join("o/a");
+    let o = build();
+    assert_eq!(summary_row(&o, "a")[1], "built", "{}", text(&o));
+    assert!(!timing_cached(&s, "scatter"));
+    let first = scatter_files(&s);
+    // the density map shapes the grass: the right half (0.8) holds about 4× the left (0.2)
+    let grass = read_csv(&s.join("placements/grass.csv"));
+    let right = grass.iter().filter(|r| r.pos[0] >= 128.0).count() as f64;
+    let left = grass.len() as f64 - right;
+    assert!(right > 2.5 * left && right < 6.0 * left, "left {left}, right {right}");
+
+    // unchanged: built*, every stage cached, identical bytes
+    let o = build();
+    assert_eq!(summary_row(&o, "a")[1], "built*", "{}", text(&o));
+    assert!(timing_cached(&s, "terrain") && timing_cached(&s, "scatter") && timing_cached(&s, "preview"));
+    assert_eq!(scatter_files(&s), first, "a cached scatter stage restored different bytes");
+
+    // a species setting changes: the scatter misses, the terrain hits
+    write(d, "p/a.toml", &preset("a", 3, &format!("{}\n{mapped}", TREE.replace("max_density = 0.01", "max_density = 0.005"))));
+    build();
+    assert!(timing_cached(&s, "terrain"), "the terrain should come from the cache");
+    assert!(!timing_cached(&s, "scatter"), "a changed max_density must recompute the scatter");
+    let fewer = read_csv(&s.join("placements/tree.csv")).len();
+    assert!(fewer < read_csv_bytes(&first["placements/tree.csv"]) * 3 / 4, "{fewer} trees after halving max_density");
+
+    // the density map's bytes change (same path, same preset): scatter misses, terrain hits
+    let before = scatter_files(&s);
+    write_density(&d.join("p/maps/grass.png"), 0.8, 0.2);
+    build();
+    assert!(timing_cached(&s, "terrain"));
+    assert!(!timing_cached(&s, "scatter"), "a changed density map must recompute the scatter");
+    assert_ne!(scatter_files(&s)["placements/grass.csv"], before["placements/grass.csv"]);
+    assert_eq!(scatter_files(&s)["placements/tree.csv"], before["placements/tree.csv"], "the trees do not use the map");
+}
+
+fn read_csv_bytes(bytes: &[u8]) -> usize {
+    bytes.iter().filter(|&&b| b == b'\n').count() - 1
+}
+
+// --------------------------------------------------------------------------------------- hard cases
+
+#[test]
+fn max_instances_exceeded_fails_the_scene_naming_the_species_and_keeps_the_old_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/a.toml", &forest("a", 3));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    let before = tree(&d.join("o/a"));
+    write(d, "p/a.toml", &preset("a", 3, &format!("{TREE}\n{GRASS}max_instances = 1000\n")));
+    let o = verdant_in(d, &["build", "p/a.toml", "--out", "o"]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(t.contains("grass") && t.contains("max_instances"), "the error does not name the species and limit: {t}");
+    assert!(!t.contains("panicked"), "{t}");
+    assert_eq!(tree(&d.join("o/a")), before, "the failed build changed the previous output");
+    let left: Vec<String> = fs::read_dir(d.join("o"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(".building-") || n.contains(".old-"))
+        .collect();
+    assert!(left.is_empty(), "temporary folders left: {left:?}");
+}
+
+#[test]
+fn a_slope_range_that_excludes_everything_writes_empty_valid_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // 50 m of relief over 256 m: no slope reaches 89.5°
+    let steep = GRASS.replace("placement = \"jittered\"\n", "placement = \"jittered\"\nslope = [89.5, 90.0]\n");
+    write(d, "p/a.toml", &preset("a", 3, &format!("{TREE}\n{steep}")));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    let s = d.join("o/a");
+    assert_eq!(fs::read_to_string(s.join("placements/grass.csv")).unwrap(), format!("{HEADER}\n"));
+    let json = read_json(&s.join("placements/grass.json"));
+    assert_eq!(json["count"].as_u64(), Some(0));
+    assert!(json["rules"]["slope"].as_u64().unwrap() > 0, "{json}");
+    let scene = verdant::validate::read_scene(&s.join("scene.glb")).unwrap();
+    let root = scene.roots.iter().map(|&r| &scene.nodes[r]).find(|n| n.name == "grass").expect("a grass node, even when empty");
+    assert!(root.children.is_empty());
+    assert!(!read_csv(&s.join("placements/tree.csv")).is_empty());
+    ok(&verdant_in(d, &["validate", "o/a/scene.glb"]));
+}
