@@ -76,6 +76,21 @@ fn timed<T>(f: impl FnOnce() -> T) -> (T, f64, f64) {
     (v, t.elapsed().as_secs_f64(), cpu_s() - c)
 }
 
+/// FNV-1a over every instance's bits and the rule counts: the placements must not change unless a
+/// commit says why.
+fn instances_digest(s: &verdant::scatter::Scatter) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |v: u64| h = (h ^ v).wrapping_mul(0x0100_0000_01b3);
+    for i in &s.instances {
+        i.position.iter().for_each(|v| eat(v.to_bits()));
+        i.rotation.iter().chain(&i.scale).chain([&i.yaw_deg]).for_each(|v| eat(v.to_bits() as u64));
+        eat(i.tile as u64);
+    }
+    let c = &s.counts;
+    [c.candidates, c.density, c.mask, c.off_surface, c.water, c.altitude, c.slope, c.exclusion, c.placed].iter().for_each(|&v| eat(v));
+    h
+}
+
 /// The product's conversion (as in `scene::scatter_stage`): instances → placement rows.
 fn rows(instances: &[Instance]) -> Vec<PlacementRow> {
     instances.iter().map(|i| PlacementRow { position: i.position, rotation: i.rotation, scale: i.scale, yaw_deg: i.yaw_deg, tile: i.tile }).collect()
@@ -143,13 +158,18 @@ fn main() {
     if let Some(k) = args.iter().position(|a| a == "--case").and_then(|p| args.get(p + 1)).and_then(|v| v.parse::<usize>().ok()) {
         let (name, sp) = &cases[k];
         let mut best: Option<Row> = None;
+        let mut digest = None;
         for _ in 0..runs() {
             reset_peak();
             let (rss0, _) = memory();
             let (out, generate_s, generate_cpu) = timed(|| scatter_species_detailed(&surface, extent, sp, Some(&density), None, &[], TILE_M, 1).expect("scatter"));
-            let (csv_bytes, format_s, format_cpu) = timed(|| placements_csv(&rows(&out.instances)).expect("csv").len() as u64);
+            // the product's path first (its peak is the case's memory), then the in-memory table
             let ((), write_s, write_cpu) = timed(|| write_placements_csv(&tmp, &rows(&out.instances)).expect("write"));
             let (_, hwm) = memory();
+            let (csv_bytes, format_s, format_cpu) = timed(|| placements_csv(&rows(&out.instances)).expect("csv").len() as u64);
+            if digest.is_none() {
+                digest = Some(instances_digest(&out));
+            }
             let row = Row {
                 case: name.to_string(),
                 instances: out.instances.len(),
@@ -177,6 +197,7 @@ fn main() {
         }
         let r = best.expect("at least one run");
         let _ = std::fs::remove_file(&tmp);
+        println!("DIGEST {:016x} {name}", digest.unwrap_or(0));
         println!(
             "ROW {} {} {} {} {} {} {} {} {} {} {}",
             r.instances, r.candidates, r.generate_s, r.generate_cpu, r.format_s, r.format_cpu, r.write_s, r.write_cpu, r.csv_bytes, r.peak_bytes, name
@@ -234,7 +255,7 @@ fn main() {
         );
     }
     println!(
-        "(the product path: scatter_species_detailed, then instances → PlacementRow + export::table::placements_csv (shortest round-trip floats), and + write_placements_csv (format + atomic write to {}, page cache, no fsync); Instance = {} bytes in memory; peak B/inst = lowest growth of the peak RSS during one run's generate + format + write, each case in its own process, over instances; the CSV is held in memory before writing)",
+        "(the product path: scatter_species_detailed, then instances → PlacementRow + export::table::placements_csv (shortest round-trip floats), and + write_placements_csv (format + atomic write to {}, page cache, no fsync); Instance = {} bytes in memory; peak B/inst = lowest growth of the peak RSS during one run's generate + write (the product path; the in-memory table is measured after), each case in its own process, over instances)",
         std::env::temp_dir().display(),
         std::mem::size_of::<Instance>()
     );
