@@ -158,25 +158,15 @@ fn format_batch(rows: &[PlacementRow], first: usize, bufs: &mut Vec<Vec<u8>>) ->
 }
 
 /// The table as CSV bytes: a header line, then one line per row. Non-finite numbers are refused
-/// (a placement bug, not something to write).
+/// (a placement bug, not something to write). Built by the streaming writer into one growing
+/// buffer, so only two batches of chunk buffers exist besides it (fresh pages are costly).
 pub fn placements_csv(rows: &[PlacementRow]) -> Result<Vec<u8>, String> {
-    let mut bufs = Vec::new();
-    format_batch(rows, 0, &mut bufs).map_err(not_finite)?;
-    let head = header();
-    let total = head.len() + bufs.iter().map(Vec::len).sum::<usize>();
-    // one allocation (zeroed pages come from the OS for large sizes, no memset), filled in
-    // parallel at each chunk's offset
-    let mut out = vec![0u8; total];
-    let (h, mut rest) = out.split_at_mut(head.len());
-    h.copy_from_slice(&head);
-    let mut parts = Vec::with_capacity(bufs.len());
-    for b in &bufs {
-        let (part, tail) = rest.split_at_mut(b.len());
-        parts.push(part);
-        rest = tail;
+    let mut out = Vec::with_capacity(64 + rows.len() * 144);
+    let mut bad = None;
+    match stream_csv(&mut out, rows, ROWS_PER_CHUNK * CHUNKS_PER_BATCH, &mut bad) {
+        Ok(()) => Ok(out),
+        Err(e) => Err(bad.map_or_else(|| e.to_string(), not_finite)),
     }
-    parts.into_par_iter().zip(bufs.par_iter()).for_each(|(dst, src)| dst.copy_from_slice(src));
-    Ok(out)
 }
 
 /// Writes the placement table to `path` atomically, streaming: batches of rows are formatted in
