@@ -311,7 +311,7 @@ mod tests {
 
     #[test]
     fn extremes_round_trip() {
-        let rows: Vec<PlacementRow> = [f64::MAX, f64::MIN_POSITIVE, -1e-300, 5e-324, 0.0, -0.0, 123456789.123456789]
+        let rows: Vec<PlacementRow> = [f64::MAX, f64::MIN_POSITIVE, -1e-300, 5e-324, 0.0, -0.0, 123_456_789.123_456_79]
             .iter()
             .enumerate()
             .map(|(k, &v)| PlacementRow {
