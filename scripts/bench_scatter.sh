@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Scatter benchmark: jittered grass and Poisson trees on the TIN of a 2049² fBm terrain with a varied
-# density map (instances/s including the height lookup and writing CSV, memory per instance), and
+# density map (instances/s for generate / + CSV format / + file write through the product's own
+# export::table writer, best of VERDANT_BENCH_RUNS with CPU time, memory per instance), and
 # scipy's qmc.PoissonDisk on the same area and radius as a peer (needs .venv with scipy; skipped
 # with a message otherwise). Arguments go to the bench, e.g. `--no-scipy`.
 set -euo pipefail

@@ -31,29 +31,57 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     let (ncx, ncz) = (ncx as i64, ncz as i64);
     let tiling = rules.tiling;
     let key = mix64(rules.key ^ 0x6a69_7474_6572); // "jitter"
+    // the density map's bound over blocks of BLOCK × BLOCK cells: where it is 0 every candidate is
+    // a density reject (keep_u ≥ 0 always), so those are counted without hashing or sampling
+    const BLOCK: i64 = 32;
     let per_tile: Vec<(Vec<Instance>, RuleCounts)> = (0..tiling.count() as u32)
         .into_par_iter()
         .map(|t| {
             let (tx, tz) = (t % tiling.tiles_x, t / tiling.tiles_x);
             let rect = tiling.rect(tx, tz);
             let mut counts = RuleCounts::default();
-            let mut out = Vec::new();
-            if rules.max_keep_over(rect) <= 0.0 {
-                return (out, counts);
+            let max_keep = rules.max_keep_over(rect);
+            if max_keep <= 0.0 {
+                return (Vec::new(), counts);
             }
             // cells overlapping the tile; each candidate is kept by the one tile containing it
             let range = |a: f64, b: f64, o: f64, n: i64| (((a - o) / cell).floor() as i64).clamp(0, n - 1)..=(((b - o) / cell).floor() as i64).clamp(0, n - 1);
-            for cj in range(rect[1], rect[3], z0, ncz) {
-                for ci in range(rect[0], rect[2], x0, ncx) {
-                    let h1 = mix64(key ^ (cj as u64 * ncx as u64 + ci as u64));
-                    let x = x0 + (ci as f64 + (h1 >> 32) as f64 * (1.0 / 4_294_967_296.0)) * cell;
-                    let z = z0 + (cj as f64 + (h1 & 0xFFFF_FFFF) as f64 * (1.0 / 4_294_967_296.0)) * cell;
-                    if x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz) {
-                        continue;
-                    }
-                    let h2 = mix64(h1);
-                    if let Some(inst) = rules.place(x, z, super::unit(h2), h2 ^ key, t, &mut counts) {
-                        out.push(inst);
+            let (ri, rj) = (range(rect[0], rect[2], x0, ncx), range(rect[1], rect[3], z0, ncz));
+            let (ci0, ci1, cj0, cj1) = (*ri.start(), *ri.end(), *rj.start(), *rj.end());
+            // interior cells (two cells clear of the tile's border, so far from any rounding) hold
+            // candidates of this tile only: no tile test for them
+            let (ii0, ii1, ij0, ij1) = (ci0 + 2, ci1 - 2, cj0 + 2, cj1 - 2);
+            // a capacity bound (virtual until touched): no reallocation while pushing
+            let cells = ((ci1 - ci0 + 1) * (cj1 - cj0 + 1)) as f64;
+            let mut out = Vec::with_capacity((cells * max_keep.min(1.0)).ceil() as usize + 16);
+            // row-major over the tile's cells (the output order), with the density bound of the
+            // blocks of each band of BLOCK rows
+            let mut empty = Vec::new();
+            for bj in (cj0..=cj1).step_by(BLOCK as usize) {
+                let bj1 = (bj + BLOCK - 1).min(cj1);
+                empty.clear();
+                empty.extend((ci0..=ci1).step_by(BLOCK as usize).map(|bi| {
+                    let bi1 = (bi + BLOCK - 1).min(ci1);
+                    rules.max_density_over([x0 + bi as f64 * cell, z0 + bj as f64 * cell, x0 + (bi1 + 1) as f64 * cell, z0 + (bj1 + 1) as f64 * cell]) <= 0.0
+                }));
+                for cj in bj..=bj1 {
+                    let row_inside = cj >= ij0 && cj <= ij1;
+                    for ci in ci0..=ci1 {
+                        let h1 = mix64(key ^ (cj as u64 * ncx as u64 + ci as u64));
+                        let x = x0 + (ci as f64 + (h1 >> 32) as f64 * (1.0 / 4_294_967_296.0)) * cell;
+                        let z = z0 + (cj as f64 + (h1 & 0xFFFF_FFFF) as f64 * (1.0 / 4_294_967_296.0)) * cell;
+                        if !(row_inside && ci >= ii0 && ci <= ii1) && (x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz)) {
+                            continue;
+                        }
+                        if empty[((ci - ci0) / BLOCK) as usize] {
+                            counts.candidates += 1;
+                            counts.density += 1;
+                            continue;
+                        }
+                        let h2 = mix64(h1);
+                        if let Some(inst) = rules.place(x, z, super::unit(h2), h2 ^ key, t, &mut counts) {
+                            out.push(inst);
+                        }
                     }
                 }
             }
@@ -61,11 +89,31 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
         })
         .collect();
     let mut counts = RuleCounts::default();
-    let total = per_tile.iter().map(|(v, _)| v.len()).sum();
-    let mut instances = Vec::with_capacity(total);
-    for (v, c) in per_tile {
-        counts.add(&c);
-        instances.extend_from_slice(&v);
+    for (_, c) in &per_tile {
+        counts.add(c);
     }
-    Ok((instances, counts))
+    Ok((join(per_tile.into_iter().map(|(v, _)| v).collect()), counts))
+}
+
+/// Concatenates the tiles' instances in order, copying in parallel into one allocation at each
+/// tile's offset (the copy and the page faults of the new allocation are split over the threads).
+pub(crate) fn join(parts: Vec<Vec<Instance>>) -> Vec<Instance> {
+    let total = parts.iter().map(Vec::len).sum();
+    let mut all: Vec<Instance> = Vec::with_capacity(total);
+    let mut rest = &mut all.spare_capacity_mut()[..total];
+    let mut slots = Vec::with_capacity(parts.len());
+    for p in &parts {
+        let (slot, tail) = rest.split_at_mut(p.len());
+        slots.push(slot);
+        rest = tail;
+    }
+    slots.into_par_iter().zip(parts.into_par_iter()).for_each(|(slot, part)| {
+        for (d, s) in slot.iter_mut().zip(part) {
+            d.write(s);
+        }
+    });
+    // SAFETY: the slots tile the first `total` elements of the spare capacity and each was
+    // written in full (slot k has exactly parts[k].len() elements)
+    unsafe { all.set_len(total) };
+    all
 }

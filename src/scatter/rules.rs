@@ -142,6 +142,14 @@ impl<'a> Rules<'a> {
         d * m * self.keep_scale
     }
 
+    /// Upper bound of the density map alone over a rectangle (1 without a map): where it is 0, every
+    /// candidate is a density reject.
+    pub fn max_density_over(&self, rect: [f64; 4]) -> f64 {
+        let (u0, v0) = self.uv(rect[0], rect[1]);
+        let (u1, v1) = self.uv(rect[2], rect[3]);
+        self.density.map_or(1.0, |m| m.max_over(u0, v0, u1, v1) as f64)
+    }
+
     /// Judges the candidate at (x, z): kept when `keep_u` (uniform in [0, 1)) is below
     /// density · keep_scale and every rule passes; `attr` seeds its yaw and scale.
     #[inline]

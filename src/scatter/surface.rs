@@ -6,6 +6,8 @@
 #[derive(Debug, Clone, Copy)]
 struct Tri {
     p: [[f64; 3]; 3],
+    /// Unit normal (computed once, as `height_at` did per query).
+    n: [f64; 3],
 }
 
 /// Point location over the upward-facing triangles of a terrain mesh.
@@ -51,7 +53,7 @@ impl SurfaceIndex {
                 if n[1] <= 1e-12 * len {
                     continue;
                 }
-                tris.push(Tri { p: [a, b, c] });
+                tris.push(Tri { p: [a, b, c], n: [n[0] / len, n[1] / len, n[2] / len] });
             }
         }
         SurfaceIndex::build(tris)
@@ -157,9 +159,7 @@ impl SurfaceIndex {
         let [a, b, c] = tri.p;
         let (w0, w1, w2, d) = bary(tri, x, z);
         let y = (w0 * a[1] + w1 * b[1] + w2 * c[1]) / d;
-        let n = cross(sub(b, a), sub(c, a));
-        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        Some((y, [n[0] / len, n[1] / len, n[2] / len]))
+        Some((y, tri.n))
     }
 
     /// Index of a triangle containing (x, z): the first one that contains it exactly, else the
