@@ -37,7 +37,8 @@ fn species(name: &str, placement: Placement) -> SpeciesSettings {
         mask: None,
         max_density: 1.0,
         placement,
-        min_spacing_m: 1.0,
+        // jittered placement keeps no spacing and refuses one
+        min_spacing_m: if placement == Placement::Poisson { 1.0 } else { 0.0 },
         slope_deg: [0.0, 90.0],
         altitude_m: [-1e9, 1e9],
         water_level_m: None,
@@ -166,7 +167,9 @@ fn deterministic_across_runs_and_thread_counts() {
     for placement in [Placement::Jittered, Placement::Poisson] {
         let mut sp = species("d", placement);
         sp.max_density = 2.0;
-        sp.min_spacing_m = 0.7;
+        if placement == Placement::Poisson {
+            sp.min_spacing_m = 0.7;
+        }
         let run = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| scatter_species(&t.surface, t.extent, &sp, Some(&map), None, &[], 10.0, 99).unwrap())
@@ -425,4 +428,13 @@ proptest! {
         let s = m.sample(u, v);
         prop_assert!(s >= lo - 1e-6 && s <= hi + 1e-6);
     }
+}
+
+#[test]
+fn jittered_refuses_a_spacing_it_cannot_keep() {
+    let t = terrain(33, 10.0, 0.5);
+    let mut sp = species("j", Placement::Jittered);
+    sp.min_spacing_m = 2.0;
+    let e = scatter_species(&t.surface, t.extent, &sp, None, None, &[], 16.0, 1).unwrap_err().to_string();
+    assert!(e.contains("min_spacing") && e.contains("poisson"), "{e}");
 }

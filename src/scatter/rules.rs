@@ -84,6 +84,13 @@ impl<'a> Rules<'a> {
                         "an exclusion radius around its own instances needs placement = \"poisson\" (set min_spacing = {self_radius}); jittered placement keeps no spacing"
                     )));
                 }
+                // a spacing the placement cannot keep must not be accepted silently
+                if species.min_spacing_m > 0.0 {
+                    return Err(bad(format!(
+                        "min_spacing = {} is kept only by placement = \"poisson\"; jittered placement keeps no spacing: remove min_spacing or use poisson",
+                        species.min_spacing_m
+                    )));
+                }
                 (0.0, species.max_density, 1.0)
             }
             Placement::Poisson => {
