@@ -169,6 +169,27 @@ where
     Ok((report, Some(extra), false))
 }
 
+/// The terrain scene for later stages: in memory when the terrain stage ran, else re-imported
+/// from the cached files on first use (also a check that what was cached reads back).
+struct LazyScene {
+    cell: std::cell::OnceCell<Scene>,
+    dir: PathBuf,
+    main: PathBuf,
+}
+
+impl LazyScene {
+    fn get(&self) -> Result<&Scene, SceneBuildError> {
+        if let Some(scene) = self.cell.get() {
+            return Ok(scene);
+        }
+        if self.main.as_os_str().is_empty() {
+            return Err(SceneBuildError::Usage("the terrain stage wrote no mesh".into()));
+        }
+        let scene = reimport(&self.dir, &self.main)?;
+        Ok(self.cell.get_or_init(|| scene))
+    }
+}
+
 fn reimport(dir: &Path, rel: &Path) -> Result<Scene, SceneBuildError> {
     let path = dir.join(rel);
     read_scene(&path).map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })
@@ -204,8 +225,8 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
     // sizes and hashes of stage files already known from the cache, so the manifest need not re-read them
     let mut known = FileHashes::new();
     // what later stages need: the terrain scene and the placements (as stored: f32 positions)
-    let mut terrain: Option<(Scene, String)> = None;
-    let mut placements: Option<(Vec<([f32; 4], Vec<[f64; 3]>)>, String)> = None;
+    let mut terrain: Option<(LazyScene, String)> = None;
+    let mut placements: Option<(Option<Vec<([f32; 4], Vec<[f64; 3]>)>>, PathBuf, String)> = None;
 
     if let (true, Some(t)) = (wants(Stage::Terrain), &preset.terrain) {
         let t0 = Instant::now();
@@ -217,16 +238,14 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             &say,
         )?;
         if wants(Stage::Scatter) || wants(Stage::Preview) {
-            let scene = match scene {
-                Some(scene) => scene,
-                None => {
-                    // cached terrain: re-import the first mesh file (also checks that what was cached reads back)
-                    let is_mesh = |p: &&PathBuf| matches!(p.extension().and_then(|e| e.to_str()), Some("glb" | "gltf" | "obj"));
-                    let main = report.files.iter().find(is_mesh).ok_or_else(|| SceneBuildError::Usage("the terrain stage wrote no mesh".into()))?;
-                    reimport(dir, main)?
-                }
-            };
-            terrain = Some((scene, key));
+            // a cached terrain is re-imported from its first mesh file only if a later stage runs
+            let is_mesh = |p: &&PathBuf| matches!(p.extension().and_then(|e| e.to_str()), Some("glb" | "gltf" | "obj"));
+            let main = report.files.iter().find(is_mesh).cloned().unwrap_or_default();
+            let lazy = LazyScene { cell: std::cell::OnceCell::new(), dir: dir.to_path_buf(), main };
+            if let Some(scene) = scene {
+                let _ = lazy.cell.set(scene);
+            }
+            terrain = Some((lazy, key));
         }
         runs.push(StageRun::Terrain { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
     }
@@ -237,21 +256,24 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         let (report, placed, hit) = cached_stage(
             &cache, force, "scatter", &key, dir, &mut known,
             ScatterStageReport::files,
-            || scatter_stage::run_scatter(preset, scene, dir).map_err(SceneBuildError::from),
+            || scatter_stage::run_scatter(preset, scene.get()?, dir).map_err(SceneBuildError::from),
             &say,
         )?;
         if wants(Stage::Preview) {
+            // positions as stored (f32), so a preview drawn after a cached scatter is the same
             let layers = match placed {
-                Some(placed) => placed
-                    .iter()
-                    .map(|p| {
-                        let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
-                        (p.color, pts)
-                    })
-                    .collect(),
-                None => placements_from_scene(&reimport(dir, &report.scene_file)?, preset),
+                Some(placed) => Some(
+                    placed
+                        .iter()
+                        .map(|p| {
+                            let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
+                            (p.color, pts)
+                        })
+                        .collect(),
+                ),
+                None => None, // cached: read back from scene.glb only if the preview runs
             };
-            placements = Some((layers, key));
+            placements = Some((layers, report.scene_file.clone(), key));
         }
         runs.push(StageRun::Scatter { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
     }
@@ -260,15 +282,21 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         let t0 = Instant::now();
         let mut k = KeyBuilder::new("preview");
         k.add(tkey.as_bytes()).add(&stages::PREVIEW_SIZE_PX.to_le_bytes());
-        if let Some((_, skey)) = &placements {
+        if let Some((_, _, skey)) = &placements {
             k.add(skey.as_bytes());
         }
         let key = k.finish();
-        let layers = placements.as_ref().map(|(l, _)| &l[..]).unwrap_or(&[]);
         let (report, _, hit) = cached_stage(
             &cache, force, "preview", &key, dir, &mut known,
             |r: &PreviewStageReport| vec![r.file.clone()],
-            || Ok((stages::run_preview(scene, layers, dir)?, ())),
+            || {
+                let layers = match &placements {
+                    Some((Some(layers), _, _)) => layers.clone(),
+                    Some((None, scene_file, _)) => placements_from_scene(&reimport(dir, scene_file)?, preset),
+                    None => Vec::new(),
+                };
+                Ok((stages::run_preview(scene.get()?, &layers, dir)?, ()))
+            },
             &say,
         )?;
         runs.push(StageRun::Preview { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });

@@ -113,8 +113,8 @@ impl Cache {
         }
     }
 
-    /// Copies an entry's files into `scene_dir`; returns their recorded sizes and hashes. Fails
-    /// when a file is missing or its size differs from the record (a damaged entry).
+    /// Links (or copies) an entry's files into `scene_dir`; returns their recorded sizes and
+    /// hashes. Fails when a file is missing or its size differs from the record (a damaged entry).
     pub fn restore(entry: &Path, scene_dir: &Path, files: &[PathBuf]) -> io::Result<FileHashes> {
         let table: FileHashes = serde_json::from_str(&fs::read_to_string(entry.join("files.json"))?).map_err(io::Error::other)?;
         let mut hashes = FileHashes::new();
@@ -125,7 +125,14 @@ impl Cache {
             if let Some(parent) = dst.parent() {
                 fs::create_dir_all(parent)?;
             }
-            let copied = fs::copy(entry.join(rel), &dst)?;
+            // a hard link costs nothing whatever the size (placement tables reach hundreds of MB);
+            // copy where links are not possible (another file system). Every writer replaces
+            // files by rename, so rebuilding never writes through a link into the cache.
+            let src = entry.join(rel);
+            let copied = match fs::hard_link(&src, &dst) {
+                Ok(()) => fs::metadata(&dst)?.len(),
+                Err(_) => fs::copy(&src, &dst)?,
+            };
             if copied != recorded.0 {
                 return Err(io::Error::other(format!("{key} has {copied} bytes, the entry recorded {}", recorded.0)));
             }
