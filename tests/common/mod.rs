@@ -1,0 +1,69 @@
+//! Helpers shared by the integration tests that drive the `verdant` binary on scene builds.
+#![allow(dead_code)]
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+/// Runs verdant in `cwd`.
+pub fn verdant_in(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_verdant")).current_dir(cwd).args(args).output().expect("run verdant")
+}
+
+pub fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+pub fn ok(o: &Output) {
+    assert_eq!(o.status.code(), Some(0), "verdant failed:\n{}", text(o));
+    assert!(!text(o).contains("panicked"), "{}", text(o));
+}
+
+pub fn write(dir: &Path, rel: &str, text: &str) -> PathBuf {
+    let path = dir.join(rel);
+    fs::create_dir_all(path.parent().unwrap()).unwrap();
+    fs::write(&path, text).unwrap();
+    path
+}
+
+pub fn read_json(path: &Path) -> Value {
+    let text = fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Every file under `dir` (relative path with `/` → bytes), hidden folders included.
+pub fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
+        for entry in fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                walk(root, &path, out);
+            } else {
+                let rel = path.strip_prefix(root).unwrap().to_string_lossy().replace('\\', "/");
+                out.insert(rel, fs::read(&path).unwrap());
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(dir, dir, &mut out);
+    out
+}
+
+/// The summary row of `scene`, split into columns.
+pub fn summary_row(o: &Output, scene: &str) -> Vec<String> {
+    let t = text(o);
+    t.lines()
+        .find(|l| l.split_whitespace().next() == Some(scene))
+        .unwrap_or_else(|| panic!("no summary row for {scene}:\n{t}"))
+        .split_whitespace()
+        .map(str::to_string)
+        .collect()
+}
+
+pub fn timing_cached(scene_dir: &Path, stage: &str) -> bool {
+    let r = read_json(&scene_dir.join("report.json"));
+    r["timing"][stage]["cached"].as_bool().unwrap_or_else(|| panic!("report.json timing.{stage}.cached missing: {r}"))
+}
