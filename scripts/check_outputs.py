@@ -90,6 +90,26 @@ class Geometry:
 
 
 # ----------------------------------------------------------------------------------------------- trimesh
+def run_and_report(name, check, summary_tsv, n_fields):
+    """Runs `check` (returning a summary line and `n_fields` table fields), prints OK/FAIL, appends
+    'name<TAB>status<TAB>fields…' to `summary_tsv` when given, and returns the exit code."""
+    fields = ["-"] * n_fields
+    try:
+        summary, *fields = check()
+        status, code = "ok", 0
+        print(f"OK    {summary}")
+    except CheckFailed as e:
+        status, code = "FAIL", 1
+        print(f"FAIL  {name}: {e}", file=sys.stderr)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        status, code = "FAIL", 1
+        print(f"FAIL  {name}: could not read/check ({type(e).__name__}: {e})", file=sys.stderr)
+    if summary_tsv:
+        with open(summary_tsv, "a") as f:
+            f.write("\t".join([name, status, *map(str, fields)]) + "\n")
+    return code
+
+
 def load_with_trimesh(path: Path) -> Geometry:
     scene = trimesh.load(str(path), force="scene", process=False)
     geom = Geometry()
@@ -705,21 +725,7 @@ def scene_main(argv: list[str]) -> int:
     parser.add_argument("--summary-tsv", help="append 'scene<TAB>status<TAB>tris<TAB>verts<TAB>placements' to this file")
     args = parser.parse_args(argv)
     name = Path(args.scene).name
-    tris = verts = placements = "-"
-    try:
-        summary, tris, verts, placements = check_scene(Path(args.scene), Path(args.thumb) if args.thumb else None)
-        status, code = "ok", 0
-        print(f"OK    {summary}")
-    except CheckFailed as e:
-        status, code = "FAIL", 1
-        print(f"FAIL  {name}: {e}", file=sys.stderr)
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        status, code = "FAIL", 1
-        print(f"FAIL  {name}: could not read/check ({type(e).__name__}: {e})", file=sys.stderr)
-    if args.summary_tsv:
-        with open(args.summary_tsv, "a") as f:
-            f.write(f"{name}\t{status}\t{tris}\t{verts}\t{placements}\n")
-    return code
+    return run_and_report(name, lambda: check_scene(Path(args.scene), Path(args.thumb) if args.thumb else None), args.summary_tsv, 3)
 
 
 # ------------------------------------------------------------------------------------- placements mode
@@ -1173,21 +1179,12 @@ def main() -> int:
     parser.add_argument("--summary-tsv", help="append 'file<TAB>status<TAB>tris<TAB>verts' to this file")
     args = parser.parse_args()
     name = Path(args.file).name
-    tris = verts = "-"
-    try:
+
+    def checked():
         summary, tris, verts = check_file(args)
-        status, code = "ok", 0
-        print(f"OK    {name}: {summary}")
-    except CheckFailed as e:
-        status, code = "FAIL", 1
-        print(f"FAIL  {name}: {e}", file=sys.stderr)
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        status, code = "FAIL", 1
-        print(f"FAIL  {name}: could not read/check ({type(e).__name__}: {e})", file=sys.stderr)
-    if args.summary_tsv:
-        with open(args.summary_tsv, "a") as f:
-            f.write(f"{name}\t{status}\t{tris}\t{verts}\n")
-    return code
+        return (f"{name}: {summary}", tris, verts)
+
+    return run_and_report(name, checked, args.summary_tsv, 2)
 
 
 if __name__ == "__main__":
