@@ -16,10 +16,21 @@ pub struct Primitive {
     pub uvs: Vec<[f32; 2]>,
     /// Linear RGBA vertex colours in 0..1, one per position, or empty.
     pub colors: Vec<[f32; 4]>,
+    /// Application-specific per-vertex data written as glTF custom attributes (names start with `_`,
+    /// e.g. `_WIND`), four floats per vertex, one entry per position.
+    pub custom: Vec<CustomAttribute>,
     /// Triangle list; every three indices are one triangle, counter-clockwise seen from its front.
     pub indices: Vec<u32>,
     /// Index into [`Scene::materials`].
     pub material: Option<usize>,
+}
+
+/// A per-vertex VEC4 float attribute an engine shader reads by name (glTF: an application-specific
+/// semantic, which must start with an underscore).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CustomAttribute {
+    pub name: String,
+    pub values: Vec<[f32; 4]>,
 }
 
 /// A named mesh made of one or more primitives.

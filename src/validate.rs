@@ -397,6 +397,15 @@ fn read_primitive(
     if let Some((d, v)) = read(issues, "COLOR_0", prim.get(&Semantic::Colors(0)), &[3, 4]) {
         p.colors = v.chunks_exact(d).map(|c| [c[0], c[1], c[2], if d == 4 { c[3] } else { 1.0 }]).collect();
     }
+    for (sem, acc) in prim.attributes() {
+        if let Semantic::Extras(name) = sem {
+            let name = format!("_{name}");
+            if let Some((_, v)) = read(issues, &name, Some(acc), &[4]) {
+                let values = v.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+                p.custom.push(crate::mesh::CustomAttribute { name, values });
+            }
+        }
+    }
     match prim.indices() {
         Some(acc) => match read_indices(&acc, buffers) {
             Ok(i) => p.indices = i,
@@ -405,7 +414,8 @@ fn read_primitive(
         // non-indexed: every three vertices are a triangle
         None => p.indices = (0..p.positions.len() as u32).collect(),
     }
-    for (name, len) in [("NORMAL", p.normals.len()), ("TEXCOORD_0", p.uvs.len()), ("COLOR_0", p.colors.len())] {
+    let custom = p.custom.iter().map(|c| (c.name.as_str(), c.values.len()));
+    for (name, len) in [("NORMAL", p.normals.len()), ("TEXCOORD_0", p.uvs.len()), ("COLOR_0", p.colors.len())].into_iter().chain(custom) {
         if len != 0 && len != p.positions.len() {
             issues.push(issue(Severity::Error, loc, format!("{name} has {len} elements for {} positions", p.positions.len())));
         }
@@ -593,6 +603,7 @@ fn load_obj(path: &Path) -> Result<Loaded, ValidateError> {
             },
             indices: m.indices.clone(),
             material: m.material_id.filter(|&i| i < scene.materials.len()),
+            ..Primitive::default()
         };
         // consecutive models with one name are one object split by `usemtl`
         let same = scene.meshes.last().is_some_and(|last| last.name == model.name);

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use proptest::prelude::*;
 use serde_json::json;
 use verdant::export::{write_atomic, write_scene, ExportError};
-use verdant::mesh::{AlphaMode, Instances, Material, Mesh, Node, Primitive, Scene, Texture};
+use verdant::mesh::{AlphaMode, CustomAttribute, Instances, Material, Mesh, Node, Primitive, Scene, Texture};
 use verdant::validate::{read_scene, validate_file, Severity, ValidateError, ValidateOptions};
 
 fn tiny_png() -> Vec<u8> {
@@ -30,6 +30,10 @@ fn sample_scene() -> Scene {
         normals: vec![[0.0, s, -s], [0.0, s, -s], [0.0, 0.0, 1.0], [0.6, 0.0, 0.8]],
         uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.1], [0.0, 0.0]],
         colors: vec![[0.2, 0.5, 0.1, 1.0], [0.3, 0.6, 0.1, 0.5], [0.2, 0.7, 0.2, 1.0], [0.1, 0.5, 0.1, 0.0]],
+        custom: vec![CustomAttribute {
+            name: "_WIND".into(),
+            values: vec![[0.0, 0.25, 1.5, 0.8], [0.0, 0.25, 1.5, 0.8], [1.0, 0.25, 1.5, 0.8], [1.0, 0.75, 2.0, 0.3]],
+        }],
         indices: vec![0, 1, 2, 0, 2, 3],
         material: Some(0),
     };

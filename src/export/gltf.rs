@@ -206,6 +206,10 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
                 let a = float_accessor(&mut root, &mut bin, &p.colors, Some(ARRAY_BUFFER));
                 attributes.insert(Valid(json::mesh::Semantic::Colors(0)), a);
             }
+            for c in &p.custom {
+                let a = float_accessor(&mut root, &mut bin, &c.values, Some(ARRAY_BUFFER));
+                attributes.insert(Valid(json::mesh::Semantic::Extras(c.name[1..].to_string())), a);
+            }
             let max_index = p.indices.iter().copied().max().unwrap_or(0);
             let (bytes, component): (Vec<u8>, _) = if max_index <= MAX_U16_INDEX {
                 (p.indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect(), ComponentType::U16)

@@ -221,6 +221,23 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneProblem> {
                     return bad(format!("{what} has {len} {name} for {n} positions"));
                 }
             }
+            for (ci, c) in p.custom.iter().enumerate() {
+                let valid_name = c.name.len() > 1
+                    && c.name.starts_with('_')
+                    && c.name[1..].bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_');
+                if !valid_name {
+                    return bad(format!("{what}: custom attribute {ci} is named {:?}; names are `_` then letters, digits or `_`", c.name));
+                }
+                if p.custom[..ci].iter().any(|o| o.name == c.name) {
+                    return bad(format!("{what}: custom attribute {:?} appears twice", c.name));
+                }
+                if c.values.len() != n {
+                    return bad(format!("{what} has {} values of {} for {n} positions", c.values.len(), c.name));
+                }
+                if let Some(v) = c.values.iter().position(|v| !finite(v)) {
+                    return bad(format!("{what}: {} value {v} is not finite ({:?})", c.name, c.values[v]));
+                }
+            }
             if let Some(v) = p.positions.iter().position(|v| !finite(v)) {
                 return bad(format!("{what}: position {v} is not finite ({:?})", p.positions[v]));
             }
