@@ -12,7 +12,7 @@ pub struct Stream {
 
 impl Stream {
     pub fn new(ids: &[u64]) -> Stream {
-        let key = ids.iter().fold(0x7665_7264_616e_74u64, |h, &id| mix64(h ^ mix64(id)));
+        let key = ids.iter().fold(0x0076_6572_6461_6e74_u64, |h, &id| mix64(h ^ mix64(id)));
         Stream { key, counter: 0 }
     }
 
@@ -38,7 +38,7 @@ impl Stream {
 
     /// Uniform integer in 0..n (n ≥ 1).
     pub fn below(&mut self, n: usize) -> usize {
-        ((self.next_u64() >> 32) * n as u64 >> 32) as usize
+        (((self.next_u64() >> 32) * n as u64) >> 32) as usize
     }
 }
 
