@@ -64,6 +64,8 @@ pub struct GrassSettings {
     /// Clumps per side of a far-field billboard.
     pub far_cells: usize,
     pub seed: u64,
+    /// A blade image (PNG, alpha = blade shape) used instead of the procedural blade texture.
+    pub blade_texture: Option<std::path::PathBuf>,
 }
 
 impl Default for GrassSettings {
@@ -87,6 +89,7 @@ impl Default for GrassSettings {
             atlas_px: 256,
             far_cells: 3,
             seed: 0,
+            blade_texture: None,
         }
     }
 }

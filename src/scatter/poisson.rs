@@ -310,6 +310,7 @@ mod tests {
             exclusions: vec![],
             seed: 0,
             max_instances: 10_000_000,
+            look: crate::scene::PlantLook::Marker,
         }
     }
 

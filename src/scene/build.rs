@@ -16,6 +16,7 @@ use crate::scene::manifest::{write_manifest_and_report, StageRun};
 use crate::scene::preset::{load_preset, PresetError};
 use crate::mesh::Scene;
 use crate::plants::marker;
+use crate::scene::plants_stage::{self, PlantsStageReport};
 use crate::scene::scatter_stage::{self, ScatterStageReport};
 use crate::scene::stages::{self, PreviewStageReport, Stage};
 use crate::scene::Preset;
@@ -248,6 +249,18 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             terrain = Some((lazy, key));
         }
         runs.push(StageRun::Terrain { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+    }
+
+    if wants(Stage::Plants) && plants_stage::has_plants(preset) {
+        let t0 = Instant::now();
+        let key = plants_stage::plants_key(preset)?;
+        let (report, _, hit) = cached_stage(
+            &cache, force, "plants", &key, dir, &mut known,
+            PlantsStageReport::files,
+            || Ok((plants_stage::run_plants(preset, dir)?, ())),
+            &say,
+        )?;
+        runs.push(StageRun::Plants { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
     }
 
     if let (true, Some((scene, tkey)), false) = (wants(Stage::Scatter), &terrain, preset.species.is_empty()) {

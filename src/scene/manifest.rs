@@ -10,6 +10,7 @@ use serde::Serialize;
 use crate::export::write_atomic;
 use crate::scene::build::SceneBuildError;
 use crate::scene::cache::{sha256_hex, FileHashes};
+use crate::scene::plants_stage::PlantsStageReport;
 use crate::scene::scatter_stage::ScatterStageReport;
 use crate::scene::stages::{PreviewStageReport, Stage, TerrainStageReport};
 use crate::scene::Preset;
@@ -18,6 +19,7 @@ use crate::scene::Preset;
 #[derive(Debug, Clone)]
 pub enum StageRun {
     Terrain { report: TerrainStageReport, cached: bool, seconds: f64 },
+    Plants { report: PlantsStageReport, cached: bool, seconds: f64 },
     Scatter { report: ScatterStageReport, cached: bool, seconds: f64 },
     Preview { report: PreviewStageReport, cached: bool, seconds: f64 },
 }
@@ -26,18 +28,19 @@ impl StageRun {
     pub fn stage(&self) -> Stage {
         match self {
             StageRun::Terrain { .. } => Stage::Terrain,
+            StageRun::Plants { .. } => Stage::Plants,
             StageRun::Scatter { .. } => Stage::Scatter,
             StageRun::Preview { .. } => Stage::Preview,
         }
     }
     pub fn cached(&self) -> bool {
         match self {
-            StageRun::Terrain { cached, .. } | StageRun::Scatter { cached, .. } | StageRun::Preview { cached, .. } => *cached,
+            StageRun::Terrain { cached, .. } | StageRun::Plants { cached, .. } | StageRun::Scatter { cached, .. } | StageRun::Preview { cached, .. } => *cached,
         }
     }
     pub fn seconds(&self) -> f64 {
         match self {
-            StageRun::Terrain { seconds, .. } | StageRun::Scatter { seconds, .. } | StageRun::Preview { seconds, .. } => *seconds,
+            StageRun::Terrain { seconds, .. } | StageRun::Plants { seconds, .. } | StageRun::Scatter { seconds, .. } | StageRun::Preview { seconds, .. } => *seconds,
         }
     }
 }
@@ -55,6 +58,7 @@ struct Manifest<'a> {
     scene: &'a str,
     files: Vec<FileEntry>,
     terrain: Option<TerrainManifest<'a>>,
+    plants: Option<Vec<PlantManifest>>,
     scatter: Option<ScatterManifest>,
     preview: Option<String>,
     settings: &'a Preset,
@@ -73,6 +77,15 @@ struct TerrainManifest<'a> {
     bounds: &'a Option<crate::mesh::Bounds>,
     chunks: &'a [crate::scene::stages::ChunkInfo],
     lods: &'a [crate::scene::stages::LodInfo],
+}
+
+/// A generated species: its files, and per level of detail the measured switch distance and the
+/// MSFT_lod screen coverage written into its glb.
+#[derive(Serialize)]
+struct PlantManifest {
+    name: String,
+    files: Vec<String>,
+    lods: Vec<serde_json::Value>,
 }
 
 #[derive(Serialize)]
@@ -139,6 +152,10 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
         StageRun::Scatter { report, .. } => Some(report),
         _ => None,
     });
+    let plants = runs.iter().find_map(|r| match r {
+        StageRun::Plants { report, .. } => Some(report),
+        _ => None,
+    });
     let preview = runs.iter().find_map(|r| match r {
         StageRun::Preview { report, .. } => Some(report),
         _ => None,
@@ -159,6 +176,34 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
             bounds: &t.bounds,
             chunks: &t.chunks,
             lods: &t.lods,
+        }),
+        plants: plants.map(|p| {
+            p.species
+                .iter()
+                .map(|sp| PlantManifest {
+                    name: sp.name.clone(),
+                    files: rel_strings(&sp.files),
+                    lods: sp
+                        .grass
+                        .as_ref()
+                        .and_then(|g| g.get("lods"))
+                        .and_then(serde_json::Value::as_array)
+                        .map(|lods| {
+                            lods.iter()
+                                .map(|l| {
+                                    serde_json::json!({
+                                        "level": l["level"],
+                                        "file": format!("species/{}_LOD{}.glb", sp.name, l["level"]),
+                                        "triangles": l["triangles"],
+                                        "switch_distance_m": l["switch_distance_m"],
+                                        "screen_coverage": l["screen_coverage"],
+                                    })
+                                })
+                                .collect()
+                        })
+                        .unwrap_or_default(),
+                })
+                .collect()
         }),
         scatter: scatter.map(|s| ScatterManifest {
             scene: s.scene_file.to_string_lossy().replace('\\', "/"),
@@ -217,6 +262,22 @@ fn report_json(preset: &Preset, runs: &[StageRun]) -> String {
                 ("scatter", v, *cached, *seconds)
             }
             StageRun::Preview { report, cached, seconds } => ("preview", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
+            StageRun::Plants { report, cached, seconds } => {
+                let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
+                if let Some(list) = v.get_mut("species").and_then(Value::as_array_mut) {
+                    for sp in list {
+                        if let Some(o) = sp.as_object_mut() {
+                            o.remove("seconds");
+                            for look in ["grass", "flower"] {
+                                if let Some(g) = o.get_mut(look).and_then(Value::as_object_mut) {
+                                    g.retain(|k, _| !k.starts_with("seconds"));
+                                }
+                            }
+                        }
+                    }
+                }
+                ("plants", v, *cached, *seconds)
+            }
         };
         // the stage's own seconds are from the run that computed it: timing, not results
         let computed = value.as_object_mut().and_then(|o| o.remove("seconds")).unwrap_or(Value::Null);
@@ -284,6 +345,7 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
                 }
                 s += "\n";
             }
+            StageRun::Plants { report: pl, .. } => s += &plants_md(pl),
             StageRun::Preview { report: p, .. } => {
                 s += &format!("## Preview\n\n`{}`, {}×{} px, shaded relief drawn from the terrain mesh\n\n", p.file.display(), p.width_px, p.height_px);
             }
@@ -292,6 +354,51 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
     s += "## Timing\n\n| stage | cached | seconds |\n|---|---|---|\n";
     for r in runs {
         s += &format!("| {} | {} | {:.3} |\n", r.stage().name(), if r.cached() { "yes" } else { "no" }, r.seconds());
+    }
+    s
+}
+
+/// The plants section of report.md: per grass species a LoD table (with the thesis' rings for
+/// comparison) and the atlas coverage per mip level; per flower species its counts.
+fn plants_md(report: &PlantsStageReport) -> String {
+    use serde_json::Value;
+    let num = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+    let mut s = String::from("## Plants\n\n");
+    for sp in &report.species {
+        if let Some(g) = &sp.grass {
+            s += &format!(
+                "### {} (grass: {} clumps, {} blades)\n\nImage error of the densest clump against its LoD0, rendered by the baker from 8 azimuths × 3 elevations; \
+                 switch distance = where the silhouette error stays ≤ 1 px in a 1920-px-wide, 60° view.\n\n",
+                sp.name, g["clumps"], g["blades_total"]
+            );
+            s += "| level | triangles | vertices | bytes | IoU near | RMSE near | IoU at switch | edge error at switch (px) | switch distance (m) | screen coverage |\n|---|---|---|---|---|---|---|---|---|---|\n";
+            for l in g["lods"].as_array().into_iter().flatten() {
+                let never = if l["never_passes"].as_bool() == Some(true) { " (never ≤ 1 px in range)" } else { "" };
+                s += &format!(
+                    "| LOD{} | {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.2} | {:.1}{never} | {:.2e} |\n",
+                    l["level"], l["triangles"], l["vertices"], l["bytes"], num(&l["near_iou"]), num(&l["near_color_rmse"]),
+                    num(&l["switch_iou"]), num(&l["switch_edge_error_px"]), num(&l["switch_distance_m"]), num(&l["screen_coverage"])
+                );
+            }
+            let rings = &g["thesis_rings_m"];
+            s += &format!(
+                "\nThe real-time grass thesis switched blades → billboards at {} m and billboards → nothing at {} m; measured here: \
+                 LoD1 from {:.1} m, LoD2 from {:.1} m, LoD3 from {:.1} m.\n\n",
+                rings[0], rings[1],
+                num(&g["lods"][1]["switch_distance_m"]), num(&g["lods"][2]["switch_distance_m"]), num(&g["lods"][3]["switch_distance_m"])
+            );
+            s += "| atlas mip | size | alpha scale | coverage |\n|---|---|---|---|\n";
+            for (k, m) in g["atlas_mips"].as_array().into_iter().flatten().enumerate() {
+                s += &format!("| {k} | {}×{} | {:.3} | {:.4} |\n", m["width"], m["height"], num(&m["alpha_scale"]), num(&m["coverage"]));
+            }
+            s += "\n";
+        }
+        if let Some(f) = &sp.flower {
+            s += &format!(
+                "### {} (flower)\n\n{} variants, {} triangles per flower (crossed billboards) baked from models of {} triangles in all\n\n",
+                sp.name, f["variants"], f["triangles_per_flower"], f["model_triangles"]
+            );
+        }
     }
     s
 }

@@ -8,6 +8,7 @@ pub mod preview;
 pub mod build;
 pub mod cache;
 pub mod manifest;
+pub mod plants_stage;
 pub mod scatter_stage;
 pub mod stages;
 
@@ -165,4 +166,18 @@ pub struct SpeciesSettings {
     pub seed: u64,
     /// Explicit limit; exceeding it is an error naming the species and the remedy.
     pub max_instances: usize,
+    /// What its instances show: a generated grass clump or flower, or a marker mesh.
+    pub look: PlantLook,
+}
+
+/// The mesh a species' instances reference.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "generator", rename_all = "lowercase")]
+pub enum PlantLook {
+    /// A small stand-in (trees and meshes until their generators land).
+    Marker,
+    /// `grass = { … }` / `[grass]`: generated clumps with LoDs and a baked atlas.
+    Grass(crate::plants::grass::GrassSettings),
+    /// `flower = { … }` / `[flower]`: crossed billboards of a baked procedural flower.
+    Flower(crate::plants::flower::FlowerSettings),
 }

@@ -12,17 +12,23 @@ use clap::ValueEnum;
 use toml::de::{DeTable, DeValue};
 use toml::Spanned;
 
+mod plants;
+
+pub use plants::{FLOWER_KEYS, GRASS_KEYS};
+
 use super::{
-    Exclusion, Format, Placement, Preset, ScatterSettings, SceneSettings, SpeciesKind, SpeciesSettings, TerrainSettings,
-    TerrainSource,
+    Exclusion, Format, Placement, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesKind, SpeciesSettings,
+    TerrainSettings, TerrainSource,
 };
+use crate::plants::flower::FlowerSettings;
+use crate::plants::grass::GrassSettings;
 use crate::heightfield::{DecodeOptions, Encoding, Heightfield, DEFAULT_MAX_SAMPLES};
 use crate::synth::{self, NoiseKind};
 use crate::terrain::job::MeshMode;
 
 /// The sections a preset may have, in the order the docs list them (`species` is an array of
 /// tables, `[[species]]`).
-pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter"];
+pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower"];
 /// Keys of `[scene]`.
 pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats"];
 /// Keys of `[terrain]`.
@@ -62,6 +68,8 @@ pub const SPECIES_KEYS: &[&str] = &[
     "exclusion",
     "seed",
     "max_instances",
+    "grass",
+    "flower",
 ];
 /// Keys of `[[species]] exclusion = { … }`.
 pub const EXCLUSION_KEYS: &[&str] = &["species", "radius"];
@@ -180,6 +188,7 @@ pub fn demo_preset() -> Preset {
                 exclusions: Vec::new(),
                 seed: 0,
                 max_instances: DEFAULT_MAX_INSTANCES,
+                look: PlantLook::Marker,
             },
             // 75 % of the map has slopes under 35°: ≈ 3.1 km² × 0.04 ≈ 125 000 clumps
             SpeciesSettings {
@@ -199,6 +208,7 @@ pub fn demo_preset() -> Preset {
                 exclusions: vec![Exclusion { species: "tree".into(), radius_m: 1.5 }],
                 seed: 0,
                 max_instances: DEFAULT_MAX_INSTANCES,
+                look: PlantLook::Grass(GrassSettings { seed: species_look_seed(0, 0), ..GrassSettings::default() }),
             },
         ],
         scatter: ScatterSettings::default(),
@@ -589,6 +599,8 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
     let mut terrain = None;
     let mut species_tables = None;
     let mut scatter = None;
+    let mut grass_section = None;
+    let mut flower_section = None;
     for (key, value) in entries {
         let name: &str = key.get_ref();
         if name == "species" {
@@ -652,6 +664,8 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             "scene" => scene = Some((key.span(), table)),
             "terrain" => terrain = Some((key.span(), table)),
             "scatter" => scatter = Some((key.span(), table)),
+            "grass" => grass_section = Some((key.span(), table)),
+            "flower" => flower_section = Some((key.span(), table)),
             _ => return Err(unknown_section(&ctx, &key.span(), &format!("[{name}]"), name)),
         }
     }
@@ -671,6 +685,19 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         None => ScatterSettings::default(),
         Some((span, table)) => parse_scatter(&Table { ctx: &ctx, label: "[scatter]".into(), span, table })?,
     };
+    let grass_defaults = match grass_section {
+        None => GrassSettings::default(),
+        Some((span, table)) => {
+            plants::apply_grass(&Table { ctx: &ctx, label: "[grass]".into(), span, table }, GrassSettings::default(), check_inputs)?
+        }
+    };
+    let flower_defaults = match flower_section {
+        None => FlowerSettings::default(),
+        Some((span, table)) => {
+            plants::apply_flower(&Table { ctx: &ctx, label: "[flower]".into(), span, table }, FlowerSettings::default())?
+        }
+    };
+    let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, scene_seed: scene.seed };
     let mut species: Vec<SpeciesSettings> = Vec::new();
     if let Some((key_span, items)) = species_tables {
         if terrain.is_none() {
@@ -685,7 +712,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         for item in items.iter() {
             let DeValue::Table(table) = item.get_ref() else { continue };
             let t = Table { ctx: &ctx, label: "[[species]]".into(), span: item.span(), table };
-            let (s, name_span) = parse_species(&t, &species, check_inputs)?;
+            let (s, name_span) = parse_species(&t, &species, &looks, check_inputs)?;
             // compared ignoring case: `Oak` and `oak` would be one file on some file systems
             if let Some(i) = species.iter().position(|e| e.name.eq_ignore_ascii_case(&s.name)) {
                 let first = &species[i].name;
@@ -848,9 +875,62 @@ fn parse_scatter(t: &Table<'_, '_>) -> Result<ScatterSettings, PresetError> {
 
 /// One `[[species]]` table; `earlier` are the species declared before it (in file order), which
 /// its exclusions may name. Returns the settings and the span of the `name` value.
+/// Defaults of the plant looks (`[grass]`, `[flower]`) and the scene seed they are keyed by.
+struct Looks<'a> {
+    grass: &'a GrassSettings,
+    flower: &'a FlowerSettings,
+    scene_seed: u64,
+}
+
+/// Seed of a species' generated look: the scene seed mixed with the species' own offset.
+pub fn species_look_seed(scene_seed: u64, species_seed: u64) -> u64 {
+    crate::synth::mix64(scene_seed ^ crate::synth::mix64(species_seed.wrapping_add(0x6c6f_6f6b)))
+}
+
+fn parse_look(t: &Table<'_, '_>, kind: SpeciesKind, looks: &Looks<'_>, seed: u64, check_inputs: bool) -> Result<PlantLook, PresetError> {
+    for (key, owner) in [("grass", SpeciesKind::Grass), ("flower", SpeciesKind::Flower)] {
+        if let Some((k, _)) = t.get(key) {
+            if kind != owner {
+                return Err(t.ctx.at(
+                    &k.span(),
+                    format!("`{key} = {{ … }}` describes kind = \"{key}\", but {} is kind = \"{}\"", t.label, value_name_kind(kind)),
+                    format!("remove `{key}` or set `kind = \"{key}\"`"),
+                ));
+            }
+        }
+    }
+    Ok(match kind {
+        SpeciesKind::Grass => {
+            let base = GrassSettings { seed: species_look_seed(looks.scene_seed, seed), ..looks.grass.clone() };
+            match t.get("grass") {
+                None => PlantLook::Grass(base),
+                Some((_, v)) => PlantLook::Grass(plants::apply_grass(&plants::sub_table(t, "grass", v)?, base, check_inputs)?),
+            }
+        }
+        SpeciesKind::Flower => {
+            let base = FlowerSettings { seed: species_look_seed(looks.scene_seed, seed), ..looks.flower.clone() };
+            match t.get("flower") {
+                None => PlantLook::Flower(base),
+                Some((_, v)) => PlantLook::Flower(plants::apply_flower(&plants::sub_table(t, "flower", v)?, base)?),
+            }
+        }
+        SpeciesKind::Tree | SpeciesKind::Mesh => PlantLook::Marker,
+    })
+}
+
+fn value_name_kind(kind: SpeciesKind) -> &'static str {
+    match kind {
+        SpeciesKind::Grass => "grass",
+        SpeciesKind::Flower => "flower",
+        SpeciesKind::Tree => "tree",
+        SpeciesKind::Mesh => "mesh",
+    }
+}
+
 fn parse_species(
     t: &Table<'_, '_>,
     earlier: &[SpeciesSettings],
+    looks: &Looks<'_>,
     check_inputs: bool,
 ) -> Result<(SpeciesSettings, Range<usize>), PresetError> {
     let (name, name_span) = t.string("name", "name = \"oak\"")?.ok_or_else(|| t.missing("name", "name = \"oak\""))?;
@@ -967,6 +1047,7 @@ fn parse_species(
     let max_instances = t
         .integer("max_instances", 1..=MAX_MAX_INSTANCES, "max_instances = 5000000")?
         .map_or(DEFAULT_MAX_INSTANCES, |(n, _)| n as usize);
+    let look = parse_look(t, kind, looks, seed, check_inputs)?;
 
     let species = SpeciesSettings {
         name: name.to_string(),
@@ -985,6 +1066,7 @@ fn parse_species(
         exclusions,
         seed,
         max_instances,
+        look,
     };
     Ok((species, name_span))
 }

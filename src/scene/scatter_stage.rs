@@ -9,7 +9,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::export::{self, table};
-use crate::mesh::{Instances, Mesh, Node, Scene};
+use crate::mesh::{Instances, Material, Mesh, Node, Scene};
 use crate::plants::marker;
 use crate::scatter::density::DensityMap;
 use crate::scatter::stats::{analyze, SpeciesStats};
@@ -145,7 +145,7 @@ pub fn run_scatter(preset: &Preset, terrain: &Scene, scene_dir: &Path) -> Result
         reports.push(report);
         placed.push(Placed { species: species.clone(), color: marker::species_color(species.kind, index), instances: result.instances });
     }
-    let scene = instanced_scene(terrain, &placed);
+    let scene = instanced_scene(terrain, &placed, extent)?;
     let scene_file = PathBuf::from("scene.glb");
     export::write_scene(&scene, &scene_dir.join(&scene_file)).map_err(|e| fail(e.to_string()))?;
     let report = ScatterStageReport { scene_file, tile_m: preset.scatter.tile_m, species: reports, seconds: t0.elapsed().as_secs_f64() };
@@ -170,41 +170,88 @@ impl<'a> From<&'a SpeciesReport> for SpeciesSummary<'a> {
     }
 }
 
-/// The terrain scene plus, per species, its marker mesh and one instanced node per tile (grouped
-/// under a node named after the species).
-pub fn instanced_scene(terrain: &Scene, placed: &[Placed]) -> Scene {
+/// Which generated mesh an instance shows: the clump density level from the density map at its
+/// position (sparse clumps where the map is low; the densest level without a map) and a variant
+/// from a hash of its position, so neighbouring clumps differ and the choice is reproducible.
+fn mesh_choice(i: &Instance, levels: usize, variants: usize, density: Option<&DensityMap>, extent: [f64; 4]) -> usize {
+    let level = match density {
+        None => levels - 1,
+        Some(m) => {
+            let u = (i.position[0] - extent[0]) / (extent[2] - extent[0]);
+            let v = (i.position[2] - extent[1]) / (extent[3] - extent[1]);
+            let d = m.sample(u, v).clamp(0.0, 1.0) as f64;
+            ((d * levels as f64) as usize).min(levels - 1)
+        }
+    };
+    let h = crate::synth::mix64(i.position[0].to_bits() ^ crate::synth::mix64(i.position[2].to_bits()));
+    level * variants + ((h >> 32) * variants as u64 >> 32) as usize
+}
+
+/// The terrain scene plus, per species, its meshes (generated grass clumps or flowers, else a
+/// marker) and one instanced node per tile and mesh (grouped under a node named after the species).
+pub fn instanced_scene(terrain: &Scene, placed: &[Placed], extent: [f64; 4]) -> Result<Scene, StageError> {
     let mut scene = terrain.clone();
     for p in placed {
-        let (mesh, materials) = marker::marker(p.species.kind, &p.species.name, p.color);
-        let material_base = scene.materials.len();
-        scene.materials.extend(materials);
-        let mesh = Mesh {
-            primitives: mesh
-                .primitives
-                .into_iter()
-                .map(|mut prim| {
-                    prim.material = prim.material.map(|m| m + material_base);
-                    prim
-                })
-                .collect(),
-            ..mesh
+        let generated = crate::scene::plants_stage::instance_meshes(&p.species.name, &p.species.look)?;
+        let density = match &generated {
+            Some(g) if g.levels > 1 => load_map(&p.species.density_map)?,
+            _ => None,
         };
-        scene.meshes.push(mesh);
-        let mesh_index = scene.meshes.len() - 1;
-        let mut by_tile: BTreeMap<u32, Instances> = BTreeMap::new();
+        let (mesh_indices, levels, variants) = match generated {
+            Some(g) => {
+                let texture = scene.textures.len();
+                scene.textures.push(g.texture);
+                let material = scene.materials.len();
+                scene.materials.push(Material { base_color_texture: Some(texture), ..g.material });
+                let first = scene.meshes.len();
+                for mut m in g.meshes {
+                    for prim in &mut m.primitives {
+                        prim.material = Some(material);
+                    }
+                    scene.meshes.push(m);
+                }
+                ((first..scene.meshes.len()).collect::<Vec<_>>(), g.levels, g.variants)
+            }
+            None => {
+                let (mesh, materials) = marker::marker(p.species.kind, &p.species.name, p.color);
+                let material_base = scene.materials.len();
+                scene.materials.extend(materials);
+                let mesh = Mesh {
+                    primitives: mesh
+                        .primitives
+                        .into_iter()
+                        .map(|mut prim| {
+                            prim.material = prim.material.map(|m| m + material_base);
+                            prim
+                        })
+                        .collect(),
+                    ..mesh
+                };
+                scene.meshes.push(mesh);
+                (vec![scene.meshes.len() - 1], 1, 1)
+            }
+        };
+        let mut by_tile: BTreeMap<(u32, usize), Instances> = BTreeMap::new();
         for i in &p.instances {
-            let inst = by_tile.entry(i.tile).or_default();
+            let choice = if mesh_indices.len() > 1 { mesh_choice(i, levels, variants, density.as_ref(), extent) } else { 0 };
+            let inst = by_tile.entry((i.tile, choice)).or_default();
             inst.translations.push([i.position[0] as f32, i.position[1] as f32, i.position[2] as f32]);
             inst.rotations.push(i.rotation);
             inst.scales.push(i.scale);
         }
         let mut children = Vec::new();
-        for (tile, instances) in by_tile {
+        for ((tile, choice), instances) in by_tile {
+            let mesh = mesh_indices[choice];
+            let name = if mesh_indices.len() > 1 {
+                format!("{}_tile_{tile}_{}", p.species.name, scene.meshes[mesh].name)
+            } else {
+                format!("{}_tile_{tile}", p.species.name)
+            };
             scene.nodes.push(Node {
-                name: format!("{}_tile_{tile}", p.species.name),
-                mesh: Some(mesh_index),
+                name,
+                mesh: Some(mesh),
                 instances: Some(instances),
-                extras: Some(serde_json::json!({ "species": p.species.name, "tile": tile })),
+                extras: Some(serde_json::json!({ "species": p.species.name, "tile": tile, "mesh": scene.meshes[mesh].name })),
                 ..Node::default()
             });
             children.push(scene.nodes.len() - 1);
@@ -212,5 +259,5 @@ pub fn instanced_scene(terrain: &Scene, placed: &[Placed]) -> Scene {
         scene.nodes.push(Node { name: p.species.name.clone(), children, ..Node::default() });
         scene.roots.push(scene.nodes.len() - 1);
     }
-    scene
+    Ok(scene)
 }

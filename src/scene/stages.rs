@@ -24,6 +24,8 @@ use crate::terrain::SampleMesh;
 pub enum Stage {
     /// Heightmap → terrain meshes (+ LoD chain).
     Terrain,
+    /// Grass and flower species → their meshes with LoDs (species/) and baked atlases (atlases/).
+    Plants,
     /// [[species]] → placements on the terrain: tables and scene.glb with GPU instancing.
     Scatter,
     /// preview.png: a shaded relief drawn from the terrain mesh.
@@ -31,10 +33,11 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 3] = [Stage::Terrain, Stage::Scatter, Stage::Preview];
+    pub const ALL: [Stage; 4] = [Stage::Terrain, Stage::Plants, Stage::Scatter, Stage::Preview];
     pub fn name(self) -> &'static str {
         match self {
             Stage::Terrain => "terrain",
+            Stage::Plants => "plants",
             Stage::Scatter => "scatter",
             Stage::Preview => "preview",
         }

@@ -1,0 +1,581 @@
+//! One grass species made ready for export: its clumps at every level of detail, the atlas baked
+//! from LoD0 by the software rasteriser (4 vertical slices + top view per clump, the far-field
+//! block, shelf-packed), the blade texture, coverage-preserving mip chains, a density-in-alpha
+//! atlas, and the analyzer's figures (triangles, bytes, image error and switch distance per LoD).
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::bake::atlas::{dilate, mip_chain, MipLevel};
+use crate::bake::image::Image;
+use crate::bake::raster::{Camera, OrthoView, RasterError};
+use crate::bake::render::{render_mesh, RenderOptions, Shading};
+use crate::bake::views::{lod_image_error_with, DistanceError, LodImageOptions, Renderable, ScreenView};
+use crate::lod::{lod_screen_coverage, LodView};
+use crate::mesh::{AlphaMode, Material, Mesh, Node, Primitive, Scene, Texture};
+use crate::plants::grass::{self, clump, far_block, Clump, GrassSettings, Slice, UvRect};
+use crate::plants::texture;
+
+/// Levels of detail of a clump (LoD0 blades … LoD3 top card).
+pub const GRASS_LODS: usize = 4;
+/// The rings the real-time grass thesis used (near blades up to 32 m, billboards to 80 m).
+pub const THESIS_RINGS_M: [f64; 2] = [32.0, 80.0];
+/// Farthest and nearest distance (eye to the clump's bounding-sphere centre) the switch search
+/// measures at, and the bisection steps that narrow the switch distance to within 2^(1/2^steps).
+pub const SEARCH_FAR_M: f64 = 256.0;
+pub const SEARCH_NEAR_M: f64 = 0.5;
+pub const SEARCH_BISECTIONS: usize = 3;
+
+/// Where a level's image error stays within the view's bound: measured at 256, 128, … m until a
+/// distance fails (error ≤ 1 px is monotone in distance but for noise: every halving on the far
+/// side is checked), then bisected in log space between the failing and the passing distance.
+/// Returns the measured rows (sorted by distance), the switch distance (the nearest distance known
+/// to pass: conservative) and whether even the farthest failed.
+pub fn switch_search(reference: &Renderable, candidate: &Renderable, view: &ScreenView) -> (Vec<DistanceError>, f64, bool) {
+    let opts = LodImageOptions { max_side_px: 128, supersample: 2, ..LodImageOptions::default() };
+    let eval = |d: f64| lod_image_error_with(reference, candidate, view, &[d], &opts).distances.into_iter().next();
+    let mut rows = Vec::new();
+    let (mut pass, mut fail) = (None, None);
+    let mut d = SEARCH_FAR_M;
+    while d >= SEARCH_NEAR_M {
+        let Some(r) = eval(d) else { break };
+        let passes = r.passes;
+        rows.push(r);
+        if !passes {
+            fail = Some(d);
+            break;
+        }
+        pass = Some(d);
+        d /= 2.0;
+    }
+    let result = match (fail, pass) {
+        (None, _) => (0.0, false),
+        (Some(f), None) => (f, true),
+        (Some(mut f), Some(mut p)) => {
+            for _ in 0..SEARCH_BISECTIONS {
+                let m = (f * p).sqrt();
+                let Some(r) = eval(m) else { break };
+                if r.passes {
+                    p = m;
+                } else {
+                    f = m;
+                }
+                rows.push(r);
+            }
+            (p, false)
+        }
+    };
+    rows.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
+    (rows, result.0, result.1)
+}
+
+const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+
+#[derive(Debug, thiserror::Error)]
+pub enum GrassAssetError {
+    #[error(transparent)]
+    Settings(#[from] grass::GrassError),
+    #[error("baking the grass atlas: {0}")]
+    Raster(#[from] RasterError),
+    #[error("blade texture: {0}")]
+    Texture(String),
+}
+
+/// Where each view sits in the atlas, in pixels and as a uv rectangle.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AtlasCell {
+    pub x: u32,
+    pub y: u32,
+    pub width: u32,
+    pub height: u32,
+    pub uv: UvRect,
+}
+
+/// Figures of one level of detail (all clumps together, and the densest clump alone).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LodFigures {
+    pub level: usize,
+    pub triangles: usize,
+    pub vertices: usize,
+    /// Size of `<name>_LOD<n>.glb`.
+    pub bytes: usize,
+    pub densest_clump_triangles: usize,
+    /// Worst over 8 azimuths × 3 elevations of the densest clump vs its LoD0, at the nearest
+    /// measured distance and at the switch distance (distances from the clump's centre).
+    pub near_distance_m: f64,
+    pub near_iou: f64,
+    pub near_color_rmse: f64,
+    pub switch_iou: f64,
+    pub switch_color_rmse: f64,
+    pub switch_edge_error_px: f64,
+    /// Every distance measured (the switch search), nearest first.
+    pub measured: Vec<DistanceError>,
+    /// Distance (eye to clump centre) from which this level's silhouette error stays ≤ 1 px
+    /// (1920 px wide, 60° view).
+    pub switch_distance_m: f64,
+    /// True when the error never fell under the bound at the measured distances.
+    pub never_passes: bool,
+    /// MSFT_lod screen coverage at the switch distance.
+    pub screen_coverage: f64,
+}
+
+/// Coverage per mip level of an atlas (fraction of texels with alpha ≥ cutoff).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MipFigures {
+    pub width: u32,
+    pub height: u32,
+    pub alpha_scale: f32,
+    pub coverage: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GrassReport {
+    pub name: String,
+    pub clumps: usize,
+    pub blades_total: usize,
+    pub lods: Vec<LodFigures>,
+    pub atlas_mips: Vec<MipFigures>,
+    pub blade_texture_mips: Vec<MipFigures>,
+    pub far_field_triangles: usize,
+    pub far_field_cells: usize,
+    pub thesis_rings_m: [f64; 2],
+    pub seconds_generate: f64,
+    pub seconds_bake: f64,
+    pub seconds_analyze: f64,
+    pub raster_fragments: u64,
+}
+
+/// Everything `build` writes for one grass species.
+#[derive(Debug, Clone)]
+pub struct GrassAsset {
+    pub name: String,
+    pub settings: GrassSettings,
+    pub clumps: Vec<Clump>,
+    /// `<name>_LOD<n>.glb`: one node per clump.
+    pub lod_scenes: Vec<Scene>,
+    /// `<name>.glb`: each clump's LoD0 node with MSFT_lod to its coarser levels.
+    pub chain: Scene,
+    /// `<name>_far.glb`.
+    pub far: Scene,
+    pub atlas: Vec<MipLevel>,
+    pub density_atlas: Image,
+    pub blade: Vec<MipLevel>,
+    pub cells: Vec<AtlasCell>,
+    pub report: GrassReport,
+}
+
+/// Shelf packing of `sizes` (in order) into rows `row_width` wide; returns cells and atlas size.
+fn pack(sizes: &[(u32, u32)], row_width: u32) -> (Vec<(u32, u32)>, u32, u32) {
+    let (mut x, mut y, mut row_h) = (0u32, 0u32, 0u32);
+    let mut out = Vec::with_capacity(sizes.len());
+    for &(w, h) in sizes {
+        if x + w > row_width && x > 0 {
+            y += row_h;
+            x = 0;
+            row_h = 0;
+        }
+        out.push((x, y));
+        x += w;
+        row_h = row_h.max(h);
+    }
+    (out, row_width, (y + row_h).max(1))
+}
+
+fn blade_material(settings: &GrassSettings, texture: usize) -> Material {
+    Material {
+        name: "grass_blade".into(),
+        base_color_texture: Some(texture),
+        roughness: 0.9,
+        alpha_mode: AlphaMode::Mask { cutoff: settings.alpha_cutoff },
+        double_sided: true,
+        ..Material::default()
+    }
+}
+
+fn atlas_material(settings: &GrassSettings, texture: usize) -> Material {
+    Material { name: "grass_atlas".into(), ..blade_material(settings, texture) }
+}
+
+/// Object → world matrix of a clump turned by `quarter` quarter turns about +Y and moved to (x, z).
+fn placed(quarter: u32, x: f32, z: f32) -> [[f64; 4]; 3] {
+    let (s, c) = match quarter % 4 {
+        0 => (0.0, 1.0),
+        1 => (1.0, 0.0),
+        2 => (0.0, -1.0),
+        _ => (-1.0, 0.0),
+    };
+    [[c, 0.0, s, x as f64], [0.0, 1.0, 0.0, 0.0], [-s, 0.0, c, z as f64]]
+}
+
+fn unlit() -> RenderOptions {
+    RenderOptions { use_vertex_colors: false, shading: Shading::Unlit, ..RenderOptions::default() }
+}
+
+/// Renders `mesh` (with the blade material) through an orthographic view.
+fn render(view: OrthoView, items: &[([[f64; 4]; 3], &Mesh)], materials: &[Material], textures: &[Image], opts: &RenderOptions) -> Result<(Image, u64), RasterError> {
+    let cam = Camera::Ortho(view);
+    let mut canvas = cam.canvas([0.0; 4])?;
+    let mut fragments = 0;
+    for (m, mesh) in items {
+        fragments += render_mesh(&mut canvas, &cam, m, mesh, materials, textures, opts).fragments;
+    }
+    Ok((Image::from_canvas(&canvas), fragments))
+}
+
+/// The view of a slice: looking along −normal at the plane, the slab of blades in front.
+fn slice_view(settings: &GrassSettings, slice: &Slice, width_px: u32, height_px: u32) -> OrthoView {
+    let s = settings.clump_size_m as f64;
+    let n = slice.normal.map(|x| x as f64);
+    let right = slice.right().map(|x| x as f64);
+    let ppm = width_px as f64 / s;
+    let c = [n[0] * slice.offset_m as f64, 0.0, n[2] * slice.offset_m as f64];
+    let top = settings.max_height_m() as f64;
+    OrthoView {
+        origin: [c[0] - right[0] * s / 2.0 + n[0] * s, top, c[2] - right[2] * s / 2.0 + n[2] * s],
+        right,
+        up: [0.0, 1.0, 0.0],
+        forward: [-n[0], -n[1], -n[2]],
+        pixels_per_metre: ppm,
+        width: width_px,
+        height: height_px,
+    }
+}
+
+fn top_view(settings: &GrassSettings, px: u32) -> OrthoView {
+    let h = settings.clump_size_m as f64 / 2.0;
+    OrthoView::top_down(-h, h, -h, h, settings.max_height_m() as f64 + 0.01, px)
+}
+
+fn far_view(settings: &GrassSettings, width_px: u32, height_px: u32) -> OrthoView {
+    let w = settings.far_cells as f64 * settings.clump_size_m as f64;
+    OrthoView {
+        origin: [-w / 2.0, settings.max_height_m() as f64, w],
+        right: [1.0, 0.0, 0.0],
+        up: [0.0, 1.0, 0.0],
+        forward: [0.0, 0.0, -1.0],
+        pixels_per_metre: width_px as f64 / w,
+        width: width_px,
+        height: height_px,
+    }
+}
+
+fn lod_mesh(name: String, prim: Primitive) -> Mesh {
+    Mesh { name, primitives: vec![prim], extras: None }
+}
+
+fn clump_name(name: &str, c: &Clump) -> String {
+    format!("{name}_d{}v{}", c.level, c.variant)
+}
+
+/// A scene holding one node per clump (laid out on a grid 1.5 clump sizes apart, so a viewer shows
+/// them side by side; each mesh has its origin at the clump centre), one material, one texture.
+fn clump_scene(name: &str, clumps: &[Clump], meshes: Vec<Mesh>, material: Material, texture: Texture, spacing: f32) -> Scene {
+    let mut scene = Scene { name: name.into(), materials: vec![material], textures: vec![texture], ..Scene::default() };
+    for (c, mesh) in clumps.iter().zip(meshes) {
+        let node = scene.add_mesh_node(mesh);
+        let n = &mut scene.nodes[node];
+        n.translation = [c.variant as f32 * spacing, 0.0, c.level as f32 * spacing];
+        n.extras = Some(serde_json::json!({ "density_level": c.level, "variant": c.variant }));
+    }
+    scene
+}
+
+fn png(image: &Image) -> Result<Vec<u8>, GrassAssetError> {
+    image.encode_png().map_err(|e| GrassAssetError::Texture(e.to_string()))
+}
+
+fn mip_figures(chain: &[MipLevel]) -> Vec<MipFigures> {
+    chain
+        .iter()
+        .map(|m| MipFigures { width: m.image.width, height: m.image.height, alpha_scale: m.alpha_scale, coverage: m.coverage })
+        .collect()
+}
+
+/// The viewer LoD switch distances are computed for: 1920 × 1080, 60° horizontal field of view.
+pub fn screen_view() -> ScreenView {
+    ScreenView { width_px: 1920.0, fov_x_deg: 60.0, max_error_px: 1.0 }
+}
+
+/// MSFT_lod screen coverage when the eye is `centre_distance_m` from the clump's centre
+/// ([`lod_screen_coverage`] takes the distance to the nearest point).
+fn coverage_at(radius_m: f64, centre_distance_m: f64) -> f64 {
+    lod_screen_coverage(radius_m, (centre_distance_m - radius_m).max(0.0), &coverage_view())
+}
+
+fn coverage_view() -> LodView {
+    let aspect = 16.0 / 9.0;
+    let fov_y = 2.0 * ((30f64).to_radians().tan() / aspect).atan();
+    LodView { screen_height_px: 1080.0, fov_y_deg: fov_y.to_degrees(), max_screen_error_px: 1.0, aspect }
+}
+
+/// Builds, bakes and measures one grass species. `user_blade` replaces the procedural blade
+/// texture (its alpha is kept).
+pub fn build_grass(name: &str, settings: &GrassSettings, user_blade: Option<&Image>) -> Result<GrassAsset, GrassAssetError> {
+    settings.check()?;
+    let started = Instant::now();
+    let s = settings;
+    let clumps: Vec<Clump> = (0..s.density_levels).flat_map(|l| (0..s.variants).map(move |v| (l, v))).map(|(l, v)| clump(s, l, v)).collect();
+    let blade_image = match user_blade {
+        Some(u) => texture::blade_texture_from(s, u),
+        None => texture::blade_texture(s),
+    };
+    let lod0: Vec<Primitive> = clumps.iter().map(|c| grass::lod0(s, c, 0)).collect();
+    let lod1: Vec<Primitive> = clumps.iter().map(|c| grass::lod1(s, c, 0)).collect();
+    let seconds_generate = started.elapsed().as_secs_f64();
+
+    // bake: views of each clump's LoD0 (slices then top), then the far-field block
+    let bake_started = Instant::now();
+    let px = s.atlas_px;
+    let slice_h = ((s.max_height_m() / s.clump_size_m) * px as f32).ceil().max(1.0) as u32;
+    let far_w = px * s.far_cells as u32;
+    let mut sizes = Vec::new();
+    for _ in &clumps {
+        sizes.extend([(px, slice_h); 4]);
+        sizes.push((px, px));
+    }
+    sizes.push((far_w, slice_h));
+    let (origins, atlas_w, atlas_h) = pack(&sizes, (4 * px).max(far_w));
+    let cells: Vec<AtlasCell> = sizes
+        .iter()
+        .zip(&origins)
+        .enumerate()
+        .map(|(i, (&(w, h), &(x, y)))| {
+            // slices and the far block show exactly the tallest blade (their images round it up);
+            // the top view shows its whole square
+            let top = i % 5 == 4 && i < 5 * clumps.len();
+            let shown_h = if top { h as f32 } else { s.max_height_m() / s.clump_size_m * px as f32 };
+            AtlasCell {
+                x,
+                y,
+                width: w,
+                height: h,
+                uv: [x as f32 / atlas_w as f32, y as f32 / atlas_h as f32, (x + w) as f32 / atlas_w as f32, (y as f32 + shown_h) / atlas_h as f32],
+            }
+        })
+        .collect();
+
+    let blade_materials = [blade_material(s, 0)];
+    let textures = [blade_image.clone()];
+    let opts = unlit();
+    let lod0_meshes: Vec<Mesh> = clumps.iter().zip(&lod0).map(|(c, p)| lod_mesh(clump_name(name, c), p.clone())).collect();
+    let mut atlas = Image { width: atlas_w, height: atlas_h, pixels: vec![[0.0; 4]; (atlas_w * atlas_h) as usize] };
+    let mut density = atlas.clone();
+    let mut fragments = 0u64;
+    // density in alpha: the same views with each blade's (1 − rank) as an opaque vertex colour
+    let rank_material = [Material { name: "rank".into(), ..Material::default() }];
+    let rank_opts = RenderOptions { use_vertex_colors: true, ..unlit() };
+    for (ci, c) in clumps.iter().enumerate() {
+        for (k, slice) in grass::slices(s.clump_size_m).iter().enumerate() {
+            let cell = cells[ci * 5 + k];
+            let view = slice_view(s, slice, cell.width, cell.height);
+            let slab = grass::lod0_filtered(s, c, 0, |b| slice.holds(b));
+            let (img, f) = render(view, &[(IDENTITY, &lod_mesh(String::new(), slab.clone()))], &blade_materials, &textures, &opts)?;
+            fragments += f;
+            atlas.blit(&img, cell.x, cell.y);
+            let ranked = rank_colored(&slab, c, |b| slice.holds(b));
+            let (img, _) = render(view, &[(IDENTITY, &lod_mesh(String::new(), ranked))], &rank_material, &[], &rank_opts)?;
+            density.blit(&img, cell.x, cell.y);
+        }
+        let cell = cells[ci * 5 + 4];
+        let view = top_view(s, cell.width);
+        let (img, f) = render(view, &[(IDENTITY, &lod0_meshes[ci])], &blade_materials, &textures, &opts)?;
+        fragments += f;
+        atlas.blit(&img, cell.x, cell.y);
+        let ranked = rank_colored(&lod0[ci], c, |_| true);
+        let (img, _) = render(view, &[(IDENTITY, &lod_mesh(String::new(), ranked))], &rank_material, &[], &rank_opts)?;
+        density.blit(&img, cell.x, cell.y);
+    }
+    let far_cell = *cells.last().expect("the far-field cell is always packed");
+    let densest = s.density_levels - 1;
+    let block: Vec<([[f64; 4]; 3], &Mesh)> = far_block(s)
+        .into_iter()
+        .map(|(variant, quarter, [x, z])| (placed(quarter, x, z), &lod0_meshes[densest * s.variants + variant]))
+        .collect();
+    let (img, f) = render(far_view(s, far_cell.width, far_cell.height), &block, &blade_materials, &textures, &opts)?;
+    fragments += f;
+    atlas.blit(&img, far_cell.x, far_cell.y);
+
+    // density atlas: colour of the atlas, alpha = 1 − rank where the atlas is opaque, else 0
+    for (d, a) in density.pixels.iter_mut().zip(&atlas.pixels) {
+        let rank_alpha = if a[3] >= s.alpha_cutoff && d[3] > 0.0 { d[0].max(1.0 / 255.0) } else { 0.0 };
+        *d = [a[0], a[1], a[2], rank_alpha];
+    }
+    dilate(&mut atlas, s.alpha_cutoff);
+    dilate(&mut density, 1.0 / 255.0);
+    let atlas_chain = mip_chain(&atlas, s.alpha_cutoff);
+    let mut blade_level0 = blade_image.clone();
+    dilate(&mut blade_level0, s.alpha_cutoff);
+    let blade_chain = mip_chain(&blade_level0, s.alpha_cutoff);
+    let seconds_bake = bake_started.elapsed().as_secs_f64();
+
+    // meshes of every level, and the scenes
+    let spacing = 1.5 * s.clump_size_m;
+    let blade_tex = Texture { name: format!("{name}_blade"), png: png(&blade_chain[0].image)? };
+    let atlas_tex = Texture { name: format!("{name}_atlas"), png: png(&atlas_chain[0].image)? };
+    let slice_rects = |ci: usize| -> [UvRect; 4] { std::array::from_fn(|k| cells[ci * 5 + k].uv) };
+    let lod2: Vec<Primitive> = clumps.iter().enumerate().map(|(ci, c)| grass::lod2(s, c, &slice_rects(ci), cells[ci * 5 + 4].uv, 0)).collect();
+    let lod3: Vec<Primitive> = clumps.iter().enumerate().map(|(ci, c)| grass::lod3(s, c, cells[ci * 5 + 4].uv, 0)).collect();
+    let levels: [Vec<Primitive>; GRASS_LODS] = [lod0, lod1, lod2, lod3];
+    let mut lod_scenes = Vec::with_capacity(GRASS_LODS);
+    for (n, prims) in levels.iter().enumerate() {
+        let meshes = clumps.iter().zip(prims).map(|(c, p)| lod_mesh(format!("{}_LOD{n}", clump_name(name, c)), p.clone())).collect();
+        let (material, texture) = if n < 2 { (blade_material(s, 0), blade_tex.clone()) } else { (atlas_material(s, 0), atlas_tex.clone()) };
+        lod_scenes.push(clump_scene(&format!("{name}_LOD{n}"), &clumps, meshes, material, texture, spacing));
+    }
+    let far_prim = grass::far_field(s, far_cell.uv, 0);
+    let far_triangles = far_prim.triangle_count();
+    let far = clump_scene(&format!("{name}_far"), &clumps[..1], vec![lod_mesh(format!("{name}_far"), far_prim)], atlas_material(s, 0), atlas_tex.clone(), 0.0);
+
+    // analyzer: the densest first variant against its LoD0, from 8 azimuths × 3 elevations
+    let analyze_started = Instant::now();
+    let atlas_level0 = atlas_chain[0].image.clone();
+    let probe = densest * s.variants;
+    let reference_mesh = lod_mesh(String::new(), levels[0][probe].clone());
+    let reference = Renderable { mesh: &reference_mesh, materials: &blade_materials, textures: &textures };
+    let atlas_materials = [atlas_material(s, 0)];
+    let atlas_textures = [atlas_level0];
+    let view = screen_view();
+    let radius = bounding_radius(&levels[0][probe]);
+    let mut lods = Vec::with_capacity(GRASS_LODS);
+    for (n, prims) in levels.iter().enumerate() {
+        let scene_bytes = crate::export::gltf::to_glb(&lod_scenes[n]).map_err(|e| GrassAssetError::Texture(e.0))?.len();
+        let (triangles, vertices) = prims.iter().fold((0, 0), |(t, v), p| (t + p.triangle_count(), v + p.positions.len()));
+        let mut f = LodFigures {
+            level: n,
+            triangles,
+            vertices,
+            bytes: scene_bytes,
+            densest_clump_triangles: prims[probe].triangle_count(),
+            near_distance_m: 0.0,
+            near_iou: 1.0,
+            near_color_rmse: 0.0,
+            measured: Vec::new(),
+            switch_iou: 1.0,
+            switch_color_rmse: 0.0,
+            switch_edge_error_px: 0.0,
+            switch_distance_m: 0.0,
+            never_passes: false,
+            screen_coverage: 1.0,
+        };
+        if n > 0 {
+            let cand_mesh = lod_mesh(String::new(), prims[probe].clone());
+            let candidate = if n < 2 {
+                Renderable { mesh: &cand_mesh, materials: &blade_materials, textures: &textures }
+            } else {
+                Renderable { mesh: &cand_mesh, materials: &atlas_materials, textures: &atlas_textures }
+            };
+            let (rows, switch_m, never) = switch_search(&reference, &candidate, &view);
+            if let Some(near) = rows.first() {
+                f.near_distance_m = near.distance_m;
+                f.near_iou = near.worst_iou;
+                f.near_color_rmse = near.worst_color_rmse;
+            }
+            if let Some(at) = rows.iter().find(|d| d.distance_m >= switch_m) {
+                f.switch_iou = at.worst_iou;
+                f.switch_color_rmse = at.worst_color_rmse;
+                f.switch_edge_error_px = at.worst_edge_error_px;
+            }
+            f.measured = rows;
+            f.switch_distance_m = switch_m;
+            f.never_passes = never;
+            f.screen_coverage = coverage_at(radius, switch_m);
+        }
+        lods.push(f);
+    }
+    // a coarser level never switches in before a finer one
+    for n in 1..lods.len() {
+        if lods[n].switch_distance_m < lods[n - 1].switch_distance_m {
+            lods[n].switch_distance_m = lods[n - 1].switch_distance_m;
+            lods[n].screen_coverage = coverage_at(radius, lods[n].switch_distance_m);
+        }
+    }
+    let seconds_analyze = analyze_started.elapsed().as_secs_f64();
+
+    let chain = lod_chain_scene(name, &clumps, &lod_scenes, &lods, spacing);
+    let report = GrassReport {
+        name: name.into(),
+        clumps: clumps.len(),
+        blades_total: clumps.iter().map(|c| c.blades.len()).sum(),
+        lods,
+        atlas_mips: mip_figures(&atlas_chain),
+        blade_texture_mips: mip_figures(&blade_chain),
+        far_field_triangles: far_triangles,
+        far_field_cells: s.far_cells * s.far_cells,
+        thesis_rings_m: THESIS_RINGS_M,
+        seconds_generate,
+        seconds_bake,
+        seconds_analyze,
+        raster_fragments: fragments,
+    };
+    Ok(GrassAsset {
+        name: name.into(),
+        settings: s.clone(),
+        clumps,
+        lod_scenes,
+        chain,
+        far,
+        atlas: atlas_chain,
+        density_atlas: density,
+        blade: blade_chain,
+        cells,
+        report,
+    })
+}
+
+/// LoD0 primitive of the blades `keep` accepts, coloured (1 − rank) for the density atlas.
+fn rank_colored(lod0: &Primitive, c: &Clump, keep: impl Fn(&grass::Blade) -> bool) -> Primitive {
+    let per_blade = lod0.positions.len() / c.blades.iter().filter(|b| keep(b)).count().max(1);
+    let ranks: Vec<f32> = c.blades.iter().filter(|b| keep(b)).map(|b| 1.0 - b.rank).collect();
+    let colors = (0..lod0.positions.len()).map(|v| {
+        let r = ranks.get(v / per_blade.max(1)).copied().unwrap_or(1.0);
+        [r, r, r, 1.0]
+    });
+    Primitive { colors: colors.collect(), custom: Vec::new(), material: Some(0), ..lod0.clone() }
+}
+
+fn bounding_radius(p: &Primitive) -> f64 {
+    let Some(b) = p.bounds() else { return 0.0 };
+    let c: [f64; 3] = std::array::from_fn(|k| 0.5 * (b.min[k] as f64 + b.max[k] as f64));
+    p.positions.iter().map(|v| (0..3).map(|k| (v[k] as f64 - c[k]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max)
+}
+
+/// `<name>.glb`: a node per clump showing LoD0, with MSFT_lod to LoD1…3 (nodes that are not roots)
+/// and `extras.MSFT_screencoverage` from the measured switch distances.
+fn lod_chain_scene(name: &str, clumps: &[Clump], lod_scenes: &[Scene], lods: &[LodFigures], spacing: f32) -> Scene {
+    let mut scene = Scene { name: name.into(), ..Scene::default() };
+    // materials and textures: the blade ones (LoD0/1) then the atlas ones (LoD2/3)
+    scene.textures = vec![lod_scenes[0].textures[0].clone(), lod_scenes[2].textures[0].clone()];
+    let mut blade = lod_scenes[0].materials[0].clone();
+    blade.base_color_texture = Some(0);
+    let mut atlas = lod_scenes[2].materials[0].clone();
+    atlas.base_color_texture = Some(1);
+    scene.materials = vec![blade, atlas];
+    let mut coverage: Vec<f32> = lods.iter().skip(1).map(|l| l.screen_coverage as f32).collect();
+    coverage.push(0.0);
+    for (ci, c) in clumps.iter().enumerate() {
+        let translation = [c.variant as f32 * spacing, 0.0, c.level as f32 * spacing];
+        let mut ids = Vec::new();
+        let mut first = None;
+        for (n, lod) in lod_scenes.iter().enumerate() {
+            let mut mesh = lod.meshes[ci].clone();
+            for p in &mut mesh.primitives {
+                p.material = Some(if n < 2 { 0 } else { 1 });
+            }
+            scene.meshes.push(mesh);
+            scene.nodes.push(Node { name: format!("{}_LOD{n}", clump_name(name, c)), mesh: Some(scene.meshes.len() - 1), translation, ..Node::default() });
+            let id = scene.nodes.len() - 1;
+            if n == 0 {
+                first = Some(id);
+            } else {
+                ids.push(id);
+            }
+        }
+        let first = first.expect("a chain has LoD0");
+        scene.nodes[first].lods = ids;
+        scene.nodes[first].lod_screen_coverage = coverage.clone();
+        scene.nodes[first].extras = Some(serde_json::json!({ "density_level": c.level, "variant": c.variant }));
+        scene.roots.push(first);
+    }
+    scene
+}

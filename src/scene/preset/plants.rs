@@ -1,0 +1,214 @@
+//! The plant-look tables of a preset: `[grass]` / `[flower]` (defaults for every species of that
+//! kind) and a species' own `grass = { … }` / `flower = { … }` (overriding them key by key).
+
+use toml::de::DeValue;
+use toml::Spanned;
+
+use super::{input_path, number_value, pair, PresetError, Table};
+use crate::plants::flower::FlowerSettings;
+use crate::plants::grass::GrassSettings;
+
+/// Keys of `[grass]` and `grass = { … }`.
+pub const GRASS_KEYS: &[&str] = &[
+    "blades",
+    "clump_size",
+    "segments",
+    "height",
+    "width",
+    "bend",
+    "density_levels",
+    "variants",
+    "wind_frequency",
+    "stiffness",
+    "root_color",
+    "tip_color",
+    "hue_jitter",
+    "value_jitter",
+    "alpha_cutoff",
+    "atlas_px",
+    "far_cells",
+    "blade_texture",
+];
+/// Keys of `[flower]` and `flower = { … }`.
+pub const FLOWER_KEYS: &[&str] =
+    &["petals", "petal_color", "center_color", "stem_color", "height", "head", "variants", "alpha_cutoff", "atlas_px"];
+
+fn srgb_to_linear(c: f64) -> f32 {
+    let c = c.clamp(0.0, 1.0);
+    (if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }) as f32
+}
+
+/// A colour as `"#rrggbb"` or `[r, g, b]` in 0..1, both sRGB (as colour pickers show them);
+/// returned linear.
+fn colour(t: &Table<'_, '_>, key: &str) -> Result<Option<[f32; 3]>, PresetError> {
+    let example = format!("{key} = \"#6a9a2c\"");
+    let Some((_, v)) = t.get(key) else { return Ok(None) };
+    match v.get_ref() {
+        DeValue::String(s) => {
+            let hex = s.strip_prefix('#').unwrap_or(s);
+            let parsed = (hex.len() == 6 && hex.bytes().all(|b| b.is_ascii_hexdigit()))
+                .then(|| std::array::from_fn(|k| u8::from_str_radix(&hex[2 * k..2 * k + 2], 16).map(|x| srgb_to_linear(x as f64 / 255.0))));
+            match parsed {
+                Some([Ok(r), Ok(g), Ok(b)]) => Ok(Some([r, g, b])),
+                _ => Err(t.ctx.at(&v.span(), format!("`{key}` = {s:?} is not a colour"), format!("write it as six hex digits, like `{example}`, or as `[0.4, 0.6, 0.17]`"))),
+            }
+        }
+        DeValue::Array(items) if items.len() == 3 => {
+            let in01 = |x: f64| if (0.0..=1.0).contains(&x) { Ok(()) } else { Err("must be between 0 and 1".to_string()) };
+            let mut c = [0.0f32; 3];
+            for (k, item) in items.iter().enumerate() {
+                c[k] = srgb_to_linear(number_value(t, key, item, &example, &in01)?);
+            }
+            Ok(Some(c))
+        }
+        _ => Err(t.wrong_type(key, v, "a colour (\"#rrggbb\" or [r, g, b] in 0..1)", &example)),
+    }
+}
+
+fn count(t: &Table<'_, '_>, key: &str, range: std::ops::RangeInclusive<u64>, example: &str) -> Result<Option<usize>, PresetError> {
+    Ok(t.integer(key, range, example)?.map(|(n, _)| n as usize))
+}
+
+fn unit_interval(x: f64) -> Result<(), String> {
+    if (0.0..=1.0).contains(&x) {
+        Ok(())
+    } else {
+        Err("must be between 0 and 1".into())
+    }
+}
+
+fn positive(x: f64) -> Result<(), String> {
+    if x > 0.0 {
+        Ok(())
+    } else {
+        Err("must be greater than 0".into())
+    }
+}
+
+fn range_f32(r: [f64; 2]) -> [f32; 2] {
+    [r[0] as f32, r[1] as f32]
+}
+
+/// Applies the keys of a grass table to `base`. Ranges are checked again as a whole by
+/// [`GrassSettings::check`], whose message is reported at the table.
+pub(super) fn apply_grass(t: &Table<'_, '_>, mut g: GrassSettings, check_inputs: bool) -> Result<GrassSettings, PresetError> {
+    t.check_keys(GRASS_KEYS, &[("[flower]", FLOWER_KEYS)])?;
+    if let Some(n) = count(t, "blades", 1..=crate::plants::grass::MAX_BLADES_PER_CLUMP as u64, "blades = 48")? {
+        g.blades_per_clump = n;
+    }
+    if let Some((x, _)) = t.number("clump_size", "clump_size = 0.5", positive)? {
+        g.clump_size_m = x as f32;
+    }
+    if let Some(n) = count(t, "segments", 2..=crate::plants::grass::MAX_SEGMENTS as u64, "segments = 5")? {
+        g.segments = n;
+    }
+    if let Some(r) = pair(t, "height", "height = [0.25, 0.5]", "metres", positive)? {
+        g.height_m = range_f32(r);
+    }
+    if let Some(r) = pair(t, "width", "width = [0.008, 0.016]", "metres", positive)? {
+        g.width_m = range_f32(r);
+    }
+    let degrees = |x: f64| if (0.0..=85.0).contains(&x) { Ok(()) } else { Err("must be between 0 and 85 degrees".to_string()) };
+    if let Some(r) = pair(t, "bend", "bend = [10.0, 50.0]", "degrees", degrees)? {
+        g.bend_rad = [r[0].to_radians() as f32, r[1].to_radians() as f32];
+    }
+    if let Some(n) = count(t, "density_levels", 1..=crate::plants::grass::MAX_DENSITY_LEVELS as u64, "density_levels = 3")? {
+        g.density_levels = n;
+    }
+    if let Some(n) = count(t, "variants", 1..=crate::plants::grass::MAX_VARIANTS as u64, "variants = 2")? {
+        g.variants = n;
+    }
+    if let Some(r) = pair(t, "wind_frequency", "wind_frequency = [0.8, 1.8]", "Hz", |x| {
+        if (0.0..=crate::plants::grass::WIND_MAX_FREQUENCY_HZ as f64).contains(&x) {
+            Ok(())
+        } else {
+            Err(format!("must be between 0 and {} Hz", crate::plants::grass::WIND_MAX_FREQUENCY_HZ))
+        }
+    })? {
+        g.wind_frequency_hz = range_f32(r);
+    }
+    if let Some(r) = pair(t, "stiffness", "stiffness = [0.3, 0.8]", "", unit_interval)? {
+        g.stiffness = range_f32(r);
+    }
+    if let Some(c) = colour(t, "root_color")? {
+        g.root_color = c;
+    }
+    if let Some(c) = colour(t, "tip_color")? {
+        g.tip_color = c;
+    }
+    if let Some((x, _)) = t.number("hue_jitter", "hue_jitter = 0.25", unit_interval)? {
+        g.hue_jitter = x as f32;
+    }
+    if let Some((x, _)) = t.number("value_jitter", "value_jitter = 0.15", |x| {
+        if (0.0..=0.5).contains(&x) {
+            Ok(())
+        } else {
+            Err("must be between 0 and 0.5".into())
+        }
+    })? {
+        g.value_jitter = x as f32;
+    }
+    if let Some((x, _)) = t.number("alpha_cutoff", "alpha_cutoff = 0.75", |x| {
+        if (0.05..=0.95).contains(&x) {
+            Ok(())
+        } else {
+            Err("must be between 0.05 and 0.95 (0.7–0.78 ≈ 180–200/255 avoids halos)".into())
+        }
+    })? {
+        g.alpha_cutoff = x as f32;
+    }
+    if let Some(n) = count(t, "atlas_px", 16..=4096, "atlas_px = 256")? {
+        g.atlas_px = n as u32;
+    }
+    if let Some(n) = count(t, "far_cells", 1..=8, "far_cells = 3")? {
+        g.far_cells = n;
+    }
+    if let Some(p) = input_path(t, "blade_texture", "blade_texture = \"textures/blade.png\"", check_inputs)? {
+        g.blade_texture = Some(p);
+    }
+    g.check().map_err(|e| t.ctx.at(&t.span, format!("{}: {e}", t.label), "see docs/presets.md, section [grass]"))?;
+    Ok(g)
+}
+
+pub(super) fn apply_flower(t: &Table<'_, '_>, mut f: FlowerSettings) -> Result<FlowerSettings, PresetError> {
+    t.check_keys(FLOWER_KEYS, &[("[grass]", GRASS_KEYS)])?;
+    if let Some(n) = count(t, "petals", 3..=32, "petals = 7")? {
+        f.petals = n;
+    }
+    for (key, slot) in [("petal_color", &mut f.petal_color), ("center_color", &mut f.center_color), ("stem_color", &mut f.stem_color)] {
+        if let Some(c) = colour(t, key)? {
+            *slot = c;
+        }
+    }
+    if let Some(r) = pair(t, "height", "height = [0.2, 0.35]", "metres", positive)? {
+        f.height_m = range_f32(r);
+    }
+    if let Some((x, _)) = t.number("head", "head = 0.06", positive)? {
+        f.head_m = x as f32;
+    }
+    if let Some(n) = count(t, "variants", 1..=16, "variants = 4")? {
+        f.variants = n;
+    }
+    if let Some((x, _)) = t.number("alpha_cutoff", "alpha_cutoff = 0.75", |x| {
+        if (0.05..=0.95).contains(&x) {
+            Ok(())
+        } else {
+            Err("must be between 0.05 and 0.95".into())
+        }
+    })? {
+        f.alpha_cutoff = x as f32;
+    }
+    if let Some(n) = count(t, "atlas_px", 16..=2048, "atlas_px = 128")? {
+        f.atlas_px = n as u32;
+    }
+    f.check().map_err(|e| t.ctx.at(&t.span, format!("{}: {e}", t.label), "see docs/presets.md, section [flower]"))?;
+    Ok(f)
+}
+
+/// A species' `grass = { … }` or `flower = { … }` value as a table to read.
+pub(super) fn sub_table<'a, 'i>(t: &Table<'a, 'i>, key: &str, v: &'a Spanned<DeValue<'i>>) -> Result<Table<'a, 'i>, PresetError> {
+    match v.get_ref() {
+        DeValue::Table(table) => Ok(Table { ctx: t.ctx, label: format!("`{key}` of {}", t.label), span: v.span(), table }),
+        _ => Err(t.wrong_type(key, v, "a table", &format!("{key} = {{ height = [0.2, 0.4] }}"))),
+    }
+}
