@@ -899,13 +899,15 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
         for c in gltf.nodes[root].children or []:
             child = gltf.nodes[c]
             prefix = f"{name}_tile_"
-            if c not in instances or not child.name.startswith(prefix) or not child.name[len(prefix):].isdigit():
-                raise CheckFailed(f"{name}: child node {child.name!r} is not an instanced {prefix}<t> node")
-            tiles_glb.append(int(child.name[len(prefix):]))
+            # <species>_tile_<t>, or <species>_tile_<t>_<mesh> when a species shows several meshes
+            tile_part = child.name[len(prefix):].split("_")[0]
+            if c not in instances or not child.name.startswith(prefix) or not tile_part.isdigit():
+                raise CheckFailed(f"{name}: child node {child.name!r} is not an instanced {prefix}<t>[_<mesh>] node")
+            tiles_glb.append(int(tile_part))
             parts.append(instances[c])
             claimed.add(c)
-        if tiles_glb != sorted(set(tiles_glb)):
-            raise CheckFailed(f"{name}: tile nodes are not in ascending, unique tile order: {tiles_glb}")
+        if tiles_glb != sorted(tiles_glb):
+            raise CheckFailed(f"{name}: tile nodes are not in ascending tile order: {tiles_glb}")
         for n in [root] + list(gltf.nodes[root].children or []):
             if not np.allclose(node_matrix(gltf.nodes[n]), np.eye(4), atol=0):
                 raise CheckFailed(f"{name}: node {gltf.nodes[n].name!r} has a transform; instances are world positions")
@@ -921,10 +923,16 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
         n = len(values)
         if len(glb_t) != n:
             raise CheckFailed(f"{name}: scene.glb has {len(glb_t)} instances, {csv_path.name} has {n} rows")
-        # the writer groups a species' instances by tile (ascending) keeping the CSV order in a tile
+        # the writer groups a species' instances by tile (ascending) and, within a tile, by mesh:
+        # compare both sides sorted by (tile, x, y, z, rotation, scale)
         order = np.argsort(tiles, kind="stable")
         in_tile_order = bool(np.all(order == np.arange(n)))
+        csv_f32 = values[:, 0:10].astype(np.float32)
+        order = np.lexsort(tuple(csv_f32[:, k] for k in reversed(range(10))) + (tiles,))
         v, t = values[order], tiles[order]
+        glb_all = np.concatenate([glb_t, glb_r, glb_s], axis=1)
+        g_order = np.lexsort(tuple(glb_all[:, k] for k in reversed(range(10))) + (glb_tile,))
+        glb_t, glb_r, glb_s, glb_tile = glb_t[g_order], glb_r[g_order], glb_s[g_order], glb_tile[g_order]
         if not np.array_equal(glb_tile, t):
             raise CheckFailed(f"{name}: the instances' tiles in scene.glb differ from the CSV's tile column")
         for label, got, want in (("translation", glb_t, v[:, 0:3].astype(np.float32)),

@@ -163,19 +163,36 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
         for r in &rows {
             by_tile.entry(r.tile).or_default().push(*r);
         }
-        assert_eq!(root.children.len(), by_tile.len(), "{species}: one node per non-empty tile");
-        assert!(by_tile.len() > 4, "{species}: instances in only {} tiles", by_tile.len());
-        for (&c, (&tile, tile_rows)) in root.children.iter().zip(&by_tile) {
+        // grass instances a clump mesh per (tile, density level, variant): one node each, named
+        // after the tile and the mesh; CSV order within a node
+        let mut nodes_by_tile: BTreeMap<u32, Vec<&verdant::mesh::Node>> = BTreeMap::new();
+        for &c in &root.children {
             let node = &scene.nodes[c];
-            assert_eq!(node.name, format!("{species}_tile_{tile}"));
+            let tile = node.extras.as_ref().and_then(|e| e["tile"].as_u64()).unwrap_or_else(|| panic!("{}: no tile in extras", node.name)) as u32;
+            assert!(node.name.starts_with(&format!("{species}_tile_{tile}")), "{}", node.name);
             assert!(node.mesh.is_some(), "{}: no mesh", node.name);
-            let inst = node.instances.as_ref().unwrap_or_else(|| panic!("{} is not instanced", node.name));
-            assert_eq!((inst.translations.len(), inst.rotations.len(), inst.scales.len()), (tile_rows.len(), tile_rows.len(), tile_rows.len()));
-            for (i, r) in tile_rows.iter().enumerate() {
-                assert_eq!(inst.translations[i], [r.pos[0] as f32, r.pos[1] as f32, r.pos[2] as f32], "{} instance {i}", node.name);
-                assert_eq!(inst.rotations[i], r.rot, "{} instance {i}", node.name);
-                assert_eq!(inst.scales[i], r.scale, "{} instance {i}", node.name);
+            nodes_by_tile.entry(tile).or_default().push(node);
+        }
+        assert_eq!(nodes_by_tile.keys().collect::<Vec<_>>(), by_tile.keys().collect::<Vec<_>>(), "{species}: nodes for exactly the non-empty tiles");
+        assert!(by_tile.len() > 4, "{species}: instances in only {} tiles", by_tile.len());
+        for (tile, tile_rows) in &by_tile {
+            let key = |t: [f32; 3], q: [f32; 4], s: [f32; 3]| format!("{t:?}{q:?}{s:?}");
+            let mut want: Vec<String> = tile_rows.iter().map(|r| key([r.pos[0] as f32, r.pos[1] as f32, r.pos[2] as f32], r.rot, r.scale)).collect();
+            let mut got = Vec::new();
+            for node in &nodes_by_tile[tile] {
+                let inst = node.instances.as_ref().unwrap_or_else(|| panic!("{} is not instanced", node.name));
+                assert_eq!(inst.translations.len(), inst.rotations.len());
+                assert_eq!(inst.translations.len(), inst.scales.len());
+                // within a node, the CSV's order
+                let order: Vec<usize> = (0..inst.translations.len())
+                    .map(|i| want.iter().position(|w| *w == key(inst.translations[i], inst.rotations[i], inst.scales[i])).expect("instance is a CSV row"))
+                    .collect();
+                assert!(order.windows(2).all(|w| w[0] < w[1]), "{}: not in CSV order", node.name);
+                got.extend((0..inst.translations.len()).map(|i| key(inst.translations[i], inst.rotations[i], inst.scales[i])));
             }
+            want.sort();
+            got.sort();
+            assert_eq!(got, want, "{species} tile {tile}: instances = CSV rows");
         }
         for r in &rows {
             let n = r.rot.iter().map(|v| (*v as f64).powi(2)).sum::<f64>().sqrt();

@@ -552,7 +552,7 @@ fn only_skip_and_out_select_what_is_built() {
     assert!(t.contains("terrain"), "{t}");
     assert!(!d.join("pv/a").exists());
     // nothing left to build at all: usage error
-    let o = verdant_in(d, &["build", "p/a.toml", "--skip", "terrain,scatter,preview", "--out", "none"]);
+    let o = verdant_in(d, &["build", "p/a.toml", "--skip", "terrain,plants,scatter,preview", "--out", "none"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     let o = verdant_in(d, &["build", "p/a.toml", "--only", "grass"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
