@@ -4,7 +4,7 @@
 
 use serde::Serialize;
 
-use crate::bake::atlas::{dilate, mip_chain, MipLevel};
+use crate::bake::atlas::{dilate, mip_chain, resolve_supersampled, MipLevel};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
@@ -203,22 +203,24 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
         let (model, _) = flower_model(s, v);
         model_triangles += model.triangle_count();
         // front view of a card_w × card_h window (non-square pixels map to the card exactly)
+        let ss = crate::plants::grass_asset::BAKE_SUPERSAMPLE;
         let ppm = cell_w as f64 / card_w as f64;
         let view = OrthoView {
             origin: [-card_w as f64 / 2.0, card_h as f64, 1.0],
             right: [1.0, 0.0, 0.0],
             up: [0.0, 1.0, 0.0],
             forward: [0.0, 0.0, -1.0],
-            pixels_per_metre: ppm,
-            width: cell_w,
-            height: ((card_h as f64 * ppm).ceil() as u32).clamp(1, cell_h),
+            pixels_per_metre: ppm * ss as f64,
+            width: cell_w * ss,
+            height: ((card_h as f64 * ppm).ceil() as u32).clamp(1, cell_h) * ss,
         };
         let cam = Camera::Ortho(view);
         let mut canvas = cam.canvas([0.0; 4])?;
         let mesh = Mesh { name: String::new(), primitives: vec![model], extras: None };
         const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
         render_mesh(&mut canvas, &cam, &IDENTITY, &mesh, &materials, &[], &opts);
-        atlas.blit(&Image::from_canvas(&canvas), v as u32 * cell_w, 0);
+        // resolved from BAKE_SUPERSAMPLE× (anti-aliased alpha, which the coverage-keeping mips need)
+        atlas.blit(&resolve_supersampled(&Image::from_canvas(&canvas), ss), v as u32 * cell_w, 0);
     }
     dilate(&mut atlas, s.alpha_cutoff);
     let chain = mip_chain(&atlas, s.alpha_cutoff);

@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::bake::atlas::{dilate, mip_chain, MipLevel};
+use crate::bake::atlas::{dilate, mip_chain, resolve_supersampled, MipLevel};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
@@ -213,14 +213,24 @@ fn unlit() -> RenderOptions {
 }
 
 /// Renders `mesh` (with the blade material) through an orthographic view.
+/// Transparent texels around every atlas cell.
+pub const ATLAS_GUTTER_PX: u32 = 4;
+/// Samples per texel along each axis when baking views: the resolved alpha is fractional at blade
+/// edges (anti-aliased), which is what lets the mip chain keep level 0's coverage closely.
+pub const BAKE_SUPERSAMPLE: u32 = 2;
+
+/// Renders the meshes through an orthographic view at BAKE_SUPERSAMPLE× and resolves to the view's
+/// size. Returns the image and the fragments written.
 fn render(view: OrthoView, items: &[([[f64; 4]; 3], &Mesh)], materials: &[Material], textures: &[Image], opts: &RenderOptions) -> Result<(Image, u64), RasterError> {
-    let cam = Camera::Ortho(view);
+    let ss = BAKE_SUPERSAMPLE;
+    let fine = OrthoView { pixels_per_metre: view.pixels_per_metre * ss as f64, width: view.width * ss, height: view.height * ss, ..view };
+    let cam = Camera::Ortho(fine);
     let mut canvas = cam.canvas([0.0; 4])?;
     let mut fragments = 0;
     for (m, mesh) in items {
         fragments += render_mesh(&mut canvas, &cam, m, mesh, materials, textures, opts).fragments;
     }
-    Ok((Image::from_canvas(&canvas), fragments))
+    Ok((resolve_supersampled(&Image::from_canvas(&canvas), ss), fragments))
 }
 
 /// The view of a slice: looking along −normal at the plane, the slab of blades in front.
@@ -335,12 +345,17 @@ pub fn build_grass(name: &str, settings: &GrassSettings, user_blade: Option<&Ima
         sizes.push((px, px));
     }
     sizes.push((far_w, slice_h));
-    let (origins, atlas_w, atlas_h) = pack(&sizes, (4 * px).max(far_w));
+    // every cell gets a gutter of ATLAS_GUTTER_PX transparent (then dilated) texels on each side, so
+    // filtering and the smaller mips do not bleed one view into its neighbour
+    let g = ATLAS_GUTTER_PX;
+    let padded: Vec<(u32, u32)> = sizes.iter().map(|&(w, h)| (w + 2 * g, h + 2 * g)).collect();
+    let (origins, atlas_w, atlas_h) = pack(&padded, (4 * px).max(far_w) + 2 * g * 4);
     let cells: Vec<AtlasCell> = sizes
         .iter()
         .zip(&origins)
         .enumerate()
         .map(|(i, (&(w, h), &(x, y)))| {
+            let (x, y) = (x + g, y + g);
             // slices and the far block show exactly the tallest blade (their images round it up);
             // the top view shows its whole square
             let top = i % 5 == 4 && i < 5 * clumps.len();

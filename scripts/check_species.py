@@ -1,0 +1,269 @@
+#!/usr/bin/env python3
+"""Independent checks of a built scene's generated plants (species/ and atlases/).
+
+For every grass species (`species/<name>_LOD<n>.glb`):
+- each LoD re-imports with trimesh, has MASK double-sided textured materials, and the triangle
+  counts strictly decrease from LoD0 to the last level;
+- LoD0 carries the wind data twice: COLOR_0 (0..1) and the custom `_WIND` attribute (physical units),
+  decoded here with pygltflib: weight equal, phase·2π, frequency·4 Hz, stiffness equal;
+- pyrender (offscreen EGL) renders every LoD from the same cameras (45° and 75° above the horizon):
+  every render is non-empty and its silhouette is similar to LoD0's (IoU ≥ MIN_IOU, covered area
+  within a factor MAX_AREA_RATIO);
+- `<name>.glb` has MSFT_lod on its root nodes with screen coverages that never increase;
+- the atlas mip chain (`atlases/<name>.png`, `<name>_mip<k>.png`) halves in size per level and keeps
+  level 0's alpha coverage (texels ≥ the material's alphaCutoff) within MIP_TOLERANCE on every
+  level of at least MIP_MIN_SIDE texels.
+For every flower species (`species/<name>.glb` without LoD files): it re-imports, renders non-empty.
+
+Usage: check_species.py SCENE_DIR [--summary-tsv FILE]   (exit 1 on any failure)
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+import numpy as np  # noqa: E402
+
+if not hasattr(np, "infty"):  # pyrender 0.1.45 still uses np.infty
+    np.infty = np.inf
+import pygltflib  # noqa: E402
+import trimesh  # noqa: E402
+from PIL import Image  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from check_outputs import gltf_buffers, read_accessor  # noqa: E402
+
+MIN_IOU = 0.15
+MAX_AREA_RATIO = 4.0
+MIP_TOLERANCE = 0.02
+MIP_MIN_SIDE = 16
+RENDER_PX = 256
+ELEVATIONS_DEG = (45.0, 75.0)
+
+
+class CheckFailed(Exception):
+    pass
+
+
+def look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
+    f = target - eye
+    f /= np.linalg.norm(f)
+    right = np.cross(f, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, f)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = right, up, -f, eye
+    return pose
+
+
+class Renderer:
+    def __init__(self):
+        import pyrender
+        self.pyrender = pyrender
+        self.r = pyrender.OffscreenRenderer(RENDER_PX, RENDER_PX)
+
+    def silhouettes(self, scene: trimesh.Scene, centre: np.ndarray, radius: float) -> list[np.ndarray]:
+        pr = self.pyrender
+        out = []
+        for el in ELEVATIONS_DEG:
+            ps = pr.Scene.from_trimesh_scene(scene, bg_color=[0, 0, 0, 0], ambient_light=[1.0, 1.0, 1.0])
+            e = np.radians(el)
+            eye = centre + 2.6 * radius * np.array([0.3 * np.cos(e), np.sin(e), np.cos(e)])
+            ps.add(pr.PerspectiveCamera(yfov=np.radians(40.0)), pose=look_at(eye, centre))
+            colour, _ = self.r.render(ps, flags=pr.RenderFlags.FLAT)
+            out.append(colour.max(axis=2) > 8)
+        return out
+
+
+def triangles(scene: trimesh.Scene) -> int:
+    return sum(len(g.faces) for g in scene.dump())
+
+
+def check_materials(gltf: pygltflib.GLTF2, name: str) -> None:
+    if not gltf.materials:
+        raise CheckFailed(f"{name}: no materials")
+    for m in gltf.materials:
+        if m.alphaMode != "MASK" or not m.doubleSided:
+            raise CheckFailed(f"{name}: material {m.name!r} is {m.alphaMode}, doubleSided={m.doubleSided}; expected MASK, double-sided")
+        if m.pbrMetallicRoughness is None or m.pbrMetallicRoughness.baseColorTexture is None:
+            raise CheckFailed(f"{name}: material {m.name!r} has no base colour texture")
+
+
+def check_wind(path: Path) -> str:
+    gltf = pygltflib.GLTF2().load(str(path))
+    buffers = gltf_buffers(gltf, path)
+    checked = 0
+    for mesh in gltf.meshes:
+        for p in mesh.primitives:
+            attrs = p.attributes.__dict__ if hasattr(p.attributes, "__dict__") else dict(p.attributes)
+            wind_index = attrs.get("_WIND")
+            colour_index = attrs.get("COLOR_0")
+            if wind_index is None or colour_index is None:
+                raise CheckFailed(f"{path.name}: mesh {mesh.name!r} lacks COLOR_0 or _WIND")
+            wind = read_accessor(gltf, buffers, wind_index).astype(np.float64)
+            colour = read_accessor(gltf, buffers, colour_index).astype(np.float64)
+            pos = read_accessor(gltf, buffers, attrs["POSITION"]).astype(np.float64)
+            if wind.shape != (len(pos), 4) or colour.shape != (len(pos), 4):
+                raise CheckFailed(f"{path.name}: _WIND {wind.shape} / COLOR_0 {colour.shape} for {len(pos)} vertices")
+            if colour.min() < 0 or colour.max() > 1:
+                raise CheckFailed(f"{path.name}: COLOR_0 outside 0..1")
+            want = np.stack([colour[:, 0], colour[:, 1] * 2 * np.pi, colour[:, 2] * 4.0, colour[:, 3]], axis=1)
+            if np.max(np.abs(wind - want)) > 1e-5:
+                raise CheckFailed(f"{path.name}: _WIND differs from COLOR_0's documented encoding by {np.max(np.abs(wind - want)):.3g}")
+            # bend weight 0 at the roots (y = 0), growing with height
+            roots = pos[:, 1] < 1e-6
+            if not roots.any() or np.max(colour[roots, 0]) > 1e-6:
+                raise CheckFailed(f"{path.name}: bend weight is not 0 at the roots")
+            order = np.argsort(pos[:, 1])
+            if np.any(np.diff(colour[order, 0]) < -1e-6):
+                raise CheckFailed(f"{path.name}: bend weight does not grow with height")
+            checked += len(pos)
+    return f"wind ok on {checked} vertices"
+
+
+def check_lod_chain(path: Path, levels: int) -> str:
+    gltf = pygltflib.GLTF2().load(str(path))
+    used = set(gltf.extensionsUsed or [])
+    if "MSFT_lod" not in used:
+        raise CheckFailed(f"{path.name}: MSFT_lod not in extensionsUsed")
+    roots = gltf.scenes[gltf.scene or 0].nodes
+    for r in roots:
+        node = gltf.nodes[r]
+        ids = (node.extensions or {}).get("MSFT_lod", {}).get("ids", [])
+        cov = (node.extras or {}).get("MSFT_screencoverage", [])
+        if len(ids) != levels - 1 or len(cov) != levels:
+            raise CheckFailed(f"{path.name}: node {node.name!r} has {len(ids)} LoD ids and {len(cov)} coverages, expected {levels - 1} and {levels}")
+        if any(b > a for a, b in zip(cov, cov[1:])):
+            raise CheckFailed(f"{path.name}: node {node.name!r} screen coverages increase: {cov}")
+    return f"MSFT_lod on {len(roots)} nodes"
+
+
+def alpha_coverage(png: Path, cutoff: float) -> tuple[float, tuple[int, int]]:
+    img = np.asarray(Image.open(png).convert("RGBA"))
+    return float(np.mean(img[:, :, 3].astype(np.float64) / 255.0 >= np.float32(cutoff))), (img.shape[1], img.shape[0])
+
+
+def check_mips(atlases: Path, stem: str, cutoff: float) -> str:
+    base = atlases / f"{stem}.png"
+    if not base.is_file():
+        raise CheckFailed(f"{base} is missing")
+    c0, (w, h) = alpha_coverage(base, cutoff)
+    if c0 <= 0:
+        raise CheckFailed(f"{base.name}: no texel reaches the alpha cutoff {cutoff}")
+    worst, k = 0.0, 1
+    while (atlases / f"{stem}_mip{k}.png").is_file():
+        ck, (wk, hk) = alpha_coverage(atlases / f"{stem}_mip{k}.png", cutoff)
+        if (wk, hk) != (max(1, w >> k), max(1, h >> k)) and (wk, hk) != (max(1, -(-w // 2 ** k)), max(1, -(-h // 2 ** k))):
+            raise CheckFailed(f"{stem}_mip{k}.png is {wk}×{hk}; level 0 is {w}×{h}")
+        if min(wk, hk) >= MIP_MIN_SIDE:
+            rel = abs(ck - c0) / c0
+            worst = max(worst, rel)
+            if rel > MIP_TOLERANCE:
+                raise CheckFailed(f"{stem}_mip{k}.png: alpha coverage {ck:.4f} vs level 0's {c0:.4f} ({rel:.1%} > {MIP_TOLERANCE:.0%})")
+        k += 1
+    if k == 1:
+        raise CheckFailed(f"{stem}: no mip levels written")
+    return f"{stem}: {k} levels, coverage within {worst:.2%}"
+
+
+def check_grass(species: Path, atlases: Path, name: str, renderer: Renderer | None) -> list[str]:
+    facts = []
+    lods = []
+    n = 0
+    while (species / f"{name}_LOD{n}.glb").is_file():
+        lods.append(species / f"{name}_LOD{n}.glb")
+        n += 1
+    scenes = [trimesh.load(p, force="scene") for p in lods]
+    tris = [triangles(s) for s in scenes]
+    if any(b >= a for a, b in zip(tris, tris[1:])):
+        raise CheckFailed(f"{name}: LoD triangle counts do not strictly decrease: {tris}")
+    facts.append(f"triangles {tris}")
+    cutoff = None
+    for p in lods:
+        g = pygltflib.GLTF2().load(str(p))
+        check_materials(g, p.name)
+        cutoff = g.materials[0].alphaCutoff if g.materials[0].alphaCutoff is not None else 0.5
+    facts.append(check_wind(lods[0]))
+    facts.append(check_lod_chain(species / f"{name}.glb", len(lods)))
+    if renderer is not None:
+        b = scenes[0].bounds
+        centre, radius = b.mean(axis=0), float(np.linalg.norm(b[1] - b[0]) / 2)
+        ref = renderer.silhouettes(scenes[0], centre, radius)
+        summary = []
+        for k, s in enumerate(scenes):
+            sil = ref if k == 0 else renderer.silhouettes(s, centre, radius)
+            for view, (a, r) in enumerate(zip(sil, ref)):
+                area = a.mean()
+                if area < 0.002:
+                    raise CheckFailed(f"{lods[k].name}: the pyrender render from view {view} is empty ({area:.4f} of the pixels)")
+                iou = (a & r).sum() / max(1, (a | r).sum())
+                ratio = area / max(r.mean(), 1e-9)
+                if k and (iou < MIN_IOU or not (1 / MAX_AREA_RATIO <= ratio <= MAX_AREA_RATIO)):
+                    raise CheckFailed(f"{lods[k].name}: silhouette from view {view} unlike LoD0's (IoU {iou:.3f}, area ratio {ratio:.2f})")
+                if k:
+                    summary.append(f"{iou:.2f}")
+        facts.append(f"pyrender silhouettes vs LoD0 IoU {', '.join(summary)}")
+    facts.append(check_mips(atlases, name, cutoff))
+    facts.append(check_mips(atlases, f"{name}_blade", cutoff))
+    if not (atlases / f"{name}_density.png").is_file():
+        raise CheckFailed(f"{name}_density.png is missing")
+    return facts
+
+
+def check_flower(species: Path, atlases: Path, name: str, renderer: Renderer | None) -> list[str]:
+    path = species / f"{name}.glb"
+    scene = trimesh.load(path, force="scene")
+    g = pygltflib.GLTF2().load(str(path))
+    check_materials(g, path.name)
+    facts = [f"{len(g.nodes)} variants, {triangles(scene)} triangles"]
+    if renderer is not None:
+        b = scene.bounds
+        for view, sil in enumerate(renderer.silhouettes(scene, b.mean(axis=0), float(np.linalg.norm(b[1] - b[0]) / 2))):
+            if sil.mean() < 0.002:
+                raise CheckFailed(f"{path.name}: the pyrender render from view {view} is empty")
+    facts.append(check_mips(atlases, name, g.materials[0].alphaCutoff or 0.5))
+    return facts
+
+
+def main(argv: list[str]) -> int:
+    if not argv or argv[0].startswith("-"):
+        print(__doc__)
+        return 2
+    scene_dir = Path(argv[0])
+    tsv = Path(argv[argv.index("--summary-tsv") + 1]) if "--summary-tsv" in argv else None
+    species, atlases = scene_dir / "species", scene_dir / "atlases"
+    manifest = json.loads((scene_dir / "manifest.json").read_text())
+    plants = manifest.get("plants") or []
+    if not plants:
+        print(f"{scene_dir.name}: no generated plants")
+        return 0
+    try:
+        renderer = Renderer()
+    except Exception as e:  # noqa: BLE001 — reported, and a failure: the check needs it
+        print(f"FAIL {scene_dir.name}: pyrender offscreen rendering is unavailable: {e}")
+        return 1
+    failed = 0
+    for p in plants:
+        name = p["name"]
+        try:
+            if (species / f"{name}_LOD0.glb").is_file():
+                facts = check_grass(species, atlases, name, renderer)
+            else:
+                facts = check_flower(species, atlases, name, renderer)
+            print(f"ok   {scene_dir.name}/{name}: " + "; ".join(facts))
+            status = "ok"
+        except CheckFailed as e:
+            print(f"FAIL {scene_dir.name}/{name}: {e}")
+            failed += 1
+            status = "FAIL"
+        if tsv:
+            with tsv.open("a") as f:
+                f.write(f"{scene_dir.name}/{name}\t{status}\n")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
