@@ -181,22 +181,27 @@ pub enum LsystemError {
         source: std::io::Error,
     },
     /// A positioned problem in the file: `file:line:column: message`, the line, a caret, the remedy.
-    #[error("{path}:{line}:{column}: {message}\n  {text}\n  {caret}\n{remedy}")]
-    Syntax {
-        path: PathBuf,
-        /// 1-based.
-        line: usize,
-        /// 1-based, in characters of the line as shown (undecodable bytes count one each).
-        column: usize,
-        message: String,
-        /// The line, lossily decoded.
-        text: String,
-        /// Spaces (tabs where the line has tabs) and a `^` under the column.
-        caret: String,
-        remedy: String,
-    },
+    #[error("{0}")]
+    Syntax(Box<SyntaxError>),
     #[error("the expansion exceeds {limit} symbols (--max-symbols); lower the recursion depth or raise the limit")]
     TooManySymbols { limit: u64 },
     #[error("invalid expansion settings: {0}")]
     Settings(String),
+}
+
+/// Where and what is wrong in an `.ls` file.
+#[derive(Debug, Error)]
+#[error("{}:{line}:{column}: {message}\n  {text}\n  {caret}\n{remedy}", path.display())]
+pub struct SyntaxError {
+    pub path: PathBuf,
+    /// 1-based.
+    pub line: usize,
+    /// 1-based, in characters of the line as shown (undecodable bytes count one each).
+    pub column: usize,
+    pub message: String,
+    /// The line, lossily decoded (a window around the column when it is long).
+    pub text: String,
+    /// Blanks (tabs where the line has tabs) and a `^` under the column.
+    pub caret: String,
+    pub remedy: String,
 }

@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use super::{ArgText, ColorLine, Dialect, Item, LSystem, LsystemError, Recursion, Rule, Variant, MAX_RECURSION};
+use super::{ArgText, ColorLine, Dialect, Item, LSystem, LsystemError, Recursion, Rule, SyntaxError, Variant, MAX_RECURSION};
 
 /// A parsed file and the remarks that did not stop it (shadowed rules, ignored keywords).
 #[derive(Debug, Clone, PartialEq)]
@@ -138,7 +138,7 @@ impl<'a> Source<'a> {
             text.push('…');
         }
         caret.push('^');
-        LsystemError::Syntax {
+        LsystemError::Syntax(Box::new(SyntaxError {
             path: self.path.to_path_buf(),
             line: number,
             column: at + 1,
@@ -146,7 +146,7 @@ impl<'a> Source<'a> {
             text,
             caret,
             remedy: remedy.into(),
-        }
+        }))
     }
 
     /// An error just past the last line (something missing at the end of the file).
@@ -207,7 +207,7 @@ fn show(b: u8) -> String {
 fn predecessor_problem(b: u8) -> Option<&'static str> {
     match b {
         b'(' | b')' => Some("parentheses hold arguments and cannot be rewritten"),
-        b'[' | b']' | b'{' | b'}' => Some("brackets cannot be rewritten: they must stay balanced"),
+        b'[' | b']' => Some("brackets cannot be rewritten: they must stay balanced"),
         b'=' | b'@' | b'#' => Some("this character is part of the file syntax"),
         _ if is_space(b) || b == b'\n' => Some("blanks separate comments"),
         _ => None,
@@ -215,7 +215,9 @@ fn predecessor_problem(b: u8) -> Option<&'static str> {
 }
 
 /// Parses an axiom or successor given as (byte, column) pairs of line `line`: symbols, `(x)`
-/// arguments, and `[ ]` / `{ }` each balanced on its own.
+/// arguments, and balanced `[ ]` (the turtle's stack and the branch levels rely on it). Polygon
+/// braces need not balance within a rule: lparser 5's horn.ls opens polygons in one rule and
+/// closes them in another.
 fn parse_items(
     source: &Source,
     line: usize,
@@ -225,7 +227,6 @@ fn parse_items(
 ) -> Result<Vec<Item>, LsystemError> {
     let mut items = Vec::with_capacity(text.len());
     let mut open_square: Vec<usize> = Vec::new();
-    let mut open_curly: Vec<usize> = Vec::new();
     let mut i = 0;
     while i < text.len() {
         let (b, col) = text[i];
@@ -250,26 +251,13 @@ fn parse_items(
             }
             b')' => return Err(source.error(line, col, "`)` without `(`", "remove it, or open the argument with `(`")),
             b'[' => open_square.push(col),
-            b'{' => open_curly.push(col),
-            b']' => {
-                if open_square.pop().is_none() {
-                    return Err(source.error(
-                        line,
-                        col,
-                        format!("unbalanced `]` in {what}: no `[` opens it"),
-                        "remove the `]` or add a `[` before it; every rule must balance its own brackets",
-                    ));
-                }
-            }
-            b'}' => {
-                if open_curly.pop().is_none() {
-                    return Err(source.error(
-                        line,
-                        col,
-                        format!("unbalanced `}}` in {what}: no `{{` opens it"),
-                        "remove the `}` or add a `{` before it; every rule must balance its own braces",
-                    ));
-                }
+            b']' if open_square.pop().is_none() => {
+                return Err(source.error(
+                    line,
+                    col,
+                    format!("unbalanced `]` in {what}: no `[` opens it"),
+                    "remove the `]` or add a `[` before it; every rule must balance its own brackets",
+                ));
             }
             _ => {}
         }
@@ -282,14 +270,6 @@ fn parse_items(
             col,
             format!("unbalanced `[` in {what}: it is never closed"),
             "add the missing `]`; every rule must balance its own brackets",
-        ));
-    }
-    if let Some(&col) = open_curly.first() {
-        return Err(source.error(
-            line,
-            col,
-            format!("unbalanced `{{` in {what}: it is never closed"),
-            "add the missing `}`; every rule must balance its own braces",
         ));
     }
     Ok(items)

@@ -296,8 +296,9 @@ pub struct Turtle {
     state: State,
     stack: Vec<State>,
     polygons: Vec<Vec<DVec3>>,
-    /// A command that may still receive an argument from the next token.
-    pending: Option<(u8, u64)>,
+    /// A command that may still receive an argument from the next token, with the growth factor in
+    /// force where it stood (a partial-growth marker may come between it and its argument).
+    pending: Option<(u8, u64, f64)>,
     partial_depth: u32,
     next_chain: u32,
     counts: TurtleCounts,
@@ -378,18 +379,19 @@ impl Turtle {
     pub fn feed<S: Sink>(&mut self, token: Token, sink: &mut S) -> Result<(), S::Error> {
         match token {
             Token::Symbol { byte, id } => {
-                if let Some((c, pid)) = self.pending.take() {
-                    self.execute(c, pid, None, sink)?;
+                if let Some((c, pid, g)) = self.pending.take() {
+                    self.execute(c, pid, None, g, sink)?;
                 }
+                let g = self.growth();
                 if takes_argument(byte) {
-                    self.pending = Some((byte, id));
+                    self.pending = Some((byte, id, g));
                     Ok(())
                 } else {
-                    self.execute(byte, id, None, sink)
+                    self.execute(byte, id, None, g, sink)
                 }
             }
             Token::Arg { value, .. } => match self.pending.take() {
-                Some((c, id)) => self.execute(c, id, Some(value), sink),
+                Some((c, id, g)) => self.execute(c, id, Some(value), g, sink),
                 // an argument after anything else has no command to go to (lparser skips it too)
                 None => Ok(()),
             },
@@ -407,8 +409,8 @@ impl Turtle {
 
     /// Runs the last pending command and ends every open chain (unclosed polygons are dropped).
     pub fn finish<S: Sink>(&mut self, sink: &mut S) -> Result<(), S::Error> {
-        if let Some((c, id)) = self.pending.take() {
-            self.execute(c, id, None, sink)?;
+        if let Some((c, id, g)) = self.pending.take() {
+            self.execute(c, id, None, g, sink)?;
         }
         self.end_chain(sink)?;
         while let Some(state) = self.stack.pop() {
@@ -435,10 +437,6 @@ impl Turtle {
         }
     }
 
-    /// A multiplicative factor under partial growth: 1 + f·(x − 1).
-    fn factor(&self, x: f64) -> f64 {
-        1.0 + self.growth() * (x - 1.0)
-    }
 
     /// Uniform in [−1, 1) from the seed, the symbol's position id and which draw it is.
     fn random(&self, id: u64, k: u64) -> f64 {
@@ -500,8 +498,10 @@ impl Turtle {
         Ok(())
     }
 
-    fn execute<S: Sink>(&mut self, c: u8, id: u64, arg: Option<f64>, sink: &mut S) -> Result<(), S::Error> {
-        let g = self.growth();
+    /// Runs command `c` (position id `id`) under growth factor `g`: lengths and angles are scaled
+    /// by it, multiplicative factors x become 1 + g·(x − 1).
+    fn execute<S: Sink>(&mut self, c: u8, id: u64, arg: Option<f64>, g: f64, sink: &mut S) -> Result<(), S::Error> {
+        let factor = |x: f64| 1.0 + g * (x - 1.0);
         let angle = |t: &Turtle| arg.unwrap_or(t.state.angle_deg) * g;
         match c {
             b'F' => self.draw(arg.unwrap_or(self.state.step) * g, sink)?,
@@ -534,18 +534,18 @@ impl Turtle {
             }
             b'"' | b'\'' => {
                 let default = if c == b'"' { self.conventions.length_up } else { self.conventions.length_down };
-                let k = self.factor(arg.unwrap_or(default));
+                let k = factor(arg.unwrap_or(default));
                 self.state.step = clamp_step(self.state.step * k);
                 self.state.half_step = clamp_step(self.state.half_step * k);
             }
             b';' | b':' => {
                 let default = if c == b';' { self.conventions.angle_up } else { self.conventions.angle_down };
-                let k = self.factor(arg.unwrap_or(default));
+                let k = factor(arg.unwrap_or(default));
                 self.state.angle_deg = clamp_finite(self.state.angle_deg * k, -MAX_STEP, MAX_STEP);
             }
             b'?' | b'!' => {
                 let default = if c == b'?' { self.conventions.thickness_up } else { self.conventions.thickness_down };
-                let k = self.factor(arg.unwrap_or(default));
+                let k = factor(arg.unwrap_or(default));
                 self.state.thickness = clamp_finite(self.state.thickness * k, 0.0, MAX_THICKNESS);
             }
             b'c' => {
