@@ -95,10 +95,10 @@ fn grows_fully(symbol: u8) -> bool {
 
 struct Frame<'a> {
     items: &'a [Item],
-    pos: usize,
+    pos: u32,
     /// Rewriting steps still to apply to the items of this frame (within its stage).
     remaining: u32,
-    stage: usize,
+    stage: u8,
     /// Emit [`Token::PartialEnd`] when exhausted.
     partial: bool,
     id: u64,
@@ -179,7 +179,7 @@ impl<'a> Expander<'a> {
     pub fn next_token(&mut self) -> Result<Option<Token>, LsystemError> {
         loop {
             let Some(top) = self.frames.last_mut() else { return Ok(None) };
-            if top.pos == top.items.len() {
+            if top.pos as usize == top.items.len() {
                 let partial = top.partial;
                 self.frames.pop();
                 if partial {
@@ -187,10 +187,10 @@ impl<'a> Expander<'a> {
                 }
                 continue;
             }
-            let index = top.pos;
+            let index = top.pos as usize;
             let item = top.items[index];
             top.pos += 1;
-            let (remaining, stage, parent) = (top.remaining, top.stage, top.id);
+            let (remaining, stage, parent) = (top.remaining, top.stage as usize, top.id);
             let symbol = match item {
                 Item::Arg(a) => {
                     // arguments are never rewritten: they pass every stage unchanged
@@ -207,7 +207,7 @@ impl<'a> Expander<'a> {
                 let v = choose_variant(&self.cumulative[k], self.seed, id);
                 let successor = &self.system.rules[k].variants[v].successor;
                 let partial = remaining == 1 && self.fraction > 0.0 && !grows_fully(symbol);
-                self.push(Frame { items: successor, pos: 0, remaining: remaining - 1, stage, partial, id });
+                self.push(Frame { items: successor, pos: 0, remaining: remaining - 1, stage: stage as u8, partial, id });
                 if partial {
                     return Ok(Some(Token::PartialBegin));
                 }
@@ -234,7 +234,7 @@ impl<'a> Expander<'a> {
             }
             if let Some(s) = enters_stage {
                 let single = &SINGLE_SYMBOLS[symbol as usize..symbol as usize + 1];
-                self.push(Frame { items: single, pos: 0, remaining: self.stage_steps[s], stage: s, partial: false, id });
+                self.push(Frame { items: single, pos: 0, remaining: self.stage_steps[s], stage: s as u8, partial: false, id });
                 continue;
             }
             if self.counts.symbols >= self.max_symbols {
