@@ -528,6 +528,23 @@ fn degenerate_commands_never_make_nan() {
     }
 }
 
+#[test]
+fn unclosed_polygons_stay_bounded() {
+    // braces need not balance within a rule: this opens 2¹⁸ polygons and closes none; the turtle
+    // keeps at most MAX_OPEN_POLYGONS of them and counts the rest
+    let system = sys("recursion 18\naxiom A\nrule A = A{fA\n");
+    let mut e = Expander::new(&system, 0, u64::MAX).unwrap();
+    let mut turtle = Turtle::new(&system, 0);
+    let mut record = Record::default();
+    while let Some(t) = e.next_token().unwrap() {
+        turtle.feed(t, &mut record).unwrap();
+    }
+    turtle.finish(&mut record).unwrap();
+    let open = verdant::lsystem::turtle::MAX_OPEN_POLYGONS as u64;
+    assert_eq!(turtle.counts().polygons_skipped, (1 << 18) - 1 - open);
+    assert_eq!(record.polygons, 0);
+}
+
 // ---------------------------------------------------------------------------------------------
 // meshes
 

@@ -27,6 +27,12 @@ pub const MAX_THICKNESS: f64 = 1e3;
 /// Most vertices one polygon `{ … }` records; later ones are counted in
 /// [`TurtleCounts::polygon_vertices_dropped`].
 pub const MAX_POLYGON_VERTICES: usize = 1 << 16;
+/// Most vertices all open polygons hold together (braces need not balance within a rule, so
+/// without this a file could open polygons in proportion to its expanded length).
+pub const MAX_OPEN_POLYGON_VERTICES: usize = 1 << 20;
+/// Most polygons open at once; a `{` beyond it, and its `}`, are ignored and counted in
+/// [`TurtleCounts::polygons_skipped`].
+pub const MAX_OPEN_POLYGONS: usize = 1 << 12;
 /// lparser's default tropism amount (`t` without an argument).
 pub const DEFAULT_TROPISM: f64 = 0.2;
 /// The largest random turn of `~` without an argument, in degrees.
@@ -296,6 +302,10 @@ pub struct Turtle {
     state: State,
     stack: Vec<State>,
     polygons: Vec<Vec<DVec3>>,
+    /// Vertices held by `polygons`.
+    open_polygon_vertices: usize,
+    /// `{` ignored beyond [`MAX_OPEN_POLYGONS`], still waiting for their `}`.
+    polygons_overflow: u64,
     /// A command that may still receive an argument from the next token, with the growth factor in
     /// force where it stood (a partial-growth marker may come between it and its argument).
     pending: Option<(u8, u64, f64)>,
@@ -351,6 +361,8 @@ impl Turtle {
             conventions,
             stack: Vec::new(),
             polygons: Vec::new(),
+            open_polygon_vertices: 0,
+            polygons_overflow: 0,
             pending: None,
             partial_depth: 0,
             next_chain: 0,
@@ -418,6 +430,7 @@ impl Turtle {
             self.end_chain(sink)?;
         }
         self.polygons.clear();
+        self.open_polygon_vertices = 0;
         Ok(())
     }
 
@@ -446,8 +459,9 @@ impl Turtle {
 
     fn record(&mut self) {
         if let Some(poly) = self.polygons.last_mut() {
-            if poly.len() < MAX_POLYGON_VERTICES {
+            if poly.len() < MAX_POLYGON_VERTICES && self.open_polygon_vertices < MAX_OPEN_POLYGON_VERTICES {
                 poly.push(self.state.pos);
+                self.open_polygon_vertices += 1;
             } else {
                 self.counts.polygon_vertices_dropped += 1;
             }
@@ -572,14 +586,20 @@ impl Turtle {
                 }
             }
             b'{' => {
-                let mut poly = Vec::new();
-                if self.conventions.polygon_starts_at_turtle {
-                    poly.push(self.state.pos);
+                if self.polygons.len() >= MAX_OPEN_POLYGONS {
+                    self.polygons_overflow += 1;
+                    self.counts.polygons_skipped += 1;
+                } else {
+                    self.polygons.push(Vec::new());
+                    if self.conventions.polygon_starts_at_turtle {
+                        self.record();
+                    }
                 }
-                self.polygons.push(poly);
             }
+            b'}' if self.polygons_overflow > 0 => self.polygons_overflow -= 1,
             b'}' => {
                 if let Some(poly) = self.polygons.pop() {
+                    self.open_polygon_vertices -= poly.len();
                     if poly.len() >= 3 {
                         self.counts.polygons += 1;
                         sink.polygon(&poly, self.state.color, self.level())?;
