@@ -12,6 +12,7 @@ pub mod bake;
 pub mod export;
 pub mod heightfield;
 pub mod lod;
+pub mod lsystem;
 pub mod mesh;
 pub mod plants;
 pub mod scatter;

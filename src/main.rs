@@ -3,8 +3,11 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 use verdant::heightfield::{DecodeOptions, Encoding, DEFAULT_MAX_SAMPLES};
+use verdant::lsystem::expand::DEFAULT_MAX_SYMBOLS;
+use verdant::lsystem::Dialect;
+use verdant::plants::tree::{self as tree_job, TreeJob, TreeOptions, DEFAULT_MAX_SEGMENTS, DEFAULT_MAX_TRIANGLES, DEFAULT_RADIAL_SEGMENTS};
 use verdant::scene::build::{self as scene_build, BuildSettings, PresetSource};
 use verdant::scene::preset;
 use verdant::scene::stages::Stage;
@@ -53,6 +56,62 @@ enum Command {
     /// Check a preset without building, or write a commented template.
     #[command(subcommand)]
     Preset(PresetCommand),
+    /// L-system file → tree mesh (branches, leaves, polygons) as glTF or OBJ, with a JSON report.
+    ///
+    /// Reads the three .ls dialects (the thesis' stochastic format, lparser 4 and 5; see
+    /// docs/lsystems.md). The expansion streams into the mesh, so long expansions need no memory.
+    ///
+    /// Example: verdant tree trees3.ls -o out/trees3.glb --report out/trees3.json
+    Tree(TreeArgs),
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum DialectArg {
+    /// Detect from the content.
+    Auto,
+    /// The point-sprite thesis' stochastic format (`3-2-2`, `X(100)=…`, `A(40)=…`).
+    Ls,
+    /// lparser 4 (positional lines, `X=…` rules, `@`).
+    V4,
+    /// lparser 5 (`recursion 12`, `rule X = …`).
+    V5,
+}
+
+#[derive(Args)]
+struct TreeArgs {
+    /// L-system file (.ls).
+    #[arg(value_name = "FILE.ls")]
+    input: PathBuf,
+    /// Output file: .glb, .gltf (+ .bin) or .obj (+ .mtl). Default: out/<input name>.glb.
+    #[arg(short, long, value_name = "FILE")]
+    output: Option<PathBuf>,
+    /// Seed of the stochastic rules and random turns; the same seed gives the same tree.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    seed: u64,
+    /// File dialect.
+    #[arg(long, value_enum, default_value_t = DialectArg::Auto)]
+    dialect: DialectArg,
+    /// Refuse trees drawing more segments than this.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_SEGMENTS)]
+    max_segments: u64,
+    /// Refuse trees needing more triangles than this.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_TRIANGLES)]
+    max_triangles: u64,
+    /// Refuse expansions longer than this many symbols.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_SYMBOLS)]
+    max_symbols: u64,
+    /// Vertices around each branch (3 to 64).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_RADIAL_SEGMENTS)]
+    radial_segments: u32,
+    /// Metres of one default step F (lparser 4's 100 units, lparser 5's and the thesis' 1 unit).
+    #[arg(long, value_name = "METRES", default_value_t = 1.0)]
+    step: f64,
+    /// Scale the finished tree to this height in metres.
+    #[arg(long, value_name = "METRES")]
+    height: Option<f64>,
+    /// Write a JSON report: symbols, segments, triangles, branch levels, seconds.
+    #[arg(long, value_name = "FILE.json")]
+    report: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -196,6 +255,7 @@ fn main() -> ExitCode {
         Command::Validate(args) => validate(args, cli.quiet),
         Command::Build(args) => build(args, cli.quiet),
         Command::Preset(cmd) => preset(cmd, cli.quiet),
+        Command::Tree(args) => tree(args, cli.quiet),
     };
     ExitCode::from(code as u8)
 }
@@ -383,5 +443,65 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
                 Err(e) => fail(&e.to_string(), 1),
             }
         }
+    }
+}
+
+fn tree(a: TreeArgs, quiet: bool) -> i32 {
+    let name = a.input.file_stem().and_then(|s| s.to_str()).unwrap_or("tree").to_string();
+    let job = TreeJob {
+        output: a.output.clone().unwrap_or_else(|| PathBuf::from("out").join(format!("{name}.glb"))),
+        input: a.input.clone(),
+        dialect: match a.dialect {
+            DialectArg::Auto => None,
+            DialectArg::Ls => Some(Dialect::Stochastic),
+            DialectArg::V4 => Some(Dialect::LparserV4),
+            DialectArg::V5 => Some(Dialect::LparserV5),
+        },
+        options: TreeOptions {
+            seed: a.seed,
+            radial_segments: a.radial_segments,
+            max_symbols: a.max_symbols,
+            max_segments: a.max_segments,
+            max_triangles: a.max_triangles,
+            metres_per_step: a.step,
+            height_m: a.height,
+            name,
+            ..TreeOptions::default()
+        },
+    };
+    match tree_job::run(&job) {
+        Ok(report) => {
+            if let Some(path) = &a.report {
+                if let Err(e) = tree_job::write_report(path, &report) {
+                    return fail(&e.to_string(), e.exit_code());
+                }
+            }
+            if !quiet {
+                let s = &report.stats;
+                println!(
+                    "{} ({}{}): {} symbols → {} segments, {} leaves, {} polygons → {} triangles in {} primitives, {} branch levels, height {:.2} m, {:.3} s",
+                    report.input,
+                    report.dialect,
+                    if report.dialect_detected { ", detected" } else { "" },
+                    s.symbols,
+                    s.segments,
+                    s.leaves,
+                    s.polygons,
+                    s.triangles,
+                    s.primitives,
+                    s.max_branch_level + 1,
+                    s.height_m,
+                    report.seconds.to_lod0
+                );
+                for w in &report.warnings {
+                    println!("  warning: {w}");
+                }
+                for f in &report.files {
+                    println!("  wrote {f}");
+                }
+            }
+            0
+        }
+        Err(e) => fail(&e.to_string(), e.exit_code()),
     }
 }

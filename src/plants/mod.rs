@@ -1,5 +1,6 @@
 //! Plants: the meshes instanced species show — grass clumps with their levels of detail and baked
-//! atlases, flowers as crossed billboards, and small marker meshes for kinds without a generator.
+//! atlases, flowers as crossed billboards, L-system trees, and small marker meshes for kinds
+//! without a generator in the scene build yet.
 
 pub mod flower;
 pub mod grass;
@@ -7,3 +8,4 @@ pub mod grass_asset;
 pub mod marker;
 pub mod random;
 pub mod texture;
+pub mod tree;
