@@ -300,6 +300,14 @@ while IFS=$'\t' read -r name status tris verts placements; do
     SCENE_PLACEMENTS[$name]="FAIL (see the scene check)"
   fi
 done < "$OUT/check_scenes.tsv"
+section "5c. check_species.py (generated grass and flowers: LoD triangles, wind attributes, MSFT_lod, pyrender silhouettes per LoD vs LoD0, mip coverage)"
+: > "$OUT/check_species.tsv"
+for scene in "${SCENES[@]}"; do
+  if "$PY" scripts/check_species.py "$BUILD_OUT/$scene" --summary-tsv "$OUT/check_species.tsv"; then pass; else fail "check_species.py $scene"; fi
+done
+declare -A SPECIES_CHECKED=()
+while IFS=$'\t' read -r name status; do SPECIES_CHECKED[$name]="$status"; done < "$OUT/check_species.tsv"
+
 for f in "${FILES[@]}"; do
   if [ -z "${IS_BUILD[$f]:-}" ]; then continue; fi
   scene="${SCENE_OF[$f]}"
@@ -307,6 +315,10 @@ for f in "${FILES[@]}"; do
     FAIL) CHECKED[$f]="FAIL (scene $scene)" ;;
     *) case "$f" in
          */terrain_LOD*) CHECKED[$f]="ok (LoD, scene check)" ;;
+         */species/*|*/atlases/*)
+           sp="$(basename "$f" .glb)"; sp="${sp%_LOD*}"; sp="${sp%_far}"
+           st="${SPECIES_CHECKED[$scene/$sp]:-FAIL (not checked)}"
+           if [ "$st" = ok ]; then CHECKED[$f]="ok (species check)"; else CHECKED[$f]="FAIL (species $sp: $st)"; fi ;;
          */scene.glb) CHECKED[$f]="ok (placements, scene check)" ;;
          *) CHECKED[$f]="ok (scene) ${SCENE_CHECKED[$scene]#ok }" ;;
        esac ;;
