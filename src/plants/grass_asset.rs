@@ -5,6 +5,7 @@
 
 use std::time::Instant;
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bake::atlas::{dilate, mip_chain, resolve_supersampled, MipLevel};
@@ -141,7 +142,10 @@ pub struct GrassReport {
     pub far_field_cells: usize,
     pub thesis_rings_m: [f64; 2],
     pub seconds_generate: f64,
+    /// Of `seconds_bake`: rendering the views (at 2×, resolved), and dilating the atlases.
     pub seconds_bake: f64,
+    pub seconds_render: f64,
+    pub seconds_dilate: f64,
     pub seconds_analyze: f64,
     pub raster_fragments: u64,
 }
@@ -322,6 +326,12 @@ fn coverage_view() -> LodView {
 /// Builds, bakes and measures one grass species. `user_blade` replaces the procedural blade
 /// texture (its alpha is kept).
 pub fn build_grass(name: &str, settings: &GrassSettings, user_blade: Option<&Image>) -> Result<GrassAsset, GrassAssetError> {
+    build_grass_with(name, settings, user_blade, true)
+}
+
+/// [`build_grass`], with the image analyzer optional (`analyze = false`: no switch distances, the
+/// MSFT_lod coverages are then all 0 — for benchmarking generation and baking alone).
+pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option<&Image>, analyze: bool) -> Result<GrassAsset, GrassAssetError> {
     settings.check()?;
     let started = Instant::now();
     let s = settings;
@@ -380,26 +390,33 @@ pub fn build_grass(name: &str, settings: &GrassSettings, user_blade: Option<&Ima
     // density in alpha: the same views with each blade's (1 − rank) as an opaque vertex colour
     let rank_material = [Material { name: "rank".into(), ..Material::default() }];
     let rank_opts = RenderOptions { use_vertex_colors: true, ..unlit() };
-    for (ci, c) in clumps.iter().enumerate() {
-        for (k, slice) in grass::slices(s.clump_size_m).iter().enumerate() {
+    // every clump view (4 slices + top), drawn in parallel and blitted in order: the same bytes at
+    // any thread count
+    let views: Vec<(usize, usize)> = (0..clumps.len()).flat_map(|ci| (0..5).map(move |k| (ci, k))).collect();
+    let rendered: Vec<Result<(Image, Image, u64), RasterError>> = views
+        .par_iter()
+        .map(|&(ci, k)| {
+            let c = &clumps[ci];
             let cell = cells[ci * 5 + k];
-            let view = slice_view(s, slice, cell.width, cell.height);
-            let slab = grass::lod0_filtered(s, c, 0, |b| slice.holds(b));
-            let (img, f) = render(view, &[(IDENTITY, &lod_mesh(String::new(), slab.clone()))], &blade_materials, &textures, &opts)?;
-            fragments += f;
-            atlas.blit(&img, cell.x, cell.y);
-            let ranked = rank_colored(&slab, c, |b| slice.holds(b));
-            let (img, _) = render(view, &[(IDENTITY, &lod_mesh(String::new(), ranked))], &rank_material, &[], &rank_opts)?;
-            density.blit(&img, cell.x, cell.y);
-        }
-        let cell = cells[ci * 5 + 4];
-        let view = top_view(s, cell.width);
-        let (img, f) = render(view, &[(IDENTITY, &lod0_meshes[ci])], &blade_materials, &textures, &opts)?;
+            let (view, prim, ranked) = if k < 4 {
+                let slice = grass::slices(s.clump_size_m)[k];
+                let slab = grass::lod0_filtered(s, c, 0, |b| slice.holds(b));
+                let ranked = rank_colored(&slab, c, |b| slice.holds(b));
+                (slice_view(s, &slice, cell.width, cell.height), slab, ranked)
+            } else {
+                (top_view(s, cell.width), lod0[ci].clone(), rank_colored(&lod0[ci], c, |_| true))
+            };
+            let (colour, f) = render(view, &[(IDENTITY, &lod_mesh(String::new(), prim))], &blade_materials, &textures, &opts)?;
+            let (rank, _) = render(view, &[(IDENTITY, &lod_mesh(String::new(), ranked))], &rank_material, &[], &rank_opts)?;
+            Ok((colour, rank, f))
+        })
+        .collect();
+    for (&(ci, k), r) in views.iter().zip(rendered) {
+        let (colour, rank, f) = r?;
+        let cell = cells[ci * 5 + k];
         fragments += f;
-        atlas.blit(&img, cell.x, cell.y);
-        let ranked = rank_colored(&lod0[ci], c, |_| true);
-        let (img, _) = render(view, &[(IDENTITY, &lod_mesh(String::new(), ranked))], &rank_material, &[], &rank_opts)?;
-        density.blit(&img, cell.x, cell.y);
+        atlas.blit(&colour, cell.x, cell.y);
+        density.blit(&rank, cell.x, cell.y);
     }
     let far_cell = *cells.last().expect("the far-field cell is always packed");
     let densest = s.density_levels - 1;
@@ -412,12 +429,14 @@ pub fn build_grass(name: &str, settings: &GrassSettings, user_blade: Option<&Ima
     atlas.blit(&img, far_cell.x, far_cell.y);
 
     // density atlas: colour of the atlas, alpha = 1 − rank where the atlas is opaque, else 0
+    let seconds_render = bake_started.elapsed().as_secs_f64();
     for (d, a) in density.pixels.iter_mut().zip(&atlas.pixels) {
         let rank_alpha = if a[3] >= s.alpha_cutoff && d[3] > 0.0 { d[0].max(1.0 / 255.0) } else { 0.0 };
         *d = [a[0], a[1], a[2], rank_alpha];
     }
     dilate(&mut atlas, s.alpha_cutoff);
     dilate(&mut density, 1.0 / 255.0);
+    let seconds_dilate = bake_started.elapsed().as_secs_f64() - seconds_render;
     let atlas_chain = mip_chain(&atlas, s.alpha_cutoff);
     let mut blade_level0 = blade_image.clone();
     dilate(&mut blade_level0, s.alpha_cutoff);
@@ -473,7 +492,7 @@ pub fn build_grass(name: &str, settings: &GrassSettings, user_blade: Option<&Ima
             never_passes: false,
             screen_coverage: 1.0,
         };
-        if n > 0 {
+        if n > 0 && analyze {
             let cand_mesh = lod_mesh(String::new(), prims[probe].clone());
             let candidate = if n < 2 {
                 Renderable { mesh: &cand_mesh, materials: &blade_materials, textures: &textures }
@@ -520,6 +539,8 @@ pub fn build_grass(name: &str, settings: &GrassSettings, user_blade: Option<&Ima
         thesis_rings_m: THESIS_RINGS_M,
         seconds_generate,
         seconds_bake,
+        seconds_render,
+        seconds_dilate,
         seconds_analyze,
         raster_fragments: fragments,
     };
