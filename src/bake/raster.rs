@@ -978,6 +978,20 @@ where
     }
 }
 
+/// w₀·a + w₁·b + w₂·c per component, summed in that order (results depend on it). A plain loop
+/// rather than `array::map`, which the compiler does not always inline in the pixel loop.
+#[inline(always)]
+fn weigh<T, const N: usize>(w: [T; 3], a: &[T; N], b: &[T; N], c: &[T; N]) -> [T; N]
+where
+    T: Copy + Default + std::ops::Mul<Output = T> + std::ops::Add<Output = T>,
+{
+    let mut out = [T::default(); N];
+    for d in 0..N {
+        out[d] = w[0] * a[d] + w[1] * b[d] + w[2] * c[d];
+    }
+    out
+}
+
 /// The optional per-vertex attributes of a primitive: each counts only when there is one per
 /// position (else it reads as its default).
 struct Attributes<'a> {
@@ -1041,21 +1055,16 @@ where
             let z = (l[0] * depths[0] + l[1] * depths[1] + l[2] * depths[2]) as f32;
             let k = (y - y0) as usize * width as usize + x as usize;
             if !opts.depth_test || z < depth[k] {
-                let lf = l.map(|v| v as f32);
-                let mix3 = |v: [[f32; 3]; 3]| [0, 1, 2].map(|d| lf[0] * v[0][d] + lf[1] * v[1][d] + lf[2] * v[2][d]);
+                let lf = [l[0] as f32, l[1] as f32, l[2] as f32];
                 let p = &prim.positions;
                 let frag = Fragment {
                     x,
                     y,
                     depth: z,
-                    position: mix3([p[vi[0]], p[vi[1]], p[vi[2]]]),
-                    normal: normals.map_or([0.0; 3], |nm| mix3([nm[vi[0]], nm[vi[1]], nm[vi[2]]])),
-                    uv: uvs.map_or([0.0; 2], |u| {
-                        [0, 1].map(|d| lf[0] * u[vi[0]][d] + lf[1] * u[vi[1]][d] + lf[2] * u[vi[2]][d])
-                    }),
-                    color: colors.map_or([1.0; 4], |cl| {
-                        [0, 1, 2, 3].map(|d| lf[0] * cl[vi[0]][d] + lf[1] * cl[vi[1]][d] + lf[2] * cl[vi[2]][d])
-                    }),
+                    position: weigh(lf, &p[vi[0]], &p[vi[1]], &p[vi[2]]),
+                    normal: normals.map_or([0.0; 3], |nm| weigh(lf, &nm[vi[0]], &nm[vi[1]], &nm[vi[2]])),
+                    uv: uvs.map_or([0.0; 2], |u| weigh(lf, &u[vi[0]], &u[vi[1]], &u[vi[2]])),
+                    color: colors.map_or([1.0; 4], |cl| weigh(lf, &cl[vi[0]], &cl[vi[1]], &cl[vi[2]])),
                     // Report weights in the triangle's index order.
                     bary: if tri.swapped { [lf[0], lf[2], lf[1]] } else { lf },
                     triangle: tri.index,
@@ -1124,23 +1133,18 @@ where
             let z = z_view as f32;
             let k = (y - y0) as usize * width as usize + x as usize;
             if !opts.depth_test || z < depth[k] {
-                let lam = q.map(|v| v * z_view);
-                let bary = [0, 1, 2].map(|d| lam[0] * b0[d] + lam[1] * b1[d] + lam[2] * b2[d]);
-                let bf = bary.map(|v| v as f32);
-                let mix3 = |v: [[f32; 3]; 3]| [0, 1, 2].map(|d| bf[0] * v[0][d] + bf[1] * v[1][d] + bf[2] * v[2][d]);
+                let lam = [q[0] * z_view, q[1] * z_view, q[2] * z_view];
+                let bary = weigh(lam, &b0, &b1, &b2);
+                let bf = [bary[0] as f32, bary[1] as f32, bary[2] as f32];
                 let p = &prim.positions;
                 let frag = Fragment {
                     x,
                     y,
                     depth: z,
-                    position: mix3([p[vi[0]], p[vi[1]], p[vi[2]]]),
-                    normal: normals.map_or([0.0; 3], |nm| mix3([nm[vi[0]], nm[vi[1]], nm[vi[2]]])),
-                    uv: uvs.map_or([0.0; 2], |u| {
-                        [0, 1].map(|d| bf[0] * u[vi[0]][d] + bf[1] * u[vi[1]][d] + bf[2] * u[vi[2]][d])
-                    }),
-                    color: colors.map_or([1.0; 4], |cl| {
-                        [0, 1, 2, 3].map(|d| bf[0] * cl[vi[0]][d] + bf[1] * cl[vi[1]][d] + bf[2] * cl[vi[2]][d])
-                    }),
+                    position: weigh(bf, &p[vi[0]], &p[vi[1]], &p[vi[2]]),
+                    normal: normals.map_or([0.0; 3], |nm| weigh(bf, &nm[vi[0]], &nm[vi[1]], &nm[vi[2]])),
+                    uv: uvs.map_or([0.0; 2], |u| weigh(bf, &u[vi[0]], &u[vi[1]], &u[vi[2]])),
+                    color: colors.map_or([1.0; 4], |cl| weigh(bf, &cl[vi[0]], &cl[vi[1]], &cl[vi[2]])),
                     bary: bf,
                     triangle: tri.index,
                     front_facing: tri.front,
@@ -1568,7 +1572,7 @@ mod tests {
             }
         }
         assert!(checked > 5000);
-        assert!(counts.iter().any(|&n| n == 0) && counts.iter().any(|&n| n == 1));
+        assert!(counts.contains(&0) && counts.contains(&1));
     }
 
     #[test]
