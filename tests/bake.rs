@@ -550,7 +550,9 @@ fn billboard_clump() -> (Mesh, Vec<Material>, Vec<Image>) {
 fn lod_image_error_of_a_mesh_against_itself_passes_everywhere() {
     let (m, mats, tex) = billboard_clump();
     let r = Renderable { mesh: &m, materials: &mats, textures: &tex };
-    let report = lod_image_error(&r, &r, &ScreenView::default(), &[2.0, 8.0, 32.0, 128.0]);
+    // 3 m: the clump is larger than the canvas limit, rendered at reduced resolution (scale > 1)
+    let report = lod_image_error(&r, &r, &ScreenView::default(), &[3.0, 12.0, 48.0, 192.0]);
+    assert!(report.distances[0].screen_px_per_rendered_px > 1.0);
     assert_eq!(report.views, 24);
     assert_eq!(report.distances.len(), 4);
     for d in &report.distances {

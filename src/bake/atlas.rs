@@ -415,6 +415,36 @@ mod tests {
     }
 
     #[test]
+    fn resolving_a_supersampled_render_averages_blocks_by_alpha() {
+        // 5×2 at factor 2: blocks of 2×2, the last column a partial block (missing = transparent).
+        let red = [1.0, 0.0, 0.0, 1.0];
+        let clear = [0.0, 0.0, 1.0, 0.0];
+        let img = Image { width: 5, height: 2, pixels: vec![red, clear, red, red, red, clear, clear, red, red, red] };
+        let r = resolve_supersampled(&img, 2);
+        assert_eq!((r.width, r.height), (3, 1));
+        // colour from the covered samples only; alpha the covered share of the 4 samples
+        assert_eq!(r.pixels[0], [1.0, 0.0, 0.0, 0.25]);
+        assert_eq!(r.pixels[1], [1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(r.pixels[2], [1.0, 0.0, 0.0, 0.5]);
+        assert_eq!(resolve_supersampled(&img, 1), img);
+    }
+
+    #[test]
+    fn coverage_scale_hits_the_target_count_and_stays_clear_of_the_cutoff() {
+        // Alphas 0.01, 0.02, …, 1.00: a target of 30 % means the 30 largest pass at 0.5 cutoff.
+        let img =
+            Image { width: 100, height: 1, pixels: (1..=100).map(|k| [0.0, 0.0, 0.0, k as f32 / 100.0]).collect() };
+        let s = coverage_scale(&img, 0.5, 0.3);
+        let passing = img.pixels.iter().filter(|p| quantized_alpha(p[3], s) >= 0.5).count();
+        assert_eq!(passing, 30);
+        // mid-range: scales from 0.5/0.71 to 0.5/0.70 give 30; the one chosen keeps the 30th alpha
+        // (0.71) and the 31st (0.70) about 0.7 % either side of the cutoff, not on it
+        assert!(0.71 * s > 0.5 * 1.005 && 0.70 * s < 0.5 * 0.995, "{s}");
+        // already right at scale 1: kept
+        assert_eq!(coverage_scale(&img, 0.5, 0.51), 1.0);
+    }
+
+    #[test]
     fn stems_with_folders_are_refused() {
         let dir = tempfile::tempdir().unwrap();
         for bad in ["", "..", "a/b", "a\\b"] {

@@ -66,7 +66,8 @@ impl Image {
         // Refuse oversized images from the header, before any pixel memory is allocated.
         let (width, height) = decoder.dimensions();
         check_size(source_name, width as u64, height as u64)?;
-        let sixteen = matches!(decoder.color_type().bytes_per_pixel() / decoder.color_type().channel_count(), 2);
+        let colour = decoder.color_type();
+        let sixteen = colour.bytes_per_pixel() / colour.channel_count() == 2;
         let dynamic = image::DynamicImage::from_decoder(decoder).map_err(png_err)?;
         let pixels: Vec<[f32; 4]> = if sixteen {
             let raw = dynamic.into_rgba16();

@@ -373,7 +373,8 @@ impl DrawStats {
 }
 
 /// One covered pixel, given to the shader. Attributes are interpolated at the pixel centre from the
-/// primitive's own (object-space) values; a missing attribute reads as zero (colour: opaque white).
+/// primitive's own (object-space) values, perspective-correctly under a perspective camera; a
+/// missing attribute reads as zero (colour: opaque white).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Fragment {
     pub x: u32,

@@ -224,9 +224,11 @@ fn bounding_sphere(reference: &Mesh, candidate: &Mesh) -> ([f64; 3], f64) {
             .collect::<Vec<_>>()
     };
     let (r, c) = (points(reference), points(candidate));
+    // An empty reference (nothing to see) still gets a view of the candidate.
+    let framed = if r.is_empty() { &c } else { &r };
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
-    for q in r.iter().chain(if r.is_empty() { c.iter() } else { [].iter() }) {
+    for q in framed {
         for k in 0..3 {
             lo[k] = lo[k].min(q[k]);
             hi[k] = hi[k].max(q[k]);
