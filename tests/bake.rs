@@ -559,7 +559,7 @@ fn lod_image_error_of_a_mesh_against_itself_passes_everywhere() {
         assert!(d.passes);
         assert_eq!((d.worst_iou, d.worst_color_rmse, d.worst_edge_error_px), (1.0, 0.0, 0.0), "{d:?}");
     }
-    assert_eq!((report.switch_distance_m, report.never_passes), (0.0, false));
+    assert_eq!((report.switch_distance_m, report.never_passes, report.problem.is_none()), (0.0, false, true));
 }
 
 #[test]

@@ -33,7 +33,25 @@ impl Default for ScreenView {
 /// Screen height / width.
 const ASPECT_HEIGHT: f64 = 9.0 / 16.0;
 
+/// Largest side of a rendered (supersampled) view: two 4096² canvases are 0.7 GB, per thread.
+/// `max_side_px` is lowered to fit (the errors then scaled up to screen pixels, as for any cap).
+pub const MAX_RENDER_SIDE_PX: u32 = 4096;
+
 impl ScreenView {
+    /// A finite screen width over 0, a field of view in (0°, 179°] and a tolerance over 0.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.width_px.is_finite() && self.width_px >= 1.0) {
+            return Err(format!("screen width_px = {} must be at least 1 pixel", self.width_px));
+        }
+        if !(self.fov_x_deg > 0.0 && self.fov_x_deg <= 179.0) {
+            return Err(format!("fov_x_deg = {} must be in (0, 179] degrees", self.fov_x_deg));
+        }
+        if !(self.max_error_px.is_finite() && self.max_error_px > 0.0) {
+            return Err(format!("max_error_px = {} must be a positive number of pixels", self.max_error_px));
+        }
+        Ok(())
+    }
+
     pub fn height_px(&self) -> f64 {
         self.width_px * ASPECT_HEIGHT
     }
@@ -145,6 +163,9 @@ pub struct LodImageReport {
     pub switch_distance_m: f64,
     /// The largest tested distance still fails: `switch_distance_m` is a lower bound only.
     pub never_passes: bool,
+    /// Why nothing was measured (an invalid [`ScreenView`]); then `distances` is empty and
+    /// `never_passes` true, so a caller that ignores this cannot mistake it for a pass.
+    pub problem: Option<String>,
 }
 
 /// [`lod_image_error_with`] with the default options (4× supersampling, 8 × 3 views).
@@ -171,6 +192,18 @@ pub fn lod_image_error_with(
     opts: &LodImageOptions,
 ) -> LodImageReport {
     let (centre, radius_m) = bounding_sphere(reference.mesh, candidate.mesh);
+    if let Err(problem) = view.check() {
+        return LodImageReport {
+            view: *view,
+            centre,
+            radius_m,
+            views: 0,
+            distances: Vec::new(),
+            switch_distance_m: 0.0,
+            never_passes: true,
+            problem: Some(problem),
+        };
+    }
     let mut distances: Vec<f64> = distances_m.iter().copied().filter(|d| d.is_finite() && *d > 0.0).collect();
     distances.sort_by(f64::total_cmp);
     let azimuths = opts.azimuths.max(1) as usize;
@@ -209,7 +242,16 @@ pub fn lod_image_error_with(
         })
         .collect();
     let (switch_distance_m, never_passes) = switch_distance(&rows, view.max_error_px);
-    LodImageReport { view: *view, centre, radius_m, views, distances: rows, switch_distance_m, never_passes }
+    LodImageReport {
+        view: *view,
+        centre,
+        radius_m,
+        views,
+        distances: rows,
+        switch_distance_m,
+        never_passes,
+        problem: None,
+    }
 }
 
 /// Centre of the reference's bounding box and the radius around it that encloses both meshes
@@ -257,14 +299,15 @@ fn measure_view(
     azimuth_deg: f64,
     elevation_deg: f64,
 ) -> (ImageError, [u32; 2], f64) {
-    let ss = opts.supersample.max(1);
+    let ss = opts.supersample.clamp(1, MAX_RENDER_SIDE_PX);
     let margin_px = 2.0;
     let diameter = view.projected_diameter_px(radius_m, distance_m) + 2.0 * margin_px;
     // The object's extent, but never more than the screen shows.
     let want = [diameter.min(view.width_px), diameter.min(view.height_px())];
-    let max_side = opts.max_side_px.max(opts.min_side_px).max(1) as f64;
-    let shrink = (max_side / want[0].max(want[1])).min(1.0);
-    let side = |px: f64| ((px * shrink).ceil() as u32).max(opts.min_side_px).max(1);
+    let max_side = opts.max_side_px.clamp(1, MAX_RENDER_SIDE_PX / ss);
+    let min_side = opts.min_side_px.clamp(1, max_side);
+    let shrink = (max_side as f64 / want[0].max(want[1])).min(1.0);
+    let side = |px: f64| ((px * shrink).ceil() as u32).clamp(min_side, max_side);
     let canvas_px = [side(want[0]), side(want[1])];
     let focal_rendered = view.focal_px() * shrink * ss as f64;
     let width = (canvas_px[0] * ss).min(crate::bake::raster::MAX_CANVAS_SIDE);
@@ -375,5 +418,17 @@ mod tests {
         assert!((c - 2.0 * 0.5 * v.focal_px() / 20.0 / 1080.0).abs() < 1e-4);
         assert!((v.distance_for_coverage(0.5, c) - 20.0).abs() < 1e-9);
         assert_eq!(v.screen_coverage(1.0, 0.5), f64::INFINITY);
+        assert!(v.check().is_ok());
+        for bad in [
+            ScreenView { width_px: f64::NAN, ..v },
+            ScreenView { fov_x_deg: 0.0, ..v },
+            ScreenView { max_error_px: -1.0, ..v },
+        ] {
+            assert!(bad.check().is_err());
+            let empty = Mesh::default();
+            let r = Renderable { mesh: &empty, materials: &[], textures: &[] };
+            let report = lod_image_error(&r, &r, &bad, &[10.0]);
+            assert!(report.problem.is_some() && report.never_passes && report.distances.is_empty());
+        }
     }
 }
