@@ -1,0 +1,296 @@
+//! Draws a [`Mesh`] with its glTF metallic-roughness materials reduced to what a billboard bake
+//! and an image comparison need: base colour × base-colour texture (× vertex colour on request),
+//! the glTF alpha modes as alpha tests, back-face culling of single-sided materials, and either no
+//! lighting or a Lambert term (Lambert, "Photometria", 1760: diffuse ∝ cos of the light angle).
+
+use crate::bake::image::Image;
+use crate::bake::raster::{Camera, Canvas, Cull, DrawOptions, DrawStats, Fragment};
+use crate::mesh::{AlphaMode, Material, Mesh, Primitive};
+
+/// Alpha threshold [`AlphaMode::Blend`] is drawn with: without sorting there is no blending, so a
+/// blended material is treated as a mask at ½ (the coverage a blend would show most of).
+pub const BLEND_AS_MASK_CUTOFF: f32 = 0.5;
+
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Shading {
+    /// Colour as the material gives it (what atlas baking uses: the engine lights the billboard).
+    #[default]
+    Unlit,
+    /// Colour × (ambient + (1 − ambient) · max(0, n·l)), with `light_dir` pointing *towards* the
+    /// light in world space (normalised here) and n the interpolated vertex normal (else the
+    /// triangle's own) moved to world space. Double-sided materials use |n·l|: a leaf is lit on both
+    /// faces. `ambient` is clamped to 0..1.
+    Lambert { light_dir: [f32; 3], ambient: f32 },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderOptions {
+    /// Multiply by COLOR_0. Off by default: grass and trees keep wind data there, not colour.
+    pub use_vertex_colors: bool,
+    pub shading: Shading,
+    /// Draw each primitive in parallel bands (same output either way; off when the caller already
+    /// runs many renders in parallel).
+    pub parallel: bool,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions { use_vertex_colors: false, shading: Shading::Unlit, parallel: true }
+    }
+}
+
+/// Draws every primitive of `mesh` in order into `canvas` as `cam` sees it, the mesh placed in the
+/// world by `object_to_world` (3×4: columns x, y, z axes and translation). A primitive's material
+/// is `materials[prim.material]` (the glTF default material when absent or out of range), its
+/// texture `textures[material.base_color_texture]` (none when out of range), sampled bilinearly
+/// with repeat wrapping. Written alpha is 1: Opaque writes every fragment, Mask discards alpha
+/// below its cutoff, Blend is drawn as a mask at [`BLEND_AS_MASK_CUTOFF`]. Depth-tested.
+pub fn render_mesh(
+    canvas: &mut Canvas,
+    cam: &Camera,
+    object_to_world: &[[f64; 4]; 3],
+    mesh: &Mesh,
+    materials: &[Material],
+    textures: &[Image],
+    opts: &RenderOptions,
+) -> DrawStats {
+    let default_material = Material::default();
+    let normal_matrix = cofactor3(object_to_world);
+    let mut total = DrawStats::default();
+    for prim in &mesh.primitives {
+        let material = prim.material.and_then(|m| materials.get(m)).unwrap_or(&default_material);
+        let texture = material.base_color_texture.and_then(|t| textures.get(t));
+        let cull = if material.double_sided { Cull::None } else { Cull::Back };
+        let draw = DrawOptions { cull, ..DrawOptions::default() };
+        let lighting = match opts.shading {
+            Shading::Unlit => None,
+            Shading::Lambert { light_dir, ambient } => Some(Lighting::new(prim, &normal_matrix, light_dir, ambient)),
+        };
+        let shader = |f: &Fragment| shade(f, material, texture, opts.use_vertex_colors, lighting.as_ref());
+        let stats = if opts.parallel {
+            canvas.draw_camera_par(cam, object_to_world, prim, &draw, shader)
+        } else {
+            canvas.draw_camera(cam, object_to_world, prim, &draw, shader)
+        };
+        total.triangles += stats.triangles;
+        total.culled += stats.culled;
+        total.skipped += stats.skipped;
+        total.clipped += stats.clipped;
+        total.fragments += stats.fragments;
+    }
+    total
+}
+
+/// The colour of one fragment, or None when the alpha test discards it.
+#[inline]
+fn shade(
+    f: &Fragment,
+    material: &Material,
+    texture: Option<&Image>,
+    use_vertex_colors: bool,
+    lighting: Option<&Lighting>,
+) -> Option<[f32; 4]> {
+    let mut c = material.base_color;
+    if let Some(t) = texture {
+        let s = t.sample_bilinear(f.uv);
+        c = [c[0] * s[0], c[1] * s[1], c[2] * s[2], c[3] * s[3]];
+    }
+    if use_vertex_colors {
+        c = [c[0] * f.color[0], c[1] * f.color[1], c[2] * f.color[2], c[3] * f.color[3]];
+    }
+    let cutoff = match material.alpha_mode {
+        AlphaMode::Opaque => None,
+        AlphaMode::Mask { cutoff } => Some(cutoff),
+        AlphaMode::Blend => Some(BLEND_AS_MASK_CUTOFF),
+    };
+    // A NaN alpha is discarded too.
+    if cutoff.is_some_and(|cut| c[3].is_nan() || c[3] < cut) {
+        return None;
+    }
+    if let Some(light) = lighting {
+        let k = light.factor(f, material.double_sided);
+        c = [c[0] * k, c[1] * k, c[2] * k, c[3]];
+    }
+    Some([c[0], c[1], c[2], 1.0])
+}
+
+/// What the Lambert term needs, prepared once per primitive.
+struct Lighting {
+    /// Object → world for normals: the cofactor matrix of the linear part (the inverse transpose
+    /// up to a positive scale, which the normalisation removes; defined for singular matrices too).
+    normal_matrix: [[f64; 3]; 3],
+    light: [f64; 3],
+    ambient: f32,
+    /// Per-triangle object-space normals when the primitive has no vertex normals.
+    face_normals: Option<Vec<[f32; 3]>>,
+}
+
+impl Lighting {
+    fn new(prim: &Primitive, normal_matrix: &[[f64; 3]; 3], light_dir: [f32; 3], ambient: f32) -> Lighting {
+        let l = light_dir.map(|v| v as f64);
+        let len = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
+        // A zero or broken light direction lights from straight above.
+        let light = if len > 0.0 && len.is_finite() { l.map(|v| v / len) } else { [0.0, 1.0, 0.0] };
+        let face_normals = (prim.normals.len() != prim.positions.len()).then(|| {
+            (0..prim.triangle_count())
+                .map(|t| {
+                    let ok = prim.indices[3 * t..3 * t + 3].iter().all(|&i| (i as usize) < prim.positions.len());
+                    if ok {
+                        prim.triangle_cross(t).map(|v| v as f32)
+                    } else {
+                        [0.0; 3]
+                    }
+                })
+                .collect()
+        });
+        let ambient = if ambient.is_nan() { 0.0 } else { ambient.clamp(0.0, 1.0) };
+        Lighting { normal_matrix: *normal_matrix, light, ambient, face_normals }
+    }
+
+    fn factor(&self, f: &Fragment, double_sided: bool) -> f32 {
+        let n = match &self.face_normals {
+            Some(faces) => faces.get(f.triangle as usize).copied().unwrap_or([0.0; 3]),
+            None => f.normal,
+        };
+        let m = &self.normal_matrix;
+        let nw = [0, 1, 2].map(|r| m[r][0] * n[0] as f64 + m[r][1] * n[1] as f64 + m[r][2] * n[2] as f64);
+        let len = (nw[0] * nw[0] + nw[1] * nw[1] + nw[2] * nw[2]).sqrt();
+        let cos = if len > 0.0 && len.is_finite() {
+            (nw[0] * self.light[0] + nw[1] * self.light[1] + nw[2] * self.light[2]) / len
+        } else {
+            // No usable normal: light it fully rather than paint it black.
+            1.0
+        };
+        let diffuse = if double_sided { cos.abs() } else { cos.max(0.0) } as f32;
+        self.ambient + (1.0 - self.ambient) * diffuse
+    }
+}
+
+/// Cofactor matrix of the 3×3 linear part of a 3×4 affine matrix.
+fn cofactor3(m: &[[f64; 4]; 3]) -> [[f64; 3]; 3] {
+    let a = |r: usize, c: usize| m[r][c];
+    let mut out = [[0.0; 3]; 3];
+    for (r, row) in out.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            let (r1, r2) = ((r + 1) % 3, (r + 2) % 3);
+            let (c1, c2) = ((c + 1) % 3, (c + 2) % 3);
+            *v = a(r1, c1) * a(r2, c2) - a(r1, c2) * a(r2, c1);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bake::raster::OrthoView;
+
+    const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+
+    /// Looking down −Z at x, y ∈ [0, 4]: one pixel per metre, x right, y up.
+    fn front_view() -> Camera {
+        Camera::Ortho(OrthoView {
+            origin: [0.0, 4.0, 10.0],
+            right: [1.0, 0.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            forward: [0.0, 0.0, -1.0],
+            pixels_per_metre: 1.0,
+            width: 4,
+            height: 4,
+        })
+    }
+
+    fn quad(normal_z: f32) -> Primitive {
+        Primitive {
+            positions: vec![[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [4.0, 4.0, 0.0], [0.0, 4.0, 0.0]],
+            normals: vec![[0.0, 0.0, normal_z]; 4],
+            uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]],
+            indices: vec![0, 1, 2, 0, 2, 3],
+            material: Some(0),
+            ..Primitive::default()
+        }
+    }
+
+    #[test]
+    fn cofactor_of_a_scale_is_the_inverse_transpose_up_to_scale() {
+        let m = [[2.0, 0.0, 0.0, 5.0], [0.0, 3.0, 0.0, 0.0], [0.0, 0.0, 4.0, 0.0]];
+        assert_eq!(cofactor3(&m), [[12.0, 0.0, 0.0], [0.0, 8.0, 0.0], [0.0, 0.0, 6.0]]);
+    }
+
+    #[test]
+    fn lambert_lights_by_the_angle_and_both_sides_when_double_sided() {
+        let light = Shading::Lambert { light_dir: [0.0, 0.6, 0.8], ambient: 0.25 };
+        let opts = RenderOptions { shading: light, ..RenderOptions::default() };
+        let mesh = Mesh { primitives: vec![quad(1.0)], ..Mesh::default() };
+        let mat = |double_sided| Material { base_color: [0.5, 1.0, 1.0, 1.0], double_sided, ..Material::default() };
+        let mut c = front_view().canvas([0.0; 4]).unwrap();
+        render_mesh(&mut c, &front_view(), &IDENTITY, &mesh, &[mat(false)], &[], &opts);
+        let lit = 0.25 + 0.75 * 0.8;
+        assert!((c.color[5][0] - 0.5 * lit).abs() < 1e-6 && (c.color[5][1] - lit).abs() < 1e-6);
+        // the normal turned away: single-sided gets only ambient, double-sided |n·l|
+        let away = Mesh { primitives: vec![quad(-1.0)], ..Mesh::default() };
+        let mut c = front_view().canvas([0.0; 4]).unwrap();
+        render_mesh(&mut c, &front_view(), &IDENTITY, &away, &[mat(false)], &[], &opts);
+        assert!((c.color[5][1] - 0.25).abs() < 1e-6);
+        let mut c = front_view().canvas([0.0; 4]).unwrap();
+        render_mesh(&mut c, &front_view(), &IDENTITY, &away, &[mat(true)], &[], &opts);
+        assert!((c.color[5][1] - lit).abs() < 1e-6);
+        // no vertex normals: the face normal (+Z for this winding) is used
+        let mut flat = quad(1.0);
+        flat.normals.clear();
+        let mut c = front_view().canvas([0.0; 4]).unwrap();
+        render_mesh(
+            &mut c,
+            &front_view(),
+            &IDENTITY,
+            &Mesh { primitives: vec![flat], ..Mesh::default() },
+            &[mat(false)],
+            &[],
+            &opts,
+        );
+        assert!((c.color[5][1] - lit).abs() < 1e-6);
+    }
+
+    #[test]
+    fn single_sided_back_faces_are_culled_and_vertex_colours_are_opt_in() {
+        let mut back = quad(1.0);
+        back.indices = vec![0, 2, 1, 0, 3, 2];
+        back.colors = vec![[0.5, 0.5, 0.5, 1.0]; 4];
+        let mesh = Mesh { primitives: vec![back], ..Mesh::default() };
+        let one_side = Material::default();
+        let mut c = front_view().canvas([0.0; 4]).unwrap();
+        let s = render_mesh(
+            &mut c,
+            &front_view(),
+            &IDENTITY,
+            &mesh,
+            std::slice::from_ref(&one_side),
+            &[],
+            &RenderOptions::default(),
+        );
+        assert_eq!((s.triangles, s.culled, s.fragments), (0, 2, 0));
+        let two = Material { double_sided: true, ..one_side };
+        let mut c = front_view().canvas([0.0; 4]).unwrap();
+        render_mesh(
+            &mut c,
+            &front_view(),
+            &IDENTITY,
+            &mesh,
+            std::slice::from_ref(&two),
+            &[],
+            &RenderOptions::default(),
+        );
+        assert!(c.color.iter().all(|p| *p == [1.0; 4]));
+        let vc = RenderOptions { use_vertex_colors: true, ..RenderOptions::default() };
+        render_mesh(
+            &mut c,
+            &front_view(),
+            &[[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.0]],
+            &mesh,
+            &[two],
+            &[],
+            &vc,
+        );
+        assert!(c.color.iter().all(|p| *p == [0.5, 0.5, 0.5, 1.0]));
+    }
+}

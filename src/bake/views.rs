@@ -1,0 +1,434 @@
+//! LoD image analyzer: renders a reference and a candidate level of detail with the baker from 8
+//! azimuths × 3 elevations at each test distance, at the size the object has on a given screen,
+//! and measures the image error ([`compare`]); the switch distance is where the silhouette error
+//! falls under a pixel tolerance for good. This is the image-space LoD metric of Lindstrom & Turk,
+//! "Image-driven simplification" (ACM TOG 2000), used here to place the switch instead of to guide
+//! the simplification.
+
+use rayon::prelude::*;
+
+use crate::bake::compare::{compare, ImageError};
+use crate::bake::image::Image;
+use crate::bake::raster::{Camera, Canvas, PerspectiveView};
+use crate::bake::render::{render_mesh, RenderOptions, Shading};
+use crate::mesh::{Material, Mesh};
+
+/// The screen the errors are measured for. Height is `width_px` · 9/16 (a 16:9 screen).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct ScreenView {
+    pub width_px: f64,
+    /// Horizontal field of view.
+    pub fov_x_deg: f64,
+    /// Largest silhouette error (mean displacement, [`ImageError::edge_error_px`]) accepted, in
+    /// screen pixels.
+    pub max_error_px: f64,
+}
+
+impl Default for ScreenView {
+    fn default() -> Self {
+        ScreenView { width_px: 1920.0, fov_x_deg: 60.0, max_error_px: 1.0 }
+    }
+}
+
+/// Screen height / width.
+const ASPECT_HEIGHT: f64 = 9.0 / 16.0;
+
+/// Largest side of a rendered (supersampled) view: two 4096² canvases are 0.7 GB, per thread.
+/// `max_side_px` is lowered to fit (the errors then scaled up to screen pixels, as for any cap).
+pub const MAX_RENDER_SIDE_PX: u32 = 4096;
+
+impl ScreenView {
+    /// A finite screen width over 0, a field of view in (0°, 179°] and a tolerance over 0.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.width_px.is_finite() && self.width_px >= 1.0) {
+            return Err(format!("screen width_px = {} must be at least 1 pixel", self.width_px));
+        }
+        if !(self.fov_x_deg > 0.0 && self.fov_x_deg <= 179.0) {
+            return Err(format!("fov_x_deg = {} must be in (0, 179] degrees", self.fov_x_deg));
+        }
+        if !(self.max_error_px.is_finite() && self.max_error_px > 0.0) {
+            return Err(format!("max_error_px = {} must be a positive number of pixels", self.max_error_px));
+        }
+        Ok(())
+    }
+
+    pub fn height_px(&self) -> f64 {
+        self.width_px * ASPECT_HEIGHT
+    }
+
+    /// Focal length in pixels: (width/2) / tan(fov_x/2) (1662.8 px for 1920 px and 60°).
+    pub fn focal_px(&self) -> f64 {
+        self.width_px * 0.5 / (self.fov_x_deg.to_radians() * 0.5).tan()
+    }
+
+    /// Diameter in pixels of a sphere of `radius_m` whose centre is `distance_m` from the eye, seen
+    /// at the centre of the screen: 2·f·tan(asin(r/d)). Infinite when the eye is inside it.
+    pub fn projected_diameter_px(&self, radius_m: f64, distance_m: f64) -> f64 {
+        if distance_m.is_nan() || radius_m.is_nan() || distance_m <= radius_m {
+            return f64::INFINITY;
+        }
+        let s = radius_m / distance_m;
+        2.0 * self.focal_px() * s / (1.0 - s * s).sqrt()
+    }
+
+    /// Screen coverage as MSFT_lod and our manifests use it: the projected bounding-sphere diameter
+    /// ([`ScreenView::projected_diameter_px`]) divided by the screen *height* (width · 9/16). It
+    /// exceeds 1 when the object is taller than the screen; infinite with the eye inside the sphere.
+    pub fn screen_coverage(&self, radius_m: f64, distance_m: f64) -> f64 {
+        self.projected_diameter_px(radius_m, distance_m) / self.height_px()
+    }
+
+    /// The distance at which a sphere of `radius_m` has screen coverage `coverage` (the inverse of
+    /// [`ScreenView::screen_coverage`]).
+    pub fn distance_for_coverage(&self, radius_m: f64, coverage: f64) -> f64 {
+        // D = coverage·H = 2 f r / sqrt(d² − r²)  ⇒  d = r · sqrt(1 + (2f/D)²).
+        let d_px = coverage * self.height_px();
+        radius_m * (1.0 + (2.0 * self.focal_px() / d_px).powi(2)).sqrt()
+    }
+}
+
+/// A mesh with what it needs to be drawn.
+#[derive(Debug, Clone, Copy)]
+pub struct Renderable<'a> {
+    pub mesh: &'a Mesh,
+    pub materials: &'a [Material],
+    pub textures: &'a [Image],
+}
+
+/// How [`lod_image_error_with`] renders.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct LodImageOptions {
+    /// Samples per output pixel along each axis.
+    pub supersample: u32,
+    /// Smallest canvas side in output pixels (the object centred, at its on-screen size).
+    pub min_side_px: u32,
+    /// Largest canvas side in output pixels: a view that would be larger is rendered at reduced
+    /// resolution and its pixel errors scaled back up to screen pixels (an estimate, flagged by
+    /// [`DistanceError::screen_px_per_rendered_px`] > 1).
+    pub max_side_px: u32,
+    /// Azimuths, evenly spaced from 0° (looking towards −Z from +Z).
+    pub azimuths: u32,
+    /// Elevations of the eye above the horizon of the object's centre.
+    pub elevations_deg: Vec<f64>,
+    /// Alpha at which a rendered sample counts as covered (renders are alpha 0 or 1).
+    pub cutoff: f32,
+}
+
+impl Default for LodImageOptions {
+    fn default() -> Self {
+        LodImageOptions {
+            supersample: 4,
+            min_side_px: 16,
+            max_side_px: 256,
+            azimuths: 8,
+            elevations_deg: vec![10.0, 40.0, 75.0],
+            cutoff: 0.5,
+        }
+    }
+}
+
+/// The errors over all views at one distance.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct DistanceError {
+    /// From the eye to the reference's bounding-sphere centre.
+    pub distance_m: f64,
+    pub worst_iou: f64,
+    pub mean_iou: f64,
+    pub worst_color_rmse: f64,
+    pub mean_color_rmse: f64,
+    /// In screen pixels.
+    pub worst_edge_error_px: f64,
+    pub mean_edge_error_px: f64,
+    /// `worst_edge_error_px` ≤ the view's `max_error_px`.
+    pub passes: bool,
+    /// Canvas size in output pixels (before supersampling).
+    pub canvas_px: [u32; 2],
+    /// 1 when rendered at screen resolution; above 1 when capped by `max_side_px`.
+    pub screen_px_per_rendered_px: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct LodImageReport {
+    pub view: ScreenView,
+    /// Reference bounding sphere (centre of its bounding box, radius enclosing both meshes).
+    pub centre: [f64; 3],
+    pub radius_m: f64,
+    /// Views per distance (azimuths × elevations).
+    pub views: usize,
+    /// Tested distances in increasing order (non-finite or non-positive ones are left out).
+    pub distances: Vec<DistanceError>,
+    /// The smallest distance from which on every tested distance passes, log-interpolated between
+    /// the last failing and the first passing one (error against distance on log-log axes); 0 when
+    /// all pass or none was tested; the largest tested distance when the last one fails.
+    pub switch_distance_m: f64,
+    /// The largest tested distance still fails: `switch_distance_m` is a lower bound only.
+    pub never_passes: bool,
+    /// Why nothing was measured (an invalid [`ScreenView`]); then `distances` is empty and
+    /// `never_passes` true, so a caller that ignores this cannot mistake it for a pass.
+    pub problem: Option<String>,
+}
+
+/// [`lod_image_error_with`] with the default options (4× supersampling, 8 × 3 views).
+pub fn lod_image_error(
+    reference: &Renderable,
+    candidate: &Renderable,
+    view: &ScreenView,
+    distances_m: &[f64],
+) -> LodImageReport {
+    lod_image_error_with(reference, candidate, view, distances_m, &LodImageOptions::default())
+}
+
+/// Renders `reference` and `candidate` (both in the same object space, unlit, alpha-tested as
+/// their materials say) with perspective cameras looking at the reference's bounding-sphere
+/// centre from every azimuth × elevation at each distance, the focal length that of `view`, and
+/// compares them ([`compare`]). The canvas is the object's on-screen extent (the sphere's projected
+/// diameter plus a margin, no larger than the screen, at least `min_side_px`), so pixel errors are
+/// screen pixels. Parallel over views; the result does not depend on the thread count.
+pub fn lod_image_error_with(
+    reference: &Renderable,
+    candidate: &Renderable,
+    view: &ScreenView,
+    distances_m: &[f64],
+    opts: &LodImageOptions,
+) -> LodImageReport {
+    let (centre, radius_m) = bounding_sphere(reference.mesh, candidate.mesh);
+    if let Err(problem) = view.check() {
+        return LodImageReport {
+            view: *view,
+            centre,
+            radius_m,
+            views: 0,
+            distances: Vec::new(),
+            switch_distance_m: 0.0,
+            never_passes: true,
+            problem: Some(problem),
+        };
+    }
+    let mut distances: Vec<f64> = distances_m.iter().copied().filter(|d| d.is_finite() && *d > 0.0).collect();
+    distances.sort_by(f64::total_cmp);
+    let azimuths = opts.azimuths.max(1) as usize;
+    let elevations = if opts.elevations_deg.is_empty() { vec![0.0] } else { opts.elevations_deg.clone() };
+    let views = azimuths * elevations.len();
+    let jobs: Vec<(usize, usize)> = (0..distances.len()).flat_map(|d| (0..views).map(move |v| (d, v))).collect();
+    let results: Vec<(ImageError, [u32; 2], f64)> = jobs
+        .par_iter()
+        .map(|&(d, v)| {
+            let azimuth = (v % azimuths) as f64 * 360.0 / azimuths as f64;
+            let elevation = elevations[v / azimuths];
+            measure_view(reference, candidate, view, opts, centre, radius_m, distances[d], azimuth, elevation)
+        })
+        .collect();
+    let rows: Vec<DistanceError> = distances
+        .iter()
+        .enumerate()
+        .map(|(d, &distance_m)| {
+            let per = &results[d * views..(d + 1) * views];
+            let n = per.len() as f64;
+            let worst = |f: fn(&ImageError) -> f64| per.iter().map(|r| f(&r.0)).fold(f64::NEG_INFINITY, f64::max);
+            let mean = |f: fn(&ImageError) -> f64| per.iter().map(|r| f(&r.0)).sum::<f64>() / n;
+            let worst_edge = worst(|e| e.edge_error_px);
+            DistanceError {
+                distance_m,
+                worst_iou: per.iter().map(|r| r.0.iou).fold(f64::INFINITY, f64::min),
+                mean_iou: mean(|e| e.iou),
+                worst_color_rmse: worst(|e| e.color_rmse),
+                mean_color_rmse: mean(|e| e.color_rmse),
+                worst_edge_error_px: worst_edge,
+                mean_edge_error_px: mean(|e| e.edge_error_px),
+                passes: worst_edge <= view.max_error_px,
+                canvas_px: per.iter().map(|r| r.1).max().unwrap_or([0, 0]),
+                screen_px_per_rendered_px: per.iter().map(|r| r.2).fold(1.0, f64::max),
+            }
+        })
+        .collect();
+    let (switch_distance_m, never_passes) = switch_distance(&rows, view.max_error_px);
+    LodImageReport {
+        view: *view,
+        centre,
+        radius_m,
+        views,
+        distances: rows,
+        switch_distance_m,
+        never_passes,
+        problem: None,
+    }
+}
+
+/// Centre of the reference's bounding box and the radius around it that encloses both meshes
+/// (the candidate may be wider, e.g. billboards); at least 1 mm.
+fn bounding_sphere(reference: &Mesh, candidate: &Mesh) -> ([f64; 3], f64) {
+    let points = |m: &Mesh| {
+        m.primitives
+            .iter()
+            .flat_map(|p| p.positions.iter())
+            .filter(|q| q.iter().all(|v| v.is_finite()))
+            .map(|q| q.map(|v| v as f64))
+            .collect::<Vec<_>>()
+    };
+    let (r, c) = (points(reference), points(candidate));
+    // An empty reference (nothing to see) still gets a view of the candidate.
+    let framed = if r.is_empty() { &c } else { &r };
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for q in framed {
+        for k in 0..3 {
+            lo[k] = lo[k].min(q[k]);
+            hi[k] = hi[k].max(q[k]);
+        }
+    }
+    let centre = if lo[0].is_finite() { [0, 1, 2].map(|k| 0.5 * (lo[k] + hi[k])) } else { [0.0; 3] };
+    let radius = r
+        .iter()
+        .chain(&c)
+        .map(|q| ((q[0] - centre[0]).powi(2) + (q[1] - centre[1]).powi(2) + (q[2] - centre[2]).powi(2)).sqrt())
+        .fold(1e-3, f64::max);
+    (centre, radius)
+}
+
+/// Renders both meshes for one view and compares them: (error in screen pixels, canvas size in
+/// output pixels, screen pixels per rendered pixel).
+#[allow(clippy::too_many_arguments)]
+fn measure_view(
+    reference: &Renderable,
+    candidate: &Renderable,
+    view: &ScreenView,
+    opts: &LodImageOptions,
+    centre: [f64; 3],
+    radius_m: f64,
+    distance_m: f64,
+    azimuth_deg: f64,
+    elevation_deg: f64,
+) -> (ImageError, [u32; 2], f64) {
+    let ss = opts.supersample.clamp(1, MAX_RENDER_SIDE_PX);
+    let margin_px = 2.0;
+    let diameter = view.projected_diameter_px(radius_m, distance_m) + 2.0 * margin_px;
+    // The object's extent, but never more than the screen shows.
+    let want = [diameter.min(view.width_px), diameter.min(view.height_px())];
+    let max_side = opts.max_side_px.clamp(1, MAX_RENDER_SIDE_PX / ss);
+    let min_side = opts.min_side_px.clamp(1, max_side);
+    let shrink = (max_side as f64 / want[0].max(want[1])).min(1.0);
+    let side = |px: f64| ((px * shrink).ceil() as u32).clamp(min_side, max_side);
+    let canvas_px = [side(want[0]), side(want[1])];
+    let focal_rendered = view.focal_px() * shrink * ss as f64;
+    let width = (canvas_px[0] * ss).min(crate::bake::raster::MAX_CANVAS_SIDE);
+    let height = (canvas_px[1] * ss).min(crate::bake::raster::MAX_CANVAS_SIDE);
+    let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
+    let dir = [el.cos() * az.sin(), el.sin(), el.cos() * az.cos()];
+    let cam = Camera::Perspective(PerspectiveView {
+        eye: [0, 1, 2].map(|k| centre[k] + distance_m * dir[k]),
+        target: centre,
+        up: [0.0, 1.0, 0.0],
+        fov_x_deg: (2.0 * (width as f64 * 0.5 / focal_rendered).atan()).to_degrees(),
+        width,
+        height,
+        // Close enough to keep what is in front of the eye, far enough for depth precision.
+        near: (distance_m * 1e-3).max(1e-4),
+    });
+    let render = |r: &Renderable| -> Image {
+        match cam.canvas([0.0; 4]) {
+            Ok(mut canvas) => {
+                draw(&mut canvas, &cam, r);
+                Image::from_canvas_owned(canvas)
+            }
+            // Cannot happen for the sizes above; an empty image keeps the analyzer total.
+            Err(_) => Image { width: 0, height: 0, pixels: Vec::new() },
+        }
+    };
+    let (a, b) = (render(reference), render(candidate));
+    let mut error = compare(&a, &b, opts.cutoff, ss);
+    error.edge_error_px /= shrink;
+    (error, canvas_px, 1.0 / shrink)
+}
+
+fn draw(canvas: &mut Canvas, cam: &Camera, r: &Renderable) {
+    const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+    // Serial inside a view: the views themselves run in parallel.
+    let opts = RenderOptions { use_vertex_colors: false, shading: Shading::Unlit, parallel: false };
+    render_mesh(canvas, cam, &IDENTITY, r.mesh, r.materials, r.textures, &opts);
+}
+
+/// (switch distance, never passes) from the rows in increasing distance.
+fn switch_distance(rows: &[DistanceError], max_error_px: f64) -> (f64, bool) {
+    let Some(last_fail) = rows.iter().rposition(|r| !r.passes) else {
+        return (0.0, false);
+    };
+    let Some(pass) = rows.get(last_fail + 1) else {
+        return (rows[last_fail].distance_m, true);
+    };
+    let fail = &rows[last_fail];
+    let (e_f, e_p, tau) = (fail.worst_edge_error_px, pass.worst_edge_error_px, max_error_px);
+    let (l_f, l_p) = (fail.distance_m.ln(), pass.distance_m.ln());
+    // Where the error crosses the tolerance: linear in log-log when both errors are positive
+    // (error ∝ 1/distance is a straight line there), else linear in error against log distance.
+    let t = if e_p > 0.0 && tau > 0.0 && e_f.is_finite() {
+        (e_f.ln() - tau.ln()) / (e_f.ln() - e_p.ln())
+    } else if e_f.is_finite() && e_f > e_p {
+        (e_f - tau) / (e_f - e_p)
+    } else {
+        1.0
+    };
+    let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 1.0 };
+    ((l_f + t * (l_p - l_f)).exp(), false)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(distance_m: f64, worst: f64) -> DistanceError {
+        DistanceError {
+            distance_m,
+            worst_iou: 1.0,
+            mean_iou: 1.0,
+            worst_color_rmse: 0.0,
+            mean_color_rmse: 0.0,
+            worst_edge_error_px: worst,
+            mean_edge_error_px: worst,
+            passes: worst <= 1.0,
+            canvas_px: [16, 16],
+            screen_px_per_rendered_px: 1.0,
+        }
+    }
+
+    #[test]
+    fn switch_distance_interpolates_in_log_log() {
+        // error = 40 / d: crosses 1 px at 40 m exactly
+        let rows: Vec<DistanceError> = [10.0, 20.0, 80.0, 160.0].iter().map(|&d| row(d, 40.0 / d)).collect();
+        let (d, never) = switch_distance(&rows, 1.0);
+        assert!((d - 40.0).abs() < 1e-9 && !never, "{d}");
+        // a later failure moves the switch past it
+        let mut bumpy = rows.clone();
+        bumpy[3] = row(160.0, 1.5);
+        let (d, never) = switch_distance(&bumpy, 1.0);
+        assert!((d - 160.0).abs() < 1e-9 && never);
+        let all_pass: Vec<DistanceError> = [10.0, 20.0].iter().map(|&d| row(d, 0.0)).collect();
+        assert_eq!(switch_distance(&all_pass, 1.0), (0.0, false));
+        // a perfect pass after a failure: linear in error
+        let (d, _) = switch_distance(&[row(10.0, 3.0), row(20.0, 0.0)], 1.0);
+        assert!(d > 10.0 && d < 20.0);
+        assert_eq!(switch_distance(&[], 1.0), (0.0, false));
+    }
+
+    #[test]
+    fn screen_coverage_and_its_inverse() {
+        let v = ScreenView::default();
+        assert!((v.focal_px() - 1662.768).abs() < 1e-3);
+        let c = v.screen_coverage(0.5, 20.0);
+        // small-angle: 2 r f / d / 1080
+        assert!((c - 2.0 * 0.5 * v.focal_px() / 20.0 / 1080.0).abs() < 1e-4);
+        assert!((v.distance_for_coverage(0.5, c) - 20.0).abs() < 1e-9);
+        assert_eq!(v.screen_coverage(1.0, 0.5), f64::INFINITY);
+        assert!(v.check().is_ok());
+        for bad in [
+            ScreenView { width_px: f64::NAN, ..v },
+            ScreenView { fov_x_deg: 0.0, ..v },
+            ScreenView { max_error_px: -1.0, ..v },
+        ] {
+            assert!(bad.check().is_err());
+            let empty = Mesh::default();
+            let r = Renderable { mesh: &empty, materials: &[], textures: &[] };
+            let report = lod_image_error(&r, &r, &bad, &[10.0]);
+            assert!(report.problem.is_some() && report.never_passes && report.distances.is_empty());
+        }
+    }
+}
