@@ -17,9 +17,11 @@ pub struct ImageError {
     /// samples' colours / downsample² (premultiplied by coverage, i.e. over black), so a pixel
     /// covered in one image only counts its whole colour.
     pub color_rmse: f64,
-    /// Σ |cov_a − cov_b| / max(1, silhouette length of `a` in output pixels): the area between the
-    /// two silhouettes per unit of outline, i.e. the mean displacement of the silhouette along its
-    /// normal. A shape moved by d pixels scores d·|cos θ| on average over its outline; for a disc
+    /// Σ |cov_a − cov_b| / max(1, L), L the silhouette length of `a` in output pixels, at most the
+    /// perimeter of the box around both silhouettes: the area between the two silhouettes per unit
+    /// of outline, i.e. the mean displacement of the silhouette along its normal. The cap keeps
+    /// thin structures honest: a grass clump's blades have an outline many times its envelope's,
+    /// and a billboard that loses every blade must not pass for a small displacement. A shape moved by d pixels scores d·|cos θ| on average over its outline; for a disc
     /// that is 2d/π ≈ 0.64·d.
     pub edge_error_px: f64,
 }
@@ -66,8 +68,32 @@ pub fn compare(a: &Image, b: &Image, cutoff: f32, downsample: u32) -> ImageError
     }
     let iou = if union > 0.0 { inter / union } else { 1.0 };
     let color_rmse = if colour_pixels > 0 { (sq_err / (3 * colour_pixels) as f64).sqrt() } else { 0.0 };
-    let perimeter_px = mask_a.crofton_length() / ds as f64;
+    // thin structures (grass blades, twigs) have an outline far longer than the object's envelope:
+    // dividing by it would credit them for detail nobody can see, so the outline counted is at most
+    // the perimeter of the box around both silhouettes
+    let perimeter_px = (mask_a.crofton_length() / ds as f64).min(envelope_perimeter(&mask_a, &mask_b) / ds as f64);
     ImageError { iou, color_rmse, edge_error_px: diff / perimeter_px.max(1.0) }
+}
+
+/// Perimeter (in samples) of the axis-aligned box around the covered samples of `a` and `b`; 0
+/// when neither covers anything.
+fn envelope_perimeter(a: &Mask, b: &Mask) -> f64 {
+    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0usize, 0usize);
+    for y in 0..a.height {
+        for x in 0..a.width {
+            if a.get(x, y) || b.get(x, y) {
+                x0 = x0.min(x);
+                x1 = x1.max(x + 1);
+                y0 = y0.min(y);
+                y1 = y1.max(y + 1);
+            }
+        }
+    }
+    if x0 == usize::MAX {
+        0.0
+    } else {
+        2.0 * ((x1 - x0) + (y1 - y0)) as f64
+    }
 }
 
 /// Which samples of an image are covered (alpha ≥ cutoff), over a `width`×`height` extent with a
@@ -161,5 +187,40 @@ mod tests {
         }
         let len = silhouette_length(&sq, 0.5);
         assert!((len / 120.0 - 0.948).abs() < 0.01, "{len}");
+    }
+
+    #[test]
+    fn losing_thin_blades_is_not_a_small_displacement() {
+        // 20 one-pixel-wide vertical blades 60 px tall in a 100 × 100 image, against nothing: the
+        // blades' outline is ~2,400 px, their area 1,200 px; divided by the outline that would be
+        // a 0.5 px "displacement". The envelope (77 + 60)·2 = 274 px caps the outline: 4.4 px.
+        let mut blades = Image::new(100, 100, [0.0; 4]).unwrap();
+        for k in 0..20 {
+            for y in 20..80 {
+                blades.pixels[y * 100 + 5 + 4 * k][3] = 1.0;
+            }
+        }
+        let empty = Image::new(100, 100, [0.0; 4]).unwrap();
+        let e = compare(&blades, &empty, 0.5, 1);
+        assert!(e.iou == 0.0);
+        let envelope = 2.0 * ((82.0 - 5.0) + 60.0);
+        assert!((e.edge_error_px - 1200.0 / envelope).abs() < 1e-9, "{e:?}");
+        // a solid disc keeps its own (shorter) outline: shifted by 2 px it scores 2·2/π
+        let a = {
+            let mut img = Image::new(120, 120, [0.0; 4]).unwrap();
+            for y in 0..120 {
+                for x in 0..120 {
+                    let (dx, dy) = (x as f64 + 0.5 - 60.0, y as f64 + 0.5 - 60.0);
+                    if dx * dx + dy * dy <= 40.0 * 40.0 {
+                        img.pixels[y * 120 + x][3] = 1.0;
+                    }
+                }
+            }
+            img
+        };
+        let mut b = Image::new(120, 120, [0.0; 4]).unwrap();
+        b.blit(&a, 2, 0);
+        let e = compare(&a, &b, 0.5, 1);
+        assert!((e.edge_error_px - 4.0 / std::f64::consts::PI).abs() < 0.1, "{e:?}");
     }
 }

@@ -34,7 +34,7 @@ pub const SEARCH_BISECTIONS: usize = 3;
 /// Returns the measured rows (sorted by distance), the switch distance (the nearest distance known
 /// to pass: conservative) and whether even the farthest failed.
 pub fn switch_search(reference: &Renderable, candidate: &Renderable, view: &ScreenView) -> (Vec<DistanceError>, f64, bool) {
-    let opts = LodImageOptions { max_side_px: 128, supersample: 2, ..LodImageOptions::default() };
+    let opts = LodImageOptions { max_side_px: 128, supersample: 4, ..LodImageOptions::default() };
     let eval = |d: f64| lod_image_error_with(reference, candidate, view, &[d], &opts).distances.into_iter().next();
     let mut rows = Vec::new();
     let (mut pass, mut fail) = (None, None);
