@@ -208,7 +208,7 @@ pub fn demo_preset() -> Preset {
                 exclusions: vec![Exclusion { species: "tree".into(), radius_m: 1.5 }],
                 seed: 0,
                 max_instances: DEFAULT_MAX_INSTANCES,
-                look: PlantLook::Grass(GrassSettings { seed: species_look_seed(0, 0), ..GrassSettings::default() }),
+                look: PlantLook::Grass(GrassSettings { seed: species_look_seed(0, "grass", 0), ..GrassSettings::default() }),
             },
         ],
         scatter: ScatterSettings::default(),
@@ -882,12 +882,14 @@ struct Looks<'a> {
     scene_seed: u64,
 }
 
-/// Seed of a species' generated look: the scene seed mixed with the species' own offset.
-pub fn species_look_seed(scene_seed: u64, species_seed: u64) -> u64 {
-    crate::synth::mix64(scene_seed ^ crate::synth::mix64(species_seed.wrapping_add(0x6c6f_6f6b)))
+/// Seed of a species' generated look: the scene seed mixed with the species' name and its own
+/// offset (two grass species of one scene differ; renaming or `seed` reshuffles one alone).
+pub fn species_look_seed(scene_seed: u64, name: &str, species_seed: u64) -> u64 {
+    let name_hash = name.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3));
+    crate::synth::mix64(scene_seed ^ crate::synth::mix64(name_hash ^ crate::synth::mix64(species_seed.wrapping_add(0x6c6f_6f6b))))
 }
 
-fn parse_look(t: &Table<'_, '_>, kind: SpeciesKind, looks: &Looks<'_>, seed: u64, check_inputs: bool) -> Result<PlantLook, PresetError> {
+fn parse_look(t: &Table<'_, '_>, name: &str, kind: SpeciesKind, looks: &Looks<'_>, seed: u64, check_inputs: bool) -> Result<PlantLook, PresetError> {
     for (key, owner) in [("grass", SpeciesKind::Grass), ("flower", SpeciesKind::Flower)] {
         if let Some((k, _)) = t.get(key) {
             if kind != owner {
@@ -901,14 +903,14 @@ fn parse_look(t: &Table<'_, '_>, kind: SpeciesKind, looks: &Looks<'_>, seed: u64
     }
     Ok(match kind {
         SpeciesKind::Grass => {
-            let base = GrassSettings { seed: species_look_seed(looks.scene_seed, seed), ..looks.grass.clone() };
+            let base = GrassSettings { seed: species_look_seed(looks.scene_seed, name, seed), ..looks.grass.clone() };
             match t.get("grass") {
                 None => PlantLook::Grass(base),
                 Some((_, v)) => PlantLook::Grass(plants::apply_grass(&plants::sub_table(t, "grass", v)?, base, check_inputs)?),
             }
         }
         SpeciesKind::Flower => {
-            let base = FlowerSettings { seed: species_look_seed(looks.scene_seed, seed), ..looks.flower.clone() };
+            let base = FlowerSettings { seed: species_look_seed(looks.scene_seed, name, seed), ..looks.flower.clone() };
             match t.get("flower") {
                 None => PlantLook::Flower(base),
                 Some((_, v)) => PlantLook::Flower(plants::apply_flower(&plants::sub_table(t, "flower", v)?, base)?),
@@ -1047,7 +1049,7 @@ fn parse_species(
     let max_instances = t
         .integer("max_instances", 1..=MAX_MAX_INSTANCES, "max_instances = 5000000")?
         .map_or(DEFAULT_MAX_INSTANCES, |(n, _)| n as usize);
-    let look = parse_look(t, kind, looks, seed, check_inputs)?;
+    let look = parse_look(t, name, kind, looks, seed, check_inputs)?;
 
     let species = SpeciesSettings {
         name: name.to_string(),
