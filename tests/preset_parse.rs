@@ -621,6 +621,26 @@ fn species_invalid_values_are_refused_where_they_are() {
     assert!(e.starts_with("p.toml:9:") && e.contains("duplicate"), "{e}");
 }
 
+/// Jittered placement keeps no spacing, so a spacing it could not keep is refused while parsing,
+/// at the `min_spacing` value (before, the build refused it, without a position).
+#[test]
+fn species_jittered_with_a_spacing_is_refused_at_the_value() {
+    let grass = "[[species]]\nname = \"grass\"\nkind = \"grass\"\nmax_density = 4";
+    // explicit placement: line 9, the value starts at column 15
+    let e = species_error(&format!("{grass}\nplacement = \"jittered\"\nmin_spacing = 2.5"));
+    assert!(e.starts_with("p.toml:10:15: `min_spacing` = 2.5 is kept only by placement = \"poisson\""), "{e}");
+    assert!(e.contains("`grass` is placed \"jittered\""), "{e}");
+    assert!(e.contains("; remove `min_spacing` (or set it to 0), or set `placement = \"poisson\"`"), "{e}");
+    // jittered by default (grass), and a tree switched to jittered
+    let e = species_error(&format!("{grass}\nmin_spacing = 1"));
+    assert!(e.starts_with("p.toml:9:15: `min_spacing` = 1 is kept only by placement = \"poisson\""), "{e}");
+    let e = species_error(&format!("{TREE}\nmin_spacing = 6\nplacement = \"jittered\""));
+    assert!(e.starts_with("p.toml:9:15:") && e.contains("`oak` is placed \"jittered\""), "{e}");
+    // 0 stays the jittered default
+    let p = parse_preset(&with_species(&format!("{grass}\nplacement = \"jittered\"\nmin_spacing = 0")), Path::new("p.toml")).unwrap();
+    assert_eq!((p.species[0].placement, p.species[0].min_spacing_m), (Placement::Jittered, 0.0));
+}
+
 #[test]
 fn species_required_keys_and_names() {
     let e = species_error("[[species]]\nkind = \"tree\"\nmax_density = 1");

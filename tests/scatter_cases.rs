@@ -83,8 +83,10 @@ fn instances_sit_on_the_tin_surface() {
         let v = scatter_species(&t.surface, t.extent, &sp, None, None, &[], 32.0, 1).unwrap();
         assert!(v.len() > 10_000, "{}", v.len());
         let stats = analyze(&t.surface, t.extent, &sp, None, None, &v, 32.0, 0.0).unwrap();
-        assert_eq!(stats.off_surface, 0);
-        assert!(stats.max_height_error_m <= 1e-4, "{}", stats.max_height_error_m);
+        assert_eq!((stats.off_surface, stats.height_checked), (0, v.len()));
+        // the CSV's f64 values sit on the mesh up to rounding; scene.glb's f32 values up to f32's
+        assert!(stats.max_height_error_csv_m <= 1e-9, "{}", stats.max_height_error_csv_m);
+        assert!(stats.max_height_error_m <= 1e-4 && stats.max_height_error_m >= stats.max_height_error_csv_m, "{}", stats.max_height_error_m);
         // independent of the index: brute force over every triangle for a sample of instances
         let mut worst = 0.0f64;
         for inst in v.iter().step_by(v.len() / 300) {
@@ -96,6 +98,87 @@ fn instances_sit_on_the_tin_surface() {
         assert!(v.iter().all(|i| (i.rotation.iter().map(|q| q * q).sum::<f32>() - 1.0).abs() < 1e-5));
         assert!(v.iter().all(|i| (0.8..=1.2).contains(&i.scale[0]) && (0.0..360.0).contains(&i.yaw_deg)));
     }
+}
+
+/// Corners (x, y, z) of triangle `k` of the terrain's index list, in f64.
+fn corners(t: &Terrain, k: usize) -> [[f64; 3]; 3] {
+    [0, 1, 2].map(|c| t.positions[t.indices[3 * k + c] as usize].map(|v| v as f64))
+}
+
+/// Edge-vector coordinates (s, u) of (x, z) in a triangle: p − a = s·(b − a) + u·(c − a) in x/z.
+fn edge_coordinates(p: [[f64; 3]; 3], x: f64, z: f64) -> (f64, f64) {
+    let [a, b, c] = p;
+    let det = (b[0] - a[0]) * (c[2] - a[2]) - (b[2] - a[2]) * (c[0] - a[0]);
+    let s = ((x - a[0]) * (c[2] - a[2]) - (z - a[2]) * (c[0] - a[0])) / det;
+    let u = ((b[0] - a[0]) * (z - a[2]) - (b[2] - a[2]) * (x - a[0])) / det;
+    (s, u)
+}
+
+/// Height at (x, z) of the plane through a triangle's corners (also outside the triangle).
+fn plane_height(p: [[f64; 3]; 3], x: f64, z: f64) -> f64 {
+    let (s, u) = edge_coordinates(p, x, z);
+    p[0][1] + s * (p[1][1] - p[0][1]) + u * (p[2][1] - p[0][1])
+}
+
+/// The analyzer's height check locates instances without the placement's index: an instance given
+/// the height of a neighbouring triangle's plane (what picking the wrong triangle would give) is
+/// measured at that distance, sampled or not, and positions off the mesh are counted.
+#[test]
+fn analyzer_height_error_catches_a_wrong_triangle() {
+    use verdant::scatter::stats::height_check;
+    let t = terrain(129, 80.0, 1.0);
+    let sp = species("grass", Placement::Jittered);
+    let placed = scatter_species(&t.surface, t.extent, &sp, None, None, &[], 32.0, 5).unwrap();
+    let clean = height_check(&t.surface, &placed, usize::MAX);
+    assert_eq!((clean.checked, clean.unlocated), (placed.len(), 0));
+    assert!(clean.max_error_f64_m <= 1e-9, "{clean:?}");
+    // for some instances (every 50th): the triangle containing it, by brute force, and the plane of
+    // a triangle sharing an edge with it; keep the instance where the two differ most
+    let tri_count = t.indices.len() / 3;
+    let (mut worst_k, mut worst_y, mut worst_d) = (0, 0.0, 0.0f64);
+    for k in (0..placed.len()).step_by(50) {
+        let [x, y, z] = placed[k].position;
+        let inside = (0..tri_count).find(|&n| {
+            let (s, u) = edge_coordinates(corners(&t, n), x, z);
+            s >= -1e-12 && u >= -1e-12 && s + u <= 1.0 + 1e-12
+        });
+        let Some(inside) = inside else { continue };
+        let own: Vec<u32> = t.indices[3 * inside..3 * inside + 3].to_vec();
+        for n in (0..tri_count).filter(|&n| n != inside) {
+            let shared = t.indices[3 * n..3 * n + 3].iter().filter(|v| own.contains(v)).count();
+            if shared == 2 {
+                let wrong = plane_height(corners(&t, n), x, z);
+                if (wrong - y).abs() > worst_d {
+                    (worst_k, worst_y, worst_d) = (k, wrong, (wrong - y).abs());
+                }
+            }
+        }
+    }
+    assert!(worst_d > 1e-3, "the terrain is too flat for this test: {worst_d}");
+    let mut bad = placed.clone();
+    bad[worst_k].position[1] = worst_y;
+    let check = height_check(&t.surface, &bad, usize::MAX);
+    assert!((check.max_error_f64_m - worst_d).abs() <= 1e-9, "{check:?} vs {worst_d}");
+    assert!(check.max_error_f32_m >= worst_d - 1e-4, "{check:?} vs {worst_d}");
+    // sampled: every k-th instance from the first, so an instance at a multiple of the stride is seen
+    let limit = bad.len() / 10;
+    let stride = bad.len().div_ceil(limit);
+    let mut sampled = placed.clone();
+    sampled[3 * stride].position[1] = worst_y;
+    sampled[3 * stride].position[0] = placed[worst_k].position[0];
+    sampled[3 * stride].position[2] = placed[worst_k].position[2];
+    let check = height_check(&t.surface, &sampled, limit);
+    assert_eq!(check.checked, sampled.len().div_ceil(stride), "{check:?}");
+    assert!(check.checked <= limit);
+    assert!((check.max_error_f64_m - worst_d).abs() <= 1e-9, "{check:?} vs {worst_d}");
+    // and through analyze(), as the report gets it
+    let stats = analyze(&t.surface, t.extent, &sp, None, None, &bad, 32.0, 0.0).unwrap();
+    assert!((stats.max_height_error_csv_m - worst_d).abs() <= 1e-9 && stats.max_height_error_m >= worst_d - 1e-4, "{stats:?}");
+    // off the mesh: counted, not measured
+    let mut off = placed[..10].to_vec();
+    off[4].position[0] = t.extent[2] + 5.0;
+    let check = height_check(&t.surface, &off, usize::MAX);
+    assert_eq!((check.checked, check.unlocated), (10, 1));
 }
 
 #[test]

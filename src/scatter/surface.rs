@@ -145,6 +145,12 @@ impl SurfaceIndex {
         self.bounds
     }
 
+    /// Corners (x, y, z) of indexed triangle `k` (0 ≤ k < [`Self::triangle_count`]): for checks
+    /// that locate points their own way (the analyzer).
+    pub fn triangle(&self, k: usize) -> [[f64; 3]; 3] {
+        self.tris[k].p
+    }
+
     /// Side of a bucket in metres.
     pub fn bucket_size(&self) -> f64 {
         self.cell

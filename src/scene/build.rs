@@ -17,6 +17,7 @@ use crate::scene::preset::{load_preset, PresetError};
 use crate::mesh::Scene;
 use crate::plants::marker;
 use crate::scene::plants_stage::{self, PlantsStageReport};
+use crate::scene::preview::{footprint_m, PreviewLayer};
 use crate::scene::scatter_stage::{self, ScatterStageReport};
 use crate::scene::stages::{self, PreviewStageReport, Stage};
 use crate::scene::Preset;
@@ -197,7 +198,7 @@ fn reimport(dir: &Path, rel: &Path) -> Result<Scene, SceneBuildError> {
 }
 
 /// Positions of the instanced nodes under each species root of a scene.glb (as f32, as stored).
-fn placements_from_scene(scene: &Scene, preset: &Preset) -> Vec<([f32; 4], Vec<[f64; 3]>)> {
+fn placements_from_scene(scene: &Scene, preset: &Preset) -> Vec<PreviewLayer> {
     preset
         .species
         .iter()
@@ -211,7 +212,7 @@ fn placements_from_scene(scene: &Scene, preset: &Preset) -> Vec<([f32; 4], Vec<[
                     }
                 }
             }
-            (marker::species_color(s.kind, index), points)
+            PreviewLayer { color: marker::species_color(s.kind, index), kind: s.kind, footprint_m: footprint_m(s.kind, s.scale), positions: points }
         })
         .collect()
 }
@@ -227,7 +228,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
     let mut known = FileHashes::new();
     // what later stages need: the terrain scene and the placements (as stored: f32 positions)
     let mut terrain: Option<(LazyScene, String)> = None;
-    let mut placements: Option<(Option<Vec<([f32; 4], Vec<[f64; 3]>)>>, PathBuf, String)> = None;
+    let mut placements: Option<(Option<Vec<PreviewLayer>>, PathBuf, String)> = None;
 
     if let (true, Some(t)) = (wants(Stage::Terrain), &preset.terrain) {
         let t0 = Instant::now();
@@ -280,7 +281,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
                         .iter()
                         .map(|p| {
                             let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
-                            (p.color, pts)
+                            PreviewLayer { color: p.color, kind: p.species.kind, footprint_m: footprint_m(p.species.kind, p.species.scale), positions: pts }
                         })
                         .collect(),
                 ),

@@ -989,6 +989,13 @@ fn parse_species(
                 "give the smallest distance in metres between two instances, e.g. `min_spacing = 4.0`, or use `placement = \"jittered\"`",
             ));
         }
+        (Placement::Jittered, Some((x, span))) if x > 0.0 => {
+            return Err(t.ctx.at(
+                &span,
+                format!("`min_spacing` = {x} is kept only by placement = \"poisson\"; {} is placed \"jittered\", which keeps no spacing", t.label),
+                "remove `min_spacing` (or set it to 0), or set `placement = \"poisson\"` to keep instances that far apart",
+            ));
+        }
         (_, Some((x, _))) => x,
         (Placement::Poisson, None) if kind == SpeciesKind::Tree => DEFAULT_TREE_SPACING_M,
         (Placement::Poisson, None) => {

@@ -362,36 +362,264 @@ mod tests {
     }
 }
 
-/// Draws placements over a preview made with `view`: per layer (colour, instance positions), the
-/// instances are counted per pixel and the colour is blended in with opacity 1 − exp(−count / 2),
-/// so sparse trees show as dots and dense ground cover as shading. Layers are drawn in order.
-pub fn draw_placements(canvas: &mut Canvas, view: &OrthoView, layers: &[([f32; 4], &[[f64; 3]])]) {
+/// One species' instances as the preview draws them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PreviewLayer {
+    pub color: [f32; 4],
+    /// Trees and meshes are objects, drawn as discs however small; grass and flowers are cover,
+    /// drawn as discs only where each is at least [`MIN_DISC_PX`] wide, else as density shading.
+    pub kind: crate::scene::SpeciesKind,
+    /// Width of one instance seen from above, in metres (see [`footprint_m`]).
+    pub footprint_m: f64,
+    /// Instance positions (x, y, z); the preview uses x and z.
+    pub positions: Vec<[f64; 3]>,
+}
+
+/// Width seen from above of a species' marker (plants/marker.rs proportions: a tree's crown is
+/// half its height wide, grass and flower cards 0.6 of it, a mesh box its height) times the middle
+/// of its scale range.
+pub fn footprint_m(kind: crate::scene::SpeciesKind, scale: [f64; 2]) -> f64 {
+    use crate::scene::SpeciesKind;
+    let width_per_height = match kind {
+        SpeciesKind::Tree => 0.5,
+        SpeciesKind::Grass | SpeciesKind::Flower => 0.6,
+        SpeciesKind::Mesh => 1.0,
+    };
+    crate::plants::marker::nominal_height_m(kind) as f64 * width_per_height * 0.5 * (scale[0] + scale[1])
+}
+
+/// Smallest disc drawn, in pixels across: a tree far smaller than a pixel still shows.
+pub const MIN_DISC_PX: f64 = 3.0;
+/// Objects whose discs would cover more than this share of the picture (were they disjoint), a
+/// dense forest, are drawn as density shading instead.
+const MAX_DISC_COVER: f64 = 0.5;
+/// Opacity of a disc, and of the densest shading.
+const DISC_OPACITY: f32 = 0.95;
+const SHADE_OPACITY: f32 = 0.85;
+/// Discs at least this wide (px) get a darker rim, so neighbouring crowns stay apart.
+const RIM_FROM_PX: f64 = 3.0;
+const RIM_FACTOR: f32 = 0.55;
+/// Density shading averages over a window expected to hold this many instances (at most
+/// (2·MAX_SHADE_RADIUS + 1)² pixels), so sparse cover is a tint rather than noise.
+const SHADE_WINDOW_COUNT: f64 = 8.0;
+const MAX_SHADE_RADIUS: usize = 6;
+
+/// True when `layer` is drawn as one disc per instance (see [`PreviewLayer::kind`]).
+fn draws_as_discs(layer: &PreviewLayer, pixels_per_metre: f64, pixels: usize) -> bool {
+    use crate::scene::SpeciesKind;
+    let footprint_px = layer.footprint_m * pixels_per_metre;
+    let d = footprint_px.max(MIN_DISC_PX);
+    let cover = layer.positions.len() as f64 * std::f64::consts::FRAC_PI_4 * d * d / pixels as f64;
+    match layer.kind {
+        SpeciesKind::Tree | SpeciesKind::Mesh => true,
+        SpeciesKind::Grass | SpeciesKind::Flower => footprint_px >= MIN_DISC_PX && cover <= MAX_DISC_COVER,
+    }
+}
+
+/// Draws placements over a preview made with `view`: objects (trees, meshes) as one disc per
+/// instance, as wide as the footprint and at least [`MIN_DISC_PX`]; cover (grass, flowers; and a
+/// forest too dense for discs) as shading whose opacity follows the local instance density
+/// (counts per pixel, box-filtered; the square root of the density relative to the densest shaded
+/// layer's 98th percentile, so a sparse cover shows fainter than a dense one). Shaded layers go
+/// first, then the discs on top, each in layer order, so trees stay visible over grass.
+pub fn draw_placements(canvas: &mut Canvas, view: &OrthoView, layers: &[PreviewLayer]) {
     let (w, h) = (canvas.width as usize, canvas.height as usize);
     if w == 0 || h == 0 || canvas.color.len() != w * h {
         return;
     }
-    let mut counts = vec![0u32; w * h];
-    for (color, points) in layers {
-        counts.iter_mut().for_each(|c| *c = 0);
-        for p in points.iter() {
-            let q = view.to_pixel(*p);
-            if !(q[0].is_finite() && q[1].is_finite()) || q[0] < 0.0 || q[1] < 0.0 {
-                continue;
+    let ppm = view.pixels_per_metre;
+    let pixel = |p: [f64; 3]| {
+        let q = view.to_pixel(p);
+        (q[0].is_finite() && q[1].is_finite()).then_some((q[0], q[1]))
+    };
+    let blend = |c: &mut [f32; 4], color: [f32; 4], a: f32| {
+        for k in 0..3 {
+            c[k] = c[k] * (1.0 - a) + color[k] * a;
+        }
+        c[3] = c[3].max(a);
+    };
+    // density per pixel of each shaded layer, then one reference for all of them (the largest of
+    // their 98th percentiles), so a sparse cover shows fainter than a dense one
+    let shaded: Vec<(&PreviewLayer, Vec<f32>)> = layers
+        .iter()
+        .filter(|l| !draws_as_discs(l, ppm, w * h))
+        .map(|layer| {
+            // fill counts per pixel
+            let mut counts = vec![0f32; w * h];
+            for &p in &layer.positions {
+                if let Some((x, y)) = pixel(p) {
+                    if x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h {
+                        counts[y as usize * w + x as usize] += 1.0;
+                    }
+                }
             }
-            let (x, y) = (q[0] as usize, q[1] as usize);
-            if x < w && y < h {
-                counts[y * w + x] = counts[y * w + x].saturating_add(1);
+            let mean = layer.positions.len() as f64 / (w * h) as f64;
+            let radius = (0..=MAX_SHADE_RADIUS).find(|r| mean * ((2 * r + 1) * (2 * r + 1)) as f64 >= SHADE_WINDOW_COUNT).unwrap_or(MAX_SHADE_RADIUS);
+            (layer, box_filter(&counts, w, h, radius))
+        })
+        .collect();
+    let reference = shaded
+        .iter()
+        .filter_map(|(_, density)| {
+            let mut present: Vec<f32> = density.iter().copied().filter(|&v| v > 0.0).collect();
+            let k = present.len().checked_sub(1)? * 98 / 100;
+            Some(*present.select_nth_unstable_by(k, f32::total_cmp).1)
+        })
+        .fold(0.0f32, f32::max);
+    for (layer, density) in &shaded {
+        for (c, &v) in canvas.color.iter_mut().zip(density) {
+            if v > 0.0 {
+                // square root: a cover a tenth as dense still shows, at a third of the opacity
+                blend(c, layer.color, SHADE_OPACITY * (v / reference).min(1.0).sqrt());
             }
         }
-        for (c, &n) in canvas.color.iter_mut().zip(&counts) {
-            if n == 0 {
-                continue;
+    }
+    for layer in layers.iter().filter(|l| draws_as_discs(l, ppm, w * h)) {
+        let r = (layer.footprint_m * ppm).max(MIN_DISC_PX) / 2.0;
+        let rim = if 2.0 * r >= RIM_FROM_PX { r - 1.0 } else { f64::INFINITY };
+        let dark = [layer.color[0] * RIM_FACTOR, layer.color[1] * RIM_FACTOR, layer.color[2] * RIM_FACTOR, layer.color[3]];
+        for &p in &layer.positions {
+            let Some((cx, cy)) = pixel(p) else { continue };
+            // pixels whose centre lies in the disc
+            let (x0, x1) = ((cx - r).floor().max(0.0), (cx + r).ceil().min(w as f64));
+            let (y0, y1) = ((cy - r).floor().max(0.0), (cy + r).ceil().min(h as f64));
+            for y in y0 as usize..y1.max(0.0) as usize {
+                for x in x0 as usize..x1.max(0.0) as usize {
+                    let d = ((x as f64 + 0.5 - cx).powi(2) + (y as f64 + 0.5 - cy).powi(2)).sqrt();
+                    if d <= r {
+                        blend(&mut canvas.color[y * w + x], if d > rim { dark } else { layer.color }, DISC_OPACITY);
+                    }
+                }
             }
-            let a = 1.0 - (-(n as f32) / 2.0).exp();
-            for k in 0..3 {
-                c[k] = c[k] * (1.0 - a) + color[k] * a;
+        }
+    }
+}
+
+/// Mean over the (2r + 1)² window around each pixel (cut at the borders), by running sums along
+/// rows, then columns.
+fn box_filter(values: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    let pass = |src: &[f32], len: usize, lines: usize, at: &dyn Fn(usize, usize) -> usize| {
+        let mut out = vec![0f32; src.len()];
+        for line in 0..lines {
+            let mut sum = 0f64;
+            // the window [i − r, i + r], entering on the right and leaving on the left
+            for i in 0..len + r {
+                if i < len {
+                    sum += src[at(line, i)] as f64;
+                }
+                if i >= r {
+                    let c = i - r;
+                    if c > r {
+                        sum -= src[at(line, c - r - 1)] as f64;
+                    }
+                    let n = (c + r).min(len - 1) + 1 - c.saturating_sub(r);
+                    out[at(line, c)] = (sum / n as f64) as f32;
+                }
             }
-            c[3] = c[3].max(a);
+        }
+        out
+    };
+    let rows = pass(values, w, h, &|line, i| line * w + i);
+    pass(&rows, h, w, &|line, i| i * w + line)
+}
+
+#[cfg(test)]
+mod placement_tests {
+    use super::*;
+    use crate::scene::SpeciesKind;
+
+    const TREE: [f32; 4] = [0.05, 0.25, 0.06, 1.0];
+    const GRASS: [f32; 4] = [0.35, 0.60, 0.12, 1.0];
+
+    /// A 100 m × 100 m view at 1 px per metre over a blank canvas.
+    fn blank() -> (Canvas, OrthoView) {
+        let view = OrthoView::top_down(0.0, 100.0, 0.0, 100.0, 10.0, 100);
+        (view.canvas(BACKGROUND).unwrap(), view)
+    }
+
+    fn layer(kind: SpeciesKind, color: [f32; 4], footprint_m: f64, positions: Vec<[f64; 3]>) -> PreviewLayer {
+        PreviewLayer { color, kind, footprint_m, positions }
+    }
+
+    fn covered(c: &Canvas) -> usize {
+        c.color.iter().filter(|p| p[3] > 0.0).count()
+    }
+
+    #[test]
+    fn trees_are_discs_of_their_footprint_and_at_least_three_pixels() {
+        // a sub-pixel crown: a 3 px disc (the 3×3 pixels whose centres are within 1.5 px)
+        let (mut c, view) = blank();
+        draw_placements(&mut c, &view, &[layer(SpeciesKind::Tree, TREE, 0.4, vec![[20.5, 0.0, 30.5], [70.5, 0.0, 60.5]])]);
+        assert_eq!(covered(&c), 2 * 9);
+        assert!(c.color[30 * 100 + 20][3] > 0.9 && c.color[31 * 100 + 21][3] > 0.9 && c.color[32 * 100 + 20][3] == 0.0);
+        // a 9 m crown: about π·4.5² pixels, its own colour inside and a darker rim
+        let (mut c, view) = blank();
+        draw_placements(&mut c, &view, &[layer(SpeciesKind::Tree, TREE, 9.0, vec![[50.5, 0.0, 50.5]])]);
+        let n = covered(&c) as f64;
+        assert!((n - std::f64::consts::PI * 4.5 * 4.5).abs() < 8.0, "{n}");
+        let (inside, rim) = (c.color[50 * 100 + 50], c.color[50 * 100 + 54]);
+        assert!((inside[1] - TREE[1] * DISC_OPACITY).abs() < 1e-6, "{inside:?}");
+        assert!(rim[3] > 0.9 && rim[1] < 0.7 * inside[1], "{rim:?}");
+        // far outside the view: nothing drawn, no panic
+        let (mut c, view) = blank();
+        draw_placements(&mut c, &view, &[layer(SpeciesKind::Tree, TREE, 9.0, vec![[-1e9, 0.0, 5.0], [f64::NAN, 0.0, 1.0]])]);
+        assert_eq!(covered(&c), 0);
+    }
+
+    #[test]
+    fn dense_cover_is_shaded_by_density_and_trees_are_drawn_over_it() {
+        // grass four times as dense on the left half as on the right: 8 and 2 per m², hashed spots
+        let mut grass = Vec::new();
+        for k in 0..50_000u64 {
+            let h = crate::synth::mix64(k);
+            let (u, v) = ((h >> 40) as f64 / (1u64 << 24) as f64, (h & 0xFF_FFFF) as f64 / (1u64 << 24) as f64);
+            let x = if k % 5 == 0 { 50.0 + 50.0 * u } else { 50.0 * u };
+            grass.push([x, 0.0, 100.0 * v]);
+        }
+        let (mut c, view) = blank();
+        // the tree comes first in the list but is drawn over the shading
+        let layers = [layer(SpeciesKind::Tree, TREE, 6.0, vec![[25.5, 0.0, 50.5]]), layer(SpeciesKind::Grass, GRASS, 0.24, grass)];
+        draw_placements(&mut c, &view, &layers);
+        let mean_alpha = |x0: usize, x1: usize| {
+            let (mut sum, mut n) = (0.0, 0);
+            for y in 10..90 {
+                for x in x0..x1 {
+                    if (x as f64 - 25.5).abs() > 5.0 || (y as f64 - 50.5).abs() > 5.0 {
+                        sum += c.color[y * 100 + x][3];
+                        n += 1;
+                    }
+                }
+            }
+            sum / n as f32
+        };
+        let (left, right) = (mean_alpha(10, 40), mean_alpha(60, 90));
+        // opacity ∝ √density: 0.85 where densest, about half of it at a quarter of the density
+        assert!(left > 0.75 && left <= SHADE_OPACITY, "{left}");
+        assert!((right / left - 0.5).abs() < 0.1, "{left} {right}");
+        let tree = c.color[50 * 100 + 25];
+        assert!((tree[1] - (0.95 * TREE[1] + 0.05 * c.color[50 * 100 + 10][1])).abs() < 0.05, "{tree:?}");
+        // the same cover seen close enough that a clump is 3 px wide is drawn as discs
+        assert!(draws_as_discs(&layers[1], MIN_DISC_PX / 0.24, 1 << 30) && !draws_as_discs(&layers[1], 1.0, 10_000));
+    }
+
+    #[test]
+    fn box_filter_is_the_window_mean() {
+        let (w, h) = (7, 5);
+        let v: Vec<f32> = (0..w * h).map(|k| ((k * 37) % 11) as f32).collect();
+        for r in 0..4 {
+            let f = box_filter(&v, w, h, r);
+            for y in 0..h {
+                for x in 0..w {
+                    let (mut s, mut n) = (0.0, 0.0);
+                    for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                        for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
+                            s += v[yy * w + xx];
+                            n += 1.0;
+                        }
+                    }
+                    assert!((f[y * w + x] - s / n).abs() < 1e-5, "r {r} at {x},{y}");
+                }
+            }
         }
     }
 }

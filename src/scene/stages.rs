@@ -280,12 +280,11 @@ pub struct PreviewStageReport {
 pub const PREVIEW_SIZE_PX: u32 = 1024;
 
 /// Draws preview.png: the terrain's shaded relief, then the placements (colour, positions) over it.
-pub fn run_preview(terrain: &Scene, placements: &[([f32; 4], Vec<[f64; 3]>)], scene_dir: &Path) -> Result<PreviewStageReport, StageError> {
+pub fn run_preview(terrain: &Scene, placements: &[crate::scene::preview::PreviewLayer], scene_dir: &Path) -> Result<PreviewStageReport, StageError> {
     let t0 = Instant::now();
     let mut canvas = crate::scene::preview::terrain_preview(terrain, PREVIEW_SIZE_PX);
     if let Some(view) = crate::scene::preview::preview_view(terrain, PREVIEW_SIZE_PX) {
-        let layers: Vec<([f32; 4], &[[f64; 3]])> = placements.iter().map(|(c, p)| (*c, &p[..])).collect();
-        crate::scene::preview::draw_placements(&mut canvas, &view, &layers);
+        crate::scene::preview::draw_placements(&mut canvas, &view, placements);
     }
     let file = PathBuf::from("preview.png");
     crate::scene::preview::write_png(&canvas, &scene_dir.join(&file)).map_err(|e| fail(Stage::Preview)(e.to_string()))?;
