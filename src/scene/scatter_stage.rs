@@ -261,3 +261,33 @@ pub fn instanced_scene(terrain: &Scene, placed: &[Placed], extent: [f64; 4]) -> 
     }
     Ok(scene)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(x: f64, z: f64) -> Instance {
+        Instance { position: [x, 0.0, z], rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0; 3], yaw_deg: 0.0, tile: 0 }
+    }
+
+    #[test]
+    fn clumps_follow_the_density_map_and_variants_mix() {
+        // left half of the extent at density 0.2, right half at 0.9; 3 levels × 2 variants
+        let map = DensityMap::from_fn(2, 1, |i, _| if i == 0 { 0.2 } else { 0.9 });
+        let extent = [0.0, 0.0, 100.0, 100.0];
+        let mut variants = [0usize; 2];
+        for k in 0..200 {
+            let z = k as f64 * 0.37;
+            let left = mesh_choice(&at(10.0 + k as f64 * 0.1, z), 3, 2, Some(&map), extent);
+            let right = mesh_choice(&at(90.0 - k as f64 * 0.1, z), 3, 2, Some(&map), extent);
+            assert_eq!(left / 2, 0, "sparse clumps where the map is low");
+            assert_eq!(right / 2, 2, "dense clumps where it is high");
+            variants[left % 2] += 1;
+        }
+        assert!(variants.iter().all(|&n| n > 60), "both variants used: {variants:?}");
+        // no map: the densest level
+        assert_eq!(mesh_choice(&at(1.0, 2.0), 3, 2, None, extent) / 2, 2);
+        // the same instance, the same choice
+        assert_eq!(mesh_choice(&at(3.5, 7.25), 3, 2, Some(&map), extent), mesh_choice(&at(3.5, 7.25), 3, 2, Some(&map), extent));
+    }
+}
