@@ -430,12 +430,13 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
 
     // density atlas: colour of the atlas, alpha = 1 − rank where the atlas is opaque, else 0
     let seconds_render = bake_started.elapsed().as_secs_f64();
+    // dilation keeps alpha, and the density atlas' opaque texels are the atlas' (alpha ≥ cutoff): its
+    // colour is the dilated atlas' colour
+    dilate(&mut atlas, s.alpha_cutoff);
     for (d, a) in density.pixels.iter_mut().zip(&atlas.pixels) {
         let rank_alpha = if a[3] >= s.alpha_cutoff && d[3] > 0.0 { d[0].max(1.0 / 255.0) } else { 0.0 };
         *d = [a[0], a[1], a[2], rank_alpha];
     }
-    dilate(&mut atlas, s.alpha_cutoff);
-    dilate(&mut density, 1.0 / 255.0);
     let seconds_dilate = bake_started.elapsed().as_secs_f64() - seconds_render;
     let atlas_chain = mip_chain(&atlas, s.alpha_cutoff);
     let mut blade_level0 = blade_image.clone();
