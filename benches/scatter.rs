@@ -202,7 +202,7 @@ fn main() {
         let r = best.expect("at least one run");
         let _ = std::fs::remove_file(&tmp);
         println!("DIGEST {:016x} {name}", digest.unwrap_or(0));
-        // the analyzer, as every build runs it (its height check samples at most 2^20 instances)
+        // the analyzer, as every build runs it (its height check samples at most 2^19 instances)
         let out = scatter_species_detailed(&surface, extent, sp, Some(&density), None, &[], TILE_M, 1).expect("scatter");
         let t = Instant::now();
         let stats = analyze(&surface, extent, sp, Some(&density), None, &out.instances, TILE_M, 0.0).expect("analyze");
