@@ -262,7 +262,7 @@ pub fn height_check(surface: &SurfaceIndex, instances: &[Instance], max_checks: 
         let n = n as usize;
         if !e.is_finite() {
             unlocated[n / 2] = true;
-        } else if n % 2 == 0 {
+        } else if n.is_multiple_of(2) {
             result.max_error_f64_m = result.max_error_f64_m.max(e);
         } else {
             result.max_error_f32_m = result.max_error_f32_m.max(e);
