@@ -3,9 +3,9 @@
 //! the placement table, plus bytes of memory per instance; scipy's `qmc.PoissonDisk` on the same
 //! area and radius as an outside peer (run through `.venv/bin/python` when it exists).
 //!
-//! It measures the product's path: `scatter::scatter_species_detailed`, then the instances →
-//! `PlacementRow` conversion the scene build does and `export::table::placements_csv` (in memory)
-//! or `write_placements_csv` (the file, as the build writes it). Each stage is reported as its best
+//! It measures the product's path: `scatter::scatter_species_detailed`, then the instances
+//! written as the scene build writes them, `export::table::placements_csv` (in memory) or
+//! `write_placements_csv` (the file), and the analyzer (`scatter::analyze`) once per case. Each stage is reported as its best
 //! wall time over the runs with the CPU time (all threads) of that run: the machine is shared and
 //! noisy, so CPU ≈ 2 × wall means both cores were ours, CPU ≈ wall means we got about one.
 //! Each case runs in its own process (its own peak RSS) and prints a digest of its placements and
@@ -18,8 +18,8 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
-use verdant::export::table::{placements_csv, write_placements_csv, PlacementRow};
-use verdant::scatter::{scatter_species_detailed, DensityMap, Instance, SurfaceIndex, POISSON_PACKING};
+use verdant::export::table::{placements_csv, write_placements_csv};
+use verdant::scatter::{analyze, scatter_species_detailed, DensityMap, Instance, SurfaceIndex, POISSON_PACKING};
 use verdant::scene::{Placement, SpeciesKind, SpeciesSettings};
 use verdant::terrain::tin::{tin, TinOptions};
 
@@ -100,11 +100,6 @@ fn instances_digest(s: &verdant::scatter::Scatter) -> u64 {
     h
 }
 
-/// The product's conversion (as in `scene::scatter_stage`): instances → placement rows.
-fn rows(instances: &[Instance]) -> Vec<PlacementRow> {
-    instances.iter().map(|i| PlacementRow { position: i.position, rotation: i.rotation, scale: i.scale, yaw_deg: i.yaw_deg, tile: i.tile }).collect()
-}
-
 /// One case: best wall time of each stage over the runs (stages independently), with the CPU
 /// time of that same run.
 struct Row {
@@ -174,9 +169,9 @@ fn main() {
             let (rss0, _) = memory();
             let (out, generate_s, generate_cpu) = timed(|| scatter_species_detailed(&surface, extent, sp, Some(&density), None, &[], TILE_M, 1).expect("scatter"));
             // the product's path first (its peak is the case's memory), then the in-memory table
-            let ((), write_s, write_cpu) = timed(|| write_placements_csv(&tmp, &rows(&out.instances)).expect("write"));
+            let ((), write_s, write_cpu) = timed(|| write_placements_csv(&tmp, &out.instances).expect("write"));
             let (_, hwm) = memory();
-            let (csv_bytes, format_s, format_cpu) = timed(|| placements_csv(&rows(&out.instances)).expect("csv").len() as u64);
+            let (csv_bytes, format_s, format_cpu) = timed(|| placements_csv(&out.instances).expect("csv").len() as u64);
             if digest.is_none() {
                 digest = Some(instances_digest(&out));
             }
@@ -208,6 +203,19 @@ fn main() {
         let r = best.expect("at least one run");
         let _ = std::fs::remove_file(&tmp);
         println!("DIGEST {:016x} {name}", digest.unwrap_or(0));
+        // the analyzer, as every build runs it (its height check samples at most 2^19 instances)
+        let out = scatter_species_detailed(&surface, extent, sp, Some(&density), None, &[], TILE_M, 1).expect("scatter");
+        let t = Instant::now();
+        let stats = analyze(&surface, extent, sp, Some(&density), None, &out.instances, TILE_M, 0.0).expect("analyze");
+        println!(
+            "ANALYZE {name}: {:.3} s for {} instances; height checked on {} ({} off the mesh): max |y − terrain| {:.2e} m as scene.glb stores it (f32), {:.2e} m in the CSV (f64)",
+            t.elapsed().as_secs_f64(),
+            out.instances.len(),
+            stats.height_checked,
+            stats.off_surface,
+            stats.max_height_error_m,
+            stats.max_height_error_csv_m
+        );
         println!(
             "ROW {} {} {} {} {} {} {} {} {} {} {}",
             r.instances, r.candidates, r.generate_s, r.generate_cpu, r.format_s, r.format_cpu, r.write_s, r.write_cpu, r.csv_bytes, r.peak_bytes, name
@@ -215,9 +223,11 @@ fn main() {
         return;
     }
     let mut rows = Vec::new();
+    let mut analyzer_lines = Vec::new();
     for k in 0..cases.len() {
         let out = Command::new(std::env::current_exe().expect("own path")).args(["--case", &k.to_string()]).output().expect("child");
         let text = String::from_utf8_lossy(&out.stdout);
+        analyzer_lines.extend(text.lines().filter_map(|l| l.strip_prefix("ANALYZE ")).map(str::to_string));
         let Some(line) = text.lines().find(|l| l.starts_with("ROW ")) else {
             println!("case {k} failed: {}", String::from_utf8_lossy(&out.stderr));
             continue;
@@ -277,10 +287,15 @@ fn main() {
         );
     }
     println!(
-        "(the product path: scatter_species_detailed, then instances → PlacementRow + export::table::placements_csv (shortest round-trip floats), and + write_placements_csv (format + atomic write to {}, page cache, no fsync); Instance = {} bytes in memory; peak B/inst = lowest growth of the peak RSS during one run's generate + write (the product path; the in-memory table is measured after), each case in its own process, over instances)",
+        "(the product path: scatter_species_detailed, then the instances → export::table::placements_csv (shortest round-trip floats, no copy of the instances), and + write_placements_csv (format + atomic write to {}, page cache, no fsync); Instance = {} bytes in memory; peak B/inst = lowest growth of the peak RSS during one run's generate + write (the product path; the in-memory table is measured after), each case in its own process, over instances)",
         std::env::temp_dir().display(),
         std::mem::size_of::<Instance>()
     );
+
+    println!();
+    for l in &analyzer_lines {
+        println!("analyzer, {l}");
+    }
 
     // the outside peer: scipy's Bridson on the same area and radius, unthinned (density 1)
     if no_scipy {

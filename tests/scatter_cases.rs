@@ -97,6 +97,12 @@ fn instances_sit_on_the_tin_surface() {
         // rotations are unit quaternions, tilted toward the (upward) normal
         assert!(v.iter().all(|i| (i.rotation.iter().map(|q| q * q).sum::<f32>() - 1.0).abs() < 1e-5));
         assert!(v.iter().all(|i| (0.8..=1.2).contains(&i.scale[0]) && (0.0..360.0).contains(&i.yaw_deg)));
+        // yaw in whole 0.01°, scale in whole 10⁻⁴, jittered x/z on the 0.1 mm grid (short CSV entries)
+        let on = |v: f64, steps: f64| ((v * steps).round() / steps - v).abs() <= v.abs() * 1e-7;
+        assert!(v.iter().all(|i| on(i.yaw_deg as f64, 100.0) && on(i.scale[0] as f64, 1e4)));
+        if placement == Placement::Jittered {
+            assert!(v.iter().all(|i| (i.position[0] * 1e4).round() / 1e4 == i.position[0] && (i.position[2] * 1e4).round() / 1e4 == i.position[2]));
+        }
     }
 }
 

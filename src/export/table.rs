@@ -25,6 +25,19 @@ pub struct PlacementRow {
     pub tile: u32,
 }
 
+/// Anything that is one row of a placement table: the writer reads rows through this, so a
+/// caller's own instances are written without first being copied into a `Vec<PlacementRow>`.
+pub trait ToPlacementRow {
+    fn placement_row(&self) -> PlacementRow;
+}
+
+impl ToPlacementRow for PlacementRow {
+    #[inline]
+    fn placement_row(&self) -> PlacementRow {
+        *self
+    }
+}
+
 /// Rows formatted by one task; a task's buffer is reserved once for its rows at the longest.
 const ROWS_PER_CHUNK: usize = 16_384;
 /// Chunks formatted while the previous batch is written (bounds the streaming writer's memory to
@@ -41,7 +54,8 @@ const ROW_MAX: usize = 3 * 24 + 8 * 16 + 10 + 12;
 ///
 /// The digits come from serde_json's `CompactFormatter` (already a dependency), which writes
 /// floats with Żmij (Schubfach-based, shortest round-trip): the same bytes as
-/// `ryu::Buffer::format_finite` (tested below), 20–35 % less CPU per number.
+/// `ryu::Buffer::format_finite` (tested below), 20–35 % less CPU per number; short decimals
+/// (see [`short_f64`], [`short_f32`]) are written from their integer directly.
 #[inline]
 fn push_row(out: &mut Vec<u8>, r: &PlacementRow) -> bool {
     let finite = r.position.iter().all(|v| v.is_finite()) && r.rotation.iter().chain(&r.scale).all(|v| v.is_finite()) && r.yaw_deg.is_finite();
@@ -64,7 +78,7 @@ fn push_row(out: &mut Vec<u8>, r: &PlacementRow) -> bool {
         }
         out.push(b',');
     }
-    push_u32(out, r.tile);
+    push_u64(out, r.tile as u64);
     out.push(b'\n');
     true
 }
@@ -74,9 +88,62 @@ fn push_row(out: &mut Vec<u8>, r: &PlacementRow) -> bool {
 const ZMIJ_F64_BELOW: f64 = 1e15;
 const ZMIJ_F32_BELOW: f32 = 1e7;
 
+/// Short decimals: an f64 that is the nearest double to a whole number of 10^-6 (a scatter's
+/// jittered x/z on its 0.1 mm grid, say), or an f32 the nearest float to a whole number of 10^-4
+/// (a scale, a yaw in 0.01°), is written straight from that integer, without the general
+/// shortest-digits search. Within these magnitudes a float's spacing is far below 10^-6 (f64) or
+/// 10^-4 (f32), so no other decimal with as few fraction digits rounds to the same value: the
+/// integer's digits are the shortest round-trip digits, ryu's bytes (tested against ryu below).
+const SHORT_F64_SCALE: f64 = 1e6;
+const SHORT_F64_DIGITS: u32 = 6;
+const SHORT_F64_RANGE: std::ops::Range<f64> = 1e-4..1e9;
+const SHORT_F32_SCALE: f64 = 1e4;
+const SHORT_F32_DIGITS: u32 = 4;
+const SHORT_F32_RANGE: std::ops::Range<f32> = 1e-4..256.0;
+
+/// |v|·10⁶ when |v| is the nearest double to that whole number of 10⁻⁶ (in range).
+#[inline]
+fn short_f64(v: f64) -> Option<u64> {
+    let a = v.abs();
+    if !SHORT_F64_RANGE.contains(&a) {
+        return None;
+    }
+    // signed conversions (one instruction each, unlike u64's); a·10⁶ + 0.5 is positive, so
+    // truncation is the rounding
+    let scaled = a * SHORT_F64_SCALE;
+    let m = (scaled + 0.5) as i64;
+    // most values are far from the grid: the product tells, before the exact test divides (a value
+    // on the grid is within a·2.3e-10 of it: the rounding of a and of the product)
+    if (scaled - m as f64).abs() > 1e-3 + a * 3e-10 {
+        return None;
+    }
+    (m as f64 / SHORT_F64_SCALE == a).then_some(m as u64)
+}
+
+/// |v|·10⁴ when that whole number of 10⁻⁴, read as an f32, gives |v| back (in range).
+#[inline]
+fn short_f32(v: f32) -> Option<u64> {
+    let a = v.abs();
+    if !SHORT_F32_RANGE.contains(&a) {
+        return None;
+    }
+    // a·10⁴ is exact in f64 (24 + 14 significant bits), and so is its distance to m: the decimal
+    // m·10⁻⁴ reads back as v when it is closer to v than half the spacing of floats around v (a
+    // quarter below a power of two, where the spacing halves); ties are not taken
+    let scaled = a as f64 * SHORT_F32_SCALE;
+    let m = (scaled + 0.5) as i64;
+    let spacing = f32::from_bits(a.to_bits() & 0x7F80_0000) as f64 * (1.0 / 8_388_608.0);
+    let half = if a.to_bits() & 0x7F_FFFF == 0 { 0.25 * spacing } else { 0.5 * spacing };
+    ((scaled - m as f64).abs() < half * SHORT_F32_SCALE).then_some(m as u64)
+}
+
 #[inline]
 fn push_f64(out: &mut Vec<u8>, v: f64) {
-    if v.abs() < ZMIJ_F64_BELOW {
+    if let Some(m) = short_f64(v) {
+        push_decimal(out, v < 0.0, m, SHORT_F64_DIGITS);
+    } else if v == 0.0 {
+        out.extend_from_slice(if v.is_sign_negative() { b"-0.0" } else { b"0.0" });
+    } else if v.abs() < ZMIJ_F64_BELOW {
         let _ = CompactFormatter.write_f64(out, v); // into a Vec: cannot fail
     } else {
         out.extend_from_slice(ryu::Buffer::new().format_finite(v).as_bytes());
@@ -85,11 +152,40 @@ fn push_f64(out: &mut Vec<u8>, v: f64) {
 
 #[inline]
 fn push_f32(out: &mut Vec<u8>, v: f32) {
-    if v.abs() < ZMIJ_F32_BELOW {
+    if let Some(m) = short_f32(v) {
+        push_decimal(out, v < 0.0, m, SHORT_F32_DIGITS);
+    } else if v == 0.0 {
+        out.extend_from_slice(if v.is_sign_negative() { b"-0.0" } else { b"0.0" });
+    } else if v.abs() < ZMIJ_F32_BELOW {
         let _ = CompactFormatter.write_f32(out, v);
     } else {
         out.extend_from_slice(ryu::Buffer::new().format_finite(v).as_bytes());
     }
+}
+
+/// Appends ±m·10^-digits as ryu writes it: the integer part, a point, the fraction without
+/// trailing zeros (at least one digit). `digits` is even (pairs of digits).
+#[inline]
+fn push_decimal(out: &mut Vec<u8>, negative: bool, m: u64, digits: u32) {
+    let unit = 10u64.pow(digits);
+    let (int, mut frac) = (m / unit, m % unit);
+    if negative {
+        out.push(b'-');
+    }
+    push_u64(out, int);
+    // the point and every fraction digit, then the trailing zeros cut (one digit stays)
+    let mut buf = [b'.'; 9];
+    let len = 1 + digits as usize;
+    for k in (0..digits as usize / 2).rev() {
+        let p = (frac % 100) as usize * 2;
+        frac /= 100;
+        buf[1 + 2 * k..3 + 2 * k].copy_from_slice(&PAIRS[p..p + 2]);
+    }
+    let mut end = len;
+    while end > 2 && buf[end - 1] == b'0' {
+        end -= 1;
+    }
+    out.extend_from_slice(&buf[..end]);
 }
 
 /// "00" … "99".
@@ -97,8 +193,8 @@ const PAIRS: &[u8; 200] = b"0001020304050607080910111213141516171819202122232425
 
 /// Appends `v` in decimal, two digits at a time.
 #[inline]
-fn push_u32(out: &mut Vec<u8>, mut v: u32) {
-    let mut buf = [0u8; 10];
+fn push_u64(out: &mut Vec<u8>, mut v: u64) {
+    let mut buf = [0u8; 20];
     let mut k = buf.len();
     while v >= 100 {
         let p = (v % 100) as usize * 2;
@@ -119,11 +215,11 @@ fn push_u32(out: &mut Vec<u8>, mut v: u32) {
 
 /// Formats `chunk` (whose first row is row `first` of the table) into `buf` (cleared first);
 /// `Err(row)` names the first row holding a non-finite number.
-fn format_chunk(chunk: &[PlacementRow], first: usize, buf: &mut Vec<u8>) -> Result<(), usize> {
+fn format_chunk<R: ToPlacementRow>(chunk: &[R], first: usize, buf: &mut Vec<u8>) -> Result<(), usize> {
     buf.clear();
     buf.reserve(chunk.len() * ROW_MAX);
     for (k, r) in chunk.iter().enumerate() {
-        if !push_row(buf, r) {
+        if !push_row(buf, &r.placement_row()) {
             return Err(first + k);
         }
     }
@@ -142,7 +238,7 @@ fn not_finite(row: usize) -> String {
 
 /// Formats `rows` (row `first` of the table first) in parallel chunks into `bufs` (one per chunk,
 /// reused across calls so their pages are touched once).
-fn format_batch(rows: &[PlacementRow], first: usize, bufs: &mut Vec<Vec<u8>>) -> Result<(), usize> {
+fn format_batch<R: ToPlacementRow + Sync>(rows: &[R], first: usize, bufs: &mut Vec<Vec<u8>>) -> Result<(), usize> {
     let chunks = rows.len().div_ceil(ROWS_PER_CHUNK);
     bufs.resize_with(bufs.len().max(chunks), Vec::new);
     let results: Vec<Result<(), usize>> = bufs[..chunks]
@@ -160,7 +256,7 @@ fn format_batch(rows: &[PlacementRow], first: usize, bufs: &mut Vec<Vec<u8>>) ->
 /// The table as CSV bytes: a header line, then one line per row. Non-finite numbers are refused
 /// (a placement bug, not something to write). Built by the streaming writer into one growing
 /// buffer, so only two batches of chunk buffers exist besides it (fresh pages are costly).
-pub fn placements_csv(rows: &[PlacementRow]) -> Result<Vec<u8>, String> {
+pub fn placements_csv<R: ToPlacementRow + Sync>(rows: &[R]) -> Result<Vec<u8>, String> {
     let mut out = Vec::with_capacity(64 + rows.len() * 144);
     let mut bad = None;
     match stream_csv(&mut out, rows, ROWS_PER_CHUNK * CHUNKS_PER_BATCH, &mut bad) {
@@ -172,7 +268,7 @@ pub fn placements_csv(rows: &[PlacementRow]) -> Result<Vec<u8>, String> {
 /// Writes the placement table to `path` atomically, streaming: batches of rows are formatted in
 /// parallel while the previous batch is written, so memory stays bounded by two batches and the
 /// bytes are those of [`placements_csv`].
-pub fn write_placements_csv(path: &Path, rows: &[PlacementRow]) -> Result<(), ExportError> {
+pub fn write_placements_csv<R: ToPlacementRow + Sync>(path: &Path, rows: &[R]) -> Result<(), ExportError> {
     let mut bad: Option<usize> = None;
     let result = write_atomic_with(path, |w| stream_csv(w, rows, ROWS_PER_CHUNK * CHUNKS_PER_BATCH, &mut bad));
     match (result, bad) {
@@ -183,7 +279,7 @@ pub fn write_placements_csv(path: &Path, rows: &[PlacementRow]) -> Result<(), Ex
 
 /// The CSV into `w` in batches of `batch` rows (the next batch formatted while this thread writes
 /// the current one); a non-finite number stops it with an error and its row in `bad`.
-fn stream_csv(w: &mut dyn std::io::Write, rows: &[PlacementRow], batch: usize, bad: &mut Option<usize>) -> std::io::Result<()> {
+fn stream_csv<R: ToPlacementRow + Sync>(w: &mut dyn std::io::Write, rows: &[R], batch: usize, bad: &mut Option<usize>) -> std::io::Result<()> {
     let mut refuse = |row: usize| {
         *bad = Some(row);
         std::io::Error::new(std::io::ErrorKind::InvalidData, not_finite(row))
@@ -274,19 +370,29 @@ mod tests {
     }
 
     /// The formatter's bytes are ryu's, over random bit patterns of every exponent.
+    fn f64_text(v: f64) -> Vec<u8> {
+        let mut out = Vec::new();
+        push_f64(&mut out, v);
+        out
+    }
+
+    fn f32_text(v: f32) -> Vec<u8> {
+        let mut out = Vec::new();
+        push_f32(&mut out, v);
+        out
+    }
+
     #[test]
     fn digits_are_ryus() {
         let mut fmt = ryu::Buffer::new();
         let mut h: u64 = 0x9E37_79B9_7F4A_7C15;
-        let mut out = Vec::new();
+        let mut out;
         let near: Vec<f64> = (0..40).flat_map(|e| [10f64.powi(e - 20), 10f64.powi(e - 20) * (1.0 - f64::EPSILON), 9.999_999e14, 9_999_999.0, 1e7 - 0.5]).collect();
         for &v in &near {
             for v in [v, -v] {
-                out.clear();
-                push_f64(&mut out, v);
+                out = f64_text(v);
                 assert_eq!(out, fmt.format_finite(v).as_bytes());
-                out.clear();
-                push_f32(&mut out, v as f32);
+                out = f32_text(v as f32);
                 assert_eq!(out, fmt.format_finite(v as f32).as_bytes());
             }
         }
@@ -295,17 +401,64 @@ mod tests {
             let (d, s) = (f64::from_bits(h), f32::from_bits((h >> 32) as u32));
             for (a, b) in [(d, s as f64), (h as f64 * 1e-12, (h >> 40) as f64 / 16.0)] {
                 if a.is_finite() {
-                    out.clear();
-                    push_f64(&mut out, a);
+                    out = f64_text(a);
                     assert_eq!(out, fmt.format_finite(a).as_bytes());
                 }
                 let b = b as f32;
                 if b.is_finite() {
-                    out.clear();
-                    push_f32(&mut out, b);
+                    out = f32_text(b);
                     assert_eq!(out, fmt.format_finite(b).as_bytes());
                 }
             }
+        }
+    }
+
+    /// Short decimals (the fast path) are ryu's bytes too: every f32 that is the nearest float to
+    /// k·10⁻⁴ below 256 (every scale, yaw in 0.01°), and f64 on 10⁻⁴ and 10⁻⁶ grids up to the
+    /// range's ends, both signs; and values just off a grid, which take the general path.
+    #[test]
+    fn short_decimals_are_ryus() {
+        let mut fmt = ryu::Buffer::new();
+        let mut out = Vec::new();
+        let mut check32 = |v: f32, out: &mut Vec<u8>| {
+            *out = f32_text(v);
+            assert_eq!(&out[..], fmt.format_finite(v).as_bytes(), "{v:e}");
+        };
+        for k in 0..2_560_000u32 {
+            let v = (k as f64 / 1e4) as f32;
+            // the short path takes every one of them (from 10⁻⁴ on)
+            assert_eq!(short_f32(v), (k > 0).then_some(k as u64), "{v:e}");
+            for v in [v, -v, f32::from_bits(v.to_bits() + 1), f32::from_bits(v.to_bits().saturating_sub(1))] {
+                check32(v, &mut out);
+            }
+        }
+        for k in 0..36_000u32 {
+            check32((k as f64 / 100.0) as f32, &mut out);
+            check32(k as f32 / 100.0, &mut out);
+        }
+        let mut fmt = ryu::Buffer::new();
+        let mut h: u64 = 7;
+        for _ in 0..1_000_000 {
+            h = crate::synth::mix64(h);
+            let m = (h >> 20) % 1_000_000_000_000_000; // below 10^15: values below 10^9 at 10⁻⁶
+            let short = m % 1_000_000_000_000_000 / 1000; // below 10^12: values below 10^6 at 10⁻⁶
+            if short >= 100 {
+                assert_eq!(short_f64(short as f64 / 1e6), Some(short));
+                assert_eq!(short_f64(-((short / 100) as f64) / 1e4), Some(short / 100 * 100));
+            }
+            for v in [m as f64 / 1e4, m as f64 / 1e6, (m % 100_000) as f64 / 1e6, (h >> 11) as f64 / (1u64 << 53) as f64 * 4096.0] {
+                for v in [v, -v, f64::from_bits(v.to_bits() + 1), f64::from_bits(v.to_bits().saturating_sub(1))] {
+                    out = f64_text(v);
+                    assert_eq!(&out[..], fmt.format_finite(v).as_bytes(), "{v:e}");
+                }
+            }
+        }
+        for v in [1e-4, 1e-4 - 1e-20, 1e9, 1e9 - 1e-6, 999_999_999.999_999, 0.000_100_000_1, 0.5, 1.0, 10.0] {
+            out = f64_text(v);
+            assert_eq!(&out[..], fmt.format_finite(v).as_bytes(), "{v:e}");
+        }
+        for v in [1e-4f32, 255.9999, 256.0, 255.99998, 0.00010001] {
+            check32(v, &mut out);
         }
     }
 
@@ -327,7 +480,7 @@ mod tests {
 
     #[test]
     fn empty_table_has_a_header_and_nan_is_refused() {
-        assert_eq!(placements_csv(&[]).unwrap(), b"x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile\n");
+        assert_eq!(placements_csv::<PlacementRow>(&[]).unwrap(), b"x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile\n");
         let bad = PlacementRow { position: [f64::NAN, 0.0, 0.0], rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0; 3], yaw_deg: 0.0, tile: 0 };
         assert!(placements_csv(&[bad]).unwrap_err().contains("row 0"));
         let mut rows = vec![PlacementRow { position: [1.0; 3], rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0; 3], yaw_deg: 0.0, tile: 0 }; 70_000];

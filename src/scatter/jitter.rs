@@ -1,13 +1,15 @@
 //! Jittered grid placement (stratified sampling, Cook 1986 "Stochastic sampling in computer
 //! graphics"): one candidate per cell of side 1/√max_density at a hashed offset, kept with
 //! probability density(x, z), so the expected count is exactly ∫ density · max_density.
+//! Positions are rounded to a 0.1 mm grid (far below the jitter's scale), which keeps the
+//! placement table's x and z short.
 
 use rayon::prelude::*;
 
 use crate::synth::mix64;
 
 use super::rules::Rules;
-use super::{Instance, RuleCounts, ScatterError, MAX_CANDIDATES};
+use super::{on_grid, Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POSITION_STEPS_PER_M};
 
 /// All instances of a jittered species, sorted by tile and then by cell (row-major).
 pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterError> {
@@ -68,8 +70,9 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
                     let row_inside = cj >= ij0 && cj <= ij1;
                     for ci in ci0..=ci1 {
                         let h1 = mix64(key ^ (cj as u64 * ncx as u64 + ci as u64));
-                        let x = x0 + (ci as f64 + (h1 >> 32) as f64 * (1.0 / 4_294_967_296.0)) * cell;
-                        let z = z0 + (cj as f64 + (h1 & 0xFFFF_FFFF) as f64 * (1.0 / 4_294_967_296.0)) * cell;
+                        // on the 0.1 mm grid (POSITION_STEPS_PER_M): short table entries
+                        let x = on_grid(x0 + (ci as f64 + (h1 >> 32) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
+                        let z = on_grid(z0 + (cj as f64 + (h1 & 0xFFFF_FFFF) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
                         if !(row_inside && ci >= ii0 && ci <= ii1) && (x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz)) {
                             continue;
                         }

@@ -47,6 +47,14 @@ pub struct Instance {
     pub tile: u32,
 }
 
+/// An instance is a row of its placement table (written without a copy).
+impl crate::export::table::ToPlacementRow for Instance {
+    #[inline]
+    fn placement_row(&self) -> crate::export::table::PlacementRow {
+        crate::export::table::PlacementRow { position: self.position, rotation: self.rotation, scale: self.scale, yaw_deg: self.yaw_deg, tile: self.tile }
+    }
+}
+
 /// Candidates examined and why they were dropped (for the report).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct RuleCounts {
@@ -201,6 +209,20 @@ pub(crate) fn sin_cos_0_pi(x: f64) -> (f64, f64) {
     let sin_t = t * (1.0 + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0 + t2 * (1.0 / 362_880.0 + t2 * (-1.0 / 39_916_800.0 + t2 / 6_227_020_800.0))))));
     let cos_t = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24.0 + t2 * (-1.0 / 720.0 + t2 * (1.0 / 40_320.0 + t2 * (-1.0 / 3_628_800.0 + t2 * (1.0 / 479_001_600.0 - t2 / 87_178_291_200.0))))));
     (cos_t, -sin_t)
+}
+
+/// Jittered positions lie on a grid of this many steps per metre (0.1 mm): far finer than any
+/// use of a placement, and their table entries are then short decimals (see `export::table`).
+/// Poisson positions keep every bit (rounding could bring two closer than `min_spacing`).
+pub const POSITION_STEPS_PER_M: f64 = 1e4;
+/// Yaw in steps of 0.01°, scale in steps of 10⁻⁴, for the same reason.
+pub const YAW_STEPS_PER_DEG: f64 = 100.0;
+pub const SCALE_STEPS: f64 = 1e4;
+
+/// `v` on a grid of `steps` per unit: the nearest f64 to ⌊v·steps + ½⌋ / steps.
+#[inline]
+pub(crate) fn on_grid(v: f64, steps: f64) -> f64 {
+    floor_i64(v * steps + 0.5) as f64 / steps
 }
 
 /// Uniform in [0, 1) from the top 53 bits of a hash.

@@ -5,7 +5,7 @@
 use crate::scene::{Placement, SpeciesSettings};
 use crate::synth::mix64;
 
-use super::{poisson::POISSON_PACKING, sin_cos_0_pi, species_key, unit, DensityMap, Instance, RuleCounts, ScatterError, SurfaceIndex, Tiling};
+use super::{on_grid, poisson::POISSON_PACKING, sin_cos_0_pi, species_key, unit, DensityMap, SCALE_STEPS, YAW_STEPS_PER_DEG, Instance, RuleCounts, ScatterError, SurfaceIndex, Tiling};
 
 /// Everything one species' candidates are judged by, resolved once.
 pub struct Rules<'a> {
@@ -232,11 +232,12 @@ impl<'a> Rules<'a> {
     fn instance(&self, position: [f64; 3], n: [f64; 3], attr: u64, tile: u32) -> Instance {
         let s = self.species;
         let h1 = mix64(attr);
-        let u = if s.random_yaw { unit(h1) } else { 0.0 };
-        let scale = (s.scale[0] + (s.scale[1] - s.scale[0]) * unit(mix64(h1))) as f32;
-        // the half angle π·u in [0, π): a polynomial sincos
-        let half = sin_cos_0_pi(std::f64::consts::PI * u);
-        Instance { position, rotation: orientation_half(half, n, self.align), scale: [scale; 3], yaw_deg: (u * 360.0) as f32, tile }
+        // yaw in whole 0.01° in [0, 360), scale in whole 10⁻⁴ within its range (short table entries)
+        let yaw_deg = if s.random_yaw { super::floor_i64(unit(h1) * 360.0 * YAW_STEPS_PER_DEG) as f64 / YAW_STEPS_PER_DEG } else { 0.0 };
+        let scale = on_grid(s.scale[0] + (s.scale[1] - s.scale[0]) * unit(mix64(h1)), SCALE_STEPS).clamp(s.scale[0], s.scale[1]) as f32;
+        // the half angle π·yaw/360 in [0, π): a polynomial sincos
+        let half = sin_cos_0_pi(yaw_deg * (std::f64::consts::PI / 360.0));
+        Instance { position, rotation: orientation_half(half, n, self.align), scale: [scale; 3], yaw_deg: yaw_deg as f32, tile }
     }
 }
 

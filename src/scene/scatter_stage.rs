@@ -82,13 +82,6 @@ fn load_map(path: &Option<PathBuf>) -> Result<Option<DensityMap>, StageError> {
     path.as_ref().map(|p| DensityMap::load(p).map_err(|e| fail(e.to_string()))).transpose()
 }
 
-fn rows(instances: &[Instance]) -> Vec<table::PlacementRow> {
-    instances
-        .iter()
-        .map(|i| table::PlacementRow { position: i.position, rotation: i.rotation, scale: i.scale, yaw_deg: i.yaw_deg, tile: i.tile })
-        .collect()
-}
-
 /// The placed instances of one species, for the preview.
 pub struct Placed {
     pub species: SpeciesSettings,
@@ -123,7 +116,7 @@ pub fn run_scatter(preset: &Preset, terrain: &Scene, scene_dir: &Path) -> Result
         let stats = analyze(&surface, extent, species, density.as_ref(), mask.as_ref(), &result.instances, preset.scatter.tile_m, generate_s)
             .map_err(|e| fail(e.to_string()))?;
         let csv = PathBuf::from("placements").join(format!("{}.csv", species.name));
-        table::write_placements_csv(&scene_dir.join(&csv), &rows(&result.instances)).map_err(|e| fail(e.to_string()))?;
+        table::write_placements_csv(&scene_dir.join(&csv), &result.instances).map_err(|e| fail(e.to_string()))?;
         let report = SpeciesReport {
             name: species.name.clone(),
             kind: species.kind,
