@@ -11,6 +11,10 @@
 
 use std::time::Instant;
 
+#[path = "common/cpu.rs"]
+mod cpu;
+use cpu::cpu_seconds;
+
 use verdant::bake::atlas::{dilate, mip_chain, resolve_supersampled};
 use verdant::bake::image::Image;
 use verdant::bake::raster::{Camera, DrawOptions, Fragment, OrthoView, PerspectiveView};
@@ -23,17 +27,6 @@ const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.
 
 fn runs() -> usize {
     std::env::var("VERDANT_BENCH_RUNS").ok().and_then(|v| v.parse().ok()).unwrap_or(3)
-}
-
-/// CPU seconds (user + system, all threads) of this process so far, from /proc (10 ms steps).
-fn cpu_seconds() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    let rest = stat.rsplit_once(')').map_or("", |r| r.1);
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    match (f.get(11).and_then(|v| v.parse::<u64>().ok()), f.get(12).and_then(|v| v.parse::<u64>().ok())) {
-        (Some(u), Some(s)) => (u + s) as f64 / 100.0,
-        _ => f64::NAN,
-    }
 }
 
 /// Best (wall, cpu) seconds of `f` over the runs, and its last result.

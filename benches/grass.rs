@@ -10,6 +10,10 @@
 
 use std::time::Instant;
 
+#[path = "common/cpu.rs"]
+mod cpu;
+use cpu::cpu_seconds;
+
 use verdant::plants::grass::GrassSettings;
 use verdant::plants::grass_asset::build_grass_with;
 
@@ -17,15 +21,16 @@ fn main() {
     let runs: usize = std::env::var("VERDANT_BENCH_RUNS").ok().and_then(|v| v.parse().ok()).unwrap_or(5).max(1);
     let settings = GrassSettings::default();
     println!("grass species: {} blades per dense clump, {} density levels × {} variants, {} segments, atlas {} px per view", settings.blades_per_clump, settings.density_levels, settings.variants, settings.segments, settings.atlas_px);
-    let (mut best_total, mut best_gen, mut best_bake, mut render, mut dilate) = (f64::MAX, f64::MAX, f64::MAX, 0.0, 0.0);
+    let (mut best_total, mut best_gen, mut best_bake, mut render, mut dilate, mut cpu_total) = (f64::MAX, f64::MAX, f64::MAX, 0.0, 0.0, 0.0);
     let mut fragments = 0;
     let mut asset = None;
     for _ in 0..runs {
-        let t = Instant::now();
+        let (t, c) = (Instant::now(), cpu_seconds());
         let a = build_grass_with("bench", &settings, None, false).expect("default settings build");
         let total = t.elapsed().as_secs_f64();
         if total < best_total {
             best_total = total;
+            cpu_total = cpu_seconds() - c;
             best_gen = a.report.seconds_generate;
             best_bake = a.report.seconds_bake;
             render = a.report.seconds_render;
@@ -51,7 +56,7 @@ fn main() {
     println!("{:<28} {:>10.3}", "  of which: render views", render);
     println!("{:<28} {:>10.3}", "  of which: dilate", dilate);
     println!("{:<28} {:>10.3}", "  of which: mip chains", best_bake - render - dilate);
-    println!("{:<28} {:>10.3}   target < 1 s: {}", "generate + bake, all", best_total, if best_total < 1.0 { "met" } else { "NOT met" });
+    println!("{:<28} {:>10.3}   target < 1 s: {} (CPU {:.2} s on all threads; CPU ≈ wall means we had about one core)", "generate + bake, all", best_total, if best_total < 1.0 { "met" } else { "NOT met" }, cpu_total);
     println!("{:<28} {:>10.3}", "analyzer (switch search)", best_analyze);
     println!();
     println!("fill rate while baking: {:.1} million fragments/s ({} fragments shaded at 2× supersampling in {:.3} s of rendering, clears and resolves included)", fragments as f64 / render / 1e6, fragments, render);
