@@ -249,12 +249,20 @@ pub fn flake_model(kind: FlakeKind, r: &mut Stream) -> Primitive {
     let mut p = Primitive { material: Some(0), ..Primitive::default() };
     match kind {
         FlakeKind::Plate => {
-            push_hexagon(&mut p, [0.0; 3], 1.0, 0.0, ICE_EDGE);
-            push_hexagon(&mut p, [0.0, 0.0, 0.001], r.range([0.45, 0.8]), 0.0, ICE);
+            // the hexagon, and on some plates short broad branches growing from its corners
+            // (the silhouette varies, not only the shading)
+            let body = r.range([0.7, 1.0]);
+            push_hexagon(&mut p, [0.0; 3], body, 0.0, ICE_EDGE);
+            if body < 0.95 {
+                let mut tip = Primitive::default();
+                push_bar(&mut tip, [body * 0.8, 0.0, 0.0], [1.0, 0.0, 0.0], body * r.range([0.25, 0.45]), ICE_EDGE);
+                sixfold(&mut p, &tip);
+            }
+            push_hexagon(&mut p, [0.0, 0.0, 0.001], body * r.range([0.45, 0.8]), 0.0, ICE);
             if r.unit() < 0.6 {
                 // ridges along the six corners (sectored plate)
                 let mut ridge = Primitive::default();
-                push_bar(&mut ridge, [0.0, 0.0, 0.002], [0.98, 0.0, 0.002], 0.06, ICE_CORE);
+                push_bar(&mut ridge, [0.0, 0.0, 0.002], [0.98 * body, 0.0, 0.002], 0.06, ICE_CORE);
                 sixfold(&mut p, &ridge);
             }
             push_hexagon(&mut p, [0.0, 0.0, 0.003], r.range([0.08, 0.2]), 0.0, ICE_CORE);
