@@ -117,7 +117,7 @@ fn value_noise(seed: u64, x: f32, z: f32, scale: f32) -> f32 {
 /// in it, for any aspect). A normal pointing down (overhang) gets no snow.
 pub fn snow_weight(s: &CoverSettings, position: [f32; 3], normal: [f32; 3]) -> [f32; 3] {
     let ny = normal[1].clamp(-1.0, 1.0);
-    if !(ny > 0.0) {
+    if ny.is_nan() || ny <= 0.0 {
         return [0.0, 0.0, altitude_factor(s, position)];
     }
     let slope_deg = ny.acos().to_degrees();
