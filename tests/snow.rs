@@ -255,19 +255,14 @@ fn all_outputs(dir: &std::path::Path) -> Vec<Vec<u8>> {
     let atlas = atlas_at(-20.0, 0.6);
     let e = Emitter::default();
     let ps = particles(&e, &atlas).unwrap();
-    let scene = snowfall_scene("snowfall", &ps, &atlas, 0.5);
-    let path = dir.join("snowfall.glb");
-    write_scene(&scene, &path).unwrap();
+    let mut files = write_snowfall(dir, &atlas, &e, &ps, 0.5).unwrap();
     let mut terrain = terrain();
     apply_cover(&mut terrain, &CoverSettings { snow_line_m: 30.0, snow_line_noise_m: 8.0, ..CoverSettings::default() }).unwrap();
-    let mask = cover_mask(&terrain, 96).unwrap().to_image().encode_png().unwrap();
-    vec![
-        atlas.png.clone(),
-        emitter_json(&e, &atlas, "flakes.png").unwrap().into_bytes(),
-        particles_csv(&ps).into_bytes(),
-        std::fs::read(&path).unwrap(),
-        mask,
-    ]
+    let mask = cover_mask(&terrain, 96).unwrap();
+    files.extend(write_cover(dir, &mask, Some(&snow_layer(&terrain, 0.5).unwrap())).unwrap());
+    let names: Vec<String> = files.iter().map(|f| f.file_name().unwrap().to_string_lossy().into_owned()).collect();
+    assert_eq!(names, ["flakes.png", "emitter.json", "particles.csv", "snowfall.glb", "cover_mask.png", "snow_layer.glb"]);
+    files.iter().map(|f| std::fs::read(f).unwrap()).collect()
 }
 
 #[test]
@@ -276,12 +271,15 @@ fn snowfall_glb_validates_and_outputs_are_identical_at_any_thread_count() {
     let one = with_threads(1, || all_outputs(dir.path()));
     let v = validate_file(&dir.path().join("snowfall.glb"), &ValidateOptions::default()).unwrap();
     assert_eq!((v.errors(), v.warnings()), (0, 0), "{v}");
+    let v = validate_file(&dir.path().join("snow_layer.glb"), &ValidateOptions::default()).unwrap();
+    assert_eq!((v.errors(), v.warnings()), (0, 0), "{v}");
     let back = read_scene(&dir.path().join("snowfall.glb")).unwrap();
     let instanced: usize = back.nodes.iter().filter_map(|n| n.instances.as_ref()).map(|i| i.len()).sum();
     let e = Emitter::default();
     assert_eq!(instanced, (e.near_count + e.far.unwrap().count) as usize, "one instance per flake");
     assert!(back.meshes.iter().all(|m| m.triangle_count() == 2), "each instanced mesh is one quad");
     let two = with_threads(2, || all_outputs(dir.path()));
+    assert_eq!(one.len(), two.len());
     for (k, (a, b)) in one.iter().zip(&two).enumerate() {
         assert!(a == b, "output {k} differs between 1 and 2 threads");
     }

@@ -4,19 +4,22 @@
 //!
 //! `flakes` draws six-fold crystals as geometry and bakes them into an atlas; `emitter` is the
 //! `emitter.json` data; `particles` places the initial flakes (CSV and an instanced glb); `cover`
-//! weights terrain vertices by slope, altitude and exposure; `analyze` measures all of it.
+//! weights terrain vertices by slope, altitude and exposure; `analyze` measures all of it; `write`
+//! writes the `snow/` folder.
 
 pub mod analyze;
 pub mod cover;
 pub mod emitter;
 pub mod flakes;
 pub mod particles;
+pub mod write;
 
 pub use analyze::{analyze, Band, SnowReport};
 pub use cover::{apply_cover, cover_mask, snow_layer, snow_weight, CoverMask, CoverSettings, SNOW_ATTRIBUTE};
 pub use emitter::{emitter_json, Emitter, FarField};
 pub use flakes::{build_atlas, flake_kind, flake_model, FlakeAtlas, FlakeCell, FlakeKind, FlakeSettings};
 pub use particles::{particles, particles_csv, snowfall_scene, Field, Particle};
+pub use write::{write_cover, write_snowfall, ATLAS_FILE};
 
 /// The one error type of the snow module: a setting out of range (named, with its remedy), a JSON
 /// document that does not parse (with line and column), or a bake / input-scene failure.
@@ -30,6 +33,9 @@ pub enum SnowError {
     Bake(String),
     #[error("terrain scene for snow cover: {0}")]
     Terrain(String),
+    /// A file could not be written (the export error's message names the file and the remedy).
+    #[error("{0}")]
+    Write(String),
 }
 
 pub(crate) fn bad<T>(key: &'static str, problem: String, remedy: &str) -> Result<T, SnowError> {
