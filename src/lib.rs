@@ -17,6 +17,7 @@ pub mod mesh;
 pub mod plants;
 pub mod scatter;
 pub mod scene;
+pub mod snow;
 pub mod synth;
 pub mod terrain;
 pub mod validate;
