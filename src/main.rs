@@ -117,8 +117,9 @@ struct TreeArgs {
     /// Levels of detail (1 to 5): LoD0 full, LoD1 simplified, LoD2 leaf-cluster cards, LoD3
     /// crossed billboards, LoD4 one impostor. Above 1 the output must be .glb: it holds the
     /// MSFT_lod chain, with <stem>_LOD<n>.glb and the atlas <stem>_atlas.png (+ mips) beside it.
-    #[arg(long, value_name = "N", default_value_t = tree_lod::TREE_LODS)]
-    lods: usize,
+    /// Default: 5 for a .glb output, 1 (LoD0 only) for .gltf and .obj.
+    #[arg(long, value_name = "N")]
+    lods: Option<usize>,
     /// Trees grown from seeds derived from --seed, written as <stem>_v<k>… (1 to 64).
     #[arg(long, value_name = "K", default_value_t = 1)]
     variants: usize,
@@ -485,13 +486,15 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             ..TreeOptions::default()
         },
     };
-    if a.lods > 1 || a.variants > 1 {
+    let glb = job.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    let lods = a.lods.unwrap_or(if glb { tree_lod::TREE_LODS } else { 1 });
+    if lods > 1 || a.variants > 1 || a.lods.is_some() {
         let lod_job = TreeLodJob {
             input: job.input.clone(),
             output: job.output.clone(),
             dialect: job.dialect,
             options: job.options.clone(),
-            lod: TreeLodOptions { lods: a.lods, atlas_px: a.atlas_size, analyze: !a.no_analysis, ..TreeLodOptions::default() },
+            lod: TreeLodOptions { lods, atlas_px: a.atlas_size, analyze: !a.no_analysis, ..TreeLodOptions::default() },
             variants: a.variants,
         };
         return match tree_lod::run_lods(&lod_job) {

@@ -55,8 +55,10 @@ pub const BAKE_SUPERSAMPLE: u32 = 2;
 pub const DEFAULT_HAUSDORFF_SAMPLES: usize = 20_000;
 /// LoD1 and LoD2 keep about this fraction of their input's triangles...
 const SIMPLIFY_RATIO: f64 = 0.5;
-/// ...unless that would move the surface more than this fraction of the mesh's extent.
-const SIMPLIFY_MAX_ERROR: f32 = 0.01;
+/// ...unless that would move the surface more than the first of these fractions of the mesh's
+/// extent; the next ones are tried only when a level would not have fewer triangles than the one
+/// before (small polygon-only plants).
+const SIMPLIFY_MAX_ERRORS: [f32; 4] = [0.01, 0.05, 0.25, 1.0];
 /// Extras key of the impostor's mesh.
 pub const IMPOSTOR_EXTRAS_KEY: &str = "verdant_impostor";
 
@@ -75,9 +77,10 @@ pub enum TreeLodError {
     #[error(transparent)]
     Export(#[from] ExportError),
     #[error(
-        "{name}: LoD{level} has {triangles} triangles, not fewer than LoD{}'s {previous}; the tree is too small for \
-         {level} levels: pass a smaller --lods",
-        level - 1
+        "{name}: LoD{level} has {triangles} triangles, not fewer than LoD{}'s {previous}: the tree is too small for \
+         {} levels; pass --lods {level}",
+        level - 1,
+        level + 1
     )]
     NotDecreasing { name: String, level: usize, triangles: usize, previous: usize },
     #[error("{path} does not pass validation (this is a bug, please report it with the input file):\n{report}")]
@@ -262,9 +265,9 @@ fn subset(p: &Primitive, keep: impl Fn(usize) -> bool) -> Primitive {
 }
 
 /// meshoptimizer's edge-collapse simplification of every primitive to about `ratio` of its
-/// triangles (never past SIMPLIFY_MAX_ERROR of the extent), zero-area results dropped, then
-/// reordered for the vertex cache and fetch.
-fn simplify(mesh: &Mesh, ratio: f64) -> Mesh {
+/// triangles (never past `max_error` of the extent), zero-area results dropped, then reordered for
+/// the vertex cache and fetch.
+fn simplify(mesh: &Mesh, ratio: f64, max_error: f32) -> Mesh {
     let mut out = Mesh { name: mesh.name.clone(), primitives: Vec::new(), extras: None };
     for p in &mesh.primitives {
         let bytes = meshopt::typed_to_bytes(&p.positions);
@@ -273,7 +276,7 @@ fn simplify(mesh: &Mesh, ratio: f64) -> Mesh {
             continue;
         };
         let target = ((p.indices.len() as f64 * ratio) as usize / 3) * 3;
-        let indices = meshopt::simplify(&p.indices, &adapter, target, SIMPLIFY_MAX_ERROR, meshopt::SimplifyOptions::None, None);
+        let indices = meshopt::simplify(&p.indices, &adapter, target, max_error, meshopt::SimplifyOptions::None, None);
         let mut q = Primitive { indices: Vec::with_capacity(indices.len()), ..p.clone() };
         for t in indices.chunks_exact(3) {
             if !is_flat(&p.positions, [t[0], t[1], t[2]]) {
@@ -314,12 +317,25 @@ struct Cluster {
     side_m: f64,
 }
 
+/// [`simplify`] with the smallest error bound of SIMPLIFY_MAX_ERRORS that leaves fewer than
+/// `below` triangles (the largest bound's result when none does).
+fn simplify_below(mesh: &Mesh, ratio: f64, below: usize) -> Mesh {
+    let mut out = Mesh::default();
+    for max_error in SIMPLIFY_MAX_ERRORS {
+        out = simplify(mesh, ratio, max_error);
+        if out.triangle_count() < below {
+            break;
+        }
+    }
+    out
+}
+
 /// Groups `dropped` by a uniform n³ grid over its triangles' centroids, n the largest of 8…1 that
-/// leaves at most MAX_CLUSTERS occupied cells; clusters in cell order (deterministic).
-fn clusters(dropped: &Mesh) -> Vec<Cluster> {
+/// leaves at most `max_clusters` occupied cells (none when 0); clusters in cell order (deterministic).
+fn clusters(dropped: &Mesh, max_clusters: usize) -> Vec<Cluster> {
     let centroid = |p: &Primitive, t: usize| (0..3).map(|k| DVec3::from(p.positions[p.indices[3 * t + k] as usize].map(f64::from))).sum::<DVec3>() / 3.0;
     let all: Vec<DVec3> = dropped.primitives.iter().flat_map(|p| (0..p.triangle_count()).map(move |t| centroid(p, t))).collect();
-    if all.is_empty() {
+    if all.is_empty() || max_clusters == 0 {
         return Vec::new();
     }
     let (lo, hi) = all.iter().fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(lo, hi), &c| (lo.min(c), hi.max(c)));
@@ -336,7 +352,7 @@ fn clusters(dropped: &Mesh) -> Vec<Cluster> {
         let mut occupied = cells.clone();
         occupied.sort_unstable();
         occupied.dedup();
-        if occupied.len() <= MAX_CLUSTERS || n == 1 {
+        if occupied.len() <= max_clusters || n == 1 {
             break;
         }
         n -= 1;
@@ -549,7 +565,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
         None
     };
     if let Some(half) = &half {
-        let mesh = simplify(half.mesh(), SIMPLIFY_RATIO);
+        let mesh = simplify_below(half.mesh(), SIMPLIFY_RATIO, levels[0].triangles());
         levels.push(TreeLod {
             level: 1,
             kind: "simplified",
@@ -574,7 +590,9 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
     let px = options.atlas_px;
     let max_level = lod0.stats.max_branch_level;
     let dropped_levels: Vec<u32> = if max_level > 0 && wanted > 2 { vec![max_level] } else { Vec::new() };
-    let groups = if dropped_levels.is_empty() { Vec::new() } else { clusters(&finer_than(&lod0, max_level - 1)) };
+    // cards take at most half of LoD1's triangle count (4 triangles a card)
+    let max_clusters = levels.get(1).map_or(0, |l| (l.triangles() / 8).min(MAX_CLUSTERS));
+    let groups = if dropped_levels.is_empty() { Vec::new() } else { clusters(&finer_than(&lod0, max_level - 1), max_clusters) };
     let impostor_cells: Vec<AtlasCell> = (0..IMPOSTOR_VIEWS).map(|k| AtlasCell::large(px, k)).collect();
     let mut jobs: Vec<(AtlasCell, CardFrame, &Mesh)> = Vec::new();
     if wanted > 2 {
@@ -621,11 +639,12 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
             }
         }
         let lod1_triangles = levels[1].triangles();
+        let below = lod1_triangles.saturating_sub(cards.triangle_count());
         let mut ratio = SIMPLIFY_RATIO;
-        let mut mesh = simplify(&kept, ratio);
-        while mesh.triangle_count() + cards.triangle_count() >= lod1_triangles && ratio > 0.01 {
+        let mut mesh = simplify_below(&kept, ratio, below);
+        while mesh.triangle_count() >= below && ratio > 0.01 {
             ratio /= 2.0;
-            mesh = simplify(&kept, ratio);
+            mesh = simplify_below(&kept, ratio, below);
         }
         let mut materials = half.scene.materials.clone();
         let mut textures = half.scene.textures.clone();
