@@ -911,10 +911,12 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
     let t_parse = t0.elapsed().as_secs_f64();
     let stem = job.output.file_stem().and_then(|s| s.to_str()).unwrap_or("tree").to_string();
     let dir = job.output.parent().map(Path::to_path_buf).unwrap_or_default();
+    // names inside the files come from the tree's name, file names from the output's stem, so the
+    // same tree written under two names has the same bytes
+    let suffix = |k: usize| if job.variants == 1 { String::new() } else { format!("_v{k}") };
     let mut chains = Vec::with_capacity(job.variants);
     for k in 0..job.variants {
-        let name = if job.variants == 1 { stem.clone() } else { format!("{stem}_v{k}") };
-        let options = TreeOptions { seed: variant_seed(job.options.seed, k), name, ..job.options.clone() };
+        let options = TreeOptions { seed: variant_seed(job.options.seed, k), name: format!("{}{}", job.options.name, suffix(k)), ..job.options.clone() };
         let chain = build_tree_lods(&parsed.system, &options, &job.lod).map_err(|e| match e {
             TreeLodError::Tree(t) => TreeLodError::Tree(TreeError::InFile { path: job.input.clone(), source: Box::new(t) }),
             e => e,
@@ -924,18 +926,18 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
     let t_build = t0.elapsed().as_secs_f64();
     let mut files = Vec::new();
     let (mut errors, mut warnings) = (0, 0);
-    for c in &chains {
-        let main = dir.join(format!("{}.glb", c.name));
+    for (k, c) in chains.iter().enumerate() {
+        let file_stem = format!("{stem}{}", suffix(k));
         for lod in &c.levels {
-            let (e, w) = write_glb(&lod.scene, &dir.join(format!("{}.glb", lod.scene.name)), &mut files)?;
+            let (e, w) = write_glb(&lod.scene, &dir.join(format!("{file_stem}_LOD{}.glb", lod.level)), &mut files)?;
             errors += e;
             warnings += w;
         }
         if !c.atlas.is_empty() {
-            let pngs = write_mip_pngs(&dir, &format!("{}_atlas", c.name), &c.atlas).map_err(|e| TreeLodError::Texture(e.to_string()))?;
+            let pngs = write_mip_pngs(&dir, &format!("{file_stem}_atlas"), &c.atlas).map_err(|e| TreeLodError::Texture(e.to_string()))?;
             files.extend(pngs);
         }
-        let (e, w) = write_glb(&c.chain, &main, &mut files)?;
+        let (e, w) = write_glb(&c.chain, &dir.join(format!("{file_stem}.glb")), &mut files)?;
         errors += e;
         warnings += w;
     }
