@@ -129,7 +129,7 @@ impl TreeLodOptions {
         if !(1..=TREE_LODS).contains(&self.lods) {
             return Err(TreeLodError::Options(format!("--lods {} is out of range; use 1 to {TREE_LODS}", self.lods)));
         }
-        if !(MIN_ATLAS_PX..=MAX_ATLAS_PX).contains(&self.atlas_px) || self.atlas_px % 16 != 0 {
+        if !(MIN_ATLAS_PX..=MAX_ATLAS_PX).contains(&self.atlas_px) || !self.atlas_px.is_multiple_of(16) {
             return Err(TreeLodError::Options(format!(
                 "--atlas-size {} must be a multiple of 16 from {MIN_ATLAS_PX} to {MAX_ATLAS_PX} (e.g. 1024 or 2048)",
                 self.atlas_px
@@ -231,7 +231,7 @@ fn bake(frame: &CardFrame, px: u32, mesh: &Mesh, materials: &[Material], texture
     Ok((resolve_supersampled(&Image::from_canvas_owned(canvas), BAKE_SUPERSAMPLE), fragments))
 }
 
-/// Appends `prims` (triangle lists) merged by material; returns nothing, keeps every attribute.
+/// `a` with `b`'s vertices and triangles after its own (positions, normals, uvs; `a`'s material).
 fn appended(mut a: Primitive, b: &Primitive) -> Primitive {
     let base = a.positions.len() as u32;
     a.positions.extend_from_slice(&b.positions);
@@ -681,8 +681,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
             "cells_uv": impostor_cells.iter().map(|c| c.uv).collect::<Vec<_>>(),
         }});
         let mesh = Mesh { name: String::new(), primitives: vec![quad], extras: Some(extras) };
-        let mut scene = single_mesh_scene(&format!("{name}_LOD4"), mesh, vec![atlas_material(0)], vec![atlas_tex.clone()]);
-        scene.meshes[0].extras = scene.meshes[0].extras.take();
+        let scene = single_mesh_scene(&format!("{name}_LOD4"), mesh, vec![atlas_material(0)], vec![atlas_tex.clone()]);
         levels.push(TreeLod { level: 4, kind: "impostor", scene, images: vec![atlas0.image.clone()] });
     }
     levels.truncate(wanted);
