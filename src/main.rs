@@ -7,6 +7,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use verdant::heightfield::{DecodeOptions, Encoding, DEFAULT_MAX_SAMPLES};
 use verdant::lsystem::expand::DEFAULT_MAX_SYMBOLS;
 use verdant::lsystem::Dialect;
+use verdant::plants::tree_lod::{self, TreeLodJob, TreeLodOptions};
 use verdant::plants::tree::{self as tree_job, TreeJob, TreeOptions, DEFAULT_MAX_SEGMENTS, DEFAULT_MAX_TRIANGLES, DEFAULT_RADIAL_SEGMENTS};
 use verdant::scene::build::{self as scene_build, BuildSettings, PresetSource};
 use verdant::scene::preset;
@@ -109,9 +110,25 @@ struct TreeArgs {
     /// Scale the finished tree to this height in metres.
     #[arg(long, value_name = "METRES")]
     height: Option<f64>,
-    /// Write a JSON report: symbols, segments, triangles, branch levels, seconds.
+    /// Write a JSON report: symbols, segments, triangles, branch levels, seconds, and per LoD
+    /// triangles, bytes, geometric and image error, switch distance (the speed/error table).
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
+    /// Levels of detail (1 to 5): LoD0 full, LoD1 simplified, LoD2 leaf-cluster cards, LoD3
+    /// crossed billboards, LoD4 one impostor. Above 1 the output must be .glb: it holds the
+    /// MSFT_lod chain, with <stem>_LOD<n>.glb and the atlas <stem>_atlas.png (+ mips) beside it.
+    /// Default: 5 for a .glb output, 1 (LoD0 only) for .gltf and .obj.
+    #[arg(long, value_name = "N")]
+    lods: Option<usize>,
+    /// Trees grown from seeds derived from --seed, written as <stem>_v<k>… (1 to 64).
+    #[arg(long, value_name = "K", default_value_t = 1)]
+    variants: usize,
+    /// Side of the square atlas the billboards, cards and impostor views are baked into.
+    #[arg(long, value_name = "PX", default_value_t = tree_lod::DEFAULT_ATLAS_PX)]
+    atlas_size: u32,
+    /// Skip the image analyzer (no switch distances: MSFT_lod coverages are 0); for timing.
+    #[arg(long)]
+    no_analysis: bool,
 }
 
 #[derive(Args)]
@@ -469,6 +486,50 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             ..TreeOptions::default()
         },
     };
+    let glb = job.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    let lods = a.lods.unwrap_or(if glb { tree_lod::TREE_LODS } else { 1 });
+    if lods > 1 || a.variants > 1 || a.lods.is_some() {
+        let lod_job = TreeLodJob {
+            input: job.input.clone(),
+            output: job.output.clone(),
+            dialect: job.dialect,
+            options: job.options.clone(),
+            lod: TreeLodOptions { lods, atlas_px: a.atlas_size, analyze: !a.no_analysis, ..TreeLodOptions::default() },
+            variants: a.variants,
+        };
+        return match tree_lod::run_lods(&lod_job) {
+            Ok(report) => {
+                if let Some(path) = &a.report {
+                    if let Err(e) = tree_lod::write_lod_report(path, &report) {
+                        return fail(&e.to_string(), e.exit_code());
+                    }
+                }
+                if !quiet {
+                    print_tree_summary(&report.tree);
+                    for v in &report.variants {
+                        println!("  {}: level triangles bytes hausdorff_max_m switch_m", v.name);
+                        for l in &v.lods {
+                            println!(
+                                "    LoD{} {:<10} {:>8} {:>9} {:>10.4} {:>9.1}{}",
+                                l.level,
+                                l.kind,
+                                l.triangles,
+                                l.bytes,
+                                l.geometric_error.max_m,
+                                l.switch_distance_m,
+                                if l.never_passes { " (never passes)" } else { "" }
+                            );
+                        }
+                    }
+                    for f in &report.tree.files {
+                        println!("  wrote {f}");
+                    }
+                }
+                0
+            }
+            Err(e) => fail(&e.to_string(), e.exit_code()),
+        };
+    }
     match tree_job::run(&job) {
         Ok(report) => {
             if let Some(path) = &a.report {
@@ -477,25 +538,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
                 }
             }
             if !quiet {
-                let s = &report.stats;
-                println!(
-                    "{} ({}{}): {} symbols → {} segments, {} leaves, {} polygons → {} triangles in {} primitives, {} branch levels, height {:.2} m, {:.3} s",
-                    report.input,
-                    report.dialect,
-                    if report.dialect_detected { ", detected" } else { "" },
-                    s.symbols,
-                    s.segments,
-                    s.leaves,
-                    s.polygons,
-                    s.triangles,
-                    s.primitives,
-                    s.max_branch_level + 1,
-                    s.height_m,
-                    report.seconds.to_lod0
-                );
-                for w in &report.warnings {
-                    println!("  warning: {w}");
-                }
+                print_tree_summary(&report);
                 for f in &report.files {
                     println!("  wrote {f}");
                 }
@@ -503,5 +546,27 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             0
         }
         Err(e) => fail(&e.to_string(), e.exit_code()),
+    }
+}
+
+fn print_tree_summary(report: &tree_job::TreeReport) {
+    let s = &report.stats;
+    println!(
+        "{} ({}{}): {} symbols → {} segments, {} leaves, {} polygons → {} triangles in {} primitives, {} branch levels, height {:.2} m, {:.3} s",
+        report.input,
+        report.dialect,
+        if report.dialect_detected { ", detected" } else { "" },
+        s.symbols,
+        s.segments,
+        s.leaves,
+        s.polygons,
+        s.triangles,
+        s.primitives,
+        s.max_branch_level + 1,
+        s.height_m,
+        report.seconds.to_lod0
+    );
+    for w in &report.warnings {
+        println!("  warning: {w}");
     }
 }

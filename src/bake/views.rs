@@ -254,6 +254,68 @@ pub fn lod_image_error_with(
     }
 }
 
+/// The distances the 1-px switch search walks: from `far_m` halving down to `near_m`, then
+/// `bisections` log-space bisections (each narrows the switch to within a factor 2^(1/2^k)).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct SwitchSearch {
+    pub far_m: f64,
+    pub near_m: f64,
+    pub bisections: usize,
+}
+
+/// Where a level's image error stays within the view's bound: measured at `far_m`, `far_m`/2, …
+/// until a distance fails (error ≤ 1 px is monotone in distance but for noise: every halving on
+/// the far side is checked), then bisected in log space between the failing and the passing
+/// distance. Returns the measured rows (sorted by distance), the switch distance (the nearest
+/// distance known to pass: conservative) and whether even the farthest failed.
+pub fn switch_search(
+    reference: &Renderable,
+    candidate: &Renderable,
+    view: &ScreenView,
+    opts: &LodImageOptions,
+    range: &SwitchSearch,
+) -> (Vec<DistanceError>, f64, bool) {
+    switch_search_by(range, |d| lod_image_error_with(reference, candidate, view, &[d], opts).distances.into_iter().next())
+}
+
+/// [`switch_search`] with the measurement at one distance given by `eval` (for candidates that
+/// are not one static mesh, e.g. a view-dependent impostor measured per view).
+pub fn switch_search_by(range: &SwitchSearch, eval: impl Fn(f64) -> Option<DistanceError>) -> (Vec<DistanceError>, f64, bool) {
+    let mut rows = Vec::new();
+    let (mut pass, mut fail) = (None, None);
+    let mut d = range.far_m;
+    while d >= range.near_m {
+        let Some(r) = eval(d) else { break };
+        let passes = r.passes;
+        rows.push(r);
+        if !passes {
+            fail = Some(d);
+            break;
+        }
+        pass = Some(d);
+        d /= 2.0;
+    }
+    let result = match (fail, pass) {
+        (None, _) => (0.0, false),
+        (Some(f), None) => (f, true),
+        (Some(mut f), Some(mut p)) => {
+            for _ in 0..range.bisections {
+                let m = (f * p).sqrt();
+                let Some(r) = eval(m) else { break };
+                if r.passes {
+                    p = m;
+                } else {
+                    f = m;
+                }
+                rows.push(r);
+            }
+            (p, false)
+        }
+    };
+    rows.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
+    (rows, result.0, result.1)
+}
+
 /// Centre of the reference's bounding box and the radius around it that encloses both meshes
 /// (the candidate may be wider, e.g. billboards); at least 1 mm.
 fn bounding_sphere(reference: &Mesh, candidate: &Mesh) -> ([f64; 3], f64) {

@@ -12,7 +12,7 @@ use crate::bake::atlas::{dilate, mip_chain, resolve_supersampled, MipLevel};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
-use crate::bake::views::{lod_image_error_with, DistanceError, LodImageOptions, Renderable, ScreenView};
+use crate::bake::views::{self, DistanceError, LodImageOptions, Renderable, ScreenView, SwitchSearch};
 use crate::lod::{lod_screen_coverage, LodView};
 use crate::mesh::{AlphaMode, Material, Mesh, Node, Primitive, Scene, Texture};
 use crate::plants::grass::{self, clump, far_block, Clump, GrassSettings, Slice, UvRect};
@@ -22,53 +22,18 @@ use crate::plants::texture;
 pub const GRASS_LODS: usize = 4;
 /// The rings the real-time grass thesis used (near blades up to 32 m, billboards to 80 m).
 pub const THESIS_RINGS_M: [f64; 2] = [32.0, 80.0];
-/// Farthest and nearest distance (eye to the clump's bounding-sphere centre) the switch search
-/// measures at, and the bisection steps that narrow the switch distance to within 2^(1/2^steps).
+/// The grass switch search's range: farthest and nearest distance (eye to the clump's
+/// bounding-sphere centre) and bisection steps (see [`SwitchSearch`]).
 pub const SEARCH_FAR_M: f64 = 256.0;
 pub const SEARCH_NEAR_M: f64 = 0.5;
 pub const SEARCH_BISECTIONS: usize = 3;
 
-/// Where a level's image error stays within the view's bound: measured at 256, 128, … m until a
-/// distance fails (error ≤ 1 px is monotone in distance but for noise: every halving on the far
-/// side is checked), then bisected in log space between the failing and the passing distance.
-/// Returns the measured rows (sorted by distance), the switch distance (the nearest distance known
-/// to pass: conservative) and whether even the farthest failed.
+/// Where a level's image error stays within the view's bound (the shared 1-px search,
+/// [`crate::bake::views::switch_search`], over the grass range at 128 px, 4×4 samples).
 pub fn switch_search(reference: &Renderable, candidate: &Renderable, view: &ScreenView) -> (Vec<DistanceError>, f64, bool) {
     let opts = LodImageOptions { max_side_px: 128, supersample: 4, ..LodImageOptions::default() };
-    let eval = |d: f64| lod_image_error_with(reference, candidate, view, &[d], &opts).distances.into_iter().next();
-    let mut rows = Vec::new();
-    let (mut pass, mut fail) = (None, None);
-    let mut d = SEARCH_FAR_M;
-    while d >= SEARCH_NEAR_M {
-        let Some(r) = eval(d) else { break };
-        let passes = r.passes;
-        rows.push(r);
-        if !passes {
-            fail = Some(d);
-            break;
-        }
-        pass = Some(d);
-        d /= 2.0;
-    }
-    let result = match (fail, pass) {
-        (None, _) => (0.0, false),
-        (Some(f), None) => (f, true),
-        (Some(mut f), Some(mut p)) => {
-            for _ in 0..SEARCH_BISECTIONS {
-                let m = (f * p).sqrt();
-                let Some(r) = eval(m) else { break };
-                if r.passes {
-                    p = m;
-                } else {
-                    f = m;
-                }
-                rows.push(r);
-            }
-            (p, false)
-        }
-    };
-    rows.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
-    (rows, result.0, result.1)
+    let range = SwitchSearch { far_m: SEARCH_FAR_M, near_m: SEARCH_NEAR_M, bisections: SEARCH_BISECTIONS };
+    views::switch_search(reference, candidate, view, &opts, &range)
 }
 
 const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];

@@ -5,7 +5,9 @@
 pub mod flower;
 pub mod grass;
 pub mod grass_asset;
+pub mod hausdorff;
 pub mod marker;
 pub mod random;
 pub mod texture;
 pub mod tree;
+pub mod tree_lod;

@@ -655,7 +655,7 @@ pub fn triangulate(points: &[DVec2]) -> Vec<[usize; 3]> {
 
 /// Zero area as the validator judges it: the cross product is negligible against the squared
 /// longest edge, computed in f64 from the f32 positions as written.
-fn is_flat(p: &[[f32; 3]], t: [u32; 3]) -> bool {
+pub(crate) fn is_flat(p: &[[f32; 3]], t: [u32; 3]) -> bool {
     let [a, b, c] = t.map(|i| DVec3::from(p[i as usize].map(f64::from)));
     let scale = (b - a).length_squared().max((c - a).length_squared()).max((c - b).length_squared());
     let cross = (b - a).cross(c - a).length();

@@ -1,0 +1,192 @@
+//! Tree LoD chains: triangles strictly decrease LoD0 → LoD4, every level and the MSFT_lod chain is
+//! a valid glb for real L-system files, no NaN, byte-identical outputs at 1 and 2 threads, switch
+//! distances that never decrease (and coverages to match), atlas mips that keep coverage, and the
+//! `verdant tree --lods` command's files and errors.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use verdant::bake::atlas::coverage;
+use verdant::export::gltf::to_glb;
+use verdant::lsystem::parse::parse_bytes;
+use verdant::plants::tree::TreeOptions;
+use verdant::plants::tree_lod::{build_tree_lods, run_lods, TreeLodJob, TreeLodOptions, TreeLods, ATLAS_ALPHA_CUTOFF, IMPOSTOR_EXTRAS_KEY, TREE_LODS};
+use verdant::validate::{read_scene, validate_file};
+
+/// The stochastic bush of the thesis' format (as ../shared/data/lsystems/stochastic/bush.ls).
+const BUSH: &str = "3-2-2\n28\n18\nX(100)=FFA\nA(40)=F[&B]>(137)A\nA(75)=F[^B]>(120)A\nA(100)=F[&B]\"[^C]>(137)A\nB(50)=F[-C]CL\nB(100)=F[+C]'C\nC(100)=F[+B]B\n@\n";
+
+fn data_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("VERDANT_LSYSTEMS_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/lsystems"));
+    dir.is_dir().then_some(dir)
+}
+
+fn bush(seed: u64, options: &TreeLodOptions) -> TreeLods {
+    let system = parse_bytes(BUSH.as_bytes(), Path::new("bush.ls"), None).unwrap().system;
+    build_tree_lods(&system, &TreeOptions { seed, name: "bush".into(), ..TreeOptions::default() }, options).unwrap()
+}
+
+fn small_atlas() -> TreeLodOptions {
+    TreeLodOptions { atlas_px: 256, ..TreeLodOptions::default() }
+}
+
+fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(f)
+}
+
+fn bytes_of(t: &TreeLods) -> Vec<Vec<u8>> {
+    let mut out: Vec<Vec<u8>> = t.levels.iter().map(|l| to_glb(&l.scene).unwrap()).collect();
+    out.push(to_glb(&t.chain).unwrap());
+    out.extend(t.atlas.iter().map(|m| m.image.encode_png().unwrap()));
+    out
+}
+
+#[test]
+fn tree_lods_are_byte_identical_at_one_and_two_threads() {
+    let opts = small_atlas();
+    let one = in_pool(1, || bush(3, &opts));
+    let two = in_pool(2, || bush(3, &opts));
+    assert_eq!(bytes_of(&one), bytes_of(&two));
+    assert_eq!(one.report.lods, two.report.lods, "the analyzer's figures too");
+    let other = bush(4, &opts);
+    assert_ne!(bytes_of(&one)[0], bytes_of(&other)[0], "another seed, another bush");
+}
+
+#[test]
+fn switch_distances_never_decrease_and_errors_grow_with_the_level() {
+    let t = bush(3, &small_atlas());
+    let lods = &t.report.lods;
+    assert_eq!(lods.len(), TREE_LODS);
+    for w in lods.windows(2) {
+        assert!(w[1].switch_distance_m >= w[0].switch_distance_m, "{} then {}", w[0].switch_distance_m, w[1].switch_distance_m);
+        assert!(w[1].screen_coverage <= w[0].screen_coverage);
+    }
+    let radius = t.report.bounding_radius_m;
+    for l in &lods[1..] {
+        // measured: at least the farthest distance, and the switch is past the bounding sphere
+        assert!(!l.measured.is_empty(), "LoD{} not measured", l.level);
+        assert!(l.switch_distance_m > radius, "LoD{} switches at {} m inside the tree", l.level, l.switch_distance_m);
+        assert!(l.geometric_error.samples > 0 && l.geometric_error.max_m.is_finite());
+        assert!(l.near_iou < 1.0, "LoD{} draws exactly LoD0 at {} m", l.level, l.near_distance_m);
+    }
+    // the simplified mesh stays close to LoD0; the flat billboards do not
+    assert!(lods[1].geometric_error.max_m < 0.05 * radius, "LoD1 moved {} m (radius {radius})", lods[1].geometric_error.max_m);
+    assert!(lods[3].geometric_error.max_m > lods[1].geometric_error.max_m);
+    assert_eq!(t.report.table.len(), TREE_LODS);
+    // the chain carries the coverages: LoD0's node with MSFT_lod to the four others
+    let root = &t.chain.nodes[t.chain.roots[0]];
+    assert_eq!(root.lods.len(), TREE_LODS - 1);
+    let expected: Vec<f32> = lods[1..].iter().map(|l| l.screen_coverage as f32).chain([0.0]).collect();
+    assert_eq!(root.lod_screen_coverage, expected);
+}
+
+#[test]
+fn atlas_mips_keep_coverage_within_two_percent() {
+    // the default atlas size (at 256 px the bush's twigs are under a texel wide by the 64-px mip,
+    // and no alpha scale brings that level within 2 %)
+    let t = bush(3, &TreeLodOptions { analyze: false, ..TreeLodOptions::default() });
+    let c0 = t.atlas[0].coverage;
+    assert!(c0 > 0.01, "the atlas shows the tree ({c0})");
+    assert_eq!(t.atlas[0].image.width, 1024);
+    for (k, m) in t.atlas.iter().enumerate().filter(|(_, m)| m.image.width.min(m.image.height) >= 32) {
+        assert!((m.coverage / c0 - 1.0).abs() <= 0.02, "atlas mip {k}: coverage {} vs {c0}", m.coverage);
+        assert_eq!(coverage(&m.image, ATLAS_ALPHA_CUTOFF), m.coverage);
+    }
+    // every impostor view shows something, inside its own cell
+    for cell in &t.impostor_cells {
+        let img = &t.atlas[0].image;
+        let opaque = (cell.y..cell.y + cell.size)
+            .flat_map(|y| (cell.x..cell.x + cell.size).map(move |x| (x, y)))
+            .filter(|&(x, y)| img.pixel(x, y).unwrap()[3] >= ATLAS_ALPHA_CUTOFF)
+            .count();
+        assert!(opaque > 20, "impostor cell {cell:?} is empty");
+    }
+}
+
+#[test]
+fn real_files_give_valid_chains_with_strictly_fewer_triangles() {
+    let Some(dir) = data_dir() else {
+        eprintln!("skipped: ../shared/data/lsystems not found (set VERDANT_LSYSTEMS_DIR)");
+        return;
+    };
+    let out = tempfile::tempdir().unwrap();
+    // small and varied: thesis format, lparser 5, lparser 4 polygons only (Koch), a stochastic bush
+    for file in ["stochastic/design-example.ls", "stochastic/bush.ls", "lparser-v5/tree1.ls", "lparser-v4/cees-koch.ls"] {
+        let input = dir.join(file);
+        let stem = input.file_stem().unwrap().to_str().unwrap().to_string();
+        let job = TreeLodJob {
+            input: input.clone(),
+            output: out.path().join(format!("{stem}.glb")),
+            dialect: None,
+            options: TreeOptions { name: stem.clone(), ..TreeOptions::default() },
+            lod: TreeLodOptions { analyze: false, ..small_atlas() },
+            variants: 1,
+        };
+        let report = run_lods(&job).unwrap_or_else(|e| panic!("{file}: {e}"));
+        assert_eq!(report.tree.validation_errors, 0);
+        let mut last = usize::MAX;
+        for n in 0..TREE_LODS {
+            let path = out.path().join(format!("{stem}_LOD{n}.glb"));
+            let v = validate_file(&path, &Default::default()).unwrap();
+            assert_eq!(v.errors(), 0, "{file} LoD{n}: {v}");
+            let scene = read_scene(&path).unwrap();
+            let tris: usize = scene.meshes.iter().map(|m| m.triangle_count()).sum();
+            assert!(tris < last, "{file} LoD{n}: {tris} triangles, not fewer than {last}");
+            last = tris;
+            for p in scene.meshes.iter().flat_map(|m| &m.primitives) {
+                let finite = p.positions.iter().flatten().chain(p.normals.iter().flatten()).chain(p.uvs.iter().flatten()).all(|x| x.is_finite());
+                assert!(finite, "{file} LoD{n}: NaN or infinity");
+            }
+        }
+        let chain = out.path().join(format!("{stem}.glb"));
+        assert_eq!(validate_file(&chain, &Default::default()).unwrap().errors(), 0);
+        let scene = read_scene(&chain).unwrap();
+        assert_eq!(scene.nodes[scene.roots[0]].lods.len(), TREE_LODS - 1, "{file}: MSFT_lod chain");
+        assert!(out.path().join(format!("{stem}_atlas.png")).is_file() && out.path().join(format!("{stem}_atlas_mip1.png")).is_file());
+        // the impostor says how to pick its view
+        let impostor = read_scene(&out.path().join(format!("{stem}_LOD4.glb"))).unwrap();
+        let extras = impostor.meshes[0].extras.as_ref().and_then(|e| e.get(IMPOSTOR_EXTRAS_KEY)).unwrap_or_else(|| panic!("{file}: no impostor extras"));
+        assert_eq!(extras["cells_uv"].as_array().map(Vec::len), Some(8));
+    }
+}
+
+fn verdant(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_verdant")).args(args).output().expect("run verdant")
+}
+
+#[test]
+fn cli_tree_writes_variants_lod_files_atlases_and_a_speed_error_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bush.ls");
+    std::fs::write(&input, BUSH).unwrap();
+    let glb = dir.path().join("out/bush.glb");
+    let report = dir.path().join("out/bush.json");
+    let (i, g, r) = (input.to_str().unwrap(), glb.to_str().unwrap(), report.to_str().unwrap());
+    let o = verdant(&["--quiet", "tree", i, "-o", g, "--variants", "2", "--lods", "4", "--atlas-size", "256", "--no-analysis", "--report", r]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for k in 0..2 {
+        for name in [format!("bush_v{k}.glb"), format!("bush_v{k}_LOD3.glb"), format!("bush_v{k}_atlas.png")] {
+            assert!(dir.path().join("out").join(&name).is_file(), "{name} missing");
+        }
+        assert!(!dir.path().join(format!("out/bush_v{k}_LOD4.glb")).exists(), "--lods 4 writes LoD0..3");
+    }
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(r["variants"].as_array().unwrap().len(), 2);
+    let table = r["variants"][0]["table"].as_array().unwrap();
+    assert_eq!(table.len(), 4);
+    assert!(table.iter().all(|row| row["triangles"].as_u64().is_some() && row["bytes"].as_u64().is_some_and(|b| b > 0)));
+    assert_ne!(r["variants"][0]["lods"][0]["triangles"], serde_json::Value::Null);
+    // bad options: exit 2, naming the option and the remedy, nothing written
+    let bad = dir.path().join("bad.glb");
+    let o = verdant(&["tree", i, "-o", bad.to_str().unwrap(), "--lods", "9"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--lods 9 is out of range"));
+    let o = verdant(&["tree", i, "-o", dir.path().join("t.obj").to_str().unwrap(), "--lods", "3"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--lods 1"));
+    let o = verdant(&["tree", i, "-o", bad.to_str().unwrap(), "--atlas-size", "100"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(!bad.exists());
+}
