@@ -203,11 +203,17 @@ impl Primitive {
         let vertex_count = self.positions.len();
         let cache = meshopt::optimize_vertex_cache(&self.indices, vertex_count);
         let mut indices = cache;
-        let remap = meshopt::optimize_vertex_fetch_remap(&indices, vertex_count);
-        // `remap[old] = new` or u32::MAX for vertices no triangle uses (dropped).
-        let new_count = remap.iter().filter(|&&r| r != u32::MAX).count();
+        // fetch order: vertices renumbered in the order the triangles first use them (what
+        // meshopt's vertex-fetch remap does), vertices no triangle uses dropped
+        let mut remap = vec![u32::MAX; vertex_count];
+        let mut new_count = 0usize;
         for i in indices.iter_mut() {
-            *i = remap[*i as usize];
+            let r = &mut remap[*i as usize];
+            if *r == u32::MAX {
+                *r = new_count as u32;
+                new_count += 1;
+            }
+            *i = *r;
         }
         fn apply<T: Copy + Default>(v: &mut Vec<T>, remap: &[u32], n: usize) {
             if v.is_empty() {
@@ -225,6 +231,9 @@ impl Primitive {
         apply(&mut self.normals, &remap, new_count);
         apply(&mut self.uvs, &remap, new_count);
         apply(&mut self.colors, &remap, new_count);
+        for c in &mut self.custom {
+            apply(&mut c.values, &remap, new_count);
+        }
         self.indices = indices;
     }
 }
@@ -311,6 +320,21 @@ mod tests {
         assert_eq!(tri_set(&p), before);
         for (q, uv) in p.positions.iter().zip(&p.uvs) {
             assert_eq!([q[0] / 2.0, q[2] / 2.0], *uv, "attributes moved together");
+        }
+    }
+
+    #[test]
+    fn optimize_drops_an_unused_vertex_in_the_middle_and_keeps_custom_attributes_aligned() {
+        // vertex 1 is used by no triangle; the custom attribute carries each vertex's own position
+        let positions: Vec<[f32; 3]> = vec![[0.0, 0.0, 0.0], [9.0, 9.0, 9.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 1.0]];
+        let custom = vec![CustomAttribute { name: "_ID".into(), values: positions.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect() }];
+        let mut p = Primitive { positions, custom, indices: vec![0, 3, 2, 2, 3, 4], ..Primitive::default() };
+        p.optimize_for_gpu();
+        assert_eq!(p.positions.len(), 4);
+        assert!(!p.positions.contains(&[9.0, 9.0, 9.0]));
+        assert_eq!(p.custom[0].values.len(), 4);
+        for (q, c) in p.positions.iter().zip(&p.custom[0].values) {
+            assert_eq!([q[0], q[1], q[2], 1.0], *c);
         }
     }
 }
