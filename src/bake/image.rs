@@ -8,7 +8,7 @@ use std::path::Path;
 use image::ImageDecoder;
 
 use crate::bake::error::BakeError;
-use crate::bake::raster::{linear_to_srgb, srgb_to_linear, to_u8, Canvas, MAX_CANVAS_SIDE};
+use crate::bake::raster::{srgb_to_linear, Canvas, MAX_CANVAS_SIDE};
 use crate::export::write_atomic;
 
 /// Largest image side accepted (the rasteriser's canvas limit): 16384² RGBA f32 is 4 GB.
@@ -90,29 +90,15 @@ impl Image {
 
     /// sRGB-encoded 8-bit RGBA, row-major from the top-left (alpha stays linear), rounded to nearest.
     pub fn to_rgba8(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(self.pixels.len() * 4);
-        for c in &self.pixels {
-            out.extend_from_slice(&[
-                to_u8(linear_to_srgb(c[0])),
-                to_u8(linear_to_srgb(c[1])),
-                to_u8(linear_to_srgb(c[2])),
-                to_u8(c[3]),
-            ]);
-        }
-        out
+        crate::bake::raster::rgba8(&self.pixels)
     }
 
     /// PNG bytes (RGBA8, sRGB colour). Deterministic: the same image gives the same bytes.
     pub fn encode_png(&self) -> Result<Vec<u8>, BakeError> {
-        use image::ImageEncoder;
         if !self.is_well_formed() {
             return Err(self.malformed());
         }
-        let mut bytes = Vec::new();
-        image::codecs::png::PngEncoder::new(&mut bytes)
-            .write_image(&self.to_rgba8(), self.width, self.height, image::ExtendedColorType::Rgba8)
-            .map_err(|e| BakeError::Encode(e.to_string()))?;
-        Ok(bytes)
+        crate::bake::raster::encode_rgba8_png(&self.to_rgba8(), self.width, self.height).map_err(BakeError::Encode)
     }
 
     /// Writes the image as a PNG, atomically (temporary file, then rename).

@@ -532,26 +532,12 @@ impl Canvas {
 
     /// sRGB-encoded 8-bit RGBA, row-major from the top-left (alpha stays linear, as PNG wants).
     pub fn to_rgba8(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(self.color.len() * 4);
-        for c in &self.color {
-            out.extend_from_slice(&[
-                to_u8(linear_to_srgb(c[0])),
-                to_u8(linear_to_srgb(c[1])),
-                to_u8(linear_to_srgb(c[2])),
-                to_u8(c[3]),
-            ]);
-        }
-        out
+        rgba8(&self.color)
     }
 
     /// The canvas as PNG bytes (sRGB, 8-bit RGBA). Deterministic.
     pub fn encode_png(&self) -> Result<Vec<u8>, RasterError> {
-        use image::ImageEncoder;
-        let mut bytes = Vec::new();
-        image::codecs::png::PngEncoder::new(&mut bytes)
-            .write_image(&self.to_rgba8(), self.width, self.height, image::ExtendedColorType::Rgba8)
-            .map_err(|e| RasterError::Encode(e.to_string()))?;
-        Ok(bytes)
+        encode_rgba8_png(&self.to_rgba8(), self.width, self.height).map_err(RasterError::Encode)
     }
 
     /// Writes the canvas as a PNG, atomically (temporary file, then rename).
@@ -563,6 +549,26 @@ impl Canvas {
 }
 
 /// The sRGB transfer function (IEC 61966-2-1) of a linear value in 0..1.
+/// Linear straight-alpha RGBA → sRGB-encoded 8-bit RGBA (alpha stays linear), rounded to nearest:
+/// what every PNG the baker writes holds.
+pub fn rgba8(pixels: &[[f32; 4]]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(pixels.len() * 4);
+    for c in pixels {
+        out.extend_from_slice(&[to_u8(linear_to_srgb(c[0])), to_u8(linear_to_srgb(c[1])), to_u8(linear_to_srgb(c[2])), to_u8(c[3])]);
+    }
+    out
+}
+
+/// PNG bytes of `width` × `height` RGBA8 pixels (deterministic: same pixels, same bytes).
+pub fn encode_rgba8_png(rgba: &[u8], width: u32, height: u32) -> Result<Vec<u8>, String> {
+    use image::ImageEncoder;
+    let mut bytes = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut bytes)
+        .write_image(rgba, width, height, image::ExtendedColorType::Rgba8)
+        .map_err(|e| e.to_string())?;
+    Ok(bytes)
+}
+
 pub fn linear_to_srgb(v: f32) -> f32 {
     if v.is_nan() || v <= 0.0 {
         0.0
