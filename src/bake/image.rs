@@ -183,6 +183,7 @@ fn check_size(source_name: &str, width: u64, height: u64) -> Result<(), BakeErro
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bake::raster::linear_to_srgb;
 
     fn checker() -> Image {
         // 2×2: red, green / blue, white at half alpha.
