@@ -37,7 +37,7 @@ pub fn blade_texture(settings: &GrassSettings) -> Image {
         let (hue, value) = column_jitter(settings, c as usize);
         let root = jitter_colour(settings.root_color, hue, value);
         let tip = jitter_colour(settings.tip_color, hue, value);
-        let mut streaks = Stream::new(&[settings.seed, 0x0073_7472_6b, c as u64]);
+        let mut streaks = Stream::new(&[settings.seed, 0x0000_7374_726b, c as u64]);
         let streak: Vec<f32> = (0..w).map(|_| 1.0 + 0.12 * (2.0 * streaks.unit() - 1.0)).collect();
         for y in 0..h {
             // row 0 is the top of the image = the tip

@@ -177,7 +177,7 @@ fn mesh_choice(i: &Instance, levels: usize, variants: usize, density: Option<&De
         }
     };
     let h = crate::synth::mix64(i.position[0].to_bits() ^ crate::synth::mix64(i.position[2].to_bits()));
-    level * variants + ((h >> 32) * variants as u64 >> 32) as usize
+    level * variants + (((h >> 32) * variants as u64) >> 32) as usize
 }
 
 /// The terrain scene plus, per species, its meshes (generated grass clumps or flowers, else a
