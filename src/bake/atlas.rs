@@ -198,6 +198,20 @@ fn box_weights(n_in: usize, n_out: usize) -> Vec<Vec<(usize, f32)>> {
         .collect()
 }
 
+/// A mip level's size, alpha scale and coverage, as reports list them.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct MipFigures {
+    pub width: u32,
+    pub height: u32,
+    pub alpha_scale: f32,
+    pub coverage: f64,
+}
+
+/// The figures of every level of a chain.
+pub fn mip_figures(chain: &[MipLevel]) -> Vec<MipFigures> {
+    chain.iter().map(|m| MipFigures { width: m.image.width, height: m.image.height, alpha_scale: m.alpha_scale, coverage: m.coverage }).collect()
+}
+
 /// The mip chain of `level0` down to 1×1. Level 0 is the input (dilate it first) with alpha
 /// rounded to 8-bit steps (q/255), as the PNG will store it and as every level is. Each further
 /// level is the area-weighted box filter of the previous (unscaled) one; then its alpha is

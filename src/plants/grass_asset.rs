@@ -8,12 +8,11 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::bake::atlas::{dilate, mip_chain, resolve_supersampled, MipLevel};
+use crate::bake::atlas::{dilate, mip_chain, mip_figures, resolve_supersampled, MipFigures, MipLevel};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
-use crate::bake::views::{self, DistanceError, LodImageOptions, Renderable, ScreenView, SwitchSearch};
-use crate::lod::{lod_screen_coverage, LodView};
+use crate::bake::views::{self, plant_screen_coverage, plant_screen_view, DistanceError, LodImageOptions, Renderable, ScreenView, SwitchSearch};
 use crate::mesh::{AlphaMode, Material, Mesh, Node, Primitive, Scene, Texture};
 use crate::plants::grass::{self, clump, far_block, Clump, GrassSettings, Slice, UvRect};
 use crate::plants::texture;
@@ -84,15 +83,6 @@ pub struct LodFigures {
     pub never_passes: bool,
     /// MSFT_lod screen coverage at the switch distance.
     pub screen_coverage: f64,
-}
-
-/// Coverage per mip level of an atlas (fraction of texels with alpha ≥ cutoff).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct MipFigures {
-    pub width: u32,
-    pub height: u32,
-    pub alpha_scale: f32,
-    pub coverage: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -264,28 +254,9 @@ fn png(image: &Image) -> Result<Vec<u8>, GrassAssetError> {
     image.encode_png().map_err(|e| GrassAssetError::Texture(e.to_string()))
 }
 
-fn mip_figures(chain: &[MipLevel]) -> Vec<MipFigures> {
-    chain
-        .iter()
-        .map(|m| MipFigures { width: m.image.width, height: m.image.height, alpha_scale: m.alpha_scale, coverage: m.coverage })
-        .collect()
-}
-
-/// The viewer LoD switch distances are computed for: 1920 × 1080, 60° horizontal field of view.
+/// The viewer LoD switch distances are computed for (shared with trees).
 pub fn screen_view() -> ScreenView {
-    ScreenView { width_px: 1920.0, fov_x_deg: 60.0, max_error_px: 1.0 }
-}
-
-/// MSFT_lod screen coverage when the eye is `centre_distance_m` from the clump's centre
-/// ([`lod_screen_coverage`] takes the distance to the nearest point).
-fn coverage_at(radius_m: f64, centre_distance_m: f64) -> f64 {
-    lod_screen_coverage(radius_m, (centre_distance_m - radius_m).max(0.0), &coverage_view())
-}
-
-fn coverage_view() -> LodView {
-    let aspect = 16.0 / 9.0;
-    let fov_y = 2.0 * ((30f64).to_radians().tan() / aspect).atan();
-    LodView { screen_height_px: 1080.0, fov_y_deg: fov_y.to_degrees(), max_screen_error_px: 1.0, aspect }
+    plant_screen_view()
 }
 
 /// Builds, bakes and measures one grass species. `user_blade` replaces the procedural blade
@@ -479,7 +450,7 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
             f.measured = rows;
             f.switch_distance_m = switch_m;
             f.never_passes = never;
-            f.screen_coverage = coverage_at(radius, switch_m);
+            f.screen_coverage = plant_screen_coverage(radius, switch_m);
         }
         lods.push(f);
     }
@@ -487,7 +458,7 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
     for n in 1..lods.len() {
         if lods[n].switch_distance_m < lods[n - 1].switch_distance_m {
             lods[n].switch_distance_m = lods[n - 1].switch_distance_m;
-            lods[n].screen_coverage = coverage_at(radius, lods[n].switch_distance_m);
+            lods[n].screen_coverage = plant_screen_coverage(radius, lods[n].switch_distance_m);
         }
     }
     let seconds_analyze = analyze_started.elapsed().as_secs_f64();

@@ -21,13 +21,12 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::json;
 
-use crate::bake::atlas::{dilate, mip_chain, resolve_supersampled, write_mip_pngs, MipLevel};
+use crate::bake::atlas::{dilate, mip_chain, mip_figures, resolve_supersampled, write_mip_pngs, MipFigures, MipLevel};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
-use crate::bake::views::{lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, ScreenView, SwitchSearch};
+use crate::bake::views::{lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, ScreenView, SwitchSearch, plant_screen_coverage, plant_screen_view};
 use crate::export::{self, ExportError};
-use crate::lod::{lod_screen_coverage, LodView};
 use crate::lsystem::{parse, Dialect, LSystem};
 use crate::mesh::{AlphaMode, Material, Mesh, Node, Primitive, Scene, Texture};
 use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleGrid};
@@ -425,14 +424,6 @@ pub struct TreeLodFigures {
     pub measured: Vec<DistanceError>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct MipFigures {
-    pub width: u32,
-    pub height: u32,
-    pub alpha_scale: f32,
-    pub coverage: f64,
-}
-
 /// One row of the speed/error table.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SpeedErrorRow {
@@ -498,17 +489,9 @@ fn atlas_material(texture: usize) -> Material {
     }
 }
 
-/// The viewer switch distances are computed for (as the grass species'): 1920 × 1080, 60°.
+/// The viewer switch distances are computed for (as the grass species').
 pub fn screen_view() -> ScreenView {
-    ScreenView { width_px: 1920.0, fov_x_deg: 60.0, max_error_px: 1.0 }
-}
-
-/// MSFT_lod screen coverage with the eye `centre_distance_m` from the bounding-sphere centre.
-fn coverage_at(radius_m: f64, centre_distance_m: f64) -> f64 {
-    let aspect = 16.0 / 9.0;
-    let fov_y = 2.0 * ((30f64).to_radians().tan() / aspect).atan();
-    let view = LodView { screen_height_px: 1080.0, fov_y_deg: fov_y.to_degrees(), max_screen_error_px: 1.0, aspect };
-    lod_screen_coverage(radius_m, (centre_distance_m - radius_m).max(0.0), &view)
+    plant_screen_view()
 }
 
 /// `mesh` turned by `angle_deg` about the vertical axis through `axis` (positions and normals).
@@ -764,7 +747,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
             f.measured = rows;
             f.switch_distance_m = switch_m;
             f.never_passes = never;
-            f.screen_coverage = coverage_at(radius, switch_m);
+            f.screen_coverage = plant_screen_coverage(radius, switch_m);
         }
         lods.push(f);
     }
@@ -772,7 +755,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
     for n in 1..lods.len() {
         if lods[n].switch_distance_m < lods[n - 1].switch_distance_m {
             lods[n].switch_distance_m = lods[n - 1].switch_distance_m;
-            lods[n].screen_coverage = coverage_at(radius, lods[n].switch_distance_m);
+            lods[n].screen_coverage = plant_screen_coverage(radius, lods[n].switch_distance_m);
         }
     }
     let seconds_analyze = analyze_started.elapsed().as_secs_f64();
@@ -799,7 +782,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
         dropped_levels,
         lods,
         table,
-        atlas_mips: atlas_chain.iter().map(|m| MipFigures { width: m.image.width, height: m.image.height, alpha_scale: m.alpha_scale, coverage: m.coverage }).collect(),
+        atlas_mips: mip_figures(&atlas_chain),
         seconds_meshes,
         seconds_bake,
         seconds_analyze,
