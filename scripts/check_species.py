@@ -15,6 +15,14 @@ For every grass species (`species/<name>_LOD<n>.glb`):
   level whose sides are at least MIP_MIN_SIDE texels (below that a level has too few texels
   for one alpha scale to match a coverage within 2 %: a 16×16 level has 256).
 For every flower species (`species/<name>.glb` without LoD files): it re-imports, renders non-empty.
+For every L-system tree species (variants `species/<name>_v<k>…`, listed in the manifest):
+- each variant's LoDs re-import with trimesh, triangle counts strictly decrease, every face index is
+  in range and every position finite;
+- `<name>_v<k>.glb` has MSFT_lod with coverages that never increase;
+- pyrender renders every LoD non-empty; the mesh levels (simplified, cards) keep a silhouette like
+  LoD0's (IoU ≥ MIN_IOU) — the billboard and impostor levels are textured cards whose alpha
+  pyrender's flat render does not cut, so for them only non-emptiness is checked;
+- the variant's atlas mips keep their alpha coverage (as for grass).
 
 Usage: check_species.py SCENE_DIR [--summary-tsv FILE]   (exit 1 on any failure)
 """
@@ -229,6 +237,51 @@ def check_flower(species: Path, atlases: Path, name: str, renderer: Renderer | N
     return facts
 
 
+def check_tree(species: Path, atlases: Path, name: str, variants: list[int], renderer: Renderer | None) -> list[str]:
+    facts = []
+    for k in variants:
+        stem = f"{name}_v{k}"
+        lods = []
+        while (species / f"{stem}_LOD{len(lods)}.glb").is_file():
+            lods.append(species / f"{stem}_LOD{len(lods)}.glb")
+        if not lods:
+            raise CheckFailed(f"{stem}_LOD0.glb is missing")
+        scenes = [trimesh.load(p, force="scene") for p in lods]
+        for p, s in zip(lods, scenes):
+            for g in s.dump():
+                if not np.all(np.isfinite(g.vertices)):
+                    raise CheckFailed(f"{p.name}: non-finite positions")
+                if len(g.faces) and (g.faces.min() < 0 or g.faces.max() >= len(g.vertices)):
+                    raise CheckFailed(f"{p.name}: face index out of range")
+        tris = [triangles(s) for s in scenes]
+        if any(b >= a for a, b in zip(tris, tris[1:])):
+            raise CheckFailed(f"{stem}: LoD triangle counts do not strictly decrease: {tris}")
+        facts.append(f"v{k} triangles {tris}")
+        facts.append(check_lod_chain(species / f"{stem}.glb", len(lods)))
+        kinds = ["full", "simplified", "cards", "billboards", "impostor"]
+        if renderer is not None:
+            b = scenes[0].bounds
+            centre, radius = b.mean(axis=0), float(np.linalg.norm(b[1] - b[0]) / 2)
+            ref = renderer.silhouettes(scenes[0], centre, radius)
+            summary = []
+            for level, s in enumerate(scenes):
+                sil = ref if level == 0 else renderer.silhouettes(s, centre, radius)
+                for view, (a, r) in enumerate(zip(sil, ref)):
+                    if a.mean() < 0.002:
+                        raise CheckFailed(f"{lods[level].name}: the pyrender render from view {view} is empty ({a.mean():.4f} of the pixels)")
+                    iou = (a & r).sum() / max(1, (a | r).sum())
+                    if level and kinds[level] in ("simplified", "cards"):
+                        if iou < MIN_IOU:
+                            raise CheckFailed(f"{lods[level].name}: silhouette from view {view} unlike LoD0's (IoU {iou:.3f})")
+                        summary.append(f"{iou:.2f}")
+            facts.append(f"v{k} pyrender IoU vs LoD0 {', '.join(summary)}")
+        if len(lods) > 3:
+            g = pygltflib.GLTF2().load(str(lods[3]))
+            cutoff = g.materials[0].alphaCutoff if g.materials and g.materials[0].alphaCutoff is not None else 0.5
+            facts.append(check_mips(atlases, stem, cutoff))
+    return facts
+
+
 def main(argv: list[str]) -> int:
     if not argv or argv[0].startswith("-"):
         print(__doc__)
@@ -250,7 +303,10 @@ def main(argv: list[str]) -> int:
     for p in plants:
         name = p["name"]
         try:
-            if (species / f"{name}_LOD0.glb").is_file():
+            tree_variants = sorted({lod["variant"] for lod in p.get("lods", []) if "variant" in lod})
+            if tree_variants:
+                facts = check_tree(species, atlases, name, tree_variants, renderer)
+            elif (species / f"{name}_LOD0.glb").is_file():
                 facts = check_grass(species, atlases, name, renderer)
             else:
                 facts = check_flower(species, atlases, name, renderer)

@@ -158,6 +158,15 @@ impl LSystem {
         self.rules.iter().any(|r| r.variants.len() > 1)
     }
 
+    /// Whether the seed changes the tree: a stochastic rule or a random turn `~` somewhere.
+    /// (Trees grown from a system without either are identical whatever the seed.)
+    pub fn uses_seed(&self) -> bool {
+        let random_turn = |items: &[Item]| items.contains(&Item::Symbol(b'~'));
+        self.is_stochastic()
+            || random_turn(&self.axiom)
+            || self.rules.iter().flat_map(|r| &r.variants).any(|v| random_turn(&v.successor))
+    }
+
     /// The file text of this system in its own dialect (bytes: symbols may be any byte).
     pub fn print(&self) -> Vec<u8> {
         parse::print(self)

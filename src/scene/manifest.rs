@@ -183,25 +183,7 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
                 .map(|sp| PlantManifest {
                     name: sp.name.clone(),
                     files: rel_strings(&sp.files),
-                    lods: sp
-                        .grass
-                        .as_ref()
-                        .and_then(|g| g.get("lods"))
-                        .and_then(serde_json::Value::as_array)
-                        .map(|lods| {
-                            lods.iter()
-                                .map(|l| {
-                                    serde_json::json!({
-                                        "level": l["level"],
-                                        "file": format!("species/{}_LOD{}.glb", sp.name, l["level"]),
-                                        "triangles": l["triangles"],
-                                        "switch_distance_m": l["switch_distance_m"],
-                                        "screen_coverage": l["screen_coverage"],
-                                    })
-                                })
-                                .collect()
-                        })
-                        .unwrap_or_default(),
+                    lods: plant_lods(sp),
                 })
                 .collect()
         }),
@@ -271,6 +253,12 @@ fn report_json(preset: &Preset, runs: &[StageRun]) -> String {
                             for look in ["grass", "flower"] {
                                 if let Some(g) = o.get_mut(look).and_then(Value::as_object_mut) {
                                     g.retain(|k, _| !k.starts_with("seconds"));
+                                }
+                            }
+                            // a tree's timing is per variant, in its chain's report
+                            for v in o.get_mut("tree").and_then(|t| t.get_mut("variants")).and_then(Value::as_array_mut).into_iter().flatten() {
+                                if let Some(c) = v.get_mut("chain").and_then(Value::as_object_mut) {
+                                    c.retain(|k, _| !k.starts_with("seconds"));
                                 }
                             }
                         }
@@ -358,6 +346,44 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
     s
 }
 
+/// Per level of a species' chain (per variant for trees): its file, triangles, switch distance
+/// and MSFT_lod screen coverage.
+fn plant_lods(sp: &crate::scene::plants_stage::PlantReport) -> Vec<serde_json::Value> {
+    use serde_json::{json, Value};
+    let rows = |stem: &str, lods: &Value, variant: Option<usize>| -> Vec<Value> {
+        lods.as_array()
+            .into_iter()
+            .flatten()
+            .map(|l| {
+                let mut row = json!({
+                    "level": l["level"],
+                    "file": format!("species/{stem}_LOD{}.glb", l["level"]),
+                    "triangles": l["triangles"],
+                    "switch_distance_m": l["switch_distance_m"],
+                    "screen_coverage": l["screen_coverage"],
+                });
+                if let Some(k) = variant {
+                    row["variant"] = json!(k);
+                }
+                row
+            })
+            .collect()
+    };
+    if let Some(g) = &sp.grass {
+        return rows(&sp.name, &g["lods"], None);
+    }
+    if let Some(t) = &sp.tree {
+        return t["variants"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .enumerate()
+            .flat_map(|(k, v)| rows(&format!("{}_v{k}", sp.name), &v["chain"]["lods"], Some(k)))
+            .collect();
+    }
+    Vec::new()
+}
+
 /// The plants section of report.md: per grass species a LoD table (with the thesis' rings for
 /// comparison) and the atlas coverage per mip level; per flower species its counts.
 fn plants_md(report: &PlantsStageReport) -> String {
@@ -390,6 +416,27 @@ fn plants_md(report: &PlantsStageReport) -> String {
             s += "| atlas mip | size | alpha scale | coverage |\n|---|---|---|---|\n";
             for (k, m) in g["atlas_mips"].as_array().into_iter().flatten().enumerate() {
                 s += &format!("| {k} | {}×{} | {:.3} | {:.4} |\n", m["width"], m["height"], num(&m["alpha_scale"]), num(&m["coverage"]));
+            }
+            s += "\n";
+        }
+        if let Some(t) = &sp.tree {
+            s += &format!(
+                "### {} (L-system tree: {}, dialect {})\n\nPer variant, the chain's speed/error table: geometric error = one-sided Hausdorff distance LoD_k → LoD0 (sampled); \
+                 image error from 8 azimuths × 3 elevations; switch distance = where the silhouette error stays ≤ 1 px (1920 px, 60°).\n\n",
+                sp.name,
+                t["lsystem"].as_str().map(|p| std::path::Path::new(p).file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()).unwrap_or_default(),
+                t["dialect"].as_str().unwrap_or("?")
+            );
+            s += "| variant | segments | leaves + polygons | level | kind | triangles | bytes | Hausdorff max (m) | IoU at switch | switch distance (m) | screen coverage |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
+            for (k, v) in t["variants"].as_array().into_iter().flatten().enumerate() {
+                for l in v["chain"]["lods"].as_array().into_iter().flatten() {
+                    let never = if l["never_passes"].as_bool() == Some(true) { " (never ≤ 1 px in range)" } else { "" };
+                    s += &format!(
+                        "| {k} | {} | {} | LOD{} | {} | {} | {} | {:.3} | {:.3} | {:.1}{never} | {:.2e} |\n",
+                        v["stats"]["segments"], v["stats"]["leaves"].as_u64().unwrap_or(0) + v["stats"]["polygons"].as_u64().unwrap_or(0), l["level"], l["kind"].as_str().unwrap_or(""), l["triangles"], l["bytes"],
+                        num(&l["geometric_error"]["max_m"]), num(&l["switch_iou"]), num(&l["switch_distance_m"]), num(&l["screen_coverage"])
+                    );
+                }
             }
             s += "\n";
         }

@@ -180,4 +180,46 @@ pub enum PlantLook {
     Grass(crate::plants::grass::GrassSettings),
     /// `flower = { … }` / `[flower]`: crossed billboards of a baked procedural flower.
     Flower(crate::plants::flower::FlowerSettings),
+    /// `lsystem = "…"` (+ `tree = { … }` / `[tree]`): L-system trees with their LoD chains.
+    Tree(TreeLook),
+}
+
+/// A tree species' look: which L-system, how many variants and how their chains are built.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TreeLook {
+    /// The `.ls` file (resolved against the preset's folder).
+    pub lsystem: PathBuf,
+    /// `None`: detected from the file.
+    pub dialect: Option<crate::lsystem::Dialect>,
+    /// Trees grown from different seeds; instances pick one by a hash of their position.
+    pub variants: usize,
+    /// Every variant scaled to this height (m) before the instance's `scale`; `None`: the file's
+    /// own step length (1 m per `F` in lparser 5 and the thesis, 1 cm in lparser 4).
+    pub height_m: Option<f64>,
+    pub radial_segments: u32,
+    /// Levels of the chain written (1..=5).
+    pub lods: usize,
+    pub atlas_px: u32,
+    pub max_segments: u64,
+    /// Measure image errors and switch distances (the MSFT_lod coverages need them).
+    pub analyze: bool,
+    /// Seed of variant 0 (see [`preset::species_look_seed`]).
+    pub seed: u64,
+}
+
+impl Default for TreeLook {
+    fn default() -> Self {
+        TreeLook {
+            lsystem: PathBuf::new(),
+            dialect: None,
+            variants: 3,
+            height_m: Some(10.0),
+            radial_segments: crate::plants::tree::DEFAULT_RADIAL_SEGMENTS,
+            lods: crate::plants::tree_lod::TREE_LODS,
+            atlas_px: 1024,
+            max_segments: 200_000,
+            analyze: true,
+            seed: 0,
+        }
+    }
 }

@@ -1,6 +1,6 @@
-//! The plants stage: for every grass and flower species, its meshes at every level of detail
-//! (`species/`), the baked atlases with their mip chains (`atlases/`) and the analyzer's figures.
-//! Independent of the terrain; the scatter stage instances what this makes.
+//! The plants stage: for every grass, flower and L-system tree species, its meshes at every level
+//! of detail (`species/`), the baked atlases with their mip chains (`atlases/`) and the analyzer's
+//! figures. Independent of the terrain; the scatter stage instances what this makes.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -17,7 +17,11 @@ use crate::plants::grass_asset::{build_grass, GrassReport};
 use crate::plants::texture;
 use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::stages::StageError;
-use crate::scene::{PlantLook, Preset};
+use crate::lsystem::parse;
+use crate::lsystem::LSystem;
+use crate::plants::tree::{build_tree, TreeOptions, TreeStats};
+use crate::plants::tree_lod::{build_tree_lods, variant_seed, TreeLodOptions, TreeLodReport};
+use crate::scene::{PlantLook, Preset, TreeLook};
 
 fn fail(message: String) -> StageError {
     StageError::Failed { stage: "plants", message }
@@ -31,7 +35,28 @@ pub struct PlantReport {
     /// The figures of a grass species (serialised as JSON values so the report stays one type).
     pub grass: Option<serde_json::Value>,
     pub flower: Option<serde_json::Value>,
+    /// A tree species: [`TreeSpeciesReport`].
+    #[serde(default)]
+    pub tree: Option<serde_json::Value>,
     pub seconds: f64,
+}
+
+/// One variant of a tree species: its seed, what the L-system grew and its chain's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct TreeVariantReport {
+    pub file: PathBuf,
+    pub seed: u64,
+    pub stats: TreeStats,
+    pub chain: TreeLodReport,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct TreeSpeciesReport {
+    pub lsystem: PathBuf,
+    pub dialect: crate::lsystem::Dialect,
+    /// `variants` of the preset; fewer are built when the L-system ignores the seed.
+    pub variants_asked: usize,
+    pub variants: Vec<TreeVariantReport>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -51,18 +76,80 @@ pub fn has_plants(preset: &Preset) -> bool {
     preset.species.iter().any(|s| !matches!(s.look, PlantLook::Marker))
 }
 
-/// Cache key: every generated look (settings, seeds) and the bytes of any user blade texture.
+/// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
+/// blade texture, an L-system).
 pub fn plants_key(preset: &Preset) -> Result<String, StageError> {
     let mut k = KeyBuilder::new("plants");
     for s in &preset.species {
         k.add(s.name.as_bytes());
         k.add(serde_json::to_string(&s.look).unwrap_or_default().as_bytes());
-        if let PlantLook::Grass(GrassSettings { blade_texture: Some(p), .. }) = &s.look {
-            let bytes = std::fs::read(p).map_err(|e| fail(format!("{}: cannot read: {e}", p.display())))?;
-            k.add(sha256_hex(&bytes).as_bytes());
-        }
+        add_look_inputs(&mut k, &s.look)?;
     }
     Ok(k.finish())
+}
+
+/// Adds the bytes of the files a look reads to a cache key (the scatter stage's key too: its
+/// scene.glb holds the instanced meshes).
+pub fn add_look_inputs(k: &mut KeyBuilder, look: &PlantLook) -> Result<(), StageError> {
+    let input = match look {
+        PlantLook::Grass(GrassSettings { blade_texture: Some(p), .. }) => p,
+        PlantLook::Tree(t) => &t.lsystem,
+        _ => return Ok(()),
+    };
+    let bytes = std::fs::read(input).map_err(|e| fail(format!("{}: cannot read: {e}", input.display())))?;
+    k.add(sha256_hex(&bytes).as_bytes());
+    Ok(())
+}
+
+/// Variants asked for, or 1 when the seed cannot change the tree (no stochastic rule, no `~`):
+/// identical copies would only cost build time and file size.
+fn distinct_variants(system: &LSystem, look: &TreeLook) -> usize {
+    if system.uses_seed() {
+        look.variants
+    } else {
+        1
+    }
+}
+
+fn read_lsystem(name: &str, look: &TreeLook) -> Result<LSystem, StageError> {
+    parse::read_file(&look.lsystem, look.dialect).map(|p| p.system).map_err(|e| fail(format!("species `{name}`: {e}")))
+}
+
+/// How variant `k` of a tree species grows (the chain's LoD0 and the instanced mesh are the same).
+fn tree_options(name: &str, look: &TreeLook, k: usize) -> TreeOptions {
+    TreeOptions {
+        seed: variant_seed(look.seed, k),
+        radial_segments: look.radial_segments,
+        max_segments: look.max_segments,
+        height_m: look.height_m,
+        name: format!("{name}_v{k}"),
+        ..TreeOptions::default()
+    }
+}
+
+/// Builds and writes every variant's chain: `species/<name>_v<k>.glb` (MSFT_lod),
+/// `species/<name>_v<k>_LOD<n>.glb` and `atlases/<name>_v<k>*.png`.
+fn run_tree(name: &str, look: &TreeLook, dir: &Path, files: &mut Vec<PathBuf>) -> Result<TreeSpeciesReport, StageError> {
+    let system = read_lsystem(name, look)?;
+    let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, ..TreeLodOptions::default() };
+    let count = distinct_variants(&system, look);
+    let mut variants = Vec::with_capacity(count);
+    for k in 0..count {
+        let options = tree_options(name, look, k);
+        let chain = build_tree_lods(&system, &options, &lod)
+            .map_err(|e| fail(format!("species `{name}`: {}: {e}", look.lsystem.display())))?;
+        let stem = format!("{name}_v{k}");
+        for level in &chain.levels {
+            write(&level.scene, dir, PathBuf::from("species").join(format!("{stem}_LOD{}.glb", level.level)), files)?;
+        }
+        let file = PathBuf::from("species").join(format!("{stem}.glb"));
+        write(&chain.chain, dir, file.clone(), files)?;
+        if !chain.atlas.is_empty() {
+            write_mips(dir, &stem, &chain.atlas, files)?;
+        }
+        variants.push(TreeVariantReport { file, seed: options.seed, stats: chain.lod0.stats.clone(), chain: chain.report });
+    }
+    Ok(TreeSpeciesReport { lsystem: look.lsystem.clone(), dialect: system.dialect, variants_asked: look.variants, variants })
 }
 
 /// The user's blade image, if the settings name one.
@@ -94,8 +181,13 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
         let t1 = Instant::now();
         let mut files = Vec::new();
         let name = &s.name;
+        let mut tree_report = None;
         let (grass_report, flower_report) = match &s.look {
             PlantLook::Marker => continue,
+            PlantLook::Tree(t) => {
+                tree_report = Some(run_tree(name, t, scene_dir, &mut files)?);
+                (None, None)
+            }
             PlantLook::Grass(g) => {
                 let blade = user_blade(g)?;
                 let asset = build_grass(name, g, blade.as_ref()).map_err(|e| fail(format!("species `{name}`: {e}")))?;
@@ -124,6 +216,7 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
             files,
             grass: grass_report.map(|r: GrassReport| serde_json::to_value(r).unwrap_or_default()),
             flower: flower_report.map(|r: FlowerReport| serde_json::to_value(r).unwrap_or_default()),
+            tree: tree_report.map(|r| serde_json::to_value(r).unwrap_or_default()),
             seconds: t1.elapsed().as_secs_f64(),
         });
     }
@@ -131,12 +224,13 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
 }
 
 /// The meshes scene.glb instances for a species with a generated look: grass LoD0 clumps (index
-/// level · variants + variant) with the blade material, or the flower variants' crossed cards.
+/// level · variants + variant) with the blade material, the flower variants' crossed cards, or
+/// the tree variants' LoD0 meshes. Primitives index `materials`, materials index `textures`.
 pub struct InstanceMeshes {
     pub meshes: Vec<Mesh>,
-    pub material: Material,
-    pub texture: Texture,
-    /// Grass: density levels (clumps are chosen by local density); flowers: 1.
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    /// Grass: density levels (clumps are chosen by local density); flowers and trees: 1.
     pub levels: usize,
     pub variants: usize,
 }
@@ -157,7 +251,8 @@ pub fn instance_meshes(name: &str, look: &PlantLook) -> Result<Option<InstanceMe
             for level in 0..g.density_levels {
                 for variant in 0..g.variants {
                     let c = grass::clump(g, level, variant);
-                    let prim = grass::lod0(g, &c, 0);
+                    let mut prim = grass::lod0(g, &c, 0);
+                    prim.material = Some(0);
                     meshes.push(Mesh { name: format!("{name}_d{level}v{variant}"), primitives: vec![prim], extras: None });
                 }
             }
@@ -169,16 +264,66 @@ pub fn instance_meshes(name: &str, look: &PlantLook) -> Result<Option<InstanceMe
                 double_sided: true,
                 ..Material::default()
             };
-            Ok(Some(InstanceMeshes { meshes, material, texture: Texture { name: format!("{name}_blade"), png }, levels: g.density_levels, variants: g.variants }))
+            Ok(Some(InstanceMeshes {
+                meshes,
+                materials: vec![material],
+                textures: vec![Texture { name: format!("{name}_blade"), png }],
+                levels: g.density_levels,
+                variants: g.variants,
+            }))
         }
         PlantLook::Flower(f) => {
             let f: &FlowerSettings = f;
             let asset = build_flower(name, f).map_err(|e| fail(format!("species `{name}`: {e}")))?;
             let scene = asset.scene;
-            let meshes = scene.meshes.clone();
-            let material = scene.materials[0].clone();
-            let texture = scene.textures[0].clone();
-            Ok(Some(InstanceMeshes { meshes, material, texture, levels: 1, variants: f.variants }))
+            Ok(Some(InstanceMeshes { meshes: scene.meshes, materials: scene.materials, textures: scene.textures, levels: 1, variants: f.variants }))
         }
+        PlantLook::Tree(t) => {
+            let system = read_lsystem(name, t)?;
+            let variants = distinct_variants(&system, t);
+            let mut out = InstanceMeshes { meshes: Vec::new(), materials: Vec::new(), textures: Vec::new(), levels: 1, variants };
+            for k in 0..variants {
+                let tree = build_tree(&system, &tree_options(name, t, k))
+                    .map_err(|e| fail(format!("species `{name}`: {}: {e}", t.lsystem.display())))?;
+                append_scene(&mut out, tree.scene);
+            }
+            Ok(Some(out))
+        }
+    }
+}
+
+/// Appends a scene's meshes, renumbering its materials and textures; a texture or material equal
+/// to one already held is shared (the variants of a tree use the same leaf texture and bark).
+fn append_scene(out: &mut InstanceMeshes, scene: crate::mesh::Scene) {
+    let textures: Vec<usize> = scene
+        .textures
+        .into_iter()
+        .map(|t| match out.textures.iter().position(|o| o.png == t.png) {
+            Some(i) => i,
+            None => {
+                out.textures.push(t);
+                out.textures.len() - 1
+            }
+        })
+        .collect();
+    let materials: Vec<usize> = scene
+        .materials
+        .into_iter()
+        .map(|m| {
+            let m = Material { base_color_texture: m.base_color_texture.map(|i| textures[i]), ..m };
+            match out.materials.iter().position(|o| *o == m) {
+                Some(i) => i,
+                None => {
+                    out.materials.push(m);
+                    out.materials.len() - 1
+                }
+            }
+        })
+        .collect();
+    for mut mesh in scene.meshes {
+        for p in &mut mesh.primitives {
+            p.material = p.material.map(|i| materials[i]);
+        }
+        out.meshes.push(mesh);
     }
 }

@@ -14,11 +14,11 @@ use toml::Spanned;
 
 mod plants;
 
-pub use plants::{FLOWER_KEYS, GRASS_KEYS};
+pub use plants::{FLOWER_KEYS, GRASS_KEYS, TREE_KEYS};
 
 use super::{
     Exclusion, Format, Placement, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesKind, SpeciesSettings,
-    TerrainSettings, TerrainSource,
+    TerrainSettings, TerrainSource, TreeLook,
 };
 use crate::plants::flower::FlowerSettings;
 use crate::plants::grass::GrassSettings;
@@ -28,7 +28,7 @@ use crate::terrain::job::MeshMode;
 
 /// The sections a preset may have, in the order the docs list them (`species` is an array of
 /// tables, `[[species]]`).
-pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower"];
+pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower", "tree"];
 /// Keys of `[scene]`.
 pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats"];
 /// Keys of `[terrain]`.
@@ -70,6 +70,8 @@ pub const SPECIES_KEYS: &[&str] = &[
     "max_instances",
     "grass",
     "flower",
+    "lsystem",
+    "tree",
 ];
 /// Keys of `[[species]] exclusion = { … }`.
 pub const EXCLUSION_KEYS: &[&str] = &["species", "radius"];
@@ -330,6 +332,8 @@ lods = [1.0, 4.0, 16.0]
 # align_to_normal = 0.0      # 0 upright … 1 along the ground normal (default: grass/flower 1, else 0)
 # seed = 0                   # offset added to the scene seed for this species
 # max_instances = 5000000    # more than this is an error naming the species
+# # lsystem = "trees/pine.ls"        # grow the trees from this L-system (else a marker)
+# # tree = { variants = 3, height = 14.0 }  # see docs/presets.md, section [tree]
 #
 # [[species]]
 # name = "grass"
@@ -601,6 +605,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
     let mut scatter = None;
     let mut grass_section = None;
     let mut flower_section = None;
+    let mut tree_section = None;
     for (key, value) in entries {
         let name: &str = key.get_ref();
         if name == "species" {
@@ -666,6 +671,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             "scatter" => scatter = Some((key.span(), table)),
             "grass" => grass_section = Some((key.span(), table)),
             "flower" => flower_section = Some((key.span(), table)),
+            "tree" => tree_section = Some((key.span(), table)),
             _ => return Err(unknown_section(&ctx, &key.span(), &format!("[{name}]"), name)),
         }
     }
@@ -697,7 +703,11 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             plants::apply_flower(&Table { ctx: &ctx, label: "[flower]".into(), span, table }, FlowerSettings::default())?
         }
     };
-    let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, scene_seed: scene.seed };
+    let tree_defaults = match tree_section {
+        None => TreeLook::default(),
+        Some((span, table)) => plants::apply_tree(&Table { ctx: &ctx, label: "[tree]".into(), span, table }, TreeLook::default())?,
+    };
+    let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, tree: &tree_defaults, scene_seed: scene.seed };
     let mut species: Vec<SpeciesSettings> = Vec::new();
     if let Some((key_span, items)) = species_tables {
         if terrain.is_none() {
@@ -879,6 +889,7 @@ fn parse_scatter(t: &Table<'_, '_>) -> Result<ScatterSettings, PresetError> {
 struct Looks<'a> {
     grass: &'a GrassSettings,
     flower: &'a FlowerSettings,
+    tree: &'a TreeLook,
     scene_seed: u64,
 }
 
@@ -890,13 +901,15 @@ pub fn species_look_seed(scene_seed: u64, name: &str, species_seed: u64) -> u64 
 }
 
 fn parse_look(t: &Table<'_, '_>, name: &str, kind: SpeciesKind, looks: &Looks<'_>, seed: u64, check_inputs: bool) -> Result<PlantLook, PresetError> {
-    for (key, owner) in [("grass", SpeciesKind::Grass), ("flower", SpeciesKind::Flower)] {
+    for (key, owner) in [("grass", SpeciesKind::Grass), ("flower", SpeciesKind::Flower), ("tree", SpeciesKind::Tree), ("lsystem", SpeciesKind::Tree)] {
         if let Some((k, _)) = t.get(key) {
             if kind != owner {
+                let owner_name = value_name_kind(owner);
+                let what = if key == "lsystem" { "`lsystem = \"…\"`".to_string() } else { format!("`{key} = {{ … }}`") };
                 return Err(t.ctx.at(
                     &k.span(),
-                    format!("`{key} = {{ … }}` describes kind = \"{key}\", but {} is kind = \"{}\"", t.label, value_name_kind(kind)),
-                    format!("remove `{key}` or set `kind = \"{key}\"`"),
+                    format!("{what} describes kind = \"{owner_name}\", but {} is kind = \"{}\"", t.label, value_name_kind(kind)),
+                    format!("remove `{key}` or set `kind = \"{owner_name}\"`"),
                 ));
             }
         }
@@ -916,7 +929,34 @@ fn parse_look(t: &Table<'_, '_>, name: &str, kind: SpeciesKind, looks: &Looks<'_
                 Some((_, v)) => PlantLook::Flower(plants::apply_flower(&plants::sub_table(t, "flower", v)?, base)?),
             }
         }
-        SpeciesKind::Tree | SpeciesKind::Mesh => PlantLook::Marker,
+        SpeciesKind::Tree => {
+            let Some(lsystem) = input_path(t, "lsystem", "lsystem = \"trees/birch.ls\"", check_inputs)? else {
+                if let Some((k, _)) = t.get("tree") {
+                    return Err(t.ctx.at(
+                        &k.span(),
+                        format!("`tree = {{ … }}` says how to grow {}'s L-system, but it names no `lsystem` file", t.label),
+                        "add `lsystem = \"trees/birch.ls\"` (a .ls file relative to this preset), or remove `tree`",
+                    ));
+                }
+                // documented: a tree species without an L-system is drawn as a marker
+                return Ok(PlantLook::Marker);
+            };
+            let base = TreeLook { lsystem, seed: species_look_seed(looks.scene_seed, name, seed), ..looks.tree.clone() };
+            let look = match t.get("tree") {
+                None => base,
+                Some((_, v)) => plants::apply_tree(&plants::sub_table(t, "tree", v)?, base)?,
+            };
+            if check_inputs {
+                // the .ls file is parsed now so a bad rule is reported before anything is built
+                if let Err(e) = crate::lsystem::parse::read_file(&look.lsystem, look.dialect) {
+                    let (k, v) = t.get("lsystem").expect("lsystem was read above");
+                    let _ = k;
+                    return Err(t.ctx.at(&v.span(), format!("the L-system of {} does not parse:\n{e}", t.label), "fix the file at the position shown, or force its format with `tree = { dialect = \"v5\" }`"));
+                }
+            }
+            PlantLook::Tree(look)
+        }
+        SpeciesKind::Mesh => PlantLook::Marker,
     })
 }
 

@@ -62,6 +62,7 @@ pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageEr
     k.add(serde_json::to_string(&preset.scatter).unwrap_or_default().as_bytes());
     for s in &preset.species {
         k.add(serde_json::to_string(s).unwrap_or_default().as_bytes());
+        crate::scene::plants_stage::add_look_inputs(&mut k, &s.look)?;
         for map in [&s.density_map, &s.mask].into_iter().flatten() {
             let bytes = std::fs::read(map).map_err(|e| fail(format!("{}: cannot read: {e}", map.display())))?;
             k.add(sha256_hex(&bytes).as_bytes());
@@ -192,14 +193,18 @@ pub fn instanced_scene(terrain: &Scene, placed: &[Placed], extent: [f64; 4]) -> 
         };
         let (mesh_indices, levels, variants) = match generated {
             Some(g) => {
-                let texture = scene.textures.len();
-                scene.textures.push(g.texture);
-                let material = scene.materials.len();
-                scene.materials.push(Material { base_color_texture: Some(texture), ..g.material });
+                let texture_base = scene.textures.len();
+                scene.textures.extend(g.textures);
+                let material_base = scene.materials.len();
+                scene.materials.extend(
+                    g.materials
+                        .into_iter()
+                        .map(|m| Material { base_color_texture: m.base_color_texture.map(|t| t + texture_base), ..m }),
+                );
                 let first = scene.meshes.len();
                 for mut m in g.meshes {
                     for prim in &mut m.primitives {
-                        prim.material = Some(material);
+                        prim.material = prim.material.map(|i| i + material_base);
                     }
                     scene.meshes.push(m);
                 }

@@ -7,6 +7,7 @@ use toml::Spanned;
 use super::{input_path, number_value, pair, PresetError, Table};
 use crate::plants::flower::FlowerSettings;
 use crate::plants::grass::GrassSettings;
+use crate::scene::TreeLook;
 
 /// Keys of `[grass]` and `grass = { … }`.
 pub const GRASS_KEYS: &[&str] = &[
@@ -29,6 +30,8 @@ pub const GRASS_KEYS: &[&str] = &[
     "far_cells",
     "blade_texture",
 ];
+/// Keys of `[tree]` and `tree = { … }` (the L-system file itself is the species' `lsystem`).
+pub const TREE_KEYS: &[&str] = &["variants", "height", "radial_segments", "lods", "atlas_size", "max_segments", "dialect", "analysis"];
 /// Keys of `[flower]` and `flower = { … }`.
 pub const FLOWER_KEYS: &[&str] =
     &["petals", "petal_color", "center_color", "stem_color", "height", "head", "variants", "alpha_cutoff", "atlas_px"];
@@ -92,7 +95,7 @@ fn range_f32(r: [f64; 2]) -> [f32; 2] {
 /// Applies the keys of a grass table to `base`. Ranges are checked again as a whole by
 /// [`GrassSettings::check`], whose message is reported at the table.
 pub(super) fn apply_grass(t: &Table<'_, '_>, mut g: GrassSettings, check_inputs: bool) -> Result<GrassSettings, PresetError> {
-    t.check_keys(GRASS_KEYS, &[("[flower]", FLOWER_KEYS)])?;
+    t.check_keys(GRASS_KEYS, &[("[flower]", FLOWER_KEYS), ("[tree]", TREE_KEYS)])?;
     if let Some(n) = count(t, "blades", 1..=crate::plants::grass::MAX_BLADES_PER_CLUMP as u64, "blades = 48")? {
         g.blades_per_clump = n;
     }
@@ -171,7 +174,7 @@ pub(super) fn apply_grass(t: &Table<'_, '_>, mut g: GrassSettings, check_inputs:
 }
 
 pub(super) fn apply_flower(t: &Table<'_, '_>, mut f: FlowerSettings) -> Result<FlowerSettings, PresetError> {
-    t.check_keys(FLOWER_KEYS, &[("[grass]", GRASS_KEYS)])?;
+    t.check_keys(FLOWER_KEYS, &[("[grass]", GRASS_KEYS), ("[tree]", TREE_KEYS)])?;
     if let Some(n) = count(t, "petals", 3..=32, "petals = 7")? {
         f.petals = n;
     }
@@ -203,6 +206,61 @@ pub(super) fn apply_flower(t: &Table<'_, '_>, mut f: FlowerSettings) -> Result<F
     }
     f.check().map_err(|e| t.ctx.at(&t.span, format!("{}: {e}", t.label), "see docs/presets.md, section [flower]"))?;
     Ok(f)
+}
+
+/// Applies the keys of a tree table to `base`.
+pub(super) fn apply_tree(t: &Table<'_, '_>, mut tree: TreeLook) -> Result<TreeLook, PresetError> {
+    use crate::plants::tree::MAX_RADIAL_SEGMENTS;
+    use crate::plants::tree_lod::{MAX_ATLAS_PX, MIN_ATLAS_PX, TREE_LODS};
+    t.check_keys(TREE_KEYS, &[("[grass]", GRASS_KEYS), ("[flower]", FLOWER_KEYS)])?;
+    if let Some(n) = count(t, "variants", 1..=16, "variants = 3")? {
+        tree.variants = n;
+    }
+    match t.get("height") {
+        Some((_, v)) if matches!(v.get_ref(), DeValue::String(s) if s == "file") => tree.height_m = None,
+        _ => {
+            if let Some((x, _)) = t.number("height", "height = 12.0", |x| {
+                if x > 0.0 && x <= 500.0 {
+                    Ok(())
+                } else {
+                    Err("must be between 0 and 500 metres (or \"file\" to keep the file's step length)".into())
+                }
+            })? {
+                tree.height_m = Some(x);
+            }
+        }
+    }
+    if let Some(n) = count(t, "radial_segments", 3..=MAX_RADIAL_SEGMENTS as u64, "radial_segments = 8")? {
+        tree.radial_segments = n as u32;
+    }
+    if let Some(n) = count(t, "lods", 1..=TREE_LODS as u64, "lods = 5")? {
+        tree.lods = n;
+    }
+    if let Some((n, span)) = t.integer("atlas_size", MIN_ATLAS_PX as u64..=MAX_ATLAS_PX as u64, "atlas_size = 1024")? {
+        if n % 16 != 0 {
+            return Err(t.ctx.at(&span, format!("`atlas_size` = {n} is not a multiple of 16"), "use e.g. `atlas_size = 1024` or 2048"));
+        }
+        tree.atlas_px = n as u32;
+    }
+    if let Some((n, _)) = t.integer("max_segments", 1..=100_000_000, "max_segments = 200000")? {
+        tree.max_segments = n;
+    }
+    if let Some((name, span)) = t.string("dialect", "dialect = \"v5\"")? {
+        tree.dialect = match name {
+            "auto" => None,
+            "ls" => Some(crate::lsystem::Dialect::Stochastic),
+            "v4" => Some(crate::lsystem::Dialect::LparserV4),
+            "v5" => Some(crate::lsystem::Dialect::LparserV5),
+            other => return Err(super::unknown_value(t, "dialect", other, &["auto", "ls", "v4", "v5"], &span)),
+        };
+    }
+    if let Some((_, v)) = t.get("analysis") {
+        match v.get_ref() {
+            DeValue::Boolean(b) => tree.analyze = *b,
+            _ => return Err(t.wrong_type("analysis", v, "a boolean", "analysis = false")),
+        }
+    }
+    Ok(tree)
 }
 
 /// A species' `grass = { … }` or `flower = { … }` value as a table to read.

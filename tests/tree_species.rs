@@ -1,0 +1,217 @@
+//! L-system trees as preset species (issue 6, item 8): `kind = "tree", lsystem = "…"` with
+//! `tree = { … }` / `[tree]`; the plants stage writes every variant's LoD chain and atlases, the
+//! scatter stage instances the variants' LoD0 meshes in scene.glb (picked by position), the
+//! manifest and report carry the chains; errors in the preset or the .ls file are positioned.
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::Path;
+
+use verdant::scene::preset::{load_preset, parse_preset};
+use verdant::scene::PlantLook;
+
+mod common;
+use common::*;
+
+/// A small stochastic tree (random turns `~`: every seed grows a different one), written here.
+const BUSH_LS: &str = "# test bush\nrecursion 4\nangle 25\nthickness 15\naxiom c(12)FFFA\n\
+                       rule A = !\"[~(20)&FL A]>(120)[~(20)&FL A]>(120)[~(20)&FL A]\n\
+                       rule L = [c(8){.-z.+z.+z.-|-z.+z.+z.}]\n";
+/// The same without random turns: the seed changes nothing.
+const FIXED_LS: &str = "recursion 3\nangle 25\nthickness 15\naxiom FFA\nrule A = !\"[&FA]>(120)[&FA]>(120)[&FA]\n";
+
+/// fbm 129² with 2 m cells (256 m across), 64 m scatter tiles, one tree species.
+fn preset(name: &str, tree_table: &str, lsystem: &str) -> String {
+    format!(
+        "[scene]\nname = \"{name}\"\nseed = 5\nformats = [\"glb\"]\n\n[terrain]\n\
+         procedural = {{ kind = \"fbm\", size = 129, seed = 3, relief = 30.0 }}\n\
+         cell_size = 2.0\nmax_error = 0.5\nchunk = 64\n\n[scatter]\ntile = 64.0\n\n\
+         [[species]]\nname = \"bush\"\nkind = \"tree\"\nlsystem = \"{lsystem}\"\n{tree_table}\n\
+         max_density = 0.004\nmin_spacing = 8.0\nscale = [0.8, 1.2]\n"
+    )
+}
+
+const QUICK: &str = "tree = { variants = 2, height = 6.0, atlas_size = 256, analysis = false }";
+
+fn csv_rows(path: &Path) -> usize {
+    fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).lines().count() - 1
+}
+
+#[test]
+fn variants_are_built_as_chains_and_instanced_by_position() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/trees/bush.ls", BUSH_LS);
+    write(d, "p/a.toml", &preset("a", QUICK, "trees/bush.ls"));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    let s = d.join("o/a");
+
+    // every variant's chain: the MSFT_lod glb, five levels, the atlas with its mips
+    for k in 0..2 {
+        let chain = verdant::validate::read_scene(&s.join(format!("species/bush_v{k}.glb"))).expect("chain re-imports");
+        assert!(!chain.meshes.is_empty());
+        let mut triangles = Vec::new();
+        for level in 0..5 {
+            let lod = verdant::validate::read_scene(&s.join(format!("species/bush_v{k}_LOD{level}.glb"))).expect("level re-imports");
+            triangles.push(lod.meshes.iter().map(|m| m.triangle_count()).sum::<usize>());
+        }
+        assert!(triangles.windows(2).all(|w| w[1] < w[0]), "variant {k}: triangles must strictly decrease: {triangles:?}");
+        assert!(s.join(format!("atlases/bush_v{k}.png")).is_file(), "variant {k}: atlas");
+        assert!(s.join(format!("atlases/bush_v{k}_mip1.png")).is_file(), "variant {k}: atlas mips");
+    }
+    assert!(!s.join("species/bush_v2.glb").exists(), "only the variants asked for");
+
+    // scene.glb: the two variants' LoD0 meshes, instanced; instances = CSV rows; both used
+    let scene = verdant::validate::read_scene(&s.join("scene.glb")).expect("scene.glb re-imports");
+    let mesh_index = |name: &str| scene.meshes.iter().position(|m| m.name == name).unwrap_or_else(|| panic!("scene.glb has no mesh {name}"));
+    let variants = [mesh_index("bush_v0"), mesh_index("bush_v1")];
+    assert_ne!(
+        scene.meshes[variants[0]].primitives[0].positions,
+        scene.meshes[variants[1]].primitives[0].positions,
+        "two seeds, two different trees"
+    );
+    let lod0 = verdant::validate::read_scene(&s.join("species/bush_v1_LOD0.glb")).unwrap();
+    assert_eq!(lod0.meshes[0].triangle_count(), scene.meshes[variants[1]].triangle_count(), "the instanced mesh is the chain's LoD0");
+    let root = scene.roots.iter().map(|&r| &scene.nodes[r]).find(|n| n.name == "bush").expect("species root node");
+    let mut per_variant = BTreeMap::new();
+    for &c in &root.children {
+        let node = &scene.nodes[c];
+        let mesh = node.mesh.expect("instanced node has a mesh");
+        assert!(variants.contains(&mesh), "{} shows mesh {mesh}, not a variant", node.name);
+        *per_variant.entry(mesh).or_insert(0) += node.instances.as_ref().expect("instanced").translations.len();
+    }
+    let rows = csv_rows(&s.join("placements/bush.csv"));
+    assert!(rows > 60, "only {rows} trees");
+    assert_eq!(per_variant.values().sum::<usize>(), rows, "instances = CSV rows");
+    assert!(per_variant.values().all(|&n| n > rows / 5), "both variants used: {per_variant:?}");
+    // textures and materials of the variants are shared, not copied per variant
+    let leaf_textures = scene.textures.iter().filter(|t| t.name.contains("leaf")).count();
+    assert!(leaf_textures <= 1, "{leaf_textures} leaf textures");
+
+    // manifest and report
+    let manifest = read_json(&s.join("manifest.json"));
+    let plants = manifest["plants"].as_array().expect("manifest plants");
+    let bush = plants.iter().find(|p| p["name"] == "bush").expect("bush in manifest plants");
+    let lods = bush["lods"].as_array().unwrap();
+    assert_eq!(lods.len(), 10, "5 levels × 2 variants: {lods:?}");
+    for l in lods {
+        assert!(s.join(l["file"].as_str().unwrap()).is_file(), "{l}");
+    }
+    let report = read_json(&s.join("report.json"));
+    let tree = report["stages"]["plants"]["species"].as_array().unwrap().iter().find(|p| p["name"] == "bush").unwrap()["tree"].clone();
+    assert_eq!(tree["variants_asked"], 2);
+    assert_eq!(tree["variants"].as_array().unwrap().len(), 2);
+    assert!(tree["variants"][0]["stats"]["segments"].as_u64().unwrap() > 20);
+    assert!(tree["variants"][0]["chain"].get("seconds_bake").is_none(), "timing stays out of report.json's results");
+    let md = fs::read_to_string(s.join("report.md")).unwrap();
+    assert!(md.contains("### bush (L-system tree: bush.ls, dialect v5)"), "{md}");
+}
+
+#[test]
+fn a_system_that_ignores_the_seed_builds_one_variant() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/fixed.ls", FIXED_LS);
+    write(d, "p/a.toml", &preset("a", "tree = { variants = 3, atlas_size = 256, analysis = false }", "fixed.ls"));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    let s = d.join("o/a");
+    assert!(s.join("species/bush_v0.glb").is_file());
+    assert!(!s.join("species/bush_v1.glb").exists(), "identical copies are not written");
+    let report = read_json(&s.join("report.json"));
+    let tree = &report["stages"]["plants"]["species"][0]["tree"];
+    assert_eq!(tree["variants_asked"], 3);
+    assert_eq!(tree["variants"].as_array().unwrap().len(), 1);
+    let scene = verdant::validate::read_scene(&s.join("scene.glb")).unwrap();
+    assert_eq!(scene.meshes.iter().filter(|m| m.name.starts_with("bush_v")).count(), 1);
+}
+
+#[test]
+fn builds_are_byte_identical_and_the_lsystem_bytes_key_the_cache() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/bush.ls", BUSH_LS);
+    write(d, "p/a.toml", &preset("a", QUICK, "bush.ls"));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o1", "--threads", "1"]));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o2", "--threads", "2"]));
+    let outputs = |root: &str| -> BTreeMap<String, Vec<u8>> {
+        tree(&d.join(root).join("a")).into_iter().filter(|(k, _)| k.starts_with("species/") || k.starts_with("atlases/") || k == "scene.glb").collect()
+    };
+    let (a, b) = (outputs("o1"), outputs("o2"));
+    assert!(a.len() > 12, "{:?}", a.keys().collect::<Vec<_>>());
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    for (k, v) in &a {
+        assert!(b[k] == *v, "{k} differs between --threads 1 and 2");
+    }
+    // unchanged: cached; the .ls file edited: the plants and the scatter stage run again
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o1"]));
+    assert!(timing_cached(&d.join("o1/a"), "plants") && timing_cached(&d.join("o1/a"), "scatter"));
+    write(d, "p/bush.ls", &BUSH_LS.replace("angle 25", "angle 30"));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o1"]));
+    assert!(!timing_cached(&d.join("o1/a"), "plants") && !timing_cached(&d.join("o1/a"), "scatter"));
+    assert_ne!(fs::read(d.join("o1/a/species/bush_v0_LOD0.glb")).unwrap(), a["species/bush_v0_LOD0.glb"], "the new angle is built");
+}
+
+// ----------------------------------------------------------------------------------- preset errors
+
+const HEAD: &str = "[scene]\nname = \"x\"\n[terrain]\nprocedural = { kind = \"fbm\", size = 65, relief = 10.0 }\n";
+
+fn error_of(text: &str) -> String {
+    match parse_preset(text, Path::new("p.toml")) {
+        Ok(p) => panic!("expected an error, parsed {p:?}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+fn species(body: &str) -> String {
+    format!("{HEAD}[[species]]\nname = \"t\"\nmax_density = 0.01\n{body}\n")
+}
+
+#[test]
+fn tree_tables_are_read_with_defaults_and_overrides() {
+    let text = format!("{HEAD}[tree]\nvariants = 4\nheight = 15.0\n[[species]]\nname = \"a\"\nkind = \"tree\"\nmax_density = 0.01\nlsystem = \"a.ls\"\n\
+                        [[species]]\nname = \"b\"\nkind = \"tree\"\nmax_density = 0.01\nlsystem = \"b.ls\"\ntree = {{ variants = 2, height = \"file\", radial_segments = 5, lods = 3, atlas_size = 512, dialect = \"v4\" }}\n\
+                        [[species]]\nname = \"c\"\nkind = \"tree\"\nmax_density = 0.01\n");
+    let p = parse_preset(&text, Path::new("dir/p.toml")).unwrap_or_else(|e| panic!("{e}"));
+    let PlantLook::Tree(a) = &p.species[0].look else { panic!("a: {:?}", p.species[0].look) };
+    assert_eq!((a.variants, a.height_m, a.lods), (4, Some(15.0), 5), "[tree] defaults");
+    assert_eq!(a.lsystem, Path::new("dir/a.ls"), "resolved against the preset's folder");
+    let PlantLook::Tree(b) = &p.species[1].look else { panic!() };
+    assert_eq!((b.variants, b.height_m, b.radial_segments, b.lods, b.atlas_px), (2, None, 5, 3, 512));
+    assert_eq!(b.dialect, Some(verdant::lsystem::Dialect::LparserV4));
+    assert_ne!(a.seed, b.seed, "each species its own seed");
+    assert_eq!(p.species[2].look, PlantLook::Marker, "a tree without an L-system is a marker (documented)");
+}
+
+#[test]
+fn tree_preset_mistakes_are_positioned_errors_with_a_remedy() {
+    let cases: &[(&str, &str, &str)] = &[
+        ("kind = \"grass\"\nlsystem = \"a.ls\"", "p.toml:9:1", "set `kind = \"tree\"`"),
+        ("kind = \"tree\"\ntree = { variants = 2 }", "names no `lsystem` file", "add `lsystem ="),
+        ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { atlas_size = 1000 }", "not a multiple of 16", "atlas_size = 1024"),
+        ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { dialect = \"v6\" }", "dialect", "allowed: auto, ls, v4, v5"),
+        ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { varients = 2 }", "varients", "variants"),
+        ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { variants = 0 }", "variants", "1"),
+        ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { height = -3.0 }", "height", "500"),
+        ("kind = \"tree\"\nlsystem = \"\"", "`lsystem` is empty", "relative to this preset"),
+    ];
+    for (body, problem, remedy) in cases {
+        let e = error_of(&species(body));
+        assert!(e.contains("p.toml:"), "{body}: no position in\n{e}");
+        assert!(e.contains(problem), "{body}: expected {problem:?} in\n{e}");
+        assert!(e.contains(remedy), "{body}: expected remedy {remedy:?} in\n{e}");
+    }
+}
+
+#[test]
+fn a_broken_lsystem_file_is_reported_with_both_positions() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "bad.ls", "recursion 2\nangle 20\nthickness 10\naxiom F[A\nrule A = F\n");
+    let p = write(d, "p.toml", &species("kind = \"tree\"\nlsystem = \"bad.ls\""));
+    let e = load_preset(&p).expect_err("the unbalanced bracket is found while loading").to_string();
+    assert!(e.contains("p.toml:9:11"), "the preset's `lsystem` value:\n{e}");
+    assert!(e.contains("bad.ls:4:"), "the position in the .ls file:\n{e}");
+    let missing = write(d, "q.toml", &species("kind = \"tree\"\nlsystem = \"nowhere.ls\""));
+    let e = load_preset(&missing).expect_err("missing file").to_string();
+    assert!(e.contains("nowhere.ls") && e.contains("q.toml:9:"), "{e}");
+}
