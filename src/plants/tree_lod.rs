@@ -29,7 +29,7 @@ use crate::bake::views::{lod_image_error_with, switch_search, switch_search_by, 
 use crate::export::{self, ExportError};
 use crate::lsystem::{parse, Dialect, LSystem};
 use crate::mesh::{AlphaMode, Bounds, Material, Mesh, Node, Primitive, Scene, Texture};
-use crate::plants::mesh_asset::SourceMesh;
+use crate::plants::mesh_asset::{load_obj, MeshAssetError, MeshAssetStats, ObjOptions, SourceMesh};
 use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleGrid};
 use crate::plants::tree::{build_tree, is_flat, TreeError, TreeMesh, TreeOptions, TreeReport, TreeSeconds};
 use crate::synth::mix64;
@@ -76,6 +76,8 @@ pub enum TreeLodError {
     Texture(String),
     #[error(transparent)]
     Export(#[from] ExportError),
+    #[error(transparent)]
+    MeshAsset(#[from] MeshAssetError),
     #[error(
         "{name}: LoD{level} has {triangles} triangles, not fewer than LoD{}'s {previous}: the tree is too small for \
          {} levels; pass --lods {level}",
@@ -83,6 +85,8 @@ pub enum TreeLodError {
         level + 1
     )]
     NotDecreasing { name: String, level: usize, triangles: usize, previous: usize },
+    #[error("{name}: LoD{level} would be empty: the model has too few triangles to simplify; pass --lods {level}")]
+    TooSmall { name: String, level: usize },
     #[error("{path} does not pass validation (this is a bug, please report it with the input file):\n{report}")]
     Invalid { path: PathBuf, report: String },
 }
@@ -92,7 +96,8 @@ impl TreeLodError {
     pub fn exit_code(&self) -> i32 {
         match self {
             TreeLodError::Tree(e) => e.exit_code(),
-            TreeLodError::Options(_) | TreeLodError::NotDecreasing { .. } => 2,
+            TreeLodError::Options(_) | TreeLodError::NotDecreasing { .. } | TreeLodError::TooSmall { .. } => 2,
+            TreeLodError::MeshAsset(e) => e.exit_code(),
             _ => 1,
         }
     }
@@ -336,20 +341,22 @@ fn simplify_below(mesh: &Mesh, ratio: f64, below: usize) -> Mesh {
 }
 
 /// meshoptimizer's sloppy (vertex-clustering) decimation of every triangle primitive to about
-/// `ratio` of its triangles: no topology kept, so it reaches targets edge collapse cannot; zero-area
-/// results dropped, then reordered for the vertex cache and fetch.
+/// `ratio` of its triangles (more when that would erase the primitive): no topology kept, so it
+/// reaches targets edge collapse cannot; zero-area results dropped, then reordered for the vertex
+/// cache and fetch.
 fn simplify_sloppy(mesh: &Mesh, ratio: f64) -> Mesh {
     let mut out = Mesh { name: mesh.name.clone(), primitives: Vec::new(), extras: None };
     for p in mesh.primitives.iter().filter(|p| !p.is_points()) {
         let bytes = meshopt::typed_to_bytes(&p.positions);
         let Ok(adapter) = meshopt::VertexDataAdapter::new(bytes, 12, 0) else { continue };
-        let target = ((p.indices.len() as f64 * ratio) as usize / 3) * 3;
-        let indices = meshopt::simplify_sloppy(&p.indices, &adapter, target, 1.0, None);
-        let mut q = Primitive { indices: Vec::with_capacity(indices.len()), ..p.clone() };
-        for t in indices.chunks_exact(3) {
-            if !is_flat(&p.positions, [t[0], t[1], t[2]]) {
-                q.indices.extend_from_slice(t);
-            }
+        // vertex clustering can erase a thin part (a trunk, a card) entirely: then ask for more
+        let mut q = Primitive { indices: Vec::new(), ..p.clone() };
+        let mut r = ratio;
+        while q.indices.is_empty() && r < 1.0 {
+            let target = ((p.indices.len() as f64 * r) as usize / 3).max(1) * 3;
+            let indices = meshopt::simplify_sloppy(&p.indices, &adapter, target, 1.0, None);
+            q.indices = indices.chunks_exact(3).filter(|t| !is_flat(&p.positions, [t[0], t[1], t[2]])).flatten().copied().collect();
+            r *= 2.0;
         }
         if q.indices.is_empty() {
             continue;
@@ -691,6 +698,9 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
     let mut levels = vec![TreeLod { level: 0, kind: "full", scene: single_mesh_scene(&format!("{name}_LOD0"), lod0.mesh, lod0.materials, lod0.textures), images: images0 }];
     let lod1_source = lod1.as_ref().map(|l| (l.materials.clone(), l.textures.clone()));
     if let Some(lod1) = lod1 {
+        if lod1.mesh.primitives.is_empty() {
+            return Err(TreeLodError::TooSmall { name, level: 1 });
+        }
         let images = decode(&lod1.textures)?;
         levels.push(TreeLod { level: 1, kind: "simplified", scene: single_mesh_scene(&format!("{name}_LOD1"), lod1.mesh, lod1.materials, lod1.textures), images });
     }
@@ -795,7 +805,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
                     mesh = simplify_sloppy(lod0_mesh, ratio);
                 }
                 if mesh.primitives.is_empty() {
-                    return Err(TreeLodError::NotDecreasing { name, level: 2, triangles: 0, previous: lod1_triangles });
+                    return Err(TreeLodError::TooSmall { name, level: 2 });
                 }
                 (mesh, lod1_materials.clone(), lod1_textures.clone(), levels[1].images.clone())
             }
@@ -830,6 +840,9 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
     }
     levels.truncate(wanted);
     for n in 1..levels.len() {
+        if levels[n].scene.meshes[0].primitives.is_empty() {
+            return Err(TreeLodError::TooSmall { name, level: n });
+        }
         let (triangles, previous) = (levels[n].triangles(), levels[n - 1].triangles());
         if triangles >= previous {
             return Err(TreeLodError::NotDecreasing { name, level: n, triangles, previous });
@@ -1036,16 +1049,45 @@ fn write_glb(scene: &Scene, path: &Path, files: &mut Vec<PathBuf>) -> Result<(us
     Ok((v.errors(), v.warnings()))
 }
 
+/// The files one run wrote and what validating them found.
+#[derive(Debug, Default)]
+struct Written {
+    files: Vec<PathBuf>,
+    errors: usize,
+    warnings: usize,
+}
+
+/// Writes `chain` as `<dir>/<file_stem>_LOD<n>.glb`, `<file_stem>_atlas*.png` and the MSFT_lod
+/// `<file_stem>.glb`, validating every glb.
+fn write_chain(chain: &TreeLods, dir: &Path, file_stem: &str, written: &mut Written) -> Result<(), TreeLodError> {
+    for lod in &chain.levels {
+        let (e, w) = write_glb(&lod.scene, &dir.join(format!("{file_stem}_LOD{}.glb", lod.level)), &mut written.files)?;
+        written.errors += e;
+        written.warnings += w;
+    }
+    if !chain.atlas.is_empty() {
+        let pngs = write_mip_pngs(dir, &format!("{file_stem}_atlas"), &chain.atlas).map_err(|e| TreeLodError::Texture(e.to_string()))?;
+        written.files.extend(pngs);
+    }
+    let (e, w) = write_glb(&chain.chain, &dir.join(format!("{file_stem}.glb")), &mut written.files)?;
+    written.errors += e;
+    written.warnings += w;
+    Ok(())
+}
+
+/// A chain's output must be a .glb (it holds MSFT_lod).
+fn check_glb_output(output: &Path) -> Result<(), TreeLodError> {
+    let ext = output.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if ext != "glb" {
+        return Err(TreeLodError::Options(format!("{}: a LoD chain is written as .glb (MSFT_lod); use a .glb output or --lods 1", output.display())));
+    }
+    Ok(())
+}
+
 /// Runs `job`: every file is built in memory before the first is written.
 pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
     let t0 = Instant::now();
-    let ext = job.output.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    if ext != "glb" {
-        return Err(TreeLodError::Options(format!(
-            "{}: a LoD chain is written as .glb (MSFT_lod); use a .glb output or --lods 1",
-            job.output.display()
-        )));
-    }
+    check_glb_output(&job.output)?;
     if !(1..=64).contains(&job.variants) {
         return Err(TreeLodError::Options(format!("--variants {} is out of range; use 1 to 64", job.variants)));
     }
@@ -1067,23 +1109,11 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
         chains.push(chain);
     }
     let t_build = t0.elapsed().as_secs_f64();
-    let mut files = Vec::new();
-    let (mut errors, mut warnings) = (0, 0);
+    let mut written = Written::default();
     for (k, c) in chains.iter().enumerate() {
-        let file_stem = format!("{stem}{}", suffix(k));
-        for lod in &c.levels {
-            let (e, w) = write_glb(&lod.scene, &dir.join(format!("{file_stem}_LOD{}.glb", lod.level)), &mut files)?;
-            errors += e;
-            warnings += w;
-        }
-        if !c.atlas.is_empty() {
-            let pngs = write_mip_pngs(&dir, &format!("{file_stem}_atlas"), &c.atlas).map_err(|e| TreeLodError::Texture(e.to_string()))?;
-            files.extend(pngs);
-        }
-        let (e, w) = write_glb(&c.chain, &dir.join(format!("{file_stem}.glb")), &mut files)?;
-        errors += e;
-        warnings += w;
+        write_chain(c, &dir, &format!("{stem}{}", suffix(k)), &mut written)?;
     }
+    let Written { files, errors, warnings } = written;
     let t_total = t0.elapsed().as_secs_f64();
     let first = &chains[0];
     let tree = TreeReport {
@@ -1110,12 +1140,71 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
     Ok(TreeLodRunReport { tree, variants: chains.into_iter().map(|c| c.report).collect() })
 }
 
-/// Writes a report as pretty JSON (atomically).
-pub fn write_lod_report(path: &Path, report: &TreeLodRunReport) -> Result<(), TreeLodError> {
+// ---------------------------------------------------------------------------------------------
+// the `verdant mesh` job
+
+/// One `verdant mesh` run: load an OBJ, build its chain, write and validate as `verdant tree` does.
+#[derive(Debug, Clone)]
+pub struct MeshLodJob {
+    pub input: PathBuf,
+    /// `<dir>/<stem>.glb`: the chain; `<stem>_LOD<n>.glb` and `<stem>_atlas*.png` beside it.
+    pub output: PathBuf,
+    pub obj: ObjOptions,
+    pub lod: TreeLodOptions,
+}
+
+/// What `verdant mesh --report` writes.
+#[derive(Debug, Clone, Serialize)]
+pub struct MeshLodRunReport {
+    pub input: String,
+    pub output: String,
+    pub files: Vec<String>,
+    pub source: MeshAssetStats,
+    pub validation_errors: usize,
+    pub validation_warnings: usize,
+    pub seconds_load: f64,
+    pub seconds_total: f64,
+    pub chain: TreeLodReport,
+}
+
+/// Runs `job`: every file is built in memory before the first is written. The names inside the
+/// files come from the input's stem, the file names from the output's.
+pub fn run_mesh_lods(job: &MeshLodJob) -> Result<MeshLodRunReport, TreeLodError> {
+    let t0 = Instant::now();
+    check_glb_output(&job.output)?;
+    job.lod.check()?;
+    let source = load_obj(&job.input, &job.obj)?;
+    let seconds_load = t0.elapsed().as_secs_f64();
+    let name = job.input.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
+    let chain = build_mesh_lods(&source, &name, &job.lod)?;
+    let stem = job.output.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
+    let dir = job.output.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mut written = Written::default();
+    write_chain(&chain, &dir, &stem, &mut written)?;
+    Ok(MeshLodRunReport {
+        input: job.input.display().to_string(),
+        output: job.output.display().to_string(),
+        files: written.files.iter().map(|f| f.display().to_string()).collect(),
+        source: source.stats,
+        validation_errors: written.errors,
+        validation_warnings: written.warnings,
+        seconds_load,
+        seconds_total: t0.elapsed().as_secs_f64(),
+        chain: chain.report,
+    })
+}
+
+/// Writes any serialisable report as pretty JSON (atomically).
+pub fn write_json_report<T: Serialize>(path: &Path, report: &T) -> Result<(), TreeLodError> {
     let mut text = serde_json::to_string_pretty(report).map_err(|e| TreeLodError::Options(format!("cannot serialise the report: {e}")))?;
     text.push('\n');
     export::write_atomic(path, text.as_bytes())?;
     Ok(())
+}
+
+/// Writes a report as pretty JSON (atomically).
+pub fn write_lod_report(path: &Path, report: &TreeLodRunReport) -> Result<(), TreeLodError> {
+    write_json_report(path, report)
 }
 
 #[cfg(test)]
