@@ -902,6 +902,13 @@ pub struct TreeReport {
 /// Parses, builds and writes the tree of `job`, then re-reads and validates the file.
 pub fn run(job: &TreeJob) -> Result<TreeReport, TreeError> {
     let t0 = Instant::now();
+    let obj = job.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"));
+    if obj && job.options.leaf_points {
+        return Err(TreeError::Options(format!(
+            "{}: OBJ cannot carry point leaves (glTF POINTS); write .glb or .gltf, or drop --point-leaves",
+            job.output.display()
+        )));
+    }
     let parsed = parse::read_file(&job.input, job.dialect).map_err(TreeError::Parse)?;
     let t_parse = t0.elapsed().as_secs_f64();
     let tree = build_tree(&parsed.system, &job.options).map_err(|e| e.in_file(&job.input))?;
