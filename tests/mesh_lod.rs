@@ -248,7 +248,7 @@ fn tree_obj_with_alpha_leaf_cards_gets_a_masked_double_sided_material_and_a_vali
     assert_eq!(source.stats.normals_generated, 1, "the trunk's normals are the file's, the cards' generated");
     let b = source.stats.bounds.unwrap();
     assert_eq!(b.min[1], 0.0);
-    assert!((b.max[1] - 3.14).abs() < 1e-5, "314 cm scaled to metres: {b:?}");
+    assert!((b.max[1] - 314.0 * 0.01).abs() < 1e-5, "314 cm scaled to metres: {b:?}");
     let out = dir.path().join("tree.glb");
     let report = run_mesh_lods(&MeshLodJob { input, output: out, obj: ObjOptions { scale: 0.01, ..ObjOptions::default() }, lod: TreeLodOptions { analyze: false, ..small_atlas() } }).unwrap();
     assert_eq!((report.validation_errors, report.validation_warnings), (0, 0));

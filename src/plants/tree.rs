@@ -786,7 +786,7 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
             prim.normals.extend(part.normals);
             prim.uvs.extend(part.uvs);
         }
-        if prim.indices.is_empty() && !(points && !prim.positions.is_empty()) {
+        if prim.indices.is_empty() && (!points || prim.positions.is_empty()) {
             continue;
         }
         let base_color = material_color(system, color);

@@ -575,6 +575,8 @@ struct LevelParts {
 }
 
 /// How LoD2 is made from its source.
+// one value per chain build: boxing the larger variant would buy nothing
+#[allow(clippy::large_enum_variant)]
 enum CoarseLevel {
     /// Trees: `kept` (the coarser branch levels of the LoD1 build) simplified below LoD1, plus
     /// crossed cards baked from the clusters of `dropped` (the finest level of the reference).
