@@ -7,7 +7,8 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use verdant::heightfield::{DecodeOptions, Encoding, DEFAULT_MAX_SAMPLES};
 use verdant::lsystem::expand::DEFAULT_MAX_SYMBOLS;
 use verdant::lsystem::Dialect;
-use verdant::plants::tree_lod::{self, TreeLodJob, TreeLodOptions};
+use verdant::plants::mesh_asset::{self, ObjOptions, UpAxis};
+use verdant::plants::tree_lod::{self, MeshLodJob, TreeLodJob, TreeLodOptions};
 use verdant::plants::tree::{self as tree_job, TreeJob, TreeOptions, DEFAULT_MAX_SEGMENTS, DEFAULT_MAX_TRIANGLES, DEFAULT_RADIAL_SEGMENTS};
 use verdant::scene::build::{self as scene_build, BuildSettings, PresetSource};
 use verdant::scene::preset;
@@ -64,6 +65,58 @@ enum Command {
     ///
     /// Example: verdant tree trees3.ls -o out/trees3.glb --report out/trees3.json
     Tree(TreeArgs),
+    /// OBJ model (+ MTL and PNG/JPEG textures) → the LoD chain trees get: LoD0 the model, LoD1
+    /// simplified, LoD2 decimated, LoD3 crossed billboards, LoD4 an impostor, with atlases.
+    ///
+    /// The model is turned to +Y up (--up-axis z for Z-up exports), scaled by --scale, and
+    /// recentred: its lowest point at y = 0, the centre of its x/z footprint at the origin.
+    ///
+    /// Example: verdant mesh rock.obj -o out/rock.glb --scale 0.01 --up-axis z --report out/rock.json
+    Mesh(MeshArgs),
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum UpAxisArg {
+    /// +Y up (glTF, Maya, Blender's default OBJ export).
+    Y,
+    /// +Z up (3ds Max, CAD, photogrammetry).
+    Z,
+}
+
+#[derive(Args)]
+struct MeshArgs {
+    /// Wavefront OBJ file; its `mtllib` and `map_Kd` files are read relative to it and to the MTL.
+    #[arg(value_name = "FILE.obj")]
+    input: PathBuf,
+    /// Output .glb holding the MSFT_lod chain, with <stem>_LOD<n>.glb and <stem>_atlas.png
+    /// (+ mips) beside it. Default: out/<input name>.glb.
+    #[arg(short, long, value_name = "FILE.glb")]
+    output: Option<PathBuf>,
+    /// Levels of detail (1 to 5).
+    #[arg(long, value_name = "N", default_value_t = tree_lod::TREE_LODS)]
+    lods: usize,
+    /// Side of the square atlas the billboards and impostor views are baked into.
+    #[arg(long, value_name = "PX", default_value_t = tree_lod::DEFAULT_ATLAS_PX)]
+    atlas_size: u32,
+    /// Metres per file unit (0.01 for a model in centimetres).
+    #[arg(long, value_name = "S", default_value_t = 1.0)]
+    scale: f64,
+    /// Which axis of the file points up.
+    #[arg(long, value_enum, default_value_t = UpAxisArg::Y)]
+    up_axis: UpAxisArg,
+    /// Refuse models with more vertices than this.
+    #[arg(long, value_name = "N", default_value_t = mesh_asset::DEFAULT_MAX_VERTICES)]
+    max_vertices: usize,
+    /// Refuse models with more triangles than this.
+    #[arg(long, value_name = "N", default_value_t = mesh_asset::DEFAULT_MAX_TRIANGLES)]
+    max_triangles: usize,
+    /// Write a JSON report: what was loaded, and per LoD triangles, bytes, geometric and image
+    /// error, switch distance (the speed/error table).
+    #[arg(long, value_name = "FILE.json")]
+    report: Option<PathBuf>,
+    /// Skip the image analyzer (no switch distances: MSFT_lod coverages are 0); for timing.
+    #[arg(long)]
+    no_analysis: bool,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -129,6 +182,10 @@ struct TreeArgs {
     /// Skip the image analyzer (no switch distances: MSFT_lod coverages are 0); for timing.
     #[arg(long)]
     no_analysis: bool,
+    /// Leaves as glTF POINTS (one per leaf at its centre, NORMAL, COLOR_0 and _LEAF_SIZE =
+    /// length, width in metres) for engines that draw leaf sprites; .glb/.gltf only.
+    #[arg(long)]
+    point_leaves: bool,
 }
 
 #[derive(Args)]
@@ -273,6 +330,7 @@ fn main() -> ExitCode {
         Command::Build(args) => build(args, cli.quiet),
         Command::Preset(cmd) => preset(cmd, cli.quiet),
         Command::Tree(args) => tree(args, cli.quiet),
+        Command::Mesh(args) => mesh(args, cli.quiet),
     };
     ExitCode::from(code as u8)
 }
@@ -482,6 +540,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             max_triangles: a.max_triangles,
             metres_per_step: a.step,
             height_m: a.height,
+            leaf_points: a.point_leaves,
             name,
             ..TreeOptions::default()
         },
@@ -507,19 +566,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
                 if !quiet {
                     print_tree_summary(&report.tree);
                     for v in &report.variants {
-                        println!("  {}: level triangles bytes hausdorff_max_m switch_m", v.name);
-                        for l in &v.lods {
-                            println!(
-                                "    LoD{} {:<10} {:>8} {:>9} {:>10.4} {:>9.1}{}",
-                                l.level,
-                                l.kind,
-                                l.triangles,
-                                l.bytes,
-                                l.geometric_error.max_m,
-                                l.switch_distance_m,
-                                if l.never_passes { " (never passes)" } else { "" }
-                            );
-                        }
+                        print_lod_table(v);
                     }
                     for f in &report.tree.files {
                         println!("  wrote {f}");
@@ -539,6 +586,70 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             }
             if !quiet {
                 print_tree_summary(&report);
+                for f in &report.files {
+                    println!("  wrote {f}");
+                }
+            }
+            0
+        }
+        Err(e) => fail(&e.to_string(), e.exit_code()),
+    }
+}
+
+fn print_lod_table(v: &tree_lod::TreeLodReport) {
+    println!("  {}: level triangles bytes hausdorff_max_m switch_m", v.name);
+    for l in &v.lods {
+        println!(
+            "    LoD{} {:<10} {:>8} {:>9} {:>10.4} {:>9.1}{}",
+            l.level,
+            l.kind,
+            l.triangles,
+            l.bytes,
+            l.geometric_error.max_m,
+            l.switch_distance_m,
+            if l.never_passes { " (never passes)" } else { "" }
+        );
+    }
+}
+
+fn mesh(a: MeshArgs, quiet: bool) -> i32 {
+    let name = a.input.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
+    let job = MeshLodJob {
+        output: a.output.clone().unwrap_or_else(|| PathBuf::from("out").join(format!("{name}.glb"))),
+        input: a.input.clone(),
+        obj: ObjOptions {
+            scale: a.scale,
+            up_axis: match a.up_axis {
+                UpAxisArg::Y => UpAxis::Y,
+                UpAxisArg::Z => UpAxis::Z,
+            },
+            max_vertices: a.max_vertices,
+            max_triangles: a.max_triangles,
+            ..ObjOptions::default()
+        },
+        lod: TreeLodOptions { lods: a.lods, atlas_px: a.atlas_size, analyze: !a.no_analysis, ..TreeLodOptions::default() },
+    };
+    match tree_lod::run_mesh_lods(&job) {
+        Ok(report) => {
+            if let Some(path) = &a.report {
+                if let Err(e) = tree_lod::write_json_report(path, &report) {
+                    return fail(&e.to_string(), e.exit_code());
+                }
+            }
+            if !quiet {
+                let s = &report.source;
+                println!(
+                    "{}: {} vertices, {} triangles in {} primitives, {} materials, {} textures{}, {:.3} s",
+                    report.input,
+                    s.vertices,
+                    s.triangles,
+                    s.primitives,
+                    s.materials,
+                    s.textures,
+                    if s.normals_generated > 0 { ", normals generated" } else { "" },
+                    report.seconds_total
+                );
+                print_lod_table(&report.chain);
                 for f in &report.files {
                     println!("  wrote {f}");
                 }

@@ -23,6 +23,19 @@ pub struct Primitive {
     pub indices: Vec<u32>,
     /// Index into [`Scene::materials`].
     pub material: Option<usize>,
+    /// How the vertices are drawn: triangles (`indices`, three per triangle) or points (one per
+    /// vertex; `indices` empty).
+    pub mode: PrimitiveMode,
+}
+
+/// The glTF primitive topology the writers and the re-import support.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub enum PrimitiveMode {
+    /// A triangle list (glTF mode 4).
+    #[default]
+    Triangles,
+    /// One point per vertex, no indices (glTF mode 0): point sprites an engine sizes and shades.
+    Points,
 }
 
 /// A per-vertex VEC4 float attribute an engine shader reads by name (glTF: an application-specific
@@ -177,8 +190,24 @@ impl Bounds {
 }
 
 impl Primitive {
+    /// Triangles drawn (0 for a points primitive).
     pub fn triangle_count(&self) -> usize {
-        self.indices.len() / 3
+        match self.mode {
+            PrimitiveMode::Triangles => self.indices.len() / 3,
+            PrimitiveMode::Points => 0,
+        }
+    }
+
+    /// Points drawn (0 for a triangle primitive).
+    pub fn point_count(&self) -> usize {
+        match self.mode {
+            PrimitiveMode::Triangles => 0,
+            PrimitiveMode::Points => self.positions.len(),
+        }
+    }
+
+    pub fn is_points(&self) -> bool {
+        self.mode == PrimitiveMode::Points
     }
 
     pub fn bounds(&self) -> Option<Bounds> {
@@ -197,7 +226,8 @@ impl Primitive {
     /// Reorders triangles and vertices for the GPU's post-transform cache and then for vertex fetch
     /// (meshoptimizer). Triangles keep their winding; the set of triangles is unchanged.
     pub fn optimize_for_gpu(&mut self) {
-        if self.indices.is_empty() || self.positions.is_empty() {
+        // points have no triangles to reorder (and every vertex is drawn)
+        if self.is_points() || self.indices.is_empty() || self.positions.is_empty() {
             return;
         }
         let vertex_count = self.positions.len();
@@ -241,6 +271,9 @@ impl Primitive {
 impl Mesh {
     pub fn triangle_count(&self) -> usize {
         self.primitives.iter().map(Primitive::triangle_count).sum()
+    }
+    pub fn point_count(&self) -> usize {
+        self.primitives.iter().map(Primitive::point_count).sum()
     }
     pub fn vertex_count(&self) -> usize {
         self.primitives.iter().map(|p| p.positions.len()).sum()

@@ -16,7 +16,7 @@ use serde_json::Value;
 use thiserror::Error;
 
 use crate::export::gltf::{EXT_INSTANCING, EXT_LOD, LOD_COVERAGE_KEY};
-use crate::mesh::{AlphaMode, Bounds, Instances, Material, Mesh, Node, Primitive, Scene, Texture};
+use crate::mesh::{AlphaMode, Bounds, Instances, Material, Mesh, Node, Primitive, PrimitiveMode, Scene, Texture};
 
 /// |length − 1| above which a normal is reported.
 pub const NORMAL_TOLERANCE: f64 = 1e-3;
@@ -350,9 +350,13 @@ fn read_primitive(
 ) -> (Primitive, Option<Bounds>) {
     use gltf::Semantic;
     let mut p = Primitive { material: prim.material().index(), ..Primitive::default() };
-    if prim.mode() != gltf::mesh::Mode::Triangles {
-        issues.push(issue(Severity::Warning, loc, format!("mode {:?} is not checked (only triangle lists are)", prim.mode())));
-        return (p, None);
+    match prim.mode() {
+        gltf::mesh::Mode::Triangles => {}
+        gltf::mesh::Mode::Points => p.mode = PrimitiveMode::Points,
+        mode => {
+            issues.push(issue(Severity::Warning, loc, format!("mode {mode:?} is not checked (only triangle lists and points are)")));
+            return (p, None);
+        }
     }
     let mut declared = None;
     let read = |issues: &mut Vec<Issue>, sem: &str, acc: Option<gltf::Accessor>, dims: &[usize]| -> Option<(usize, Vec<f32>)> {
@@ -411,7 +415,9 @@ fn read_primitive(
             Ok(i) => p.indices = i,
             Err(e) => issues.push(issue(Severity::Error, loc, format!("indices: {e}"))),
         },
-        // non-indexed: every three vertices are a triangle
+        // non-indexed points: every vertex is one (kept without indices, as written)
+        None if p.mode == PrimitiveMode::Points => {}
+        // non-indexed triangles: every three vertices are a triangle
         None => p.indices = (0..p.positions.len() as u32).collect(),
     }
     let custom = p.custom.iter().map(|c| (c.name.as_str(), c.values.len()));
@@ -744,7 +750,8 @@ fn length(v: &[f32]) -> f64 {
 
 fn check_primitive(p: &Primitive, loc: &str, issues: &mut Vec<Issue>) {
     let n = p.positions.len();
-    if !p.indices.len().is_multiple_of(3) {
+    let points = p.mode == PrimitiveMode::Points;
+    if !points && !p.indices.len().is_multiple_of(3) {
         issues.push(issue(Severity::Error, loc, format!("{} indices is not a whole number of triangles", p.indices.len())));
     }
     {
@@ -781,6 +788,9 @@ fn check_primitive(p: &Primitive, loc: &str, issues: &mut Vec<Issue>) {
                 f.found(format!("vertex {k}"), format!("normal {nrm:?} has length {len:.6}"));
             }
         }
+    }
+    if points {
+        return;
     }
     let mut f = Finder { issues, loc: loc.into(), what: "degenerate triangles", count: 0 };
     for t in 0..p.indices.len() / 3 {

@@ -1,7 +1,7 @@
 //! Tree LoD chains: triangles strictly decrease LoD0 → LoD4, every level and the MSFT_lod chain is
 //! a valid glb for real L-system files, no NaN, byte-identical outputs at 1 and 2 threads, switch
 //! distances that never decrease (and coverages to match), atlas mips that keep coverage, and the
-//! `verdant tree --lods` command's files and errors.
+//! `verdant tree --lods` command's files and errors; point leaves (glTF POINTS with `_LEAF_SIZE`).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -9,7 +9,8 @@ use std::process::Command;
 use verdant::bake::atlas::coverage;
 use verdant::export::gltf::to_glb;
 use verdant::lsystem::parse::parse_bytes;
-use verdant::plants::tree::TreeOptions;
+use verdant::mesh::PrimitiveMode;
+use verdant::plants::tree::{build_tree, TreeOptions, LEAF_SIZE_ATTRIBUTE};
 use verdant::plants::tree_lod::{build_tree_lods, run_lods, TreeLodJob, TreeLodOptions, TreeLods, ATLAS_ALPHA_CUTOFF, IMPOSTOR_EXTRAS_KEY, TREE_LODS};
 use verdant::validate::{read_scene, validate_file};
 
@@ -189,4 +190,85 @@ fn cli_tree_writes_variants_lod_files_atlases_and_a_speed_error_table() {
     let o = verdant(&["tree", i, "-o", bad.to_str().unwrap(), "--atlas-size", "100"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(!bad.exists());
+}
+
+/// The POINTS primitives of a glb's JSON chunk: (mode, has indices) of every primitive.
+fn primitive_modes(glb: &[u8]) -> Vec<(u64, bool)> {
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let json: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    json["meshes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|m| m["primitives"].as_array().unwrap().iter())
+        .map(|p| (p["mode"].as_u64().unwrap_or(4), p.get("indices").is_some()))
+        .collect()
+}
+
+#[test]
+fn point_leaves_are_one_point_per_quad_leaf_with_normal_colour_and_size() {
+    let system = parse_bytes(BUSH.as_bytes(), Path::new("bush.ls"), None).unwrap().system;
+    let quads = build_tree(&system, &TreeOptions { seed: 3, ..TreeOptions::default() }).unwrap();
+    let points = build_tree(&system, &TreeOptions { seed: 3, leaf_points: true, ..TreeOptions::default() }).unwrap();
+    // the quad leaves: two triangles each, in the textured leaf primitives
+    let leaf_texture = |m: Option<usize>| m.and_then(|m| quads.scene.materials[m].base_color_texture).is_some();
+    let quad_leaves: usize = quads.mesh().primitives.iter().filter(|p| leaf_texture(p.material)).map(|p| p.triangle_count() / 2).sum();
+    assert!(quad_leaves > 10, "the bush has leaves ({quad_leaves})");
+    assert_eq!(points.mesh().point_count(), quad_leaves, "one point per quad leaf");
+    assert_eq!(points.mesh().triangle_count() + 2 * quad_leaves, quads.mesh().triangle_count(), "only the leaves changed");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("points.glb");
+    verdant::export::write_scene(&points.scene, &path).unwrap();
+    let v = validate_file(&path, &Default::default()).unwrap();
+    assert_eq!((v.errors(), v.warnings()), (0, 0), "{v}");
+    let modes = primitive_modes(&std::fs::read(&path).unwrap());
+    assert!(modes.contains(&(0, false)), "a POINTS primitive without indices: {modes:?}");
+    let scene = read_scene(&path).unwrap();
+    assert_eq!(scene.meshes[0].primitives, points.mesh().primitives, "re-imports as built");
+    let leaves: Vec<_> = scene.meshes[0].primitives.iter().filter(|p| p.mode == PrimitiveMode::Points).collect();
+    assert!(!leaves.is_empty());
+    for p in leaves {
+        assert_eq!(p.normals.len(), p.positions.len());
+        assert_eq!(p.colors.len(), p.positions.len());
+        assert!(p.colors.iter().all(|c| c[1] > c[0] && c[3] == 1.0), "leaf green");
+        let size = p.custom.iter().find(|c| c.name == LEAF_SIZE_ATTRIBUTE).expect("_LEAF_SIZE");
+        assert_eq!(size.values.len(), p.positions.len());
+        assert!(size.values.iter().all(|s| s[0] > 0.0 && s[1] > 0.0 && (s[1] - s[0] / 2.0).abs() < 1e-6), "length, width = length / 2");
+        assert!(p.uvs.is_empty() && p.indices.is_empty());
+        // no texture on points (they have no texture coordinates)
+        assert_eq!(scene.materials[p.material.unwrap()].base_color_texture, None);
+    }
+    // each point sits at its quad leaf's centre: the quads' centres, in the same order
+    let quad_prim = quads.mesh().primitives.iter().find(|p| leaf_texture(p.material)).unwrap();
+    let centres: Vec<[f32; 3]> = quad_prim.indices.chunks_exact(6).map(|q| {
+        let (a, c) = (quad_prim.positions[q[0] as usize], quad_prim.positions[q[2] as usize]);
+        [(a[0] + c[0]) / 2.0, (a[1] + c[1]) / 2.0, (a[2] + c[2]) / 2.0]
+    }).collect();
+    let point_prim = points.mesh().primitives.iter().find(|p| p.mode == PrimitiveMode::Points).unwrap();
+    let close = centres.iter().filter(|c| point_prim.positions.iter().any(|p| (0..3).all(|k| (p[k] - c[k]).abs() < 1e-4))).count();
+    assert_eq!(close, centres.len(), "every quad's centre has its point");
+}
+
+#[test]
+fn point_leaf_chains_keep_points_at_lod0_and_stay_valid() {
+    let system = parse_bytes(BUSH.as_bytes(), Path::new("bush.ls"), None).unwrap().system;
+    let options = TreeLodOptions { analyze: false, ..small_atlas() };
+    let t = build_tree_lods(&system, &TreeOptions { seed: 3, name: "bush".into(), leaf_points: true, ..TreeOptions::default() }, &options).unwrap();
+    let quads = build_tree_lods(&system, &TreeOptions { seed: 3, name: "bush".into(), ..TreeOptions::default() }, &options).unwrap();
+    assert!(t.levels[0].scene.meshes[0].point_count() > 0 && t.levels[1].scene.meshes[0].point_count() > 0, "LoD0 and LoD1 draw points");
+    let tris: Vec<usize> = t.levels.iter().map(|l| l.triangles()).collect();
+    assert!(tris.windows(2).all(|w| w[1] < w[0]), "{tris:?}");
+    // the atlas is baked from the quad-leaf tree
+    assert_eq!(t.atlas[0].image, quads.atlas[0].image);
+    // and the command writes it (OBJ refused with a remedy)
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bush.ls");
+    std::fs::write(&input, BUSH).unwrap();
+    let glb = dir.path().join("bush.glb");
+    let o = verdant(&["--quiet", "tree", input.to_str().unwrap(), "-o", glb.to_str().unwrap(), "--point-leaves", "--atlas-size", "256", "--no-analysis"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(primitive_modes(&std::fs::read(dir.path().join("bush_LOD0.glb")).unwrap()).iter().any(|m| m.0 == 0));
+    let o = verdant(&["tree", input.to_str().unwrap(), "-o", dir.path().join("bush.obj").to_str().unwrap(), "--point-leaves"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("point leaves"));
 }

@@ -4,7 +4,7 @@
 //! array and image, each starting on a 4-byte boundary, in scene order (meshes, then instanced
 //! nodes, then textures). POSITION accessors carry min/max computed from the f32 values exactly as
 //! written. Indices are UNSIGNED_SHORT when the largest is ≤ 65534 (65535 is the primitive restart
-//! value of some APIs), else UNSIGNED_INT. No hash maps anywhere: the same scene gives the same bytes.
+//! value of some APIs), else UNSIGNED_INT. Points primitives (mode POINTS) have no index list. No hash maps anywhere: the same scene gives the same bytes.
 
 use std::collections::BTreeSet;
 
@@ -15,7 +15,7 @@ use json::Index;
 use serde_json::{Map, Value};
 
 use super::{check_scene, SceneProblem};
-use crate::mesh::{AlphaMode, Scene};
+use crate::mesh::{AlphaMode, PrimitiveMode, Scene};
 
 /// `asset.generator` of every file written.
 pub const GENERATOR: &str = concat!("verdant ", env!("CARGO_PKG_VERSION"));
@@ -210,21 +210,30 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
                 let a = float_accessor(&mut root, &mut bin, &c.values, Some(ARRAY_BUFFER));
                 attributes.insert(Valid(json::mesh::Semantic::Extras(c.name[1..].to_string())), a);
             }
-            let max_index = p.indices.iter().copied().max().unwrap_or(0);
-            let (bytes, component): (Vec<u8>, _) = if max_index <= MAX_U16_INDEX {
-                (p.indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect(), ComponentType::U16)
+            // points draw every vertex in order: no index list
+            let indices = if p.indices.is_empty() && p.mode == PrimitiveMode::Points {
+                None
             } else {
-                (p.indices.iter().flat_map(|&i| i.to_le_bytes()).collect(), ComponentType::U32)
+                let max_index = p.indices.iter().copied().max().unwrap_or(0);
+                let (bytes, component): (Vec<u8>, _) = if max_index <= MAX_U16_INDEX {
+                    (p.indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect(), ComponentType::U16)
+                } else {
+                    (p.indices.iter().flat_map(|&i| i.to_le_bytes()).collect(), ComponentType::U32)
+                };
+                let view = bin.push_view(&bytes, Some(ELEMENT_ARRAY_BUFFER));
+                Some(root.push(accessor(view, p.indices.len(), component, Type::Scalar)))
             };
-            let view = bin.push_view(&bytes, Some(ELEMENT_ARRAY_BUFFER));
-            let indices = root.push(accessor(view, p.indices.len(), component, Type::Scalar));
+            let mode = match p.mode {
+                PrimitiveMode::Triangles => json::mesh::Mode::Triangles,
+                PrimitiveMode::Points => json::mesh::Mode::Points,
+            };
             primitives.push(json::mesh::Primitive {
                 attributes,
                 extensions: None,
                 extras: None,
-                indices: Some(indices),
+                indices,
                 material: p.material.map(|m| Index::new(m as u32)),
-                mode: Valid(json::mesh::Mode::Triangles),
+                mode: Valid(mode),
                 targets: None,
             });
         }

@@ -204,10 +204,11 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneProblem> {
         for (pi, p) in mesh.primitives.iter().enumerate() {
             let what = format!("mesh {mi} ({:?}) primitive {pi}", mesh.name);
             let n = p.positions.len();
-            if n == 0 || p.indices.is_empty() {
+            let points = p.mode == crate::mesh::PrimitiveMode::Points;
+            if n == 0 || (p.indices.is_empty() && !points) {
                 return bad(format!("{what} is empty (no vertices or no triangles); drop it before export"));
             }
-            if !p.indices.len().is_multiple_of(3) {
+            if !points && !p.indices.len().is_multiple_of(3) {
                 return bad(format!("{what} has {} indices, not a multiple of 3", p.indices.len()));
             }
             if n > u32::MAX as usize - 1 {

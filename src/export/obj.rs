@@ -13,13 +13,14 @@
 //! transformed nodes, normals, u) reads back bit-exact; v reads back as 1 − (1 − v), exact for
 //! multiples of 2⁻²⁴ in 0..1 and within one ulp of 1.0 otherwise. MTL has Kd, d, map_Kd and the
 //! PBR extension's Pm/Pr; alpha mode and double-sidedness have no OBJ equivalent and are dropped.
+//! Scenes with points primitives (point leaves) are refused with a message: OBJ has no point sprites.
 
 use std::fmt::Write;
 
 use glam::{DMat3, DMat4, DQuat, DVec3};
 
 use super::{check_scene, sanitize_name, SceneProblem};
-use crate::mesh::{Node, Scene};
+use crate::mesh::{Node, PrimitiveMode, Scene};
 
 /// The files of one OBJ export: `<stem>.obj`, `<stem>.mtl` (None without materials) and the
 /// textures as `(file name, PNG bytes)`.
@@ -66,6 +67,16 @@ fn local(node: &Node) -> DMat4 {
 
 pub fn to_obj(scene: &Scene, stem: &str) -> Result<ObjOutput, SceneProblem> {
     check_scene(scene)?;
+    // OBJ's `p` elements carry no size or normal and few readers draw them: refuse, do not drop
+    for (mi, mesh) in scene.meshes.iter().enumerate() {
+        if let Some(pi) = mesh.primitives.iter().position(|p| p.mode == PrimitiveMode::Points) {
+            return Err(SceneProblem(format!(
+                "mesh {mi} ({:?}) primitive {pi} is drawn as points (point leaves); OBJ cannot carry point sprites: \
+                 write .glb or .gltf, or build without --point-leaves",
+                mesh.name
+            )));
+        }
+    }
     let textures: Vec<(String, Vec<u8>)> = scene
         .textures
         .iter()
@@ -218,5 +229,14 @@ mod tests {
         assert!(text.contains("v 10.1 0 0\n"), "{text}");
         assert!(text.contains("vt 0 0.75\n"), "{text}");
         assert!(text.contains("f 1/1/1 3/3/3 2/2/2\n"), "{text}");
+    }
+
+    #[test]
+    fn points_are_refused_with_a_remedy() {
+        let mut scene = Scene::default();
+        let p = Primitive { positions: vec![[0.0; 3], [1.0, 0.0, 0.0]], mode: PrimitiveMode::Points, ..Primitive::default() };
+        scene.add_mesh_node(Mesh { name: "leaves".into(), primitives: vec![p], extras: None });
+        let e = to_obj(&scene, "t").err().expect("points refused");
+        assert!(e.0.contains("points") && e.0.contains(".glb"), "{}", e.0);
     }
 }

@@ -7,6 +7,7 @@ pub mod grass;
 pub mod grass_asset;
 pub mod hausdorff;
 pub mod marker;
+pub mod mesh_asset;
 pub mod random;
 pub mod texture;
 pub mod tree;

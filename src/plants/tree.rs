@@ -22,7 +22,7 @@ use crate::export::{self, ExportError};
 use crate::lsystem::expand::{Expander, DEFAULT_MAX_SYMBOLS};
 use crate::lsystem::turtle::{Conventions, Frame, Leaf, Segment, Sink, Turtle, TurtleCounts};
 use crate::lsystem::{parse, Dialect, LSystem, LsystemError};
-use crate::mesh::{AlphaMode, Bounds, Material, Mesh, Primitive, Scene, Texture};
+use crate::mesh::{AlphaMode, Bounds, CustomAttribute, Material, Mesh, Primitive, PrimitiveMode, Scene, Texture};
 use crate::validate::{validate_file, ValidateOptions};
 
 pub const DEFAULT_RADIAL_SEGMENTS: u32 = 8;
@@ -56,6 +56,10 @@ pub struct TreeOptions {
     pub tip_radius_ratio: f64,
     /// Leaf quads (`L`): length as a fraction of the current step; the width is half the length.
     pub leaf_length_ratio: f64,
+    /// Leaves (`L`) as one glTF point each (the point-sprite thesis) instead of textured quads: at
+    /// the quad's centre, NORMAL the leaf's normal, COLOR_0 its colour, `_LEAF_SIZE` = (length,
+    /// width, 0, 0) in metres for the engine to size the sprite. Polygons stay triangles.
+    pub leaf_points: bool,
     /// Name of the mesh and its node.
     pub name: String,
 }
@@ -73,6 +77,7 @@ impl Default for TreeOptions {
             min_radius_m: 0.002,
             tip_radius_ratio: 0.5,
             leaf_length_ratio: 0.4,
+            leaf_points: false,
             name: "tree".into(),
         }
     }
@@ -189,10 +194,11 @@ impl TreeMesh {
                 k if k == ranges.levels.len() => (p.positions.len(), p.indices.len()),
                 k => (ranges.vertex_starts[k] as usize, ranges.index_starts[k] as usize),
             };
-            if i_end == 0 {
+            if i_end == 0 && !(p.is_points() && v_end > 0) {
                 continue;
             }
             let cut = |n: usize| n.min(v_end);
+            let custom = p.custom.iter().map(|c| CustomAttribute { name: c.name.clone(), values: c.values[..cut(c.values.len())].to_vec() }).collect();
             // every field is set, but Primitive literals end in `..Primitive::default()` (fields get added)
             #[allow(clippy::needless_update)]
             out.primitives.push(Primitive {
@@ -202,6 +208,8 @@ impl TreeMesh {
                 colors: p.colors[..cut(p.colors.len())].to_vec(),
                 indices: p.indices[..i_end].to_vec(),
                 material: p.material,
+                custom,
+                mode: p.mode,
                 ..Primitive::default()
             });
         }
@@ -296,7 +304,12 @@ enum Kind {
     Bark,
     Polygon,
     Leaf,
+    /// A leaf as one point (`TreeOptions::leaf_points`).
+    LeafPoint,
 }
+
+/// Custom attribute of point leaves: (length, width, 0, 0) of the leaf in metres.
+pub const LEAF_SIZE_ATTRIBUTE: &str = "_LEAF_SIZE";
 
 /// Vertices and triangles of one (kind, colour, level).
 #[derive(Default)]
@@ -305,6 +318,8 @@ struct Part {
     normals: Vec<[f32; 3]>,
     uvs: Vec<[f32; 2]>,
     indices: Vec<u32>,
+    /// Point leaves only: (length, width, 0, 0) per vertex.
+    sizes: Vec<[f32; 4]>,
 }
 
 impl Part {
@@ -531,6 +546,13 @@ impl Sink for Builder<'_> {
         let width = length * 0.5;
         let Frame { heading, left, up } = leaf.frame;
         let p = leaf.position * self.metres_per_unit;
+        if self.options.leaf_points {
+            // the quad's centre, facing where the quad faces
+            let part = self.part(Kind::LeafPoint, leaf.color, leaf.level);
+            part.vertex(p + heading * (length / 2.0), up, [0.5, 0.5]);
+            part.sizes.push([length as f32, width as f32, 0.0, 0.0]);
+            return Ok(());
+        }
         let corners = [p - left * (width / 2.0), p + left * (width / 2.0), p + left * (width / 2.0) + heading * length, p - left * (width / 2.0) + heading * length];
         let uvs = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
         let part = self.part(Kind::Leaf, leaf.color, leaf.level);
@@ -719,16 +741,33 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
     let mut dropped = 0u64;
     let mut leaf_texture = None;
     for ((kind, color), levels) in std::mem::take(&mut builder.parts) {
-        let mut prim = Primitive::default();
+        let points = kind == Kind::LeafPoint;
+        let mut prim = Primitive { mode: if points { PrimitiveMode::Points } else { PrimitiveMode::Triangles }, ..Primitive::default() };
+        let mut sizes = Vec::new();
         let mut ranges = LevelRanges::default();
         for (level, mut part) in levels {
             if scale != 1.0 {
                 for p in &mut part.positions {
                     *p = p.map(|x| (x as f64 * scale) as f32);
                 }
+                for s in &mut part.sizes {
+                    *s = s.map(|x| (x as f64 * scale) as f32);
+                }
             }
             let base = prim.positions.len() as u32;
             let index_start = prim.indices.len() as u32;
+            if points {
+                if part.positions.is_empty() {
+                    continue;
+                }
+                ranges.levels.push(level);
+                ranges.vertex_starts.push(base);
+                ranges.index_starts.push(index_start);
+                prim.positions.extend(part.positions);
+                prim.normals.extend(part.normals);
+                sizes.extend(part.sizes);
+                continue;
+            }
             for t in part.indices.chunks_exact(3) {
                 let t = [t[0], t[1], t[2]];
                 if is_flat(&part.positions, t) {
@@ -747,10 +786,14 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
             prim.normals.extend(part.normals);
             prim.uvs.extend(part.uvs);
         }
-        if prim.indices.is_empty() {
+        if prim.indices.is_empty() && (!points || prim.positions.is_empty()) {
             continue;
         }
         let base_color = material_color(system, color);
+        if points {
+            prim.colors = vec![base_color; prim.positions.len()];
+            prim.custom = vec![CustomAttribute { name: LEAF_SIZE_ATTRIBUTE.into(), values: sizes }];
+        }
         let (name, material) = match kind {
             Kind::Bark => (format!("bark_c{color}"), Material { base_color, roughness: 0.9, ..Material::default() }),
             Kind::Polygon => (format!("leaf_polygon_c{color}"), Material { base_color, roughness: 0.7, double_sided: true, ..Material::default() }),
@@ -769,6 +812,9 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
                 };
                 (format!("leaf_c{color}"), m)
             }
+            // the colour rides on COLOR_0 (per point, as the sprite shader reads it); no texture:
+            // points have no texture coordinates
+            Kind::LeafPoint => (format!("leaf_points_c{color}"), Material { roughness: 0.7, double_sided: true, ..Material::default() }),
         };
         scene.materials.push(Material { name, ..material });
         prim.material = Some(scene.materials.len() - 1);
@@ -776,7 +822,7 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
         all_levels.push(ranges);
     }
     let triangles: u64 = mesh.primitives.iter().map(|p| p.triangle_count() as u64).sum();
-    if triangles == 0 {
+    if triangles == 0 && mesh.point_count() == 0 {
         return Err(TreeError::Empty);
     }
     let mut skeleton = std::mem::take(&mut builder.skeleton);
@@ -856,6 +902,13 @@ pub struct TreeReport {
 /// Parses, builds and writes the tree of `job`, then re-reads and validates the file.
 pub fn run(job: &TreeJob) -> Result<TreeReport, TreeError> {
     let t0 = Instant::now();
+    let obj = job.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"));
+    if obj && job.options.leaf_points {
+        return Err(TreeError::Options(format!(
+            "{}: OBJ cannot carry point leaves (glTF POINTS); write .glb or .gltf, or drop --point-leaves",
+            job.output.display()
+        )));
+    }
     let parsed = parse::read_file(&job.input, job.dialect).map_err(TreeError::Parse)?;
     let t_parse = t0.elapsed().as_secs_f64();
     let tree = build_tree(&parsed.system, &job.options).map_err(|e| e.in_file(&job.input))?;

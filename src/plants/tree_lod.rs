@@ -28,7 +28,8 @@ use crate::bake::render::{render_mesh, RenderOptions, Shading};
 use crate::bake::views::{lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, ScreenView, SwitchSearch, plant_screen_coverage, plant_screen_view};
 use crate::export::{self, ExportError};
 use crate::lsystem::{parse, Dialect, LSystem};
-use crate::mesh::{AlphaMode, Material, Mesh, Node, Primitive, Scene, Texture};
+use crate::mesh::{AlphaMode, Bounds, Material, Mesh, Node, Primitive, Scene, Texture};
+use crate::plants::mesh_asset::{load_obj, MeshAssetError, MeshAssetStats, ObjOptions, SourceMesh};
 use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleGrid};
 use crate::plants::tree::{build_tree, is_flat, TreeError, TreeMesh, TreeOptions, TreeReport, TreeSeconds};
 use crate::synth::mix64;
@@ -75,6 +76,8 @@ pub enum TreeLodError {
     Texture(String),
     #[error(transparent)]
     Export(#[from] ExportError),
+    #[error(transparent)]
+    MeshAsset(#[from] MeshAssetError),
     #[error(
         "{name}: LoD{level} has {triangles} triangles, not fewer than LoD{}'s {previous}: the tree is too small for \
          {} levels; pass --lods {level}",
@@ -82,6 +85,8 @@ pub enum TreeLodError {
         level + 1
     )]
     NotDecreasing { name: String, level: usize, triangles: usize, previous: usize },
+    #[error("{name}: LoD{level} would be empty: the model has too few triangles to simplify; pass --lods {level}")]
+    TooSmall { name: String, level: usize },
     #[error("{path} does not pass validation (this is a bug, please report it with the input file):\n{report}")]
     Invalid { path: PathBuf, report: String },
 }
@@ -91,7 +96,8 @@ impl TreeLodError {
     pub fn exit_code(&self) -> i32 {
         match self {
             TreeLodError::Tree(e) => e.exit_code(),
-            TreeLodError::Options(_) | TreeLodError::NotDecreasing { .. } => 2,
+            TreeLodError::Options(_) | TreeLodError::NotDecreasing { .. } | TreeLodError::TooSmall { .. } => 2,
+            TreeLodError::MeshAsset(e) => e.exit_code(),
             _ => 1,
         }
     }
@@ -269,6 +275,11 @@ fn subset(p: &Primitive, keep: impl Fn(usize) -> bool) -> Primitive {
 fn simplify(mesh: &Mesh, ratio: f64, max_error: f32) -> Mesh {
     let mut out = Mesh { name: mesh.name.clone(), primitives: Vec::new(), extras: None };
     for p in &mesh.primitives {
+        // point leaves stay as they are (a point is already as cheap as it gets)
+        if p.is_points() {
+            out.primitives.push(p.clone());
+            continue;
+        }
         let bytes = meshopt::typed_to_bytes(&p.positions);
         let Ok(adapter) = meshopt::VertexDataAdapter::new(bytes, 12, 0) else {
             out.primitives.push(p.clone());
@@ -325,6 +336,34 @@ fn simplify_below(mesh: &Mesh, ratio: f64, below: usize) -> Mesh {
         if out.triangle_count() < below {
             break;
         }
+    }
+    out
+}
+
+/// meshoptimizer's sloppy (vertex-clustering) decimation of every triangle primitive to about
+/// `ratio` of its triangles (more when that would erase the primitive): no topology kept, so it
+/// reaches targets edge collapse cannot; zero-area results dropped, then reordered for the vertex
+/// cache and fetch.
+fn simplify_sloppy(mesh: &Mesh, ratio: f64) -> Mesh {
+    let mut out = Mesh { name: mesh.name.clone(), primitives: Vec::new(), extras: None };
+    for p in mesh.primitives.iter().filter(|p| !p.is_points()) {
+        let bytes = meshopt::typed_to_bytes(&p.positions);
+        let Ok(adapter) = meshopt::VertexDataAdapter::new(bytes, 12, 0) else { continue };
+        // vertex clustering can erase a thin part (a trunk, a card) entirely: then ask for more
+        let mut q = Primitive { indices: Vec::new(), ..p.clone() };
+        let mut r = ratio;
+        while q.indices.is_empty() && r < 1.0 {
+            let target = ((p.indices.len() as f64 * r) as usize / 3).max(1) * 3;
+            let indices = meshopt::simplify_sloppy(&p.indices, &adapter, target, 1.0, None);
+            q.indices = indices.chunks_exact(3).filter(|t| !is_flat(&p.positions, [t[0], t[1], t[2]])).flatten().copied().collect();
+            r *= 2.0;
+        }
+        if q.indices.is_empty() {
+            continue;
+        }
+        let mut q = subset(&q, |_| true);
+        q.optimize_for_gpu();
+        out.primitives.push(q);
     }
     out
 }
@@ -465,7 +504,8 @@ pub struct TreeLods {
     pub atlas: Vec<MipLevel>,
     pub impostor_cells: Vec<AtlasCell>,
     pub report: TreeLodReport,
-    pub lod0: TreeMesh,
+    /// The L-system tree LoD0 shows (None for a mesh asset).
+    pub lod0: Option<TreeMesh>,
 }
 
 fn decode(textures: &[Texture]) -> Result<Vec<Image>, TreeLodError> {
@@ -527,60 +567,176 @@ fn merged(rows: Vec<DistanceError>) -> Option<DistanceError> {
     })
 }
 
+/// A level's mesh with the materials and textures it refers to.
+struct LevelParts {
+    mesh: Mesh,
+    materials: Vec<Material>,
+    textures: Vec<Texture>,
+}
+
+/// How LoD2 is made from its source.
+// one value per chain build: boxing the larger variant would buy nothing
+#[allow(clippy::large_enum_variant)]
+enum CoarseLevel {
+    /// Trees: `kept` (the coarser branch levels of the LoD1 build) simplified below LoD1, plus
+    /// crossed cards baked from the clusters of `dropped` (the finest level of the reference).
+    Cards { kept: LevelParts, dropped: Mesh, dropped_levels: Vec<u32> },
+    /// Meshes: LoD0 decimated much harder than LoD1 (meshoptimizer's sloppy simplifier, about
+    /// SLOPPY_RATIO of the triangles, halved until below LoD1).
+    Sloppy,
+}
+
+/// Everything the generic chain builder needs from a tree or a mesh asset.
+struct ChainInput<'a> {
+    name: String,
+    /// Seeds the Hausdorff sampling.
+    seed: u64,
+    lod0: LevelParts,
+    /// What the atlas is baked from and every level measured against: LoD0 itself, or for a tree
+    /// with point leaves the same tree with quad leaves (points are not rasterised).
+    reference: &'a Mesh,
+    reference_materials: &'a [Material],
+    reference_textures: &'a [Texture],
+    lod1: Option<LevelParts>,
+    coarse: CoarseLevel,
+    started: Instant,
+}
+
+/// LoD2 of a mesh asset keeps about this fraction of LoD0's triangles.
+pub const SLOPPY_RATIO: f64 = 0.1;
+
 /// Builds the LoD chain of `system`'s tree, bakes its atlas and measures every level.
+///
+/// With `tree_options.leaf_points`, LoD0 and LoD1 draw leaves as points; the atlases, LoD2's cards
+/// and the analyzer's reference use the same tree with quad leaves (a rasteriser does not draw
+/// sprites), so the coarser levels look like those of the quad-leaf tree.
 pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &TreeLodOptions) -> Result<TreeLods, TreeLodError> {
     options.check()?;
     let started = Instant::now();
-    let name = tree_options.name.clone();
     let lod0 = build_tree(system, tree_options)?;
-    let images0 = decode(&lod0.scene.textures)?;
-    let materials0 = lod0.scene.materials.clone();
+    let quads = if tree_options.leaf_points { Some(build_tree(system, &TreeOptions { leaf_points: false, ..tree_options.clone() })?) } else { None };
+    let reference = quads.as_ref().unwrap_or(&lod0);
     let wanted = options.lods;
-    let mut levels = vec![TreeLod {
-        level: 0,
-        kind: "full",
-        scene: single_mesh_scene(&format!("{name}_LOD0"), lod0.mesh().clone(), materials0.clone(), lod0.scene.textures.clone()),
-        images: images0.clone(),
-    }];
+    let lod0_triangles = lod0.mesh().triangle_count();
     let half = if wanted > 1 {
         Some(build_tree(system, &TreeOptions { radial_segments: (tree_options.radial_segments / 2).max(3), ..tree_options.clone() })?)
     } else {
         None
     };
-    if let Some(half) = &half {
-        let mesh = simplify_below(half.mesh(), SIMPLIFY_RATIO, levels[0].triangles());
-        levels.push(TreeLod {
-            level: 1,
-            kind: "simplified",
-            scene: single_mesh_scene(&format!("{name}_LOD1"), mesh, half.scene.materials.clone(), half.scene.textures.clone()),
-            images: decode(&half.scene.textures)?,
-        });
+    let lod1 = half.as_ref().map(|half| LevelParts {
+        mesh: simplify_below(half.mesh(), SIMPLIFY_RATIO, lod0_triangles),
+        materials: half.scene.materials.clone(),
+        textures: half.scene.textures.clone(),
+    });
+    let max_level = lod0.stats.max_branch_level;
+    let coarse = match &half {
+        Some(half) if max_level > 0 && wanted > 2 => CoarseLevel::Cards {
+            kept: LevelParts { mesh: half.up_to_level(max_level - 1), materials: half.scene.materials.clone(), textures: half.scene.textures.clone() },
+            dropped: finer_than(reference, max_level - 1),
+            dropped_levels: vec![max_level],
+        },
+        Some(half) => CoarseLevel::Cards {
+            kept: LevelParts { mesh: half.mesh().clone(), materials: half.scene.materials.clone(), textures: half.scene.textures.clone() },
+            dropped: Mesh::default(),
+            dropped_levels: Vec::new(),
+        },
+        None => CoarseLevel::Sloppy,
+    };
+    let input = ChainInput {
+        name: tree_options.name.clone(),
+        seed: tree_options.seed,
+        lod0: LevelParts { mesh: lod0.mesh().clone(), materials: lod0.scene.materials.clone(), textures: lod0.scene.textures.clone() },
+        reference: reference.mesh(),
+        reference_materials: &reference.scene.materials,
+        reference_textures: &reference.scene.textures,
+        lod1,
+        coarse,
+        started,
+    };
+    let (name, levels, chain, atlas, impostor_cells, report) = build_chain(input, options)?;
+    Ok(TreeLods { name, levels, chain, atlas, impostor_cells, report, lod0: Some(lod0) })
+}
+
+/// Builds the LoD chain of a loaded mesh (an OBJ tree or rock): LoD0 the mesh, LoD1 meshoptimizer
+/// simplification to about half, LoD2 sloppy decimation to about a tenth (strictly fewer triangles
+/// than LoD1), LoD3 crossed billboards and LoD4 the impostor from the atlas baked from LoD0; every
+/// level measured as a tree's. `name` names the meshes, nodes and atlas inside the files.
+pub fn build_mesh_lods(source: &SourceMesh, name: &str, options: &TreeLodOptions) -> Result<TreeLods, TreeLodError> {
+    options.check()?;
+    let started = Instant::now();
+    let mesh = source.mesh();
+    if mesh.triangle_count() == 0 {
+        return Err(TreeLodError::Options(format!("{name}: the mesh has no triangles")));
+    }
+    let lod1 = (options.lods > 1).then(|| LevelParts {
+        mesh: simplify_below(mesh, SIMPLIFY_RATIO, mesh.triangle_count()),
+        materials: source.scene.materials.clone(),
+        textures: source.scene.textures.clone(),
+    });
+    let input = ChainInput {
+        name: name.to_string(),
+        seed: mix64(source.stats.triangles as u64),
+        lod0: LevelParts { mesh: mesh.clone(), materials: source.scene.materials.clone(), textures: source.scene.textures.clone() },
+        reference: mesh,
+        reference_materials: &source.scene.materials,
+        reference_textures: &source.scene.textures,
+        lod1,
+        coarse: CoarseLevel::Sloppy,
+        started,
+    };
+    let (name, levels, chain, atlas, impostor_cells, report) = build_chain(input, options)?;
+    Ok(TreeLods { name, levels, chain, atlas, impostor_cells, report, lod0: None })
+}
+
+type Chain = (String, Vec<TreeLod>, Scene, Vec<MipLevel>, Vec<AtlasCell>, TreeLodReport);
+
+/// The levels after LoD1, the atlas, the analyzer and the MSFT_lod scene, for any source.
+fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, TreeLodError> {
+    let ChainInput { name, seed, lod0, reference, reference_materials, reference_textures, lod1, coarse, started } = input;
+    let images0 = decode(&lod0.textures)?;
+    let reference_images = decode(reference_textures)?;
+    let materials0 = reference_materials.to_vec();
+    let wanted = options.lods;
+    let mut levels = vec![TreeLod { level: 0, kind: "full", scene: single_mesh_scene(&format!("{name}_LOD0"), lod0.mesh, lod0.materials, lod0.textures), images: images0 }];
+    let lod1_source = lod1.as_ref().map(|l| (l.materials.clone(), l.textures.clone()));
+    if let Some(lod1) = lod1 {
+        if lod1.mesh.primitives.is_empty() {
+            return Err(TreeLodError::TooSmall { name, level: 1 });
+        }
+        let images = decode(&lod1.textures)?;
+        levels.push(TreeLod { level: 1, kind: "simplified", scene: single_mesh_scene(&format!("{name}_LOD1"), lod1.mesh, lod1.materials, lod1.textures), images });
     }
     let seconds_meshes = started.elapsed().as_secs_f64();
 
-    // the frame every tree-wide view uses: a square around the trunk axis, the whole tree inside
-    let bounds = lod0.stats.bounds.ok_or(TreeError::Empty)?;
+    // the frame every model-wide view uses: a square around the vertical axis through the
+    // footprint centre, the whole model inside
+    let all_positions: Vec<[f32; 3]> = reference.primitives.iter().flat_map(|p| p.positions.iter().copied()).collect();
+    let bounds = Bounds::of(&all_positions).ok_or(TreeError::Empty)?;
     let axis = DVec3::new((bounds.min[0] + bounds.max[0]) as f64 / 2.0, 0.0, (bounds.min[2] + bounds.max[2]) as f64 / 2.0);
-    let reach = lod0.mesh().primitives.iter().flat_map(|p| &p.positions).map(|v| ((v[0] as f64 - axis.x).powi(2) + (v[2] as f64 - axis.z).powi(2)).sqrt()).fold(0.0, f64::max);
+    let reach = all_positions.iter().map(|v| ((v[0] as f64 - axis.x).powi(2) + (v[2] as f64 - axis.z).powi(2)).sqrt()).fold(0.0, f64::max);
     let height = (bounds.max[1] - bounds.min[1]) as f64;
     let centre = DVec3::new(axis.x, (bounds.min[1] + bounds.max[1]) as f64 / 2.0, axis.z);
     let tree_side = (2.0 * reach).max(height).max(1e-3) * 1.02;
     let tree_frame = |k: usize| CardFrame { centre, azimuth_deg: k as f64 * 360.0 / IMPOSTOR_VIEWS as f64, side_m: tree_side };
-    let radius = lod0.mesh().primitives.iter().flat_map(|p| &p.positions).map(|v| (DVec3::from(v.map(f64::from)) - centre).length()).fold(0.0, f64::max);
+    let radius = all_positions.iter().map(|v| (DVec3::from(v.map(f64::from)) - centre).length()).fold(0.0, f64::max);
+    drop(all_positions);
 
     // bake: the impostor views (LoD3 reuses the first four), then two views per leaf cluster
     let bake_started = Instant::now();
     let px = options.atlas_px;
-    let max_level = lod0.stats.max_branch_level;
-    let dropped_levels: Vec<u32> = if max_level > 0 && wanted > 2 { vec![max_level] } else { Vec::new() };
-    // cards take at most half of LoD1's triangle count (4 triangles a card)
-    let max_clusters = levels.get(1).map_or(0, |l| (l.triangles() / 8).min(MAX_CLUSTERS));
-    let groups = if dropped_levels.is_empty() { Vec::new() } else { clusters(&finer_than(&lod0, max_level - 1), max_clusters) };
+    let (dropped_levels, groups) = match &coarse {
+        CoarseLevel::Cards { dropped, dropped_levels, .. } if !dropped_levels.is_empty() => {
+            // cards take at most half of LoD1's triangle count (4 triangles a card)
+            let max_clusters = levels.get(1).map_or(0, |l| (l.triangles() / 8).min(MAX_CLUSTERS));
+            (dropped_levels.clone(), clusters(dropped, max_clusters))
+        }
+        _ => (Vec::new(), Vec::new()),
+    };
     let impostor_cells: Vec<AtlasCell> = (0..IMPOSTOR_VIEWS).map(|k| AtlasCell::large(px, k)).collect();
     let mut jobs: Vec<(AtlasCell, CardFrame, &Mesh)> = Vec::new();
     if wanted > 2 {
         for (k, cell) in impostor_cells.iter().enumerate() {
-            jobs.push((*cell, tree_frame(k), lod0.mesh()));
+            jobs.push((*cell, tree_frame(k), reference));
         }
         for (c, g) in groups.iter().enumerate() {
             for side in 0..2 {
@@ -589,7 +745,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
             }
         }
     }
-    let rendered: Vec<Result<(Image, u64), RasterError>> = jobs.par_iter().map(|(cell, frame, mesh)| bake(frame, cell.inner_px(), mesh, &materials0, &images0)).collect();
+    let rendered: Vec<Result<(Image, u64), RasterError>> = jobs.par_iter().map(|(cell, frame, mesh)| bake(frame, cell.inner_px(), mesh, &materials0, &reference_images)).collect();
     let mut atlas = Image { width: px, height: px, pixels: vec![[0.0; 4]; (px as usize) * (px as usize)] };
     let mut fragments = 0;
     for ((cell, _, _), r) in jobs.iter().zip(rendered) {
@@ -610,36 +766,53 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
         Some(level0) => Some(Texture { name: format!("{name}_atlas"), png: level0.image.encode_png().map_err(|e| TreeLodError::Texture(e.to_string()))? }),
         None => None,
     };
-    if let (Some(half), Some(atlas_tex), Some(atlas0)) = (&half, &atlas_texture, atlas_chain.first()) {
-        // LoD2: the coarser branch levels simplified, plus the cards; simplified harder until it
-        // has fewer triangles than LoD1
-        let kept = if dropped_levels.is_empty() { half.mesh().clone() } else { half.up_to_level(max_level - 1) };
-        let mut cards = Primitive::default();
-        for (c, g) in groups.iter().enumerate() {
-            for side in 0..2 {
-                let frame = CardFrame { centre: g.centre, azimuth_deg: 90.0 * side as f64, side_m: g.side_m };
-                cards = appended(cards, &frame.quad(AtlasCell::small(px, 2 * c + side).uv));
-            }
-        }
+    if let (Some((lod1_materials, lod1_textures)), Some(atlas_tex), Some(atlas0)) = (&lod1_source, &atlas_texture, atlas_chain.first()) {
         let lod1_triangles = levels[1].triangles();
-        let below = lod1_triangles.saturating_sub(cards.triangle_count());
-        let mut ratio = SIMPLIFY_RATIO;
-        let mut mesh = simplify_below(&kept, ratio, below);
-        while mesh.triangle_count() >= below && ratio > 0.01 {
-            ratio /= 2.0;
-            mesh = simplify_below(&kept, ratio, below);
-        }
-        let mut materials = half.scene.materials.clone();
-        let mut textures = half.scene.textures.clone();
-        let mut images = decode(&textures)?;
-        if !cards.indices.is_empty() {
-            textures.push(atlas_tex.clone());
-            images.push(atlas0.image.clone());
-            materials.push(atlas_material(textures.len() - 1));
-            cards.material = Some(materials.len() - 1);
-            mesh.primitives.push(cards);
-        }
-        levels.push(TreeLod { level: 2, kind: "cards", scene: single_mesh_scene(&format!("{name}_LOD2"), mesh, materials, textures), images });
+        let (mesh, materials, textures, images) = match &coarse {
+            CoarseLevel::Cards { kept, .. } => {
+                // LoD2: the coarser branch levels simplified, plus the cards; simplified harder
+                // until it has fewer triangles than LoD1
+                let mut cards = Primitive::default();
+                for (c, g) in groups.iter().enumerate() {
+                    for side in 0..2 {
+                        let frame = CardFrame { centre: g.centre, azimuth_deg: 90.0 * side as f64, side_m: g.side_m };
+                        cards = appended(cards, &frame.quad(AtlasCell::small(px, 2 * c + side).uv));
+                    }
+                }
+                let below = lod1_triangles.saturating_sub(cards.triangle_count());
+                let mut ratio = SIMPLIFY_RATIO;
+                let mut mesh = simplify_below(&kept.mesh, ratio, below);
+                while mesh.triangle_count() >= below && ratio > 0.01 {
+                    ratio /= 2.0;
+                    mesh = simplify_below(&kept.mesh, ratio, below);
+                }
+                let mut materials = kept.materials.clone();
+                let mut textures = kept.textures.clone();
+                let mut images = decode(&textures)?;
+                if !cards.indices.is_empty() {
+                    textures.push(atlas_tex.clone());
+                    images.push(atlas0.image.clone());
+                    materials.push(atlas_material(textures.len() - 1));
+                    cards.material = Some(materials.len() - 1);
+                    mesh.primitives.push(cards);
+                }
+                (mesh, materials, textures, images)
+            }
+            CoarseLevel::Sloppy => {
+                let lod0_mesh = &levels[0].scene.meshes[0];
+                let mut ratio = SLOPPY_RATIO;
+                let mut mesh = simplify_sloppy(lod0_mesh, ratio);
+                while mesh.triangle_count() >= lod1_triangles && ratio > 1e-4 {
+                    ratio /= 2.0;
+                    mesh = simplify_sloppy(lod0_mesh, ratio);
+                }
+                if mesh.primitives.is_empty() {
+                    return Err(TreeLodError::TooSmall { name, level: 2 });
+                }
+                (mesh, lod1_materials.clone(), lod1_textures.clone(), levels[1].images.clone())
+            }
+        };
+        levels.push(TreeLod { level: 2, kind: if matches!(coarse, CoarseLevel::Sloppy) { "decimated" } else { "cards" }, scene: single_mesh_scene(&format!("{name}_LOD2"), mesh, materials, textures), images });
         // LoD3: crossed billboards
         let mut planes = Primitive { material: Some(0), ..Primitive::default() };
         for (k, cell) in impostor_cells.iter().take(BILLBOARD_PLANES).enumerate() {
@@ -669,6 +842,9 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
     }
     levels.truncate(wanted);
     for n in 1..levels.len() {
+        if levels[n].scene.meshes[0].primitives.is_empty() {
+            return Err(TreeLodError::TooSmall { name, level: n });
+        }
         let (triangles, previous) = (levels[n].triangles(), levels[n - 1].triangles());
         if triangles >= previous {
             return Err(TreeLodError::NotDecreasing { name, level: n, triangles, previous });
@@ -677,16 +853,16 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
 
     // analyzer
     let analyze_started = Instant::now();
-    let grid = TriangleGrid::new(lod0.mesh());
+    let grid = TriangleGrid::new(reference);
     let view = screen_view();
     let range = SwitchSearch { far_m: radius * 1024.0, near_m: radius * 2.0, bisections: 3 };
-    let reference = Renderable { mesh: lod0.mesh(), materials: &materials0, textures: &images0 };
+    let reference_view = Renderable { mesh: reference, materials: &materials0, textures: &reference_images };
     let mut lods = Vec::with_capacity(levels.len());
     for lod in &levels {
         let mesh = &lod.scene.meshes[0];
         let bytes = crate::export::gltf::to_glb(&lod.scene).map_err(|e| TreeLodError::Texture(e.0))?.len();
         let geometric_error = match (&grid, lod.level) {
-            (Some(grid), n) if n > 0 => hausdorff(mesh, &lod.scene.materials, &lod.images, grid, options.hausdorff_samples, mix64(tree_options.seed ^ n as u64)),
+            (Some(grid), n) if n > 0 => hausdorff(mesh, &lod.scene.materials, &lod.images, grid, options.hausdorff_samples, mix64(seed ^ n as u64)),
             _ => HausdorffError::default(),
         };
         let mut f = TreeLodFigures {
@@ -717,7 +893,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
                     .map(|(k, cell)| {
                         let azimuth = k as f64 * 360.0 / IMPOSTOR_VIEWS as f64;
                         let quad = Primitive { material: Some(0), ..tree_frame(0).quad(cell.uv) };
-                        (rotated(lod0.mesh(), centre, -azimuth), Mesh { name: String::new(), primitives: vec![quad], extras: None })
+                        (rotated(reference, centre, -azimuth), Mesh { name: String::new(), primitives: vec![quad], extras: None })
                     })
                     .collect();
                 let one_azimuth = LodImageOptions { azimuths: 1, ..options.image.clone() };
@@ -725,7 +901,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
                     let rows = turned
                         .iter()
                         .filter_map(|(r, c)| {
-                            let r = Renderable { mesh: r, materials: &materials0, textures: &images0 };
+                            let r = Renderable { mesh: r, materials: &materials0, textures: &reference_images };
                             let c = Renderable { mesh: c, ..candidate };
                             lod_image_error_with(&r, &c, &view, &[d], &one_azimuth).distances.into_iter().next()
                         })
@@ -733,7 +909,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
                     merged(rows)
                 })
             } else {
-                switch_search(&reference, &candidate, &view, &options.image, &range)
+                switch_search(&reference_view, &candidate, &view, &options.image, &range)
             };
             if let Some(near) = rows.first() {
                 f.near_distance_m = near.distance_m;
@@ -775,7 +951,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
     let chain = chain_scene(&name, &levels, &lods);
     let report = TreeLodReport {
         name: name.clone(),
-        seed: tree_options.seed,
+        seed,
         atlas_px: px,
         bounding_radius_m: radius,
         clusters: groups.len(),
@@ -788,7 +964,7 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
         seconds_analyze,
         raster_fragments: fragments,
     };
-    Ok(TreeLods { name, levels, chain, atlas: atlas_chain, impostor_cells, report, lod0 })
+    Ok((name, levels, chain, atlas_chain, impostor_cells, report))
 }
 
 /// `<name>.glb`: LoD0's node with MSFT_lod to the coarser levels' nodes (not roots) and
@@ -875,16 +1051,45 @@ fn write_glb(scene: &Scene, path: &Path, files: &mut Vec<PathBuf>) -> Result<(us
     Ok((v.errors(), v.warnings()))
 }
 
+/// The files one run wrote and what validating them found.
+#[derive(Debug, Default)]
+struct Written {
+    files: Vec<PathBuf>,
+    errors: usize,
+    warnings: usize,
+}
+
+/// Writes `chain` as `<dir>/<file_stem>_LOD<n>.glb`, `<file_stem>_atlas*.png` and the MSFT_lod
+/// `<file_stem>.glb`, validating every glb.
+fn write_chain(chain: &TreeLods, dir: &Path, file_stem: &str, written: &mut Written) -> Result<(), TreeLodError> {
+    for lod in &chain.levels {
+        let (e, w) = write_glb(&lod.scene, &dir.join(format!("{file_stem}_LOD{}.glb", lod.level)), &mut written.files)?;
+        written.errors += e;
+        written.warnings += w;
+    }
+    if !chain.atlas.is_empty() {
+        let pngs = write_mip_pngs(dir, &format!("{file_stem}_atlas"), &chain.atlas).map_err(|e| TreeLodError::Texture(e.to_string()))?;
+        written.files.extend(pngs);
+    }
+    let (e, w) = write_glb(&chain.chain, &dir.join(format!("{file_stem}.glb")), &mut written.files)?;
+    written.errors += e;
+    written.warnings += w;
+    Ok(())
+}
+
+/// A chain's output must be a .glb (it holds MSFT_lod).
+fn check_glb_output(output: &Path) -> Result<(), TreeLodError> {
+    let ext = output.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if ext != "glb" {
+        return Err(TreeLodError::Options(format!("{}: a LoD chain is written as .glb (MSFT_lod); use a .glb output or --lods 1", output.display())));
+    }
+    Ok(())
+}
+
 /// Runs `job`: every file is built in memory before the first is written.
 pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
     let t0 = Instant::now();
-    let ext = job.output.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    if ext != "glb" {
-        return Err(TreeLodError::Options(format!(
-            "{}: a LoD chain is written as .glb (MSFT_lod); use a .glb output or --lods 1",
-            job.output.display()
-        )));
-    }
+    check_glb_output(&job.output)?;
     if !(1..=64).contains(&job.variants) {
         return Err(TreeLodError::Options(format!("--variants {} is out of range; use 1 to 64", job.variants)));
     }
@@ -906,23 +1111,11 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
         chains.push(chain);
     }
     let t_build = t0.elapsed().as_secs_f64();
-    let mut files = Vec::new();
-    let (mut errors, mut warnings) = (0, 0);
+    let mut written = Written::default();
     for (k, c) in chains.iter().enumerate() {
-        let file_stem = format!("{stem}{}", suffix(k));
-        for lod in &c.levels {
-            let (e, w) = write_glb(&lod.scene, &dir.join(format!("{file_stem}_LOD{}.glb", lod.level)), &mut files)?;
-            errors += e;
-            warnings += w;
-        }
-        if !c.atlas.is_empty() {
-            let pngs = write_mip_pngs(&dir, &format!("{file_stem}_atlas"), &c.atlas).map_err(|e| TreeLodError::Texture(e.to_string()))?;
-            files.extend(pngs);
-        }
-        let (e, w) = write_glb(&c.chain, &dir.join(format!("{file_stem}.glb")), &mut files)?;
-        errors += e;
-        warnings += w;
+        write_chain(c, &dir, &format!("{stem}{}", suffix(k)), &mut written)?;
     }
+    let Written { files, errors, warnings } = written;
     let t_total = t0.elapsed().as_secs_f64();
     let first = &chains[0];
     let tree = TreeReport {
@@ -933,7 +1126,7 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
         dialect_detected: parsed.detected,
         seed: job.options.seed,
         radial_segments: job.options.radial_segments,
-        stats: first.lod0.stats.clone(),
+        stats: first.lod0.as_ref().map(|t| t.stats.clone()).unwrap_or_default(),
         warnings: parsed.warnings,
         validation_errors: errors,
         validation_warnings: warnings,
@@ -949,12 +1142,71 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
     Ok(TreeLodRunReport { tree, variants: chains.into_iter().map(|c| c.report).collect() })
 }
 
-/// Writes a report as pretty JSON (atomically).
-pub fn write_lod_report(path: &Path, report: &TreeLodRunReport) -> Result<(), TreeLodError> {
+// ---------------------------------------------------------------------------------------------
+// the `verdant mesh` job
+
+/// One `verdant mesh` run: load an OBJ, build its chain, write and validate as `verdant tree` does.
+#[derive(Debug, Clone)]
+pub struct MeshLodJob {
+    pub input: PathBuf,
+    /// `<dir>/<stem>.glb`: the chain; `<stem>_LOD<n>.glb` and `<stem>_atlas*.png` beside it.
+    pub output: PathBuf,
+    pub obj: ObjOptions,
+    pub lod: TreeLodOptions,
+}
+
+/// What `verdant mesh --report` writes.
+#[derive(Debug, Clone, Serialize)]
+pub struct MeshLodRunReport {
+    pub input: String,
+    pub output: String,
+    pub files: Vec<String>,
+    pub source: MeshAssetStats,
+    pub validation_errors: usize,
+    pub validation_warnings: usize,
+    pub seconds_load: f64,
+    pub seconds_total: f64,
+    pub chain: TreeLodReport,
+}
+
+/// Runs `job`: every file is built in memory before the first is written. The names inside the
+/// files come from the input's stem, the file names from the output's.
+pub fn run_mesh_lods(job: &MeshLodJob) -> Result<MeshLodRunReport, TreeLodError> {
+    let t0 = Instant::now();
+    check_glb_output(&job.output)?;
+    job.lod.check()?;
+    let source = load_obj(&job.input, &job.obj)?;
+    let seconds_load = t0.elapsed().as_secs_f64();
+    let name = job.input.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
+    let chain = build_mesh_lods(&source, &name, &job.lod)?;
+    let stem = job.output.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
+    let dir = job.output.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mut written = Written::default();
+    write_chain(&chain, &dir, &stem, &mut written)?;
+    Ok(MeshLodRunReport {
+        input: job.input.display().to_string(),
+        output: job.output.display().to_string(),
+        files: written.files.iter().map(|f| f.display().to_string()).collect(),
+        source: source.stats,
+        validation_errors: written.errors,
+        validation_warnings: written.warnings,
+        seconds_load,
+        seconds_total: t0.elapsed().as_secs_f64(),
+        chain: chain.report,
+    })
+}
+
+/// Writes any serialisable report as pretty JSON (atomically).
+pub fn write_json_report<T: Serialize>(path: &Path, report: &T) -> Result<(), TreeLodError> {
     let mut text = serde_json::to_string_pretty(report).map_err(|e| TreeLodError::Options(format!("cannot serialise the report: {e}")))?;
     text.push('\n');
     export::write_atomic(path, text.as_bytes())?;
     Ok(())
+}
+
+/// Writes a report as pretty JSON (atomically).
+pub fn write_lod_report(path: &Path, report: &TreeLodRunReport) -> Result<(), TreeLodError> {
+    write_json_report(path, report)
 }
 
 #[cfg(test)]
