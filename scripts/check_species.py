@@ -15,11 +15,12 @@ For every grass species (`species/<name>_LOD<n>.glb`):
   level whose sides are at least MIP_MIN_SIDE texels (below that a level has too few texels
   for one alpha scale to match a coverage within 2 %: a 16×16 level has 256).
 For every flower species (`species/<name>.glb` without LoD files): it re-imports, renders non-empty.
-For every L-system tree species (variants `species/<name>_v<k>…`, listed in the manifest):
+For every L-system tree species (variants `species/<name>_v<k>…`) and every mesh species (an OBJ
+model, `species/<name>…`), as the manifest's `look` says:
 - each variant's LoDs re-import with trimesh, triangle counts strictly decrease, every face index is
   in range and every position finite;
 - `<name>_v<k>.glb` has MSFT_lod with coverages that never increase;
-- pyrender renders every LoD non-empty; the mesh levels (simplified, cards) keep a silhouette like
+- pyrender renders every LoD non-empty; the mesh levels (simplified, cards, decimated) keep a silhouette like
   LoD0's (IoU ≥ MIN_IOU) — the billboard and impostor levels are textured cards whose alpha
   pyrender's flat render does not cut, so for them only non-emptiness is checked;
 - the variant's atlas mips keep their alpha coverage (as for grass).
@@ -237,10 +238,11 @@ def check_flower(species: Path, atlases: Path, name: str, renderer: Renderer | N
     return facts
 
 
-def check_tree(species: Path, atlases: Path, name: str, variants: list[int], renderer: Renderer | None) -> list[str]:
+def check_chains(species: Path, atlases: Path, stems: list[str], kinds_of: dict, renderer: Renderer | None) -> list[str]:
+    """`kinds_of[(stem, level)]` is the level's kind from the manifest ("full", "simplified", …)."""
     facts = []
-    for k in variants:
-        stem = f"{name}_v{k}"
+    for stem in stems:
+        k = stem
         lods = []
         while (species / f"{stem}_LOD{len(lods)}.glb").is_file():
             lods.append(species / f"{stem}_LOD{len(lods)}.glb")
@@ -256,9 +258,9 @@ def check_tree(species: Path, atlases: Path, name: str, variants: list[int], ren
         tris = [triangles(s) for s in scenes]
         if any(b >= a for a, b in zip(tris, tris[1:])):
             raise CheckFailed(f"{stem}: LoD triangle counts do not strictly decrease: {tris}")
-        facts.append(f"v{k} triangles {tris}")
+        facts.append(f"{k} triangles {tris}")
         facts.append(check_lod_chain(species / f"{stem}.glb", len(lods)))
-        kinds = ["full", "simplified", "cards", "billboards", "impostor"]
+        kinds = [kinds_of.get((stem, level), "") for level in range(len(lods))]
         if renderer is not None:
             b = scenes[0].bounds
             centre, radius = b.mean(axis=0), float(np.linalg.norm(b[1] - b[0]) / 2)
@@ -270,7 +272,7 @@ def check_tree(species: Path, atlases: Path, name: str, variants: list[int], ren
                     if a.mean() < 0.002:
                         raise CheckFailed(f"{lods[level].name}: the pyrender render from view {view} is empty ({a.mean():.4f} of the pixels)")
                     iou = (a & r).sum() / max(1, (a | r).sum())
-                    if level and kinds[level] in ("simplified", "cards"):
+                    if level and kinds[level] in ("simplified", "cards", "decimated"):
                         if iou < MIN_IOU:
                             raise CheckFailed(f"{lods[level].name}: silhouette from view {view} unlike LoD0's (IoU {iou:.3f})")
                         summary.append(f"{iou:.2f}")
@@ -303,9 +305,13 @@ def main(argv: list[str]) -> int:
     for p in plants:
         name = p["name"]
         try:
-            tree_variants = sorted({lod["variant"] for lod in p.get("lods", []) if "variant" in lod})
-            if tree_variants:
-                facts = check_tree(species, atlases, name, tree_variants, renderer)
+            look = p.get("look")
+            if look in ("tree", "mesh"):
+                kinds_of = {(Path(lod["file"]).stem.rsplit("_LOD", 1)[0], lod["level"]): lod.get("kind", "") for lod in p.get("lods", [])}
+                stems = sorted({stem for stem, _ in kinds_of})
+                if not stems:
+                    raise CheckFailed(f"{name}: the manifest lists no LoD files")
+                facts = check_chains(species, atlases, stems, kinds_of, renderer)
             elif (species / f"{name}_LOD0.glb").is_file():
                 facts = check_grass(species, atlases, name, renderer)
             else:

@@ -215,3 +215,104 @@ fn a_broken_lsystem_file_is_reported_with_both_positions() {
     let e = load_preset(&missing).expect_err("missing file").to_string();
     assert!(e.contains("nowhere.ls") && e.contains("q.toml:9:"), "{e}");
 }
+
+// ------------------------------------------------------------------------------------ mesh species
+
+/// A lumpy rock as OBJ text: a UV sphere of `rings` × `sectors` quads, displaced by sines, with
+/// a material library `rock.mtl`.
+fn rock_obj(rings: usize, sectors: usize) -> String {
+    let mut s = String::from("mtllib rock.mtl\no rock\n");
+    for r in 0..=rings {
+        let theta = std::f64::consts::PI * r as f64 / rings as f64;
+        for k in 0..sectors {
+            let phi = 2.0 * std::f64::consts::PI * k as f64 / sectors as f64;
+            let bump = 1.0 + 0.15 * (3.0 * phi).sin() * (2.0 * theta).sin();
+            s += &format!("v {:.5} {:.5} {:.5}\n", bump * theta.sin() * phi.cos(), 0.7 * bump * theta.cos(), bump * theta.sin() * phi.sin());
+        }
+    }
+    s += "usemtl stone\n";
+    let at = |r: usize, k: usize| r * sectors + (k % sectors) + 1;
+    for r in 0..rings {
+        for k in 0..sectors {
+            s += &format!("f {} {} {} {}\n", at(r, k), at(r, k + 1), at(r + 1, k + 1), at(r + 1, k));
+        }
+    }
+    s
+}
+
+fn mesh_preset(name: &str, mesh_table: &str) -> String {
+    format!(
+        "[scene]\nname = \"{name}\"\nseed = 5\nformats = [\"glb\"]\n\n[terrain]\n\
+         procedural = {{ kind = \"fbm\", size = 129, seed = 3, relief = 30.0 }}\n\
+         cell_size = 2.0\nmax_error = 0.5\nchunk = 64\n\n[scatter]\ntile = 64.0\n\n\
+         [[species]]\nname = \"rock\"\nkind = \"mesh\"\nobj = \"models/rock.obj\"\n{mesh_table}\n\
+         max_density = 0.003\nplacement = \"poisson\"\nmin_spacing = 8.0\nscale = [0.5, 2.0]\n"
+    )
+}
+
+#[test]
+fn an_obj_model_gets_the_chain_and_is_instanced() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/models/rock.obj", &rock_obj(16, 24));
+    write(d, "p/models/rock.mtl", "newmtl stone\nKd 0.4 0.38 0.35\n");
+    write(d, "p/a.toml", &mesh_preset("a", "mesh = { atlas_size = 256, analysis = false }"));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    let s = d.join("o/a");
+    let mut triangles = Vec::new();
+    for level in 0..5 {
+        let lod = verdant::validate::read_scene(&s.join(format!("species/rock_LOD{level}.glb"))).expect("level re-imports");
+        triangles.push(lod.meshes.iter().map(|m| m.triangle_count()).sum::<usize>());
+    }
+    assert_eq!(triangles[0], 16 * 24 * 2 - 2 * 24, "LoD0 is the model (poles' degenerate halves dropped): {triangles:?}");
+    assert!(triangles.windows(2).all(|w| w[1] < w[0]), "{triangles:?}");
+    assert!(s.join("species/rock.glb").is_file() && s.join("atlases/rock.png").is_file());
+
+    let scene = verdant::validate::read_scene(&s.join("scene.glb")).unwrap();
+    let root = scene.roots.iter().map(|&r| &scene.nodes[r]).find(|n| n.name == "rock").expect("species root node");
+    let instanced: usize = root.children.iter().map(|&c| scene.nodes[c].instances.as_ref().unwrap().translations.len()).sum();
+    assert_eq!(instanced, csv_rows(&s.join("placements/rock.csv")));
+    let mesh = scene.nodes[root.children[0]].mesh.unwrap();
+    assert_eq!(scene.meshes[mesh].triangle_count(), triangles[0], "scene.glb instances the model itself");
+    // the model stands on y = 0 (recentred), so instances sit on the ground
+    let min_y = scene.meshes[mesh].primitives.iter().flat_map(|p| p.positions.iter().map(|v| v[1])).fold(f32::INFINITY, f32::min);
+    assert!(min_y.abs() < 1e-5, "model base at y = {min_y}");
+    let manifest = read_json(&s.join("manifest.json"));
+    let rock = manifest["plants"].as_array().unwrap().iter().find(|p| p["name"] == "rock").unwrap().clone();
+    assert_eq!(rock["look"], "mesh");
+    assert_eq!(rock["lods"].as_array().unwrap().len(), 5);
+    assert!(fs::read_to_string(s.join("report.md")).unwrap().contains("### rock (mesh: rock.obj)"));
+
+    // the material library keys the cache too: a new colour rebuilds the plants and the scene
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    assert!(timing_cached(&s, "plants") && timing_cached(&s, "scatter"));
+    write(d, "p/models/rock.mtl", "newmtl stone\nKd 0.6 0.3 0.2\n");
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    assert!(!timing_cached(&s, "plants") && !timing_cached(&s, "scatter"));
+}
+
+#[test]
+fn mesh_preset_mistakes_are_positioned_errors() {
+    let cases: &[(&str, &str, &str)] = &[
+        ("kind = \"tree\"\nobj = \"a.obj\"", "describes kind = \"mesh\"", "set `kind = \"mesh\"`"),
+        ("kind = \"mesh\"\nmesh = { scale = 0.01 }", "names no `obj` file", "add `obj ="),
+        ("kind = \"mesh\"\nobj = \"a.obj\"\nmesh = { up_axis = \"x\" }", "up_axis", "allowed: y, z"),
+        ("kind = \"mesh\"\nobj = \"a.obj\"\nmesh = { scale = 0.0 }", "scale", "centimetres"),
+        ("kind = \"mesh\"\nobj = \"a.obj\"\nmesh = { variants = 2 }", "variants", "[tree]"),
+    ];
+    for (body, problem, remedy) in cases {
+        let e = error_of(&species(body));
+        assert!(e.contains("p.toml:"), "{body}: no position in\n{e}");
+        assert!(e.contains(problem), "{body}: expected {problem:?} in\n{e}");
+        assert!(e.contains(remedy), "{body}: expected remedy {remedy:?} in\n{e}");
+    }
+    // a broken model fails the build naming the file and line
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/models/rock.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
+    write(d, "p/a.toml", &mesh_preset("a", ""));
+    let o = verdant_in(d, &["build", "p/a.toml", "--out", "o"]);
+    assert_ne!(o.status.code(), Some(0));
+    let t = text(&o);
+    assert!(t.contains("rock.obj") && t.contains("species `rock`"), "{t}");
+}

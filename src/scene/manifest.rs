@@ -84,6 +84,8 @@ struct TerrainManifest<'a> {
 #[derive(Serialize)]
 struct PlantManifest {
     name: String,
+    /// "grass", "flower", "tree" or "mesh": what made the files.
+    look: &'static str,
     files: Vec<String>,
     lods: Vec<serde_json::Value>,
 }
@@ -183,6 +185,15 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
                 .map(|sp| PlantManifest {
                     name: sp.name.clone(),
                     files: rel_strings(&sp.files),
+                    look: if sp.grass.is_some() {
+                        "grass"
+                    } else if sp.flower.is_some() {
+                        "flower"
+                    } else if sp.tree.is_some() {
+                        "tree"
+                    } else {
+                        "mesh"
+                    },
                     lods: plant_lods(sp),
                 })
                 .collect()
@@ -255,8 +266,16 @@ fn report_json(preset: &Preset, runs: &[StageRun]) -> String {
                                     g.retain(|k, _| !k.starts_with("seconds"));
                                 }
                             }
-                            // a tree's timing is per variant, in its chain's report
-                            for v in o.get_mut("tree").and_then(|t| t.get_mut("variants")).and_then(Value::as_array_mut).into_iter().flatten() {
+                            // a tree's timing is per variant, in its chain's report; a mesh's in its chain's
+                            let (mut tree, mut mesh) = (None, None);
+                            for (k, v) in o.iter_mut() {
+                                match k.as_str() {
+                                    "tree" => tree = v.get_mut("variants").and_then(Value::as_array_mut),
+                                    "mesh" => mesh = Some(v),
+                                    _ => {}
+                                }
+                            }
+                            for v in tree.into_iter().flatten().chain(mesh) {
                                 if let Some(c) = v.get_mut("chain").and_then(Value::as_object_mut) {
                                     c.retain(|k, _| !k.starts_with("seconds"));
                                 }
@@ -357,6 +376,7 @@ fn plant_lods(sp: &crate::scene::plants_stage::PlantReport) -> Vec<serde_json::V
             .map(|l| {
                 let mut row = json!({
                     "level": l["level"],
+                    "kind": l["kind"],
                     "file": format!("species/{stem}_LOD{}.glb", l["level"]),
                     "triangles": l["triangles"],
                     "switch_distance_m": l["switch_distance_m"],
@@ -381,7 +401,34 @@ fn plant_lods(sp: &crate::scene::plants_stage::PlantReport) -> Vec<serde_json::V
             .flat_map(|(k, v)| rows(&format!("{}_v{k}", sp.name), &v["chain"]["lods"], Some(k)))
             .collect();
     }
+    if let Some(m) = &sp.mesh {
+        return rows(&sp.name, &m["chain"]["lods"], None);
+    }
     Vec::new()
+}
+
+const CHAIN_NOTE: &str = "The chain's speed/error table: geometric error = one-sided Hausdorff distance LoD_k → LoD0 (sampled); \
+     image error from 8 azimuths × 3 elevations; switch distance = where the silhouette error stays ≤ 1 px (1920 px, 60°).";
+const CHAIN_HEADER: &str = "| model | level | kind | triangles | bytes | Hausdorff max (m) | IoU at switch | switch distance (m) | screen coverage |\n\
+                            |---|---|---|---|---|---|---|---|---|\n";
+
+fn file_name(path: &serde_json::Value) -> String {
+    path.as_str().and_then(|p| std::path::Path::new(p).file_name()).map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()
+}
+
+/// The rows of one chain's table (a TreeLodReport as JSON), the first cell naming the model.
+fn chain_rows(model: &str, chain: &serde_json::Value) -> String {
+    let num = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let mut s = String::new();
+    for l in chain["lods"].as_array().into_iter().flatten() {
+        let never = if l["never_passes"].as_bool() == Some(true) { " (never ≤ 1 px in range)" } else { "" };
+        s += &format!(
+            "| {model} | LOD{} | {} | {} | {} | {:.3} | {:.3} | {:.1}{never} | {:.2e} |\n",
+            l["level"], l["kind"].as_str().unwrap_or(""), l["triangles"], l["bytes"],
+            num(&l["geometric_error"]["max_m"]), num(&l["switch_iou"]), num(&l["switch_distance_m"]), num(&l["screen_coverage"])
+        );
+    }
+    s
 }
 
 /// The plants section of report.md: per grass species a LoD table (with the thesis' rings for
@@ -421,23 +468,22 @@ fn plants_md(report: &PlantsStageReport) -> String {
         }
         if let Some(t) = &sp.tree {
             s += &format!(
-                "### {} (L-system tree: {}, dialect {})\n\nPer variant, the chain's speed/error table: geometric error = one-sided Hausdorff distance LoD_k → LoD0 (sampled); \
-                 image error from 8 azimuths × 3 elevations; switch distance = where the silhouette error stays ≤ 1 px (1920 px, 60°).\n\n",
+                "### {} (L-system tree: {}, dialect {})\n\n{CHAIN_NOTE}\n\n",
                 sp.name,
-                t["lsystem"].as_str().map(|p| std::path::Path::new(p).file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()).unwrap_or_default(),
+                file_name(&t["lsystem"]),
                 t["dialect"].as_str().unwrap_or("?")
             );
-            s += "| variant | segments | leaves + polygons | level | kind | triangles | bytes | Hausdorff max (m) | IoU at switch | switch distance (m) | screen coverage |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
+            s += CHAIN_HEADER;
             for (k, v) in t["variants"].as_array().into_iter().flatten().enumerate() {
-                for l in v["chain"]["lods"].as_array().into_iter().flatten() {
-                    let never = if l["never_passes"].as_bool() == Some(true) { " (never ≤ 1 px in range)" } else { "" };
-                    s += &format!(
-                        "| {k} | {} | {} | LOD{} | {} | {} | {} | {:.3} | {:.3} | {:.1}{never} | {:.2e} |\n",
-                        v["stats"]["segments"], v["stats"]["leaves"].as_u64().unwrap_or(0) + v["stats"]["polygons"].as_u64().unwrap_or(0), l["level"], l["kind"].as_str().unwrap_or(""), l["triangles"], l["bytes"],
-                        num(&l["geometric_error"]["max_m"]), num(&l["switch_iou"]), num(&l["switch_distance_m"]), num(&l["screen_coverage"])
-                    );
-                }
+                let parts = v["stats"]["leaves"].as_u64().unwrap_or(0) + v["stats"]["polygons"].as_u64().unwrap_or(0);
+                s += &chain_rows(&format!("{k} ({} segments, {parts} leaves + polygons)", v["stats"]["segments"]), &v["chain"]);
             }
+            s += "\n";
+        }
+        if let Some(m) = &sp.mesh {
+            s += &format!("### {} (mesh: {})\n\n{CHAIN_NOTE}\n\n", sp.name, file_name(&m["obj"]));
+            s += CHAIN_HEADER;
+            s += &chain_rows(&format!("{} vertices, {} triangles", m["stats"]["vertices"], m["stats"]["triangles"]), &m["chain"]);
             s += "\n";
         }
         if let Some(f) = &sp.flower {

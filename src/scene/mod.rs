@@ -182,6 +182,34 @@ pub enum PlantLook {
     Flower(crate::plants::flower::FlowerSettings),
     /// `lsystem = "…"` (+ `tree = { … }` / `[tree]`): L-system trees with their LoD chains.
     Tree(TreeLook),
+    /// `obj = "…"` (+ `mesh = { … }` / `[mesh]`): your own OBJ model with the same LoD chain.
+    Mesh(MeshLook),
+}
+
+/// A mesh species' look: the OBJ file, how it is read and how its chain is built.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MeshLook {
+    /// The `.obj` file (resolved against the preset's folder); its MTL and textures beside it.
+    pub obj: PathBuf,
+    /// Metres per file unit.
+    pub scale: f64,
+    pub up_axis: crate::plants::mesh_asset::UpAxis,
+    pub lods: usize,
+    pub atlas_px: u32,
+    pub analyze: bool,
+}
+
+impl Default for MeshLook {
+    fn default() -> Self {
+        MeshLook {
+            obj: PathBuf::new(),
+            scale: 1.0,
+            up_axis: crate::plants::mesh_asset::UpAxis::Y,
+            lods: crate::plants::tree_lod::TREE_LODS,
+            atlas_px: 1024,
+            analyze: true,
+        }
+    }
 }
 
 /// A tree species' look: which L-system, how many variants and how their chains are built.

@@ -20,8 +20,9 @@ use crate::scene::stages::StageError;
 use crate::lsystem::parse;
 use crate::lsystem::LSystem;
 use crate::plants::tree::{build_tree, TreeOptions, TreeStats};
-use crate::plants::tree_lod::{build_tree_lods, variant_seed, TreeLodOptions, TreeLodReport};
-use crate::scene::{PlantLook, Preset, TreeLook};
+use crate::plants::mesh_asset::{load_obj, MeshAssetStats, ObjOptions, SourceMesh};
+use crate::plants::tree_lod::{build_mesh_lods, build_tree_lods, variant_seed, TreeLodOptions, TreeLodReport, TreeLods};
+use crate::scene::{MeshLook, PlantLook, Preset, TreeLook};
 
 fn fail(message: String) -> StageError {
     StageError::Failed { stage: "plants", message }
@@ -38,6 +39,9 @@ pub struct PlantReport {
     /// A tree species: [`TreeSpeciesReport`].
     #[serde(default)]
     pub tree: Option<serde_json::Value>,
+    /// A mesh species: [`MeshSpeciesReport`].
+    #[serde(default)]
+    pub mesh: Option<serde_json::Value>,
     pub seconds: f64,
 }
 
@@ -83,17 +87,24 @@ pub fn plants_key(preset: &Preset) -> Result<String, StageError> {
     for s in &preset.species {
         k.add(s.name.as_bytes());
         k.add(serde_json::to_string(&s.look).unwrap_or_default().as_bytes());
-        add_look_inputs(&mut k, &s.look)?;
+        add_look_inputs(&mut k, &s.name, &s.look)?;
     }
     Ok(k.finish())
 }
 
 /// Adds the bytes of the files a look reads to a cache key (the scatter stage's key too: its
 /// scene.glb holds the instanced meshes).
-pub fn add_look_inputs(k: &mut KeyBuilder, look: &PlantLook) -> Result<(), StageError> {
+pub fn add_look_inputs(k: &mut KeyBuilder, name: &str, look: &PlantLook) -> Result<(), StageError> {
     let input = match look {
         PlantLook::Grass(GrassSettings { blade_texture: Some(p), .. }) => p,
         PlantLook::Tree(t) => &t.lsystem,
+        PlantLook::Mesh(m) => {
+            // the model as loaded (OBJ, its MTL and textures), as glb bytes
+            let source = load_model(name, m)?;
+            let glb = export::gltf::to_glb(&source.scene).map_err(|e| fail(format!("{}: {e}", m.obj.display())))?;
+            k.add(sha256_hex(&glb).as_bytes());
+            return Ok(());
+        }
         _ => return Ok(()),
     };
     let bytes = std::fs::read(input).map_err(|e| fail(format!("{}: cannot read: {e}", input.display())))?;
@@ -127,6 +138,44 @@ fn tree_options(name: &str, look: &TreeLook, k: usize) -> TreeOptions {
     }
 }
 
+/// Writes a chain: `species/<stem>.glb` (MSFT_lod; returned), `species/<stem>_LOD<n>.glb` and
+/// `atlases/<stem>*.png`.
+fn write_chain(chain: &TreeLods, dir: &Path, stem: &str, files: &mut Vec<PathBuf>) -> Result<PathBuf, StageError> {
+    for level in &chain.levels {
+        write(&level.scene, dir, PathBuf::from("species").join(format!("{stem}_LOD{}.glb", level.level)), files)?;
+    }
+    let file = PathBuf::from("species").join(format!("{stem}.glb"));
+    write(&chain.chain, dir, file.clone(), files)?;
+    if !chain.atlas.is_empty() {
+        write_mips(dir, stem, &chain.atlas, files)?;
+    }
+    Ok(file)
+}
+
+/// What the plants stage made of a mesh species: the model as loaded and its chain's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct MeshSpeciesReport {
+    pub obj: PathBuf,
+    pub file: PathBuf,
+    pub stats: MeshAssetStats,
+    pub chain: TreeLodReport,
+}
+
+fn load_model(name: &str, look: &MeshLook) -> Result<SourceMesh, StageError> {
+    let options = ObjOptions { scale: look.scale, up_axis: look.up_axis, ..ObjOptions::default() };
+    load_obj(&look.obj, &options).map_err(|e| fail(format!("species `{name}`: {e}")))
+}
+
+/// Builds and writes a mesh species' chain: `species/<name>.glb`, `species/<name>_LOD<n>.glb`,
+/// `atlases/<name>*.png`.
+fn run_mesh(name: &str, look: &MeshLook, dir: &Path, files: &mut Vec<PathBuf>) -> Result<MeshSpeciesReport, StageError> {
+    let source = load_model(name, look)?;
+    let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, ..TreeLodOptions::default() };
+    let chain = build_mesh_lods(&source, name, &lod).map_err(|e| fail(format!("species `{name}`: {}: {e}", look.obj.display())))?;
+    let file = write_chain(&chain, dir, name, files)?;
+    Ok(MeshSpeciesReport { obj: look.obj.clone(), file, stats: source.stats, chain: chain.report })
+}
+
 /// Builds and writes every variant's chain: `species/<name>_v<k>.glb` (MSFT_lod),
 /// `species/<name>_v<k>_LOD<n>.glb` and `atlases/<name>_v<k>*.png`.
 fn run_tree(name: &str, look: &TreeLook, dir: &Path, files: &mut Vec<PathBuf>) -> Result<TreeSpeciesReport, StageError> {
@@ -138,16 +187,8 @@ fn run_tree(name: &str, look: &TreeLook, dir: &Path, files: &mut Vec<PathBuf>) -
         let options = tree_options(name, look, k);
         let chain = build_tree_lods(&system, &options, &lod)
             .map_err(|e| fail(format!("species `{name}`: {}: {e}", look.lsystem.display())))?;
-        let stem = format!("{name}_v{k}");
-        for level in &chain.levels {
-            write(&level.scene, dir, PathBuf::from("species").join(format!("{stem}_LOD{}.glb", level.level)), files)?;
-        }
-        let file = PathBuf::from("species").join(format!("{stem}.glb"));
-        write(&chain.chain, dir, file.clone(), files)?;
-        if !chain.atlas.is_empty() {
-            write_mips(dir, &stem, &chain.atlas, files)?;
-        }
-        variants.push(TreeVariantReport { file, seed: options.seed, stats: chain.lod0.stats.clone(), chain: chain.report });
+        let file = write_chain(&chain, dir, &format!("{name}_v{k}"), files)?;
+        variants.push(TreeVariantReport { file, seed: options.seed, stats: chain.lod0.as_ref().map(|t| t.stats.clone()).unwrap_or_default(), chain: chain.report });
     }
     Ok(TreeSpeciesReport { lsystem: look.lsystem.clone(), dialect: system.dialect, variants_asked: look.variants, variants })
 }
@@ -181,11 +222,15 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
         let t1 = Instant::now();
         let mut files = Vec::new();
         let name = &s.name;
-        let mut tree_report = None;
+        let (mut tree_report, mut mesh_report) = (None, None);
         let (grass_report, flower_report) = match &s.look {
             PlantLook::Marker => continue,
             PlantLook::Tree(t) => {
                 tree_report = Some(run_tree(name, t, scene_dir, &mut files)?);
+                (None, None)
+            }
+            PlantLook::Mesh(m) => {
+                mesh_report = Some(run_mesh(name, m, scene_dir, &mut files)?);
                 (None, None)
             }
             PlantLook::Grass(g) => {
@@ -217,6 +262,7 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
             grass: grass_report.map(|r: GrassReport| serde_json::to_value(r).unwrap_or_default()),
             flower: flower_report.map(|r: FlowerReport| serde_json::to_value(r).unwrap_or_default()),
             tree: tree_report.map(|r| serde_json::to_value(r).unwrap_or_default()),
+            mesh: mesh_report.map(|r| serde_json::to_value(r).unwrap_or_default()),
             seconds: t1.elapsed().as_secs_f64(),
         });
     }
@@ -287,6 +333,12 @@ pub fn instance_meshes(name: &str, look: &PlantLook) -> Result<Option<InstanceMe
                     .map_err(|e| fail(format!("species `{name}`: {}: {e}", t.lsystem.display())))?;
                 append_scene(&mut out, tree.scene);
             }
+            Ok(Some(out))
+        }
+        PlantLook::Mesh(m) => {
+            let source = load_model(name, m)?;
+            let mut out = InstanceMeshes { meshes: Vec::new(), materials: Vec::new(), textures: Vec::new(), levels: 1, variants: 1 };
+            append_scene(&mut out, source.scene);
             Ok(Some(out))
         }
     }

@@ -14,11 +14,11 @@ use toml::Spanned;
 
 mod plants;
 
-pub use plants::{FLOWER_KEYS, GRASS_KEYS, TREE_KEYS};
+pub use plants::{FLOWER_KEYS, GRASS_KEYS, MESH_KEYS, TREE_KEYS};
 
 use super::{
     Exclusion, Format, Placement, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesKind, SpeciesSettings,
-    TerrainSettings, TerrainSource, TreeLook,
+    MeshLook, TerrainSettings, TerrainSource, TreeLook,
 };
 use crate::plants::flower::FlowerSettings;
 use crate::plants::grass::GrassSettings;
@@ -28,7 +28,7 @@ use crate::terrain::job::MeshMode;
 
 /// The sections a preset may have, in the order the docs list them (`species` is an array of
 /// tables, `[[species]]`).
-pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower", "tree"];
+pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower", "tree", "mesh"];
 /// Keys of `[scene]`.
 pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats"];
 /// Keys of `[terrain]`.
@@ -72,6 +72,8 @@ pub const SPECIES_KEYS: &[&str] = &[
     "flower",
     "lsystem",
     "tree",
+    "obj",
+    "mesh",
 ];
 /// Keys of `[[species]] exclusion = { … }`.
 pub const EXCLUSION_KEYS: &[&str] = &["species", "radius"];
@@ -606,6 +608,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
     let mut grass_section = None;
     let mut flower_section = None;
     let mut tree_section = None;
+    let mut mesh_section = None;
     for (key, value) in entries {
         let name: &str = key.get_ref();
         if name == "species" {
@@ -672,6 +675,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             "grass" => grass_section = Some((key.span(), table)),
             "flower" => flower_section = Some((key.span(), table)),
             "tree" => tree_section = Some((key.span(), table)),
+            "mesh" => mesh_section = Some((key.span(), table)),
             _ => return Err(unknown_section(&ctx, &key.span(), &format!("[{name}]"), name)),
         }
     }
@@ -707,7 +711,11 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         None => TreeLook::default(),
         Some((span, table)) => plants::apply_tree(&Table { ctx: &ctx, label: "[tree]".into(), span, table }, TreeLook::default())?,
     };
-    let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, tree: &tree_defaults, scene_seed: scene.seed };
+    let mesh_defaults = match mesh_section {
+        None => MeshLook::default(),
+        Some((span, table)) => plants::apply_mesh(&Table { ctx: &ctx, label: "[mesh]".into(), span, table }, MeshLook::default())?,
+    };
+    let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, tree: &tree_defaults, mesh: &mesh_defaults, scene_seed: scene.seed };
     let mut species: Vec<SpeciesSettings> = Vec::new();
     if let Some((key_span, items)) = species_tables {
         if terrain.is_none() {
@@ -890,6 +898,7 @@ struct Looks<'a> {
     grass: &'a GrassSettings,
     flower: &'a FlowerSettings,
     tree: &'a TreeLook,
+    mesh: &'a MeshLook,
     scene_seed: u64,
 }
 
@@ -901,11 +910,11 @@ pub fn species_look_seed(scene_seed: u64, name: &str, species_seed: u64) -> u64 
 }
 
 fn parse_look(t: &Table<'_, '_>, name: &str, kind: SpeciesKind, looks: &Looks<'_>, seed: u64, check_inputs: bool) -> Result<PlantLook, PresetError> {
-    for (key, owner) in [("grass", SpeciesKind::Grass), ("flower", SpeciesKind::Flower), ("tree", SpeciesKind::Tree), ("lsystem", SpeciesKind::Tree)] {
+    for (key, owner) in [("grass", SpeciesKind::Grass), ("flower", SpeciesKind::Flower), ("tree", SpeciesKind::Tree), ("lsystem", SpeciesKind::Tree), ("mesh", SpeciesKind::Mesh), ("obj", SpeciesKind::Mesh)] {
         if let Some((k, _)) = t.get(key) {
             if kind != owner {
                 let owner_name = value_name_kind(owner);
-                let what = if key == "lsystem" { "`lsystem = \"…\"`".to_string() } else { format!("`{key} = {{ … }}`") };
+                let what = if matches!(key, "lsystem" | "obj") { format!("`{key} = \"…\"`") } else { format!("`{key} = {{ … }}`") };
                 return Err(t.ctx.at(
                     &k.span(),
                     format!("{what} describes kind = \"{owner_name}\", but {} is kind = \"{}\"", t.label, value_name_kind(kind)),
@@ -956,7 +965,24 @@ fn parse_look(t: &Table<'_, '_>, name: &str, kind: SpeciesKind, looks: &Looks<'_
             }
             PlantLook::Tree(look)
         }
-        SpeciesKind::Mesh => PlantLook::Marker,
+        SpeciesKind::Mesh => {
+            let Some(obj) = input_path(t, "obj", "obj = \"rocks/boulder.obj\"", check_inputs)? else {
+                if let Some((k, _)) = t.get("mesh") {
+                    return Err(t.ctx.at(
+                        &k.span(),
+                        format!("`mesh = {{ … }}` says how to read {}'s model, but it names no `obj` file", t.label),
+                        "add `obj = \"rocks/boulder.obj\"` (relative to this preset), or remove `mesh`",
+                    ));
+                }
+                // documented: a mesh species without a model is drawn as a marker
+                return Ok(PlantLook::Marker);
+            };
+            let base = MeshLook { obj, ..looks.mesh.clone() };
+            PlantLook::Mesh(match t.get("mesh") {
+                None => base,
+                Some((_, v)) => plants::apply_mesh(&plants::sub_table(t, "mesh", v)?, base)?,
+            })
+        }
     })
 }
 

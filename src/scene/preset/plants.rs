@@ -7,7 +7,7 @@ use toml::Spanned;
 use super::{input_path, number_value, pair, PresetError, Table};
 use crate::plants::flower::FlowerSettings;
 use crate::plants::grass::GrassSettings;
-use crate::scene::TreeLook;
+use crate::scene::{MeshLook, TreeLook};
 
 /// Keys of `[grass]` and `grass = { … }`.
 pub const GRASS_KEYS: &[&str] = &[
@@ -32,6 +32,8 @@ pub const GRASS_KEYS: &[&str] = &[
 ];
 /// Keys of `[tree]` and `tree = { … }` (the L-system file itself is the species' `lsystem`).
 pub const TREE_KEYS: &[&str] = &["variants", "height", "radial_segments", "lods", "atlas_size", "max_segments", "dialect", "analysis"];
+/// Keys of `[mesh]` and `mesh = { … }` (the model itself is the species' `obj`).
+pub const MESH_KEYS: &[&str] = &["scale", "up_axis", "lods", "atlas_size", "analysis"];
 /// Keys of `[flower]` and `flower = { … }`.
 pub const FLOWER_KEYS: &[&str] =
     &["petals", "petal_color", "center_color", "stem_color", "height", "head", "variants", "alpha_cutoff", "atlas_px"];
@@ -211,8 +213,7 @@ pub(super) fn apply_flower(t: &Table<'_, '_>, mut f: FlowerSettings) -> Result<F
 /// Applies the keys of a tree table to `base`.
 pub(super) fn apply_tree(t: &Table<'_, '_>, mut tree: TreeLook) -> Result<TreeLook, PresetError> {
     use crate::plants::tree::MAX_RADIAL_SEGMENTS;
-    use crate::plants::tree_lod::{MAX_ATLAS_PX, MIN_ATLAS_PX, TREE_LODS};
-    t.check_keys(TREE_KEYS, &[("[grass]", GRASS_KEYS), ("[flower]", FLOWER_KEYS)])?;
+    t.check_keys(TREE_KEYS, &[("[mesh]", MESH_KEYS), ("[grass]", GRASS_KEYS), ("[flower]", FLOWER_KEYS)])?;
     if let Some(n) = count(t, "variants", 1..=16, "variants = 3")? {
         tree.variants = n;
     }
@@ -233,15 +234,7 @@ pub(super) fn apply_tree(t: &Table<'_, '_>, mut tree: TreeLook) -> Result<TreeLo
     if let Some(n) = count(t, "radial_segments", 3..=MAX_RADIAL_SEGMENTS as u64, "radial_segments = 8")? {
         tree.radial_segments = n as u32;
     }
-    if let Some(n) = count(t, "lods", 1..=TREE_LODS as u64, "lods = 5")? {
-        tree.lods = n;
-    }
-    if let Some((n, span)) = t.integer("atlas_size", MIN_ATLAS_PX as u64..=MAX_ATLAS_PX as u64, "atlas_size = 1024")? {
-        if n % 16 != 0 {
-            return Err(t.ctx.at(&span, format!("`atlas_size` = {n} is not a multiple of 16"), "use e.g. `atlas_size = 1024` or 2048"));
-        }
-        tree.atlas_px = n as u32;
-    }
+    chain_keys(t, &mut tree.lods, &mut tree.atlas_px, &mut tree.analyze)?;
     if let Some((n, _)) = t.integer("max_segments", 1..=100_000_000, "max_segments = 200000")? {
         tree.max_segments = n;
     }
@@ -254,13 +247,52 @@ pub(super) fn apply_tree(t: &Table<'_, '_>, mut tree: TreeLook) -> Result<TreeLo
             other => return Err(super::unknown_value(t, "dialect", other, &["auto", "ls", "v4", "v5"], &span)),
         };
     }
+    Ok(tree)
+}
+
+/// `lods`, `atlas_size` and `analysis` of a tree or mesh table.
+fn chain_keys(t: &Table<'_, '_>, lods: &mut usize, atlas_px: &mut u32, analyze: &mut bool) -> Result<(), PresetError> {
+    use crate::plants::tree_lod::{MAX_ATLAS_PX, MIN_ATLAS_PX, TREE_LODS};
+    if let Some(n) = count(t, "lods", 1..=TREE_LODS as u64, "lods = 5")? {
+        *lods = n;
+    }
+    if let Some((n, span)) = t.integer("atlas_size", MIN_ATLAS_PX as u64..=MAX_ATLAS_PX as u64, "atlas_size = 1024")? {
+        if n % 16 != 0 {
+            return Err(t.ctx.at(&span, format!("`atlas_size` = {n} is not a multiple of 16"), "use e.g. `atlas_size = 1024` or 2048"));
+        }
+        *atlas_px = n as u32;
+    }
     if let Some((_, v)) = t.get("analysis") {
         match v.get_ref() {
-            DeValue::Boolean(b) => tree.analyze = *b,
+            DeValue::Boolean(b) => *analyze = *b,
             _ => return Err(t.wrong_type("analysis", v, "a boolean", "analysis = false")),
         }
     }
-    Ok(tree)
+    Ok(())
+}
+
+/// Applies the keys of a mesh table to `base`.
+pub(super) fn apply_mesh(t: &Table<'_, '_>, mut mesh: MeshLook) -> Result<MeshLook, PresetError> {
+    use crate::plants::mesh_asset::UpAxis;
+    t.check_keys(MESH_KEYS, &[("[tree]", TREE_KEYS), ("[grass]", GRASS_KEYS), ("[flower]", FLOWER_KEYS)])?;
+    if let Some((x, _)) = t.number("scale", "scale = 0.01", |x| {
+        if x > 0.0 && x <= 1e6 {
+            Ok(())
+        } else {
+            Err("must be greater than 0 (metres per file unit: 0.01 for centimetres)".into())
+        }
+    })? {
+        mesh.scale = x;
+    }
+    if let Some((axis, span)) = t.string("up_axis", "up_axis = \"z\"")? {
+        mesh.up_axis = match axis {
+            "y" | "Y" => UpAxis::Y,
+            "z" | "Z" => UpAxis::Z,
+            other => return Err(super::unknown_value(t, "up_axis", other, &["y", "z"], &span)),
+        };
+    }
+    chain_keys(t, &mut mesh.lods, &mut mesh.atlas_px, &mut mesh.analyze)?;
+    Ok(mesh)
 }
 
 /// A species' `grass = { … }` or `flower = { … }` value as a table to read.
