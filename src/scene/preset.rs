@@ -13,8 +13,10 @@ use toml::de::{DeTable, DeValue};
 use toml::Spanned;
 
 mod plants;
+mod snow;
 
 pub use plants::{FLOWER_KEYS, GRASS_KEYS};
+pub use snow::{default_snow_seed, SNOW_KEYS};
 
 use super::{
     Exclusion, Format, Placement, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesKind, SpeciesSettings,
@@ -28,7 +30,7 @@ use crate::terrain::job::MeshMode;
 
 /// The sections a preset may have, in the order the docs list them (`species` is an array of
 /// tables, `[[species]]`).
-pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower"];
+pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower", "snow"];
 /// Keys of `[scene]`.
 pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats"];
 /// Keys of `[terrain]`.
@@ -212,6 +214,7 @@ pub fn demo_preset() -> Preset {
             },
         ],
         scatter: ScatterSettings::default(),
+        snow: None,
     }
 }
 
@@ -601,6 +604,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
     let mut scatter = None;
     let mut grass_section = None;
     let mut flower_section = None;
+    let mut snow_section = None;
     for (key, value) in entries {
         let name: &str = key.get_ref();
         if name == "species" {
@@ -666,6 +670,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             "scatter" => scatter = Some((key.span(), table)),
             "grass" => grass_section = Some((key.span(), table)),
             "flower" => flower_section = Some((key.span(), table)),
+            "snow" => snow_section = Some((key.span(), table)),
             _ => return Err(unknown_section(&ctx, &key.span(), &format!("[{name}]"), name)),
         }
     }
@@ -696,6 +701,10 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         Some((span, table)) => {
             plants::apply_flower(&Table { ctx: &ctx, label: "[flower]".into(), span, table }, FlowerSettings::default())?
         }
+    };
+    let snow = match snow_section {
+        None => None,
+        Some((span, table)) => Some(snow::parse_snow(&Table { ctx: &ctx, label: "[snow]".into(), span, table }, scene.seed)?),
     };
     let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, scene_seed: scene.seed };
     let mut species: Vec<SpeciesSettings> = Vec::new();
@@ -731,7 +740,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             species.push(s);
         }
     }
-    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain, species, scatter })
+    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain, species, scatter, snow })
 }
 
 fn unknown_section(ctx: &Ctx<'_>, span: &Range<usize>, header: &str, name: &str) -> PresetError {
@@ -1321,7 +1330,8 @@ mod tests {
         assert_eq!(did_you_mean("terain", SECTIONS), Some("terrain"));
         assert_eq!(did_you_mean("specie", SECTIONS), Some("species"));
         assert_eq!(did_you_mean("densty_map", SPECIES_KEYS), Some("density_map"));
-        assert_eq!(did_you_mean("snow", SECTIONS), None);
+        assert_eq!(did_you_mean("snwo", SECTIONS), Some("snow"));
+        assert_eq!(did_you_mean("rain", SECTIONS), None);
         assert_eq!(did_you_mean("zzz", TERRAIN_KEYS), None);
     }
 
