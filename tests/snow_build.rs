@@ -117,6 +117,9 @@ fn snow_section_errors_are_positioned_with_a_remedy() {
     assert!(msg.contains("far_count = 0 turns it off"), "{msg}");
     let (_, _, msg) = error_at(&format!("{base}[snow]\nwind_direction = [0.0, 0.0]\n"));
     assert!(msg.contains("has no direction"), "{msg}");
+    let (line, column, msg) = error_at("[scene]\nname = \"x\"\n\n[snow]\n");
+    assert_eq!((line, column), (4, 2), "{msg}");
+    assert!(msg.contains("[snow] needs a terrain"), "{msg}");
     // a misspelt section name is caught too
     let (_, _, msg) = error_at(&format!("{base}[snwo]\n"));
     assert!(msg.contains("did you mean `[snow]`?"), "{msg}");

@@ -302,18 +302,16 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         )?;
         if wants(Stage::Preview) {
             // positions as stored (f32), so a preview drawn after a cached scatter is the same
-            let layers = match placed {
-                Some(placed) => Some(
-                    placed
-                        .iter()
-                        .map(|p| {
-                            let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
-                            PreviewLayer { color: p.color, kind: p.species.kind, footprint_m: footprint_m(p.species.kind, p.species.scale), positions: pts }
-                        })
-                        .collect(),
-                ),
-                None => None, // cached: read back from scene.glb only if the preview runs
-            };
+            // (None when cached: read back from scene.glb only if the preview runs)
+            let layers = placed.map(|placed| {
+                placed
+                    .iter()
+                    .map(|p| {
+                        let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
+                        PreviewLayer { color: p.color, kind: p.species.kind, footprint_m: footprint_m(p.species.kind, p.species.scale), positions: pts }
+                    })
+                    .collect::<Vec<_>>()
+            });
             placements = Some((layers, report.scene_file.clone(), key));
         }
         runs.push(StageRun::Scatter { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
@@ -465,11 +463,14 @@ pub fn summary_table(outcomes: &[SceneOutcome]) -> String {
     s
 }
 
+/// The spinner of each scene, by scene name.
+type SceneBars = Vec<(String, indicatif::ProgressBar)>;
+
 /// Progress display: a spinner line per scene (indicatif) on a terminal, plain lines on stderr
 /// otherwise, nothing with `--quiet`.
 pub struct ProgressView {
     quiet: bool,
-    bars: Option<(indicatif::MultiProgress, Mutex<Vec<(String, indicatif::ProgressBar)>>)>,
+    bars: Option<(indicatif::MultiProgress, Mutex<SceneBars>)>,
     lines: Mutex<()>,
 }
 

@@ -741,6 +741,13 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
     };
     let snow = match snow_section {
         None => None,
+        Some((span, _)) if terrain.is_none() => {
+            return Err(ctx.at(
+                &span,
+                "[snow] needs a terrain: the snow cover lies on it",
+                "add a `[terrain]` section (e.g. `procedural = { kind = \"fbm\", size = 513, relief = 200.0 }`)",
+            ));
+        }
         Some((span, table)) => Some(snow::parse_snow(&Table { ctx: &ctx, label: "[snow]".into(), span, table }, scene.seed)?),
     };
     let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, scene_seed: scene.seed };

@@ -264,7 +264,7 @@ const SNOW_MAX_OPACITY: f32 = 0.85;
 /// weight at its centre (× [`SNOW_MAX_OPACITY`]). Draw it before the placements, so they stay on top.
 pub fn draw_cover(canvas: &mut Canvas, view: &OrthoView, mask: &crate::snow::CoverMask) {
     let w = canvas.width as usize;
-    if w == 0 || canvas.color.len() != w * canvas.height as usize || !(view.pixels_per_metre > 0.0) {
+    if w == 0 || canvas.color.len() != w * canvas.height as usize || view.pixels_per_metre.is_nan() || view.pixels_per_metre <= 0.0 {
         return;
     }
     // pixel (i, j) of a top-down view has its centre at x = origin.x + (i + ½)/ppm, z = origin.z + (j + ½)/ppm

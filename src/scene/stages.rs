@@ -179,7 +179,7 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
     // (a shared level's meshing and measuring time is counted under `lods`)
     let (mut mesh_s, mut analyze_s) = (0.0, 0.0);
     let (mesh, hit_triangle_limit, stats) = match shared {
-        Some(l) => (l.mesh.clone(), l.hit_triangle_limit, l.stats.clone()),
+        Some(l) => (l.mesh.clone(), l.hit_triangle_limit, l.stats),
         None => {
             let t1 = Instant::now();
             let (mesh, hit) = mesh_at(t, &hf, t.max_error_m)?;
@@ -301,5 +301,5 @@ pub fn run_preview(
     }
     let file = PathBuf::from("preview.png");
     crate::scene::preview::write_png(&canvas, &scene_dir.join(&file)).map_err(|e| fail(Stage::Preview)(e.to_string()))?;
-    Ok(PreviewStageReport { file, width_px: canvas.width as u32, height_px: canvas.height as u32, seconds: t0.elapsed().as_secs_f64() })
+    Ok(PreviewStageReport { file, width_px: canvas.width, height_px: canvas.height, seconds: t0.elapsed().as_secs_f64() })
 }
