@@ -78,7 +78,8 @@ pub fn build_preset(preset: &Preset, settings: &BuildSettings, progress: Progres
     let name = &preset.scene.name;
     let out = &settings.out_dir;
     for stage in [Stage::Snow, Stage::Scatter, Stage::Preview] {
-        if settings.stages.contains(&stage) && !settings.stages.contains(&Stage::Terrain) && preset.terrain.is_some() {
+        let applies = stage != Stage::Snow || preset.snow.is_some();
+        if applies && settings.stages.contains(&stage) && !settings.stages.contains(&Stage::Terrain) && preset.terrain.is_some() {
             return Err(SceneBuildError::Usage(format!(
                 "the {} stage needs the terrain: select it too (--only terrain,{})",
                 stage.name(),

@@ -1375,7 +1375,7 @@ mod tests {
         assert_eq!(did_you_mean("specie", SECTIONS), Some("species"));
         assert_eq!(did_you_mean("densty_map", SPECIES_KEYS), Some("density_map"));
         assert_eq!(did_you_mean("snwo", SECTIONS), Some("snow"));
-        assert_eq!(did_you_mean("rain", SECTIONS), None);
+        assert_eq!(did_you_mean("hail", SECTIONS), None);
         assert_eq!(did_you_mean("zzz", TERRAIN_KEYS), None);
     }
 
