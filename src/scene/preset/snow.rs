@@ -126,11 +126,10 @@ pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSetti
     let view_angle = t.number("view_angle", "view_angle = 90.0", in_range(1.0, 360.0, " degrees"))?;
     match far_count {
         // far_count = 0: no far field; its other keys would be silently unused
-        Some((0, span)) => {
+        Some((0, _)) => {
             if let Some((k, _)) = t.get("far_radius").or(t.get("view_angle")) {
                 return Err(t.ctx.at(&k.span(), format!("`{}` describes the far field, but far_count = 0 turns it off", k.get_ref()), "remove it, or give far_count > 0"));
             }
-            let _ = span;
             e.far = None;
         }
         _ => {
