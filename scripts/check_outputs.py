@@ -566,7 +566,7 @@ def self_test() -> int:
             right = ok == expect_ok
             wrong += not right
             print(f"{'ok  ' if right else 'BAD '} self-test {name}: {detail}")
-        for name, right, detail in placement_self_test(d / "placements"):
+        for name, right, detail in snow_self_test() + placement_self_test(d / "placements"):
             cases.append((name,))
             wrong += not right
             print(f"{'ok  ' if right else 'BAD '} self-test {name}: {detail}")
@@ -710,12 +710,202 @@ def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int, str
         sp = manifest["scatter"]["species"]
         placements = f"{len(sp)} species, {sum(s['count'] for s in sp)} instances"
 
+    if manifest.get("snow"):
+        facts.extend(check_snow(scene_dir, manifest, report))
+    elif (scene_dir / "snow").exists():
+        raise CheckFailed("snow/ exists but the manifest has no snow section")
+
     preview = manifest.get("preview")
     if preview:
         stage = report.get("stages", {}).get("preview", {})
         size = (stage["width_px"], stage["height_px"]) if "width_px" in stage else None
         facts.append(check_preview(scene_dir / preview, size))
     return f"{manifest.get('scene')}: " + "; ".join(facts), tris, verts, placements
+
+
+# ------------------------------------------------------------------------------------------- snow mode
+SNOW_FILES = ["snow/flakes.png", "snow/emitter.json", "snow/particles.csv", "snow/snowfall.glb",
+              "snow/cover_mask.png", "snow/terrain_snow.glb"]
+GRAVITY_M_S2 = 9.80665
+VOLUME_REL_TOL = 1e-5
+
+
+def read_particles_csv(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(is_far bool[n], xyz float64[n, 3], cell int64[n]) of snow/particles.csv."""
+    lines = path.read_text().splitlines()
+    want = "field,x,y,z,size_m,cell,angle_rad,spin_rad_s"
+    if not lines or lines[0] != want:
+        raise CheckFailed(f"{path.name}: header {lines[:1]} is not {want!r}")
+    rows = [ln.split(",") for ln in lines[1:] if ln]
+    if any(len(r) != 8 or r[0] not in ("near", "far") for r in rows):
+        raise CheckFailed(f"{path.name}: a row is not `near|far` + 7 numbers")
+    far = np.array([r[0] == "far" for r in rows], dtype=bool)
+    xyz = np.array([[float(v) for v in r[1:4]] for r in rows], dtype=np.float64).reshape(-1, 3)
+    cell = np.array([int(r[5]) for r in rows], dtype=np.int64)
+    return far, xyz, cell
+
+
+def particles_outside_volume(emitter: dict, far: np.ndarray, xyz: np.ndarray) -> list[str]:
+    """Problems with particles outside the emitter's declared volume: the near cylinder (radius r1,
+    0 <= y <= fall height) or the far sector (r1..r2 within +-view/2 of -Z)."""
+    problems = []
+    r1, h = emitter["near_radius_m"], emitter["fall_height_m"]
+    tol = VOLUME_REL_TOL * max(r1, h, 1.0)
+    radius = np.hypot(xyz[:, 0], xyz[:, 2])
+    y = xyz[:, 1]
+    if len(y) and (y.min() < -tol or y.max() > h + tol):
+        problems.append(f"heights {y.min():.4f}..{y.max():.4f} outside 0..{h}")
+    near = ~far
+    if near.any() and radius[near].max() > r1 + tol:
+        problems.append(f"a near flake at radius {radius[near].max():.5f} > near_radius_m {r1}")
+    if far.any():
+        f = emitter.get("far")
+        if not f:
+            problems.append("far flakes but no far field")
+        else:
+            r2 = f["outer_radius_m"]
+            tol2 = VOLUME_REL_TOL * max(r2, 1.0)
+            if radius[far].min() < r1 - tol2 or radius[far].max() > r2 + tol2:
+                problems.append(f"far flakes at radius {radius[far].min():.4f}..{radius[far].max():.4f} outside {r1}..{r2}")
+            # angle from the view direction -Z, positive towards +X
+            angle = np.degrees(np.arctan2(xyz[far, 0], -xyz[far, 2]))
+            half = f["view_angle_deg"] / 2
+            if np.abs(angle).max() > half + 1e-3:
+                problems.append(f"a far flake {np.abs(angle).max():.3f} deg off the view axis, more than {half}")
+    return problems
+
+
+def check_snow(scene_dir: Path, manifest: dict, report: dict) -> list[str]:
+    """The snow/ folder against manifest.snow, emitter.json and itself: every file there; the particle
+    table's counts per field = emitter.json's, every flake inside the declared volume, its atlas cell
+    valid; snowfall.glb's instances (EXT_mesh_gpu_instancing, one node per cell) = the table's rows
+    (f32 positions, per cell in table order); v = m.g/k; the mask PNG's size, greyness and coverage
+    as reported; terrain_snow.glb's _SNOW weights in 0..1 with depth = weight x depth; the layer's
+    triangle count; trees and meshes never thinned by snow."""
+    import pygltflib
+    from PIL import Image
+
+    snow = manifest["snow"]
+    settings = (manifest.get("settings") or {}).get("snow") or {}
+    files = set(snow["files"])
+    want = set(SNOW_FILES) | ({"snow/snow_layer.glb"} if settings.get("layer") else set())
+    if files != want:
+        raise CheckFailed(f"snow files {sorted(files)}, expected {sorted(want)}")
+    facts = []
+
+    emitter = json.loads((scene_dir / "snow/emitter.json").read_text())
+    v = emitter["flake_mass_kg"] * GRAVITY_M_S2 / emitter["drag_kg_s"]
+    if abs(emitter["terminal_velocity_m_s"] - v) > 1e-4 * v:
+        raise CheckFailed(f"emitter.json terminal velocity {emitter['terminal_velocity_m_s']} != m*g/k = {v}")
+    if abs(snow["analysis"]["terminal_velocity_m_s"] - v) > 1e-4 * v:
+        raise CheckFailed(f"manifest snow terminal velocity {snow['analysis']['terminal_velocity_m_s']} != m*g/k = {v}")
+    atlas = emitter["atlas"]
+    cells = atlas["columns"] * atlas["rows"]
+    if len(atlas["cells"]) != cells:
+        raise CheckFailed(f"emitter.json lists {len(atlas['cells'])} atlas cells for {atlas['columns']}x{atlas['rows']}")
+    with Image.open(scene_dir / "snow/flakes.png") as im:
+        if im.size != (atlas["columns"] * atlas["cell_px"], atlas["rows"] * atlas["cell_px"]):
+            raise CheckFailed(f"flakes.png is {im.size}, emitter.json says {atlas['columns']}x{atlas['rows']} cells of {atlas['cell_px']} px")
+        alpha = np.asarray(im.convert("RGBA"))[:, :, 3]
+    n = atlas["cell_px"]
+    empty = [k for k in range(cells) if alpha[(k // atlas["columns"]) * n:(k // atlas["columns"] + 1) * n,
+                                               (k % atlas["columns"]) * n:(k % atlas["columns"] + 1) * n].max() < 128]
+    if empty:
+        raise CheckFailed(f"flakes.png cells {empty} have no opaque texel")
+
+    far, xyz, cell = read_particles_csv(scene_dir / "snow/particles.csv")
+    want_near = emitter["near_count"]
+    want_far = emitter["far"]["count"] if emitter.get("far") else 0
+    if (int((~far).sum()), int(far.sum())) != (want_near, want_far):
+        raise CheckFailed(f"particles.csv has {(~far).sum()} near + {far.sum()} far flakes, emitter.json says {want_near} + {want_far}")
+    if len(cell) and (cell.min() < 0 or cell.max() >= cells):
+        raise CheckFailed(f"particles.csv uses atlas cells {cell.min()}..{cell.max()}, the atlas has {cells}")
+    problems = particles_outside_volume(emitter, far, xyz)
+    if problems:
+        raise CheckFailed("particles.csv: " + "; ".join(problems))
+
+    gltf = pygltflib.GLTF2().load(str(scene_dir / "snow/snowfall.glb"))
+    buffers = gltf_buffers(gltf, scene_dir / "snow/snowfall.glb")
+    if INSTANCING not in (gltf.extensionsUsed or []):
+        raise CheckFailed(f"snowfall.glb does not declare {INSTANCING}")
+    total = 0
+    for node in gltf.nodes:
+        ext = (node.extensions or {}).get(INSTANCING)
+        if not ext:
+            continue
+        k = (node.extras or {}).get("cell")
+        t = read_accessor(gltf, buffers, ext["attributes"]["TRANSLATION"])
+        mine = xyz[cell == k].astype(np.float32).astype(np.float64)
+        if t.shape != mine.shape or not np.array_equal(t, mine):
+            raise CheckFailed(f"snowfall.glb node {node.name}: {len(t)} instances do not equal the {len(mine)} CSV rows of cell {k}")
+        total += len(t)
+    if total != len(xyz):
+        raise CheckFailed(f"snowfall.glb has {total} flake instances, particles.csv {len(xyz)} rows")
+    facts.append(f"snow: {len(xyz)} flakes ({want_near} near + {want_far} far) inside the emitter volume = snowfall.glb instances, v = {v:.3f} m/s")
+
+    mask = snow["mask"]
+    with Image.open(scene_dir / mask["file"]) as im:
+        if im.size != (mask["width"], mask["height"]):
+            raise CheckFailed(f"{mask['file']} is {im.size}, manifest says {mask['width']}x{mask['height']}")
+        rgba = np.asarray(im.convert("RGBA")).astype(np.int64)
+    if max(im.size) != settings.get("mask_px", max(im.size)):
+        raise CheckFailed(f"{mask['file']} long side {max(im.size)} px, [snow] mask_px {settings.get('mask_px')}")
+    if not (np.array_equal(rgba[:, :, 0], rgba[:, :, 1]) and np.array_equal(rgba[:, :, 0], rgba[:, :, 2])):
+        raise CheckFailed(f"{mask['file']} is not grey")
+    coverage = float((rgba[:, :, 0] >= 128).mean())
+    reported = snow["analysis"]["mask_coverage"]
+    if reported is None or abs(coverage - reported) > 1e-9:
+        raise CheckFailed(f"{mask['file']}: {coverage:.6f} of it at weight >= 1/2, the report says {reported}")
+
+    path = scene_dir / snow["terrain"]
+    tg = pygltflib.GLTF2().load(str(path))
+    tb = gltf_buffers(tg, path)
+    depth = settings["cover"]["max_depth_m"]
+    weights = []
+    for mesh in tg.meshes:
+        for prim in mesh.primitives:
+            a = getattr(prim.attributes, "_SNOW", None)
+            if a is None:
+                raise CheckFailed(f"{path.name}: mesh {mesh.name!r} has a primitive without _SNOW")
+            w = read_accessor(tg, tb, a)
+            if len(w) != tg.accessors[prim.attributes.POSITION].count:
+                raise CheckFailed(f"{path.name}: _SNOW count differs from POSITION's")
+            if w[:, 0].min() < 0 or w[:, 0].max() > 1 or np.abs(w[:, 1] - w[:, 0] * depth).max() > 1e-5 * max(depth, 1):
+                raise CheckFailed(f"{path.name}: _SNOW weights outside 0..1 or depth != weight x {depth} m")
+            weights.append(w[:, 0])
+    if not weights:
+        raise CheckFailed(f"{path.name} has no primitives")
+    weights = np.concatenate(weights)
+    if settings.get("layer"):
+        geom = load_geometry(scene_dir / "snow/snow_layer.glb")
+        if geom.face_count != snow["layer_triangles"]:
+            raise CheckFailed(f"snow_layer.glb has {geom.face_count} triangles, the manifest says {snow['layer_triangles']}")
+    facts.append(f"mask {im.size[0]}x{im.size[1]} ({coverage:.1%} covered, as reported), _SNOW on {len(weights)} vertices "
+                 f"(mean {weights.mean():.3f})")
+
+    # thinning: only grass and flowers
+    for sp in ((report.get("stages") or {}).get("scatter") or {}).get("species", []):
+        if sp["kind"] in ("tree", "mesh") and sp["rules"].get("snow", 0):
+            raise CheckFailed(f"species {sp['name']} ({sp['kind']}) has {sp['rules']['snow']} instances thinned by snow")
+    return facts
+
+
+def snow_self_test() -> list[tuple[str, bool, str]]:
+    """The volume check on a made-up emitter: flakes inside pass, each kind of stray flake fails."""
+    emitter = {"near_radius_m": 10.0, "fall_height_m": 20.0, "far": {"outer_radius_m": 40.0, "view_angle_deg": 90.0}}
+    far = np.array([False, False, True, True])
+    good = np.array([[3.0, 1.0, -4.0], [0.0, 19.9, 9.99], [0.0, 5.0, -39.0], [20.0, 0.0, -21.0]])
+    cases = [("snow volume good", good, True)]
+    for name, row, col, value in [("snow near flake outside r1", 1, 2, 10.5), ("snow flake above fall height", 0, 1, 20.5),
+                                  ("snow far flake behind the camera", 2, 2, 39.0), ("snow far flake beyond r2", 3, 0, 40.0)]:
+        bad = good.copy()
+        bad[row, col] = value
+        cases.append((name, bad, False))
+    out = []
+    for name, xyz, expect_ok in cases:
+        problems = particles_outside_volume(emitter, far, xyz)
+        out.append((name, (not problems) == expect_ok, "; ".join(problems) or "passed"))
+    return out
 
 
 def scene_main(argv: list[str]) -> int:

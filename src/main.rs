@@ -456,7 +456,7 @@ fn build(a: BuildArgs, quiet: bool) -> i32 {
     if stages.is_empty() {
         return fail("--only/--skip leave no stage to build", 2);
     }
-    for s in [Stage::Scatter, Stage::Preview] {
+    for s in [Stage::Snow, Stage::Scatter, Stage::Preview] {
         if stages.contains(&s) && !stages.contains(&Stage::Terrain) {
             return fail(&format!("the {0} stage needs the terrain stage: add it (--only terrain,{0})", s.name()), 2);
         }

@@ -230,9 +230,9 @@ fn unknown_key_has_position_and_did_you_mean() {
 
 #[test]
 fn unknown_section_lists_the_known_ones() {
-    let e = error_of(&format!("{MINIMAL}\n[snow]\nflakes = 1\n"));
+    let e = error_of(&format!("{MINIMAL}\n[weather]\nflakes = 1\n"));
     assert!(
-        e.starts_with("p.toml:4:2: unknown section `[snow]`; known sections are `[scene]`, `[terrain]`, `[[species]]`, `[scatter]`"),
+        e.starts_with("p.toml:4:2: unknown section `[weather]`; known sections are `[scene]`, `[terrain]`, `[[species]]`, `[scatter]`"),
         "{e}"
     );
     let e = error_of(&format!("{MINIMAL}\n[[specie]]\nname = \"a\"\n"));

@@ -344,3 +344,28 @@ fn bad_settings_give_clear_errors() {
     assert!(err.to_string().contains("apply_cover"), "{err}");
 }
 
+
+#[test]
+fn the_stored_mask_reads_back_on_its_8_bit_steps_and_in_place() {
+    let mut scene = terrain();
+    let s = CoverSettings { snow_line_m: 30.0, snow_line_noise_m: 5.0, wind_scour: 0.3, ..CoverSettings::default() };
+    apply_cover(&mut scene, &s).unwrap();
+    let mask = cover_mask(&scene, 96).unwrap();
+    let png = mask.to_image().encode_png().unwrap();
+    let back = CoverMask::from_png(&png, mask.min_x, mask.min_z, mask.metres_per_pixel).unwrap();
+    assert_eq!((back.width, back.height), (mask.width, mask.height));
+    // every weight is the nearest 1/255 step of the computed one (what a cached build reads)
+    for (a, b) in mask.weights.iter().zip(&back.weights) {
+        assert!((a - b).abs() <= 0.5 / 255.0 + 1e-6, "{a} stored as {b}");
+        assert_eq!((b * 255.0).round() / 255.0, *b);
+    }
+    assert!(back.weights.iter().any(|&w| w > 0.9) && back.weights.iter().any(|&w| w < 0.1), "partly covered");
+    // the same place: read at a pixel centre, both give that pixel's value
+    let (i, j) = (back.width / 3, back.height / 2);
+    let (x, z) = (mask.min_x + (i as f32 + 0.5) * mask.metres_per_pixel, mask.min_z + (j as f32 + 0.5) * mask.metres_per_pixel);
+    assert!((back.weight_at(x, z) - back.weights[(j * back.width + i) as usize]).abs() < 1e-5);
+    assert!((back.weight_at(x, z) - mask.weight_at(x, z)).abs() <= 0.5 / 255.0 + 1e-5);
+    // not a PNG: an error naming the remedy, no panic
+    let e = CoverMask::from_png(b"not a png", 0.0, 0.0, 1.0).unwrap_err();
+    assert!(e.to_string().contains("rebuild with --force"), "{e}");
+}

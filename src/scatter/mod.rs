@@ -68,6 +68,9 @@ pub struct RuleCounts {
     pub altitude: u64,
     pub slope: u64,
     pub exclusion: u64,
+    /// Grass and flowers dropped where snow lies (`[snow] thin_plants`; 0 without snow).
+    #[serde(default)]
+    pub snow: u64,
     pub placed: u64,
 }
 
@@ -81,6 +84,7 @@ impl RuleCounts {
         self.altitude += o.altitude;
         self.slope += o.slope;
         self.exclusion += o.exclusion;
+        self.snow += o.snow;
         self.placed += o.placed;
     }
 }
@@ -260,8 +264,25 @@ pub fn scatter_species_detailed(
     tile_m: f64,
     scene_seed: u64,
 ) -> Result<Scatter, ScatterError> {
+    scatter_species_snow(surface, extent, species, density, mask, earlier, tile_m, scene_seed, None)
+}
+
+/// [`scatter_species_detailed`] with snow thinning (`None`: none; see [`rules::SnowThinning`]).
+#[allow(clippy::too_many_arguments)]
+pub fn scatter_species_snow(
+    surface: &SurfaceIndex,
+    extent: [f64; 4],
+    species: &SpeciesSettings,
+    density: Option<&DensityMap>,
+    mask: Option<&DensityMap>,
+    earlier: &[(&str, &[Instance])],
+    tile_m: f64,
+    scene_seed: u64,
+    snow: Option<rules::SnowThinning<'_>>,
+) -> Result<Scatter, ScatterError> {
     let tiling = Tiling::new(extent, tile_m)?;
-    let ctx = rules::Rules::new(surface, tiling, species, density, mask, earlier, scene_seed)?;
+    let mut ctx = rules::Rules::new(surface, tiling, species, density, mask, earlier, scene_seed)?;
+    ctx.snow = snow;
     let area = (extent[2] - extent[0]) * (extent[3] - extent[1]);
     // fail fast: estimate from the density/mask/rules integral before allocating anything
     let estimate = rules::estimate(&ctx, 128) * ctx.effective_max_density * area;

@@ -28,7 +28,21 @@ pub struct Rules<'a> {
     align: f64,
     /// cos of the slope range's ends: slope ∈ [a, b] ⇔ n.y ∈ [cos b, cos a] (no acos per candidate)
     cos_slope: [f64; 2],
+    /// Snow thinning (grass and flowers under a `[snow]` cover); `None` places as without snow.
+    pub snow: Option<SnowThinning<'a>>,
 }
+
+/// Drops a candidate that passed the terrain rules with probability `strength × weight_at(x, z)`
+/// of the snow cover mask, decided by a hash of the candidate's own seed (order-independent).
+#[derive(Debug, Clone, Copy)]
+pub struct SnowThinning<'a> {
+    pub mask: &'a crate::snow::CoverMask,
+    /// `[snow] thin_plants`, 0..1.
+    pub strength: f64,
+}
+
+/// Tag mixed into a candidate's seed for its snow decision ("snow"), independent of yaw and scale.
+const SNOW_TAG: u64 = 0x736e_6f77;
 
 impl<'a> Rules<'a> {
     pub fn new(
@@ -119,6 +133,7 @@ impl<'a> Rules<'a> {
             inv_h: 1.0 / (z1 - z0),
             align: if species.align_to_normal.is_finite() { species.align_to_normal.clamp(0.0, 1.0) } else { 0.0 },
             cos_slope: cos_range(species.slope_deg),
+            snow: None,
         })
     }
 
@@ -182,6 +197,13 @@ impl<'a> Rules<'a> {
             Some(Reject::Altitude) => counts.altitude += 1,
             Some(Reject::Slope) => counts.slope += 1,
             None => {
+                if let Some(snow) = &self.snow {
+                    let w = snow.mask.weight_at(x as f32, z as f32) as f64;
+                    if unit(mix64(attr ^ SNOW_TAG)) < snow.strength * w {
+                        counts.snow += 1;
+                        return None;
+                    }
+                }
                 if self.exclusions.iter().any(|g| g.excludes(x, z)) {
                     counts.exclusion += 1;
                     return None;

@@ -19,6 +19,7 @@ use crate::plants::marker;
 use crate::scene::plants_stage::{self, PlantsStageReport};
 use crate::scene::preview::{footprint_m, PreviewLayer};
 use crate::scene::scatter_stage::{self, ScatterStageReport};
+use crate::scene::snow_stage::{self, SnowStageReport};
 use crate::scene::stages::{self, PreviewStageReport, Stage};
 use crate::scene::Preset;
 use crate::validate::read_scene;
@@ -76,8 +77,9 @@ pub fn build_preset(preset: &Preset, settings: &BuildSettings, progress: Progres
     let t0 = Instant::now();
     let name = &preset.scene.name;
     let out = &settings.out_dir;
-    for stage in [Stage::Scatter, Stage::Preview] {
-        if settings.stages.contains(&stage) && !settings.stages.contains(&Stage::Terrain) && preset.terrain.is_some() {
+    for stage in [Stage::Snow, Stage::Scatter, Stage::Preview] {
+        let applies = stage != Stage::Snow || preset.snow.is_some();
+        if applies && settings.stages.contains(&stage) && !settings.stages.contains(&Stage::Terrain) && preset.terrain.is_some() {
             return Err(SceneBuildError::Usage(format!(
                 "the {} stage needs the terrain: select it too (--only terrain,{})",
                 stage.name(),
@@ -239,7 +241,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             || stages::run_terrain(preset, t, dir).map_err(SceneBuildError::from),
             &say,
         )?;
-        if wants(Stage::Scatter) || wants(Stage::Preview) {
+        if wants(Stage::Scatter) || wants(Stage::Preview) || (wants(Stage::Snow) && preset.snow.is_some()) {
             // a cached terrain is re-imported from its first mesh file only if a later stage runs
             let is_mesh = |p: &&PathBuf| matches!(p.extension().and_then(|e| e.to_str()), Some("glb" | "gltf" | "obj"));
             let main = report.files.iter().find(is_mesh).cloned().unwrap_or_default();
@@ -250,6 +252,27 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             terrain = Some((lazy, key));
         }
         runs.push(StageRun::Terrain { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+    }
+
+    // the snow cover as stored in snow/cover_mask.png (cached or not, the same values) and the
+    // stage's key, for the scatter's thinning and the preview
+    let mut cover: Option<(crate::snow::CoverMask, String)> = None;
+    if let (true, Some(snow), Some((scene, tkey))) = (wants(Stage::Snow), &preset.snow, &terrain) {
+        let t0 = Instant::now();
+        let key = snow_stage::snow_key(snow, tkey);
+        let (report, _, hit) = cached_stage(
+            &cache, force, "snow", &key, dir, &mut known,
+            SnowStageReport::files,
+            || {
+                // always from the terrain as written (not the in-memory scene), so a snow stage
+                // run after a cached terrain gives the same bytes as one after a fresh terrain
+                let written = reimport(dir, &scene.main)?;
+                Ok((snow_stage::run_snow(preset, snow, &written, dir)?, ()))
+            },
+            &say,
+        )?;
+        cover = Some((snow_stage::load_mask(dir, &report.mask)?, key));
+        runs.push(StageRun::Snow { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
     }
 
     if wants(Stage::Plants) && plants_stage::has_plants(preset) {
@@ -266,27 +289,30 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
 
     if let (true, Some((scene, tkey)), false) = (wants(Stage::Scatter), &terrain, preset.species.is_empty()) {
         let t0 = Instant::now();
-        let key = scatter_stage::scatter_key(preset, tkey)?;
+        // thinning by the snow cover makes the placements depend on the snow stage too
+        let upstream = match &cover {
+            Some((_, skey)) => format!("{tkey}+snow:{skey}"),
+            None => tkey.clone(),
+        };
+        let key = scatter_stage::scatter_key(preset, &upstream)?;
         let (report, placed, hit) = cached_stage(
             &cache, force, "scatter", &key, dir, &mut known,
             ScatterStageReport::files,
-            || scatter_stage::run_scatter(preset, scene.get()?, dir).map_err(SceneBuildError::from),
+            || scatter_stage::run_scatter_with_snow(preset, scene.get()?, dir, cover.as_ref().map(|(m, _)| m)).map_err(SceneBuildError::from),
             &say,
         )?;
         if wants(Stage::Preview) {
             // positions as stored (f32), so a preview drawn after a cached scatter is the same
-            let layers = match placed {
-                Some(placed) => Some(
-                    placed
-                        .iter()
-                        .map(|p| {
-                            let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
-                            PreviewLayer { color: p.color, kind: p.species.kind, footprint_m: footprint_m(p.species.kind, p.species.scale), positions: pts }
-                        })
-                        .collect(),
-                ),
-                None => None, // cached: read back from scene.glb only if the preview runs
-            };
+            // (None when cached: read back from scene.glb only if the preview runs)
+            let layers = placed.map(|placed| {
+                placed
+                    .iter()
+                    .map(|p| {
+                        let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
+                        PreviewLayer { color: p.color, kind: p.species.kind, footprint_m: footprint_m(p.species.kind, p.species.scale), positions: pts }
+                    })
+                    .collect::<Vec<_>>()
+            });
             placements = Some((layers, report.scene_file.clone(), key));
         }
         runs.push(StageRun::Scatter { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
@@ -299,6 +325,9 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         if let Some((_, _, skey)) = &placements {
             k.add(skey.as_bytes());
         }
+        if let Some((_, snow_key)) = &cover {
+            k.add(b"snow").add(snow_key.as_bytes());
+        }
         let key = k.finish();
         let (report, _, hit) = cached_stage(
             &cache, force, "preview", &key, dir, &mut known,
@@ -309,7 +338,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
                     Some((None, scene_file, _)) => placements_from_scene(&reimport(dir, scene_file)?, preset),
                     None => Vec::new(),
                 };
-                Ok((stages::run_preview(scene.get()?, &layers, dir)?, ()))
+                Ok((stages::run_preview(scene.get()?, &layers, cover.as_ref().map(|(m, _)| m), dir)?, ()))
             },
             &say,
         )?;
@@ -435,11 +464,14 @@ pub fn summary_table(outcomes: &[SceneOutcome]) -> String {
     s
 }
 
+/// The spinner of each scene, by scene name.
+type SceneBars = Vec<(String, indicatif::ProgressBar)>;
+
 /// Progress display: a spinner line per scene (indicatif) on a terminal, plain lines on stderr
 /// otherwise, nothing with `--quiet`.
 pub struct ProgressView {
     quiet: bool,
-    bars: Option<(indicatif::MultiProgress, Mutex<Vec<(String, indicatif::ProgressBar)>>)>,
+    bars: Option<(indicatif::MultiProgress, Mutex<SceneBars>)>,
     lines: Mutex<()>,
 }
 

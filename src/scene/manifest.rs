@@ -12,6 +12,7 @@ use crate::scene::build::SceneBuildError;
 use crate::scene::cache::{sha256_hex, FileHashes};
 use crate::scene::plants_stage::PlantsStageReport;
 use crate::scene::scatter_stage::ScatterStageReport;
+use crate::scene::snow_stage::SnowStageReport;
 use crate::scene::stages::{PreviewStageReport, Stage, TerrainStageReport};
 use crate::scene::Preset;
 
@@ -22,6 +23,7 @@ pub enum StageRun {
     Plants { report: PlantsStageReport, cached: bool, seconds: f64 },
     Scatter { report: ScatterStageReport, cached: bool, seconds: f64 },
     Preview { report: PreviewStageReport, cached: bool, seconds: f64 },
+    Snow { report: SnowStageReport, cached: bool, seconds: f64 },
 }
 
 impl StageRun {
@@ -31,16 +33,25 @@ impl StageRun {
             StageRun::Plants { .. } => Stage::Plants,
             StageRun::Scatter { .. } => Stage::Scatter,
             StageRun::Preview { .. } => Stage::Preview,
+            StageRun::Snow { .. } => Stage::Snow,
         }
     }
     pub fn cached(&self) -> bool {
         match self {
-            StageRun::Terrain { cached, .. } | StageRun::Plants { cached, .. } | StageRun::Scatter { cached, .. } | StageRun::Preview { cached, .. } => *cached,
+            StageRun::Terrain { cached, .. }
+            | StageRun::Plants { cached, .. }
+            | StageRun::Scatter { cached, .. }
+            | StageRun::Preview { cached, .. }
+            | StageRun::Snow { cached, .. } => *cached,
         }
     }
     pub fn seconds(&self) -> f64 {
         match self {
-            StageRun::Terrain { seconds, .. } | StageRun::Plants { seconds, .. } | StageRun::Scatter { seconds, .. } | StageRun::Preview { seconds, .. } => *seconds,
+            StageRun::Terrain { seconds, .. }
+            | StageRun::Plants { seconds, .. }
+            | StageRun::Scatter { seconds, .. }
+            | StageRun::Preview { seconds, .. }
+            | StageRun::Snow { seconds, .. } => *seconds,
         }
     }
 }
@@ -60,6 +71,7 @@ struct Manifest<'a> {
     terrain: Option<TerrainManifest<'a>>,
     plants: Option<Vec<PlantManifest>>,
     scatter: Option<ScatterManifest>,
+    snow: Option<SnowManifest<'a>>,
     preview: Option<String>,
     settings: &'a Preset,
 }
@@ -104,6 +116,17 @@ struct SpeciesManifest {
     table: String,
     summary: String,
     tiles: usize,
+}
+
+/// The snow stage's files and the analyzer's figures (deterministic: no timings).
+#[derive(Serialize)]
+struct SnowManifest<'a> {
+    files: Vec<String>,
+    mask: &'a crate::scene::snow_stage::MaskInfo,
+    terrain: String,
+    particles: usize,
+    layer_triangles: usize,
+    analysis: &'a crate::snow::SnowReport,
 }
 
 /// Scene-relative paths of every file under `dir`, sorted, with `/` separators.
@@ -162,6 +185,10 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
         StageRun::Preview { report, .. } => Some(report),
         _ => None,
     });
+    let snow = runs.iter().find_map(|r| match r {
+        StageRun::Snow { report, .. } => Some(report),
+        _ => None,
+    });
     let manifest = Manifest {
         verdant_version: env!("CARGO_PKG_VERSION"),
         scene: &preset.scene.name,
@@ -213,6 +240,14 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
                 })
                 .collect(),
         }),
+        snow: snow.map(|s| SnowManifest {
+            files: rel_strings(&s.files),
+            mask: &s.mask,
+            terrain: s.terrain_file.to_string_lossy().replace('\\', "/"),
+            particles: s.particles,
+            layer_triangles: s.layer_triangles,
+            analysis: &s.analysis,
+        }),
         preview: preview.map(|p| p.file.to_string_lossy().replace('\\', "/")),
         settings: preset,
     };
@@ -255,6 +290,7 @@ fn report_json(preset: &Preset, runs: &[StageRun]) -> String {
                 ("scatter", v, *cached, *seconds)
             }
             StageRun::Preview { report, cached, seconds } => ("preview", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
+            StageRun::Snow { report, cached, seconds } => ("snow", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
             StageRun::Plants { report, cached, seconds } => {
                 let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
                 if let Some(list) = v.get_mut("species").and_then(Value::as_array_mut) {
@@ -353,6 +389,7 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
                 s += "\n";
             }
             StageRun::Plants { report: pl, .. } => s += &plants_md(pl),
+            StageRun::Snow { report: sn, .. } => s += &snow_md(sn),
             StageRun::Preview { report: p, .. } => {
                 s += &format!("## Preview\n\n`{}`, {}×{} px, shaded relief drawn from the terrain mesh\n\n", p.file.display(), p.width_px, p.height_px);
             }
@@ -427,6 +464,44 @@ fn chain_rows(model: &str, chain: &serde_json::Value) -> String {
             l["level"], l["kind"].as_str().unwrap_or(""), l["triangles"], l["bytes"],
             num(&l["geometric_error"]["max_m"]), num(&l["switch_iou"]), num(&l["switch_distance_m"]), num(&l["screen_coverage"])
         );
+    }
+    s
+}
+
+/// The snow section of report.md: counts, the fall, and the cover by slope and altitude band.
+fn snow_md(r: &SnowStageReport) -> String {
+    let a = &r.analysis;
+    let mut s = String::from("## Snow
+
+");
+    let kinds = |m: &std::collections::BTreeMap<String, usize>| m.iter().map(|(k, n)| format!("{k} {n}")).collect::<Vec<_>>().join(", ");
+    s += &format!("Atlas cells by habit: {}. Particles: {} near + {} far ({}).
+
+", kinds(&a.atlas_cells_by_kind), a.near_particles, a.far_particles, kinds(&a.particles_by_kind));
+    s += &format!(
+        "Terminal velocity v = m·g/k = {:.3} m/s, time constant {:.3} s, fall from the top in {:.1} s.
+
+",
+        a.terminal_velocity_m_s, a.time_constant_s, a.fall_time_s
+    );
+    s += &format!(
+        "Cover mask `{}` {}×{} px ({:.3} m/px): {:.1} % of it at weight ≥ ½. Terrain with the weight: `{}`{}.
+
+",
+        r.mask.file.display(),
+        r.mask.width,
+        r.mask.height,
+        r.mask.metres_per_pixel,
+        100.0 * a.mask_coverage.unwrap_or(0.0),
+        r.terrain_file.display(),
+        r.layer_file.as_ref().map_or(String::new(), |f| format!("; snow layer `{}` ({} triangles)", f.display(), r.layer_triangles)),
+    );
+    for (title, unit, bands) in [("slope", "°", &a.cover_by_slope), ("altitude", " m", &a.cover_by_altitude)] {
+        s += &format!("| {title} band | vertices | mean weight | covered (≥ ½) |\n|---|---|---|---|\n");
+        for b in bands {
+            s += &format!("| {:.1}{unit} – {:.1}{unit} | {} | {:.3} | {:.3} |\n", b.from, b.to, b.vertices, b.mean_weight, b.covered_fraction);
+        }
+        s += "\n";
     }
     s
 }

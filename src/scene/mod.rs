@@ -10,6 +10,7 @@ pub mod cache;
 pub mod manifest;
 pub mod plants_stage;
 pub mod scatter_stage;
+pub mod snow_stage;
 pub mod stages;
 
 use std::path::PathBuf;
@@ -90,6 +91,8 @@ pub struct Preset {
     pub species: Vec<SpeciesSettings>,
     /// `[scatter]`
     pub scatter: ScatterSettings,
+    /// `[snow]`: flakes, emitter, cover and plant thinning; `None` without the section.
+    pub snow: Option<crate::snow::SnowSettings>,
 }
 
 /// `[scatter]`: how placement is split into tiles.

@@ -13,8 +13,10 @@ use toml::de::{DeTable, DeValue};
 use toml::Spanned;
 
 mod plants;
+mod snow;
 
 pub use plants::{FLOWER_KEYS, GRASS_KEYS, MESH_KEYS, TREE_KEYS};
+pub use snow::{default_snow_seed, SNOW_KEYS};
 
 use super::{
     Exclusion, Format, Placement, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesKind, SpeciesSettings,
@@ -28,7 +30,7 @@ use crate::terrain::job::MeshMode;
 
 /// The sections a preset may have, in the order the docs list them (`species` is an array of
 /// tables, `[[species]]`).
-pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower", "tree", "mesh"];
+pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower", "tree", "mesh", "snow"];
 /// Keys of `[scene]`.
 pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats"];
 /// Keys of `[terrain]`.
@@ -216,6 +218,7 @@ pub fn demo_preset() -> Preset {
             },
         ],
         scatter: ScatterSettings::default(),
+        snow: None,
     }
 }
 
@@ -344,6 +347,43 @@ lods = [1.0, 4.0, 16.0]
 # slope = [0.0, 30.0]
 # # keep 1.5 m clear around every pine (an array of such tables lists several species)
 # exclusion = { species = "pine", radius = 1.5 }
+
+# Snow: a flake atlas, a particle emitter for the engine, a frozen frame of the fall, and snow
+# cover on the terrain that thins grass and flowers (written to snow/). Uncomment to add it.
+#
+# [snow]
+# seed = 0                   # default: derived from the scene seed
+# temperature_c = -15.0      # where crystals grow, −40..+2 °C: picks the habits (see docs/snow.md)
+# humidity = 0.6             # 0 dry … 1 saturated: plates vs dendrites, flake sizes
+# atlas_cells = [4, 4]       # flake atlas columns, rows (1..32 each)
+# cell_px = 64               # pixels a cell side (16..1024)
+# alpha_cutoff = 0.5         # alpha-test threshold of the flake material
+# near_radius = 15.0         # r1: cylinder around the camera holding near_count flakes, m
+# near_count = 4000          # N1
+# far_radius = 60.0          # r2 > r1: far field out to here, only inside the view angle, m
+# far_count = 6000           # N2 (0: no far field)
+# view_angle = 90.0          # horizontal view angle of the far field, degrees
+# fall_height = 20.0         # flakes live from the ground up to here, m
+# wind_direction = [1.0, 0.0]  # [x, z] the wind blows towards (also scours windward snow)
+# wind_speed = 1.5           # m/s
+# flake_mass = 3e-6          # kg; terminal velocity v = m·g/drag
+# drag = 3e-5                # linear drag coefficient k, kg/s
+# ground_slowdown = 0.5      # below this height flakes slow down, m …
+# ground_speed_factor = 0.3  # … to this fraction of their speed at the ground
+# respawn = "top"            # "top" or "wrap_vertical"
+# max_spin = 1.0             # sprite spin, rad/s
+# snow_line = 100.0          # altitude of half cover, m
+# snow_line_noise = 10.0     # the snow line wanders this much up and down, m …
+# noise_scale = 200.0        # … over this horizontal wavelength, m
+# transition = 10.0          # height over which cover goes from none to full, m
+# full_slope = 25.0          # full cover up to this slope, degrees …
+# max_slope = 50.0           # … and none from this slope on
+# wind_scour = 0.5           # 0..1: how bare faces turned into the wind are
+# depth = 0.3                # snow depth at full cover, m
+# mask_px = 512              # cover_mask.png's long side, pixels
+# layer = true               # write snow_layer.glb (the snow surface lifted by its depth)
+# layer_min_weight = 0.5     # the layer keeps triangles at least this covered
+# thin_plants = 0.8          # grass/flowers dropped with probability thin_plants × cover weight
 "#;
 
 // ---------------------------------------------------------------------------------------------
@@ -609,6 +649,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
     let mut flower_section = None;
     let mut tree_section = None;
     let mut mesh_section = None;
+    let mut snow_section = None;
     for (key, value) in entries {
         let name: &str = key.get_ref();
         if name == "species" {
@@ -676,6 +717,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             "flower" => flower_section = Some((key.span(), table)),
             "tree" => tree_section = Some((key.span(), table)),
             "mesh" => mesh_section = Some((key.span(), table)),
+            "snow" => snow_section = Some((key.span(), table)),
             _ => return Err(unknown_section(&ctx, &key.span(), &format!("[{name}]"), name)),
         }
     }
@@ -715,6 +757,17 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         None => MeshLook::default(),
         Some((span, table)) => plants::apply_mesh(&Table { ctx: &ctx, label: "[mesh]".into(), span, table }, MeshLook::default())?,
     };
+    let snow = match snow_section {
+        None => None,
+        Some((span, _)) if terrain.is_none() => {
+            return Err(ctx.at(
+                &span,
+                "[snow] needs a terrain: the snow cover lies on it",
+                "add a `[terrain]` section (e.g. `procedural = { kind = \"fbm\", size = 513, relief = 200.0 }`)",
+            ));
+        }
+        Some((span, table)) => Some(snow::parse_snow(&Table { ctx: &ctx, label: "[snow]".into(), span, table }, scene.seed)?),
+    };
     let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, tree: &tree_defaults, mesh: &mesh_defaults, scene_seed: scene.seed };
     let mut species: Vec<SpeciesSettings> = Vec::new();
     if let Some((key_span, items)) = species_tables {
@@ -749,7 +802,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             species.push(s);
         }
     }
-    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain, species, scatter })
+    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain, species, scatter, snow })
 }
 
 fn unknown_section(ctx: &Ctx<'_>, span: &Range<usize>, header: &str, name: &str) -> PresetError {
@@ -1387,7 +1440,8 @@ mod tests {
         assert_eq!(did_you_mean("terain", SECTIONS), Some("terrain"));
         assert_eq!(did_you_mean("specie", SECTIONS), Some("species"));
         assert_eq!(did_you_mean("densty_map", SPECIES_KEYS), Some("density_map"));
-        assert_eq!(did_you_mean("snow", SECTIONS), None);
+        assert_eq!(did_you_mean("snwo", SECTIONS), Some("snow"));
+        assert_eq!(did_you_mean("hail", SECTIONS), None);
         assert_eq!(did_you_mean("zzz", TERRAIN_KEYS), None);
     }
 

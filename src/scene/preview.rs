@@ -255,6 +255,33 @@ pub fn hypsometric_tint(t: f32) -> [f32; 3] {
     c.map(srgb_to_linear)
 }
 
+/// Colour of snow in the preview (linear), and how opaque full cover (weight 1) is drawn: the relief
+/// stays readable under it.
+const SNOW_COLOR: [f32; 3] = [0.92, 0.94, 0.97];
+const SNOW_MAX_OPACITY: f32 = 0.85;
+
+/// Blends the snow cover into a drawn terrain: every covered pixel towards white by the mask's
+/// weight at its centre (× [`SNOW_MAX_OPACITY`]). Draw it before the placements, so they stay on top.
+pub fn draw_cover(canvas: &mut Canvas, view: &OrthoView, mask: &crate::snow::CoverMask) {
+    let w = canvas.width as usize;
+    if w == 0 || canvas.color.len() != w * canvas.height as usize || view.pixels_per_metre.is_nan() || view.pixels_per_metre <= 0.0 {
+        return;
+    }
+    // pixel (i, j) of a top-down view has its centre at x = origin.x + (i + ½)/ppm, z = origin.z + (j + ½)/ppm
+    let inv = 1.0 / view.pixels_per_metre;
+    for (k, (c, d)) in canvas.color.iter_mut().zip(&canvas.depth).enumerate() {
+        if !d.is_finite() {
+            continue;
+        }
+        let x = view.origin[0] + ((k % w) as f64 + 0.5) * inv;
+        let z = view.origin[2] + ((k / w) as f64 + 0.5) * inv;
+        let a = SNOW_MAX_OPACITY * mask.weight_at(x as f32, z as f32).clamp(0.0, 1.0);
+        for ch in 0..3 {
+            c[ch] = c[ch] * (1.0 - a) + SNOW_COLOR[ch] * a;
+        }
+    }
+}
+
 /// Writes a preview (or any canvas) as an sRGB PNG, atomically.
 pub fn write_png(canvas: &Canvas, path: &Path) -> Result<(), RasterError> {
     canvas.write_png(path)

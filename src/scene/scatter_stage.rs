@@ -14,7 +14,8 @@ use crate::plants::marker;
 use crate::scatter::density::DensityMap;
 use crate::scatter::stats::{analyze, SpeciesStats};
 use crate::scatter::surface::SurfaceIndex;
-use crate::scatter::{scatter_species_detailed, Instance, RuleCounts};
+use crate::scatter::rules::SnowThinning;
+use crate::scatter::{scatter_species_snow, Instance, RuleCounts};
 use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::stages::StageError;
 use crate::scene::{Preset, SpeciesSettings};
@@ -92,6 +93,17 @@ pub struct Placed {
 
 /// Runs the scatter stage into `scene_dir`.
 pub fn run_scatter(preset: &Preset, terrain: &Scene, scene_dir: &Path) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
+    run_scatter_with_snow(preset, terrain, scene_dir, None)
+}
+
+/// [`run_scatter`] with the snow stage's cover mask: grass and flowers are thinned by
+/// `[snow] thin_plants` × the mask's weight (counted as the `snow` rule); trees and meshes are not.
+pub fn run_scatter_with_snow(
+    preset: &Preset,
+    terrain: &Scene,
+    scene_dir: &Path,
+    snow_mask: Option<&crate::snow::CoverMask>,
+) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
     let t0 = Instant::now();
     let surface = surface_of(terrain);
     let extent = surface.bounds();
@@ -102,7 +114,13 @@ pub fn run_scatter(preset: &Preset, terrain: &Scene, scene_dir: &Path) -> Result
         let density = load_map(&species.density_map)?;
         let mask = load_map(&species.mask)?;
         let earlier: Vec<(&str, &[Instance])> = placed.iter().map(|p| (p.species.name.as_str(), &p.instances[..])).collect();
-        let result = scatter_species_detailed(
+        let thinning = match (snow_mask, &preset.snow, species.kind) {
+            (Some(mask), Some(snow), crate::scene::SpeciesKind::Grass | crate::scene::SpeciesKind::Flower) if snow.thin_plants > 0.0 => {
+                Some(SnowThinning { mask, strength: snow.thin_plants })
+            }
+            _ => None,
+        };
+        let result = scatter_species_snow(
             &surface,
             extent,
             species,
@@ -111,6 +129,7 @@ pub fn run_scatter(preset: &Preset, terrain: &Scene, scene_dir: &Path) -> Result
             &earlier,
             preset.scatter.tile_m,
             preset.scene.seed,
+            thinning,
         )
         .map_err(|e| fail(e.to_string()))?;
         let generate_s = t1.elapsed().as_secs_f64();

@@ -24,6 +24,9 @@ use crate::terrain::SampleMesh;
 pub enum Stage {
     /// Heightmap → terrain meshes (+ LoD chain).
     Terrain,
+    /// `[snow]` → snow/: flake atlas, emitter.json, particle frame, cover mask, snow layer, and the
+    /// terrain with the `_SNOW` weight (skipped without `[snow]`).
+    Snow,
     /// Grass and flower species → their meshes with LoDs (species/) and baked atlases (atlases/).
     Plants,
     /// [[species]] → placements on the terrain: tables and scene.glb with GPU instancing.
@@ -33,10 +36,11 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 4] = [Stage::Terrain, Stage::Plants, Stage::Scatter, Stage::Preview];
+    pub const ALL: [Stage; 5] = [Stage::Terrain, Stage::Snow, Stage::Plants, Stage::Scatter, Stage::Preview];
     pub fn name(self) -> &'static str {
         match self {
             Stage::Terrain => "terrain",
+            Stage::Snow => "snow",
             Stage::Plants => "plants",
             Stage::Scatter => "scatter",
             Stage::Preview => "preview",
@@ -175,7 +179,7 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
     // (a shared level's meshing and measuring time is counted under `lods`)
     let (mut mesh_s, mut analyze_s) = (0.0, 0.0);
     let (mesh, hit_triangle_limit, stats) = match shared {
-        Some(l) => (l.mesh.clone(), l.hit_triangle_limit, l.stats.clone()),
+        Some(l) => (l.mesh.clone(), l.hit_triangle_limit, l.stats),
         None => {
             let t1 = Instant::now();
             let (mesh, hit) = mesh_at(t, &hf, t.max_error_m)?;
@@ -279,14 +283,23 @@ pub struct PreviewStageReport {
 
 pub const PREVIEW_SIZE_PX: u32 = 1024;
 
-/// Draws preview.png: the terrain's shaded relief, then the placements (colour, positions) over it.
-pub fn run_preview(terrain: &Scene, placements: &[crate::scene::preview::PreviewLayer], scene_dir: &Path) -> Result<PreviewStageReport, StageError> {
+/// Draws preview.png: the terrain's shaded relief, the snow cover (when given) blended in white by
+/// its weight, then the placements (colour, positions) over it.
+pub fn run_preview(
+    terrain: &Scene,
+    placements: &[crate::scene::preview::PreviewLayer],
+    cover: Option<&crate::snow::CoverMask>,
+    scene_dir: &Path,
+) -> Result<PreviewStageReport, StageError> {
     let t0 = Instant::now();
     let mut canvas = crate::scene::preview::terrain_preview(terrain, PREVIEW_SIZE_PX);
     if let Some(view) = crate::scene::preview::preview_view(terrain, PREVIEW_SIZE_PX) {
+        if let Some(mask) = cover {
+            crate::scene::preview::draw_cover(&mut canvas, &view, mask);
+        }
         crate::scene::preview::draw_placements(&mut canvas, &view, placements);
     }
     let file = PathBuf::from("preview.png");
     crate::scene::preview::write_png(&canvas, &scene_dir.join(&file)).map_err(|e| fail(Stage::Preview)(e.to_string()))?;
-    Ok(PreviewStageReport { file, width_px: canvas.width as u32, height_px: canvas.height as u32, seconds: t0.elapsed().as_secs_f64() })
+    Ok(PreviewStageReport { file, width_px: canvas.width, height_px: canvas.height, seconds: t0.elapsed().as_secs_f64() })
 }

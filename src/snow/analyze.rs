@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::mesh::Scene;
 use crate::snow::cover::SNOW_ATTRIBUTE;
@@ -14,7 +14,7 @@ use crate::snow::particles::{Field, Particle};
 
 /// Cover in one band of slope (degrees) or altitude (metres): terrain vertices in [from, to), their
 /// mean weight, and the fraction with weight ≥ ½ ("covered").
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Band {
     pub from: f32,
     pub to: f32,
@@ -23,7 +23,7 @@ pub struct Band {
     pub covered_fraction: f64,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SnowReport {
     pub atlas_cells_by_kind: BTreeMap<String, usize>,
     pub particles_by_kind: BTreeMap<String, usize>,

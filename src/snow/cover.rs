@@ -237,6 +237,26 @@ impl CoverMask {
         self.weights.iter().filter(|&&w| w >= threshold).count() as f64 / self.weights.len() as f64
     }
 
+    /// The mask as `cover_mask.png` stores it (8-bit, value/255 per pixel) read back over the given
+    /// extent: what a later stage uses, so a build from cached snow files thins and draws exactly
+    /// like the build that computed them.
+    pub fn from_png(bytes: &[u8], min_x: f32, min_z: f32, metres_per_pixel: f32) -> Result<CoverMask, SnowError> {
+        let img = image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
+            .map_err(|e| SnowError::Terrain(format!("the cover mask PNG does not decode ({e}); rebuild with --force")))?
+            .to_rgba8();
+        if img.width() == 0 || img.height() == 0 || !(metres_per_pixel.is_finite() && metres_per_pixel > 0.0) {
+            return Err(SnowError::Terrain("the cover mask is empty; rebuild with --force".into()));
+        }
+        Ok(CoverMask {
+            width: img.width(),
+            height: img.height(),
+            min_x,
+            min_z,
+            metres_per_pixel,
+            weights: img.pixels().map(|p| p.0[0] as f32 / 255.0).collect(),
+        })
+    }
+
     /// A grey image whose 8-bit PNG value is weight·255 (the colour is pre-linearised so the sRGB
     /// encoding stores the weight itself); alpha 1.
     pub fn to_image(&self) -> Image {

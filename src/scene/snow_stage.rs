@@ -1,0 +1,153 @@
+//! The snow stage: from the preset's `[snow]` and the built terrain, writes `snow/` — the flake
+//! atlas, `emitter.json`, the particle frame (CSV and instanced `snowfall.glb`), the cover mask,
+//! `snow_layer.glb` when asked, and `terrain_snow.glb` (the terrain with the `_SNOW` attribute).
+//!
+//! The terrain with the weight goes to `snow/terrain_snow.glb` rather than over `terrain/terrain.glb`:
+//! the terrain stage's files are cached under the terrain's key alone, and scene.glb and the LoD
+//! files are built from them, so rewriting them here would make one file depend on two stages.
+//! Later stages (scatter thinning, preview) read the mask back from `cover_mask.png`, so a build
+//! that restores this stage from the cache thins and draws exactly like the one that computed it.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::export;
+use crate::mesh::Scene;
+use crate::scene::cache::KeyBuilder;
+use crate::scene::stages::StageError;
+use crate::scene::Preset;
+use crate::snow::{self, CoverMask, SnowReport, SnowSettings};
+
+/// Folder of the stage's files in the scene folder.
+pub const SNOW_DIR: &str = "snow";
+/// The mask's file name in `snow/`.
+pub const MASK_FILE: &str = "cover_mask.png";
+/// The terrain with the `_SNOW` attribute, in `snow/`.
+pub const TERRAIN_FILE: &str = "terrain_snow.glb";
+
+fn fail(message: String) -> StageError {
+    StageError::Failed { stage: "snow", message }
+}
+
+/// Where the mask lies over the terrain (pixel (i, j) centre at min + (i + ½, j + ½)·metres_per_pixel).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct MaskInfo {
+    pub file: PathBuf,
+    pub width: u32,
+    pub height: u32,
+    pub min_x: f32,
+    pub min_z: f32,
+    pub metres_per_pixel: f32,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
+pub struct SnowSeconds {
+    pub atlas: f64,
+    pub particles: f64,
+    pub cover: f64,
+    pub write: f64,
+    pub analyze: f64,
+    pub total: f64,
+}
+
+/// What the snow stage wrote and measured.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct SnowStageReport {
+    /// Every file written, scene-relative (`snow/…`).
+    pub files: Vec<PathBuf>,
+    pub mask: MaskInfo,
+    pub terrain_file: PathBuf,
+    pub layer_file: Option<PathBuf>,
+    pub particles: usize,
+    pub layer_triangles: usize,
+    pub analysis: SnowReport,
+    pub seconds: SnowSeconds,
+}
+
+impl SnowStageReport {
+    pub fn files(&self) -> Vec<PathBuf> {
+        self.files.clone()
+    }
+}
+
+/// Cache key: the terrain's key and the snow settings.
+pub fn snow_key(snow: &SnowSettings, terrain_key: &str) -> String {
+    let mut k = KeyBuilder::new("snow");
+    k.add(terrain_key.as_bytes());
+    k.add(serde_json::to_string(snow).unwrap_or_default().as_bytes());
+    k.finish()
+}
+
+fn rel(scene_dir: &Path, files: Vec<PathBuf>) -> Vec<PathBuf> {
+    files.into_iter().map(|w| w.strip_prefix(scene_dir).map(Path::to_path_buf).unwrap_or(w)).collect()
+}
+
+/// Runs the snow stage into `scene_dir/snow/` on `terrain` (the terrain stage's main scene).
+pub fn run_snow(_preset: &Preset, s: &SnowSettings, terrain: &Scene, scene_dir: &Path) -> Result<SnowStageReport, StageError> {
+    let t0 = Instant::now();
+    let dir = scene_dir.join(SNOW_DIR);
+    let err = |e: snow::SnowError| fail(e.to_string());
+
+    let t1 = Instant::now();
+    let atlas = snow::build_atlas(&s.flakes).map_err(err)?;
+    let atlas_s = t1.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let particles = snow::particles(&s.emitter, &atlas).map_err(err)?;
+    let particles_s = t1.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let mut covered = terrain.clone();
+    covered.name = "terrain_snow".into();
+    snow::apply_cover(&mut covered, &s.cover).map_err(err)?;
+    let mask = snow::cover_mask(&covered, s.mask_px).map_err(err)?;
+    let layer = if s.layer { Some(snow::snow_layer(&covered, s.layer_min_weight).map_err(err)?) } else { None };
+    let cover_s = t1.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let mut files = rel(scene_dir, snow::write_snowfall(&dir, &atlas, &s.emitter, &particles, s.flakes.alpha_cutoff).map_err(err)?);
+    files.extend(rel(scene_dir, snow::write_cover(&dir, &mask, layer.as_ref()).map_err(err)?));
+    let terrain_file = PathBuf::from(SNOW_DIR).join(TERRAIN_FILE);
+    let written = export::write_scene(&covered, &scene_dir.join(&terrain_file)).map_err(|e| fail(e.to_string()))?;
+    files.extend(rel(scene_dir, written));
+    let write_s = t1.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    // the report's mask coverage is that of the mask as stored (what later stages read)
+    let mask_file = PathBuf::from(SNOW_DIR).join(MASK_FILE);
+    let mut info = MaskInfo {
+        file: mask_file,
+        width: mask.width,
+        height: mask.height,
+        min_x: mask.min_x,
+        min_z: mask.min_z,
+        metres_per_pixel: mask.metres_per_pixel,
+    };
+    let stored = load_mask(scene_dir, &info)?;
+    info.width = stored.width;
+    info.height = stored.height;
+    let analysis = snow::analyze(&atlas, &s.emitter, &particles, Some(&covered), Some(&stored));
+    let analyze_s = t1.elapsed().as_secs_f64();
+
+    let layer_file = layer.as_ref().map(|_| PathBuf::from(SNOW_DIR).join("snow_layer.glb"));
+    let layer_triangles = layer.as_ref().map_or(0, |l| l.meshes.iter().map(|m| m.triangle_count()).sum());
+    Ok(SnowStageReport {
+        files,
+        mask: info,
+        terrain_file,
+        layer_file,
+        particles: particles.len(),
+        layer_triangles,
+        analysis,
+        seconds: SnowSeconds { atlas: atlas_s, particles: particles_s, cover: cover_s, write: write_s, analyze: analyze_s, total: t0.elapsed().as_secs_f64() },
+    })
+}
+
+/// The cover mask as stored in `snow/cover_mask.png`, placed over the terrain as the report says.
+pub fn load_mask(scene_dir: &Path, info: &MaskInfo) -> Result<CoverMask, StageError> {
+    let path = scene_dir.join(&info.file);
+    let bytes = std::fs::read(&path).map_err(|e| fail(format!("{}: cannot read the cover mask: {e}", path.display())))?;
+    CoverMask::from_png(&bytes, info.min_x, info.min_z, info.metres_per_pixel).map_err(|e| fail(format!("{}: {e}", path.display())))
+}
