@@ -7,6 +7,7 @@
 # Then the full LoD chain (5 levels, 2048-px atlas, every glb and mip written and re-validated):
 # best of VERDANT_BENCH_RUNS runs without the image analyzer, the analyzer's own seconds from one
 # run, and peak memory. Target: trees3.ls full chain under 5 s.
+# Last, `verdant mesh` on a generated OBJ rock (noisy icosphere, 20 480 triangles): the same chain.
 #
 # Uses ../shared/data/lsystems relative to the repo root (override with VERDANT_LSYSTEMS_DIR).
 # Arguments go to every `verdant tree` run, e.g. `--radial-segments 12`.
@@ -63,4 +64,50 @@ for file in "$DATA/lparser-v4/trees3.ls" "$DATA/lparser-v4/fern-plant.ls" "$DATA
     fi
     printf '%-16s %-34s %9.3f %9.3f %10.2f %9.1f  %s\n' "$name.ls" "$tris" "$best" "$median" "$analyze" "$(awk -v k="$peak_kib" 'BEGIN { print k / 1024 }')" "$target"
 done
+
+# bring your own mesh: a rock written as OBJ + MTL (icosphere subdivided 5 times, smooth bumps, 2 m)
+python3 - "$OUT/rock.obj" <<'PY'
+import math, sys
+t = (1 + 5 ** 0.5) / 2
+v = [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]
+f = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
+     [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
+unit = lambda p: [x / math.sqrt(sum(y * y for y in p)) for x in p]
+v = [unit(p) for p in v]
+for _ in range(5):
+    mid, nf = {}, []
+    for tri in f:
+        m = []
+        for k in range(3):
+            a, b = sorted((tri[k], tri[(k + 1) % 3]))
+            if (a, b) not in mid:
+                v.append(unit([(v[a][i] + v[b][i]) / 2 for i in range(3)]))
+                mid[(a, b)] = len(v) - 1
+            m.append(mid[(a, b)])
+        nf += [[tri[0], m[0], m[2]], [tri[1], m[1], m[0]], [tri[2], m[2], m[1]], [m[0], m[1], m[2]]]
+    f = nf
+with open(sys.argv[1], 'w') as o:
+    o.write('mtllib rock.mtl\nusemtl stone\n')
+    for p in v:
+        b = 1 + 0.12 * math.sin(3 * p[0]) * math.cos(2 * p[2]) + 0.06 * math.sin(5 * p[1] + 1) + 0.02 * math.sin(17 * p[0] + 11 * p[1])
+        o.write('v %f %f %f\n' % (p[0] * b, max(p[1] * b * 0.7, -0.45), p[2] * b * 0.9))
+    for tri in f:
+        o.write('f %d %d %d\n' % tuple(i + 1 for i in tri))
+with open(sys.argv[1][:-4] + '.mtl', 'w') as o:
+    o.write('newmtl stone\nKd 0.4 0.36 0.3\n')
+PY
+echo
+echo "bring your own mesh: verdant mesh on an OBJ rock, 2048-px atlas"
+printf '%-16s %-34s %9s %9s %10s %9s\n' file triangles_LoD0..4 best_s median_s analyze_s peak_MiB
+times=()
+for ((run = 0; run < RUNS; run++)); do
+    "$BIN" --quiet mesh "$OUT/rock.obj" -o "$OUT/mesh/rock.glb" --atlas-size 2048 --no-analysis --report "$OUT/rock.chain.json"
+    times+=("$(jq '.seconds_total' "$OUT/rock.chain.json")")
+done
+read -r best median < <(printf '%s\n' "${times[@]}" | sort -g | awk '{ v[NR] = $1 } END { print v[1], v[int((NR + 1) / 2)] }')
+peak_kib=$( { /usr/bin/time -f '%M' "$BIN" --quiet mesh "$OUT/rock.obj" -o "$OUT/mesh/rock.glb" --atlas-size 2048 --no-analysis ; } 2>&1 | tail -n 1)
+"$BIN" --quiet mesh "$OUT/rock.obj" -o "$OUT/mesh/rock.glb" --atlas-size 2048 --report "$OUT/rock.analyzed.json"
+analyze=$(jq '.chain.seconds_analyze' "$OUT/rock.analyzed.json")
+tris=$(jq -r '[.chain.lods[].triangles] | map(tostring) | join("/")' "$OUT/rock.chain.json")
+printf '%-16s %-34s %9.3f %9.3f %10.2f %9.1f\n' rock.obj "$tris" "$best" "$median" "$analyze" "$(awk -v k="$peak_kib" 'BEGIN { print k / 1024 }')"
 exit $status

@@ -62,6 +62,8 @@ pub struct Issue {
 pub struct PrimitiveReport {
     pub vertices: usize,
     pub triangles: usize,
+    /// Points drawn (POINTS primitives, e.g. point leaves).
+    pub points: usize,
     pub bounds: Option<Bounds>,
 }
 
@@ -77,6 +79,9 @@ impl MeshReport {
     }
     pub fn triangles(&self) -> usize {
         self.primitives.iter().map(|p| p.triangles).sum()
+    }
+    pub fn points(&self) -> usize {
+        self.primitives.iter().map(|p| p.points).sum()
     }
     pub fn bounds(&self) -> Option<Bounds> {
         let corners: Vec<[f32; 3]> =
@@ -112,6 +117,9 @@ impl fmt::Display for ValidationReport {
         writeln!(f, "{}: {} meshes, {v} vertices, {t} triangles", self.path.display(), self.meshes.len())?;
         for m in &self.meshes {
             write!(f, "  mesh {:?}: {} vertices, {} triangles", m.name, m.vertices(), m.triangles())?;
+            if m.points() > 0 {
+                write!(f, ", {} points", m.points())?;
+            }
             match m.bounds() {
                 Some(b) => writeln!(f, ", bounds {:?} .. {:?}", b.min, b.max)?,
                 None => writeln!(f)?,
@@ -146,7 +154,7 @@ pub fn validate_file(path: &Path, opts: &ValidateOptions) -> Result<ValidationRe
             primitives: m
                 .primitives
                 .iter()
-                .map(|p| PrimitiveReport { vertices: p.positions.len(), triangles: p.triangle_count(), bounds: p.bounds() })
+                .map(|p| PrimitiveReport { vertices: p.positions.len(), triangles: p.triangle_count(), points: p.point_count(), bounds: p.bounds() })
                 .collect(),
         })
         .collect();

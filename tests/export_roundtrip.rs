@@ -36,6 +36,7 @@ fn sample_scene() -> Scene {
         }],
         indices: vec![0, 1, 2, 0, 2, 3],
         material: Some(0),
+        ..Primitive::default()
     };
     let trunk = Primitive {
         positions: vec![[-0.1, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 1.3, 0.0]],

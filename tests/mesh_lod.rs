@@ -332,3 +332,24 @@ fn cli_mesh_writes_the_chain_like_tree_and_reports() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("--scale"));
 }
+
+#[test]
+fn jpeg_textures_load_and_stay_opaque() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = "mtllib bark.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl bark\nf 1/1 2/2 3/3 4/4\n";
+    std::fs::write(dir.path().join("wall.obj"), obj).unwrap();
+    std::fs::write(dir.path().join("bark.mtl"), "newmtl bark\nKd 0.8 0.8 0.8\nmap_Kd bark.jpg\n").unwrap();
+    let img = image::RgbImage::from_fn(32, 32, |x, y| image::Rgb([(x * 8) as u8, (y * 8) as u8, 90]));
+    img.save(dir.path().join("bark.jpg")).unwrap();
+    let source = load_obj(&dir.path().join("wall.obj"), &ObjOptions::default()).unwrap();
+    assert_eq!(source.scene.textures.len(), 1);
+    assert!(source.scene.textures[0].png.starts_with(b"\x89PNG"), "stored as PNG");
+    let m = &source.scene.materials[0];
+    assert_eq!((m.alpha_mode, m.double_sided, m.base_color_texture), (AlphaMode::Opaque, false, Some(0)));
+    assert_eq!(source.mesh().primitives[0].uvs.len(), 4);
+    // v flipped to glTF's convention: the OBJ's bottom edge (vt v = 0) is the image's bottom (v = 1)
+    let p = &source.mesh().primitives[0];
+    for (pos, uv) in p.positions.iter().zip(&p.uvs) {
+        assert_eq!(uv[1], 1.0 - pos[1]);
+    }
+}
