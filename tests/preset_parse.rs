@@ -807,11 +807,18 @@ fn shipped_presets_have_the_species_they_promise() {
     assert!(p.species.iter().all(|s| s.density_map.is_none() && s.mask.is_none()), "no image files are shipped");
 
     let p = load_preset(&manifest_dir().join("presets/alpine.toml")).unwrap();
-    let [conifer, grass] = &p.species[..] else { panic!("{:?}", p.species) };
+    let [conifer, grass, boulder] = &p.species[..] else { panic!("{:?}", p.species) };
     assert_eq!((conifer.kind, conifer.placement, conifer.min_spacing_m), (SpeciesKind::Tree, Placement::Poisson, 6.0));
     assert!(conifer.slope_deg[1] <= 35.0 && conifer.altitude_m[1] < 1500.0 && conifer.altitude_m[0] > 0.0);
     assert_eq!(grass.kind, SpeciesKind::Grass);
     assert_eq!(grass.exclusions[0].species, "conifer");
+    assert_eq!((boulder.kind, boulder.placement), (SpeciesKind::Mesh, Placement::Poisson));
+    let verdant::scene::PlantLook::Mesh(model) = &boulder.look else { panic!("boulder: {:?}", boulder.look) };
+    assert!(model.obj.ends_with("models/boulder.obj") && model.obj.is_file(), "{}", model.obj.display());
+    let verdant::scene::PlantLook::Tree(oak_look) = &load_preset(&manifest_dir().join("presets/meadow.toml")).unwrap().species[0].look else {
+        panic!("the meadow's oaks grow from an L-system")
+    };
+    assert!(oak_look.lsystem.ends_with("lsystems/broadleaf.ls") && oak_look.lsystem.is_file());
 }
 
 #[test]

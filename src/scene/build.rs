@@ -214,7 +214,7 @@ fn placements_from_scene(scene: &Scene, preset: &Preset) -> Vec<PreviewLayer> {
                     }
                 }
             }
-            PreviewLayer { color: marker::species_color(s.kind, index), kind: s.kind, footprint_m: footprint_m(s.kind, s.scale), positions: points }
+            PreviewLayer { color: marker::species_color(s.kind, index), kind: s.kind, footprint_m: footprint_m(s), positions: points }
         })
         .collect()
 }
@@ -309,7 +309,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
                     .iter()
                     .map(|p| {
                         let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
-                        PreviewLayer { color: p.color, kind: p.species.kind, footprint_m: footprint_m(p.species.kind, p.species.scale), positions: pts }
+                        PreviewLayer { color: p.color, kind: p.species.kind, footprint_m: footprint_m(&p.species), positions: pts }
                     })
                     .collect::<Vec<_>>()
             });

@@ -402,18 +402,28 @@ pub struct PreviewLayer {
     pub positions: Vec<[f64; 3]>,
 }
 
-/// Width seen from above of a species' marker (plants/marker.rs proportions: a tree's crown is
-/// half its height wide, grass and flower cards 0.6 of it, a mesh box its height) times the middle
-/// of its scale range.
-pub fn footprint_m(kind: crate::scene::SpeciesKind, scale: [f64; 2]) -> f64 {
-    use crate::scene::SpeciesKind;
+/// Width seen from above of one instance of a species, times the middle of its scale range: a
+/// marker's from plants/marker.rs proportions (a tree's crown is half its height wide, grass and
+/// flower cards 0.6 of it, a mesh box its height); an L-system tree scaled to a height as wide as
+/// [`TREE_CROWN_PER_HEIGHT`] of it (an estimate, so the preview needs no tree built).
+pub fn footprint_m(species: &crate::scene::SpeciesSettings) -> f64 {
+    use crate::scene::{PlantLook, SpeciesKind};
+    let mid_scale = 0.5 * (species.scale[0] + species.scale[1]);
+    if let PlantLook::Tree(crate::scene::TreeLook { height_m: Some(h), .. }) = &species.look {
+        return h * TREE_CROWN_PER_HEIGHT * mid_scale;
+    }
+    let kind = species.kind;
     let width_per_height = match kind {
         SpeciesKind::Tree => 0.5,
         SpeciesKind::Grass | SpeciesKind::Flower => 0.6,
         SpeciesKind::Mesh => 1.0,
     };
-    crate::plants::marker::nominal_height_m(kind) as f64 * width_per_height * 0.5 * (scale[0] + scale[1])
+    crate::plants::marker::nominal_height_m(kind) as f64 * width_per_height * mid_scale
 }
+
+/// Crown width over height assumed for L-system trees in the preview (broad-leaved trees are about
+/// as wide as tall, conifers a third: the middle).
+pub const TREE_CROWN_PER_HEIGHT: f64 = 0.7;
 
 /// Smallest disc drawn, in pixels across: a tree far smaller than a pixel still shows.
 pub const MIN_DISC_PX: f64 = 3.0;
