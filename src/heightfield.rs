@@ -223,7 +223,7 @@ fn heightfield(width: usize, height: usize, heights: Vec<f32>) -> Heightfield {
 
 /// SRTM .hgt: a square of big-endian int16 metres; −32768 marks a void.
 fn decode_hgt(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded, HeightfieldError> {
-    if bytes.len() % 2 != 0 {
+    if !bytes.len().is_multiple_of(2) {
         return Err(HeightfieldError::format(path, format!("a .hgt file holds 16-bit samples, but its size ({} bytes) is odd; the file is truncated or not SRTM", bytes.len())));
     }
     let n = bytes.len() / 2;
@@ -245,16 +245,20 @@ fn decode_hgt(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
     Ok(Decoded { heightfield: heightfield(side, side, heights), encoding: Encoding::Hgt, voids_filled })
 }
 
+/// [`fill_voids`] found no valid sample to fill from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NothingValid;
+
 /// Fills samples with `valid == false` from their valid neighbours: breadth-first from the valid
 /// region, each void takes the mean of its already-known 4-neighbours (deterministic, one pass per
-/// ring). Returns the number filled, or Err if nothing is valid.
-pub fn fill_voids(width: usize, height: usize, heights: &mut [f32], mut known: Vec<bool>) -> Result<usize, ()> {
+/// ring). Returns the number filled, or [`NothingValid`] if no sample is valid.
+pub fn fill_voids(width: usize, height: usize, heights: &mut [f32], mut known: Vec<bool>) -> Result<usize, NothingValid> {
     let total_void = known.iter().filter(|&&k| !k).count();
     if total_void == 0 {
         return Ok(0);
     }
     if total_void == known.len() {
-        return Err(());
+        return Err(NothingValid);
     }
     let neighbours = |k: usize| {
         let (i, j) = (k % width, k / width);
@@ -320,7 +324,7 @@ fn decode_r16(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
         Some(s) => s,
         None => {
             let side = (n as f64).sqrt().round() as usize;
-            if side * side != n || bytes.len() % 2 != 0 {
+            if side * side != n || !bytes.len().is_multiple_of(2) {
                 return Err(HeightfieldError::format(
                     path,
                     format!("a raw 16-bit heightmap needs its size: pass --size WIDTHxHEIGHT ({} bytes is not a square of 16-bit samples)", bytes.len()),

@@ -180,9 +180,9 @@ impl Bounds {
         let first = *points.first()?;
         let mut b = Bounds { min: first, max: first };
         for p in &points[1..] {
-            for k in 0..3 {
-                b.min[k] = b.min[k].min(p[k]);
-                b.max[k] = b.max[k].max(p[k]);
+            for (k, &v) in p.iter().enumerate() {
+                b.min[k] = b.min[k].min(v);
+                b.max[k] = b.max[k].max(v);
             }
         }
         Some(b)

@@ -59,7 +59,7 @@ fn without_timing(rel: &str, bytes: &[u8]) -> Vec<u8> {
     } else if rel.ends_with("report.md") {
         let s = String::from_utf8(bytes.to_vec()).unwrap();
         let cut = s.find("## Timing").unwrap_or_else(|| panic!("{rel} has no timing section"));
-        s[..cut].as_bytes().to_vec()
+        s.as_bytes()[..cut].to_vec()
     } else {
         bytes.to_vec()
     }
