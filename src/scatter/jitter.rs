@@ -1,15 +1,15 @@
 //! Jittered grid placement (stratified sampling, Cook 1986 "Stochastic sampling in computer
 //! graphics"): one candidate per cell of side 1/√max_density at a hashed offset, kept with
 //! probability density(x, z), so the expected count is exactly ∫ density · max_density.
-//! Positions are rounded to a 0.1 mm grid (far below the jitter's scale), which keeps the
-//! placement table's x and z short.
+//! Positions are rounded to a 0.1 mm grid (far below the jitter's scale), heights and rotations to
+//! theirs (see `on_table_grids`), which keeps the placement table's entries short.
 
 use rayon::prelude::*;
 
 use crate::synth::mix64;
 
 use super::rules::Rules;
-use super::{on_grid, Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POSITION_STEPS_PER_M};
+use super::{height_bounds, on_grid, on_table_grids, Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POSITION_STEPS_PER_M};
 
 /// All instances of a jittered species, sorted by tile and then by cell (row-major).
 pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterError> {
@@ -33,6 +33,7 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     let (ncx, ncz) = (ncx as i64, ncz as i64);
     let tiling = rules.tiling;
     let key = mix64(rules.key ^ 0x6a69_7474_6572); // "jitter"
+    let bounds = height_bounds(s);
     // the density map's bound over blocks of BLOCK × BLOCK cells: where it is 0 every candidate is
     // a density reject (keep_u ≥ 0 always), so those are counted without hashing or sampling
     const BLOCK: i64 = 32;
@@ -83,7 +84,7 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
                         }
                         let h2 = mix64(h1);
                         if let Some(inst) = rules.place(x, z, super::unit(h2), h2 ^ key, t, &mut counts) {
-                            out.push(inst);
+                            out.push(on_table_grids(inst, bounds));
                         }
                     }
                 }

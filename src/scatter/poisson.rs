@@ -57,6 +57,7 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     }
     let blocks = Blocks { extent: tiling.extent, block_m, nbx, nbz, r };
     let key = mix64(rules.key ^ 0x0070_6f69_7373_6f6e); // "poisson"
+    let bounds = super::height_bounds(s);
     let mut finished: Vec<Vec<[f64; 2]>> = vec![Vec::new(); nbx * nbz];
     for phase in 0..4 {
         let ids: Vec<usize> = (0..nbx * nbz).filter(|&b| (b % nbx) % 2 + 2 * ((b / nbx) % 2) == phase).collect();
@@ -87,7 +88,8 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
                 let h = mix64(bkey.wrapping_add(k as u64));
                 let tile = tiling.tile_of(p[0], p[1]);
                 if let Some(inst) = rules.place(p[0], p[1], super::unit(h), mix64(h), tile, &mut counts) {
-                    out.push(inst);
+                    // x and z keep every bit (rounding could bring two closer than the spacing)
+                    out.push(super::on_table_grids(inst, bounds));
                 }
             }
             (out, counts)
