@@ -255,7 +255,9 @@ pub(crate) fn on_grid(v: f64, steps: f64) -> f64 {
 /// Uniform in [0, 1) from the top 53 bits of a hash.
 #[inline]
 pub(crate) fn unit(h: u64) -> f64 {
-    (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    // through i64 (exact below 2^53): one conversion instruction, where u64 → f64 takes a branch
+    // and several on x86-64
+    ((h >> 11) as i64) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
 /// Places one species; see the module docs. `earlier` holds the species placed before this one

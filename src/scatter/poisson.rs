@@ -161,7 +161,8 @@ impl Blocks {
             if !(fi >= 0.0 && fj >= 0.0 && fi < gw as f64 && fj < gh as f64) {
                 return None;
             }
-            Some((fi as usize, fj as usize))
+            // through i64: one instruction (f64 → usize takes several); both are ≥ 0 here
+            Some((fi as i64 as usize, fj as i64 as usize))
         };
         // the neighbours' final points within the margin; a second point in one cell (only by
         // rounding, at distance ≈ r) goes to an overflow list that every check also reads
