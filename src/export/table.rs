@@ -74,6 +74,16 @@ impl Line<'_> {
         self.len += n;
     }
 
+    /// Appends what `write` writes (at most 24 bytes: a float's shortest digits) in place.
+    #[inline]
+    fn put_with(&mut self, write: impl FnOnce(&mut &mut [u8]) -> std::io::Result<()>) {
+        let mut rest = &mut self.buf[self.len..];
+        let before = rest.len();
+        // the buffer holds ROW_MAX per row, so a number always fits
+        let _ = write(&mut rest);
+        self.len += before - rest.len();
+    }
+
     #[inline]
     fn extend(&mut self, s: &[u8]) {
         self.buf[self.len..self.len + s.len()].copy_from_slice(s);
@@ -114,7 +124,7 @@ impl Line<'_> {
 
     /// Appends ±m·10^-D as ryu writes it: the integer part, a point, the fraction without trailing
     /// zeros (at least one digit). 1 ≤ D ≤ 7.
-    #[inline]
+    #[inline(always)]
     fn put_fixed<const D: u32>(&mut self, negative: bool, m: u64) {
         if negative {
             self.push(b'-');
@@ -189,8 +199,16 @@ fn push_row(line: &mut Line<'_>, r: &PlacementRow) -> bool {
     for v in r.scale.into_iter().chain([r.yaw_deg]) {
         let bits = v.to_bits();
         if bits == prev.0 {
-            line.buf.copy_within(prev.1..prev.2, line.len);
-            line.len += prev.2 - prev.1;
+            let n = prev.2 - prev.1;
+            if n <= 8 {
+                // one 8-byte load and store (a short scale like "1.0123"), no memmove call
+                let mut word = [0u8; 8];
+                word.copy_from_slice(&line.buf[prev.1..prev.1 + 8]);
+                line.put8(u64::from_le_bytes(word), n);
+            } else {
+                line.buf.copy_within(prev.1..prev.2, line.len);
+                line.len += n;
+            }
         } else {
             let start = line.len;
             push_f32(line, v);
@@ -279,9 +297,7 @@ fn push_f64(line: &mut Line<'_>, v: f64) {
     } else if v == 0.0 {
         line.extend(if v.is_sign_negative() { b"-0.0" } else { b"0.0" });
     } else if v.abs() < ZMIJ_F64_BELOW {
-        let mut digits = Vec::with_capacity(32);
-        let _ = CompactFormatter.write_f64(&mut digits, v); // into a Vec: cannot fail
-        line.extend(&digits);
+        line.put_with(|w| CompactFormatter.write_f64(w, v));
     } else {
         line.extend(ryu::Buffer::new().format_finite(v).as_bytes());
     }
@@ -294,9 +310,7 @@ fn push_f32(line: &mut Line<'_>, v: f32) {
     } else if v == 0.0 {
         line.extend(if v.is_sign_negative() { b"-0.0" } else { b"0.0" });
     } else if v.abs() < ZMIJ_F32_BELOW {
-        let mut digits = Vec::with_capacity(32);
-        let _ = CompactFormatter.write_f32(&mut digits, v);
-        line.extend(&digits);
+        line.put_with(|w| CompactFormatter.write_f32(w, v));
     } else {
         line.extend(ryu::Buffer::new().format_finite(v).as_bytes());
     }
