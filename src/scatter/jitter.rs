@@ -34,8 +34,12 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     let tiling = rules.tiling;
     let key = mix64(rules.key ^ 0x6a69_7474_6572); // "jitter"
     let bounds = height_bounds(s);
-    // the density map's bound over blocks of BLOCK × BLOCK cells: where it is 0 every candidate is
-    // a density reject (keep_u ≥ 0 always), so those are counted without hashing or sampling
+    // the density map's bound over blocks of BLOCK × BLOCK cells: a candidate whose keep_u is at or
+    // above it is a density reject (counted without sampling the map or calling the rules), and
+    // where the bound is 0 every candidate is (counted without hashing). The bound is the largest
+    // pixel under the block's bilinear footprint (map values are 0..1, NaN-free), raised by 10⁻⁶
+    // for the f32 rounding of the interpolation, so the kept instances and counts are exactly
+    // those of sampling every candidate.
     const BLOCK: i64 = 32;
     let per_tile: Vec<(Vec<Instance>, RuleCounts)> = (0..tiling.count() as u32)
         .into_par_iter()
@@ -59,13 +63,18 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
             let mut out = Vec::with_capacity((cells * max_keep.min(1.0)).ceil() as usize + 16);
             // row-major over the tile's cells (the output order), with the density bound of the
             // blocks of each band of BLOCK rows
-            let mut empty = Vec::new();
+            let mut bound = Vec::new();
             for bj in (cj0..=cj1).step_by(BLOCK as usize) {
                 let bj1 = (bj + BLOCK - 1).min(cj1);
-                empty.clear();
-                empty.extend((ci0..=ci1).step_by(BLOCK as usize).map(|bi| {
+                bound.clear();
+                bound.extend((ci0..=ci1).step_by(BLOCK as usize).map(|bi| {
                     let bi1 = (bi + BLOCK - 1).min(ci1);
-                    rules.max_density_over([x0 + bi as f64 * cell, z0 + bj as f64 * cell, x0 + (bi1 + 1) as f64 * cell, z0 + (bj1 + 1) as f64 * cell]) <= 0.0
+                    let d = rules.max_density_over([x0 + bi as f64 * cell, z0 + bj as f64 * cell, x0 + (bi1 + 1) as f64 * cell, z0 + (bj1 + 1) as f64 * cell]);
+                    if d <= 0.0 {
+                        0.0
+                    } else {
+                        d.min(1.0) * (1.0 + 1e-6) * rules.keep_scale
+                    }
                 }));
                 for cj in bj..=bj1 {
                     let row_inside = cj >= ij0 && cj <= ij1;
@@ -77,13 +86,20 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
                         if !(row_inside && ci >= ii0 && ci <= ii1) && (x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz)) {
                             continue;
                         }
-                        if empty[((ci - ci0) / BLOCK) as usize] {
+                        let keep_bound = bound[((ci - ci0) / BLOCK) as usize];
+                        if keep_bound <= 0.0 {
                             counts.candidates += 1;
                             counts.density += 1;
                             continue;
                         }
                         let h2 = mix64(h1);
-                        if let Some(inst) = rules.place(x, z, super::unit(h2), h2 ^ key, t, &mut counts) {
+                        let keep_u = super::unit(h2);
+                        if keep_u >= keep_bound {
+                            counts.candidates += 1;
+                            counts.density += 1;
+                            continue;
+                        }
+                        if let Some(inst) = rules.place(x, z, keep_u, h2 ^ key, t, &mut counts) {
                             out.push(on_table_grids(inst, bounds));
                         }
                     }
