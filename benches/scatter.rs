@@ -116,9 +116,12 @@ struct Row {
     write_cpu: f64,
     csv_bytes: u64,
     peak_bytes: u64,
+    /// generate + write of one and the same run (the target's figure): best and median over the runs
+    total_best_s: f64,
+    total_median_s: f64,
 }
 
-const ROW_FIELDS: usize = 11;
+const ROW_FIELDS: usize = 13;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -163,6 +166,7 @@ fn main() {
     if let Some(k) = args.iter().position(|a| a == "--case").and_then(|p| args.get(p + 1)).and_then(|v| v.parse::<usize>().ok()) {
         let (name, sp) = &cases[k];
         let mut best: Option<Row> = None;
+        let mut totals = Vec::new();
         let mut digest = None;
         for _ in 0..runs() {
             reset_peak();
@@ -187,7 +191,10 @@ fn main() {
                 write_cpu,
                 csv_bytes,
                 peak_bytes: hwm.saturating_sub(rss0),
+                total_best_s: generate_s + write_s,
+                total_median_s: f64::NAN,
             };
+            totals.push(generate_s + write_s);
             drop(out);
             best = Some(match best {
                 None => row,
@@ -200,7 +207,10 @@ fn main() {
                 }
             });
         }
-        let r = best.expect("at least one run");
+        let mut r = best.expect("at least one run");
+        totals.sort_by(f64::total_cmp);
+        r.total_best_s = totals[0];
+        r.total_median_s = if totals.len() % 2 == 1 { totals[totals.len() / 2] } else { 0.5 * (totals[totals.len() / 2 - 1] + totals[totals.len() / 2]) };
         let _ = std::fs::remove_file(&tmp);
         println!("DIGEST {:016x} {name}", digest.unwrap_or(0));
         // the analyzer, as every build runs it (its height check samples at most 2^19 instances)
@@ -217,8 +227,8 @@ fn main() {
             stats.max_height_error_csv_m
         );
         println!(
-            "ROW {} {} {} {} {} {} {} {} {} {} {}",
-            r.instances, r.candidates, r.generate_s, r.generate_cpu, r.format_s, r.format_cpu, r.write_s, r.write_cpu, r.csv_bytes, r.peak_bytes, name
+            "ROW {} {} {} {} {} {} {} {} {} {} {} {} {}",
+            r.instances, r.candidates, r.generate_s, r.generate_cpu, r.format_s, r.format_cpu, r.write_s, r.write_cpu, r.csv_bytes, r.peak_bytes, r.total_best_s, r.total_median_s, name
         );
         return;
     }
@@ -246,6 +256,8 @@ fn main() {
             write_cpu: num(8),
             csv_bytes: num(9) as u64,
             peak_bytes: num(10) as u64,
+            total_best_s: num(11),
+            total_median_s: num(12),
         });
     }
 
@@ -280,10 +292,12 @@ fn main() {
         let target = if r.case.starts_with("jittered") { 5.0 } else { 0.5 };
         let wall = r.instances as f64 / (r.generate_s + r.write_s) / 1e6;
         let cpu2 = r.instances as f64 / ((r.generate_cpu + r.write_cpu) / 2.0) / 1e6;
+        let (best, median) = (r.instances as f64 / r.total_best_s / 1e6, r.instances as f64 / r.total_median_s / 1e6);
         println!(
-            "target {}: ≥ {target} M inst/s incl. writing — {wall:.2} M/s wall ({}), {cpu2:.2} M/s from CPU time on 2 cores",
+            "target {}: ≥ {target} M inst/s incl. writing — {wall:.2} M/s wall from the best stages ({}); one run's generate + write: best {best:.2}, median {median:.2} M/s over {} runs; {cpu2:.2} M/s from CPU time on 2 cores",
             r.case,
-            if wall >= target { "met" } else { "not met" }
+            if wall >= target { "met" } else { "not met" },
+            runs()
         );
     }
     println!(

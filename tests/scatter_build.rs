@@ -223,10 +223,11 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
         assert!((rows.len() as f64 - expected).abs() < 0.1 * expected, "{species}: {} placed, {expected} expected", rows.len());
         let max_err = st["max_height_error_m"].as_f64().unwrap_or_else(|| panic!("{species}: no max_height_error_m: {st}"));
         assert!((0.0..=1e-4).contains(&max_err), "{species}: max height error {max_err}");
-        // measured on every instance (below the sampling limit): the CSV's f64 values to rounding
+        // measured on every instance (below the sampling limit): the CSV's heights are the mesh's
+        // on their 1 µm grid (half a step, 5e-7 m, at most)
         assert_eq!(st["height_checked"].as_u64(), Some(rows.len() as u64), "{species}: {st}");
         let csv_err = st["max_height_error_csv_m"].as_f64().unwrap_or_else(|| panic!("{species}: no max_height_error_csv_m: {st}"));
-        assert!((0.0..=1e-9).contains(&csv_err) && csv_err <= max_err, "{species}: CSV height error {csv_err}");
+        assert!((0.0..=5e-7 + 1e-12).contains(&csv_err), "{species}: CSV height error {csv_err}");
         let min_pair = st["min_pair_distance_m"].as_f64().unwrap_or_else(|| panic!("{species}: no min_pair_distance_m: {st}"));
         let ours = min_distance(&rows, &rows, true, 6.0);
         if ours.is_finite() {

@@ -39,47 +39,185 @@ impl ToPlacementRow for PlacementRow {
 }
 
 /// Rows formatted by one task; a task's buffer is reserved once for its rows at the longest.
-const ROWS_PER_CHUNK: usize = 16_384;
-/// Chunks formatted while the previous batch is written (bounds the streaming writer's memory to
-/// two batches: 2 × 32 × 16384 rows ≈ 150 MB at 143 B/row).
-const CHUNKS_PER_BATCH: usize = 32;
+const ROWS_PER_CHUNK: usize = 4096;
+/// Chunks formatted while the previous batch is written. The streaming writer's buffers (two
+/// batches: 2 × 8 × 4096 rows at most ≈ 15 MB) are reused from batch to batch: their pages are
+/// touched once and stay warm in the caches, where fresh pages for a whole table would cost a
+/// page fault per 4 KiB.
+const CHUNKS_PER_BATCH: usize = 8;
 /// Longest row: a shortest round-trip f64 is at most 24 bytes and an f32 16, a u32 has 10 digits,
 /// and 11 commas + a newline.
 const ROW_MAX: usize = 3 * 24 + 8 * 16 + 10 + 12;
 
-/// Appends one row: each number's shortest round-trip digits, a field equal to the previous one
-/// (the uniform scale) copied instead of formatted again, the tile by pairs of digits. Returns
-/// false (writing nothing) if a number is not finite. The caller reserves [`ROW_MAX`] per row, so
-/// nothing reallocates here.
-///
-/// The digits come from serde_json's `CompactFormatter` (already a dependency), which writes
-/// floats with Żmij (Schubfach-based, shortest round-trip): the same bytes as
-/// `ryu::Buffer::format_finite` (tested below), 20–35 % less CPU per number; short decimals
-/// (see [`short_f64`], [`short_f32`]) are written from their integer directly.
+/// A chunk's bytes under construction: `buf[..len]` is written. Fields are stored with fixed-size
+/// 8-byte copies (the buffer holds [`ROW_MAX`] per row plus [`SLACK`], which absorbs the
+/// over-write): no per-field call to `memcpy` for a variable length.
+struct Line<'a> {
+    buf: &'a mut [u8],
+    len: usize,
+}
+
+/// Bytes past the last row that an 8-byte store may touch.
+const SLACK: usize = 16;
+
+impl Line<'_> {
+    #[inline]
+    fn push(&mut self, b: u8) {
+        self.buf[self.len] = b;
+        self.len += 1;
+    }
+
+    /// Stores the 8 bytes of `word` (little-endian) and keeps the first `n` (≤ 8).
+    #[inline]
+    fn put8(&mut self, word: u64, n: usize) {
+        self.buf[self.len..self.len + 8].copy_from_slice(&word.to_le_bytes());
+        self.len += n;
+    }
+
+    /// Appends what `write` writes (at most 24 bytes: a float's shortest digits) in place.
+    #[inline]
+    fn put_with(&mut self, write: impl FnOnce(&mut &mut [u8]) -> std::io::Result<()>) {
+        let mut rest = &mut self.buf[self.len..];
+        let before = rest.len();
+        // the buffer holds ROW_MAX per row, so a number always fits
+        let _ = write(&mut rest);
+        self.len += before - rest.len();
+    }
+
+    #[inline]
+    fn extend(&mut self, s: &[u8]) {
+        self.buf[self.len..self.len + s.len()].copy_from_slice(s);
+        self.len += s.len();
+    }
+
+    /// Appends `v` in decimal.
+    #[inline]
+    fn put_u64(&mut self, v: u64) {
+        if v < 100_000_000 {
+            self.put_below_1e8(v as u32);
+        } else {
+            self.put_large(v);
+        }
+    }
+
+    /// Appends `v` < 10⁸ in decimal.
+    #[inline]
+    fn put_below_1e8(&mut self, v: u32) {
+        let d = eight_digits(v);
+        // leading zero digits are the low zero bytes; one digit stays
+        let skip = ((d.trailing_zeros() / 8) as usize).min(7);
+        self.put8((d | ASCII_ZEROS) >> (8 * skip), 8 - skip);
+    }
+
+    /// Appends `v` ≥ 10⁸ in decimal: groups of eight digits.
+    #[cold]
+    fn put_large(&mut self, v: u64) {
+        let (high, low) = (v / 100_000_000, (v % 100_000_000) as u32);
+        if high < 100_000_000 {
+            self.put_below_1e8(high as u32);
+        } else {
+            self.put_below_1e8((high / 100_000_000) as u32);
+            self.put8(eight_digits((high % 100_000_000) as u32) | ASCII_ZEROS, 8);
+        }
+        self.put8(eight_digits(low) | ASCII_ZEROS, 8);
+    }
+
+    /// Appends ±m·10^-D as ryu writes it: the integer part, a point, the fraction without trailing
+    /// zeros (at least one digit). 1 ≤ D ≤ 7.
+    #[inline(always)]
+    fn put_fixed<const D: u32>(&mut self, negative: bool, m: u64) {
+        if negative {
+            self.push(b'-');
+        }
+        let unit = 10u64.pow(D);
+        if m < 100_000_000 {
+            // all digits from one conversion: 8 − D integer digits (leading zeros skipped, one
+            // stays), the point, D fraction digits (trailing zeros cut, one stays)
+            let int_len = 8 - D as usize;
+            let d = eight_digits(m as u32);
+            let skip = ((d.trailing_zeros() / 8) as usize).min(int_len - 1);
+            let cut = ((d.leading_zeros() / 8) as usize).min(D as usize - 1);
+            let ascii = d | ASCII_ZEROS;
+            self.put8(ascii >> (8 * skip), int_len - skip);
+            self.push(b'.');
+            self.put8(ascii >> (8 * int_len), D as usize - cut);
+            return;
+        }
+        let (int, frac) = (m / unit, m % unit);
+        self.put_u64(int);
+        self.push(b'.');
+        // the fraction's D digits, then zeros: trailing zero digits are the high zero bytes
+        let d = eight_digits((frac * 10u64.pow(8 - D)) as u32);
+        let keep = 8 - ((d.leading_zeros() / 8) as usize).min(7);
+        self.put8(d | ASCII_ZEROS, keep);
+    }
+}
+
+/// The eight decimal digits of `n` < 10⁸ as byte values 0–9, most significant in the lowest byte
+/// (the order they are written in): 4 + 4 digits in two 32-bit lanes, each lane split into pairs
+/// (x/100 = x·10486 >> 20 for x < 10⁴), each pair into digits (x/10 = x·103 >> 10 for x < 100),
+/// all lanes at once, so a number costs a few multiplications instead of a division per digit.
 #[inline]
-fn push_row(out: &mut Vec<u8>, r: &PlacementRow) -> bool {
+fn eight_digits(n: u32) -> u64 {
+    debug_assert!(n < 100_000_000);
+    let n = n as u64;
+    let halves = (n / 10_000) | ((n % 10_000) << 32);
+    let hundreds = ((halves * 10_486) >> 20) & 0x0000_007F_0000_007F;
+    let pairs = hundreds | ((halves - hundreds * 100) << 16);
+    let tens = ((pairs * 103) >> 10) & 0x000F_000F_000F_000F;
+    tens | ((pairs - tens * 10) << 8)
+}
+
+const ASCII_ZEROS: u64 = 0x3030_3030_3030_3030;
+
+/// Appends one row: each number's shortest round-trip digits, a field equal to the previous one
+/// (the uniform scale) copied instead of formatted again. Returns false if a number is not finite.
+///
+/// Numbers that are short decimals (see [`short_f64`], [`short_f32`]: a scatter's positions,
+/// heights, quaternions, scales and yaws on their grids) are written from their integer by
+/// [`Line::put_fixed`]; others get their digits from serde_json's `CompactFormatter` (already a
+/// dependency), which writes floats with Żmij (Schubfach-based, shortest round-trip): the same
+/// bytes as `ryu::Buffer::format_finite` (tested below), 20–35 % less CPU per number.
+#[inline]
+fn push_row(line: &mut Line<'_>, r: &PlacementRow) -> bool {
     let finite = r.position.iter().all(|v| v.is_finite()) && r.rotation.iter().chain(&r.scale).all(|v| v.is_finite()) && r.yaw_deg.is_finite();
     if !finite {
         return false;
     }
     for v in r.position {
-        push_f64(out, v);
-        out.push(b',');
+        push_f64(line, v);
+        line.push(b',');
     }
-    let mut prev: (u32, usize, usize) = (u32::MAX, 0, 0); // bits, start, end of the last f32 field
-    for v in r.rotation.into_iter().chain(r.scale).chain([r.yaw_deg]) {
+    for v in r.rotation {
+        match short_f32(v, &UNIT_GRID) {
+            Some(m) => line.put_fixed::<UNIT_DIGITS>(v < 0.0, m),
+            None => push_f32(line, v),
+        }
+        line.push(b',');
+    }
+    let mut prev: (u32, usize, usize) = (u32::MAX, 0, 0); // bits, start, end of the last field
+    for v in r.scale.into_iter().chain([r.yaw_deg]) {
         let bits = v.to_bits();
         if bits == prev.0 {
-            out.extend_from_within(prev.1..prev.2);
+            let n = prev.2 - prev.1;
+            if n <= 8 {
+                // one 8-byte load and store (a short scale like "1.0123"), no memmove call
+                let mut word = [0u8; 8];
+                word.copy_from_slice(&line.buf[prev.1..prev.1 + 8]);
+                line.put8(u64::from_le_bytes(word), n);
+            } else {
+                line.buf.copy_within(prev.1..prev.2, line.len);
+                line.len += n;
+            }
         } else {
-            let start = out.len();
-            push_f32(out, v);
-            prev = (bits, start, out.len());
+            let start = line.len;
+            push_f32(line, v);
+            prev = (bits, start, line.len);
         }
-        out.push(b',');
+        line.push(b',');
     }
-    push_u64(out, r.tile as u64);
-    out.push(b'\n');
+    line.put_u64(r.tile as u64);
+    line.push(b'\n');
     true
 }
 
@@ -89,17 +227,27 @@ const ZMIJ_F64_BELOW: f64 = 1e15;
 const ZMIJ_F32_BELOW: f32 = 1e7;
 
 /// Short decimals: an f64 that is the nearest double to a whole number of 10^-6 (a scatter's
-/// jittered x/z on its 0.1 mm grid, say), or an f32 the nearest float to a whole number of 10^-4
-/// (a scale, a yaw in 0.01°), is written straight from that integer, without the general
-/// shortest-digits search. Within these magnitudes a float's spacing is far below 10^-6 (f64) or
-/// 10^-4 (f32), so no other decimal with as few fraction digits rounds to the same value: the
-/// integer's digits are the shortest round-trip digits, ryu's bytes (tested against ryu below).
+/// jittered x/z on their 0.1 mm grid, its heights on their 1 µm grid), or an f32 that reads back
+/// from a whole number of 10^-4 (a scale, a yaw in 0.01°) or, below 1, of 10^-7 (a quaternion
+/// component on its grid), is written straight from that integer, without the general
+/// shortest-digits search. Within these ranges a float's spacing is below the grid step, so no
+/// other decimal with as few digits rounds to the same value: the integer's digits are the
+/// shortest round-trip digits, ryu's bytes (tested against ryu below).
 const SHORT_F64_SCALE: f64 = 1e6;
 const SHORT_F64_DIGITS: u32 = 6;
 const SHORT_F64_RANGE: std::ops::Range<f64> = 1e-4..1e9;
-const SHORT_F32_SCALE: f64 = 1e4;
+
+/// Whole numbers of 1/`scale` for f32 magnitudes in `range`.
+struct F32Grid {
+    scale: f64,
+    range: std::ops::Range<f32>,
+}
 const SHORT_F32_DIGITS: u32 = 4;
-const SHORT_F32_RANGE: std::ops::Range<f32> = 1e-4..256.0;
+const SHORT_GRID: F32Grid = F32Grid { scale: 1e4, range: 1e-4..256.0 };
+/// Quaternion components: ryu writes plain decimals from 10⁻⁵ on, and up to 1 an f32's spacing
+/// (≤ 6·10⁻⁸) is below the grid step.
+const UNIT_DIGITS: u32 = 7;
+const UNIT_GRID: F32Grid = F32Grid { scale: 1e7, range: 1e-5..1.000_000_1 };
 
 /// |v|·10⁶ when |v| is the nearest double to that whole number of 10⁻⁶ (in range).
 #[inline]
@@ -120,110 +268,84 @@ fn short_f64(v: f64) -> Option<u64> {
     (m as f64 / SHORT_F64_SCALE == a).then_some(m as u64)
 }
 
-/// |v|·10⁴ when that whole number of 10⁻⁴, read as an f32, gives |v| back (in range).
+/// |v|·scale when that whole number of grid steps, read as an f32, gives |v| back (in range).
 #[inline]
-fn short_f32(v: f32) -> Option<u64> {
+fn short_f32(v: f32, grid: &F32Grid) -> Option<u64> {
     let a = v.abs();
-    if !SHORT_F32_RANGE.contains(&a) {
+    if !grid.range.contains(&a) {
         return None;
     }
-    // a·10⁴ is exact in f64 (24 + 14 significant bits), and so is its distance to m: the decimal
-    // m·10⁻⁴ reads back as v when it is closer to v than half the spacing of floats around v (a
-    // quarter below a power of two, where the spacing halves); ties are not taken
-    let scaled = a as f64 * SHORT_F32_SCALE;
+    // a·scale is exact in f64 (24 + at most 17 significant bits), and so is its distance to m: the
+    // decimal m/scale reads back as v when it is closer to v than half the spacing of floats around
+    // v (a quarter below a power of two, where the spacing halves); ties are not taken
+    let scaled = a as f64 * grid.scale;
     let m = (scaled + 0.5) as i64;
     let spacing = f32::from_bits(a.to_bits() & 0x7F80_0000) as f64 * (1.0 / 8_388_608.0);
     let half = if a.to_bits() & 0x7F_FFFF == 0 { 0.25 * spacing } else { 0.5 * spacing };
-    ((scaled - m as f64).abs() < half * SHORT_F32_SCALE).then_some(m as u64)
+    ((scaled - m as f64).abs() < half * grid.scale).then_some(m as u64)
 }
 
 #[inline]
-fn push_f64(out: &mut Vec<u8>, v: f64) {
+fn push_f64(line: &mut Line<'_>, v: f64) {
     if let Some(m) = short_f64(v) {
-        push_decimal(out, v < 0.0, m, SHORT_F64_DIGITS);
+        // on the 10⁻⁴ grid (jittered x and z): four fraction digits, more often one conversion
+        if m % 100 == 0 {
+            line.put_fixed::<4>(v < 0.0, m / 100);
+        } else {
+            line.put_fixed::<SHORT_F64_DIGITS>(v < 0.0, m);
+        }
     } else if v == 0.0 {
-        out.extend_from_slice(if v.is_sign_negative() { b"-0.0" } else { b"0.0" });
+        line.extend(if v.is_sign_negative() { b"-0.0" } else { b"0.0" });
     } else if v.abs() < ZMIJ_F64_BELOW {
-        let _ = CompactFormatter.write_f64(out, v); // into a Vec: cannot fail
+        line.put_with(|w| CompactFormatter.write_f64(w, v));
     } else {
-        out.extend_from_slice(ryu::Buffer::new().format_finite(v).as_bytes());
+        line.extend(ryu::Buffer::new().format_finite(v).as_bytes());
     }
 }
 
 #[inline]
-fn push_f32(out: &mut Vec<u8>, v: f32) {
-    if let Some(m) = short_f32(v) {
-        push_decimal(out, v < 0.0, m, SHORT_F32_DIGITS);
+fn push_f32(line: &mut Line<'_>, v: f32) {
+    if let Some(m) = short_f32(v, &SHORT_GRID) {
+        line.put_fixed::<SHORT_F32_DIGITS>(v < 0.0, m);
     } else if v == 0.0 {
-        out.extend_from_slice(if v.is_sign_negative() { b"-0.0" } else { b"0.0" });
+        line.extend(if v.is_sign_negative() { b"-0.0" } else { b"0.0" });
     } else if v.abs() < ZMIJ_F32_BELOW {
-        let _ = CompactFormatter.write_f32(out, v);
+        line.put_with(|w| CompactFormatter.write_f32(w, v));
     } else {
-        out.extend_from_slice(ryu::Buffer::new().format_finite(v).as_bytes());
+        line.extend(ryu::Buffer::new().format_finite(v).as_bytes());
     }
-}
-
-/// Appends ±m·10^-digits as ryu writes it: the integer part, a point, the fraction without
-/// trailing zeros (at least one digit). `digits` is even (pairs of digits).
-#[inline]
-fn push_decimal(out: &mut Vec<u8>, negative: bool, m: u64, digits: u32) {
-    let unit = 10u64.pow(digits);
-    let (int, mut frac) = (m / unit, m % unit);
-    if negative {
-        out.push(b'-');
-    }
-    push_u64(out, int);
-    // the point and every fraction digit, then the trailing zeros cut (one digit stays)
-    let mut buf = [b'.'; 9];
-    let len = 1 + digits as usize;
-    for k in (0..digits as usize / 2).rev() {
-        let p = (frac % 100) as usize * 2;
-        frac /= 100;
-        buf[1 + 2 * k..3 + 2 * k].copy_from_slice(&PAIRS[p..p + 2]);
-    }
-    let mut end = len;
-    while end > 2 && buf[end - 1] == b'0' {
-        end -= 1;
-    }
-    out.extend_from_slice(&buf[..end]);
-}
-
-/// "00" … "99".
-const PAIRS: &[u8; 200] = b"00010203040506070809101112131415161718192021222324252627282930313233343536373839404142434445464748495051525354555657585960616263646566676869707172737475767778798081828384858687888990919293949596979899";
-
-/// Appends `v` in decimal, two digits at a time.
-#[inline]
-fn push_u64(out: &mut Vec<u8>, mut v: u64) {
-    let mut buf = [0u8; 20];
-    let mut k = buf.len();
-    while v >= 100 {
-        let p = (v % 100) as usize * 2;
-        v /= 100;
-        k -= 2;
-        buf[k..k + 2].copy_from_slice(&PAIRS[p..p + 2]);
-    }
-    if v >= 10 {
-        let p = v as usize * 2;
-        k -= 2;
-        buf[k..k + 2].copy_from_slice(&PAIRS[p..p + 2]);
-    } else {
-        k -= 1;
-        buf[k] = b'0' + v as u8;
-    }
-    out.extend_from_slice(&buf[k..]);
 }
 
 /// Formats `chunk` (whose first row is row `first` of the table) into `buf` (cleared first);
 /// `Err(row)` names the first row holding a non-finite number.
-fn format_chunk<R: ToPlacementRow>(chunk: &[R], first: usize, buf: &mut Vec<u8>) -> Result<(), usize> {
-    buf.clear();
-    buf.reserve(chunk.len() * ROW_MAX);
+fn format_chunk<R: ToPlacementRow>(chunk: &[R], first: usize, buf: &mut Chunk) -> Result<(), usize> {
+    // grown (and zeroed) once, then reused batch after batch: rows are stored straight into it
+    let need = chunk.len() * ROW_MAX + SLACK;
+    if buf.bytes.len() < need {
+        buf.bytes.resize(need, 0);
+    }
+    let mut line = Line { buf: &mut buf.bytes, len: 0 };
     for (k, r) in chunk.iter().enumerate() {
-        if !push_row(buf, &r.placement_row()) {
+        if !push_row(&mut line, &r.placement_row()) {
+            buf.len = 0;
             return Err(first + k);
         }
     }
+    buf.len = line.len;
     Ok(())
+}
+
+/// One task's formatted rows: `bytes[..len]`.
+#[derive(Default)]
+struct Chunk {
+    bytes: Vec<u8>,
+    len: usize,
+}
+
+impl Chunk {
+    fn written(&self) -> &[u8] {
+        &self.bytes[..self.len]
+    }
 }
 
 fn header() -> Vec<u8> {
@@ -238,9 +360,9 @@ fn not_finite(row: usize) -> String {
 
 /// Formats `rows` (row `first` of the table first) in parallel chunks into `bufs` (one per chunk,
 /// reused across calls so their pages are touched once).
-fn format_batch<R: ToPlacementRow + Sync>(rows: &[R], first: usize, bufs: &mut Vec<Vec<u8>>) -> Result<(), usize> {
+fn format_batch<R: ToPlacementRow + Sync>(rows: &[R], first: usize, bufs: &mut Vec<Chunk>) -> Result<(), usize> {
     let chunks = rows.len().div_ceil(ROWS_PER_CHUNK);
-    bufs.resize_with(bufs.len().max(chunks), Vec::new);
+    bufs.resize_with(bufs.len().max(chunks), Chunk::default);
     let results: Vec<Result<(), usize>> = bufs[..chunks]
         .par_iter_mut()
         .zip(rows.par_chunks(ROWS_PER_CHUNK))
@@ -248,7 +370,7 @@ fn format_batch<R: ToPlacementRow + Sync>(rows: &[R], first: usize, bufs: &mut V
         .map(|(c, (buf, chunk))| format_chunk(chunk, first + c * ROWS_PER_CHUNK, buf))
         .collect();
     for b in &mut bufs[chunks..] {
-        b.clear();
+        b.len = 0;
     }
     results.into_iter().collect()
 }
@@ -285,8 +407,8 @@ fn stream_csv<R: ToPlacementRow + Sync>(w: &mut dyn std::io::Write, rows: &[R], 
         std::io::Error::new(std::io::ErrorKind::InvalidData, not_finite(row))
     };
     w.write_all(&header())?;
-    let mut cur: Vec<Vec<u8>> = Vec::new();
-    let mut next: Vec<Vec<u8>> = Vec::new();
+    let mut cur: Vec<Chunk> = Vec::new();
+    let mut next: Vec<Chunk> = Vec::new();
     let mut batches = rows.chunks(batch.max(1)).enumerate();
     let Some((_, first)) = batches.next() else { return Ok(()) };
     format_batch(first, 0, &mut cur).map_err(&mut refuse)?;
@@ -294,13 +416,13 @@ fn stream_csv<R: ToPlacementRow + Sync>(w: &mut dyn std::io::Write, rows: &[R], 
         let mut formatted = Ok(());
         let written = rayon::in_place_scope(|s| {
             s.spawn(|_| formatted = format_batch(rows, k * batch, &mut next));
-            cur.iter().try_for_each(|b| w.write_all(b))
+            cur.iter().try_for_each(|b| w.write_all(b.written()))
         });
         written?;
         formatted.map_err(&mut refuse)?;
         std::mem::swap(&mut cur, &mut next);
     }
-    cur.iter().try_for_each(|b| w.write_all(b))
+    cur.iter().try_for_each(|b| w.write_all(b.written()))
 }
 
 #[cfg(test)]
@@ -370,16 +492,42 @@ mod tests {
     }
 
     /// The formatter's bytes are ryu's, over random bit patterns of every exponent.
+    fn text(put: impl FnOnce(&mut Line<'_>)) -> Vec<u8> {
+        let mut buf = [0u8; ROW_MAX + SLACK];
+        let mut line = Line { buf: &mut buf, len: 0 };
+        put(&mut line);
+        let len = line.len;
+        buf[..len].to_vec()
+    }
+
     fn f64_text(v: f64) -> Vec<u8> {
-        let mut out = Vec::new();
-        push_f64(&mut out, v);
-        out
+        text(|line| push_f64(line, v))
     }
 
     fn f32_text(v: f32) -> Vec<u8> {
-        let mut out = Vec::new();
-        push_f32(&mut out, v);
-        out
+        text(|line| push_f32(line, v))
+    }
+
+    /// A quaternion component as `push_row` writes it.
+    fn unit_text(v: f32) -> Vec<u8> {
+        text(|line| match short_f32(v, &UNIT_GRID) {
+            Some(m) => line.put_fixed::<UNIT_DIGITS>(v < 0.0, m),
+            None => push_f32(line, v),
+        })
+    }
+
+    #[test]
+    fn integers_are_decimal() {
+        let mut h: u64 = 3;
+        let mut values: Vec<u64> = (0..20).flat_map(|e| [10u64.pow(e), 10u64.pow(e) - 1, 10u64.pow(e) + 1]).collect();
+        values.extend([0, u32::MAX as u64, u64::MAX, 99_999_999, 100_000_000]);
+        for _ in 0..100_000 {
+            h = crate::synth::mix64(h);
+            values.push(h >> (h % 64));
+        }
+        for v in values {
+            assert_eq!(text(|line| line.put_u64(v)), v.to_string().as_bytes());
+        }
     }
 
     #[test]
@@ -427,7 +575,7 @@ mod tests {
         for k in 0..2_560_000u32 {
             let v = (k as f64 / 1e4) as f32;
             // the short path takes every one of them (from 10⁻⁴ on)
-            assert_eq!(short_f32(v), (k > 0).then_some(k as u64), "{v:e}");
+            assert_eq!(short_f32(v, &SHORT_GRID), (k > 0).then_some(k as u64), "{v:e}");
             for v in [v, -v, f32::from_bits(v.to_bits() + 1), f32::from_bits(v.to_bits().saturating_sub(1))] {
                 check32(v, &mut out);
             }
@@ -459,6 +607,28 @@ mod tests {
         }
         for v in [1e-4f32, 255.9999, 256.0, 255.99998, 0.00010001] {
             check32(v, &mut out);
+        }
+    }
+
+    /// Quaternion components on their 10⁻⁷ grid (every one of them, as the scatter rounds them),
+    /// their neighbouring floats and the ends of the range are written as ryu writes them, and the
+    /// grid's values take the short path from 10⁻⁵ on.
+    #[test]
+    fn unit_grid_decimals_are_ryus() {
+        let mut fmt = ryu::Buffer::new();
+        for k in 0..=10_000_000u32 {
+            // as the scatter rounds a component: the nearest f32 to the nearest f64 to k·10⁻⁷
+            let v = (k as f64 / 1e7) as f32;
+            assert_eq!(short_f32(v, &UNIT_GRID), (k >= 100).then_some(k as u64), "{v:e}");
+            let near = [f32::from_bits(v.to_bits() + 1), f32::from_bits(v.to_bits().saturating_sub(1))];
+            for v in [v, -v].into_iter().chain(if k % 5 == 0 { near.to_vec() } else { vec![] }) {
+                assert_eq!(unit_text(v), fmt.format_finite(v).as_bytes(), "{v:e}");
+            }
+        }
+        for v in [1e-5f32, 0.99999994, 1.0, 1.000_000_1, 9.99e-6, 1.0e-5 * (1.0 + f32::EPSILON), 0.1, 0.5] {
+            for v in [v, -v] {
+                assert_eq!(unit_text(v), fmt.format_finite(v).as_bytes(), "{v:e}");
+            }
         }
     }
 

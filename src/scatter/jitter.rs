@@ -1,15 +1,15 @@
 //! Jittered grid placement (stratified sampling, Cook 1986 "Stochastic sampling in computer
 //! graphics"): one candidate per cell of side 1/√max_density at a hashed offset, kept with
 //! probability density(x, z), so the expected count is exactly ∫ density · max_density.
-//! Positions are rounded to a 0.1 mm grid (far below the jitter's scale), which keeps the
-//! placement table's x and z short.
+//! Positions are rounded to a 0.1 mm grid (far below the jitter's scale), heights and rotations to
+//! theirs (see `on_table_grids`), which keeps the placement table's entries short.
 
 use rayon::prelude::*;
 
 use crate::synth::mix64;
 
 use super::rules::Rules;
-use super::{on_grid, Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POSITION_STEPS_PER_M};
+use super::{height_bounds, on_grid, on_table_grids, Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POSITION_STEPS_PER_M};
 
 /// All instances of a jittered species, sorted by tile and then by cell (row-major).
 pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterError> {
@@ -33,8 +33,13 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     let (ncx, ncz) = (ncx as i64, ncz as i64);
     let tiling = rules.tiling;
     let key = mix64(rules.key ^ 0x6a69_7474_6572); // "jitter"
-    // the density map's bound over blocks of BLOCK × BLOCK cells: where it is 0 every candidate is
-    // a density reject (keep_u ≥ 0 always), so those are counted without hashing or sampling
+    let bounds = height_bounds(s);
+    // the density map's bound over blocks of BLOCK × BLOCK cells: a candidate whose keep_u is at or
+    // above it is a density reject (counted without sampling the map or calling the rules), and
+    // where the bound is 0 every candidate is (counted without hashing). The bound is the largest
+    // pixel under the block's bilinear footprint (map values are 0..1, NaN-free), raised by 10⁻⁶
+    // for the f32 rounding of the interpolation, so the kept instances and counts are exactly
+    // those of sampling every candidate.
     const BLOCK: i64 = 32;
     let per_tile: Vec<(Vec<Instance>, RuleCounts)> = (0..tiling.count() as u32)
         .into_par_iter()
@@ -58,13 +63,18 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
             let mut out = Vec::with_capacity((cells * max_keep.min(1.0)).ceil() as usize + 16);
             // row-major over the tile's cells (the output order), with the density bound of the
             // blocks of each band of BLOCK rows
-            let mut empty = Vec::new();
+            let mut bound = Vec::new();
             for bj in (cj0..=cj1).step_by(BLOCK as usize) {
                 let bj1 = (bj + BLOCK - 1).min(cj1);
-                empty.clear();
-                empty.extend((ci0..=ci1).step_by(BLOCK as usize).map(|bi| {
+                bound.clear();
+                bound.extend((ci0..=ci1).step_by(BLOCK as usize).map(|bi| {
                     let bi1 = (bi + BLOCK - 1).min(ci1);
-                    rules.max_density_over([x0 + bi as f64 * cell, z0 + bj as f64 * cell, x0 + (bi1 + 1) as f64 * cell, z0 + (bj1 + 1) as f64 * cell]) <= 0.0
+                    let d = rules.max_density_over([x0 + bi as f64 * cell, z0 + bj as f64 * cell, x0 + (bi1 + 1) as f64 * cell, z0 + (bj1 + 1) as f64 * cell]);
+                    if d <= 0.0 {
+                        0.0
+                    } else {
+                        d.min(1.0) * (1.0 + 1e-6) * rules.keep_scale
+                    }
                 }));
                 for cj in bj..=bj1 {
                     let row_inside = cj >= ij0 && cj <= ij1;
@@ -76,14 +86,21 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
                         if !(row_inside && ci >= ii0 && ci <= ii1) && (x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz)) {
                             continue;
                         }
-                        if empty[((ci - ci0) / BLOCK) as usize] {
+                        let keep_bound = bound[((ci - ci0) / BLOCK) as usize];
+                        if keep_bound <= 0.0 {
                             counts.candidates += 1;
                             counts.density += 1;
                             continue;
                         }
                         let h2 = mix64(h1);
-                        if let Some(inst) = rules.place(x, z, super::unit(h2), h2 ^ key, t, &mut counts) {
-                            out.push(inst);
+                        let keep_u = super::unit(h2);
+                        if keep_u >= keep_bound {
+                            counts.candidates += 1;
+                            counts.density += 1;
+                            continue;
+                        }
+                        if let Some(inst) = rules.place(x, z, keep_u, h2 ^ key, t, &mut counts) {
+                            out.push(on_table_grids(inst, bounds));
                         }
                     }
                 }
@@ -111,9 +128,10 @@ pub(crate) fn join(parts: Vec<Vec<Instance>>) -> Vec<Instance> {
         rest = tail;
     }
     slots.into_par_iter().zip(parts.into_par_iter()).for_each(|(slot, part)| {
-        for (d, s) in slot.iter_mut().zip(part) {
-            d.write(s);
-        }
+        // SAFETY: `slot` has exactly `part.len()` elements (split above) and does not overlap
+        // `part` (another allocation); one memcpy (its non-temporal stores skip reading the
+        // destination's cache lines first, which the element-wise loop paid for)
+        unsafe { std::ptr::copy_nonoverlapping(part.as_ptr(), slot.as_mut_ptr().cast::<Instance>(), part.len()) };
     });
     // SAFETY: the slots tile the first `total` elements of the spare capacity and each was
     // written in full (slot k has exactly parts[k].len() elements)

@@ -223,6 +223,33 @@ pub const POSITION_STEPS_PER_M: f64 = 1e4;
 pub const YAW_STEPS_PER_DEG: f64 = 100.0;
 pub const SCALE_STEPS: f64 = 1e4;
 
+/// Heights lie on a 1 µm grid (error ≤ 5·10⁻⁷ m against the mesh, far below the 10⁻⁴ m the
+/// placement promises), quaternion components on a 10⁻⁷ grid (about f32's own resolution near 1):
+/// their table entries are then short decimals written from integers, and the CSV and scene.glb
+/// hold the same values.
+pub const HEIGHT_STEPS_PER_M: f64 = 1e6;
+pub const ROTATION_STEPS: f64 = 1e7;
+
+/// The heights a placed instance may have: [max(water level, altitude min), altitude max].
+pub(crate) fn height_bounds(s: &SpeciesSettings) -> (f64, f64) {
+    (s.altitude_m[0].max(s.water_level_m.unwrap_or(f64::NEG_INFINITY)), s.altitude_m[1])
+}
+
+/// `inst` with its height and rotation on their grids ([`HEIGHT_STEPS_PER_M`],
+/// [`ROTATION_STEPS`]). A height that the rounding would carry out of `bounds` (water level,
+/// altitude range) keeps its exact value, so the rules still hold for the written value.
+#[inline]
+pub(crate) fn on_table_grids(mut inst: Instance, bounds: (f64, f64)) -> Instance {
+    let y = on_grid(inst.position[1], HEIGHT_STEPS_PER_M);
+    if y >= bounds.0 && y <= bounds.1 {
+        inst.position[1] = y;
+    }
+    for q in &mut inst.rotation {
+        *q = on_grid(*q as f64, ROTATION_STEPS) as f32;
+    }
+    inst
+}
+
 /// `v` on a grid of `steps` per unit: the nearest f64 to ⌊v·steps + ½⌋ / steps.
 #[inline]
 pub(crate) fn on_grid(v: f64, steps: f64) -> f64 {
@@ -232,7 +259,9 @@ pub(crate) fn on_grid(v: f64, steps: f64) -> f64 {
 /// Uniform in [0, 1) from the top 53 bits of a hash.
 #[inline]
 pub(crate) fn unit(h: u64) -> f64 {
-    (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    // through i64 (exact below 2^53): one conversion instruction, where u64 → f64 takes a branch
+    // and several on x86-64
+    ((h >> 11) as i64) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
 /// Places one species; see the module docs. `earlier` holds the species placed before this one

@@ -57,6 +57,7 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     }
     let blocks = Blocks { extent: tiling.extent, block_m, nbx, nbz, r };
     let key = mix64(rules.key ^ 0x0070_6f69_7373_6f6e); // "poisson"
+    let bounds = super::height_bounds(s);
     let mut finished: Vec<Vec<[f64; 2]>> = vec![Vec::new(); nbx * nbz];
     for phase in 0..4 {
         let ids: Vec<usize> = (0..nbx * nbz).filter(|&b| (b % nbx) % 2 + 2 * ((b / nbx) % 2) == phase).collect();
@@ -87,7 +88,8 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
                 let h = mix64(bkey.wrapping_add(k as u64));
                 let tile = tiling.tile_of(p[0], p[1]);
                 if let Some(inst) = rules.place(p[0], p[1], super::unit(h), mix64(h), tile, &mut counts) {
-                    out.push(inst);
+                    // x and z keep every bit (rounding could bring two closer than the spacing)
+                    out.push(super::on_table_grids(inst, bounds));
                 }
             }
             (out, counts)
@@ -124,8 +126,22 @@ struct Stream {
 impl Stream {
     #[inline]
     fn next(&mut self) -> f64 {
+        super::unit(self.next_bits())
+    }
+
+    #[inline]
+    fn next_bits(&mut self) -> u64 {
         self.n += 1;
-        super::unit(mix64(self.key.wrapping_add(self.n.wrapping_mul(0x9E37_79B9_7F4A_7C15))))
+        mix64(self.key.wrapping_add(self.n.wrapping_mul(0x9E37_79B9_7F4A_7C15)))
+    }
+
+    /// Two uniform numbers in [0, 1) from one hash (32 bits each: steps of 4r/2³² ≈ 10⁻⁹ r in a
+    /// candidate's offset), half the hashing of two calls to `next`.
+    #[inline]
+    fn next_pair(&mut self) -> (f64, f64) {
+        let h = self.next_bits();
+        const SCALE: f64 = 1.0 / 4_294_967_296.0;
+        ((h >> 32) as i64 as f64 * SCALE, (h & 0xFFFF_FFFF) as i64 as f64 * SCALE)
     }
 }
 
@@ -159,7 +175,8 @@ impl Blocks {
             if !(fi >= 0.0 && fj >= 0.0 && fi < gw as f64 && fj < gh as f64) {
                 return None;
             }
-            Some((fi as usize, fj as usize))
+            // through i64: one instruction (f64 → usize takes several); both are ≥ 0 here
+            Some((fi as i64 as usize, fj as i64 as usize))
         };
         // the neighbours' final points within the margin; a second point in one cell (only by
         // rounding, at distance ≈ r) goes to an overflow list that every check also reads
@@ -259,7 +276,8 @@ impl Blocks {
                 // uniform by area in the annulus [r, 2r): rejection from the square [−2r, 2r]²
                 // (accepts 3π/16 ≈ 59 %; cheaper than sin/cos and sqrt)
                 let (dx, dz) = loop {
-                    let (dx, dz) = ((rng.next() * 4.0 - 2.0) * r, (rng.next() * 4.0 - 2.0) * r);
+                    let (u, v) = rng.next_pair();
+                    let (dx, dz) = ((u * 4.0 - 2.0) * r, (v * 4.0 - 2.0) * r);
                     let d2 = dx * dx + dz * dz;
                     if d2 >= r2 && d2 < 4.0 * r2 {
                         break (dx, dz);

@@ -189,14 +189,18 @@ impl SurfaceIndex {
         let mut best_score = -EDGE_TOLERANCE;
         for &t in &self.items[s..e] {
             let (w0, w1, w2, d) = bary(&self.tris[t as usize], x, z);
-            // all weights share the sign of d when inside; normalise so inside means ≥ 0
-            let m = w0.min(w1).min(w2) / d;
-            if m >= 0.0 {
+            // all weights share the sign of d when inside; normalised (d > 0) inside means ≥ 0
+            let least = w0.min(w1).min(w2);
+            if least >= 0.0 {
                 return Some(t as usize);
             }
-            if m >= best_score {
-                best_score = m;
-                best = Some(t as usize);
+            // the relative distance (a division) only for the few within the tolerance
+            if least >= -EDGE_TOLERANCE * d {
+                let m = least / d;
+                if m >= best_score {
+                    best_score = m;
+                    best = Some(t as usize);
+                }
             }
         }
         best
