@@ -370,11 +370,11 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
             }
             StageRun::Scatter { report: sc, .. } => {
                 s += &format!("## Scatter\n\n`{}` (terrain + one instanced node per species per tile), tiles of {} m\n\n", sc.scene_file.display(), sc.tile_m);
-                s += "| species | kind | instances | expected | ratio | min pair distance (m) | min_spacing (m) | max \\|y − terrain\\| (m) | tiles |\n|---|---|---|---|---|---|---|---|---|\n";
+                s += "| species | kind | instances | expected | ratio | min pair distance (m) | min_spacing (m) | max \\|y − terrain\\| scene.glb, f32 (m) | max \\|y − terrain\\| CSV (m) | snow-thinned | tiles |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
                 for sp in &sc.species {
                     let spacing = preset.species.iter().find(|x| x.name == sp.name).map_or(0.0, |x| x.min_spacing_m);
                     s += &format!(
-                        "| {} | {:?} | {} | {:.0} | {:.3} | {} | {} | {:.2e} | {} |\n",
+                        "| {} | {:?} | {} | {:.0} | {:.3} | {} | {} | {:.2e} | {:.2e} | {} | {} |\n",
                         sp.name,
                         sp.kind,
                         sp.count,
@@ -383,6 +383,8 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
                         sp.stats.min_pair_distance_m.map_or("—".to_string(), |d| format!("{d:.3}")),
                         spacing,
                         sp.stats.max_height_error_m,
+                        sp.stats.max_height_error_csv_m,
+                        sp.rules.snow,
                         sp.stats.per_tile.len()
                     );
                 }
