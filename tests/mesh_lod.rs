@@ -8,11 +8,14 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use verdant::export::gltf::to_glb;
 use verdant::mesh::AlphaMode;
 use verdant::plants::mesh_asset::{load_obj, MeshAssetError, ObjOptions, UpAxis};
-use verdant::plants::tree_lod::{build_mesh_lods, run_mesh_lods, MeshLodJob, TreeLodError, TreeLodOptions, TreeLods, TREE_LODS};
+use verdant::plants::tree_lod::{build_mesh_lods, run_mesh_lods, MeshLodJob, TreeLodError, TreeLodOptions, TREE_LODS};
 use verdant::validate::{read_scene, validate_file};
+
+#[path = "common/lod.rs"]
+mod lod;
+use lod::{bytes_of, in_pool, small_atlas};
 
 /// A rock: an icosahedron subdivided 3 times (1280 triangles), pushed in and out by smooth
 /// bumps, flattened underneath, 2 m across and centred away from the origin (at (5, 3, −2)).
@@ -137,20 +140,6 @@ fn write_tree(dir: &Path) -> PathBuf {
     dir.join("tree.obj")
 }
 
-fn small_atlas() -> TreeLodOptions {
-    TreeLodOptions { atlas_px: 256, ..TreeLodOptions::default() }
-}
-
-fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
-    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(f)
-}
-
-fn bytes_of(t: &TreeLods) -> Vec<Vec<u8>> {
-    let mut out: Vec<Vec<u8>> = t.levels.iter().map(|l| to_glb(&l.scene).unwrap()).collect();
-    out.push(to_glb(&t.chain).unwrap());
-    out.extend(t.atlas.iter().map(|m| m.image.encode_png().unwrap()));
-    out
-}
 
 #[test]
 fn rock_stands_on_the_origin_and_z_up_equals_y_up() {

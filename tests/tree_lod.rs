@@ -7,12 +7,15 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use verdant::bake::atlas::coverage;
-use verdant::export::gltf::to_glb;
 use verdant::lsystem::parse::parse_bytes;
 use verdant::mesh::PrimitiveMode;
 use verdant::plants::tree::{build_tree, TreeOptions, LEAF_SIZE_ATTRIBUTE};
 use verdant::plants::tree_lod::{build_tree_lods, run_lods, TreeLodJob, TreeLodOptions, TreeLods, ATLAS_ALPHA_CUTOFF, IMPOSTOR_EXTRAS_KEY, TREE_LODS};
 use verdant::validate::{read_scene, validate_file};
+
+#[path = "common/lod.rs"]
+mod lod;
+use lod::{bytes_of, in_pool, small_atlas};
 
 /// The stochastic bush of the thesis' format (as ../shared/data/lsystems/stochastic/bush.ls).
 const BUSH: &str = "3-2-2\n28\n18\nX(100)=FFA\nA(40)=F[&B]>(137)A\nA(75)=F[^B]>(120)A\nA(100)=F[&B]\"[^C]>(137)A\nB(50)=F[-C]CL\nB(100)=F[+C]'C\nC(100)=F[+B]B\n@\n";
@@ -29,20 +32,6 @@ fn bush(seed: u64, options: &TreeLodOptions) -> TreeLods {
     build_tree_lods(&system, &TreeOptions { seed, name: "bush".into(), ..TreeOptions::default() }, options).unwrap()
 }
 
-fn small_atlas() -> TreeLodOptions {
-    TreeLodOptions { atlas_px: 256, ..TreeLodOptions::default() }
-}
-
-fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
-    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(f)
-}
-
-fn bytes_of(t: &TreeLods) -> Vec<Vec<u8>> {
-    let mut out: Vec<Vec<u8>> = t.levels.iter().map(|l| to_glb(&l.scene).unwrap()).collect();
-    out.push(to_glb(&t.chain).unwrap());
-    out.extend(t.atlas.iter().map(|m| m.image.encode_png().unwrap()));
-    out
-}
 
 #[test]
 fn tree_lods_are_byte_identical_at_one_and_two_threads() {

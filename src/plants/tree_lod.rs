@@ -287,22 +287,25 @@ fn simplify(mesh: &Mesh, ratio: f64, max_error: f32) -> Mesh {
         };
         let target = ((p.indices.len() as f64 * ratio) as usize / 3) * 3;
         let indices = meshopt::simplify(&p.indices, &adapter, target, max_error, meshopt::SimplifyOptions::None, None);
-        let mut q = Primitive { indices: Vec::with_capacity(indices.len()), ..p.clone() };
-        for t in indices.chunks_exact(3) {
-            if !is_flat(&p.positions, [t[0], t[1], t[2]]) {
-                q.indices.extend_from_slice(t);
-            }
+        if let Some(q) = simplified(p, &indices) {
+            out.primitives.push(q);
         }
-        if q.indices.is_empty() {
-            continue;
-        }
-        // compact first: Primitive::optimize_for_gpu assumes every vertex is used (meshopt's fetch
-        // remap is as long as the used vertices, not all of them)
-        let mut q = subset(&q, |_| true);
-        q.optimize_for_gpu();
-        out.primitives.push(q);
     }
     out
+}
+
+/// `p` with the triangles `indices` (those of zero area dropped), its unused vertices removed and
+/// reordered for the vertex cache and fetch; `None` when no triangle is left.
+fn simplified(p: &Primitive, indices: &[u32]) -> Option<Primitive> {
+    let kept: Vec<u32> = indices.chunks_exact(3).filter(|t| !is_flat(&p.positions, [t[0], t[1], t[2]])).flatten().copied().collect();
+    if kept.is_empty() {
+        return None;
+    }
+    // compact first: Primitive::optimize_for_gpu assumes every vertex is used (meshopt's fetch
+    // remap is as long as the used vertices, not all of them)
+    let mut q = subset(&Primitive { indices: kept, ..p.clone() }, |_| true);
+    q.optimize_for_gpu();
+    Some(q)
 }
 
 /// The triangles of branch levels above `max_kept` (what LoD2 drops), per primitive.
@@ -350,20 +353,15 @@ fn simplify_sloppy(mesh: &Mesh, ratio: f64) -> Mesh {
         let bytes = meshopt::typed_to_bytes(&p.positions);
         let Ok(adapter) = meshopt::VertexDataAdapter::new(bytes, 12, 0) else { continue };
         // vertex clustering can erase a thin part (a trunk, a card) entirely: then ask for more
-        let mut q = Primitive { indices: Vec::new(), ..p.clone() };
         let mut r = ratio;
-        while q.indices.is_empty() && r < 1.0 {
+        while r < 1.0 {
             let target = ((p.indices.len() as f64 * r) as usize / 3).max(1) * 3;
-            let indices = meshopt::simplify_sloppy(&p.indices, &adapter, target, 1.0, None);
-            q.indices = indices.chunks_exact(3).filter(|t| !is_flat(&p.positions, [t[0], t[1], t[2]])).flatten().copied().collect();
+            if let Some(q) = simplified(p, &meshopt::simplify_sloppy(&p.indices, &adapter, target, 1.0, None)) {
+                out.primitives.push(q);
+                break;
+            }
             r *= 2.0;
         }
-        if q.indices.is_empty() {
-            continue;
-        }
-        let mut q = subset(&q, |_| true);
-        q.optimize_for_gpu();
-        out.primitives.push(q);
     }
     out
 }
