@@ -172,7 +172,10 @@ fn main() {
             reset_peak();
             let (rss0, _) = memory();
             let (out, generate_s, generate_cpu) = timed(|| scatter_species_detailed(&surface, extent, sp, Some(&density), None, &[], TILE_M, 1).expect("scatter"));
-            // the product's path first (its peak is the case's memory), then the in-memory table
+            // the product's path first (its peak is the case's memory), then the in-memory table;
+            // the previous run's file is removed first: the product writes into a fresh build folder,
+            // and replacing a 0.9 GB file would time the kernel freeing its pages
+            let _ = std::fs::remove_file(&tmp);
             let ((), write_s, write_cpu) = timed(|| write_placements_csv(&tmp, &out.instances).expect("write"));
             let (_, hwm) = memory();
             let (csv_bytes, format_s, format_cpu) = timed(|| placements_csv(&out.instances).expect("csv").len() as u64);
