@@ -276,7 +276,7 @@ def check_chains(species: Path, atlases: Path, stems: list[str], kinds_of: dict,
                         if iou < MIN_IOU:
                             raise CheckFailed(f"{lods[level].name}: silhouette from view {view} unlike LoD0's (IoU {iou:.3f})")
                         summary.append(f"{iou:.2f}")
-            facts.append(f"v{k} pyrender IoU vs LoD0 {', '.join(summary)}")
+            facts.append(f"{k} pyrender IoU vs LoD0 {', '.join(summary)}")
         if len(lods) > 3:
             g = pygltflib.GLTF2().load(str(lods[3]))
             cutoff = g.materials[0].alphaCutoff if g.materials and g.materials[0].alphaCutoff is not None else 0.5
