@@ -268,6 +268,23 @@ impl CoverMask {
     }
 }
 
+/// The checked primitive `k` of mesh `mesh`'s `_SNOW` attribute, one value per vertex (what
+/// [`apply_cover`] wrote).
+fn snow_of<'a>(mesh: &str, k: usize, p: &'a Primitive) -> Result<&'a crate::mesh::CustomAttribute, SnowError> {
+    check_primitive(mesh, k, p)?;
+    let Some(snow) = p.custom.iter().find(|c| c.name == SNOW_ATTRIBUTE) else {
+        return Err(SnowError::Terrain(format!("mesh {mesh:?} primitive {k} has no {SNOW_ATTRIBUTE} attribute; call apply_cover first")));
+    };
+    if snow.values.len() != p.positions.len() {
+        return Err(SnowError::Terrain(format!(
+            "mesh {mesh:?} primitive {k} has {} {SNOW_ATTRIBUTE} values for {} vertices; call apply_cover again",
+            snow.values.len(),
+            p.positions.len()
+        )));
+    }
+    Ok(snow)
+}
+
 /// Draws the terrain (after [`apply_cover`]) from above with each vertex coloured by its weight,
 /// `size_px` pixels along the longer side of its x–z extent.
 pub fn cover_mask(terrain: &Scene, size_px: u32) -> Result<CoverMask, SnowError> {
@@ -277,13 +294,7 @@ pub fn cover_mask(terrain: &Scene, size_px: u32) -> Result<CoverMask, SnowError>
     let mut prims = Vec::new();
     for mesh in &terrain.meshes {
         for (k, p) in mesh.primitives.iter().enumerate() {
-            check_primitive(&mesh.name, k, p)?;
-            let Some(snow) = p.custom.iter().find(|c| c.name == SNOW_ATTRIBUTE) else {
-                return Err(SnowError::Terrain(format!("mesh {:?} primitive {k} has no {SNOW_ATTRIBUTE} attribute; call apply_cover first", mesh.name)));
-            };
-            if snow.values.len() != p.positions.len() {
-                return Err(SnowError::Terrain(format!("mesh {:?} primitive {k} has {} {SNOW_ATTRIBUTE} values for {} vertices; call apply_cover again", mesh.name, snow.values.len(), p.positions.len())));
-            }
+            let snow = snow_of(&mesh.name, k, p)?;
             prims.push(Primitive {
                 positions: p.positions.clone(),
                 colors: snow.values.iter().map(|v| [v[0], v[0], v[0], 1.0]).collect(),
@@ -329,13 +340,7 @@ pub fn snow_layer(terrain: &Scene, min_weight: f32) -> Result<Scene, SnowError> 
     for mesh in &terrain.meshes {
         let mut prims = Vec::new();
         for (k, p) in mesh.primitives.iter().enumerate() {
-            check_primitive(&mesh.name, k, p)?;
-            let Some(snow) = p.custom.iter().find(|c| c.name == SNOW_ATTRIBUTE) else {
-                return Err(SnowError::Terrain(format!("mesh {:?} primitive {k} has no {SNOW_ATTRIBUTE} attribute; call apply_cover first", mesh.name)));
-            };
-            if snow.values.len() != p.positions.len() {
-                return Err(SnowError::Terrain(format!("mesh {:?} primitive {k} has {} {SNOW_ATTRIBUTE} values for {} vertices; call apply_cover again", mesh.name, snow.values.len(), p.positions.len())));
-            }
+            let snow = snow_of(&mesh.name, k, p)?;
             let normals = if p.normals.len() == p.positions.len() { p.normals.clone() } else { vertex_normals(p) };
             let mut q = Primitive { material: Some(0), ..Primitive::default() };
             let mut remap = vec![u32::MAX; p.positions.len()];
