@@ -198,6 +198,7 @@ fn main() {
                 total_median_s: f64::NAN,
             };
             totals.push(generate_s + write_s);
+            println!("RUN {name}: generate {generate_s:.3} ({generate_cpu:.2}) + format and write {write_s:.3} ({write_cpu:.2}) = {:.3} s, {:.2} M inst/s; in-memory table {format_s:.3} ({format_cpu:.2})", generate_s + write_s, out.instances.len() as f64 / (generate_s + write_s) / 1e6);
             drop(out);
             best = Some(match best {
                 None => row,
@@ -237,10 +238,12 @@ fn main() {
     }
     let mut rows = Vec::new();
     let mut analyzer_lines = Vec::new();
+    let mut run_lines = Vec::new();
     for k in 0..cases.len() {
         let out = Command::new(std::env::current_exe().expect("own path")).args(["--case", &k.to_string()]).output().expect("child");
         let text = String::from_utf8_lossy(&out.stdout);
         analyzer_lines.extend(text.lines().filter_map(|l| l.strip_prefix("ANALYZE ")).map(str::to_string));
+        run_lines.extend(text.lines().filter_map(|l| l.strip_prefix("RUN ")).map(str::to_string));
         let Some(line) = text.lines().find(|l| l.starts_with("ROW ")) else {
             println!("case {k} failed: {}", String::from_utf8_lossy(&out.stderr));
             continue;
@@ -309,6 +312,11 @@ fn main() {
         std::mem::size_of::<Instance>()
     );
 
+    println!();
+    println!("every run, in order (wall s, CPU s in parentheses; the first run of a process also pays for memory the machine has not handed out before):");
+    for l in &run_lines {
+        println!("run, {l}");
+    }
     println!();
     for l in &analyzer_lines {
         println!("analyzer, {l}");

@@ -4,11 +4,10 @@
 //! Positions are rounded to a 0.1 mm grid (far below the jitter's scale), heights and rotations to
 //! theirs (see `on_table_grids`), which keeps the placement table's entries short.
 
-use rayon::prelude::*;
-
 use crate::synth::mix64;
 
 use super::rules::Rules;
+use super::storage::gather_in_order;
 use super::{height_bounds, on_grid, on_table_grids, Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POSITION_STEPS_PER_M};
 
 /// All instances of a jittered species, sorted by tile and then by cell (row-major).
@@ -23,12 +22,7 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     // a cell's candidate belongs to the tile that contains it
     let (ncx, ncz) = (((x1 - x0) / cell).ceil(), ((z1 - z0) / cell).ceil());
     if ncx * ncz > MAX_CANDIDATES || ncx >= u32::MAX as f64 || ncz >= u32::MAX as f64 {
-        return Err(ScatterError::TooMuchWork {
-            species: s.name.clone(),
-            work: ncx * ncz,
-            limit: MAX_CANDIDATES,
-            remedy: "lower max_density".into(),
-        });
+        return Err(ScatterError::TooMuchWork { species: s.name.clone(), work: ncx * ncz, limit: MAX_CANDIDATES, remedy: "lower max_density".into() });
     }
     let (ncx, ncz) = (ncx as i64, ncz as i64);
     let tiling = rules.tiling;
@@ -41,100 +35,86 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     // for the f32 rounding of the interpolation, so the kept instances and counts are exactly
     // those of sampling every candidate.
     const BLOCK: i64 = 32;
-    let per_tile: Vec<(Vec<Instance>, RuleCounts)> = (0..tiling.count() as u32)
-        .into_par_iter()
+    // cells overlapping a tile; each candidate is kept by the one tile containing it
+    let range = |a: f64, b: f64, o: f64, n: i64| (((a - o) / cell).floor() as i64).clamp(0, n - 1)..=(((b - o) / cell).floor() as i64).clamp(0, n - 1);
+    let tile_cells = |t: usize| {
+        let rect = tiling.rect(t as u32 % tiling.tiles_x, t as u32 / tiling.tiles_x);
+        let (ri, rj) = (range(rect[0], rect[2], x0, ncx), range(rect[1], rect[3], z0, ncz));
+        (*ri.start(), *ri.end(), *rj.start(), *rj.end())
+    };
+    // each tile's keep bound, and from it a bound of its instances (the result's capacity: virtual
+    // until touched, so an over-estimate costs no memory)
+    let tile_keep: Vec<f64> = (0..tiling.count() as u32).map(|t| rules.max_keep_over(tiling.rect(t % tiling.tiles_x, t / tiling.tiles_x))).collect();
+    let tile_bound: Vec<usize> = (0..tiling.count())
         .map(|t| {
-            let (tx, tz) = (t % tiling.tiles_x, t / tiling.tiles_x);
-            let rect = tiling.rect(tx, tz);
-            let mut counts = RuleCounts::default();
-            let max_keep = rules.max_keep_over(rect);
-            if max_keep <= 0.0 {
-                return (Vec::new(), counts);
-            }
-            // cells overlapping the tile; each candidate is kept by the one tile containing it
-            let range = |a: f64, b: f64, o: f64, n: i64| (((a - o) / cell).floor() as i64).clamp(0, n - 1)..=(((b - o) / cell).floor() as i64).clamp(0, n - 1);
-            let (ri, rj) = (range(rect[0], rect[2], x0, ncx), range(rect[1], rect[3], z0, ncz));
-            let (ci0, ci1, cj0, cj1) = (*ri.start(), *ri.end(), *rj.start(), *rj.end());
-            // interior cells (two cells clear of the tile's border, so far from any rounding) hold
-            // candidates of this tile only: no tile test for them
-            let (ii0, ii1, ij0, ij1) = (ci0 + 2, ci1 - 2, cj0 + 2, cj1 - 2);
-            // a capacity bound (virtual until touched): no reallocation while pushing
-            let cells = ((ci1 - ci0 + 1) * (cj1 - cj0 + 1)) as f64;
-            let mut out = Vec::with_capacity((cells * max_keep.min(1.0)).ceil() as usize + 16);
-            // row-major over the tile's cells (the output order), with the density bound of the
-            // blocks of each band of BLOCK rows
-            let mut bound = Vec::new();
-            for bj in (cj0..=cj1).step_by(BLOCK as usize) {
-                let bj1 = (bj + BLOCK - 1).min(cj1);
-                bound.clear();
-                bound.extend((ci0..=ci1).step_by(BLOCK as usize).map(|bi| {
-                    let bi1 = (bi + BLOCK - 1).min(ci1);
-                    let d = rules.max_density_over([x0 + bi as f64 * cell, z0 + bj as f64 * cell, x0 + (bi1 + 1) as f64 * cell, z0 + (bj1 + 1) as f64 * cell]);
-                    if d <= 0.0 {
-                        0.0
-                    } else {
-                        d.min(1.0) * (1.0 + 1e-6) * rules.keep_scale
+            let (ci0, ci1, cj0, cj1) = tile_cells(t);
+            (((ci1 - ci0 + 1) * (cj1 - cj0 + 1)) as f64 * tile_keep[t].clamp(0.0, 1.0)).ceil() as usize
+        })
+        .collect();
+    let (total_bound, part_bound) = (tile_bound.iter().sum(), tile_bound.iter().copied().max().unwrap_or(0));
+    // tiles in parallel, each one's instances appended in tile order as it finishes
+    let (instances, per_tile) = gather_in_order(tiling.count(), total_bound, part_bound, |t, out: &mut Vec<Instance>| {
+        let mut counts = RuleCounts::default();
+        if tile_keep[t] <= 0.0 {
+            return counts;
+        }
+        let (ci0, ci1, cj0, cj1) = tile_cells(t);
+        let t = t as u32;
+        let (tx, tz) = (t % tiling.tiles_x, t / tiling.tiles_x);
+        // interior cells (two cells clear of the tile's border, so far from any rounding) hold
+        // candidates of this tile only: no tile test for them
+        let (ii0, ii1, ij0, ij1) = (ci0 + 2, ci1 - 2, cj0 + 2, cj1 - 2);
+        // no reallocation while pushing
+        out.reserve(tile_bound[t as usize]);
+        // row-major over the tile's cells (the output order), with the density bound of the
+        // blocks of each band of BLOCK rows
+        let mut bound = Vec::new();
+        for bj in (cj0..=cj1).step_by(BLOCK as usize) {
+            let bj1 = (bj + BLOCK - 1).min(cj1);
+            bound.clear();
+            bound.extend((ci0..=ci1).step_by(BLOCK as usize).map(|bi| {
+                let bi1 = (bi + BLOCK - 1).min(ci1);
+                let d = rules.max_density_over([x0 + bi as f64 * cell, z0 + bj as f64 * cell, x0 + (bi1 + 1) as f64 * cell, z0 + (bj1 + 1) as f64 * cell]);
+                if d <= 0.0 {
+                    0.0
+                } else {
+                    d.min(1.0) * (1.0 + 1e-6) * rules.keep_scale
+                }
+            }));
+            for cj in bj..=bj1 {
+                let row_inside = cj >= ij0 && cj <= ij1;
+                for ci in ci0..=ci1 {
+                    let h1 = mix64(key ^ (cj as u64 * ncx as u64 + ci as u64));
+                    // on the 0.1 mm grid (POSITION_STEPS_PER_M): short table entries
+                    let x = on_grid(x0 + (ci as f64 + (h1 >> 32) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
+                    let z = on_grid(z0 + (cj as f64 + (h1 & 0xFFFF_FFFF) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
+                    if !(row_inside && ci >= ii0 && ci <= ii1) && (x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz)) {
+                        continue;
                     }
-                }));
-                for cj in bj..=bj1 {
-                    let row_inside = cj >= ij0 && cj <= ij1;
-                    for ci in ci0..=ci1 {
-                        let h1 = mix64(key ^ (cj as u64 * ncx as u64 + ci as u64));
-                        // on the 0.1 mm grid (POSITION_STEPS_PER_M): short table entries
-                        let x = on_grid(x0 + (ci as f64 + (h1 >> 32) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
-                        let z = on_grid(z0 + (cj as f64 + (h1 & 0xFFFF_FFFF) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
-                        if !(row_inside && ci >= ii0 && ci <= ii1) && (x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz)) {
-                            continue;
-                        }
-                        let keep_bound = bound[((ci - ci0) / BLOCK) as usize];
-                        if keep_bound <= 0.0 {
-                            counts.candidates += 1;
-                            counts.density += 1;
-                            continue;
-                        }
-                        let h2 = mix64(h1);
-                        let keep_u = super::unit(h2);
-                        if keep_u >= keep_bound {
-                            counts.candidates += 1;
-                            counts.density += 1;
-                            continue;
-                        }
-                        if let Some(inst) = rules.place(x, z, keep_u, h2 ^ key, t, &mut counts) {
-                            out.push(on_table_grids(inst, bounds));
-                        }
+                    let keep_bound = bound[((ci - ci0) / BLOCK) as usize];
+                    if keep_bound <= 0.0 {
+                        counts.candidates += 1;
+                        counts.density += 1;
+                        continue;
+                    }
+                    let h2 = mix64(h1);
+                    let keep_u = super::unit(h2);
+                    if keep_u >= keep_bound {
+                        counts.candidates += 1;
+                        counts.density += 1;
+                        continue;
+                    }
+                    if let Some(inst) = rules.place(x, z, keep_u, h2 ^ key, t, &mut counts) {
+                        out.push(on_table_grids(inst, bounds));
                     }
                 }
             }
-            (out, counts)
-        })
-        .collect();
+        }
+        counts
+    });
     let mut counts = RuleCounts::default();
-    for (_, c) in &per_tile {
+    for c in &per_tile {
         counts.add(c);
     }
-    Ok((join(per_tile.into_iter().map(|(v, _)| v).collect()), counts))
-}
-
-/// Concatenates the tiles' instances in order, copying in parallel into one allocation at each
-/// tile's offset (the copy and the page faults of the new allocation are split over the threads).
-pub(crate) fn join(parts: Vec<Vec<Instance>>) -> Vec<Instance> {
-    let total = parts.iter().map(Vec::len).sum();
-    let mut all: Vec<Instance> = Vec::with_capacity(total);
-    let mut rest = &mut all.spare_capacity_mut()[..total];
-    let mut slots = Vec::with_capacity(parts.len());
-    for p in &parts {
-        let (slot, tail) = rest.split_at_mut(p.len());
-        slots.push(slot);
-        rest = tail;
-    }
-    slots.into_par_iter().zip(parts.into_par_iter()).for_each(|(slot, part)| {
-        // SAFETY: `slot` has exactly `part.len()` elements (split above) and does not overlap
-        // `part` (another allocation); one memcpy (its non-temporal stores skip reading the
-        // destination's cache lines first, which the element-wise loop paid for)
-        unsafe { std::ptr::copy_nonoverlapping(part.as_ptr(), slot.as_mut_ptr().cast::<Instance>(), part.len()) };
-    });
-    // SAFETY: the slots tile the first `total` elements of the spare capacity and each was
-    // written in full (slot k has exactly parts[k].len() elements)
-    unsafe { all.set_len(total) };
-    all
+    Ok((instances, counts))
 }

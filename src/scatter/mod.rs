@@ -23,6 +23,7 @@ pub mod jitter;
 pub mod poisson;
 pub mod rules;
 pub mod stats;
+pub mod storage;
 pub mod surface;
 
 use std::path::PathBuf;
