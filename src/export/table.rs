@@ -243,7 +243,9 @@ struct F32Grid {
     range: std::ops::Range<f32>,
 }
 const SHORT_F32_DIGITS: u32 = 4;
-const SHORT_GRID: F32Grid = F32Grid { scale: 1e4, range: 1e-4..256.0 };
+/// Up to 1024 an f32's spacing (≤ 6.1·10⁻⁵) is below the grid step, so a rounding interval holds at
+/// most one grid value (yaws reach 359.99°).
+const SHORT_GRID: F32Grid = F32Grid { scale: 1e4, range: 1e-4..1024.0 };
 /// Quaternion components: ryu writes plain decimals from 10⁻⁵ on, and up to 1 an f32's spacing
 /// (≤ 6·10⁻⁸) is below the grid step.
 const UNIT_DIGITS: u32 = 7;
@@ -562,7 +564,7 @@ mod tests {
     }
 
     /// Short decimals (the fast path) are ryu's bytes too: every f32 that is the nearest float to
-    /// k·10⁻⁴ below 256 (every scale, yaw in 0.01°), and f64 on 10⁻⁴ and 10⁻⁶ grids up to the
+    /// k·10⁻⁴ below 1024 (every scale, yaw in 0.01°), and f64 on 10⁻⁴ and 10⁻⁶ grids up to the
     /// range's ends, both signs; and values just off a grid, which take the general path.
     #[test]
     fn short_decimals_are_ryus() {
@@ -572,7 +574,7 @@ mod tests {
             *out = f32_text(v);
             assert_eq!(&out[..], fmt.format_finite(v).as_bytes(), "{v:e}");
         };
-        for k in 0..2_560_000u32 {
+        for k in 0..10_240_000u32 {
             let v = (k as f64 / 1e4) as f32;
             // the short path takes every one of them (from 10⁻⁴ on)
             assert_eq!(short_f32(v, &SHORT_GRID), (k > 0).then_some(k as u64), "{v:e}");
@@ -605,7 +607,7 @@ mod tests {
             out = f64_text(v);
             assert_eq!(&out[..], fmt.format_finite(v).as_bytes(), "{v:e}");
         }
-        for v in [1e-4f32, 255.9999, 256.0, 255.99998, 0.00010001] {
+        for v in [1e-4f32, 255.9999, 256.0, 255.99998, 0.00010001, 1023.9999, 1024.0, 1023.99994, 1024.0001, 359.99, 512.0001] {
             check32(v, &mut out);
         }
     }

@@ -51,10 +51,14 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
             (((ci1 - ci0 + 1) * (cj1 - cj0 + 1)) as f64 * tile_keep[t].clamp(0.0, 1.0)).ceil() as usize
         })
         .collect();
-    let (total_bound, part_bound) = (tile_bound.iter().sum(), tile_bound.iter().copied().max().unwrap_or(0));
+    // more than max_instances is an error after generating, so the reservation stops there
+    let total_bound = tile_bound.iter().sum::<usize>().min(s.max_instances.saturating_add(1));
+    let part_bound = tile_bound.iter().copied().max().unwrap_or(0);
     // tiles in parallel, each one's instances appended in tile order as it finishes
     let (instances, per_tile) = gather_in_order(tiling.count(), total_bound, part_bound, |t, out: &mut Vec<Instance>| {
         let mut counts = RuleCounts::default();
+        // the triangle of the last candidate: the next one, a cell away, is most often in it
+        let mut hint = u32::MAX;
         if tile_keep[t] <= 0.0 {
             return counts;
         }
@@ -104,7 +108,7 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
                         counts.density += 1;
                         continue;
                     }
-                    if let Some(inst) = rules.place(x, z, keep_u, h2 ^ key, t, &mut counts) {
+                    if let Some(inst) = rules.place(x, z, keep_u, h2 ^ key, t, &mut counts, &mut hint) {
                         out.push(on_table_grids(inst, bounds));
                     }
                 }

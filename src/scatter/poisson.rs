@@ -83,11 +83,12 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
         .map(|(b, pts)| {
             let bkey = mix64(key ^ 0x6b65_6570 ^ mix64(b as u64)); // "keep"
             let mut counts = RuleCounts::default();
+            let mut hint = u32::MAX;
             let mut out = Vec::new();
             for (k, p) in pts.iter().enumerate() {
                 let h = mix64(bkey.wrapping_add(k as u64));
                 let tile = tiling.tile_of(p[0], p[1]);
-                if let Some(inst) = rules.place(p[0], p[1], super::unit(h), mix64(h), tile, &mut counts) {
+                if let Some(inst) = rules.place(p[0], p[1], super::unit(h), mix64(h), tile, &mut counts, &mut hint) {
                     // x and z keep every bit (rounding could bring two closer than the spacing)
                     out.push(super::on_table_grids(inst, bounds));
                 }

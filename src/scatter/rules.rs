@@ -174,8 +174,11 @@ impl<'a> Rules<'a> {
 
     /// Judges the candidate at (x, z): kept when `keep_u` (uniform in [0, 1)) is below
     /// density · keep_scale and every rule passes; `attr` seeds its yaw and scale.
+    /// `hint` is the surface's point-location hint for a run of nearby candidates
+    /// ([`SurfaceIndex::height_at_near`]).
     #[inline]
-    pub fn place(&self, x: f64, z: f64, keep_u: f64, attr: u64, tile: u32, counts: &mut RuleCounts) -> Option<Instance> {
+    #[allow(clippy::too_many_arguments)]
+    pub fn place(&self, x: f64, z: f64, keep_u: f64, attr: u64, tile: u32, counts: &mut RuleCounts, hint: &mut u32) -> Option<Instance> {
         counts.candidates += 1;
         if keep_u >= self.density_at(x, z) * self.keep_scale {
             counts.density += 1;
@@ -188,7 +191,7 @@ impl<'a> Rules<'a> {
                 return None;
             }
         }
-        let Some((y, n)) = self.surface.height_at(x, z) else {
+        let Some((y, n)) = self.surface.height_at_near(x, z, hint) else {
             counts.off_surface += 1;
             return None;
         };

@@ -1,23 +1,10 @@
-//! Storage for millions of instances: vectors whose pages the kernel may back with transparent
-//! huge pages. A dense species fills hundreds of MB of fresh memory; on 4 KiB pages the first
-//! touch of each page is a fault and a page clear, which on these virtual machines cost about as
-//! much CPU as generating the instances (measured: 561 MB faulted in 0.30 s on 4 KiB pages,
-//! 0.06 s on 2 MiB pages, and unmapped in 0.05 s vs 0.002 s). Linux only; elsewhere, or when the
-//! kernel says no (THP `never`), these are ordinary vectors.
-
-/// Capacities below this stay ordinary allocations (a huge page is 2 MiB).
-const HUGE_MIN_BYTES: usize = 4 << 20;
-
-/// `Vec::with_capacity(cap)`, with the allocation advised for transparent huge pages when it is
-/// large. Nothing is touched: the capacity stays virtual until written.
-pub fn vec_with_capacity<T>(cap: usize) -> Vec<T> {
-    let v: Vec<T> = Vec::with_capacity(cap);
-    let bytes = v.capacity().saturating_mul(std::mem::size_of::<T>());
-    if bytes >= HUGE_MIN_BYTES {
-        advise_huge(v.as_ptr().cast::<u8>(), bytes);
-    }
-    v
-}
+//! Gathering the instances of many tiles into one vector in tile order, touching as little fresh
+//! memory as possible: a dense species fills hundreds of MB, and on these virtual machines the first
+//! touch of a fresh page costs about as much CPU as generating what it holds (measured: 561 MB
+//! faulted in 0.25–0.34 s on 4 KiB pages). Transparent huge pages were tried and dropped: they fault
+//! 561 MB in 0.06 s once the host backs the memory, but 1.4 s when the host has taken the free
+//! memory back (virtio-balloon free page reporting, seconds after a process ends), which is the
+//! situation of every fresh build.
 
 /// Runs `produce(k, buf)` for every part k in 0..n on the thread pool and concatenates the parts'
 /// items in k order into one vector; returns it with each part's summary, in k order.
@@ -25,7 +12,7 @@ pub fn vec_with_capacity<T>(cap: usize) -> Vec<T> {
 /// Parts are claimed in order from a shared counter, so they finish nearly in order: a finished
 /// part is appended at once when it is the next one due, else parked until it is (with two
 /// threads, rarely more than one part waits). The parts' buffers are reused from part to part, so
-/// the only fresh memory is the result (advised for huge pages, see [`vec_with_capacity`]), and
+/// the only fresh memory is the result, and
 /// each part is copied once while it is still warm in the caches. Collecting each part into a
 /// vector of its own and joining them afterwards touches twice the fresh memory and reads every
 /// item back cold (measured on 8.8 M instances of 64 bytes: the join alone took 0.06–0.58 s).
@@ -54,13 +41,13 @@ where
         spare: Vec<Vec<T>>,
     }
     let claim = AtomicUsize::new(0);
-    let commit = Mutex::new(Commit { all: vec_with_capacity(capacity), due: 0, parked: BTreeMap::new(), spare: Vec::new() });
+    let commit = Mutex::new(Commit { all: Vec::with_capacity(capacity), due: 0, parked: BTreeMap::new(), spare: Vec::new() });
     let workers = rayon::current_num_threads().clamp(1, n.max(1));
     let summaries: Vec<Vec<(usize, S)>> = (0..workers)
         .into_par_iter()
         .map(|_| {
             let mut mine = Vec::new();
-            let mut buf: Vec<T> = vec_with_capacity(part_capacity);
+            let mut buf: Vec<T> = Vec::with_capacity(part_capacity);
             loop {
                 let k = claim.fetch_add(1, Ordering::Relaxed);
                 if k >= n {
@@ -71,7 +58,7 @@ where
                 // a poisoned lock means another part panicked: that panic propagates from the pool
                 let Ok(mut c) = commit.lock() else { break };
                 if k != c.due {
-                    let fresh = c.spare.pop().unwrap_or_else(|| vec_with_capacity(part_capacity));
+                    let fresh = c.spare.pop().unwrap_or_else(|| Vec::with_capacity(part_capacity));
                     c.parked.insert(k, std::mem::replace(&mut buf, fresh));
                     continue;
                 }
@@ -103,24 +90,6 @@ where
     (all, summaries.into_iter().map(|(_, s)| s).collect())
 }
 
-#[cfg(target_os = "linux")]
-fn advise_huge(ptr: *const u8, len: usize) {
-    const PAGE: usize = 4096;
-    let start = (ptr as usize).div_ceil(PAGE) * PAGE;
-    let end = (ptr as usize + len) / PAGE * PAGE;
-    if end > start {
-        // SAFETY: [start, end) lies inside one live allocation of ours; MADV_HUGEPAGE only changes
-        // how the kernel backs those pages, never their contents. A refusal (EINVAL where THP is
-        // compiled out) leaves ordinary pages, which is fine.
-        unsafe {
-            libc::madvise(start as *mut libc::c_void, end - start, libc::MADV_HUGEPAGE);
-        }
-    }
-}
-
-#[cfg(not(target_os = "linux"))]
-fn advise_huge(_ptr: *const u8, _len: usize) {}
-
 #[cfg(test)]
 mod tests {
     #[test]
@@ -147,15 +116,5 @@ mod tests {
         }
         let (none, s): (Vec<u64>, Vec<()>) = super::gather_in_order(0, 0, 0, |_, _| ());
         assert!(none.is_empty() && s.is_empty());
-    }
-
-    #[test]
-    fn behaves_as_a_vector() {
-        for cap in [0usize, 10, 1 << 20] {
-            let mut v: Vec<u64> = super::vec_with_capacity(cap);
-            assert!(v.capacity() >= cap && v.is_empty());
-            v.extend(0..cap as u64 + 5);
-            assert_eq!(v.iter().sum::<u64>(), (cap as u64 + 5) * (cap as u64 + 4) / 2);
-        }
     }
 }

@@ -29,6 +29,9 @@ pub struct SurfaceIndex {
 /// its doubled area) still counts, so points on shared edges never fall between two triangles.
 const EDGE_TOLERANCE: f64 = 1e-12;
 
+/// Relative margin inside a hinted triangle (see [`SurfaceIndex::height_at_near`]).
+const HINT_MARGIN: f64 = 1e-9;
+
 impl SurfaceIndex {
     /// Index over one primitive's triangles (world-space positions, triangle list). Triangles whose
     /// normal does not point up (skirts, the base) or that are degenerate or reference missing
@@ -168,6 +171,28 @@ impl SurfaceIndex {
         Some((y, tri.n))
     }
 
+    /// [`Self::height_at`] for a run of nearby queries (a row of jittered cells, a tile's Poisson
+    /// points): `hint` holds the triangle the last query found (any value to start, e.g.
+    /// `u32::MAX`) and is tried first; it is taken only when (x, z) lies inside it by a margin
+    /// (10⁻⁹ of its doubled area) far above rounding, where no other triangle of the mesh can
+    /// contain the point, so the answer is the one `height_at` gives.
+    #[inline]
+    pub fn height_at_near(&self, x: f64, z: f64, hint: &mut u32) -> Option<(f64, [f64; 3])> {
+        if let Some(tri) = self.tris.get(*hint as usize) {
+            let (w0, w1, w2, d) = bary(tri, x, z);
+            if w0.min(w1).min(w2) > HINT_MARGIN * d {
+                let [a, b, c] = tri.p;
+                return Some(((w0 * a[1] + w1 * b[1] + w2 * c[1]) / d, tri.n));
+            }
+        }
+        let t = self.locate(x, z)?;
+        *hint = t as u32;
+        let tri = &self.tris[t];
+        let [a, b, c] = tri.p;
+        let (w0, w1, w2, d) = bary(tri, x, z);
+        Some(((w0 * a[1] + w1 * b[1] + w2 * c[1]) / d, tri.n))
+    }
+
     /// Index of a triangle containing (x, z): the first one that contains it exactly, else the
     /// best within [`EDGE_TOLERANCE`] (a point on an edge, up to rounding).
     #[inline]
@@ -262,6 +287,36 @@ mod tests {
         assert!(n[1] > 0.0 && ((n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) - 1.0).abs() < 1e-12);
         assert!(s.height_at(-0.1, 0.5).is_none());
         assert!(s.height_at(f64::NAN, 0.5).is_none());
+    }
+
+    /// The hinted lookup gives `height_at`'s answer bit for bit, from any hint, on a mesh of many
+    /// small triangles (points on edges and vertices included).
+    #[test]
+    fn hinted_lookup_matches_the_plain_one() {
+        let n = 24usize;
+        let mut p = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, z) = (i as f32 * 1.5, j as f32 * 1.5);
+                p.push([x, (x * 0.37).sin() * 3.0 + z * 0.2, z]);
+            }
+        }
+        let mut idx = Vec::new();
+        for j in 0..n as u32 {
+            for i in 0..n as u32 {
+                let (a, b, c, d) = (j * (n as u32 + 1) + i, j * (n as u32 + 1) + i + 1, (j + 1) * (n as u32 + 1) + i, (j + 1) * (n as u32 + 1) + i + 1);
+                idx.extend([a, c, b, b, c, d]);
+            }
+        }
+        let s = SurfaceIndex::new(&p, &idx);
+        let mut hint = u32::MAX;
+        let mut h: u64 = 3;
+        for k in 0..20_000 {
+            h = crate::synth::mix64(h);
+            // a walk of small steps, every 7th query on the lattice (vertices and edges)
+            let (x, z) = if k % 7 == 0 { ((h % 25) as f64 * 1.5, ((h >> 8) % 25) as f64 * 0.75) } else { ((h >> 11) as f64 / (1u64 << 53) as f64 * 37.0 - 0.5, (h & 0xFFFF) as f64 / 65536.0 * 36.0) };
+            assert_eq!(s.height_at_near(x, z, &mut hint).map(|(y, n)| (y.to_bits(), n.map(f64::to_bits))), s.height_at(x, z).map(|(y, n)| (y.to_bits(), n.map(f64::to_bits))), "({x}, {z})");
+        }
     }
 
     #[test]
