@@ -131,7 +131,7 @@ fn annulus_offsets() -> &'static [[f64; 2]; ANNULUS_OFFSETS] {
     static TABLE: std::sync::OnceLock<Box<[[f64; 2]; ANNULUS_OFFSETS]>> = std::sync::OnceLock::new();
     TABLE.get_or_init(|| {
         let mut t = Box::new([[0.0; 2]; ANNULUS_OFFSETS]);
-        let mut rng = Stream { key: 0x616e_6e75_6c75_73, n: 0 }; // "annulus"
+        let mut rng = Stream { key: 0x0061_6e6e_756c_7573, n: 0 }; // "annulus"
         for o in t.iter_mut() {
             *o = loop {
                 let (u, v) = rng.next_pair();

@@ -96,7 +96,7 @@ mod tests {
     fn gathers_parts_in_order_at_any_thread_count() {
         // parts of uneven length (some empty, some long) so they finish out of order
         let produce = |k: usize, buf: &mut Vec<u64>| {
-            let len = (k * 7919) % 23 * if k % 5 == 0 { 400 } else { 1 };
+            let len = (k * 7919) % 23 * if k.is_multiple_of(5) { 400 } else { 1 };
             buf.extend((0..len as u64).map(|i| (k as u64) << 32 | i));
             len
         };
