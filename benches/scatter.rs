@@ -220,7 +220,7 @@ fn main() {
         // the analyzer, as every build runs it (its height check samples at most 2^19 instances)
         let out = scatter_species_detailed(&surface, extent, sp, Some(&density), None, &[], TILE_M, 1).expect("scatter");
         let t = Instant::now();
-        let stats = analyze(&surface, extent, sp, Some(&density), None, &out.instances, TILE_M, 0.0).expect("analyze");
+        let stats = analyze(&surface, extent, sp, Some(&density), None, None, &out.instances, TILE_M, 0.0).expect("analyze");
         println!(
             "ANALYZE {name}: {:.3} s for {} instances; height checked on {} ({} off the mesh): max |y − terrain| {:.2e} m as scene.glb stores it (f32), {:.2e} m in the CSV (f64)",
             t.elapsed().as_secs_f64(),

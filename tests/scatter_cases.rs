@@ -82,7 +82,7 @@ fn instances_sit_on_the_tin_surface() {
         let sp = species("grass", placement);
         let v = scatter_species(&t.surface, t.extent, &sp, None, None, &[], 32.0, 1).unwrap();
         assert!(v.len() > 10_000, "{}", v.len());
-        let stats = analyze(&t.surface, t.extent, &sp, None, None, &v, 32.0, 0.0).unwrap();
+        let stats = analyze(&t.surface, t.extent, &sp, None, None, None, &v, 32.0, 0.0).unwrap();
         assert_eq!((stats.off_surface, stats.height_checked), (0, v.len()));
         // the CSV's f64 heights sit on the mesh up to their 1 µm grid (half a step); scene.glb's
         // f32 values up to f32's rounding too
@@ -184,7 +184,7 @@ fn analyzer_height_error_catches_a_wrong_triangle() {
     assert!(check.checked <= limit);
     assert!((check.max_error_f64_m - worst_d).abs() <= GRID_ERROR, "{check:?} vs {worst_d}");
     // and through analyze(), as the report gets it
-    let stats = analyze(&t.surface, t.extent, &sp, None, None, &bad, 32.0, 0.0).unwrap();
+    let stats = analyze(&t.surface, t.extent, &sp, None, None, None, &bad, 32.0, 0.0).unwrap();
     assert!((stats.max_height_error_csv_m - worst_d).abs() <= GRID_ERROR && stats.max_height_error_m >= worst_d - 1e-4, "{stats:?}");
     // off the mesh: counted, not measured
     let mut off = placed[..10].to_vec();
@@ -234,7 +234,7 @@ fn density_fidelity_in_two_constant_regions() {
             // jittered: 1/m² → 4,000 expected at 0.2; Poisson r = 1 (0.613/m² at full packing) → 2,450
             let v = scatter_species(&t.surface, t.extent, &sp, Some(&map), None, &[], 16.0, 11).unwrap();
             for (k, half) in halves.iter().enumerate() {
-                let expected = expected_count(&t.surface, t.extent, &sp, Some(&map), None, *half, 400).unwrap();
+                let expected = expected_count(&t.surface, t.extent, &sp, Some(&map), None, None, *half, 400).unwrap();
                 let effective = match placement {
                     Placement::Jittered => sp.max_density,
                     Placement::Poisson => sp.max_density.min(POISSON_PACKING / (sp.min_spacing_m * sp.min_spacing_m)),
@@ -249,7 +249,7 @@ fn density_fidelity_in_two_constant_regions() {
                 assert!((ratio - 1.0).abs() < 0.05, "{placement:?} seed {seed} half {k}: {measured} / {expected:.0} = {ratio:.3}");
             }
             // the analyzer says the same
-            let stats = analyze(&t.surface, t.extent, &sp, Some(&map), None, &v, 16.0, 0.0).unwrap();
+            let stats = analyze(&t.surface, t.extent, &sp, Some(&map), None, None, &v, 16.0, 0.0).unwrap();
             assert!((stats.count_ratio.unwrap() - 1.0).abs() < 0.03, "{:?}", stats.count_ratio);
             assert_eq!(stats.regions.len(), 64);
         }
@@ -295,7 +295,7 @@ fn density_all_zero_all_one_and_one_pixel() {
         let uniform = scatter_species(&t.surface, t.extent, &sp, None, None, &[], 16.0, 5).unwrap();
         assert_eq!(scatter_species(&t.surface, t.extent, &sp, Some(&ones), None, &[], 16.0, 5).unwrap(), uniform);
         assert_eq!(scatter_species(&t.surface, t.extent, &sp, Some(&DensityMap::constant(1.0)), None, &[], 16.0, 5).unwrap(), uniform);
-        let expected = expected_count(&t.surface, t.extent, &sp, None, None, t.extent, 200).unwrap();
+        let expected = expected_count(&t.surface, t.extent, &sp, None, None, None, t.extent, 200).unwrap();
         assert!((uniform.len() as f64 / expected - 1.0).abs() < 0.03, "{} vs {expected}", uniform.len());
         // a 1×1 map of 0.5: half
         let half = scatter_species(&t.surface, t.extent, &sp, Some(&DensityMap::constant(0.5)), None, &[], 16.0, 5).unwrap();
@@ -312,7 +312,7 @@ fn density_map_of_another_resolution_and_aspect() {
         let mut sp = species("g", placement);
         sp.max_density = 1.5;
         let v = scatter_species(&t.surface, t.extent, &sp, Some(&map), None, &[], 25.0, 8).unwrap();
-        let stats = analyze(&t.surface, t.extent, &sp, Some(&map), None, &v, 25.0, 0.0).unwrap();
+        let stats = analyze(&t.surface, t.extent, &sp, Some(&map), None, None, &v, 25.0, 0.0).unwrap();
         assert!((stats.count_ratio.unwrap() - 1.0).abs() < 0.03, "{placement:?} {:?}", stats.count_ratio);
         // every region with a good number expected is within 15 % (a few hundred each)
         for r in stats.regions.iter().filter(|r| r.expected > 400.0) {
@@ -432,7 +432,7 @@ fn water_level_and_altitude() {
         let out = scatter_species_detailed(&t.surface, t.extent, &sp, None, None, &[], 16.0, 4).unwrap();
         assert!(out.counts.water > 100 && out.counts.altitude > 100 && out.instances.len() > 100, "{:?}", out.counts);
         assert!(out.instances.iter().all(|i| i.position[1] >= 30.0 && i.position[1] <= 70.0));
-        let stats = analyze(&t.surface, t.extent, &sp, None, None, &out.instances, 16.0, 0.0).unwrap();
+        let stats = analyze(&t.surface, t.extent, &sp, None, None, None, &out.instances, 16.0, 0.0).unwrap();
         assert!((stats.count_ratio.unwrap() - 1.0).abs() < 0.05, "{:?}", stats.count_ratio);
     }
 }

@@ -60,6 +60,11 @@ fn outputs(scene_dir: &Path) -> BTreeMap<String, Vec<u8>> {
     tree(scene_dir).into_iter().filter(|(k, _)| k != "report.json" && k != "report.md").collect()
 }
 
+fn species_stats(scene_dir: &Path, name: &str) -> serde_json::Value {
+    let r = read_json(&scene_dir.join("report.json"));
+    r["stages"]["scatter"]["species"].as_array().unwrap().iter().find(|s| s["name"] == name).unwrap_or_else(|| panic!("no species {name} in the report"))["stats"].clone()
+}
+
 fn species_rules(scene_dir: &Path, name: &str) -> serde_json::Value {
     let r = read_json(&scene_dir.join("report.json"));
     r["stages"]["scatter"]["species"]
@@ -271,6 +276,11 @@ fn snow_thins_grass_and_flowers_by_the_reported_count_and_leaves_trees() {
         assert!(before.len() > 1000 && (0.45..0.55).contains(&share), "{name}: {} of {} kept ({share:.3})", after.len(), before.len());
         let summary = read_json(&snowy.join(format!("placements/{name}.json")));
         assert_eq!(summary["rules"]["snow"].as_u64().unwrap() as usize, thinned);
+        // the analyzer expects what the snow leaves: count / expected near 1 with and without it
+        for scene in [&bare, &snowy] {
+            let ratio = species_stats(scene, name)["count_ratio"].as_f64().unwrap();
+            assert!((0.93..1.07).contains(&ratio), "{name} in {}: count / expected = {ratio}", scene.display());
+        }
     }
 }
 

@@ -330,8 +330,9 @@ pub fn scatter_species_snow(
 }
 
 /// Expected count of a species over `[x0, z0, x1, z1]` (a region of the extent): the integral of
-/// density · mask · terrain rules (slope, altitude, water) times the effective max density, by the
-/// midpoint rule on `samples`² points. Exclusions are not counted. Used by the analyzer.
+/// density · mask · terrain rules (slope, altitude, water) · the share snow thinning leaves, times
+/// the effective max density, by the midpoint rule on `samples`² points. Exclusions are not
+/// counted. Used by the analyzer.
 #[allow(clippy::too_many_arguments)]
 pub fn expected_count(
     surface: &SurfaceIndex,
@@ -339,15 +340,17 @@ pub fn expected_count(
     species: &SpeciesSettings,
     density: Option<&DensityMap>,
     mask: Option<&DensityMap>,
+    snow: Option<rules::SnowThinning<'_>>,
     region: [f64; 4],
     samples: usize,
 ) -> Result<f64, ScatterError> {
     let tiling = Tiling::new(extent, (extent[2] - extent[0]).max(extent[3] - extent[1]))?;
-    let ctx = rules::Rules::new(surface, tiling, species, density, mask, &[], 0).or_else(|e| match e {
+    let mut ctx = rules::Rules::new(surface, tiling, species, density, mask, &[], 0).or_else(|e| match e {
         // exclusions are ignored here, so unknown names do not matter
         ScatterError::UnknownExclusion { .. } => rules::Rules::without_exclusions(surface, tiling, species, density, mask, 0),
         e => Err(e),
     })?;
+    ctx.snow = snow;
     let area = (region[2] - region[0]).max(0.0) * (region[3] - region[1]).max(0.0);
     Ok(rules::estimate_region(&ctx, region, samples) * ctx.effective_max_density * area)
 }

@@ -236,7 +236,8 @@ impl<'a> Rules<'a> {
         None
     }
 
-    /// Weight of a sample point in the estimate: density · mask · terrain rules (no randomness).
+    /// Weight of a sample point in the estimate: density · mask · terrain rules · the share snow
+    /// leaves (1 − strength · cover weight; no randomness).
     fn weight(&self, x: f64, z: f64) -> f64 {
         let d = self.density_at(x, z);
         if d <= 0.0 {
@@ -249,7 +250,10 @@ impl<'a> Rules<'a> {
             }
         }
         match self.surface.height_at(x, z) {
-            Some((y, n)) if self.terrain_rule(y, n).is_none() => d,
+            Some((y, n)) if self.terrain_rule(y, n).is_none() => match &self.snow {
+                Some(snow) => d * (1.0 - snow.strength * snow.mask.weight_at(x as f32, z as f32) as f64).clamp(0.0, 1.0),
+                None => d,
+            },
             _ => 0.0,
         }
     }

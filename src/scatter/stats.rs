@@ -70,7 +70,8 @@ pub struct SpeciesStats {
     pub analyze_seconds: f64,
 }
 
-/// Measures one species' instances; `seconds` is the generation time to report with them.
+/// Measures one species' instances; `snow` is the thinning they were placed with (the expected
+/// counts leave out what it drops), `seconds` the generation time to report with them.
 #[allow(clippy::too_many_arguments)]
 pub fn analyze(
     surface: &SurfaceIndex,
@@ -78,6 +79,7 @@ pub fn analyze(
     species: &SpeciesSettings,
     density: Option<&DensityMap>,
     mask: Option<&DensityMap>,
+    snow: Option<super::rules::SnowThinning<'_>>,
     instances: &[Instance],
     tile_m: f64,
     seconds: f64,
@@ -97,7 +99,7 @@ pub fn analyze(
     for (k, &m) in measured.iter().enumerate() {
         let (i, j) = ((k % REGIONS) as f64, (k / REGIONS) as f64);
         let region = [x0 + i * rw, z0 + j * rh, x0 + (i + 1.0) * rw, z0 + (j + 1.0) * rh];
-        let expected = expected_count(surface, extent, species, density, mask, region, REGION_SAMPLES)?;
+        let expected = expected_count(surface, extent, species, density, mask, snow, region, REGION_SAMPLES)?;
         regions.push(RegionStat { region, expected, measured: m, ratio: ratio(m, expected) });
     }
     let expected: f64 = regions.iter().map(|r| r.expected).sum();

@@ -133,7 +133,7 @@ pub fn run_scatter_with_snow(
         )
         .map_err(|e| fail(e.to_string()))?;
         let generate_s = t1.elapsed().as_secs_f64();
-        let stats = analyze(&surface, extent, species, density.as_ref(), mask.as_ref(), &result.instances, preset.scatter.tile_m, generate_s)
+        let stats = analyze(&surface, extent, species, density.as_ref(), mask.as_ref(), thinning, &result.instances, preset.scatter.tile_m, generate_s)
             .map_err(|e| fail(e.to_string()))?;
         let csv = PathBuf::from("placements").join(format!("{}.csv", species.name));
         table::write_placements_csv(&scene_dir.join(&csv), &result.instances).map_err(|e| fail(e.to_string()))?;
