@@ -90,10 +90,20 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
                 for ci in ci0..=ci1 {
                     let h1 = mix64(key ^ (cj as u64 * ncx as u64 + ci as u64));
                     // on the 0.1 mm grid (POSITION_STEPS_PER_M): short table entries
-                    let x = on_grid(x0 + (ci as f64 + (h1 >> 32) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
-                    let z = on_grid(z0 + (cj as f64 + (h1 & 0xFFFF_FFFF) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
-                    if !(row_inside && ci >= ii0 && ci <= ii1) && (x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz)) {
-                        continue;
+                    let position = || {
+                        let x = on_grid(x0 + (ci as f64 + (h1 >> 32) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
+                        let z = on_grid(z0 + (cj as f64 + (h1 & 0xFFFF_FFFF) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
+                        (x, z)
+                    };
+                    // a border cell's candidate may belong to the next tile: its position first; an
+                    // interior one's only once it passed the density bound (half are rejected before)
+                    let mut at = None;
+                    if !(row_inside && ci >= ii0 && ci <= ii1) {
+                        let (x, z) = position();
+                        if x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz) {
+                            continue;
+                        }
+                        at = Some((x, z));
                     }
                     let keep_bound = bound[((ci - ci0) / BLOCK) as usize];
                     if keep_bound <= 0.0 {
@@ -108,6 +118,7 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
                         counts.density += 1;
                         continue;
                     }
+                    let (x, z) = at.unwrap_or_else(position);
                     if let Some(inst) = rules.place(x, z, keep_u, h2 ^ key, t, &mut counts, &mut hint) {
                         out.push(on_table_grids(inst, bounds));
                     }
