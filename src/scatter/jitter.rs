@@ -68,8 +68,8 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
         // interior cells (two cells clear of the tile's border, so far from any rounding) hold
         // candidates of this tile only: no tile test for them
         let (ii0, ii1, ij0, ij1) = (ci0 + 2, ci1 - 2, cj0 + 2, cj1 - 2);
-        // no reallocation while pushing
-        out.reserve(tile_bound[t as usize]);
+        // no reallocation while pushing (a hint: a bound the system refuses leaves the buffer to grow)
+        let _ = out.try_reserve(tile_bound[t as usize]);
         // row-major over the tile's cells (the output order), with the density bound of the
         // blocks of each band of BLOCK rows
         let mut bound = Vec::new();
