@@ -163,12 +163,8 @@ impl SurfaceIndex {
     /// interpolation in f64; `None` outside the mesh (or over a hole).
     #[inline]
     pub fn height_at(&self, x: f64, z: f64) -> Option<(f64, [f64; 3])> {
-        let t = self.locate(x, z)?;
-        let tri = &self.tris[t];
-        let [a, b, c] = tri.p;
-        let (w0, w1, w2, d) = bary(tri, x, z);
-        let y = (w0 * a[1] + w1 * b[1] + w2 * c[1]) / d;
-        Some((y, tri.n))
+        // no triangle has index u32::MAX: the lookup starts from the bucket
+        self.height_at_near(x, z, &mut u32::MAX)
     }
 
     /// [`Self::height_at`] for a run of nearby queries (a row of jittered cells, a tile's Poisson
