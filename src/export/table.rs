@@ -61,16 +61,30 @@ struct Line<'a> {
 const SLACK: usize = 16;
 
 impl Line<'_> {
+    /// Room for one more row: at least [`ROW_MAX`] + [`SLACK`] bytes past `len`. [`push_row`]
+    /// checks it once per row; the single-byte and 8-byte stores of the row (at most `ROW_MAX`
+    /// bytes, and an 8-byte store reaches at most 7 past the row's end) are then unchecked, which
+    /// took a quarter of the formatting's instructions as bounds checks.
+    #[inline]
+    fn has_room_for_a_row(&self) -> bool {
+        self.buf.len() >= self.len + ROW_MAX + SLACK
+    }
+
     #[inline]
     fn push(&mut self, b: u8) {
-        self.buf[self.len] = b;
+        debug_assert!(self.len < self.buf.len());
+        // SAFETY: within a row (see `has_room_for_a_row`), len < buf.len()
+        unsafe { *self.buf.get_unchecked_mut(self.len) = b };
         self.len += 1;
     }
 
     /// Stores the 8 bytes of `word` (little-endian) and keeps the first `n` (≤ 8).
     #[inline]
     fn put8(&mut self, word: u64, n: usize) {
-        self.buf[self.len..self.len + 8].copy_from_slice(&word.to_le_bytes());
+        debug_assert!(self.len + 8 <= self.buf.len() && n <= 8);
+        // SAFETY: within a row (see `has_room_for_a_row`), len + 8 ≤ buf.len(); the store is
+        // unaligned-safe
+        unsafe { self.buf.as_mut_ptr().add(self.len).cast::<[u8; 8]>().write_unaligned(word.to_le_bytes()) };
         self.len += n;
     }
 
@@ -184,6 +198,8 @@ fn push_row(line: &mut Line<'_>, r: &PlacementRow) -> bool {
     if !finite {
         return false;
     }
+    // the stores below are unchecked: this is the check (every buffer is sized for it)
+    assert!(line.has_room_for_a_row(), "placement table buffer too small for a row");
     for v in r.position {
         push_f64(line, v);
         line.push(b',');

@@ -164,7 +164,8 @@ impl SurfaceIndex {
     #[inline]
     pub fn height_at(&self, x: f64, z: f64) -> Option<(f64, [f64; 3])> {
         // no triangle has index u32::MAX: the lookup starts from the bucket
-        self.height_at_near(x, z, &mut u32::MAX)
+        let mut no_hint = u32::MAX;
+        self.height_at_near(x, z, &mut no_hint)
     }
 
     /// [`Self::height_at`] for a run of nearby queries (a row of jittered cells, a tile's Poisson
