@@ -123,17 +123,19 @@ impl DensityMap {
 /// Bilinear weights along one axis: (fraction, lower index, upper index), clamped to the border.
 #[inline]
 fn axis(u: f64, n: usize) -> (f32, usize, usize) {
-    let p = u * n as f64 - 0.5;
-    let last = (n - 1) as f64;
+    // conversions through i64 (exact for any map size): one instruction each, where usize ↔ f64
+    // takes several on x86-64
+    let p = u * n as i64 as f64 - 0.5;
+    let last = (n - 1) as i64 as f64;
     if p.is_nan() || p <= 0.0 {
         return (0.0, 0, 0);
     }
     if p >= last {
         return (0.0, n - 1, n - 1);
     }
-    // p > 0 here, so truncation is the floor (and no libm call)
-    let i = p as usize;
-    ((p - i as f64) as f32, i, (i + 1).min(n - 1))
+    // 0 < p < n − 1 here, so truncation is the floor (and no libm call)
+    let i = p as i64;
+    ((p - i as f64) as f32, i as usize, (i as usize + 1).min(n - 1))
 }
 
 /// Gray values of an RGB(A) image whose channels agree; anything else is an error naming the pixel.
