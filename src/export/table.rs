@@ -63,8 +63,9 @@ const SLACK: usize = 16;
 impl Line<'_> {
     /// Room for one more row: at least [`ROW_MAX`] + [`SLACK`] bytes past `len`. [`push_row`]
     /// checks it once per row; the single-byte and 8-byte stores of the row (at most `ROW_MAX`
-    /// bytes, and an 8-byte store reaches at most 7 past the row's end) are then unchecked, which
-    /// took a quarter of the formatting's instructions as bounds checks.
+    /// bytes, and an 8-byte store reaches at most 6 past the row's end, as every one keeps at
+    /// least one byte and a newline follows) are then unchecked: the bounds checks were ~15 % of
+    /// the formatting's instructions. `push` and `put8` are private and have this precondition.
     #[inline]
     fn has_room_for_a_row(&self) -> bool {
         self.buf.len() >= self.len + ROW_MAX + SLACK
