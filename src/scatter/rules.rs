@@ -41,6 +41,14 @@ pub struct SnowThinning<'a> {
     pub strength: f64,
 }
 
+impl SnowThinning<'_> {
+    /// Probability that a candidate at (x, z) is dropped: strength × the cover weight there.
+    #[inline]
+    pub fn drop_share(&self, x: f64, z: f64) -> f64 {
+        self.strength * self.mask.weight_at(x as f32, z as f32) as f64
+    }
+}
+
 /// Tag mixed into a candidate's seed for its snow decision ("snow"), independent of yaw and scale.
 const SNOW_TAG: u64 = 0x736e_6f77;
 
@@ -201,8 +209,7 @@ impl<'a> Rules<'a> {
             Some(Reject::Slope) => counts.slope += 1,
             None => {
                 if let Some(snow) = &self.snow {
-                    let w = snow.mask.weight_at(x as f32, z as f32) as f64;
-                    if unit(mix64(attr ^ SNOW_TAG)) < snow.strength * w {
+                    if unit(mix64(attr ^ SNOW_TAG)) < snow.drop_share(x, z) {
                         counts.snow += 1;
                         return None;
                     }
@@ -251,7 +258,7 @@ impl<'a> Rules<'a> {
         }
         match self.surface.height_at(x, z) {
             Some((y, n)) if self.terrain_rule(y, n).is_none() => match &self.snow {
-                Some(snow) => d * (1.0 - snow.strength * snow.mask.weight_at(x as f32, z as f32) as f64).clamp(0.0, 1.0),
+                Some(snow) => d * (1.0 - snow.drop_share(x, z)).clamp(0.0, 1.0),
                 None => d,
             },
             _ => 0.0,

@@ -176,18 +176,15 @@ impl SurfaceIndex {
     #[inline]
     pub fn height_at_near(&self, x: f64, z: f64, hint: &mut u32) -> Option<(f64, [f64; 3])> {
         if let Some(tri) = self.tris.get(*hint as usize) {
-            let (w0, w1, w2, d) = bary(tri, x, z);
-            if w0.min(w1).min(w2) > HINT_MARGIN * d {
-                let [a, b, c] = tri.p;
-                return Some(((w0 * a[1] + w1 * b[1] + w2 * c[1]) / d, tri.n));
+            let w = bary(tri, x, z);
+            if w.0.min(w.1).min(w.2) > HINT_MARGIN * w.3 {
+                return Some((interpolate(tri, w), tri.n));
             }
         }
         let t = self.locate(x, z)?;
         *hint = t as u32;
         let tri = &self.tris[t];
-        let [a, b, c] = tri.p;
-        let (w0, w1, w2, d) = bary(tri, x, z);
-        Some(((w0 * a[1] + w1 * b[1] + w2 * c[1]) / d, tri.n))
+        Some((interpolate(tri, bary(tri, x, z)), tri.n))
     }
 
     /// Index of a triangle containing (x, z): the first one that contains it exactly, else the
@@ -227,6 +224,13 @@ impl SurfaceIndex {
         }
         best
     }
+}
+
+/// Height at the point whose unnormalised weights [`bary`] gave.
+#[inline]
+fn interpolate(t: &Tri, (w0, w1, w2, d): (f64, f64, f64, f64)) -> f64 {
+    let [a, b, c] = t.p;
+    (w0 * a[1] + w1 * b[1] + w2 * c[1]) / d
 }
 
 /// Unnormalised barycentric weights of (x, z) and their sum d (twice the signed area in x/z).
