@@ -5,6 +5,10 @@
 //! nodes, then textures). POSITION accessors carry min/max computed from the f32 values exactly as
 //! written. Indices are UNSIGNED_SHORT when the largest is ≤ 65534 (65535 is the primitive restart
 //! value of some APIs), else UNSIGNED_INT. Points primitives (mode POINTS) have no index list. No hash maps anywhere: the same scene gives the same bytes.
+//!
+//! The scene is compacted first ([`super::compact`]): objects nothing shows are left out, equal
+//! materials and textures are written once, and nodes shown only as MSFT_lod levels form a second,
+//! non-default glTF scene (scene 0 is the one every viewer shows).
 
 use std::collections::BTreeSet;
 
@@ -14,6 +18,7 @@ use json::validation::USize64;
 use json::Index;
 use serde_json::{Map, Value};
 
+use super::compact::compact;
 use super::{check_scene, SceneProblem};
 use crate::mesh::{AlphaMode, PrimitiveMode, Scene};
 
@@ -23,6 +28,9 @@ pub const EXT_INSTANCING: &str = "EXT_mesh_gpu_instancing";
 pub const EXT_LOD: &str = "MSFT_lod";
 /// Key in a LoD node's extras holding the screen coverage of each level (MSFT_lod convention).
 pub const LOD_COVERAGE_KEY: &str = "MSFT_screencoverage";
+
+/// Name of the second glTF scene, which holds the nodes shown only as MSFT_lod levels.
+pub const LOD_SCENE_NAME: &str = "MSFT_lod levels (not shown by default)";
 
 /// Largest index written as UNSIGNED_SHORT.
 pub const MAX_U16_INDEX: u32 = 65534;
@@ -174,6 +182,9 @@ fn opt_name(name: &str) -> Option<String> {
 fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), SceneProblem> {
     use json::accessor::{ComponentType, Type};
     check_scene(scene)?;
+    let (compacted, _) = compact(scene);
+    let lod_roots = compacted.lod_roots;
+    let scene: &Scene = &compacted.scene;
     let mut root = json::Root {
         asset: json::Asset { generator: Some(GENERATOR.to_string()), version: "2.0".into(), ..Default::default() },
         ..Default::default()
@@ -362,6 +373,16 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
             nodes: scene.roots.iter().map(|&r| Index::new(r as u32)).collect(),
         });
         root.scene = Some(Index::new(0));
+        // levels shown only through MSFT_lod: a second scene, so they are used but not shown by
+        // importers that ignore the extension (see `compact`)
+        if !lod_roots.is_empty() {
+            root.scenes.push(json::Scene {
+                extensions: None,
+                extras: None,
+                name: Some(LOD_SCENE_NAME.into()),
+                nodes: lod_roots.iter().map(|&r| Index::new(r as u32)).collect(),
+            });
+        }
     }
     bin.data.resize(bin.data.len().next_multiple_of(4), 0);
     if !bin.data.is_empty() {

@@ -5,6 +5,7 @@
 //! writes them, each through [`write_atomic`]: a scene that cannot be written leaves the previous
 //! outputs untouched.
 
+pub mod compact;
 pub mod gltf;
 pub mod obj;
 pub mod table;

@@ -171,11 +171,25 @@ pub fn flower_model(s: &FlowerSettings, variant: usize) -> (Primitive, f32) {
     (p, height)
 }
 
+/// Transparent (then dilated) texels around each variant's atlas cell.
+pub const ATLAS_GUTTER_PX: u32 = 4;
+
+/// One variant's place in the atlas, as (u0, v0, u1, v1) with v down.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlowerCell {
+    /// The cell's inside (within the gutter).
+    pub uv: [f32; 4],
+    /// What the cards show: the whole card, centred, its bottom on the cell's bottom (the ground).
+    pub card_uv: [f32; 4],
+}
+
 /// A flower species: crossed billboards per variant, the atlas they show, its mips.
 #[derive(Debug, Clone)]
 pub struct FlowerAsset {
     pub scene: Scene,
     pub atlas: Vec<MipLevel>,
+    /// Each variant's atlas cell and the part of it its cards show.
+    pub cells: Vec<FlowerCell>,
     pub report: FlowerReport,
 }
 
@@ -192,27 +206,34 @@ pub struct FlowerReport {
 pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, RasterError> {
     let started = std::time::Instant::now();
     let px = s.atlas_px;
+    let g = ATLAS_GUTTER_PX;
+    // each variant's cell is px × 2px inside a gutter of transparent (then dilated) texels, so
+    // filtering and the smaller mips never read a neighbour's flower
     let (cell_w, cell_h) = (px, 2 * px);
+    let (atlas_w, atlas_h) = ((cell_w + 2 * g) * s.variants as u32, cell_h + 2 * g);
     let card_w = s.card_width();
     let card_h = s.height_m[1] * 1.1;
-    let mut atlas = Image { width: cell_w * s.variants as u32, height: cell_h, pixels: vec![[0.0; 4]; (cell_w * s.variants as u32 * cell_h) as usize] };
+    // square pixels; the whole card fits the cell, its bottom edge (the ground) on the cell's
+    let ppm = (cell_w as f64 / card_w as f64).min(cell_h as f64 / card_h as f64);
+    let (window_w, window_h) = (cell_w as f64 / ppm, cell_h as f64 / ppm);
+    let mut atlas = Image { width: atlas_w, height: atlas_h, pixels: vec![[0.0; 4]; (atlas_w * atlas_h) as usize] };
     let materials = [Material { name: "flower_model".into(), double_sided: true, ..Material::default() }];
     let opts = RenderOptions { use_vertex_colors: true, shading: Shading::Unlit, ..RenderOptions::default() };
     let mut model_triangles = 0;
+    let mut cells = Vec::with_capacity(s.variants);
     for v in 0..s.variants {
         let (model, _) = flower_model(s, v);
         model_triangles += model.triangle_count();
-        // front view of a card_w × card_h window (non-square pixels map to the card exactly)
+        // front view of the cell's window, centred on the stem, its bottom row at the ground
         let ss = crate::plants::grass_asset::BAKE_SUPERSAMPLE;
-        let ppm = cell_w as f64 / card_w as f64;
         let view = OrthoView {
-            origin: [-card_w as f64 / 2.0, card_h as f64, 1.0],
+            origin: [-window_w / 2.0, window_h, 1.0],
             right: [1.0, 0.0, 0.0],
             up: [0.0, 1.0, 0.0],
             forward: [0.0, 0.0, -1.0],
             pixels_per_metre: ppm * ss as f64,
             width: cell_w * ss,
-            height: ((card_h as f64 * ppm).ceil() as u32).clamp(1, cell_h) * ss,
+            height: cell_h * ss,
         };
         let cam = Camera::Ortho(view);
         let mut canvas = cam.canvas([0.0; 4])?;
@@ -220,12 +241,23 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
         const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
         render_mesh(&mut canvas, &cam, &IDENTITY, &mesh, &materials, &[], &opts);
         // resolved from BAKE_SUPERSAMPLE× (anti-aliased alpha, which the coverage-keeping mips need)
-        atlas.blit(&resolve_supersampled(&Image::from_canvas(&canvas), ss), v as u32 * cell_w, 0);
+        let (x, y) = (v as u32 * (cell_w + 2 * g) + g, g);
+        atlas.blit(&resolve_supersampled(&Image::from_canvas(&canvas), ss), x, y);
+        // the card's rectangle inside the cell: centred, bottom-aligned
+        let (shown_w, shown_h) = (card_w as f64 * ppm, card_h as f64 * ppm);
+        let (aw, ah) = (atlas_w as f64, atlas_h as f64);
+        let u0 = (x as f64 + (cell_w as f64 - shown_w) / 2.0) / aw;
+        let u1 = (x as f64 + (cell_w as f64 + shown_w) / 2.0) / aw;
+        let v1 = (y + cell_h) as f64 / ah;
+        let v0 = v1 - shown_h / ah;
+        cells.push(FlowerCell {
+            uv: [x as f32 / aw as f32, y as f32 / ah as f32, (x + cell_w) as f32 / aw as f32, (y + cell_h) as f32 / ah as f32],
+            card_uv: [u0 as f32, v0 as f32, u1 as f32, v1 as f32],
+        });
     }
     dilate(&mut atlas, s.alpha_cutoff);
     let chain = mip_chain(&atlas, s.alpha_cutoff);
     let png = chain[0].image.encode_png().map_err(|e| RasterError::Encode(e.to_string()))?;
-    let shown_v = (card_h as f64 * cell_w as f64 / card_w as f64 / cell_h as f64) as f32;
     let mut scene = Scene {
         name: name.into(),
         materials: vec![Material {
@@ -240,10 +272,8 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
         ..Scene::default()
     };
     let mut per_flower = 0;
-    for v in 0..s.variants {
-        let u0 = v as f32 / s.variants as f32;
-        let u1 = (v + 1) as f32 / s.variants as f32;
-        let prim = crossed_cards(card_w, card_h, [u0, 0.0, u1, shown_v]);
+    for (v, cell) in cells.iter().enumerate() {
+        let prim = crossed_cards(card_w, card_h, cell.card_uv);
         per_flower = prim.triangle_count();
         let node = scene.add_mesh_node(Mesh { name: format!("{name}_v{v}"), primitives: vec![prim], extras: None });
         scene.nodes[node].translation = [v as f32 * card_w * 1.5, 0.0, 0.0];
@@ -257,7 +287,7 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
         atlas_coverage: chain.iter().map(|m| m.coverage).collect(),
         seconds: started.elapsed().as_secs_f64(),
     };
-    Ok(FlowerAsset { scene, atlas: chain, report })
+    Ok(FlowerAsset { scene, atlas: chain, cells, report })
 }
 
 /// Two crossed vertical cards `width` × `height` showing `rect` ([u0, v0, u1, v1], v down).
