@@ -100,12 +100,40 @@ else
   echo "npm: ready in $(elapsed "$t")"
 fi
 
+# Blender as a Python module (PyPI bpy) for the import checks; its wheel needs CPython 3.11, so it gets
+# a venv of its own (.venv-blender), made with a python3.11 from PATH or pyenv.
+BPY_PKG="bpy==4.5.15"
+BVENV="$ROOT/.venv-blender"
+BPY="$BVENV/bin/python"
+bpy_stamp="$BVENV/.verdant-check-deps"
+if [ -x "$BPY" ] && [ -f "$bpy_stamp" ] && [ "$(cat "$bpy_stamp")" = "$BPY_PKG" ]; then
+  echo "blender venv: up to date ($BVENV)"
+else
+  t=$SECONDS
+  py311=""
+  for cand in python3.11 "$(pyenv root 2>/dev/null)/versions/3.11"*/bin/python3.11 python3; do
+    if command -v "$cand" >/dev/null 2>&1 && "$cand" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' 2>/dev/null; then
+      py311="$cand"; break
+    fi
+  done
+  if [ -z "$py311" ]; then
+    echo "check.sh: $BPY_PKG needs CPython 3.11 (install it, e.g. with pyenv or apt python3.11)" >&2
+    exit 1
+  fi
+  echo "blender venv: creating $BVENV with $py311, pip: installing $BPY_PKG"
+  "$py311" -m venv "$BVENV"
+  "$BPY" -m pip install -q --disable-pip-version-check "$BPY_PKG"
+  echo "$BPY_PKG" > "$bpy_stamp"
+  echo "blender venv: ready in $(elapsed "$t")"
+fi
+
 # Smoke-test the tools, so a broken set-up fails here with a clear message rather than mid-check.
 "$PY" -c 'import trimesh, pygltflib, pyrender, OpenGL, numpy, PIL, scipy.spatial, rtree
 print(f"python tools: trimesh {trimesh.__version__}, pyrender {pyrender.__version__}, "
       f"PyOpenGL {OpenGL.__version__}, numpy {numpy.__version__}")'
 node -e 'const v=require(process.argv[1]); console.log("node tools: gltf-validator " + v.version())' \
   "$ROOT/scripts/node_modules/gltf-validator"
+"$BPY" -c 'import bpy; print("blender tools: bpy " + bpy.app.version_string)' 2>/dev/null
 echo "set-up took $(elapsed "$setup_start")"
 
 section "1b. Self-test of check_outputs.py (good samples pass, broken ones fail)"
@@ -307,6 +335,26 @@ for scene in "${SCENES[@]}"; do
 done
 declare -A SPECIES_CHECKED=()
 while IFS=$'\t' read -r name status; do SPECIES_CHECKED[$name]="$status"; done < "$OUT/check_species.tsv"
+
+section "5d. Blender (bpy) imports every LoD chain file: one level visible, no repeated materials"
+chain_files=()
+for f in "${FILES[@]}"; do
+  case "$f" in */species/*_LOD*.glb|*/species/*_far.glb) ;; */species/*.glb) chain_files+=("$OUT/$f") ;; esac
+done
+BLENDER_TSV="$OUT/check_blender.tsv"
+: > "$BLENDER_TSV"
+if ((${#chain_files[@]})); then
+  # the importer logs every node it creates at INFO level: keep only the check's own lines
+  if "$BPY" scripts/check_blender.py --summary-tsv "$BLENDER_TSV" "${chain_files[@]}" 2>&1 | grep -v ' | INFO: \|^$'; then
+    :
+  fi
+  while IFS=$'\t' read -r file status visible objects; do
+    if [ "$status" = ok ]; then pass; else fail "Blender import of ${file#"$OUT"/}: see the table above"; fi
+  done < "$BLENDER_TSV"
+  if [ "$(wc -l < "$BLENDER_TSV")" -ne "${#chain_files[@]}" ]; then fail "check_blender.py did not report every chain file"; fi
+else
+  fail "no species chain files to import into Blender"
+fi
 
 for f in "${FILES[@]}"; do
   if [ -z "${IS_BUILD[$f]:-}" ]; then continue; fi

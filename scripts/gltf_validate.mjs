@@ -7,6 +7,12 @@
 // counts per file; exits 1 unless every file has 0 errors and 0 warnings (their messages are printed).
 // Infos and hints are allowed: EXT_mesh_gpu_instancing and MSFT_lod are reported as unsupported at info
 // level, because the validator cannot check them (scripts/check_outputs.py does).
+//
+// Unused objects (UNUSED_OBJECT, info level) fail too: a file holds only what it shows. Two kinds are
+// told apart rather than failed: accessors that EXT_mesh_gpu_instancing references (the validator
+// cannot read that extension, so it calls its accessors unused), and TEXCOORD_n attributes on
+// primitives whose material has no texture yet (terrain, bark and leaves keep their UVs for the
+// user's textures; counted as `uv without texture`).
 import { readFile, appendFile } from 'node:fs/promises';
 import path from 'node:path';
 import validator from 'gltf-validator';
@@ -32,6 +38,39 @@ for (let i = 0; i < args.length; i++) {
   }
 }
 if (files.length === 0) usage('no files given');
+
+// The glTF JSON of a .glb or .gltf file.
+function gltfJson(data) {
+  const magic = String.fromCharCode(...data.subarray(0, 4));
+  if (magic !== 'glTF') return JSON.parse(new TextDecoder().decode(data));
+  const view = new DataView(data.buffer, data.byteOffset, data.byteLength);
+  const jsonLength = view.getUint32(12, true);
+  return JSON.parse(new TextDecoder().decode(data.subarray(20, 20 + jsonLength)));
+}
+
+// Accessor indices that EXT_mesh_gpu_instancing attributes name.
+function instancingAccessors(doc) {
+  const used = new Set();
+  for (const node of doc.nodes ?? []) {
+    const attributes = node.extensions?.EXT_mesh_gpu_instancing?.attributes ?? {};
+    for (const a of Object.values(attributes)) used.add(a);
+  }
+  return used;
+}
+
+// Splits UNUSED_OBJECT messages into really unused, instancing (a validator blind spot), uv without texture.
+function unusedObjects(messages, doc) {
+  const instancing = instancingAccessors(doc);
+  const out = { unused: [], instancing: 0, uvWithoutTexture: 0 };
+  for (const m of messages) {
+    if (m.code !== 'UNUSED_OBJECT') continue;
+    const accessor = /^\/accessors\/(\d+)$/.exec(m.pointer ?? '');
+    if (accessor && instancing.has(Number(accessor[1]))) out.instancing++;
+    else if (/\/attributes\/TEXCOORD_\d+$/.test(m.pointer ?? '')) out.uvWithoutTexture++;
+    else out.unused.push(m.pointer ?? '?');
+  }
+  return out;
+}
 
 async function validateFile(file) {
   const dir = path.dirname(file);
@@ -59,14 +98,17 @@ for (const file of files) {
   try {
     const report = await validateFile(file);
     const { numErrors, numWarnings, numInfos, numHints, messages } = report.issues;
-    counts = `${numErrors}/${numWarnings}/${numInfos}/${numHints}`;
-    const bad = numErrors > 0 || numWarnings > 0;
+    const unused = unusedObjects(messages, gltfJson(new Uint8Array(await readFile(file))));
+    counts = `${numErrors}/${numWarnings}/${numInfos}/${numHints} unused ${unused.unused.length}`;
+    const bad = numErrors > 0 || numWarnings > 0 || unused.unused.length > 0;
     // summarise infos/hints by code, so the allowed ones stay visible without flooding the log
     const minor = {};
     for (const m of messages) if (m.severity >= 2) minor[m.code] = (minor[m.code] ?? 0) + 1;
     const minorText = Object.entries(minor).map(([code, n]) => `${code}×${n}`).join(', ');
     console.log(`${bad ? 'FAIL' : 'OK  '}  ${name}: ${numErrors} errors, ${numWarnings} warnings, ` +
-      `${numInfos} infos, ${numHints} hints${minorText ? ` (${minorText})` : ''}`);
+      `${numInfos} infos, ${numHints} hints${minorText ? ` (${minorText})` : ''}; ` +
+      `unused objects ${unused.unused.length} (not counted: ${unused.instancing} instancing accessors, ` +
+      `${unused.uvWithoutTexture} uv without texture)`);
     if (bad) {
       status = 'FAIL';
       failed++;
@@ -75,6 +117,10 @@ for (const file of files) {
         console.log(`      ${SEVERITY[m.severity]} ${m.code} at ${m.pointer ?? m.offset ?? '?'}: ${m.message}`);
       }
       if (serious.length > MAX_PRINTED) console.log(`      ... and ${serious.length - MAX_PRINTED} more`);
+      if (unused.unused.length) {
+        console.log(`      unused objects: ${unused.unused.slice(0, MAX_PRINTED).join(', ')}` +
+          (unused.unused.length > MAX_PRINTED ? ` ... and ${unused.unused.length - MAX_PRINTED} more` : ''));
+      }
     }
   } catch (e) {
     status = 'FAIL';
@@ -85,5 +131,5 @@ for (const file of files) {
   if (summaryTsv) await appendFile(summaryTsv, `${name}\t${status}\t${counts}\n`);
 }
 
-console.log(`gltf-validator: ${files.length - failed} of ${files.length} files without errors or warnings`);
+console.log(`gltf-validator: ${files.length - failed} of ${files.length} files without errors, warnings or unused objects`);
 process.exit(failed ? 1 : 0);

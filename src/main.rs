@@ -58,6 +58,11 @@ enum Command {
     /// Check a preset without building, or write a commented template.
     #[command(subcommand)]
     Preset(PresetCommand),
+    /// Manage the stage cache of an output folder (<DIR>/.cache/).
+    ///
+    /// Example: verdant cache prune --out out
+    #[command(subcommand)]
+    Cache(CacheCommand),
     /// L-system file → tree mesh (branches, leaves, polygons) as glTF or OBJ, with a JSON report.
     ///
     /// Reads the three .ls dialects (the thesis' stochastic format, lparser 4 and 5; see
@@ -212,6 +217,23 @@ struct BuildArgs {
 }
 
 #[derive(Subcommand)]
+enum CacheCommand {
+    /// Remove every cache entry that no scene folder in <DIR> was last built from, and temporary
+    /// folders left by builds that were killed.
+    Prune {
+        /// Output folder whose cache to prune.
+        #[arg(long, value_name = "DIR", default_value = "out")]
+        out: PathBuf,
+    },
+    /// Remove the whole cache of <DIR> (the next build recomputes every stage).
+    Clean {
+        /// Output folder whose cache to remove.
+        #[arg(long, value_name = "DIR", default_value = "out")]
+        out: PathBuf,
+    },
+}
+
+#[derive(Subcommand)]
 enum PresetCommand {
     /// Parse and check presets (keys, types, values, input files) without building.
     ///
@@ -329,10 +351,38 @@ fn main() -> ExitCode {
         Command::Validate(args) => validate(args, cli.quiet),
         Command::Build(args) => build(args, cli.quiet),
         Command::Preset(cmd) => preset(cmd, cli.quiet),
+        Command::Cache(cmd) => cache(cmd, cli.quiet),
         Command::Tree(args) => tree(args, cli.quiet),
         Command::Mesh(args) => mesh(args, cli.quiet),
     };
     ExitCode::from(code as u8)
+}
+
+fn cache(cmd: CacheCommand, quiet: bool) -> i32 {
+    let (out, pruning) = match &cmd {
+        CacheCommand::Prune { out } => (out, true),
+        CacheCommand::Clean { out } => (out, false),
+    };
+    if out.exists() && !out.is_dir() {
+        return fail(&format!("{}: not a folder; pass the output folder of `verdant build` with --out", out.display()), 2);
+    }
+    let cache = verdant::scene::cache::Cache::new(out);
+    let result = if pruning { cache.prune(out) } else { cache.clean() };
+    match result {
+        Ok(done) => {
+            if !quiet {
+                let mb = done.bytes_freed as f64 / 1e6;
+                println!(
+                    "{}: removed {} entries ({mb:.1} MB), kept {}",
+                    cache.root.display(),
+                    done.entries_removed,
+                    done.entries_kept
+                );
+            }
+            0
+        }
+        Err(e) => fail(&format!("{}: {e}; check the folder's permissions", cache.root.display()), 1),
+    }
 }
 
 fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
@@ -608,6 +658,15 @@ fn print_lod_table(v: &tree_lod::TreeLodReport) {
             l.geometric_error.max_m,
             l.switch_distance_m,
             if l.never_passes { " (never passes)" } else { "" }
+        );
+    }
+    for o in &v.left_out {
+        println!(
+            "    left out: the {} level ({} triangles, not fewer than the {} before it), so the chain has {} levels",
+            o.kind,
+            o.triangles,
+            o.previous_triangles,
+            v.lods.len()
         );
     }
 }

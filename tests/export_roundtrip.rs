@@ -152,6 +152,10 @@ fn gltf_and_glb_round_trip_exactly() {
     // instancing is required (one copy at the node would be wrong); MSFT_lod degrades gracefully
     assert_eq!(json["extensionsRequired"], json!(["EXT_mesh_gpu_instancing"]));
     assert_eq!(json["nodes"][4]["extensions"]["MSFT_lod"]["ids"], json!([5]));
+    // the level shown only through MSFT_lod is in a second scene: used, but not the default one
+    assert_eq!(json["scene"], json!(0));
+    assert_eq!(json["scenes"][0]["nodes"], json!([0, 2, 3, 4]));
+    assert_eq!(json["scenes"][1]["nodes"], json!([5]));
     assert_eq!(json["nodes"][4]["extras"]["MSFT_screencoverage"], json!([0.5, 0.10000000149011612]));
     assert!(json["nodes"][2].get("translation").is_none(), "identity TRS omitted");
     assert_eq!(json["materials"][0]["alphaMode"], "MASK");
@@ -162,6 +166,35 @@ fn gltf_and_glb_round_trip_exactly() {
     }
     no_temp_files(&dir.path().join("out"));
     run_khronos_validator(&[glb, gltf]);
+}
+
+#[test]
+fn written_files_hold_only_what_the_scene_shows() {
+    // the sample scene plus a mesh no node shows, a node under no root, a material no primitive uses
+    // and a second copy of the bark material that the trunk uses (as a chain assembled from level files has)
+    let mut scene = sample_scene();
+    let orphan_mesh = scene.meshes[0].clone();
+    scene.meshes.push(Mesh { name: "unused".into(), ..orphan_mesh });
+    scene.nodes.push(Node { name: "orphan".into(), mesh: Some(0), ..Node::default() });
+    scene.materials.push(Material { name: "never used".into(), ..Material::default() });
+    let copy = scene.materials[1].clone();
+    scene.materials.push(copy);
+    scene.meshes[0].primitives[1].material = Some(scene.materials.len() - 1);
+    let dir = tempfile::tempdir().unwrap();
+    let glb = dir.path().join("compact.glb");
+    write_scene(&scene, &glb).unwrap();
+    let back = read_scene(&glb).unwrap();
+    // what the sample shows, exactly: the extra mesh, node and materials are gone, the copy merged
+    let sample = sample_scene();
+    assert_eq!(back.nodes, sample.nodes);
+    assert_eq!(back.meshes, sample.meshes);
+    assert_eq!(back.materials, sample.materials);
+    assert_eq!(back.textures, sample.textures);
+    // and the same bytes as the sample itself
+    let plain = dir.path().join("sample.glb");
+    write_scene(&sample, &plain).unwrap();
+    assert_eq!(fs::read(&glb).unwrap(), fs::read(&plain).unwrap());
+    run_khronos_validator(&[glb]);
 }
 
 /// One triangle corner: position, normal, uv.

@@ -347,15 +347,13 @@ fn error_of(text: &[u8], dialect: Option<Dialect>) -> String {
 }
 
 #[test]
-fn unbalanced_brackets_and_bad_rules_give_positioned_errors() {
-    let cases: [(&[u8], Option<Dialect>, &str, &str); 9] = [
-        (b"7\n22.5\n80\nA\nA=F[+F]]F\n@\n", None, "bad.ls:5:8: unbalanced `]`", "  A=F[+F]]F\n         ^"),
-        (b"# c\n7\n22.5\n80\nA\nB=F\nA=[F[-F]\n@\n", None, "bad.ls:7:3: unbalanced `[`", "  A=[F[-F]\n    ^"),
+fn bad_arguments_and_rules_give_positioned_errors() {
+    let cases: [(&[u8], Option<Dialect>, &str, &str); 8] = [
+        (b"7\n22.5\n80\nA\nA=F[+F](F\n@\n", None, "bad.ls:5:8: `(` is never closed", "  A=F[+F](F\n         ^"),
         (b"7\n22.5\n80\nA\nAF\n@\n", None, "bad.ls:5:1: expected a rule `X=…`", "  AF\n  ^"),
         (b"7\n22.5\n80\nA\nA=+(3x)F\n@\n", None, "bad.ls:5:4: `(3x)` is not a number", "  A=+(3x)F\n     ^"),
         (b"7\n22.5\n80\nA\n[=F\n@\n", None, "bad.ls:5:1: `[` cannot be a rule's predecessor", "  [=F\n  ^"),
         (b"recursion 3\r\nangle 10\r\naxiom F\r\nrule FF = F\r\n", None, "bad.ls:4:6: expected `rule X = …`", "  rule FF = F\n       ^"),
-        (b"recursion 3\r\naxiom F\r\nrule F = F[\r\n", None, "bad.ls:3:11: unbalanced `[`", "  rule F = F[\n            ^"),
         (b"3-2-2\n28\n18\nX(100)=FFA\nA(40)=F\nA(90)=FF\n@\n", None, "bad.ls:6:3: the variants of `A` end at 90; the last must be 100", "  A(90)=FF\n    ^"),
         (b"3-2-2\n28\n18\nX(100)=FFA\nA(40)=F\nA(140)=FF\n@\n", None, "bad.ls:6:3: distribution `140` is not a whole number", "  A(140)=FF\n    ^"),
     ];
@@ -374,10 +372,10 @@ fn unbalanced_brackets_and_bad_rules_give_positioned_errors() {
 #[test]
 fn errors_show_lines_with_cp437_bytes() {
     let mut text = b"# \xc9\xcd\xcd\xbb Koch \xba\n7\n30\n1\nD\n".to_vec();
-    text.extend_from_slice(b"D=\xcdF]\n@\n");
+    text.extend_from_slice(b"D=\xcdF(\n@\n");
     let e = error_of(&text, None);
-    assert!(e.starts_with("bad.ls:6:5: unbalanced `]`"), "{e}");
-    assert!(e.contains("  D=\u{FFFD}F]\n      ^"), "{e}");
+    assert!(e.starts_with("bad.ls:6:5: `(` is never closed"), "{e}");
+    assert!(e.contains("  D=\u{FFFD}F(\n      ^"), "{e}");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -724,12 +722,12 @@ fn cli_tree_writes_the_glb_and_a_report() {
 
     // bad input: exit 2, a positioned message, no output written
     let bad = dir.path().join("bad.ls");
-    std::fs::write(&bad, "7\n22.5\n80\nA\nA=F[+F]]F\n@\n").unwrap();
+    std::fs::write(&bad, "7\n22.5\n80\nA\nA=F[+F](F\n@\n").unwrap();
     let target = dir.path().join("bad.glb");
     let o = verdant(&["tree", bad.to_str().unwrap(), "-o", target.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("bad.ls:5:8: unbalanced `]`") && err.contains("         ^"), "{err}");
+    assert!(err.contains("bad.ls:5:8: `(` is never closed") && err.contains("         ^"), "{err}");
     assert!(!target.exists());
     // a budget: exit 2, names the file and the option
     let o = verdant(&["tree", input.to_str().unwrap(), "-o", target.to_str().unwrap(), "--max-segments", "10"]);
@@ -872,4 +870,29 @@ fn tokens_carry_arguments_after_their_symbol() {
     assert_eq!(tokens.len(), 2);
     let e: LsystemError = expand::count(&system, 0, 0).unwrap_err();
     assert!(matches!(e, LsystemError::TooManySymbols { limit: 0 }));
+}
+
+#[test]
+fn files_lparser_accepts_build_with_positioned_warnings() {
+    // written here in the shape of real lparser 4 files: brackets opened in one rule and closed in
+    // another (`ò=[` then `ó=]`, CP437 bytes as predecessors) and a stray `)` before the end
+    let cross_rule = b"6\n20\n10\nX\nX=F\xf2+F\xf3X\n\xf2=[\"\"\n\xf3=]c-(135)\n@\n".to_vec();
+    let stray = b"4\n25\n10\nA\nA=F[&FA]^^f)[+FA]\n@\n".to_vec();
+    for (name, text, warned) in [("cross_rule.ls", cross_rule, 2usize), ("stray.ls", stray, 1)] {
+        let parsed = parse_bytes(&text, Path::new(name), None).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(parsed.warnings.len(), warned, "{name}: {:?}", parsed.warnings);
+        assert!(parsed.warnings.iter().all(|w| w.starts_with("line ") && w.contains(", column ")), "{:?}", parsed.warnings);
+        let tree = build_tree(&parsed.system, &TreeOptions::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(tree.stats.segments > 10, "{name}: {:?}", tree.stats);
+        // branch levels come from the turtle's stack depth: the branches are there
+        assert!(tree.stats.max_branch_level >= 1, "{name}: {:?}", tree.stats);
+    }
+    // a `]` that no branch ever opened, and an axiom whose branch never closes, are repaired too
+    let parsed = parse_bytes(b"3\n20\n10\nF]F[A\nA=FA\n@\n", Path::new("open.ls"), None).unwrap();
+    assert_eq!(parsed.warnings.len(), 2, "{:?}", parsed.warnings);
+    let tree = build_tree(&parsed.system, &TreeOptions::default()).unwrap();
+    assert!(tree.stats.segments >= 5);
+    // what cannot mean anything is still refused, with its position
+    let e = parse_bytes(b"3\n20\n10\nA\nA=F(2\n@\n", Path::new("bad.ls"), None).unwrap_err().to_string();
+    assert!(e.starts_with("bad.ls:5:4: `(` is never closed"), "{e}");
 }

@@ -671,3 +671,85 @@ fn concurrent_stores_of_one_cache_entry_stay_complete() {
         Cache::restore(&entry, &restored, &files).unwrap_or_else(|e| panic!("round {round}: incomplete cache entry: {e}"));
     }
 }
+
+// ------------------------------------------------------------------------------ algorithm versions
+
+/// The algorithm version and output digest of each stage on presets/winter_valley.toml (every stage
+/// runs there). When a change alters a stage's output bytes on purpose, bump that stage's
+/// `*_ALGORITHM_VERSION` (its cache key then changes, so an older `out/.cache` is never served to
+/// the new binary) and put the new digest here; the test prints the whole table to copy.
+const PINNED: &[(&str, u32, &str)] = &[
+    ("terrain", 1, "a555ab441163e6f2"),
+    ("plants", 2, "67b5706fd2693bbe"),
+    ("snow", 1, "f91cedd545fed334"),
+    ("scatter", 2, "f448ac020c3408cb"),
+    ("preview", 1, "8ce63b12c88d160f"),
+];
+
+/// The stage a scene file belongs to (manifest and reports carry timings: not digested).
+fn stage_of(rel: &str) -> Option<&'static str> {
+    match rel.split('/').next()? {
+        "terrain" => Some("terrain"),
+        "species" | "atlases" => Some("plants"),
+        "snow" => Some("snow"),
+        "placements" | "scene.glb" => Some("scatter"),
+        "preview.png" => Some("preview"),
+        _ => None,
+    }
+}
+
+#[test]
+fn stage_outputs_match_their_pinned_algorithm_versions() {
+    use verdant::scene::{plants_stage, scatter_stage, snow_stage, stages};
+    let versions = [
+        ("terrain", stages::TERRAIN_ALGORITHM_VERSION),
+        ("plants", plants_stage::PLANTS_ALGORITHM_VERSION),
+        ("snow", snow_stage::SNOW_ALGORITHM_VERSION),
+        ("scatter", scatter_stage::SCATTER_ALGORITHM_VERSION),
+        ("preview", stages::PREVIEW_ALGORITHM_VERSION),
+    ];
+    let preset_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("presets/winter_valley.toml");
+    let preset = load_preset(&preset_path).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let settings = BuildSettings { out_dir: dir.path().to_path_buf(), force: true, ..BuildSettings::default() };
+    let outcome = build_preset(&preset, &settings, &|_, _| {}).unwrap();
+    let scene_dir = outcome.dir.unwrap();
+    let mut files: BTreeMap<&str, Vec<(String, String)>> = BTreeMap::new();
+    let mut stack = vec![scene_dir.clone()];
+    while let Some(d) = stack.pop() {
+        for e in fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+                continue;
+            }
+            let rel = p.strip_prefix(&scene_dir).unwrap().to_string_lossy().replace('\\', "/");
+            if let Some(stage) = stage_of(&rel) {
+                files.entry(stage).or_default().push((rel, sha256_hex(&fs::read(&p).unwrap())));
+            }
+        }
+    }
+    let digest = |stage: &str| -> String {
+        let mut list = files.get(stage).cloned().unwrap_or_default();
+        list.sort();
+        assert!(!list.is_empty(), "winter_valley wrote no {stage} files");
+        sha256_hex(list.iter().map(|(r, h)| format!("{r} {h}\n")).collect::<String>().as_bytes())[..16].to_string()
+    };
+    let table: Vec<String> = versions.iter().map(|(s, v)| format!("    (\"{s}\", {v}, \"{}\"),", digest(s))).collect();
+    let table = table.join("\n");
+    for ((stage, version), (pinned_stage, pinned_version, pinned_digest)) in versions.iter().zip(PINNED) {
+        assert_eq!(stage, pinned_stage);
+        let now = digest(stage);
+        if now != *pinned_digest && version == pinned_version {
+            panic!(
+                "the {stage} stage's output changed (digest {now}, pinned {pinned_digest}) but its algorithm \
+                 version is still {version}: bump it (so older cache entries are not served) and update PINNED:\n{table}"
+            );
+        }
+        assert_eq!(
+            (version, now.as_str()),
+            (pinned_version, *pinned_digest),
+            "{stage}: the version was bumped; pin the new digest in PINNED:\n{table}"
+        );
+    }
+}

@@ -261,3 +261,45 @@ fn point_leaf_chains_keep_points_at_lod0_and_stay_valid() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("point leaves"));
 }
+
+#[test]
+fn a_tree_too_small_for_a_level_still_yields_a_valid_chain() {
+    // one trunk segment, no leaves (written here by hand): its cards level has as many triangles as
+    // the billboards would, so the billboards save nothing and are left out (this used to be an
+    // error asking for --lods 3)
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("stick.ls");
+    std::fs::write(&input, "1\n28\n18\nX(100)=F\n@\n").unwrap();
+    let job = TreeLodJob {
+        input: input.clone(),
+        output: dir.path().join("out/stick.glb"),
+        dialect: None,
+        options: TreeOptions { name: "stick".into(), ..TreeOptions::default() },
+        lod: small_atlas(),
+        variants: 1,
+    };
+    let report = run_lods(&job).unwrap_or_else(|e| panic!("{e}"));
+    let chain = &report.variants[0];
+    assert_eq!(chain.left_out.len(), 1, "{:?}", chain.left_out);
+    assert_eq!(chain.left_out[0].kind, "billboards");
+    assert!(chain.left_out[0].triangles >= chain.left_out[0].previous_triangles);
+    let levels = chain.lods.len();
+    assert_eq!(levels, TREE_LODS - 1);
+    // contiguous, strictly decreasing, every file and the chain valid
+    let mut last = usize::MAX;
+    for (n, l) in chain.lods.iter().enumerate() {
+        assert_eq!(l.level, n);
+        assert!(l.triangles < last, "LoD{n}: {} triangles, not fewer than {last}", l.triangles);
+        last = l.triangles;
+        let file = dir.path().join(format!("out/stick_LOD{n}.glb"));
+        assert!(validate_file(&file, &Default::default()).unwrap().ok(), "{}", file.display());
+        let scene = read_scene(&file).unwrap();
+        assert_eq!(scene.nodes[scene.roots[0]].name, format!("stick_LOD{n}"));
+    }
+    assert_eq!(chain.lods.last().unwrap().kind, "impostor");
+    assert!(!dir.path().join(format!("out/stick_LOD{levels}.glb")).exists(), "no file past the last level");
+    let scene = read_scene(&dir.path().join("out/stick.glb")).unwrap();
+    assert_eq!(scene.nodes[scene.roots[0]].lods.len(), levels - 1, "MSFT_lod names every coarser level");
+    let names: Vec<&str> = scene.nodes[scene.roots[0]].lods.iter().map(|&i| scene.nodes[i].name.as_str()).collect();
+    assert_eq!(names, (1..levels).map(|n| format!("stick_LOD{n}")).collect::<Vec<_>>());
+}

@@ -206,9 +206,9 @@ fn tree_preset_mistakes_are_positioned_errors_with_a_remedy() {
 fn a_broken_lsystem_file_is_reported_with_both_positions() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    write(d, "bad.ls", "recursion 2\nangle 20\nthickness 10\naxiom F[A\nrule A = F\n");
+    write(d, "bad.ls", "recursion 2\nangle 20\nthickness 10\naxiom F+(2x)A\nrule A = F\n");
     let p = write(d, "p.toml", &species("kind = \"tree\"\nlsystem = \"bad.ls\""));
-    let e = load_preset(&p).expect_err("the unbalanced bracket is found while loading").to_string();
+    let e = load_preset(&p).expect_err("the bad argument is found while loading").to_string();
     assert!(e.contains("p.toml:9:11"), "the preset's `lsystem` value:\n{e}");
     assert!(e.contains("bad.ls:4:"), "the position in the .ls file:\n{e}");
     let missing = write(d, "q.toml", &species("kind = \"tree\"\nlsystem = \"nowhere.ls\""));

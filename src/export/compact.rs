@@ -194,7 +194,7 @@ mod tests {
     }
 
     fn chain() -> Scene {
-        let tex = |b: u8| Texture { name: "atlas".into(), png: vec![b; 4] };
+        let tex = |b: u8| Texture { name: "atlas".into(), png: [b"\x89PNG\r\n\x1a\n".as_slice(), &[b; 4]].concat() };
         let mat = |t: usize| Material { name: "bark".into(), base_color_texture: Some(t), ..Material::default() };
         let mut s = Scene {
             name: "chain".into(),

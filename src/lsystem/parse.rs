@@ -149,6 +149,13 @@ impl<'a> Source<'a> {
         }))
     }
 
+    /// A positioned warning: `line L, column C: message` (C 1-based, in characters).
+    fn warning(&self, number: usize, col: usize, message: impl Into<String>) -> String {
+        let bytes = self.lines.get(number.wrapping_sub(1)).map(|l| l.bytes).unwrap_or(&[]);
+        let column = String::from_utf8_lossy(&bytes[..col.min(bytes.len())]).chars().count() + 1;
+        format!("line {number}, column {column}: {}", message.into())
+    }
+
     /// An error just past the last line (something missing at the end of the file).
     fn error_at_end(&self, message: impl Into<String>, remedy: impl Into<String>) -> LsystemError {
         let number = self.lines.len().max(1);
@@ -214,16 +221,20 @@ fn predecessor_problem(b: u8) -> Option<&'static str> {
     }
 }
 
-/// Parses an axiom or successor given as (byte, column) pairs of line `line`: symbols, `(x)`
-/// arguments, and balanced `[ ]` (the turtle's stack and the branch levels rely on it). Polygon
-/// braces need not balance within a rule: lparser 5's horn.ls opens polygons in one rule and
-/// closes them in another.
+/// Parses an axiom or successor given as (byte, column) pairs of line `line`: symbols and `(x)`
+/// arguments. Brackets need not balance within a rule, as in lparser, which rewrites the whole
+/// string: real files open a branch in one rule and close it in another (`ò=[""`, `ó=]c-(135)`),
+/// and lparser 5's horn.ls does the same with polygon braces. The turtle matches brackets over the
+/// derivation (branch levels are its stack depth): a `]` with no open branch is ignored and
+/// branches still open at the end are closed there. Such rules, and a stray `)` (which lparser
+/// ignores; it is dropped), get a positioned warning.
 fn parse_items(
     source: &Source,
     line: usize,
     text: &[(u8, usize)],
     args: &mut Vec<ArgText>,
     what: &str,
+    warnings: &mut Vec<String>,
 ) -> Result<Vec<Item>, LsystemError> {
     let mut items = Vec::with_capacity(text.len());
     let mut open_square: Vec<usize> = Vec::new();
@@ -249,14 +260,17 @@ fn parse_items(
                 i = close + 1;
                 continue;
             }
-            b')' => return Err(source.error(line, col, "`)` without `(`", "remove it, or open the argument with `(`")),
+            b')' => {
+                warnings.push(source.warning(line, col, format!("a `)` without `(` in {what} is ignored (as lparser does)")));
+                i += 1;
+                continue;
+            }
             b'[' => open_square.push(col),
             b']' if open_square.pop().is_none() => {
-                return Err(source.error(
+                warnings.push(source.warning(
                     line,
                     col,
-                    format!("unbalanced `]` in {what}: no `[` opens it"),
-                    "remove the `]` or add a `[` before it; every rule must balance its own brackets",
+                    format!("`]` in {what} closes a branch it did not open: matched over the derivation (as lparser does); ignored where no branch is open"),
                 ));
             }
             _ => {}
@@ -265,11 +279,10 @@ fn parse_items(
         i += 1;
     }
     if let Some(&col) = open_square.first() {
-        return Err(source.error(
+        warnings.push(source.warning(
             line,
             col,
-            format!("unbalanced `[` in {what}: it is never closed"),
-            "add the missing `]`; every rule must balance its own brackets",
+            format!("`[` in {what} is not closed there: matched over the derivation (as lparser does); a branch still open at the end is closed there"),
         ));
     }
     Ok(items)
@@ -349,7 +362,7 @@ fn parse_v4(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
     if token.is_empty() {
         return Err(source.error(axiom_line.number, col, "the axiom is empty", "write the start string, e.g. `c(12)A`"));
     }
-    let axiom = parse_items(source, axiom_line.number, &tagged(token, col), &mut args, "the axiom")?;
+    let axiom = parse_items(source, axiom_line.number, &tagged(token, col), &mut args, "the axiom", warnings)?;
     let mut rules = Vec::new();
     let mut rule_lines = Vec::new();
     let mut ended = false;
@@ -372,7 +385,7 @@ fn parse_v4(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
             return Err(source.error(line.number, col, format!("{} cannot be a rule's predecessor: {why}", show(predecessor)), "rewrite another symbol"));
         }
         let what = format!("the rule for {}", show(predecessor));
-        let successor = parse_items(source, line.number, &tagged(&token[2..], col + 2), &mut args, &what)?;
+        let successor = parse_items(source, line.number, &tagged(&token[2..], col + 2), &mut args, &what, warnings)?;
         let rule = Rule { predecessor, variants: vec![Variant { cumulative: 100, successor }] };
         add_rule(&mut rules, &mut rule_lines, rule, line.number, warnings);
     }
@@ -506,7 +519,7 @@ fn parse_v5(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
                 if axiom.is_some() {
                     warnings.push(format!("line {}: a second `axiom` replaces the first", line.number));
                 }
-                axiom = Some(parse_items(source, line.number, &items_text, &mut args, "the axiom")?);
+                axiom = Some(parse_items(source, line.number, &items_text, &mut args, "the axiom", warnings)?);
             }
             b"rule" => {
                 let eq = items_text.iter().position(|&(b, _)| b == b'=');
@@ -525,7 +538,7 @@ fn parse_v5(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
                     return Err(source.error(line.number, col, format!("{} cannot be a rule's predecessor: {why}", show(pred)), "rewrite another symbol"));
                 }
                 let what = format!("the rule for {}", show(pred));
-                let successor = parse_items(source, line.number, &items_text[2..], &mut args, &what)?;
+                let successor = parse_items(source, line.number, &items_text[2..], &mut args, &what, warnings)?;
                 let rule = Rule { predecessor: pred, variants: vec![Variant { cumulative: 100, successor }] };
                 add_rule(&mut rules, &mut rule_lines, rule, line.number, warnings);
             }
@@ -561,7 +574,7 @@ fn parse_v5(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
 /// Most recursion levels accepted in `a-b-c` (the thesis uses three).
 pub const MAX_LEVELS: usize = 8;
 
-fn parse_stochastic(source: &Source, _warnings: &mut Vec<String>) -> Result<LSystem, LsystemError> {
+fn parse_stochastic(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, LsystemError> {
     const FORMAT: &str = "the stochastic .ls format is: recursion levels (e.g. 3-2-2), angle, thickness, `X(100)=axiom`, rules `C(P)=R`, `@`";
     let mut lines = source.lines.iter().filter(|l| !is_comment_or_blank(l.bytes));
     let mut next = |what: &str| {
@@ -608,7 +621,7 @@ fn parse_stochastic(source: &Source, _warnings: &mut Vec<String>) -> Result<LSys
     if axiom_text.is_empty() {
         return Err(source.error(line.number, col + 7, "the axiom is empty", "write the start string after `X(100)=`"));
     }
-    let axiom = parse_items(source, line.number, &tagged(axiom_text, col + 7), &mut args, "the axiom")?;
+    let axiom = parse_items(source, line.number, &tagged(axiom_text, col + 7), &mut args, "the axiom", warnings)?;
     // rules C(P)=R, variants of one symbol in ascending P, the last at 100
     let mut rules: Vec<Rule> = Vec::new();
     let mut last_variant_at: Vec<(usize, usize)> = Vec::new(); // (line, col) of each rule's latest variant
@@ -651,7 +664,7 @@ fn parse_stochastic(source: &Source, _warnings: &mut Vec<String>) -> Result<LSys
             }
         };
         let what = format!("the rule for {}", show(predecessor));
-        let successor = parse_items(source, line.number, &tagged(&token[close + 2..], col + close + 2), &mut args, &what)?;
+        let successor = parse_items(source, line.number, &tagged(&token[close + 2..], col + close + 2), &mut args, &what, warnings)?;
         match rules.iter().position(|r| r.predecessor == predecessor) {
             Some(k) => {
                 let previous = rules[k].variants.last().map_or(0, |v| v.cumulative);
@@ -860,6 +873,19 @@ mod tests {
     }
 
     #[test]
+    fn brackets_balance_over_the_derivation_with_positioned_warnings() {
+        // lparser accepts rules whose brackets balance only with other rules, and stray `)`
+        let p = parse("2\n10\n10\nAXB\nX=F[+F\nB=F]F)\n@\n", None).unwrap();
+        assert_eq!(p.warnings.len(), 3, "{:?}", p.warnings);
+        assert!(p.warnings[0].starts_with("line 5, column 4: `[`"), "{:?}", p.warnings);
+        assert!(p.warnings[1].starts_with("line 6, column 4: `]`"), "{:?}", p.warnings);
+        assert!(p.warnings[2].starts_with("line 6, column 6: a `)` without `(`"), "{:?}", p.warnings);
+        // the `)` is dropped, the brackets kept for the turtle to match
+        let b = p.system.rules.iter().find(|r| r.predecessor == b'B').unwrap();
+        assert_eq!(p.system.items_text(&b.variants[0].successor), b"F]F");
+    }
+
+    #[test]
     fn first_rule_wins_with_a_warning() {
         let p = parse("2\n10\n10\nA\nA=F\nA=FF\n@\n", None).unwrap();
         assert_eq!(p.system.rules.len(), 1);
@@ -869,12 +895,10 @@ mod tests {
 
     #[test]
     fn errors_are_positioned_with_a_caret() {
-        let e = parse("2\n10\n10\nA\nA=F[+F]]F\n@\n", None).unwrap_err();
+        let e = parse("2\n10\n10\nA\nA=F[+F+(30F\n@\n", None).unwrap_err();
         let text = e.to_string();
-        assert!(text.starts_with("t.ls:5:8: unbalanced `]`"), "{text}");
-        assert!(text.contains("\n  A=F[+F]]F\n         ^\n"), "{text}");
-        let e = parse("2\n10\n10\nA\nA=F[+F\n@\n", None).unwrap_err().to_string();
-        assert!(e.starts_with("t.ls:5:4: unbalanced `[`"), "{e}");
+        assert!(text.starts_with("t.ls:5:8: `(` is never closed"), "{text}");
+        assert!(text.contains("\n  A=F[+F+(30F\n         ^\n"), "{text}");
         let e = parse("2\n10\n10\nA\nA=+(x)F\n@\n", None).unwrap_err().to_string();
         assert!(e.starts_with("t.ls:5:4: `(x)` is not a number"), "{e}");
         let e = parse("2\n10\n10\nA\nA=F\n", None).unwrap_err().to_string();

@@ -78,13 +78,6 @@ pub enum TreeLodError {
     Export(#[from] ExportError),
     #[error(transparent)]
     MeshAsset(#[from] MeshAssetError),
-    #[error(
-        "{name}: LoD{level} has {triangles} triangles, not fewer than LoD{}'s {previous}: the tree is too small for \
-         {} levels; pass --lods {level}",
-        level - 1,
-        level + 1
-    )]
-    NotDecreasing { name: String, level: usize, triangles: usize, previous: usize },
     #[error("{name}: LoD{level} would be empty: the model has too few triangles to simplify; pass --lods {level}")]
     TooSmall { name: String, level: usize },
     #[error("{path} does not pass validation (this is a bug, please report it with the input file):\n{report}")]
@@ -96,7 +89,7 @@ impl TreeLodError {
     pub fn exit_code(&self) -> i32 {
         match self {
             TreeLodError::Tree(e) => e.exit_code(),
-            TreeLodError::Options(_) | TreeLodError::NotDecreasing { .. } | TreeLodError::TooSmall { .. } => 2,
+            TreeLodError::Options(_) | TreeLodError::TooSmall { .. } => 2,
             TreeLodError::MeshAsset(e) => e.exit_code(),
             _ => 1,
         }
@@ -142,6 +135,13 @@ impl TreeLodOptions {
         }
         Ok(())
     }
+}
+
+/// Every cell of an `atlas_px` tree atlas as its inside's (u0, v0, u1, v1): the impostor views
+/// (large cells 0..8), then the small cells cards and billboards use.
+pub fn atlas_cell_rects(atlas_px: u32) -> Vec<[f32; 4]> {
+    let large = (0..IMPOSTOR_VIEWS).map(|k| AtlasCell::large(atlas_px, k).uv);
+    large.chain((0..128).map(|j| AtlasCell::small(atlas_px, j).uv)).collect()
 }
 
 /// A square atlas cell; `uv` is its inside (within the gutter) as (u0, v0, u1, v1).
@@ -483,6 +483,9 @@ pub struct TreeLodReport {
     pub clusters: usize,
     /// Branch levels LoD2 drops (finest first); empty when the tree has one level.
     pub dropped_levels: Vec<u32>,
+    /// Levels built but left out because they saved nothing over the level before (the written
+    /// chain is renumbered, so `lods` and the files stay contiguous).
+    pub left_out: Vec<LeftOutLevel>,
     pub lods: Vec<TreeLodFigures>,
     pub table: Vec<SpeedErrorRow>,
     pub atlas_mips: Vec<MipFigures>,
@@ -839,15 +842,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         levels.push(TreeLod { level: 4, kind: "impostor", scene, images: vec![atlas0.image.clone()] });
     }
     levels.truncate(wanted);
-    for n in 1..levels.len() {
-        if levels[n].scene.meshes[0].primitives.is_empty() {
-            return Err(TreeLodError::TooSmall { name, level: n });
-        }
-        let (triangles, previous) = (levels[n].triangles(), levels[n - 1].triangles());
-        if triangles >= previous {
-            return Err(TreeLodError::NotDecreasing { name, level: n, triangles, previous });
-        }
-    }
+    let (levels, left_out) = without_levels_that_save_nothing(&name, levels);
 
     // analyzer
     let analyze_started = Instant::now();
@@ -954,6 +949,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         bounding_radius_m: radius,
         clusters: groups.len(),
         dropped_levels,
+        left_out,
         lods,
         table,
         atlas_mips: mip_figures(&atlas_chain),
@@ -963,6 +959,48 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         raster_fragments: fragments,
     };
     Ok((name, levels, chain, atlas_chain, impostor_cells, report))
+}
+
+/// A level built but not written: it would have drawn no fewer triangles than the level before it
+/// (a small tree's cards can outnumber its simplified branches), so an engine would gain nothing.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LeftOutLevel {
+    /// What it would have been ("cards", "billboards", …) and its number in the full chain.
+    pub kind: &'static str,
+    pub planned_level: usize,
+    pub triangles: usize,
+    /// The triangles of the level before it in the written chain.
+    pub previous_triangles: usize,
+}
+
+/// `levels` without those that are empty or draw no fewer triangles than the level kept before
+/// them; the rest renumbered 0, 1, 2, … (files and names `_LOD<n>` stay contiguous).
+fn without_levels_that_save_nothing(name: &str, levels: Vec<TreeLod>) -> (Vec<TreeLod>, Vec<LeftOutLevel>) {
+    let mut kept: Vec<TreeLod> = Vec::with_capacity(levels.len());
+    let mut left_out = Vec::new();
+    for lod in levels {
+        let empty = lod.scene.meshes.first().is_none_or(|m| m.primitives.is_empty());
+        match kept.last().map(TreeLod::triangles) {
+            Some(previous) if empty || lod.triangles() >= previous => {
+                left_out.push(LeftOutLevel { kind: lod.kind, planned_level: lod.level, triangles: lod.triangles(), previous_triangles: previous });
+            }
+            _ => kept.push(lod),
+        }
+    }
+    for (n, lod) in kept.iter_mut().enumerate() {
+        if lod.level != n {
+            let renamed = format!("{name}_LOD{n}");
+            lod.level = n;
+            lod.scene.name = renamed.clone();
+            for mesh in &mut lod.scene.meshes {
+                mesh.name = renamed.clone();
+            }
+            for node in &mut lod.scene.nodes {
+                node.name = renamed.clone();
+            }
+        }
+    }
+    (kept, left_out)
 }
 
 /// `<name>.glb`: LoD0's node with MSFT_lod to the coarser levels' nodes (not roots) and

@@ -11,7 +11,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::scene::cache::{Cache, FileHashes, KeyBuilder};
+use crate::scene::cache::{process_alive, temp_owner, Cache, FileHashes, KeyBuilder};
 use crate::scene::manifest::{write_manifest_and_report, StageRun};
 use crate::scene::preset::{load_preset, PresetError};
 use crate::mesh::Scene;
@@ -89,6 +89,7 @@ pub fn build_preset(preset: &Preset, settings: &BuildSettings, progress: Progres
     }
     fs::create_dir_all(out).map_err(io_err(out))?;
     let final_dir = out.join(name);
+    remove_stale_folders(out, name);
     let tmp_dir = out.join(format!(".{name}.building-{}", std::process::id()));
     let _ = fs::remove_dir_all(&tmp_dir);
     fs::create_dir_all(&tmp_dir).map_err(io_err(&tmp_dir))?;
@@ -104,6 +105,35 @@ pub fn build_preset(preset: &Preset, settings: &BuildSettings, progress: Progres
             let _ = fs::remove_dir_all(&tmp_dir);
             Err(e)
         }
+    }
+}
+
+/// Cleans up after builds of scene `name` that were killed: their `.NAME.building-PID` folders are
+/// removed, and a `.NAME.old-PID` folder (the previous scene, moved aside just before the new one
+/// was to take its place) is put back when no scene folder exists, else removed. Folders of
+/// processes still running are left alone.
+pub fn remove_stale_folders(out: &Path, name: &str) {
+    let Ok(items) = fs::read_dir(out) else { return };
+    let final_dir = out.join(name);
+    let (building, old) = (format!(".{name}.building-"), format!(".{name}.old-"));
+    for item in items.flatten() {
+        let file = item.file_name().to_string_lossy().to_string();
+        let owner = if file.starts_with(&building) {
+            temp_owner(&file, ".building-")
+        } else if file.starts_with(&old) {
+            temp_owner(&file, ".old-")
+        } else {
+            continue;
+        };
+        let Some(pid) = owner else { continue };
+        if pid == std::process::id() || process_alive(pid) {
+            continue;
+        }
+        let path = item.path();
+        if file.starts_with(&old) && !final_dir.exists() && fs::rename(&path, &final_dir).is_ok() {
+            continue;
+        }
+        let _ = fs::remove_dir_all(&path);
     }
 }
 
@@ -133,6 +163,15 @@ fn swap_into_place(tmp_dir: &Path, final_dir: &Path) -> Result<(), SceneBuildErr
     Ok(())
 }
 
+/// The cache as one build used it.
+#[derive(Default)]
+struct CacheUse {
+    /// Sizes and hashes of the files restored or stored.
+    hashes: FileHashes,
+    /// Entry folder names looked up (served or stored).
+    entries: Vec<String>,
+}
+
 /// Runs one cached stage: restores its files and report from the cache when `key` is there and
 /// the entry is whole, otherwise computes them (`compute` also returns in-memory results for later
 /// stages) and stores them. Returns the report, the in-memory results when computed, and whether
@@ -144,7 +183,7 @@ fn cached_stage<R, X>(
     stage: &str,
     key: &str,
     dir: &Path,
-    known: &mut FileHashes,
+    used: &mut CacheUse,
     files_of: impl Fn(&R) -> Vec<PathBuf>,
     compute: impl FnOnce() -> Result<(R, X), SceneBuildError>,
     progress: &dyn Fn(&str),
@@ -156,9 +195,10 @@ where
     // an entry that cannot be read or restored completely is recomputed (and replaced)
     let restored = cached.and_then(|(json, entry)| {
         let report: R = serde_json::from_str(&json).ok()?;
-        known.extend(Cache::restore(&entry, dir, &files_of(&report)).ok()?);
+        used.hashes.extend(Cache::restore(&entry, dir, &files_of(&report)).ok()?);
         Some(report)
     });
+    used.entries.push(Cache::entry_name(stage, key));
     if let Some(report) = restored {
         progress(&format!("{stage}: cached"));
         return Ok((report, None, true));
@@ -167,7 +207,7 @@ where
     let (report, extra) = compute()?;
     let json = serde_json::to_string_pretty(&report).unwrap_or_default();
     match cache.store(stage, key, dir, &files_of(&report), &json) {
-        Ok(hashes) => known.extend(hashes),
+        Ok(hashes) => used.hashes.extend(hashes),
         Err(e) => progress(&format!("{stage}: could not store the cache entry ({e}); continuing")),
     }
     Ok((report, Some(extra), false))
@@ -226,8 +266,9 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
     let force = settings.force;
     let wants = |s: Stage| settings.stages.contains(&s);
     let mut runs: Vec<StageRun> = Vec::new();
-    // sizes and hashes of stage files already known from the cache, so the manifest need not re-read them
-    let mut known = FileHashes::new();
+    // sizes and hashes of stage files already known from the cache, so the manifest need not
+    // re-read them, and the entries this build used (what `verdant cache prune` keeps)
+    let mut known = CacheUse::default();
     // what later stages need: the terrain scene and the placements (as stored: f32 positions)
     let mut terrain: Option<(LazyScene, String)> = None;
     let mut placements: Option<(Option<Vec<PreviewLayer>>, PathBuf, String)> = None;
@@ -320,7 +361,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
 
     if let (true, Some((scene, tkey))) = (wants(Stage::Preview), &terrain) {
         let t0 = Instant::now();
-        let mut k = KeyBuilder::new("preview");
+        let mut k = KeyBuilder::new("preview", stages::PREVIEW_ALGORITHM_VERSION);
         k.add(tkey.as_bytes()).add(&stages::PREVIEW_SIZE_PX.to_le_bytes());
         if let Some((_, _, skey)) = &placements {
             k.add(skey.as_bytes());
@@ -346,7 +387,10 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
     }
 
     progress(name, "manifest and report");
-    let files = write_manifest_and_report(preset, dir, &runs, &known)?;
+    let files = write_manifest_and_report(preset, dir, &runs, &known.hashes)?;
+    if let Err(e) = cache.record_scene(name, &known.entries) {
+        progress(name, &format!("could not record the cache entries used ({e}); `verdant cache prune` may remove them"));
+    }
     let triangles = runs
         .iter()
         .map(|r| match r {
@@ -520,5 +564,36 @@ impl ProgressView {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn folders_of_killed_builds_are_cleaned_up() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        // a build of pid 4294967295 (never a running process) was killed while building `a`, and one
+        // between the two renames of `b`'s swap: `b` exists only as the folder moved aside
+        let stale = out.join(".a.building-4294967295");
+        let moved = out.join(".b.old-4294967295");
+        let running = out.join(format!(".a.building-{}", std::process::id()));
+        for d in [&stale, &moved, &running] {
+            fs::create_dir_all(d).unwrap();
+        }
+        fs::write(moved.join("manifest.json"), b"{}").unwrap();
+        fs::create_dir_all(out.join(".ab.building-4294967295")).unwrap();
+        remove_stale_folders(out, "a");
+        assert!(!stale.exists(), "a killed build's folder is removed");
+        assert!(running.exists(), "this process's own folder is left (it may be in use)");
+        assert!(out.join(".ab.building-4294967295").exists(), "another scene's folder is not touched");
+        remove_stale_folders(out, "b");
+        assert!(!moved.exists() && out.join("b/manifest.json").is_file(), "the previous scene is put back");
+        // with a scene folder in place, a leftover old folder is removed
+        fs::create_dir_all(out.join(".b.old-4294967295")).unwrap();
+        remove_stale_folders(out, "b");
+        assert!(!out.join(".b.old-4294967295").exists() && out.join("b").is_dir());
     }
 }

@@ -5,6 +5,11 @@
 //! `stage.json` (what the stage reported) and `files.json` (each file's size and sha256, so a
 //! cached build need not hash them again for its manifest). Entries are written to a uniquely
 //! named temporary folder and renamed into place, so a half-written entry is never read.
+//!
+//! Keys are salted by the crate version and each stage's algorithm version, so a newer binary
+//! whose stage writes other bytes never reads an older entry. After each build, `used-by/<scene>.json`
+//! names the entries the scene was built from: `verdant cache prune` keeps those of the scene folders
+//! still present and removes the rest; `verdant cache clean` removes the whole cache.
 
 use std::collections::BTreeMap;
 use std::fs;
@@ -28,10 +33,13 @@ fn hex(bytes: &[u8]) -> String {
 pub struct KeyBuilder(Sha256);
 
 impl KeyBuilder {
-    pub fn new(stage: &str) -> Self {
+    /// A key for `stage` whose output algorithm is at `algorithm_version`: entries of an older
+    /// version (or another crate version) are never served.
+    pub fn new(stage: &str, algorithm_version: u32) -> Self {
         let mut k = KeyBuilder(Sha256::new());
         k.add(stage.as_bytes());
         k.add(env!("CARGO_PKG_VERSION").as_bytes());
+        k.add(&algorithm_version.to_le_bytes());
         k
     }
     /// Adds a length-prefixed field, so ("ab", "c") and ("a", "bc") differ.
@@ -57,13 +65,121 @@ pub struct Cache {
     pub root: PathBuf,
 }
 
+/// What [`Cache::prune`] or [`Cache::clean`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CacheCleanup {
+    pub entries_removed: usize,
+    pub entries_kept: usize,
+    /// Bytes of the removed entries and leftover temporary folders.
+    pub bytes_freed: u64,
+}
+
+/// Whether process `pid` is running (Linux: /proc; elsewhere every process counts as running, so
+/// nothing another build may still be writing is removed).
+pub fn process_alive(pid: u32) -> bool {
+    if cfg!(target_os = "linux") {
+        Path::new("/proc").join(pid.to_string()).exists()
+    } else {
+        true
+    }
+}
+
+/// The process id a temporary name ends with (`….tmp-<pid>-<n>`, `….building-<pid>`, `….old-<pid>`).
+pub fn temp_owner(name: &str, marker: &str) -> Option<u32> {
+    let rest = &name[name.find(marker)? + marker.len()..];
+    rest.split('-').next()?.parse().ok()
+}
+
+fn size_of(path: &Path) -> u64 {
+    let Ok(meta) = fs::symlink_metadata(path) else { return 0 };
+    if !meta.is_dir() {
+        return meta.len();
+    }
+    fs::read_dir(path).map(|d| d.flatten().map(|e| size_of(&e.path())).sum()).unwrap_or(0)
+}
+
+/// An entry folder's name: `<stage>-<32 hex digits>`.
+fn is_entry_name(name: &str) -> bool {
+    name.rsplit_once('-').is_some_and(|(stage, key)| !stage.is_empty() && !stage.starts_with('.') && key.len() == 32 && key.bytes().all(|b| b.is_ascii_hexdigit()))
+}
+
 impl Cache {
     pub fn new(out_dir: &Path) -> Self {
         Cache { root: out_dir.join(".cache") }
     }
 
     fn entry(&self, stage: &str, key: &str) -> PathBuf {
-        self.root.join(format!("{stage}-{key}"))
+        self.root.join(Self::entry_name(stage, key))
+    }
+
+    /// The folder name of `stage`'s entry under `key`.
+    pub fn entry_name(stage: &str, key: &str) -> String {
+        format!("{stage}-{key}")
+    }
+
+    fn used_by(&self) -> PathBuf {
+        self.root.join("used-by")
+    }
+
+    /// Records the entries scene `scene` was just built from (what [`Cache::prune`] keeps).
+    pub fn record_scene(&self, scene: &str, entries: &[String]) -> io::Result<()> {
+        let dir = self.used_by();
+        fs::create_dir_all(&dir)?;
+        let text = serde_json::to_string_pretty(entries).map_err(io::Error::other)?;
+        crate::export::write_atomic(&dir.join(format!("{scene}.json")), text.as_bytes()).map_err(io::Error::other)
+    }
+
+    /// Removes every entry that no scene folder of `out_dir` was last built from, the records of
+    /// scenes whose folder is gone, and temporary folders of processes that are no longer running.
+    pub fn prune(&self, out_dir: &Path) -> io::Result<CacheCleanup> {
+        let mut done = CacheCleanup::default();
+        if !self.root.is_dir() {
+            return Ok(done);
+        }
+        let mut keep = std::collections::BTreeSet::new();
+        if let Ok(records) = fs::read_dir(self.used_by()) {
+            for record in records.flatten() {
+                let path = record.path();
+                let scene = path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+                let entries: Option<Vec<String>> = fs::read_to_string(&path).ok().and_then(|t| serde_json::from_str(&t).ok());
+                match entries {
+                    Some(entries) if out_dir.join(&scene).join("manifest.json").is_file() => keep.extend(entries),
+                    _ => {
+                        let _ = fs::remove_file(&path);
+                    }
+                }
+            }
+        }
+        for item in fs::read_dir(&self.root)?.flatten() {
+            let name = item.file_name().to_string_lossy().to_string();
+            let path = item.path();
+            let remove = if is_entry_name(&name) {
+                !keep.contains(&name)
+            } else if name.starts_with('.') {
+                temp_owner(&name, ".tmp-").is_some_and(|pid| !process_alive(pid))
+            } else {
+                false
+            };
+            if remove {
+                done.bytes_freed += size_of(&path);
+                fs::remove_dir_all(&path)?;
+                done.entries_removed += usize::from(is_entry_name(&name));
+            } else if is_entry_name(&name) {
+                done.entries_kept += 1;
+            }
+        }
+        Ok(done)
+    }
+
+    /// Removes the whole cache folder.
+    pub fn clean(&self) -> io::Result<CacheCleanup> {
+        if !self.root.exists() {
+            return Ok(CacheCleanup::default());
+        }
+        let entries = fs::read_dir(&self.root)?.flatten().filter(|e| is_entry_name(&e.file_name().to_string_lossy())).count();
+        let bytes_freed = size_of(&self.root);
+        fs::remove_dir_all(&self.root)?;
+        Ok(CacheCleanup { entries_removed: entries, entries_kept: 0, bytes_freed })
     }
 
     /// The stored `stage.json` text and the entry folder, when present.
@@ -149,7 +265,7 @@ mod tests {
     #[test]
     fn keys_separate_fields_and_stages() {
         let key = |stage: &str, parts: &[&str]| {
-            let mut k = KeyBuilder::new(stage);
+            let mut k = KeyBuilder::new(stage, 1);
             for p in parts {
                 k.add(p.as_bytes());
             }
@@ -158,6 +274,8 @@ mod tests {
         assert_eq!(key("terrain", &["ab", "c"]), key("terrain", &["ab", "c"]));
         assert_ne!(key("terrain", &["ab", "c"]), key("terrain", &["a", "bc"]));
         assert_ne!(key("terrain", &["x"]), key("preview", &["x"]));
+        let versioned = |v: u32| KeyBuilder::new("terrain", v).finish();
+        assert_ne!(versioned(1), versioned(2), "a bumped algorithm version gives new keys");
         assert_eq!(sha256_hex(b"abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
     }
 
@@ -176,6 +294,53 @@ mod tests {
         let other = dir.path().join("other");
         Cache::restore(&entry, &other, &files).unwrap();
         assert_eq!(fs::read(other.join("terrain/a.glb")).unwrap(), b"glb");
+    }
+
+    #[test]
+    fn prune_keeps_what_present_scenes_were_built_from() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        let scene = out.join("work");
+        fs::create_dir_all(&scene).unwrap();
+        fs::write(scene.join("a.png"), b"png").unwrap();
+        let cache = Cache::new(out);
+        let files = vec![PathBuf::from("a.png")];
+        let key = |n: u32| KeyBuilder::new("preview", n).finish();
+        for n in 1..=3 {
+            cache.store("preview", &key(n), &scene, &files, "{}").unwrap();
+        }
+        // scene `meadow` is present and was built from entry 1; `gone` (entry 2) has no folder
+        fs::create_dir_all(out.join("meadow")).unwrap();
+        fs::write(out.join("meadow/manifest.json"), b"{}").unwrap();
+        cache.record_scene("meadow", &[Cache::entry_name("preview", &key(1))]).unwrap();
+        cache.record_scene("gone", &[Cache::entry_name("preview", &key(2))]).unwrap();
+        // a temporary entry of a process that is gone, and one of this (running) process
+        let dead = cache.root.join(".preview-x.tmp-4294967295-0");
+        let live = cache.root.join(format!(".preview-y.tmp-{}-0", std::process::id()));
+        fs::create_dir_all(&dead).unwrap();
+        fs::create_dir_all(&live).unwrap();
+        let done = cache.prune(out).unwrap();
+        assert_eq!((done.entries_removed, done.entries_kept), (2, 1));
+        assert!(done.bytes_freed > 0);
+        assert!(cache.lookup("preview", &key(1)).is_some());
+        assert!(cache.lookup("preview", &key(2)).is_none() && cache.lookup("preview", &key(3)).is_none());
+        assert!(!dead.exists() && live.exists());
+        assert!(!cache.used_by().join("gone.json").exists());
+        // pruning again removes nothing; clean removes everything
+        assert_eq!(cache.prune(out).unwrap().entries_removed, 0);
+        assert_eq!(cache.clean().unwrap().entries_removed, 1);
+        assert!(!cache.root.exists());
+        assert_eq!(cache.clean().unwrap(), CacheCleanup::default());
+    }
+
+    #[test]
+    fn temporary_names_tell_their_process() {
+        assert_eq!(temp_owner(".terrain-abc.tmp-123-4", ".tmp-"), Some(123));
+        assert_eq!(temp_owner(".demo.building-77", ".building-"), Some(77));
+        assert_eq!(temp_owner(".demo.building-x", ".building-"), None);
+        assert!(process_alive(std::process::id()));
+        assert!(is_entry_name(&Cache::entry_name("scatter", &KeyBuilder::new("scatter", 2).finish())));
+        assert!(!is_entry_name("used-by") && !is_entry_name(".scatter-0123.tmp-1-2"));
     }
 
     #[test]

@@ -467,6 +467,12 @@ fn chain_rows(model: &str, chain: &serde_json::Value) -> String {
             num(&l["geometric_error"]["max_m"]), num(&l["switch_iou"]), num(&l["switch_distance_m"]), num(&l["screen_coverage"])
         );
     }
+    for o in chain["left_out"].as_array().into_iter().flatten() {
+        s += &format!(
+            "| {model} | — | {} (left out) | {} | — | — | — | not fewer triangles than the {} before it | — |\n",
+            o["kind"].as_str().unwrap_or(""), o["triangles"], o["previous_triangles"]
+        );
+    }
     s
 }
 

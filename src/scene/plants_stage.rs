@@ -80,10 +80,15 @@ pub fn has_plants(preset: &Preset) -> bool {
     preset.species.iter().any(|s| !matches!(s.look, PlantLook::Marker))
 }
 
+/// Version of what the plants stage writes for given inputs: part of its cache key (see
+/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: chain files keep their coarser levels
+/// in a second glTF scene with shared materials; flower cards inside their atlas cells.
+pub const PLANTS_ALGORITHM_VERSION: u32 = 2;
+
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).
 pub fn plants_key(preset: &Preset) -> Result<String, StageError> {
-    let mut k = KeyBuilder::new("plants");
+    let mut k = KeyBuilder::new("plants", PLANTS_ALGORITHM_VERSION);
     for s in &preset.species {
         k.add(s.name.as_bytes());
         k.add(serde_json::to_string(&s.look).unwrap_or_default().as_bytes());
@@ -122,7 +127,7 @@ fn distinct_variants(system: &LSystem, look: &TreeLook) -> usize {
     }
 }
 
-fn read_lsystem(name: &str, look: &TreeLook) -> Result<LSystem, StageError> {
+pub fn read_lsystem(name: &str, look: &TreeLook) -> Result<LSystem, StageError> {
     parse::read_file(&look.lsystem, look.dialect).map(|p| p.system).map_err(|e| fail(format!("species `{name}`: {e}")))
 }
 
@@ -169,26 +174,35 @@ fn load_model(name: &str, look: &MeshLook) -> Result<SourceMesh, StageError> {
 /// Builds and writes a mesh species' chain: `species/<name>.glb`, `species/<name>_LOD<n>.glb`,
 /// `atlases/<name>*.png`.
 fn run_mesh(name: &str, look: &MeshLook, dir: &Path, files: &mut Vec<PathBuf>) -> Result<MeshSpeciesReport, StageError> {
+    let (source, chain) = mesh_chain(name, look)?;
+    let file = write_chain(&chain, dir, name, files)?;
+    Ok(MeshSpeciesReport { obj: look.obj.clone(), file, stats: source.stats, chain: chain.report })
+}
+
+/// A mesh species' model as loaded and the LoD chain the plants stage writes for it.
+pub fn mesh_chain(name: &str, look: &MeshLook) -> Result<(SourceMesh, TreeLods), StageError> {
     let source = load_model(name, look)?;
     let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, ..TreeLodOptions::default() };
     let chain = build_mesh_lods(&source, name, &lod).map_err(|e| fail(format!("species `{name}`: {}: {e}", look.obj.display())))?;
-    let file = write_chain(&chain, dir, name, files)?;
-    Ok(MeshSpeciesReport { obj: look.obj.clone(), file, stats: source.stats, chain: chain.report })
+    Ok((source, chain))
+}
+
+/// Variant `k`'s LoD chain of a tree species, as the plants stage writes it.
+pub fn tree_chain(name: &str, look: &TreeLook, system: &LSystem, k: usize) -> Result<TreeLods, StageError> {
+    let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, ..TreeLodOptions::default() };
+    build_tree_lods(system, &tree_options(name, look, k), &lod).map_err(|e| fail(format!("species `{name}`: {}: {e}", look.lsystem.display())))
 }
 
 /// Builds and writes every variant's chain: `species/<name>_v<k>.glb` (MSFT_lod),
 /// `species/<name>_v<k>_LOD<n>.glb` and `atlases/<name>_v<k>*.png`.
 fn run_tree(name: &str, look: &TreeLook, dir: &Path, files: &mut Vec<PathBuf>) -> Result<TreeSpeciesReport, StageError> {
     let system = read_lsystem(name, look)?;
-    let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, ..TreeLodOptions::default() };
     let count = distinct_variants(&system, look);
     let mut variants = Vec::with_capacity(count);
     for k in 0..count {
-        let options = tree_options(name, look, k);
-        let chain = build_tree_lods(&system, &options, &lod)
-            .map_err(|e| fail(format!("species `{name}`: {}: {e}", look.lsystem.display())))?;
+        let chain = tree_chain(name, look, &system, k)?;
         let file = write_chain(&chain, dir, &format!("{name}_v{k}"), files)?;
-        variants.push(TreeVariantReport { file, seed: options.seed, stats: chain.lod0.as_ref().map(|t| t.stats.clone()).unwrap_or_default(), chain: chain.report });
+        variants.push(TreeVariantReport { file, seed: variant_seed(look.seed, k), stats: chain.lod0.as_ref().map(|t| t.stats.clone()).unwrap_or_default(), chain: chain.report });
     }
     Ok(TreeSpeciesReport { lsystem: look.lsystem.clone(), dialect: system.dialect, variants_asked: look.variants, variants })
 }

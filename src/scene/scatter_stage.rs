@@ -55,9 +55,13 @@ impl ScatterStageReport {
     }
 }
 
+/// Version of what the scatter stage writes for given inputs: part of its cache key (see
+/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: scene.glb holds no unused mesh.
+pub const SCATTER_ALGORITHM_VERSION: u32 = 2;
+
 /// Cache key: the terrain's key, the species and scatter settings, the scene seed, the maps' bytes.
 pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageError> {
-    let mut k = KeyBuilder::new("scatter");
+    let mut k = KeyBuilder::new("scatter", SCATTER_ALGORITHM_VERSION);
     k.add(terrain_key.as_bytes());
     k.add(&preset.scene.seed.to_le_bytes());
     k.add(serde_json::to_string(&preset.scatter).unwrap_or_default().as_bytes());

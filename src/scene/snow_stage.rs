@@ -72,9 +72,13 @@ impl SnowStageReport {
     }
 }
 
+/// Version of what the snow stage writes for given inputs: part of its cache key (see
+/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]).
+pub const SNOW_ALGORITHM_VERSION: u32 = 1;
+
 /// Cache key: the terrain's key and the snow settings.
 pub fn snow_key(snow: &SnowSettings, terrain_key: &str) -> String {
-    let mut k = KeyBuilder::new("snow");
+    let mut k = KeyBuilder::new("snow", SNOW_ALGORITHM_VERSION);
     k.add(terrain_key.as_bytes());
     k.add(serde_json::to_string(snow).unwrap_or_default().as_bytes());
     k.finish()

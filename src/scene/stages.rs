@@ -129,9 +129,17 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
     }
 }
 
+/// Version of what the terrain stage writes for given inputs: part of its cache key. Bump it in
+/// the commit that changes the stage's output bytes (tests/stage_versions.rs pins a digest of a
+/// reference build per version and fails until it is bumped).
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 1;
+
+/// Version of the preview stage's output for given inputs (see [`TERRAIN_ALGORITHM_VERSION`]).
+pub const PREVIEW_ALGORITHM_VERSION: u32 = 1;
+
 /// Cache key of the terrain stage: its settings, the formats, the input's content.
 pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageError> {
-    let mut k = KeyBuilder::new("terrain");
+    let mut k = KeyBuilder::new("terrain", TERRAIN_ALGORITHM_VERSION);
     k.add(serde_json::to_string(t).unwrap_or_default().as_bytes());
     k.add(serde_json::to_string(&preset.scene.formats).unwrap_or_default().as_bytes());
     if let TerrainSource::Heightmap { path, .. } = &t.source {

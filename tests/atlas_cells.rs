@@ -1,0 +1,135 @@
+//! Every card of every shipped species reads only its own atlas cell: each triangle drawn with an
+//! atlas material has all three texture coordinates inside one cell's inside (within the gutter of
+//! transparent, dilated texels that keeps filtering and mips from reading a neighbour). A card whose
+//! V ran past its cell (the old flowers: 0..1.458 with repeat wrapping) showed a second flower head
+//! on the ground. Flowers also must meet the ground: the card's bottom edge samples the cell's
+//! bottom row, where the stem was drawn.
+
+use std::path::{Path, PathBuf};
+
+use verdant::mesh::Scene;
+use verdant::plants::flower::build_flower;
+use verdant::plants::grass_asset::build_grass;
+use verdant::plants::tree_lod::atlas_cell_rects;
+use verdant::scene::plants_stage::{mesh_chain, read_lsystem, tree_chain, user_blade};
+use verdant::scene::preset::{demo_preset, load_preset};
+use verdant::scene::{PlantLook, Preset};
+
+const EPS: f32 = 1e-6;
+
+fn shipped_presets() -> Vec<(String, Preset)> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("presets");
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "toml")).collect();
+    paths.sort();
+    assert!(paths.len() >= 3, "shipped presets in {}", dir.display());
+    let mut out = vec![("demo".to_string(), demo_preset())];
+    out.extend(paths.iter().map(|p| (p.display().to_string(), load_preset(p).unwrap_or_else(|e| panic!("{e}")))));
+    out
+}
+
+fn inside(uv: [f32; 2], r: &[f32; 4]) -> bool {
+    uv[0] >= r[0] - EPS && uv[0] <= r[2] + EPS && uv[1] >= r[1] - EPS && uv[1] <= r[3] + EPS
+}
+
+/// Checks every triangle drawn with a texture whose name ends in `_atlas`; returns how many.
+fn check_cards(what: &str, scene: &Scene, cells: &[[f32; 4]]) -> usize {
+    let mut checked = 0;
+    for mesh in &scene.meshes {
+        for p in &mesh.primitives {
+            let Some(m) = p.material else { continue };
+            let Some(t) = scene.materials[m].base_color_texture else { continue };
+            if !scene.textures[t].name.ends_with("_atlas") {
+                continue;
+            }
+            assert_eq!(p.uvs.len(), p.positions.len(), "{what}: mesh {} has no uv per vertex", mesh.name);
+            for (k, tri) in p.indices.chunks_exact(3).enumerate() {
+                let uv = [tri[0], tri[1], tri[2]].map(|i| p.uvs[i as usize]);
+                assert!(
+                    cells.iter().any(|c| uv.iter().all(|&q| inside(q, c))),
+                    "{what}: mesh {} triangle {k} reads outside every atlas cell: uvs {uv:?}",
+                    mesh.name
+                );
+                checked += 1;
+            }
+        }
+    }
+    checked
+}
+
+#[test]
+fn every_shipped_card_stays_inside_its_atlas_cell() {
+    let mut kinds = std::collections::BTreeSet::new();
+    for (preset_name, preset) in shipped_presets() {
+        for s in &preset.species {
+            let what = format!("{preset_name}: species `{}`", s.name);
+            match &s.look {
+                PlantLook::Marker => continue,
+                PlantLook::Grass(g) => {
+                    let blade = user_blade(g).unwrap();
+                    let asset = build_grass(&s.name, g, blade.as_ref()).unwrap();
+                    let cells: Vec<[f32; 4]> = asset.cells.iter().map(|c| c.uv).collect();
+                    let mut n = check_cards(&format!("{what} chain"), &asset.chain, &cells);
+                    for (k, scene) in asset.lod_scenes.iter().enumerate() {
+                        n += check_cards(&format!("{what} LOD{k}"), scene, &cells);
+                    }
+                    n += check_cards(&format!("{what} far field"), &asset.far, &cells);
+                    assert!(n > 0, "{what}: no atlas cards checked");
+                    kinds.insert("grass");
+                }
+                PlantLook::Flower(f) => {
+                    let asset = build_flower(&s.name, f).unwrap();
+                    let cells: Vec<[f32; 4]> = asset.cells.iter().map(|c| c.uv).collect();
+                    assert!(check_cards(&what, &asset.scene, &cells) > 0, "{what}: no atlas cards checked");
+                    for (v, c) in asset.cells.iter().enumerate() {
+                        // the card's bottom (y = 0) samples the cell's bottom row: the stem meets the ground
+                        assert!((c.card_uv[3] - c.uv[3]).abs() < EPS, "{what} v{v}: card bottom {} vs cell bottom {}", c.card_uv[3], c.uv[3]);
+                        let prim = &asset.scene.meshes[v].primitives[0];
+                        for (pos, uv) in prim.positions.iter().zip(&prim.uvs) {
+                            if pos[1] == 0.0 {
+                                assert!((uv[1] - c.uv[3]).abs() < EPS, "{what} v{v}: a ground vertex samples v = {}", uv[1]);
+                            }
+                        }
+                    }
+                    kinds.insert("flower");
+                }
+                PlantLook::Tree(t) => {
+                    let system = read_lsystem(&s.name, t).unwrap();
+                    let chain = tree_chain(&s.name, t, &system, 0).unwrap();
+                    let cells = atlas_cell_rects(t.atlas_px);
+                    let mut n = check_cards(&format!("{what} chain"), &chain.chain, &cells);
+                    for level in &chain.levels {
+                        n += check_cards(&format!("{what} LOD{}", level.level), &level.scene, &cells);
+                    }
+                    assert!(n > 0, "{what}: no atlas cards checked");
+                    kinds.insert("tree");
+                }
+                PlantLook::Mesh(m) => {
+                    let (_, chain) = mesh_chain(&s.name, m).unwrap();
+                    let cells = atlas_cell_rects(m.atlas_px);
+                    let mut n = check_cards(&format!("{what} chain"), &chain.chain, &cells);
+                    for level in &chain.levels {
+                        n += check_cards(&format!("{what} LOD{}", level.level), &level.scene, &cells);
+                    }
+                    assert!(n > 0, "{what}: no atlas cards checked");
+                    kinds.insert("mesh");
+                }
+            }
+        }
+    }
+    // the shipped presets exercise every generated look
+    assert_eq!(kinds.into_iter().collect::<Vec<_>>(), ["flower", "grass", "mesh", "tree"]);
+}
+
+#[test]
+fn a_tall_flower_card_fits_its_cell() {
+    // taller than twice its width: the old atlas clipped the card's bottom and stretched V past 1
+    let s = verdant::plants::flower::FlowerSettings { height_m: [0.6, 0.9], ..Default::default() };
+    s.check().unwrap();
+    let asset = build_flower("tall", &s).unwrap();
+    for c in &asset.cells {
+        assert!(c.card_uv.iter().all(|v| (0.0..=1.0).contains(v)), "{c:?}");
+        assert!(c.card_uv[0] >= c.uv[0] - EPS && c.card_uv[2] <= c.uv[2] + EPS && c.card_uv[1] >= c.uv[1] - EPS && c.card_uv[3] <= c.uv[3] + EPS, "{c:?}");
+    }
+    let cells: Vec<[f32; 4]> = asset.cells.iter().map(|c| c.uv).collect();
+    assert!(check_cards("tall flower", &asset.scene, &cells) > 0);
+}
