@@ -527,7 +527,7 @@ fn build(a: BuildArgs, quiet: bool) -> i32 {
     } else if !quiet {
         print!("{table}");
     }
-    i32::from(failed)
+    scene_build::batch_exit_code(&outcomes)
 }
 
 fn preset(cmd: PresetCommand, quiet: bool) -> i32 {

@@ -348,7 +348,7 @@ fn error_of(text: &[u8], dialect: Option<Dialect>) -> String {
 
 #[test]
 fn bad_arguments_and_rules_give_positioned_errors() {
-    let cases: [(&[u8], Option<Dialect>, &str, &str); 8] = [
+    let cases: [(&[u8], Option<Dialect>, &str, &str); 7] = [
         (b"7\n22.5\n80\nA\nA=F[+F](F\n@\n", None, "bad.ls:5:8: `(` is never closed", "  A=F[+F](F\n         ^"),
         (b"7\n22.5\n80\nA\nAF\n@\n", None, "bad.ls:5:1: expected a rule `X=…`", "  AF\n  ^"),
         (b"7\n22.5\n80\nA\nA=+(3x)F\n@\n", None, "bad.ls:5:4: `(3x)` is not a number", "  A=+(3x)F\n     ^"),

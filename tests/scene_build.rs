@@ -150,9 +150,9 @@ fn preset_check_reports_errors_at_file_line_column() {
     assert_eq!(o.status.code(), Some(2));
     assert!(text(&o).contains("p/good.toml: ok"), "{}", text(&o));
 
-    // the same errors stop a build before anything is written
+    // the same errors stop a build before anything is written, with the same exit code (bad input)
     let o = verdant_in(d, &["build", "p/unknown.toml", "--out", "o"]);
-    assert_ne!(o.status.code(), Some(0));
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("max_eror"), "{}", text(&o));
     assert!(!d.join("o/u").exists());
 }
@@ -235,7 +235,7 @@ fn two_presets_with_one_scene_name_the_second_fails_clearly() {
     write(d, "p/two.toml", &small_preset("same", 2));
     let o = verdant_in(d, &["build", "p/one.toml", "p/two.toml", "--jobs", "2", "--out", "o"]);
     let t = text(&o);
-    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert_eq!(o.status.code(), Some(2), "a usage error: {t}");
     assert!(t.contains("already built by p/one.toml"), "{t}");
     assert!(t.contains("p/two.toml") && t.contains("`same`"), "{t}");
     // the first one is the one built

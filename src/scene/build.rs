@@ -50,6 +50,28 @@ pub enum SceneBuildError {
     Usage(String),
 }
 
+impl SceneBuildError {
+    /// 2 for bad input or usage (a preset that does not parse or names what is not there, stages
+    /// that cannot run alone), 1 for a failure of the build itself.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            SceneBuildError::Preset(e) => e.exit_code(),
+            SceneBuildError::Usage(_) => 2,
+            SceneBuildError::Stage(_) | SceneBuildError::Io { .. } => 1,
+        }
+    }
+}
+
+/// The exit code of a batch: 1 when a build failed, else 2 when an input was bad, else 0.
+pub fn batch_exit_code(outcomes: &[SceneOutcome]) -> i32 {
+    let codes = || outcomes.iter().map(|o| o.exit_code);
+    if codes().any(|c| c == 1) {
+        1
+    } else {
+        codes().max().unwrap_or(0)
+    }
+}
+
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> SceneBuildError + '_ {
     move |e| SceneBuildError::Io { path: path.to_owned(), message: e.to_string() }
 }
@@ -62,6 +84,10 @@ pub struct SceneOutcome {
     pub scene: String,
     /// `None` when the scene was built; the error message otherwise.
     pub error: Option<String>,
+    /// The process exit code this outcome asks for: 0 built, 2 bad input or usage, 1 a failure of
+    /// the build itself ([`SceneBuildError::exit_code`]).
+    #[serde(skip)]
+    pub exit_code: i32,
     pub dir: Option<PathBuf>,
     pub files: usize,
     pub triangles: usize,
@@ -402,6 +428,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         preset: preset_label(preset),
         scene: name.clone(),
         error: None,
+        exit_code: 0,
         dir: None,
         files,
         triangles,
@@ -454,6 +481,7 @@ pub fn build_batch(sources: &[PresetSource], settings: &BuildSettings, jobs: usi
             preset: label.clone(),
             scene,
             error: Some(e.to_string()),
+            exit_code: e.exit_code(),
             dir: None,
             files: 0,
             triangles: 0,
