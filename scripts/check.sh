@@ -336,7 +336,7 @@ done
 declare -A SPECIES_CHECKED=()
 while IFS=$'\t' read -r name status; do SPECIES_CHECKED[$name]="$status"; done < "$OUT/check_species.tsv"
 
-section "5d. Blender (bpy) imports every LoD chain file: one level visible, no repeated materials"
+section "5d. Blender (bpy) imports every species file (LoD chains and flowers): one level visible, no repeated materials"
 chain_files=()
 for f in "${FILES[@]}"; do
   case "$f" in */species/*_LOD*.glb|*/species/*_far.glb) ;; */species/*.glb) chain_files+=("$OUT/$f") ;; esac
@@ -365,6 +365,8 @@ for f in "${FILES[@]}"; do
          */terrain_LOD*) CHECKED[$f]="ok (LoD, scene check)" ;;
          */species/*|*/atlases/*)
            sp="$(basename "$f" .glb)"; sp="${sp%_LOD*}"; sp="${sp%_far}"
+           # a tree species' variants (<name>_v<k>…) are checked under the species' name
+           if [ -z "${SPECIES_CHECKED[$scene/$sp]:-}" ] && [[ "$sp" =~ ^(.+)_v[0-9]+$ ]]; then sp="${BASH_REMATCH[1]}"; fi
            st="${SPECIES_CHECKED[$scene/$sp]:-FAIL (not checked)}"
            if [ "$st" = ok ]; then CHECKED[$f]="ok (species check)"; else CHECKED[$f]="FAIL (species $sp: $st)"; fi ;;
          */scene.glb) CHECKED[$f]="ok (placements, scene check)" ;;

@@ -1,12 +1,13 @@
-"""Import LoD chain files into Blender (the PyPI `bpy` module) and check what a person sees there.
+"""Import species files into Blender (the PyPI `bpy` module) and check what a person sees there.
 
-    python check_blender.py [--summary-tsv FILE] CHAIN.glb...
+    python check_blender.py [--summary-tsv FILE] FILE.glb...
 
 Blender's glTF importer does not know MSFT_lod. A chain file must still show exactly one level: the
 mesh objects visible in the view layer after the import are the default glTF scene's mesh nodes,
 nothing else (the coarser levels live in a second glTF scene, which Blender puts in another
 Blender scene or an excluded collection; nodes of no scene would land, visible, in "Orphan Nodes").
-Materials must not be repeated: Blender copies a material that a file holds twice as `name.001`,
+A file without MSFT_lod (a flower species' variants) must show exactly its default scene's mesh
+nodes too. Materials must not be repeated: Blender copies a material that a file holds twice as `name.001`,
 so the imported material count must equal the file's distinct material count and no name may
 carry such a suffix. Exits 1 on any failure.
 """
@@ -43,8 +44,7 @@ def default_scene_meshes(doc):
 def check(path):
     doc = gltf_json(path)
     problems = []
-    if "MSFT_lod" not in doc.get("extensionsUsed", []):
-        problems.append("not a chain file (no MSFT_lod)")
+    chain = "MSFT_lod" in doc.get("extensionsUsed", [])
     want_visible = default_scene_meshes(doc)
     lod_levels = sum(len(n.get("extensions", {}).get("MSFT_lod", {}).get("ids", [])) for n in doc["nodes"])
     materials = doc.get("materials", [])
@@ -79,7 +79,7 @@ def check(path):
         "file": path,
         "visible": len(visible),
         "objects": len(all_meshes),
-        "levels": lod_levels,
+        "levels": lod_levels if chain else "-",
         "materials": len(names),
         "seconds": seconds,
         "problems": problems,
@@ -95,7 +95,7 @@ def main(argv):
         print(__doc__)
         return 2
     failed = 0
-    print(f"Blender {bpy.app.version_string}: importing {len(argv)} chain files")
+    print(f"Blender {bpy.app.version_string}: importing {len(argv)} species files")
     print(f"{'file':<60} {'visible':>7} {'mesh objects':>12} {'lod levels':>10} {'materials':>9} {'s':>6}  result")
     rows = []
     for path in argv:
@@ -112,7 +112,7 @@ def main(argv):
         with open(summary, "a") as f:
             for row in rows:
                 f.write(f"{row['file']}\t{'ok' if not row['problems'] else 'FAIL'}\t{row['visible']}\t{row['objects']}\n")
-    print(f"{len(rows) - failed} of {len(rows)} chain files show one level and no repeated material in Blender")
+    print(f"{len(rows) - failed} of {len(rows)} species files show one level and no repeated material in Blender")
     return 1 if failed else 0
 
 

@@ -31,8 +31,23 @@ fn inside(uv: [f32; 2], r: &[f32; 4]) -> bool {
     uv[0] >= r[0] - EPS && uv[0] <= r[2] + EPS && uv[1] >= r[1] - EPS && uv[1] <= r[3] + EPS
 }
 
+/// Every primitive with texture coordinates has a textured material (no UV a viewer ignores: the
+/// Khronos validator reports those as unused).
+fn uvs_are_used(what: &str, scene: &Scene) {
+    for mesh in &scene.meshes {
+        for (k, p) in mesh.primitives.iter().enumerate() {
+            if p.uvs.is_empty() {
+                continue;
+            }
+            let textured = p.material.is_some_and(|m| scene.materials[m].base_color_texture.is_some());
+            assert!(textured, "{what}: mesh {} primitive {k} has UVs but its material has no texture", mesh.name);
+        }
+    }
+}
+
 /// Checks every triangle drawn with a texture whose name ends in `_atlas`; returns how many.
 fn check_cards(what: &str, scene: &Scene, cells: &[[f32; 4]]) -> usize {
+    uvs_are_used(what, scene);
     let mut checked = 0;
     for mesh in &scene.meshes {
         for p in &mesh.primitives {

@@ -622,11 +622,19 @@ fn leaves_and_polygons_are_grouped_by_material() {
     assert_eq!(materials, vec!["bark_c12", "leaf_c8"]);
     let leaf = &tree.scene.materials[mesh.primitives[1].material.unwrap()];
     assert!(leaf.double_sided && leaf.base_color_texture.is_some());
-    assert_eq!(tree.scene.textures.len(), 1);
+    // the leaf texture and the bark texture, once each; every primitive with UVs samples one
+    let textures: Vec<&str> = tree.scene.textures.iter().map(|t| t.name.as_str()).collect();
+    assert_eq!(textures, ["bark", "leaf"]);
+    for p in &mesh.primitives {
+        assert!(tree.scene.materials[p.material.unwrap()].base_color_texture.is_some());
+    }
     assert_eq!(mesh.primitives[1].triangle_count() as u64, 2 * tree.stats.leaves);
     let tree = tree_of("recursion 0\nangle 90\nthickness 10\naxiom F[c(8){f+f+f}]F[c(4){f+f+f+f}][c(8){f-f-f}]\n", &TreeOptions::default());
     let names: Vec<String> = tree.mesh().primitives.iter().map(|p| tree.scene.materials[p.material.unwrap()].name.clone()).collect();
     assert_eq!(names, vec!["bark_c2", "leaf_polygon_c4", "leaf_polygon_c8"]);
+    // both polygon colours share the one leaf-surface texture, tinted by their factors
+    let textures: Vec<&str> = tree.scene.textures.iter().map(|t| t.name.as_str()).collect();
+    assert_eq!(textures, ["bark", "leaf_surface"]);
     // a square polygon: two triangles facing one way, unit normals
     let square = &tree.mesh().primitives[1];
     assert_eq!(square.triangle_count(), 2);

@@ -675,15 +675,15 @@ fn concurrent_stores_of_one_cache_entry_stay_complete() {
 // ------------------------------------------------------------------------------ algorithm versions
 
 /// The algorithm version and output digest of each stage on presets/winter_valley.toml (every stage
-/// runs there). When a change alters a stage's output bytes on purpose, bump that stage's
+/// runs there) and presets/meadow.toml (L-system trees and flowers). When a change alters a stage's output bytes on purpose, bump that stage's
 /// `*_ALGORITHM_VERSION` (its cache key then changes, so an older `out/.cache` is never served to
 /// the new binary) and put the new digest here; the test prints the whole table to copy.
 const PINNED: &[(&str, u32, &str)] = &[
-    ("terrain", 1, "a555ab441163e6f2"),
-    ("plants", 2, "67b5706fd2693bbe"),
-    ("snow", 1, "f91cedd545fed334"),
-    ("scatter", 2, "f448ac020c3408cb"),
-    ("preview", 1, "8ce63b12c88d160f"),
+    ("terrain", 2, "8bc1ae9eab0dcd1a"),
+    ("plants", 3, "49f46e968f63b21a"),
+    ("snow", 2, "afe32471f9508a26"),
+    ("scatter", 3, "674a4a7d2c640e7d"),
+    ("preview", 1, "caf2316dc2008600"),
 ];
 
 /// The stage a scene file belongs to (manifest and reports carry timings: not digested).
@@ -708,31 +708,31 @@ fn stage_outputs_match_their_pinned_algorithm_versions() {
         ("scatter", scatter_stage::SCATTER_ALGORITHM_VERSION),
         ("preview", stages::PREVIEW_ALGORITHM_VERSION),
     ];
-    let preset_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("presets/winter_valley.toml");
-    let preset = load_preset(&preset_path).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let settings = BuildSettings { out_dir: dir.path().to_path_buf(), force: true, ..BuildSettings::default() };
-    let outcome = build_preset(&preset, &settings, &|_, _| {}).unwrap();
-    let scene_dir = outcome.dir.unwrap();
     let mut files: BTreeMap<&str, Vec<(String, String)>> = BTreeMap::new();
-    let mut stack = vec![scene_dir.clone()];
-    while let Some(d) = stack.pop() {
-        for e in fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-                continue;
-            }
-            let rel = p.strip_prefix(&scene_dir).unwrap().to_string_lossy().replace('\\', "/");
-            if let Some(stage) = stage_of(&rel) {
-                files.entry(stage).or_default().push((rel, sha256_hex(&fs::read(&p).unwrap())));
+    for name in ["winter_valley", "meadow"] {
+        let preset = load_preset(&Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("presets/{name}.toml"))).unwrap();
+        let settings = BuildSettings { out_dir: dir.path().to_path_buf(), force: true, ..BuildSettings::default() };
+        let scene_dir = build_preset(&preset, &settings, &|_, _| {}).unwrap().dir.unwrap();
+        let mut stack = vec![scene_dir.clone()];
+        while let Some(d) = stack.pop() {
+            for e in fs::read_dir(&d).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    stack.push(p);
+                    continue;
+                }
+                let rel = p.strip_prefix(&scene_dir).unwrap().to_string_lossy().replace('\\', "/");
+                if let Some(stage) = stage_of(&rel) {
+                    files.entry(stage).or_default().push((format!("{name}/{rel}"), sha256_hex(&fs::read(&p).unwrap())));
+                }
             }
         }
     }
     let digest = |stage: &str| -> String {
         let mut list = files.get(stage).cloned().unwrap_or_default();
         list.sort();
-        assert!(!list.is_empty(), "winter_valley wrote no {stage} files");
+        assert!(!list.is_empty(), "the reference presets wrote no {stage} files");
         sha256_hex(list.iter().map(|(r, h)| format!("{r} {h}\n")).collect::<String>().as_bytes())[..16].to_string()
     };
     let table: Vec<String> = versions.iter().map(|(s, v)| format!("    (\"{s}\", {v}, \"{}\"),", digest(s))).collect();

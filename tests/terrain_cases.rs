@@ -195,3 +195,29 @@ fn chunks_skirts_and_base_round_trip() {
     let b = r.output.unwrap().bounds.unwrap();
     assert!(b.min[1] <= -10.0 + 1e-3, "base {} below the lowest sample", b.min[1]);
 }
+
+#[test]
+fn the_terrain_is_textured_from_its_layers() {
+    // a plain on the left, a 60° ramp on the right: grass, then rock, in the base colour that the
+    // written file's material samples through the planar UVs
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (65u32, 17u32);
+    let png = write_png(dir.path(), "ramp.png", w, h, |x, _| if x < 32 { 0 } else { ((x - 32) * 1732) as u16 });
+    let mut job = job_for(&png, 0.01);
+    job.decode.height_scale_m = 65.535;
+    let (report, _) = run_checked(&job, dir.path(), "glb");
+    let back = read_scene(&dir.path().join("out.glb")).unwrap();
+    let m = &back.materials[0];
+    let t = m.base_color_texture.expect("the terrain material has a base-colour texture");
+    assert_eq!(m.base_color, [1.0; 4], "the texture's colour is what shows");
+    assert!(back.meshes.iter().flat_map(|x| &x.primitives).all(|p| !p.uvs.is_empty()));
+    let img = image::load_from_memory(&back.textures[t].png).unwrap().to_rgb8();
+    assert_eq!((img.width(), img.height()), (64, 16));
+    let grass = img.get_pixel(4, 8).0;
+    let rock = img.get_pixel(60, 8).0;
+    assert!(grass[1] > grass[0] && grass[1] > grass[2], "gentle ground is green: {grass:?}");
+    assert!(rock[0].abs_diff(rock[1]) < 12 && rock[1].abs_diff(rock[2]) < 12, "a cliff is grey rock: {rock:?}");
+    let c = &report.layers.coverage;
+    assert_eq!(report.layers.layers, ["grass", "scree", "rock", "snow"]);
+    assert!((c.iter().sum::<f64>() - 1.0).abs() < 1e-9 && c[0] > 0.3 && c[2] > 0.3, "{c:?}");
+}

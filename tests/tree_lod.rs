@@ -200,7 +200,7 @@ fn point_leaves_are_one_point_per_quad_leaf_with_normal_colour_and_size() {
     let quads = build_tree(&system, &TreeOptions { seed: 3, ..TreeOptions::default() }).unwrap();
     let points = build_tree(&system, &TreeOptions { seed: 3, leaf_points: true, ..TreeOptions::default() }).unwrap();
     // the quad leaves: two triangles each, in the textured leaf primitives
-    let leaf_texture = |m: Option<usize>| m.and_then(|m| quads.scene.materials[m].base_color_texture).is_some();
+    let leaf_texture = |m: Option<usize>| m.and_then(|m| quads.scene.materials[m].base_color_texture).is_some_and(|t| quads.scene.textures[t].name == "leaf");
     let quad_leaves: usize = quads.mesh().primitives.iter().filter(|p| leaf_texture(p.material)).map(|p| p.triangle_count() / 2).sum();
     assert!(quad_leaves > 10, "the bush has leaves ({quad_leaves})");
     assert_eq!(points.mesh().point_count(), quad_leaves, "one point per quad leaf");

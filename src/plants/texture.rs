@@ -101,3 +101,46 @@ mod tests {
         assert_eq!(blade_texture(&s), t, "deterministic");
     }
 }
+
+/// Side of the procedural bark and polygon-leaf textures.
+pub const SURFACE_TEXTURE_PX: u32 = 128;
+
+/// A grey tileable texture (sRGB bytes, opaque) from a luminance function of (u, v) in [0, 1)²;
+/// the material's base colour factor tints it.
+fn luminance_png(f: impl Fn(f64, f64) -> f64) -> Vec<u8> {
+    let n = SURFACE_TEXTURE_PX;
+    let image = image::RgbaImage::from_fn(n, n, |x, y| {
+        let (u, v) = ((x as f64 + 0.5) / n as f64, (y as f64 + 0.5) / n as f64);
+        let l = (f(u, v).clamp(0.0, 1.0) * 255.0).round() as u8;
+        image::Rgba([l, l, l, 255])
+    });
+    let mut png = Vec::new();
+    // an in-memory PNG encode of a valid RGBA buffer cannot fail
+    image.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).expect("PNG encoding in memory");
+    png
+}
+
+/// Bark, tileable in u (around the branch, one turn) and v (along it, one circumference a
+/// repeat): twelve vertical ridges that wander along the branch, darker furrows between them and a
+/// finer grain. Luminance 0.66–1 (mean ≈ 0.86), multiplied by the bark colour.
+pub fn bark_texture_png() -> Vec<u8> {
+    use std::f64::consts::TAU;
+    luminance_png(|u, v| {
+        let wander = 0.35 * (TAU * 2.0 * v).sin() + 0.15 * (TAU * (5.0 * v + 3.0 * u)).sin();
+        let ridge = 0.5 + 0.5 * (TAU * (12.0 * u + wander)).sin();
+        let grain = 0.5 + 0.5 * (TAU * (40.0 * u + 7.0 * v)).sin() * (TAU * (3.0 * u + 23.0 * v)).sin();
+        0.66 + 0.30 * ridge.powf(0.6) + 0.04 * grain
+    })
+}
+
+/// A leaf surface for polygon leaves (uv spans the polygon's extent): a soft midrib along v and
+/// side veins; luminance 0.8–1, multiplied by the leaf colour.
+pub fn polygon_leaf_texture_png() -> Vec<u8> {
+    luminance_png(|u, v| {
+        let across = (u - 0.5).abs();
+        let midrib = (1.0 - across / 0.04).max(0.0);
+        let phase = (v * 7.0 + across * 3.0).rem_euclid(1.0);
+        let vein = (1.0 - (phase - 0.5).abs() / 0.06).max(0.0);
+        0.97 - 0.12 * midrib - 0.08 * vein
+    })
+}

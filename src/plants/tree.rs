@@ -740,6 +740,7 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
     let mut all_levels = Vec::new();
     let mut dropped = 0u64;
     let mut leaf_texture = None;
+    let (mut bark_texture, mut polygon_texture) = (None, None);
     for ((kind, color), levels) in std::mem::take(&mut builder.parts) {
         let points = kind == Kind::LeafPoint;
         let mut prim = Primitive { mode: if points { PrimitiveMode::Points } else { PrimitiveMode::Triangles }, ..Primitive::default() };
@@ -795,8 +796,21 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
             prim.custom = vec![CustomAttribute { name: LEAF_SIZE_ATTRIBUTE.into(), values: sizes }];
         }
         let (name, material) = match kind {
-            Kind::Bark => (format!("bark_c{color}"), Material { base_color, roughness: 0.9, ..Material::default() }),
-            Kind::Polygon => (format!("leaf_polygon_c{color}"), Material { base_color, roughness: 0.7, double_sided: true, ..Material::default() }),
+            Kind::Bark => {
+                let texture = *bark_texture.get_or_insert_with(|| {
+                    scene.textures.push(Texture { name: "bark".into(), png: crate::plants::texture::bark_texture_png() });
+                    scene.textures.len() - 1
+                });
+                (format!("bark_c{color}"), Material { base_color, base_color_texture: Some(texture), roughness: 0.9, ..Material::default() })
+            }
+            Kind::Polygon => {
+                let texture = *polygon_texture.get_or_insert_with(|| {
+                    scene.textures.push(Texture { name: "leaf_surface".into(), png: crate::plants::texture::polygon_leaf_texture_png() });
+                    scene.textures.len() - 1
+                });
+                let m = Material { base_color, base_color_texture: Some(texture), roughness: 0.7, double_sided: true, ..Material::default() };
+                (format!("leaf_polygon_c{color}"), m)
+            }
             Kind::Leaf => {
                 let texture = *leaf_texture.get_or_insert_with(|| {
                     scene.textures.push(Texture { name: "leaf".into(), png: leaf_texture_png() });

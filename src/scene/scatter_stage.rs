@@ -56,8 +56,8 @@ impl ScatterStageReport {
 }
 
 /// Version of what the scatter stage writes for given inputs: part of its cache key (see
-/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: scene.glb holds no unused mesh.
-pub const SCATTER_ALGORITHM_VERSION: u32 = 2;
+/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: scene.glb holds no unused mesh; 3: its terrain is textured.
+pub const SCATTER_ALGORITHM_VERSION: u32 = 3;
 
 /// Cache key: the terrain's key, the species and scatter settings, the scene seed, the maps' bytes.
 pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageError> {

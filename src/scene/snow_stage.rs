@@ -73,8 +73,8 @@ impl SnowStageReport {
 }
 
 /// Version of what the snow stage writes for given inputs: part of its cache key (see
-/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]).
-pub const SNOW_ALGORITHM_VERSION: u32 = 1;
+/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: terrain_snow.glb carries the textured terrain.
+pub const SNOW_ALGORITHM_VERSION: u32 = 2;
 
 /// Cache key: the terrain's key and the snow settings.
 pub fn snow_key(snow: &SnowSettings, terrain_key: &str) -> String {

@@ -14,6 +14,7 @@ use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
+use crate::terrain::layers::{bake_layers, LayerReport};
 use crate::terrain::error::measure;
 use crate::terrain::job::{mesh_samples, MeshMode};
 use crate::terrain::SampleMesh;
@@ -98,6 +99,8 @@ pub struct TerrainStageReport {
     pub files: Vec<PathBuf>,
     pub chunks: Vec<ChunkInfo>,
     pub lods: Vec<LodInfo>,
+    /// The material layers baked into the base-colour texture and `terrain/terrain_layers.png`.
+    pub layers: LayerReport,
     /// Seconds of the run that computed these results (a cached build reports the original run).
     pub seconds: StageSeconds,
 }
@@ -130,9 +133,10 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 }
 
 /// Version of what the terrain stage writes for given inputs: part of its cache key. Bump it in
-/// the commit that changes the stage's output bytes (tests/stage_versions.rs pins a digest of a
-/// reference build per version and fails until it is bumped).
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 1;
+/// the commit that changes the stage's output bytes (tests/scene_build.rs pins a digest of a
+/// reference build per version and fails until it is bumped). 2: base-colour texture from the
+/// material layers, terrain_layers.png.
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 2;
 
 /// Version of the preview stage's output for given inputs (see [`TERRAIN_ALGORITHM_VERSION`]).
 pub const PREVIEW_ALGORITHM_VERSION: u32 = 1;
@@ -201,18 +205,27 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
 
     let build_opts = |name: String| BuildOptions { chunk_samples: t.chunk, skirt_depth_m: t.skirt_m, base_depth_m: t.base_m, name };
     let t1 = Instant::now();
-    let scene = build_scene(&hf, &mesh, &build_opts("terrain".into())).map_err(|e| f(e.to_string()))?;
+    let layers = bake_layers(&hf);
+    let textured = |mut scene: Scene| -> Result<Scene, StageError> {
+        layers.texture(&mut scene, "terrain").map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
+        Ok(scene)
+    };
+    let scene = textured(build_scene(&hf, &mesh, &build_opts("terrain".into())).map_err(|e| f(e.to_string()))?)?;
     let build_s = t1.elapsed().as_secs_f64();
 
     let t1 = Instant::now();
-    let files = write_formats(preset, &scene, scene_dir, "terrain")?;
+    let mut files = write_formats(preset, &scene, scene_dir, "terrain")?;
+    let weights = PathBuf::from("terrain").join("terrain_layers.png");
+    let png = layers.weights_png().map_err(|e| f(format!("cannot encode the layer weight map: {e}")))?;
+    export::write_atomic(&scene_dir.join(&weights), &png).map_err(|e| f(e.to_string()))?;
+    files.push(weights);
     let export_s = t1.elapsed().as_secs_f64();
 
     let t1 = Instant::now();
     let mut lods = Vec::new();
     for level in chain {
         let stem = format!("terrain_LOD{}", level.level);
-        let lod_scene = build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| f(e.to_string()))?;
+        let lod_scene = textured(build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| f(e.to_string()))?)?;
         let files = write_formats(preset, &lod_scene, scene_dir, &stem)?;
         lods.push(LodInfo {
             level: level.level,
@@ -258,6 +271,7 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
         files,
         chunks,
         lods,
+        layers: layers.report.clone(),
         seconds: StageSeconds {
             decode: decode_s,
             mesh: mesh_s,

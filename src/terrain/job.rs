@@ -9,6 +9,7 @@ use serde::Serialize;
 use crate::export::{self, ExportError};
 use crate::heightfield::{self, DecodeOptions, Decoded, Encoding, Heightfield, HeightfieldError};
 use crate::mesh::{Bounds, Scene};
+use crate::terrain::layers::{bake_layers, LayerReport};
 use crate::terrain::build::{build_scene, BuildError, BuildOptions};
 use crate::terrain::error::{measure, ErrorStats};
 use crate::terrain::grid::grid;
@@ -64,13 +65,15 @@ pub enum JobError {
     Export(#[from] ExportError),
     #[error("invalid option: {0}")]
     Options(String),
+    #[error("cannot encode the terrain's base-colour texture: {0}")]
+    Texture(String),
 }
 
 impl JobError {
     /// Process exit code: 2 for bad input or usage, 1 for a failure while building or writing.
     pub fn exit_code(&self) -> i32 {
         match self {
-            JobError::Export(_) => 1,
+            JobError::Export(_) | JobError::Texture(_) => 1,
             _ => 2,
         }
     }
@@ -120,6 +123,8 @@ pub struct TerrainReport {
     /// Triangles of the full grid (2·(w−1)·(h−1)), for the reduction ratio.
     pub full_grid_triangles: usize,
     pub output: Option<OutputSummary>,
+    /// The material layers baked into the terrain's base-colour texture (terrain/layers.rs).
+    pub layers: LayerReport,
     pub seconds: Seconds,
 }
 
@@ -191,7 +196,9 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
     let t_analyze = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let scene = build_scene(hf, &mesh, &job.build)?;
+    let mut scene = build_scene(hf, &mesh, &job.build)?;
+    let layers = bake_layers(hf);
+    layers.texture(&mut scene, &job.build.name).map_err(JobError::Texture)?;
     let t_build = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -223,6 +230,7 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
         triangles: mesh.triangles.len(),
         full_grid_triangles: 2 * (hf.width - 1) * (hf.height - 1),
         output: output_summary,
+        layers: layers.report,
         seconds: Seconds {
             decode: t_decode,
             mesh: t_mesh,

@@ -6,6 +6,7 @@ pub mod chunks;
 pub mod error;
 pub mod grid;
 pub mod job;
+pub mod layers;
 pub mod solid;
 pub mod tin;
 

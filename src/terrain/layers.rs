@@ -1,0 +1,213 @@
+//! Terrain material layers from rules, and the base-colour texture baked from them.
+//!
+//! Each texel of a map covering the terrain gets four layer weights from the surface there (the
+//! terrain walk-through thesis' surface attributes): grass on gentle ground, scree on moderate
+//! slopes, rock on steep ones, snow above the snowline unless too steep to hold it. The weights
+//! are written as an RGBA weight map (R grass, G scree, B rock, A snow; the splat/alpha-map layout
+//! Unity terrain and Unreal landscape layers import), and blended with each layer's albedo into a
+//! base-colour texture (no lighting baked in) that terrain.glb's material samples through its
+//! planar UVs, so every viewer shows the terrain coloured. The analyzer is the coverage: the share
+//! of the map each layer covers.
+
+use serde::{Deserialize, Serialize};
+
+use crate::bake::image::Image;
+use crate::bake::raster::encode_rgba8_png;
+use crate::heightfield::Heightfield;
+use crate::mesh::{Scene, Texture};
+
+/// The layers, in weight-map channel order (R, G, B, A).
+pub const LAYER_NAMES: [&str; 4] = ["grass", "scree", "rock", "snow"];
+
+/// Each layer's albedo, linear RGB (sRGB (84, 112, 46), (128, 112, 88), (112, 108, 102), (236, 240, 246)).
+pub const LAYER_ALBEDO: [[f32; 3]; 4] = [[0.0887, 0.162, 0.0273], [0.216, 0.162, 0.0976], [0.162, 0.150, 0.133], [0.838, 0.871, 0.922]];
+
+/// Slopes (degrees) where scree starts and is full, then rock starts and is full.
+pub const SCREE_SLOPE_DEG: [f64; 2] = [18.0, 30.0];
+pub const ROCK_SLOPE_DEG: [f64; 2] = [32.0, 45.0];
+/// Snow lies above this height (metres), fading in over [`SNOW_FADE_M`] above it, on slopes below
+/// 40° (gone at 55°).
+pub const SNOWLINE_M: f64 = 2500.0;
+pub const SNOW_FADE_M: f64 = 300.0;
+pub const SNOW_SLOPE_DEG: [f64; 2] = [40.0, 55.0];
+
+/// Longest side of the baked maps, in texels.
+pub const MAX_LAYER_MAP_PX: u32 = 2048;
+
+fn smoothstep(edge: [f64; 2], x: f64) -> f64 {
+    let t = ((x - edge[0]) / (edge[1] - edge[0])).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// The four layer weights (summing to 1) of ground with this slope and height.
+pub fn layer_weights(slope_deg: f64, height_m: f64) -> [f64; 4] {
+    let rock = smoothstep(ROCK_SLOPE_DEG, slope_deg);
+    let scree = smoothstep(SCREE_SLOPE_DEG, slope_deg) * (1.0 - rock);
+    let snow_cover = smoothstep([SNOWLINE_M, SNOWLINE_M + SNOW_FADE_M], height_m) * (1.0 - smoothstep(SNOW_SLOPE_DEG, slope_deg));
+    let rest = 1.0 - snow_cover;
+    let (rock, scree) = (rock * rest, scree * rest);
+    let grass = (1.0 - rock - scree - snow_cover).max(0.0);
+    [grass, scree, rock, snow_cover]
+}
+
+/// Texels along an axis of `samples` heightmap samples: the power of two nearest the number of
+/// sample spacings (about a texel per cell; the larger when within 3/4 of it), from 2 to
+/// [`MAX_LAYER_MAP_PX`].
+pub fn map_px(samples: usize) -> u32 {
+    let spans = samples.saturating_sub(1).clamp(2, 1 << 20) as u32;
+    let above = spans.next_power_of_two();
+    let nearest = if 4 * spans >= 3 * above { above } else { above / 2 };
+    nearest.clamp(2, MAX_LAYER_MAP_PX)
+}
+
+/// What the layers cover, for the report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LayerReport {
+    /// Weight map and base-colour texture size (width, height) in texels.
+    pub map_px: [u32; 2],
+    /// Layer names in weight-map channel order.
+    pub layers: Vec<String>,
+    /// Mean weight of each layer over the map (sums to 1).
+    pub coverage: Vec<f64>,
+    pub snowline_m: f64,
+}
+
+/// The baked layers of one heightfield.
+#[derive(Debug, Clone)]
+pub struct TerrainLayers {
+    /// RGBA8 weights per texel, row 0 at the map's top (v = 0), as written to the weight map.
+    pub weights: Vec<[u8; 4]>,
+    /// The base colour (linear RGBA) the weights blend to.
+    pub albedo: Image,
+    pub report: LayerReport,
+}
+
+/// Bilinear height and surface slope (degrees) at continuous sample coordinates (s, t).
+fn surface_at(hf: &Heightfield, s: f64, t: f64) -> (f64, f64) {
+    let (i0, j0) = (s.floor().max(0.0) as usize, t.floor().max(0.0) as usize);
+    let (i0, j0) = (i0.min(hf.width - 1), j0.min(hf.height - 1));
+    let (i1, j1) = ((i0 + 1).min(hf.width - 1), (j0 + 1).min(hf.height - 1));
+    let (fs, ft) = ((s - i0 as f64).clamp(0.0, 1.0), (t - j0 as f64).clamp(0.0, 1.0));
+    let lerp = |a: f64, b: f64, f: f64| a + (b - a) * f;
+    let h = |i, j| hf.at(i, j) as f64;
+    let height = lerp(lerp(h(i0, j0), h(i1, j0), fs), lerp(h(i0, j1), h(i1, j1), fs), ft);
+    let ny = |i, j| hf.normal_at(i, j)[1];
+    let up = lerp(lerp(ny(i0, j0), ny(i1, j0), fs), lerp(ny(i0, j1), ny(i1, j1), fs), ft);
+    (height, up.clamp(-1.0, 1.0).acos().to_degrees())
+}
+
+/// Bakes the weight map and the base colour over the whole heightfield (at least 2 × 2 samples).
+/// Texel (x, y) is sampled at its centre, uv ((x + ½)/W, (y + ½)/H), which the planar terrain UVs
+/// map to sample coordinates (u·(w − 1), v·(h − 1)).
+pub fn bake_layers(hf: &Heightfield) -> TerrainLayers {
+    let (w, h) = (map_px(hf.width), map_px(hf.height));
+    let n = (w * h) as usize;
+    let mut weights = Vec::with_capacity(n);
+    let mut pixels = Vec::with_capacity(n);
+    let mut sums = [0.0f64; 4];
+    for y in 0..h {
+        let t = (y as f64 + 0.5) / h as f64 * (hf.height - 1) as f64;
+        for x in 0..w {
+            let s = (x as f64 + 0.5) / w as f64 * (hf.width - 1) as f64;
+            let (height, slope) = surface_at(hf, s, t);
+            let wts = layer_weights(slope, height);
+            let mut colour = [0.0f32; 4];
+            colour[3] = 1.0;
+            for (k, &wk) in wts.iter().enumerate() {
+                sums[k] += wk;
+                for c in 0..3 {
+                    colour[c] += wk as f32 * LAYER_ALBEDO[k][c];
+                }
+            }
+            weights.push(wts.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8));
+            pixels.push(colour);
+        }
+    }
+    let coverage = sums.iter().map(|s| s / n as f64).collect();
+    TerrainLayers {
+        weights,
+        albedo: Image { width: w, height: h, pixels },
+        report: LayerReport { map_px: [w, h], layers: LAYER_NAMES.iter().map(|s| s.to_string()).collect(), coverage, snowline_m: SNOWLINE_M },
+    }
+}
+
+impl TerrainLayers {
+    /// The weight map as PNG bytes (RGBA8, stored as is: weights, not colours).
+    pub fn weights_png(&self) -> Result<Vec<u8>, String> {
+        let [w, h] = self.report.map_px;
+        encode_rgba8_png(&self.weights.concat(), w, h)
+    }
+
+    /// Puts the base colour on every terrain material of `scene` (materials named `terrain`):
+    /// the texture, and a white factor so the texture's colour is what shows.
+    pub fn texture(&self, scene: &mut Scene, name: &str) -> Result<(), String> {
+        let png = self.albedo.encode_png().map_err(|e| e.to_string())?;
+        scene.textures.push(Texture { name: format!("{name}_base_color"), png });
+        let t = scene.textures.len() - 1;
+        for m in scene.materials.iter_mut().filter(|m| m.name == "terrain") {
+            m.base_color_texture = Some(t);
+            m.base_color = [1.0, 1.0, 1.0, 1.0];
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn weights_follow_slope_and_height_and_sum_to_one() {
+        let flat_low = layer_weights(2.0, 100.0);
+        assert!(flat_low[0] > 0.99, "{flat_low:?}");
+        let steep = layer_weights(60.0, 100.0);
+        assert!(steep[2] > 0.99, "{steep:?}");
+        let moderate = layer_weights(25.0, 100.0);
+        assert!(moderate[1] > 0.3 && moderate[0] > 0.1, "{moderate:?}");
+        let high_flat = layer_weights(5.0, SNOWLINE_M + 2.0 * SNOW_FADE_M);
+        assert!(high_flat[3] > 0.99, "{high_flat:?}");
+        let high_cliff = layer_weights(70.0, SNOWLINE_M + 2.0 * SNOW_FADE_M);
+        assert!(high_cliff[3] < 0.01 && high_cliff[2] > 0.99, "{high_cliff:?}");
+        for slope in (0..90).step_by(3) {
+            for height in [0.0, 2400.0, 2600.0, 2700.0, 9000.0] {
+                let w = layer_weights(slope as f64, height);
+                assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12 && w.iter().all(|&v| v >= 0.0), "{slope} {height} {w:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn map_sizes_are_powers_of_two_near_the_sample_spacing() {
+        assert_eq!(map_px(513), 512);
+        assert_eq!(map_px(512), 512);
+        assert_eq!(map_px(257), 256);
+        assert_eq!(map_px(300), 256);
+        assert_eq!(map_px(400), 512);
+        assert_eq!(map_px(2), 2);
+        assert_eq!(map_px(20001), MAX_LAYER_MAP_PX);
+    }
+
+    #[test]
+    fn a_cliff_bakes_rock_and_a_plain_grass() {
+        // left half flat, right half a 60° ramp
+        let (w, h) = (65, 33);
+        let cell = 1.0;
+        let heights: Vec<f32> = (0..w * h).map(|k| { let i = k % w; if i < 32 { 0.0 } else { (i - 32) as f32 * 1.732 } }).collect();
+        let hf = Heightfield { width: w, height: h, cell_size_m: cell, heights };
+        let layers = bake_layers(&hf);
+        assert_eq!(layers.report.map_px, [64, 32]);
+        let at = |x: usize, y: usize| layers.weights[y * 64 + x];
+        assert!(at(4, 16)[0] == 255, "{:?}", at(4, 16));
+        assert!(at(60, 16)[2] == 255, "{:?}", at(60, 16));
+        let c = &layers.report.coverage;
+        assert!((c.iter().sum::<f64>() - 1.0).abs() < 1e-9);
+        assert!(c[0] > 0.4 && c[2] > 0.4, "{c:?}");
+        let png = layers.weights_png().unwrap();
+        assert!(png.starts_with(b"\x89PNG"));
+        // the texture goes on the terrain material
+        let mut scene = Scene { materials: vec![crate::terrain::build::terrain_material()], ..Scene::default() };
+        layers.texture(&mut scene, "terrain").unwrap();
+        assert_eq!(scene.materials[0].base_color_texture, Some(0));
+        assert_eq!(scene.textures[0].name, "terrain_base_color");
+    }
+}
