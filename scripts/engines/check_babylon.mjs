@@ -1,0 +1,124 @@
+// Loads glb files in Babylon.js (headless Chromium, WebGL through SwiftShader) and checks what a
+// person would see: no loader error or warning, no page error, and for MSFT_lod chains every level
+// arriving in order with exactly the default scene's LoD0 meshes enabled at the end.
+//
+//   node scripts/engines/check_babylon.mjs [--thumbs DIR] [--no-range-requests] FILE.glb...
+//
+// MSFT_lod files are loaded with the loader's `useRangeRequests` on (Babylon's progressive LoD
+// loading needs it for a .glb); --no-range-requests loads them with Babylon's defaults instead.
+// Exits 1 if any file fails.
+import http from 'node:http';
+import fs from 'node:fs';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+import puppeteer from 'puppeteer-core';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const args = process.argv.slice(2);
+let thumbs = null;
+let rangeRequests = true;
+const files = [];
+for (let i = 0; i < args.length; i++) {
+  if (args[i] === '--thumbs') thumbs = args[++i];
+  else if (args[i] === '--no-range-requests') rangeRequests = false;
+  else files.push(path.resolve(args[i]));
+}
+if (!files.length) {
+  console.error('usage: node scripts/engines/check_babylon.mjs [--thumbs DIR] [--no-range-requests] FILE.glb...');
+  process.exit(2);
+}
+
+// what the page may load: the page, Babylon from node_modules, and the files named on the command line
+const allowed = new Set(files);
+const server = http.createServer((req, res) => {
+  const url = decodeURIComponent(req.url.split('?')[0]);
+  let file;
+  if (url === '/') file = path.join(here, 'babylon.html');
+  else if (url.startsWith('/node_modules/')) file = path.join(here, url);
+  else if (url.startsWith('/files/') && allowed.has(url.slice('/files'.length))) file = url.slice('/files'.length);
+  if (!file) { res.writeHead(url === '/favicon.ico' ? 204 : 404); res.end(); return; }
+  fs.readFile(file, (err, data) => {
+    if (err) { res.writeHead(404); res.end(); return; }
+    const range = /bytes=(\d+)-(\d*)/.exec(req.headers.range || '');
+    const type = file.endsWith('.html') ? 'text/html' : file.endsWith('.js') ? 'text/javascript' : 'application/octet-stream';
+    if (range) {
+      const a = Number(range[1]);
+      const b = range[2] ? Math.min(Number(range[2]), data.length - 1) : data.length - 1;
+      res.writeHead(206, { 'Content-Type': type, 'Content-Range': `bytes ${a}-${b}/${data.length}`, 'Content-Length': b - a + 1, 'Accept-Ranges': 'bytes' });
+      res.end(data.subarray(a, b + 1));
+      return;
+    }
+    res.writeHead(200, { 'Content-Type': type, 'Accept-Ranges': 'bytes' });
+    res.end(data);
+  });
+}).listen(0, '127.0.0.1');
+await new Promise((resolve) => server.once('listening', resolve));
+const port = server.address().port;
+
+// the default-scene mesh nodes a viewer must show, and whether the file is an MSFT_lod chain
+function expected(file) {
+  const data = fs.readFileSync(file);
+  const json = JSON.parse(data.subarray(20, 20 + data.readUInt32LE(12)).toString('utf8'));
+  const scene = json.scenes[json.scene ?? 0];
+  const stack = [...scene.nodes];
+  let meshNodes = 0;
+  let levels = 0;
+  while (stack.length) {
+    const node = json.nodes[stack.pop()];
+    if (node.mesh !== undefined) meshNodes++;
+    levels = Math.max(levels, node.extensions?.MSFT_lod?.ids?.length ?? 0);
+    stack.push(...(node.children ?? []));
+  }
+  return { chain: (json.extensionsUsed ?? []).includes('MSFT_lod'), levels: levels + 1 };
+}
+
+const browser = await puppeteer.launch({
+  executablePath: process.env.CHROMIUM ?? '/usr/bin/chromium',
+  headless: true,
+  protocolTimeout: 240000,
+  args: ['--no-sandbox', '--disable-gpu', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--no-first-run',
+    '--disable-background-networking', '--disable-component-update', '--disable-sync', '--disable-quic'],
+});
+let failed = 0;
+console.log(`Babylon.js ${JSON.parse(fs.readFileSync(path.join(here, 'node_modules/babylonjs/package.json'))).version}, ` +
+  `MSFT_lod files with range requests ${rangeRequests ? 'on' : 'off (Babylon defaults)'}`);
+for (const file of files) {
+  const want = expected(file);
+  const page = await browser.newPage();
+  const pageErrors = [];
+  page.on('console', (m) => {
+    const t = m.type();
+    if ((t === 'error' || t === 'warn' || t === 'warning') && !/GL Driver Message/.test(m.text())) pageErrors.push(m.text());
+  });
+  page.on('pageerror', (e) => pageErrors.push(String(e)));
+  await page.goto(`http://127.0.0.1:${port}/`);
+  let r;
+  try {
+    r = await page.evaluate((url, options) => window.loadGlb(url, options), `/files${file}`,
+      { rangeRequests: want.chain && rangeRequests, timeoutMs: 60000 });
+  } catch (e) {
+    r = { ok: false, error: String(e) };
+  }
+  await new Promise((resolve) => setTimeout(resolve, 200));
+  const problems = [];
+  if (!r.ok) problems.push(r.error);
+  problems.push(...(r.errors ?? []), ...pageErrors);
+  if (r.ok && want.chain) {
+    const inOrder = r.lodLevels.length === want.levels && r.lodLevels.every((l, k) => l === k);
+    if (!inOrder) problems.push(`MSFT_lod levels arrived as ${JSON.stringify(r.lodLevels)}, expected 0..${want.levels - 1} in order`);
+    if (r.enabled.some((n) => !/_LOD0(_primitive\d+)?$/.test(n))) problems.push(`levels other than LoD0 left enabled: ${r.enabled.join(', ')}`);
+  }
+  if (thumbs && r.ok) {
+    fs.mkdirSync(thumbs, { recursive: true });
+    const canvas = await page.$('#c');
+    await canvas.screenshot({ path: path.join(thumbs, `babylon_${path.basename(path.dirname(path.dirname(file)))}_${path.basename(file, '.glb')}.png`) });
+  }
+  failed += problems.length > 0;
+  const what = r.ok ? `${r.meshes} meshes, ${r.enabled.length} enabled${want.chain ? `, LoD levels ${JSON.stringify(r.lodLevels)}` : ''}` : '';
+  console.log(`${problems.length ? 'FAIL' : 'ok  '}  ${file}: ${what}${problems.length ? ' — ' + problems.join(' | ') : ''}`);
+  await page.close();
+}
+await browser.close();
+server.close();
+console.log(`Babylon.js: ${files.length - failed} of ${files.length} files load without errors`);
+process.exit(failed ? 1 : 0);
