@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use verdant::mesh::Scene;
 use verdant::plants::flower::build_flower;
 use verdant::plants::grass_asset::build_grass;
-use verdant::plants::tree_lod::atlas_cell_rects;
+use verdant::plants::tree_lod::{atlas_cell_rects, TreeLods};
 use verdant::scene::plants_stage::{mesh_chain, read_lsystem, tree_chain, user_blade};
 use verdant::scene::preset::{demo_preset, load_preset};
 use verdant::scene::{PlantLook, Preset};
@@ -71,6 +71,16 @@ fn check_cards(what: &str, scene: &Scene, cells: &[[f32; 4]]) -> usize {
     checked
 }
 
+/// A tree or mesh chain: the MSFT_lod file and every level against the tree atlas' cells.
+fn check_chain(what: &str, chain: &TreeLods, atlas_px: u32) {
+    let cells = atlas_cell_rects(atlas_px);
+    let mut n = check_cards(&format!("{what} chain"), &chain.chain, &cells);
+    for level in &chain.levels {
+        n += check_cards(&format!("{what} LOD{}", level.level), &level.scene, &cells);
+    }
+    assert!(n > 0, "{what}: no atlas cards checked");
+}
+
 #[test]
 fn every_shipped_card_stays_inside_its_atlas_cell() {
     let mut kinds = std::collections::BTreeSet::new();
@@ -109,23 +119,11 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                 }
                 PlantLook::Tree(t) => {
                     let system = read_lsystem(&s.name, t).unwrap();
-                    let chain = tree_chain(&s.name, t, &system, 0).unwrap();
-                    let cells = atlas_cell_rects(t.atlas_px);
-                    let mut n = check_cards(&format!("{what} chain"), &chain.chain, &cells);
-                    for level in &chain.levels {
-                        n += check_cards(&format!("{what} LOD{}", level.level), &level.scene, &cells);
-                    }
-                    assert!(n > 0, "{what}: no atlas cards checked");
+                    check_chain(&what, &tree_chain(&s.name, t, &system, 0).unwrap(), t.atlas_px);
                     kinds.insert("tree");
                 }
                 PlantLook::Mesh(m) => {
-                    let (_, chain) = mesh_chain(&s.name, m).unwrap();
-                    let cells = atlas_cell_rects(m.atlas_px);
-                    let mut n = check_cards(&format!("{what} chain"), &chain.chain, &cells);
-                    for level in &chain.levels {
-                        n += check_cards(&format!("{what} LOD{}", level.level), &level.scene, &cells);
-                    }
-                    assert!(n > 0, "{what}: no atlas cards checked");
+                    check_chain(&what, &mesh_chain(&s.name, m).unwrap().1, m.atlas_px);
                     kinds.insert("mesh");
                 }
             }
