@@ -485,7 +485,9 @@ fn thesis_dialect_uses_its_own_factors_and_leaves() {
     let r = interpret(&sys("1\n90\n10\nX(100)=F\"F?FL|F\n@\n"), 0);
     let lengths: Vec<f64> = r.segments.iter().map(|s| s.start.distance(s.end)).collect();
     assert!((lengths[1] - 1.1).abs() < 1e-12, "\" is +10 %: {lengths:?}");
-    assert!((r.segments[2].diameter / lengths[2] - 0.13).abs() < 1e-12, "? is +30 %");
+    // length and thickness are separate attributes in the thesis: `"` lengthens without thickening
+    assert!((r.segments[1].diameter - 0.1).abs() < 1e-12, "\" must not thicken: {}", r.segments[1].diameter);
+    assert!((r.segments[2].diameter - 0.13).abs() < 1e-12, "? is +30 %: {}", r.segments[2].diameter);
     assert_eq!(r.leaves.len(), 1);
     // `|` turns 180° about the heading in the thesis: the next F keeps going up
     assert!(r.segments[3].end.y > r.segments[3].start.y);

@@ -184,6 +184,28 @@ fn first_token(line: &[u8]) -> (usize, &[u8]) {
     (start, &line[start..start + len])
 }
 
+/// The thesis' format has no blanks: text after one is a comment. When that text reads like more of
+/// the rule (turtle commands, brackets, arguments) rather than words, the blank most likely split
+/// the rule: warn with its position (the rule is read up to the blank).
+fn warn_blank_inside(source: &Source, line: &Line, end: usize, what: &str, warnings: &mut Vec<String>) {
+    let rest = &line.bytes[end.min(line.bytes.len())..];
+    let Some(start) = rest.iter().position(|&b| !is_space(b)) else { return };
+    let next = first_word(&rest[start..]);
+    let rule_like = !next.starts_with(b"#")
+        && next.iter().any(|b| b"[]()+-&^<>|%$\"'!?;:=".contains(b))
+        && !next.iter().any(|b| b.is_ascii_lowercase() && !b"fgtzc".contains(b));
+    if rule_like {
+        warnings.push(source.warning(
+            line.number,
+            end,
+            format!(
+                "a blank inside {what}: `{}` after it is read as a comment (the format has no blanks; remove the blank to make it part of the rule)",
+                String::from_utf8_lossy(next)
+            ),
+        ));
+    }
+}
+
 /// The first blank-separated word.
 fn first_word(line: &[u8]) -> &[u8] {
     let start = line.iter().position(|&b| !is_space(b)).unwrap_or(line.len());
@@ -622,6 +644,7 @@ fn parse_stochastic(source: &Source, warnings: &mut Vec<String>) -> Result<LSyst
         return Err(source.error(line.number, col + 7, "the axiom is empty", "write the start string after `X(100)=`"));
     }
     let axiom = parse_items(source, line.number, &tagged(axiom_text, col + 7), &mut args, "the axiom", warnings)?;
+    warn_blank_inside(source, line, col + token.len(), "the axiom", warnings);
     // rules C(P)=R, variants of one symbol in ascending P, the last at 100
     let mut rules: Vec<Rule> = Vec::new();
     let mut last_variant_at: Vec<(usize, usize)> = Vec::new(); // (line, col) of each rule's latest variant
@@ -665,6 +688,7 @@ fn parse_stochastic(source: &Source, warnings: &mut Vec<String>) -> Result<LSyst
         };
         let what = format!("the rule for {}", show(predecessor));
         let successor = parse_items(source, line.number, &tagged(&token[close + 2..], col + close + 2), &mut args, &what, warnings)?;
+        warn_blank_inside(source, line, col + token.len(), &what, warnings);
         match rules.iter().position(|r| r.predecessor == predecessor) {
             Some(k) => {
                 let previous = rules[k].variants.last().map_or(0, |v| v.cumulative);
@@ -883,6 +907,17 @@ mod tests {
         // the `)` is dropped, the brackets kept for the turtle to match
         let b = p.system.rules.iter().find(|r| r.predecessor == b'B').unwrap();
         assert_eq!(p.system.items_text(&b.variants[0].successor), b"F]F");
+    }
+
+    #[test]
+    fn a_blank_inside_a_thesis_rule_warns_with_its_position() {
+        let p = parse("2\n28\n18\nX(100)=FA\nA(100)=F[&A] >(137)A\n@\n", None).unwrap();
+        assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
+        assert!(p.warnings[0].starts_with("line 5, column 13: a blank inside the rule for `A`"), "{:?}", p.warnings);
+        // the rule is read up to the blank; a real comment after a blank does not warn
+        assert_eq!(p.system.items_text(&p.system.rules[0].variants[0].successor), b"F[&A]");
+        let p = parse("2\n28\n18\nX(100)=FA # the trunk\nA(100)=F[&A]A  grows upward\n@\n", None).unwrap();
+        assert!(p.warnings.is_empty(), "{:?}", p.warnings);
     }
 
     #[test]

@@ -192,6 +192,10 @@ pub struct Conventions {
     /// Colour index at the start (lparser: 2) and of thesis leaves.
     pub start_color: u16,
     pub leaf_color: u16,
+    /// The diameter is the thickness times the current segment length, so `"` thickens too
+    /// (lparser); or times the dialect's step, independent of the length (the thesis keeps length
+    /// and thickness as separate turtle attributes, its §3.3).
+    pub thickness_follows_length: bool,
 }
 
 impl Conventions {
@@ -209,6 +213,7 @@ impl Conventions {
             polygon_starts_at_turtle: false,
             start_color: 2,
             leaf_color: 8,
+            thickness_follows_length: true,
         };
         match dialect {
             Dialect::LparserV4 => Conventions { step: 100.0, polygon_starts_at_turtle: true, ..lparser },
@@ -221,6 +226,7 @@ impl Conventions {
                 bar_rolls: true,
                 polygon_starts_at_turtle: true,
                 start_color: 12,
+                thickness_follows_length: false,
                 ..lparser
             },
         }
@@ -239,7 +245,8 @@ pub struct Segment {
     pub end: DVec3,
     /// The turtle's frame while drawing it (the heading points from start to end for positive lengths).
     pub frame: Frame,
-    /// Diameter in turtle units: |length| × thickness, at least the minimum thickness.
+    /// Diameter in turtle units: |length| × thickness (lparser) or step × thickness (the thesis),
+    /// at least the minimum thickness.
     pub diameter: f64,
     pub color: u16,
     /// Branch level: the `[` nesting depth it was drawn at (0 for the trunk).
@@ -286,7 +293,7 @@ struct State {
     step: f64,
     half_step: f64,
     angle_deg: f64,
-    /// Diameter as a fraction of the segment length.
+    /// Diameter as a fraction of the segment length (lparser) or of the step (the thesis).
     thickness: f64,
     tropism: f64,
     color: u16,
@@ -484,7 +491,8 @@ impl Turtle {
                 (c, false)
             }
         };
-        let diameter = (length.abs() * self.state.thickness).max(self.min_diameter);
+        let scale = if self.conventions.thickness_follows_length { length.abs() } else { self.conventions.step };
+        let diameter = (scale * self.state.thickness).max(self.min_diameter);
         let segment = Segment {
             chain,
             continues,
