@@ -489,6 +489,15 @@ fn thesis_dialect_uses_its_own_factors_and_leaves() {
     assert!((r.segments[1].diameter - 0.1).abs() < 1e-12, "\" must not thicken: {}", r.segments[1].diameter);
     assert!((r.segments[2].diameter - 0.13).abs() < 1e-12, "? is +30 %: {}", r.segments[2].diameter);
     assert_eq!(r.leaves.len(), 1);
+    assert_eq!(r.leaves[0].color, 8, "leaf green until a `c` sets a colour");
+    // leaves take the turtle's colour index once a `c` set one, on that branch only
+    let c = interpret(&sys("1
+90
+10
+X(100)=F[c(5)FL]FL
+@
+"), 0);
+    assert_eq!(c.leaves.iter().map(|l| l.color).collect::<Vec<_>>(), vec![5, 8]);
     // `|` turns 180° about the heading in the thesis: the next F keeps going up
     assert!(r.segments[3].end.y > r.segments[3].start.y);
     // lparser's `|` turns about up: the heading reverses

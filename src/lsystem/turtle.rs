@@ -297,6 +297,8 @@ struct State {
     thickness: f64,
     tropism: f64,
     color: u16,
+    /// A `c` has set the colour on this path (thesis leaves then take it).
+    color_set: bool,
     chain: Option<u32>,
 }
 
@@ -363,6 +365,7 @@ impl Turtle {
                 thickness: clamp_finite(system.thickness_pct / 100.0, 0.0, MAX_THICKNESS),
                 tropism: DEFAULT_TROPISM,
                 color: conventions.start_color,
+                color_set: false,
                 chain: None,
             },
             conventions,
@@ -580,6 +583,7 @@ impl Turtle {
                     self.end_chain(sink)?;
                     self.state.color = color;
                 }
+                self.state.color_set = true;
             }
             b'[' => {
                 let saved = self.state.clone();
@@ -622,7 +626,8 @@ impl Turtle {
                     position: self.state.pos,
                     frame: self.state.frame,
                     length: self.state.step.abs() * g,
-                    color: self.conventions.leaf_color,
+                    // the turtle's colour index once a `c` has set one, else leaf green
+                    color: if self.state.color_set { self.state.color } else { self.conventions.leaf_color },
                     level: self.level(),
                 };
                 sink.leaf(&leaf)?;
