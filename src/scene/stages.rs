@@ -133,7 +133,7 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 }
 
 /// Version of what the terrain stage writes for given inputs: part of its cache key. Bump it in
-/// the commit that changes the stage's output bytes (tests/scene_build.rs pins a digest of a
+/// the commit that changes the stage's output bytes (tests/suite/scene_build.rs pins a digest of a
 /// reference build per version and fails until it is bumped). 2: base-colour texture from the
 /// material layers, terrain_layers.png.
 pub const TERRAIN_ALGORITHM_VERSION: u32 = 2;

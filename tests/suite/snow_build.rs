@@ -12,8 +12,7 @@ use std::path::Path;
 
 use verdant::scene::preset::{parse_preset, template};
 
-mod common;
-use common::*;
+use crate::common::*;
 
 const TREE: &str = "[[species]]\nname = \"tree\"\nkind = \"tree\"\nplacement = \"poisson\"\nmax_density = 0.01\nmin_spacing = 5.0\n";
 /// No exclusion, so every grass candidate the snow drops would otherwise have been placed.

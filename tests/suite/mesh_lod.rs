@@ -13,9 +13,7 @@ use verdant::plants::mesh_asset::{load_obj, MeshAssetError, ObjOptions, UpAxis};
 use verdant::plants::tree_lod::{build_mesh_lods, run_mesh_lods, MeshLodJob, TreeLodError, TreeLodOptions, TREE_LODS};
 use verdant::validate::{read_scene, validate_file};
 
-#[path = "common/lod.rs"]
-mod lod;
-use lod::{bytes_of, in_pool, small_atlas};
+use crate::common::lod::{bytes_of, in_pool, small_atlas};
 
 /// A rock: an icosahedron subdivided 3 times (1280 triangles), pushed in and out by smooth
 /// bumps, flattened underneath, 2 m across and centred away from the origin (at (5, 3, −2)).

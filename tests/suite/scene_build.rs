@@ -16,8 +16,7 @@ use verdant::scene::cache::sha256_hex;
 use verdant::scene::preset::{demo_preset, load_preset};
 use verdant::scene::stages::Stage;
 
-mod common;
-use common::*;
+use crate::common::*;
 
 // ------------------------------------------------------------------------------------------ helpers
 

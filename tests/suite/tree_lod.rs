@@ -13,9 +13,7 @@ use verdant::plants::tree::{build_tree, TreeOptions, LEAF_SIZE_ATTRIBUTE};
 use verdant::plants::tree_lod::{build_tree_lods, run_lods, TreeLodJob, TreeLodOptions, TreeLods, ATLAS_ALPHA_CUTOFF, IMPOSTOR_EXTRAS_KEY, TREE_LODS};
 use verdant::validate::{read_scene, validate_file};
 
-#[path = "common/lod.rs"]
-mod lod;
-use lod::{bytes_of, in_pool, small_atlas};
+use crate::common::lod::{bytes_of, in_pool, small_atlas};
 
 /// The stochastic bush of the thesis' format (as ../shared/data/lsystems/stochastic/bush.ls).
 const BUSH: &str = "3-2-2\n28\n18\nX(100)=FFA\nA(40)=F[&B]>(137)A\nA(75)=F[^B]>(120)A\nA(100)=F[&B]\"[^C]>(137)A\nB(50)=F[-C]CL\nB(100)=F[+C]'C\nC(100)=F[+B]B\n@\n";

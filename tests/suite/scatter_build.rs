@@ -13,8 +13,7 @@ use std::path::Path;
 
 use image::{ImageBuffer, Luma};
 
-mod common;
-use common::*;
+use crate::common::*;
 
 // ------------------------------------------------------------------------------------------ helpers
 

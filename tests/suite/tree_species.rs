@@ -10,8 +10,7 @@ use std::path::Path;
 use verdant::scene::preset::{load_preset, parse_preset};
 use verdant::scene::PlantLook;
 
-mod common;
-use common::*;
+use crate::common::*;
 
 /// A small stochastic tree (random turns `~`: every seed grows a different one), written here.
 const BUSH_LS: &str = "# test bush\nrecursion 4\nangle 25\nthickness 15\naxiom c(12)FFFA\n\

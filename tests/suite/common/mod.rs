@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests that drive the `verdant` binary on scene builds.
 #![allow(dead_code)]
 
+pub mod lod;
+
 use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};

@@ -1,0 +1,23 @@
+//! Every integration test in one binary: the library and its dependencies are linked once instead
+//! of once per test file, which was most of the check's compile time (19 test binaries). Each
+//! module is one former `tests/<name>.rs`; run one with `cargo test --release --test suite <name>::`.
+
+mod common;
+mod atlas_cells;
+mod bake;
+mod cli;
+mod export_roundtrip;
+mod grass;
+mod heightfield_decode;
+mod lsystem;
+mod mesh_lod;
+mod preset_parse;
+mod preview_lod;
+mod scatter_build;
+mod scatter_cases;
+mod scene_build;
+mod snow;
+mod snow_build;
+mod terrain_cases;
+mod tree_lod;
+mod tree_species;
