@@ -1,6 +1,6 @@
 //! Procedural plant textures, so no photograph has to ship: grass blade columns (root-to-tip
 //! gradient, per-column hue/value jitter, fine streak noise, alpha shaped like the blade's taper)
-//! and the same columns made from a user's blade image.
+//! and the same columns made from a user's blade image; tileable bark and polygon-leaf surfaces.
 
 use crate::bake::image::Image;
 use crate::plants::grass::{taper, GrassSettings, BLADE_TEXTURE_COLUMNS};
@@ -79,29 +79,6 @@ pub fn blade_texture_from(settings: &GrassSettings, user: &Image) -> Image {
     Image { width, height: h, pixels }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn blade_columns_taper_to_the_tip_and_differ_in_colour() {
-        let s = GrassSettings::default();
-        let t = blade_texture(&s);
-        let coverage_row = |y: u32| (0..COLUMN_PX).filter(|&x| t.pixels[(y * t.width + x) as usize][3] >= 0.5).count();
-        // wide at the root (bottom), narrow at the tip (top)
-        assert!(coverage_row(BLADE_TEXTURE_HEIGHT - 1) >= COLUMN_PX as usize - 1);
-        assert!(coverage_row(0) <= 2);
-        let mid = |c: u32| t.pixels[((BLADE_TEXTURE_HEIGHT / 2) * t.width + c * COLUMN_PX + COLUMN_PX / 2) as usize];
-        let distinct = (1..BLADE_TEXTURE_COLUMNS as u32).filter(|&c| mid(c) != mid(0)).count();
-        assert!(distinct >= BLADE_TEXTURE_COLUMNS - 2);
-        // root darker than tip (gradient)
-        let root = t.pixels[((BLADE_TEXTURE_HEIGHT - 1) * t.width + COLUMN_PX / 2) as usize];
-        let tip = t.pixels[(8 * t.width + COLUMN_PX / 2) as usize];
-        assert!(root[1] < tip[1]);
-        assert_eq!(blade_texture(&s), t, "deterministic");
-    }
-}
-
 /// Side of the procedural bark and polygon-leaf textures.
 pub const SURFACE_TEXTURE_PX: u32 = 128;
 
@@ -143,4 +120,27 @@ pub fn polygon_leaf_texture_png() -> Vec<u8> {
         let vein = (1.0 - (phase - 0.5).abs() / 0.06).max(0.0);
         0.97 - 0.12 * midrib - 0.08 * vein
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blade_columns_taper_to_the_tip_and_differ_in_colour() {
+        let s = GrassSettings::default();
+        let t = blade_texture(&s);
+        let coverage_row = |y: u32| (0..COLUMN_PX).filter(|&x| t.pixels[(y * t.width + x) as usize][3] >= 0.5).count();
+        // wide at the root (bottom), narrow at the tip (top)
+        assert!(coverage_row(BLADE_TEXTURE_HEIGHT - 1) >= COLUMN_PX as usize - 1);
+        assert!(coverage_row(0) <= 2);
+        let mid = |c: u32| t.pixels[((BLADE_TEXTURE_HEIGHT / 2) * t.width + c * COLUMN_PX + COLUMN_PX / 2) as usize];
+        let distinct = (1..BLADE_TEXTURE_COLUMNS as u32).filter(|&c| mid(c) != mid(0)).count();
+        assert!(distinct >= BLADE_TEXTURE_COLUMNS - 2);
+        // root darker than tip (gradient)
+        let root = t.pixels[((BLADE_TEXTURE_HEIGHT - 1) * t.width + COLUMN_PX / 2) as usize];
+        let tip = t.pixels[(8 * t.width + COLUMN_PX / 2) as usize];
+        assert!(root[1] < tip[1]);
+        assert_eq!(blade_texture(&s), t, "deterministic");
+    }
 }
