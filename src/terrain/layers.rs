@@ -80,6 +80,8 @@ pub struct TerrainLayers {
     /// The base colour (linear RGBA) the weights blend to.
     pub albedo: Image,
     pub report: LayerReport,
+    /// `albedo` as PNG, encoded on first use (every LoD scene shares it).
+    albedo_png: std::sync::OnceLock<Result<Vec<u8>, String>>,
 }
 
 /// Bilinear height and surface slope (degrees) at continuous sample coordinates (s, t).
@@ -128,6 +130,7 @@ pub fn bake_layers(hf: &Heightfield) -> TerrainLayers {
         weights,
         albedo: Image { width: w, height: h, pixels },
         report: LayerReport { map_px: [w, h], layers: LAYER_NAMES.iter().map(|s| s.to_string()).collect(), coverage, snowline_m: SNOWLINE_M },
+        albedo_png: std::sync::OnceLock::new(),
     }
 }
 
@@ -141,7 +144,7 @@ impl TerrainLayers {
     /// Puts the base colour on every terrain material of `scene` (materials named `terrain`):
     /// the texture, and a white factor so the texture's colour is what shows.
     pub fn texture(&self, scene: &mut Scene, name: &str) -> Result<(), String> {
-        let png = self.albedo.encode_png().map_err(|e| e.to_string())?;
+        let png = self.albedo_png.get_or_init(|| self.albedo.encode_png().map_err(|e| e.to_string())).clone()?;
         scene.textures.push(Texture { name: format!("{name}_base_color"), png });
         let t = scene.textures.len() - 1;
         for m in scene.materials.iter_mut().filter(|m| m.name == "terrain") {
