@@ -4,8 +4,8 @@
 For every grass species (`species/<name>_LOD<n>.glb`):
 - each LoD re-imports with trimesh, has MASK double-sided textured materials, and the triangle
   counts strictly decrease from LoD0 to the last level;
-- LoD0 carries the wind data twice: COLOR_0 (0..1) and the custom `_WIND` attribute (physical units),
-  decoded here with pygltflib: weight equal, phase·2π, frequency·4 Hz, stiffness equal;
+- every LoD carries `_WIND` (docs/wind.md), read with pygltflib: within its ranges, bend weight 0 at
+  the ground and growing with height; no COLOR_0 (it would darken the blades and cut their alpha);
 - pyrender (offscreen EGL) renders every LoD from the same cameras (45° and 75° above the horizon):
   every render is non-empty and its silhouette is similar to LoD0's (IoU ≥ MIN_IOU, covered area
   within a factor MAX_AREA_RATIO);
@@ -23,7 +23,9 @@ model, `species/<name>…`), as the manifest's `look` says:
 - pyrender renders every LoD non-empty; the mesh levels (simplified, cards, decimated) keep a silhouette like
   LoD0's (IoU ≥ MIN_IOU) — the billboard and impostor levels are textured cards whose alpha
   pyrender's flat render does not cut, so for them only non-emptiness is checked;
-- the variant's atlas mips keep their alpha coverage (as for grass).
+- the variant's atlas mips keep their alpha coverage (as for grass);
+- tree levels carry `_WIND` (and the full and simplified ones `_WIND_BRANCH`), OBJ models none.
+Flowers carry `_WIND` too.
 
 Usage: check_species.py SCENE_DIR [--summary-tsv FILE]   (exit 1 on any failure)
 """
@@ -102,36 +104,59 @@ def check_materials(gltf: pygltflib.GLTF2, name: str) -> None:
             raise CheckFailed(f"{name}: material {m.name!r} has no base colour texture")
 
 
-def check_wind(path: Path) -> str:
+def check_wind(path: Path, branch: bool = False, required: bool = True) -> str:
+    """docs/wind.md, read back from the file: `_WIND` (VEC4) on every primitive (none on a model
+    that does not sway: `required=False`), within its ranges, the bend weight 0 at the ground and
+    one non-decreasing function of height across each mesh; `_WIND_BRANCH` too when `branch`; no
+    COLOR_0 unless it is an opaque colour."""
     gltf = pygltflib.GLTF2().load(str(path))
     buffers = gltf_buffers(gltf, path)
     checked = 0
     for mesh in gltf.meshes:
+        heights, bends = [], []
         for p in mesh.primitives:
             attrs = p.attributes.__dict__ if hasattr(p.attributes, "__dict__") else dict(p.attributes)
-            wind_index = attrs.get("_WIND")
-            colour_index = attrs.get("COLOR_0")
-            if wind_index is None or colour_index is None:
-                raise CheckFailed(f"{path.name}: mesh {mesh.name!r} lacks COLOR_0 or _WIND")
-            wind = read_accessor(gltf, buffers, wind_index).astype(np.float64)
-            colour = read_accessor(gltf, buffers, colour_index).astype(np.float64)
             pos = read_accessor(gltf, buffers, attrs["POSITION"]).astype(np.float64)
-            if wind.shape != (len(pos), 4) or colour.shape != (len(pos), 4):
-                raise CheckFailed(f"{path.name}: _WIND {wind.shape} / COLOR_0 {colour.shape} for {len(pos)} vertices")
-            if colour.min() < 0 or colour.max() > 1:
-                raise CheckFailed(f"{path.name}: COLOR_0 outside 0..1")
-            want = np.stack([colour[:, 0], colour[:, 1] * 2 * np.pi, colour[:, 2] * 4.0, colour[:, 3]], axis=1)
-            if np.max(np.abs(wind - want)) > 1e-5:
-                raise CheckFailed(f"{path.name}: _WIND differs from COLOR_0's documented encoding by {np.max(np.abs(wind - want)):.3g}")
-            # bend weight 0 at the roots (y = 0), growing with height
-            roots = pos[:, 1] < 1e-6
-            if not roots.any() or np.max(colour[roots, 0]) > 1e-6:
-                raise CheckFailed(f"{path.name}: bend weight is not 0 at the roots")
-            order = np.argsort(pos[:, 1])
-            if np.any(np.diff(colour[order, 0]) < -1e-6):
-                raise CheckFailed(f"{path.name}: bend weight does not grow with height")
+            colour_index = attrs.get("COLOR_0")
+            if colour_index is not None:
+                colour = read_accessor(gltf, buffers, colour_index).astype(np.float64)
+                if colour.shape[1] == 4 and np.any(colour[:, 3] != 1.0):
+                    raise CheckFailed(f"{path.name}: mesh {mesh.name!r} has COLOR_0 with alpha below 1 (glTF multiplies it into the material's alpha)")
+                if colour.min() < 0 or colour.max() > 1:
+                    raise CheckFailed(f"{path.name}: COLOR_0 outside 0..1")
+            wind_index = attrs.get("_WIND")
+            if not required:
+                if wind_index is not None:
+                    raise CheckFailed(f"{path.name}: mesh {mesh.name!r} of a model that does not sway has _WIND")
+                continue
+            if wind_index is None:
+                raise CheckFailed(f"{path.name}: mesh {mesh.name!r} lacks _WIND")
+            wind = read_accessor(gltf, buffers, wind_index).astype(np.float64)
+            if wind.shape != (len(pos), 4):
+                raise CheckFailed(f"{path.name}: _WIND {wind.shape} for {len(pos)} vertices")
+            lo = np.array([0, 0, 1e-9, 0])
+            hi = np.array([1, 2 * np.pi, 4, 1])
+            if np.any(wind < lo) or np.any(wind > hi):
+                raise CheckFailed(f"{path.name}: _WIND outside (0..1, 0..2π, 0..4 Hz, 0..1)")
+            if branch:
+                b_index = attrs.get("_WIND_BRANCH")
+                if b_index is None:
+                    raise CheckFailed(f"{path.name}: mesh {mesh.name!r} lacks _WIND_BRANCH")
+                b = read_accessor(gltf, buffers, b_index).astype(np.float64)
+                if b.shape != (len(pos), 4) or np.any(b[:, [0, 2]] < 0) or np.any(b[:, [0, 2]] > 1) or np.any(b[:, [1, 3]] < 0) or np.any(b[:, [1, 3]] > 2 * np.pi):
+                    raise CheckFailed(f"{path.name}: _WIND_BRANCH outside (0..1, 0..2π, 0..1, 0..2π)")
+            heights.append(pos[:, 1])
+            bends.append(wind[:, 0])
             checked += len(pos)
-    return f"wind ok on {checked} vertices"
+        if heights:
+            y, w = np.concatenate(heights), np.concatenate(bends)
+            order = np.lexsort((w, y))
+            if np.any(np.diff(w[order]) < -1e-6):
+                raise CheckFailed(f"{path.name}: mesh {mesh.name!r}: the bend weight does not grow with height")
+            ground = np.abs(y) < 1e-6
+            if ground.any() and np.max(w[ground]) > 1e-6:
+                raise CheckFailed(f"{path.name}: mesh {mesh.name!r}: the bend weight is not 0 at the ground")
+    return f"wind ok on {checked} vertices" if required else "no wind data (does not sway)"
 
 
 def check_lod_chain(path: Path, levels: int) -> str:
@@ -196,7 +221,7 @@ def check_grass(species: Path, atlases: Path, name: str, renderer: Renderer | No
         g = pygltflib.GLTF2().load(str(p))
         check_materials(g, p.name)
         cutoff = g.materials[0].alphaCutoff if g.materials[0].alphaCutoff is not None else 0.5
-    facts.append(check_wind(lods[0]))
+    facts.append(", ".join(f"LOD{k} {check_wind(p)}" for k, p in enumerate(lods)))
     facts.append(check_lod_chain(species / f"{name}.glb", len(lods)))
     if renderer is not None:
         b = scenes[0].bounds
@@ -228,7 +253,7 @@ def check_flower(species: Path, atlases: Path, name: str, renderer: Renderer | N
     scene = trimesh.load(path, force="scene")
     g = pygltflib.GLTF2().load(str(path))
     check_materials(g, path.name)
-    facts = [f"{len(g.nodes)} variants, {triangles(scene)} triangles"]
+    facts = [f"{len(g.nodes)} variants, {triangles(scene)} triangles", check_wind(path)]
     if renderer is not None:
         b = scene.bounds
         for view, sil in enumerate(renderer.silhouettes(scene, b.mean(axis=0), float(np.linalg.norm(b[1] - b[0]) / 2))):
@@ -238,8 +263,10 @@ def check_flower(species: Path, atlases: Path, name: str, renderer: Renderer | N
     return facts
 
 
-def check_chains(species: Path, atlases: Path, stems: list[str], kinds_of: dict, renderer: Renderer | None) -> list[str]:
-    """`kinds_of[(stem, level)]` is the level's kind from the manifest ("full", "simplified", …)."""
+def check_chains(species: Path, atlases: Path, stems: list[str], kinds_of: dict, renderer: Renderer | None, sways: bool) -> list[str]:
+    """`kinds_of[(stem, level)]` is the level's kind from the manifest ("full", "simplified", …);
+    `sways`: an L-system tree (wind data on every level, branch data on the full and simplified ones),
+    not an OBJ model (none)."""
     facts = []
     for stem in stems:
         k = stem
@@ -261,6 +288,8 @@ def check_chains(species: Path, atlases: Path, stems: list[str], kinds_of: dict,
         facts.append(f"{k} triangles {tris}")
         facts.append(check_lod_chain(species / f"{stem}.glb", len(lods)))
         kinds = [kinds_of.get((stem, level), "") for level in range(len(lods))]
+        winds = [check_wind(p, branch=kinds[level] in ("full", "simplified"), required=sways) for level, p in enumerate(lods)]
+        facts.append(f"{k} " + ("; ".join(sorted(set(w.split(" on ")[0] for w in winds)))))
         if renderer is not None:
             b = scenes[0].bounds
             centre, radius = b.mean(axis=0), float(np.linalg.norm(b[1] - b[0]) / 2)
@@ -311,7 +340,7 @@ def main(argv: list[str]) -> int:
                 stems = sorted({stem for stem, _ in kinds_of})
                 if not stems:
                     raise CheckFailed(f"{name}: the manifest lists no LoD files")
-                facts = check_chains(species, atlases, stems, kinds_of, renderer)
+                facts = check_chains(species, atlases, stems, kinds_of, renderer, sways=look == "tree")
             elif (species / f"{name}_LOD0.glb").is_file():
                 facts = check_grass(species, atlases, name, renderer)
             else:

@@ -25,7 +25,8 @@ pub enum Shading {
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderOptions {
-    /// Multiply by COLOR_0. Off by default: grass and trees keep wind data there, not colour.
+    /// Multiply by COLOR_0 (vertex-coloured models: flowers, snow). Off by default: textured plants
+    /// have no COLOR_0, and a bake must not darken by one it does not mean.
     pub use_vertex_colors: bool,
     pub shading: Shading,
     /// Draw each primitive in parallel bands (same output either way; off when the caller already

@@ -251,6 +251,27 @@ pub struct Segment {
     pub color: u16,
     /// Branch level: the `[` nesting depth it was drawn at (0 for the trunk).
     pub level: u32,
+    /// Where it lies along its limb: see [`Limb`] (`arc` at the segment's start).
+    pub limb: Limb,
+}
+
+/// Where a drawn piece lies on the tree: which limb (everything grown from one branch off the
+/// trunk, twigs included) and how far along it the turtle has travelled from the trunk, in turtle
+/// units. On the trunk (level 0) both are 0; limbs are numbered from 1 in the order they start.
+/// Wind data uses it: branch bending grows with the arc, and one limb sways with one phase.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Limb {
+    pub id: u32,
+    pub arc: f64,
+}
+
+/// A closed polygon `{ … }`: its recorded vertices and where it was closed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Polygon<'a> {
+    pub vertices: &'a [DVec3],
+    pub color: u16,
+    pub level: u32,
+    pub limb: Limb,
 }
 
 /// A leaf (`L` in the thesis' dialect).
@@ -262,6 +283,7 @@ pub struct Leaf {
     pub length: f64,
     pub color: u16,
     pub level: u32,
+    pub limb: Limb,
 }
 
 /// Receives what the turtle draws.
@@ -272,7 +294,7 @@ pub trait Sink {
     fn chain_end(&mut self, chain: u32) -> Result<(), Self::Error>;
     fn leaf(&mut self, leaf: &Leaf) -> Result<(), Self::Error>;
     /// A closed polygon `{ … }` with at least three recorded vertices.
-    fn polygon(&mut self, vertices: &[DVec3], color: u16, level: u32) -> Result<(), Self::Error>;
+    fn polygon(&mut self, polygon: &Polygon) -> Result<(), Self::Error>;
 }
 
 /// What the turtle did, counted.
@@ -300,6 +322,7 @@ struct State {
     /// A `c` has set the colour on this path (thesis leaves then take it).
     color_set: bool,
     chain: Option<u32>,
+    limb: Limb,
 }
 
 /// Interprets a token stream; feed it tokens in order, then call [`Turtle::finish`].
@@ -320,6 +343,7 @@ pub struct Turtle {
     pending: Option<(u8, u64, f64)>,
     partial_depth: u32,
     next_chain: u32,
+    next_limb: u32,
     counts: TurtleCounts,
 }
 
@@ -367,6 +391,7 @@ impl Turtle {
                 color: conventions.start_color,
                 color_set: false,
                 chain: None,
+                limb: Limb::default(),
             },
             conventions,
             stack: Vec::new(),
@@ -376,6 +401,7 @@ impl Turtle {
             pending: None,
             partial_depth: 0,
             next_chain: 0,
+            next_limb: 1,
             counts: TurtleCounts::default(),
         }
     }
@@ -505,10 +531,19 @@ impl Turtle {
             diameter: clamp_finite(diameter, 0.0, MAX_STEP),
             color: self.state.color,
             level: self.level(),
+            limb: self.state.limb,
         };
         self.counts.segments += 1;
         self.state.pos = end;
+        self.travel(length);
         sink.segment(&segment)
+    }
+
+    /// Moving `length` along a limb lengthens its arc; the trunk's stays 0.
+    fn travel(&mut self, length: f64) {
+        if self.level() > 0 {
+            self.state.limb.arc = clamp_finite(self.state.limb.arc + length.abs(), 0.0, f64::MAX);
+        }
     }
 
     fn advance<S: Sink>(&mut self, length: f64, record: bool, sink: &mut S) -> Result<(), S::Error> {
@@ -516,6 +551,7 @@ impl Turtle {
         if length != 0.0 {
             self.end_chain(sink)?;
             self.state.pos += self.state.frame.heading * length;
+            self.travel(length);
         }
         if record {
             self.record();
@@ -588,6 +624,11 @@ impl Turtle {
             b'[' => {
                 let saved = self.state.clone();
                 self.stack.push(saved);
+                if self.stack.len() == 1 {
+                    // a branch off the trunk starts a limb; deeper branches stay on theirs
+                    self.state.limb = Limb { id: self.next_limb, arc: 0.0 };
+                    self.next_limb = self.next_limb.wrapping_add(1).max(1);
+                }
                 // a branch starts its own run; the parent's run continues after `]`
                 self.state.chain = None;
             }
@@ -614,7 +655,7 @@ impl Turtle {
                     self.open_polygon_vertices -= poly.len();
                     if poly.len() >= 3 {
                         self.counts.polygons += 1;
-                        sink.polygon(&poly, self.state.color, self.level())?;
+                        sink.polygon(&Polygon { vertices: &poly, color: self.state.color, level: self.level(), limb: self.state.limb })?;
                     } else {
                         self.counts.polygons_skipped += 1;
                     }
@@ -629,6 +670,7 @@ impl Turtle {
                     // the turtle's colour index once a `c` has set one, else leaf green
                     color: if self.state.color_set { self.state.color } else { self.conventions.leaf_color },
                     level: self.level(),
+                    limb: self.state.limb,
                 };
                 sink.leaf(&leaf)?;
             }

@@ -10,6 +10,7 @@ use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
 use crate::mesh::{AlphaMode, Material, Mesh, Primitive, Scene, Texture};
 use crate::plants::random::Stream;
+use crate::plants::wind;
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FlowerSettings {
@@ -273,7 +274,10 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
     };
     let mut per_flower = 0;
     for (v, cell) in cells.iter().enumerate() {
-        let prim = crossed_cards(card_w, card_h, cell.card_uv);
+        let mut prim = crossed_cards(card_w, card_h, cell.card_uv);
+        // the stem sways from the ground; each variant with its own phase
+        let phase = Stream::new(&[s.seed, 0x77_696e64, v as u64]).unit() * std::f32::consts::TAU;
+        prim.custom = vec![wind::height_wind(&prim.positions, 0.0, card_h, phase, wind::FLOWER_SWAY_HZ, wind::FLOWER_STIFFNESS)];
         per_flower = prim.triangle_count();
         let node = scene.add_mesh_node(Mesh { name: format!("{name}_v{v}"), primitives: vec![prim], extras: None });
         scene.nodes[node].translation = [v as f32 * card_w * 1.5, 0.0, 0.0];

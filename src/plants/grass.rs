@@ -22,9 +22,8 @@ use serde::Serialize;
 use crate::mesh::{CustomAttribute, Primitive};
 use crate::plants::random::Stream;
 
-/// Name of the custom vertex attribute mirroring the wind data in physical units.
-pub const WIND_ATTRIBUTE: &str = "_WIND";
-/// Largest wind frequency COLOR_0.b can encode (Hz): b = frequency / this.
+pub use crate::plants::wind::WIND_ATTRIBUTE;
+/// Largest blade sway frequency a preset may ask for (Hz).
 pub const WIND_MAX_FREQUENCY_HZ: f32 = 4.0;
 /// Limits that keep one clump a reasonable asset (and the generator's memory bounded).
 pub const MAX_BLADES_PER_CLUMP: usize = 4096;
@@ -305,12 +304,10 @@ pub fn clump(settings: &GrassSettings, level: usize, variant: usize) -> Clump {
     Clump { level, variant, size_m: settings.clump_size_m, blades }
 }
 
-/// Wind data of one vertex: (bend weight, phase, frequency, stiffness).
-/// COLOR_0 = (weight, phase in cycles, frequency / WIND_MAX_FREQUENCY_HZ, stiffness), all 0..1;
-/// `_WIND` = (weight, phase in radians, frequency in Hz, stiffness).
+/// Wind data of one vertex in `_WIND` (plants::wind): bend weight, phase in radians, frequency in
+/// Hz, stiffness. No COLOR_0: the blade's colour is its texture's.
 fn push_wind(p: &mut Primitive, blade: &Blade, height_fraction: f32) {
-    let weight = (height_fraction.clamp(0.0, 1.0)).powi(2);
-    p.colors.push([weight, blade.phase, blade.frequency_hz / WIND_MAX_FREQUENCY_HZ, blade.stiffness]);
+    let weight = crate::plants::wind::bend_weight(height_fraction);
     if let Some(w) = p.custom.first_mut() {
         w.values.push([weight, blade.phase * std::f32::consts::TAU, blade.frequency_hz, blade.stiffness]);
     }
@@ -604,16 +601,17 @@ mod tests {
         let n = c.blades.len();
         assert_eq!(p.triangle_count(), n * (2 * s.segments - 1));
         assert_eq!(p.positions.len(), n * (2 * s.segments + 1));
-        assert_eq!(p.colors.len(), p.positions.len());
+        // COLOR_0 would multiply the blade's colour and alpha: the wind data is in _WIND only
+        assert!(p.colors.is_empty());
+        assert_eq!(p.custom[0].name, WIND_ATTRIBUTE);
         assert_eq!(p.custom[0].values.len(), p.positions.len());
-        for (i, (col, wind)) in p.colors.iter().zip(&p.custom[0].values).enumerate() {
+        for (i, wind) in p.custom[0].values.iter().enumerate() {
             let y = p.positions[i][1];
             // bend weight: 0 at the root, rising with height, 1 only at the tallest possible tip
-            assert!((col[0] - (y / s.max_height_m()).powi(2)).abs() < 1e-6);
-            assert_eq!(col[0], wind[0]);
-            assert!((wind[1] - col[1] * std::f32::consts::TAU).abs() < 1e-5);
-            assert!((wind[2] - col[2] * WIND_MAX_FREQUENCY_HZ).abs() < 1e-5);
-            assert!(col.iter().all(|x| (0.0..=1.0).contains(x)));
+            assert!((wind[0] - (y / s.max_height_m()).powi(2)).abs() < 1e-6);
+            assert!((0.0..std::f32::consts::TAU).contains(&wind[1]), "phase {}", wind[1]);
+            assert!((s.wind_frequency_hz[0]..=s.wind_frequency_hz[1]).contains(&wind[2]));
+            assert!((s.stiffness[0]..=s.stiffness[1]).contains(&wind[3]));
         }
         for (k, v) in p.normals.iter().enumerate() {
             let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();

@@ -12,3 +12,4 @@ pub mod random;
 pub mod texture;
 pub mod tree;
 pub mod tree_lod;
+pub mod wind;

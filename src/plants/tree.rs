@@ -20,9 +20,11 @@ use thiserror::Error;
 
 use crate::export::{self, ExportError};
 use crate::lsystem::expand::{Expander, DEFAULT_MAX_SYMBOLS};
-use crate::lsystem::turtle::{Conventions, Frame, Leaf, Segment, Sink, Turtle, TurtleCounts};
+use crate::lsystem::turtle::{Conventions, Frame, Leaf, Limb, Polygon, Segment, Sink, Turtle, TurtleCounts};
 use crate::lsystem::{parse, Dialect, LSystem, LsystemError};
 use crate::mesh::{AlphaMode, Bounds, CustomAttribute, Material, Mesh, Primitive, PrimitiveMode, Scene, Texture};
+use crate::plants::wind::{self, WIND_ATTRIBUTE, WIND_BRANCH_ATTRIBUTE};
+use crate::synth::mix64;
 use crate::validate::{validate_file, ValidateOptions};
 
 pub const DEFAULT_RADIAL_SEGMENTS: u32 = 8;
@@ -320,10 +322,14 @@ struct Part {
     indices: Vec<u32>,
     /// Point leaves only: (length, width, 0, 0) per vertex.
     sizes: Vec<[f32; 4]>,
+    /// Per vertex, before the tree's size is known: (arc along its limb in metres, flutter
+    /// weight, flutter phase, limb phase); `assemble` turns it into `_WIND` and `_WIND_BRANCH`.
+    wind: Vec<[f32; 4]>,
 }
 
 impl Part {
-    fn vertex(&mut self, p: DVec3, n: DVec3, uv: [f64; 2]) -> u32 {
+    fn vertex(&mut self, p: DVec3, n: DVec3, uv: [f64; 2], wind: [f32; 4]) -> u32 {
+        self.wind.push(wind);
         self.positions.push(p.as_vec3().to_array());
         self.normals.push(n.normalize_or(DVec3::Y).as_vec3().normalize_or(glam::Vec3::Y).to_array());
         self.uvs.push([uv[0] as f32, uv[1] as f32]);
@@ -345,6 +351,8 @@ struct OpenChain {
     /// Length along the branch at `end`, in units of the first ring's circumference (texture v).
     v_at_end: f64,
     circumference: f64,
+    /// The limb and the arc along it at `end`.
+    limb: Limb,
 }
 
 struct Builder<'a> {
@@ -360,6 +368,8 @@ struct Builder<'a> {
     triangles: u64,
     segments: u64,
     polygons_skipped: u64,
+    /// Leaves and polygons so far: each gets its own flutter phase.
+    leaves: u64,
 }
 
 impl<'a> Builder<'a> {
@@ -383,7 +393,28 @@ impl<'a> Builder<'a> {
             triangles: 0,
             segments: 0,
             polygons_skipped: 0,
+            leaves: 0,
         }
+    }
+
+    /// Raw wind data of a vertex on `limb` (see [`Part::wind`]): wood does not flutter.
+    fn wood(&self, limb: Limb) -> [f32; 4] {
+        [(limb.arc * self.metres_per_unit) as f32, 0.0, 0.0, self.limb_phase(limb.id)]
+    }
+
+    /// One phase per limb, 0 on the trunk.
+    fn limb_phase(&self, id: u32) -> f32 {
+        if id == 0 {
+            0.0
+        } else {
+            wind::phase_of(mix64(self.options.seed ^ 0x6c69_6d62) ^ id as u64)
+        }
+    }
+
+    /// The next leaf's flutter phase.
+    fn flutter_phase(&mut self) -> f32 {
+        self.leaves += 1;
+        wind::phase_of(mix64(self.options.seed ^ 0x666c_7574) ^ self.leaves)
     }
 
     fn part(&mut self, kind: Kind, color: u16, level: u32) -> &mut Part {
@@ -401,8 +432,9 @@ impl<'a> Builder<'a> {
     /// Emits a ring of R + 1 vertices (the seam twice, for the texture) around `centre` in the plane
     /// with normal `normal`; `stretch` widens it along `bend` (the elliptical cut of a mitred joint).
     #[allow(clippy::too_many_arguments)]
-    fn ring(&mut self, key: (Kind, u16), level: u32, centre: DVec3, normal: DVec3, side: DVec3, radius: f64, stretch: Option<(DVec3, f64)>, v: f64) -> u32 {
+    fn ring(&mut self, key: (Kind, u16), level: u32, limb: Limb, centre: DVec3, normal: DVec3, side: DVec3, radius: f64, stretch: Option<(DVec3, f64)>, v: f64) -> u32 {
         let t = normal.cross(side);
+        let wind = self.wood(limb);
         let dirs = std::mem::take(&mut self.ring_dirs);
         let radial = self.radial as f64;
         let part = self.part(key.0, key.1, level);
@@ -412,7 +444,7 @@ impl<'a> Builder<'a> {
             if let Some((bend, k)) = stretch {
                 offset += bend * (offset.dot(bend) * (k - 1.0));
             }
-            part.vertex(centre + offset * radius, offset, [j as f64 / radial, v]);
+            part.vertex(centre + offset * radius, offset, [j as f64 / radial, v], wind);
         }
         self.ring_dirs = dirs;
         first
@@ -430,14 +462,16 @@ impl<'a> Builder<'a> {
     }
 
     /// A flat cap over a ring's circle: `facing` is the cap's outward normal; `centre` its middle.
-    fn cap(&mut self, key: (Kind, u16), level: u32, centre: DVec3, facing: DVec3, side: DVec3, radius: f64) -> Result<(), TreeError> {
+    #[allow(clippy::too_many_arguments)]
+    fn cap(&mut self, key: (Kind, u16), level: u32, limb: Limb, centre: DVec3, facing: DVec3, side: DVec3, radius: f64) -> Result<(), TreeError> {
         let t = facing.cross(side);
+        let wind = self.wood(limb);
         let dirs = std::mem::take(&mut self.ring_dirs);
         let radial = self.radial;
         let part = self.part(key.0, key.1, level);
-        let middle = part.vertex(centre, facing, [0.5, 0.5]);
+        let middle = part.vertex(centre, facing, [0.5, 0.5], wind);
         for &(c, s) in &dirs[..radial] {
-            part.vertex(centre + (side * c + t * s) * radius, facing, [0.5 + 0.5 * c, 0.5 - 0.5 * s]);
+            part.vertex(centre + (side * c + t * s) * radius, facing, [0.5 + 0.5 * c, 0.5 - 0.5 * s], wind);
         }
         for j in 0..radial as u32 {
             let (p, q) = (middle + 1 + j, middle + 1 + (j + 1) % radial as u32);
@@ -451,9 +485,9 @@ impl<'a> Builder<'a> {
     fn close_chain(&mut self, chain: OpenChain) -> Result<(), TreeError> {
         let radius = (chain.radius * self.options.tip_radius_ratio).max(self.options.min_radius_m);
         let side = transport(chain.side, chain.dir);
-        let tip = self.ring(chain.kind_color, chain.level, chain.end, chain.dir, side, radius, None, chain.v_at_end);
+        let tip = self.ring(chain.kind_color, chain.level, chain.limb, chain.end, chain.dir, side, radius, None, chain.v_at_end);
         self.tube(chain.kind_color, chain.level, chain.ring, tip)?;
-        self.cap(chain.kind_color, chain.level, chain.end, chain.dir, side, radius)
+        self.cap(chain.kind_color, chain.level, chain.limb, chain.end, chain.dir, side, radius)
     }
 
     fn radius_of(&self, segment: &Segment) -> f64 {
@@ -488,6 +522,8 @@ impl Sink for Builder<'_> {
         }
         let dir = (p1 - p0) / length;
         let radius = self.radius_of(s);
+        // the arc along the limb at the segment's end (the trunk's stays 0, as the turtle's)
+        let end_limb = Limb { arc: if s.level > 0 { s.limb.arc + (s.end - s.start).length() } else { 0.0 }, ..s.limb };
         let key = (Kind::Bark, s.color);
         self.skeleton.push(SkeletonSegment {
             start: p0.as_vec3().to_array(),
@@ -506,9 +542,10 @@ impl Sink for Builder<'_> {
                 let cos_half = bisector.dot(dir).clamp(0.1, 1.0);
                 let bend = chain.dir.cross(dir);
                 let stretch = (bend.length() > 1e-9).then(|| (bisector.cross(bend.normalize()).normalize(), 1.0 / cos_half));
-                let ring = self.ring(key, chain.level, p0, bisector, side, radius, stretch, chain.v_at_end);
+                let ring = self.ring(key, chain.level, chain.limb, p0, bisector, side, radius, stretch, chain.v_at_end);
                 self.tube(key, chain.level, chain.ring, ring)?;
                 chain.ring = ring;
+                chain.limb = end_limb;
                 chain.side = side;
                 chain.end = p1;
                 chain.dir = dir;
@@ -522,11 +559,11 @@ impl Sink for Builder<'_> {
         // a new run: base ring (capped underneath) at the start
         let side = transport(s.frame.up, dir);
         let circumference = std::f64::consts::TAU * radius;
-        let ring = self.ring(key, s.level, p0, dir, side, radius, None, 0.0);
-        self.cap(key, s.level, p0, -dir, side, radius)?;
+        let ring = self.ring(key, s.level, s.limb, p0, dir, side, radius, None, 0.0);
+        self.cap(key, s.level, s.limb, p0, -dir, side, radius)?;
         self.chains.insert(
             s.chain,
-            OpenChain { kind_color: key, level: s.level, ring, side, end: p1, dir, radius, v_at_end: length / circumference, circumference },
+            OpenChain { kind_color: key, level: s.level, ring, side, end: p1, dir, radius, v_at_end: length / circumference, circumference, limb: end_limb },
         );
         Ok(())
     }
@@ -546,10 +583,12 @@ impl Sink for Builder<'_> {
         let width = length * 0.5;
         let Frame { heading, left, up } = leaf.frame;
         let p = leaf.position * self.metres_per_unit;
+        let [arc, _, _, limb_phase] = self.wood(leaf.limb);
+        let flutter_phase = self.flutter_phase();
         if self.options.leaf_points {
             // the quad's centre, facing where the quad faces
             let part = self.part(Kind::LeafPoint, leaf.color, leaf.level);
-            part.vertex(p + heading * (length / 2.0), up, [0.5, 0.5]);
+            part.vertex(p + heading * (length / 2.0), up, [0.5, 0.5], [arc, 1.0, flutter_phase, limb_phase]);
             part.sizes.push([length as f32, width as f32, 0.0, 0.0]);
             return Ok(());
         }
@@ -557,15 +596,18 @@ impl Sink for Builder<'_> {
         let uvs = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
         let part = self.part(Kind::Leaf, leaf.color, leaf.level);
         let first = part.positions.len() as u32;
-        for (c, uv) in corners.iter().zip(uvs) {
-            // (b − a) × (c − a) = w·ℓ·(L × H) = U: counter-clockwise seen from the up side
-            part.vertex(*c, up, uv);
+        for (k, (c, uv)) in corners.iter().zip(uvs).enumerate() {
+            // (b − a) × (c − a) = w·ℓ·(L × H) = U: counter-clockwise seen from the up side;
+            // the stalk end (corners 0, 1) holds still, the tip (2, 3) flutters
+            let flutter = if k >= 2 { 1.0 } else { 0.0 };
+            part.vertex(*c, up, uv, [arc, flutter, flutter_phase, limb_phase]);
         }
         part.indices.extend_from_slice(&[first, first + 1, first + 2, first, first + 2, first + 3]);
         self.add_triangles(2)
     }
 
-    fn polygon(&mut self, vertices: &[DVec3], color: u16, level: u32) -> Result<(), TreeError> {
+    fn polygon(&mut self, polygon: &Polygon) -> Result<(), TreeError> {
+        let Polygon { vertices, color, level, limb } = *polygon;
         let scale = self.metres_per_unit;
         let mut points: Vec<DVec3> = Vec::with_capacity(vertices.len());
         let extent = vertices.iter().fold(0.0f64, |m, v| m.max(v.abs().max_element())) * scale;
@@ -601,11 +643,16 @@ impl Sink for Builder<'_> {
         }
         let (lo, hi) = flat.iter().fold((DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
         let size = (hi - lo).max(DVec2::splat(1e-12));
+        // a polygon leaf is held where it starts (its first vertex, the stalk): flutter grows away from it
+        let reach = points.iter().map(|p| p.distance(points[0])).fold(0.0, f64::max).max(1e-12);
+        let [arc, _, _, limb_phase] = self.wood(limb);
+        let flutter_phase = self.flutter_phase();
         let part = self.part(Kind::Polygon, color, level);
         let first = part.positions.len() as u32;
         for (p, f) in points.iter().zip(&flat) {
             let uv = (*f - lo) / size;
-            part.vertex(*p, n, [uv.x, 1.0 - uv.y]);
+            let flutter = (p.distance(points[0]) / reach) as f32;
+            part.vertex(*p, n, [uv.x, 1.0 - uv.y], [arc, flutter, flutter_phase, limb_phase]);
         }
         for t in &triangles {
             part.indices.extend(t.iter().map(|&k| first + k as u32));
@@ -735,6 +782,12 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
     };
     let system = builder.system;
     let options = builder.options;
+    // wind: the bend runs from the ground (the root, or the lowest point when all is above it) to
+    // the top; branch weights from the trunk to the farthest tip along any limb
+    let ground = ((if (lo..=hi).contains(&0.0) { 0.0 } else { lo }) * scale) as f32;
+    let top = (hi * scale) as f32;
+    let longest_arc = builder.parts.values().flat_map(|levels| levels.values()).flat_map(|p| &p.wind).fold(0.0f64, |m, w| m.max(w[0] as f64)) * scale;
+    let sway_hz = wind::tree_sway_frequency_hz(((hi - lo) * scale).max(0.0));
     let mut scene = Scene { name: options.name.clone(), ..Scene::default() };
     let mut mesh = Mesh { name: options.name.clone(), primitives: Vec::new(), extras: None };
     let mut all_levels = Vec::new();
@@ -745,6 +798,7 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
         let points = kind == Kind::LeafPoint;
         let mut prim = Primitive { mode: if points { PrimitiveMode::Points } else { PrimitiveMode::Triangles }, ..Primitive::default() };
         let mut sizes = Vec::new();
+        let mut raw_wind: Vec<[f32; 4]> = Vec::new();
         let mut ranges = LevelRanges::default();
         for (level, mut part) in levels {
             if scale != 1.0 {
@@ -767,6 +821,7 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
                 prim.positions.extend(part.positions);
                 prim.normals.extend(part.normals);
                 sizes.extend(part.sizes);
+                raw_wind.extend(part.wind);
                 continue;
             }
             for t in part.indices.chunks_exact(3) {
@@ -786,6 +841,7 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
             prim.positions.extend(part.positions);
             prim.normals.extend(part.normals);
             prim.uvs.extend(part.uvs);
+            raw_wind.extend(part.wind);
         }
         if prim.indices.is_empty() && (!points || prim.positions.is_empty()) {
             continue;
@@ -795,6 +851,17 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
             prim.colors = vec![base_color; prim.positions.len()];
             prim.custom = vec![CustomAttribute { name: LEAF_SIZE_ATTRIBUTE.into(), values: sizes }];
         }
+        let span = top - ground;
+        let sway = prim.positions.iter().map(|p| [if span > 0.0 { wind::bend_weight((p[1] - ground) / span) } else { 0.0 }, 0.0, sway_hz, 0.0]).collect();
+        let branch = raw_wind
+            .iter()
+            .map(|&[arc, flutter, flutter_phase, limb_phase]| {
+                let w = if longest_arc > 0.0 { wind::bend_weight((arc as f64 * scale / longest_arc) as f32) } else { 0.0 };
+                [w, limb_phase, flutter, flutter_phase]
+            })
+            .collect();
+        prim.custom.push(CustomAttribute { name: WIND_ATTRIBUTE.into(), values: sway });
+        prim.custom.push(CustomAttribute { name: WIND_BRANCH_ATTRIBUTE.into(), values: branch });
         let (name, material) = match kind {
             Kind::Bark => {
                 let texture = *bark_texture.get_or_insert_with(|| {

@@ -28,10 +28,11 @@ use crate::bake::render::{render_mesh, RenderOptions, Shading};
 use crate::bake::views::{lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, ScreenView, SwitchSearch, plant_screen_coverage, plant_screen_view};
 use crate::export::{self, ExportError};
 use crate::lsystem::{parse, Dialect, LSystem};
-use crate::mesh::{AlphaMode, Bounds, Material, Mesh, Node, Primitive, Scene, Texture};
+use crate::mesh::{AlphaMode, Bounds, CustomAttribute, Material, Mesh, Node, Primitive, Scene, Texture};
 use crate::plants::mesh_asset::{load_obj, MeshAssetError, MeshAssetStats, ObjOptions, SourceMesh};
 use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleGrid};
 use crate::plants::tree::{build_tree, is_flat, TreeError, TreeMesh, TreeOptions, TreeReport, TreeSeconds};
+use crate::plants::wind::{self, WIND_ATTRIBUTE, WIND_BRANCH_ATTRIBUTE};
 use crate::synth::mix64;
 use crate::validate::{validate_file, ValidateOptions};
 
@@ -236,14 +237,72 @@ fn bake(frame: &CardFrame, px: u32, mesh: &Mesh, materials: &[Material], texture
     Ok((resolve_supersampled(&Image::from_canvas_owned(canvas), BAKE_SUPERSAMPLE), fragments))
 }
 
-/// `a` with `b`'s vertices and triangles after its own (positions, normals, uvs; `a`'s material).
+/// `a` with `b`'s vertices and triangles after its own (positions, normals, uvs and the custom
+/// attributes both have, or all of `b`'s when `a` is empty; `a`'s material).
 fn appended(mut a: Primitive, b: &Primitive) -> Primitive {
     let base = a.positions.len() as u32;
+    if a.positions.is_empty() {
+        a.custom = b.custom.iter().map(|c| CustomAttribute { name: c.name.clone(), values: Vec::new() }).collect();
+    }
+    a.custom.retain(|c| b.custom.iter().any(|d| d.name == c.name));
+    for c in &mut a.custom {
+        if let Some(d) = wind::find(&b.custom, &c.name) {
+            c.values.extend_from_slice(&d.values);
+        }
+    }
     a.positions.extend_from_slice(&b.positions);
     a.normals.extend_from_slice(&b.normals);
     a.uvs.extend_from_slice(&b.uvs);
     a.indices.extend(b.indices.iter().map(|i| i + base));
     a
+}
+
+/// How a tree's card levels sway: the model's ground and top and its sway frequency, from LoD0's
+/// `_WIND` (None when LoD0 has none: an OBJ rock does not sway).
+#[derive(Debug, Clone, Copy)]
+struct CardWind {
+    ground_y: f32,
+    top_y: f32,
+    sway_hz: f32,
+}
+
+impl CardWind {
+    fn of(lod0: &Mesh) -> Option<CardWind> {
+        let sway_hz = lod0.primitives.iter().find_map(|p| wind::find(&p.custom, WIND_ATTRIBUTE)).and_then(|w| w.values.first())?[2];
+        let positions: Vec<[f32; 3]> = lod0.primitives.iter().flat_map(|p| p.positions.iter().copied()).collect();
+        let b = Bounds::of(&positions)?;
+        let ground_y = if (b.min[1]..=b.max[1]).contains(&0.0) { 0.0 } else { b.min[1] };
+        Some(CardWind { ground_y, top_y: b.max[1], sway_hz })
+    }
+
+    /// `card` with `_WIND` from each vertex's height and, when `branch` is given (a card standing
+    /// for part of the crown: its mean branch weight and its limb's phase), `_WIND_BRANCH`.
+    fn on(&self, mut card: Primitive, branch: Option<[f32; 2]>) -> Primitive {
+        card.custom = vec![wind::height_wind(&card.positions, self.ground_y, self.top_y, 0.0, self.sway_hz, 0.0)];
+        if let Some([weight, phase]) = branch {
+            card.custom.push(CustomAttribute { name: WIND_BRANCH_ATTRIBUTE.into(), values: vec![[weight, phase, 0.0, 0.0]; card.positions.len()] });
+        }
+        card
+    }
+}
+
+/// The mean branch weight of `mesh`'s vertices and the limb phase most of them have.
+fn branch_of(mesh: &Mesh) -> [f32; 2] {
+    let values: Vec<[f32; 4]> = mesh.primitives.iter().filter_map(|p| wind::find(&p.custom, WIND_BRANCH_ATTRIBUTE)).flat_map(|c| c.values.iter().copied()).collect();
+    if values.is_empty() {
+        return [0.0, 0.0];
+    }
+    let weight = values.iter().map(|v| v[0] as f64).sum::<f64>() / values.len() as f64;
+    let mut phases: Vec<u32> = values.iter().map(|v| v[1].to_bits()).collect();
+    phases.sort_unstable();
+    let (mut best, mut best_run, mut run) = (phases[0], 0, 0);
+    for (k, &ph) in phases.iter().enumerate() {
+        run = if k > 0 && phases[k - 1] == ph { run + 1 } else { 1 };
+        if run > best_run {
+            (best, best_run) = (ph, run);
+        }
+    }
+    [weight as f32, f32::from_bits(best)]
 }
 
 /// The triangles `keep` picks from `p`, with only the vertices they use (in first-use order).
@@ -261,6 +320,17 @@ fn subset(p: &Primitive, keep: impl Fn(usize) -> bool) -> Primitive {
                 }
                 if let Some(uv) = p.uvs.get(i) {
                     out.uvs.push(*uv);
+                }
+                if let Some(c) = p.colors.get(i) {
+                    out.colors.push(*c);
+                }
+                for (k, c) in p.custom.iter().enumerate() {
+                    if out.custom.len() <= k {
+                        out.custom.push(CustomAttribute { name: c.name.clone(), values: Vec::new() });
+                    }
+                    if let Some(v) = c.values.get(i) {
+                        out.custom[k].values.push(*v);
+                    }
                 }
             }
             out.indices.push(remap[i]);
@@ -698,6 +768,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
     let reference_images = decode(reference_textures)?;
     let materials0 = reference_materials.to_vec();
     let wanted = options.lods;
+    let card_wind = CardWind::of(&lod0.mesh);
     let mut levels = vec![TreeLod { level: 0, kind: "full", scene: single_mesh_scene(&format!("{name}_LOD0"), lod0.mesh, lod0.materials, lod0.textures), images: images0 }];
     let lod1_source = lod1.as_ref().map(|l| (l.materials.clone(), l.textures.clone()));
     if let Some(lod1) = lod1 {
@@ -775,9 +846,11 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
                 // until it has fewer triangles than LoD1
                 let mut cards = Primitive::default();
                 for (c, g) in groups.iter().enumerate() {
+                    let branch = branch_of(&g.mesh);
                     for side in 0..2 {
                         let frame = CardFrame { centre: g.centre, azimuth_deg: 90.0 * side as f64, side_m: g.side_m };
-                        cards = appended(cards, &frame.quad(AtlasCell::small(px, 2 * c + side).uv));
+                        let quad = frame.quad(AtlasCell::small(px, 2 * c + side).uv);
+                        cards = appended(cards, &card_wind.map_or(quad.clone(), |w| w.on(quad, Some(branch))));
                     }
                 }
                 let below = lod1_triangles.saturating_sub(cards.triangle_count());
@@ -817,7 +890,8 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         // LoD3: crossed billboards
         let mut planes = Primitive { material: Some(0), ..Primitive::default() };
         for (k, cell) in impostor_cells.iter().take(BILLBOARD_PLANES).enumerate() {
-            planes = appended(planes, &tree_frame(k).quad(cell.uv));
+            let quad = tree_frame(k).quad(cell.uv);
+            planes = appended(planes, &card_wind.map_or(quad.clone(), |w| w.on(quad, None)));
         }
         let mesh = Mesh { name: String::new(), primitives: vec![planes], extras: None };
         levels.push(TreeLod {
@@ -827,7 +901,8 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
             images: vec![atlas0.image.clone()],
         });
         // LoD4: the impostor quad facing +Z (view 0), the others' cells in the extras
-        let quad = Primitive { material: Some(0), ..tree_frame(0).quad(impostor_cells[0].uv) };
+        let quad = tree_frame(0).quad(impostor_cells[0].uv);
+        let quad = Primitive { material: Some(0), ..card_wind.map_or(quad.clone(), |w| w.on(quad, None)) };
         let extras = json!({ IMPOSTOR_EXTRAS_KEY: {
             "views": IMPOSTOR_VIEWS,
             "azimuth_step_deg": 360.0 / IMPOSTOR_VIEWS as f64,

@@ -83,8 +83,9 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// Version of what the plants stage writes for given inputs: part of its cache key (see
 /// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: chain files keep their coarser levels
 /// in a second glTF scene with shared materials; flower cards inside their atlas cells. 3: bark
-/// and polygon leaves textured (procedural, tinted by their colour).
-pub const PLANTS_ALGORITHM_VERSION: u32 = 3;
+/// and polygon leaves textured (procedural, tinted by their colour). 4: wind data in `_WIND` /
+/// `_WIND_BRANCH` on every plant, none in COLOR_0.
+pub const PLANTS_ALGORITHM_VERSION: u32 = 4;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).

@@ -15,6 +15,8 @@ use verdant::scene::plants_stage::{mesh_chain, read_lsystem, tree_chain, user_bl
 use verdant::scene::preset::{demo_preset, load_preset};
 use verdant::scene::{PlantLook, Preset};
 
+use crate::wind::{check_plant_scene, Expect};
+
 const EPS: f32 = 1e-6;
 
 fn shipped_presets() -> Vec<(String, Preset)> {
@@ -72,11 +74,18 @@ fn check_cards(what: &str, scene: &Scene, cells: &[[f32; 4]]) -> usize {
 }
 
 /// A tree or mesh chain: the MSFT_lod file and every level against the tree atlas' cells.
-fn check_chain(what: &str, chain: &TreeLods, atlas_px: u32) {
+fn check_chain(what: &str, chain: &TreeLods, atlas_px: u32, sways: bool) {
     let cells = atlas_cell_rects(atlas_px);
     let mut n = check_cards(&format!("{what} chain"), &chain.chain, &cells);
     for level in &chain.levels {
         n += check_cards(&format!("{what} LOD{}", level.level), &level.scene, &cells);
+        // wind: the full tree and its simplified level bend branches; the card levels sway
+        let expect = match (sways, level.kind) {
+            (false, _) => Expect::Nothing,
+            (true, "full" | "simplified") => Expect::SwayAndBranch,
+            (true, _) => Expect::Sway,
+        };
+        check_plant_scene(&format!("{what} LOD{}", level.level), &level.scene, expect);
     }
     assert!(n > 0, "{what}: no atlas cards checked");
 }
@@ -99,12 +108,18 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                     }
                     n += check_cards(&format!("{what} far field"), &asset.far, &cells);
                     assert!(n > 0, "{what}: no atlas cards checked");
+                    for (k, scene) in asset.lod_scenes.iter().enumerate() {
+                        assert!(check_plant_scene(&format!("{what} LOD{k}"), scene, Expect::Sway) > 0);
+                    }
+                    check_plant_scene(&format!("{what} chain"), &asset.chain, Expect::Sway);
+                    check_plant_scene(&format!("{what} far field"), &asset.far, Expect::Sway);
                     kinds.insert("grass");
                 }
                 PlantLook::Flower(f) => {
                     let asset = build_flower(&s.name, f).unwrap();
                     let cells: Vec<[f32; 4]> = asset.cells.iter().map(|c| c.uv).collect();
                     assert!(check_cards(&what, &asset.scene, &cells) > 0, "{what}: no atlas cards checked");
+                    assert!(check_plant_scene(&what, &asset.scene, Expect::Sway) > 0);
                     for (v, c) in asset.cells.iter().enumerate() {
                         // the card's bottom (y = 0) samples the cell's bottom row: the stem meets the ground
                         assert!((c.card_uv[3] - c.uv[3]).abs() < EPS, "{what} v{v}: card bottom {} vs cell bottom {}", c.card_uv[3], c.uv[3]);
@@ -119,11 +134,11 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                 }
                 PlantLook::Tree(t) => {
                     let system = read_lsystem(&s.name, t).unwrap();
-                    check_chain(&what, &tree_chain(&s.name, t, &system, 0).unwrap(), t.atlas_px);
+                    check_chain(&what, &tree_chain(&s.name, t, &system, 0).unwrap(), t.atlas_px, true);
                     kinds.insert("tree");
                 }
                 PlantLook::Mesh(m) => {
-                    check_chain(&what, &mesh_chain(&s.name, m).unwrap().1, m.atlas_px);
+                    check_chain(&what, &mesh_chain(&s.name, m).unwrap().1, m.atlas_px, false);
                     kinds.insert("mesh");
                 }
             }

@@ -432,7 +432,7 @@ impl Sink for Record {
         self.leaves.push(*l);
         Ok(())
     }
-    fn polygon(&mut self, _: &[glam::DVec3], _: u16, _: u32) -> Result<(), ()> {
+    fn polygon(&mut self, _: &verdant::lsystem::turtle::Polygon) -> Result<(), ()> {
         self.polygons += 1;
         Ok(())
     }
@@ -447,6 +447,16 @@ fn interpret(system: &LSystem, seed: u64) -> Record {
     }
     turtle.finish(&mut record).unwrap();
     record
+}
+
+#[test]
+fn limbs_and_arcs_follow_the_branching() {
+    // trunk F, limb 1 = [+F [-F] F], then the trunk again and limb 2 = [&FF]: arcs run from where a
+    // limb leaves the trunk (0 there, so wind bending is 0 at the joint), twigs continue their
+    // limb's arc, the trunk's stays 0
+    let r = interpret(&sys("recursion 0\nangle 30\nthickness 10\naxiom F[+F[-F]F]F[&FF]\n"), 0);
+    let limbs: Vec<(u32, u32, f64)> = r.segments.iter().map(|s| (s.level, s.limb.id, s.limb.arc)).collect();
+    assert_eq!(limbs, vec![(0, 0, 0.0), (1, 1, 0.0), (2, 1, 1.0), (1, 1, 1.0), (0, 0, 0.0), (1, 2, 0.0), (1, 2, 1.0)]);
 }
 
 #[test]

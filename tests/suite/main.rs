@@ -21,3 +21,4 @@ mod snow_build;
 mod terrain_cases;
 mod tree_lod;
 mod tree_species;
+mod wind;

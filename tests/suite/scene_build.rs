@@ -680,9 +680,9 @@ fn concurrent_stores_of_one_cache_entry_stay_complete() {
 /// the new binary) and put the new digest here; the test prints the whole table to copy.
 const PINNED: &[(&str, u32, &str)] = &[
     ("terrain", 2, "8ede27b74341dd54"),
-    ("plants", 3, "a162fb81fd7d1f70"),
+    ("plants", 4, "bc50d3498ec17ee4"),
     ("snow", 2, "afe32471f9508a26"),
-    ("scatter", 3, "a3d3ee7b9b30eb36"),
+    ("scatter", 4, "55854912252de11c"),
     ("preview", 1, "9af582b8301c787b"),
 ];
 
