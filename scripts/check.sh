@@ -33,7 +33,8 @@ done
 PY_PKGS=(trimesh==5.2.0 pyrender==0.1.45 pygltflib==1.16.5 numpy==2.4.6 pillow==12.3.0 scipy==1.17.1 networkx==3.6.1 rtree==1.4.1)
 PY_PKGS_AFTER=(pyopengl==3.1.10)
 # libopengl0 / libgl1 give PyOpenGL the desktop GL library it loads first (else it falls back to GLES).
-APT_PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgl1)
+# chromium: Babylon.js renders the species files headless (WebGL through SwiftShader), step 5e.
+APT_PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgl1 chromium)
 
 export PYOPENGL_PLATFORM=egl
 VENV="$ROOT/.venv"
@@ -98,6 +99,20 @@ else
   (cd "$ROOT/scripts" && npm ci --no-audit --no-fund --loglevel=error)
   echo "$lock_sum" > "$npm_stamp"
   echo "npm: ready in $(elapsed "$t")"
+fi
+
+# npm: Babylon.js + puppeteer-core for the engine check (scripts/engines, its own lock file).
+engines_stamp="$ROOT/scripts/engines/node_modules/.verdant-check-lock"
+engines_sum="$(sha256sum "$ROOT/scripts/engines/package-lock.json" | cut -d' ' -f1)"
+if [ -f "$engines_stamp" ] && [ "$(cat "$engines_stamp")" = "$engines_sum" ] \
+   && [ -f "$ROOT/scripts/engines/node_modules/babylonjs/package.json" ]; then
+  echo "npm: Babylon.js up to date (scripts/engines/node_modules)"
+else
+  t=$SECONDS
+  echo "npm: npm ci in scripts/engines/"
+  (cd "$ROOT/scripts/engines" && npm ci --no-audit --no-fund --loglevel=error)
+  echo "$engines_sum" > "$engines_stamp"
+  echo "npm: Babylon.js ready in $(elapsed "$t")"
 fi
 
 # Blender as a Python module (PyPI bpy) for the import checks; its wheel needs CPython 3.11, so it gets
@@ -354,6 +369,34 @@ if ((${#chain_files[@]})); then
   if [ "$(wc -l < "$BLENDER_TSV")" -ne "${#chain_files[@]}" ]; then fail "check_blender.py did not report every chain file"; fi
 else
   fail "no species chain files to import into Blender"
+fi
+
+section "5e. Babylon.js (headless Chromium) loads every species file without an error or warning, MSFT_lod levels in order; grass is seen green"
+# thumbnails of what Babylon drew go to out/check/babylon/
+green_files=()
+other_files=()
+for f in "${FILES[@]}"; do
+  case "$f" in
+    */species/*_far.glb) ;;
+    # grass levels: LoD3 is one horizontal card of the top view, whose thin blade tips a near,
+    # oblique camera hardly sees (an engine shows it far away): loaded and drawn, not judged by colour
+    */species/*_LOD3.glb) if [ -f "$OUT/${f%_LOD*}_far.glb" ]; then other_files+=("$OUT/$f"); fi ;;
+    */species/*_LOD*.glb) if [ -f "$OUT/${f%_LOD*}_far.glb" ]; then green_files+=("$OUT/$f"); fi ;;
+    */species/*.glb) if [ -f "$OUT/${f%.glb}_far.glb" ]; then green_files+=("$OUT/$f"); else other_files+=("$OUT/$f"); fi ;;
+  esac
+done
+if ((${#green_files[@]})) && ((${#other_files[@]})); then
+  for group in green other; do
+    if [ "$group" = green ]; then args=(--green "${green_files[@]}"); n=${#green_files[@]}; else args=("${other_files[@]}"); n=${#other_files[@]}; fi
+    log="$OUT/check_babylon_$group.log"
+    node scripts/engines/check_babylon.mjs --thumbs "$OUT/babylon" "${args[@]}" > "$log" 2>&1 || true
+    grep -v '^Babylon.js' "$log" | sed 's|'"$OUT"'/||' || true
+    oks=$(grep -c '^ok ' "$log" || true)
+    for _ in $(seq 1 "$oks"); do pass; done
+    if [ "$oks" -ne "$n" ]; then fail "Babylon.js: $((n - oks)) of $n $group species files failed (see $log)"; fi
+  done
+else
+  fail "no grass or other species files to load in Babylon.js"
 fi
 
 for f in "${FILES[@]}"; do

@@ -2,7 +2,12 @@
 // person would see: no loader error or warning, no page error, and for MSFT_lod chains every level
 // arriving in order with exactly the default scene's LoD0 meshes enabled at the end.
 //
-//   node scripts/engines/check_babylon.mjs [--thumbs DIR] [--no-range-requests] FILE.glb...
+//   node scripts/engines/check_babylon.mjs [--thumbs DIR] [--no-range-requests] [--green] FILE.glb...
+//
+// Every file's frame is measured where it is not the sky (covered share, mean colour, dark and
+// green-leading shares). --green: the files are grass, which a person must see as green: at least
+// 0.2 % of the frame covered, green leading on most of it and at most a fifth of it dark (wind data
+// in COLOR_0 rendered grass black and cut it out under the alpha test).
 //
 // MSFT_lod files are loaded with the loader's `useRangeRequests` on (Babylon's progressive LoD
 // loading needs it for a .glb); --no-range-requests loads them with Babylon's defaults instead.
@@ -17,10 +22,12 @@ const here = path.dirname(fileURLToPath(import.meta.url));
 const args = process.argv.slice(2);
 let thumbs = null;
 let rangeRequests = true;
+let expectGreen = false;
 const files = [];
 for (let i = 0; i < args.length; i++) {
   if (args[i] === '--thumbs') thumbs = args[++i];
   else if (args[i] === '--no-range-requests') rangeRequests = false;
+  else if (args[i] === '--green') expectGreen = true;
   else files.push(path.resolve(args[i]));
 }
 if (!files.length) {
@@ -108,13 +115,18 @@ for (const file of files) {
     if (!inOrder) problems.push(`MSFT_lod levels arrived as ${JSON.stringify(r.lodLevels)}, expected 0..${want.levels - 1} in order`);
     if (r.enabled.some((n) => !/_LOD0(_primitive\d+)?$/.test(n))) problems.push(`levels other than LoD0 left enabled: ${r.enabled.join(', ')}`);
   }
+  const seen = r.pixels;
+  if (r.ok && expectGreen && seen && !(seen.covered >= 0.002 && seen.green >= 0.5 && seen.dark <= 0.2)) {
+    problems.push(`not seen as green grass: ${(100 * seen.covered).toFixed(1)} % of the frame covered, green leading on ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %`);
+  }
   if (thumbs && r.ok) {
     fs.mkdirSync(thumbs, { recursive: true });
     const canvas = await page.$('#c');
     await canvas.screenshot({ path: path.join(thumbs, `babylon_${path.basename(path.dirname(path.dirname(file)))}_${path.basename(file, '.glb')}.png`) });
   }
   failed += problems.length > 0;
-  const what = r.ok ? `${r.meshes} meshes, ${r.enabled.length} enabled${want.chain ? `, LoD levels ${JSON.stringify(r.lodLevels)}` : ''}` : '';
+  const colour = seen ? `, frame ${(100 * seen.covered).toFixed(1)} % covered, mean rgb ${seen.mean.map((v) => v.toFixed(2)).join(' ')}, green ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %` : '';
+  const what = r.ok ? `${r.meshes} meshes, ${r.enabled.length} enabled${want.chain ? `, LoD levels ${JSON.stringify(r.lodLevels)}` : ''}${colour}` : '';
   console.log(`${problems.length ? 'FAIL' : 'ok  '}  ${file}: ${what}${problems.length ? ' — ' + problems.join(' | ') : ''}`);
   await page.close();
 }
