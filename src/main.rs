@@ -68,6 +68,9 @@ enum Command {
     /// Reads the three .ls dialects (the thesis' stochastic format, lparser 4 and 5; see
     /// docs/lsystems.md). The expansion streams into the mesh, so long expansions need no memory.
     ///
+    /// A built-in tree instead of a file: `builtin:conifer`, `builtin:broadleaf`, `builtin:birch`,
+    /// `builtin:bush` (grown to the species' height unless --height says otherwise).
+    ///
     /// Example: verdant tree trees3.ls -o out/trees3.glb --report out/trees3.json
     Tree(TreeArgs),
     /// OBJ model (+ MTL and PNG/JPEG textures) → the LoD chain trees get: LoD0 the model, LoD1
@@ -138,7 +141,7 @@ enum DialectArg {
 
 #[derive(Args)]
 struct TreeArgs {
-    /// L-system file (.ls).
+    /// L-system file (.ls), or `builtin:<name>` for a tree of the built-in library.
     #[arg(value_name = "FILE.ls")]
     input: PathBuf,
     /// Output file: .glb, .gltf (+ .bin) or .obj (+ .mtl). Default: out/<input name>.glb.
@@ -165,7 +168,8 @@ struct TreeArgs {
     /// Metres of one default step F (lparser 4's 100 units, lparser 5's and the thesis' 1 unit).
     #[arg(long, value_name = "METRES", default_value_t = 1.0)]
     step: f64,
-    /// Scale the finished tree to this height in metres.
+    /// Scale the finished tree to this height in metres (default: the L-system's own scale, with a
+    /// warning when that is under 5 cm or over 120 m; a built-in tree's species height).
     #[arg(long, value_name = "METRES")]
     height: Option<f64>,
     /// Write a JSON report: symbols, segments, triangles, branch levels, seconds, and per LoD
@@ -572,7 +576,16 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
 }
 
 fn tree(a: TreeArgs, quiet: bool) -> i32 {
-    let name = a.input.file_stem().and_then(|s| s.to_str()).unwrap_or("tree").to_string();
+    // `builtin:<name>`: a tree of the built-in library, named after it and grown to its height
+    let builtin = match verdant::lsystem::library::named(&a.input) {
+        Some(Ok(species)) => Some(species),
+        Some(Err(names)) => return fail(&format!("{}: no built-in L-system of that name; built-in: {names} (e.g. builtin:conifer)", a.input.display()), 2),
+        None => None,
+    };
+    let name = match builtin {
+        Some(species) => species.name.to_string(),
+        None => a.input.file_stem().and_then(|s| s.to_str()).unwrap_or("tree").to_string(),
+    };
     let job = TreeJob {
         output: a.output.clone().unwrap_or_else(|| PathBuf::from("out").join(format!("{name}.glb"))),
         input: a.input.clone(),
@@ -589,7 +602,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             max_segments: a.max_segments,
             max_triangles: a.max_triangles,
             metres_per_step: a.step,
-            height_m: a.height,
+            height_m: a.height.or(builtin.map(|s| s.height_m)),
             leaf_points: a.point_leaves,
             name,
             ..TreeOptions::default()

@@ -10,6 +10,7 @@
 //! of [`expand::Token`]s, never the whole string) → [`turtle::Turtle`] (events for a geometry sink).
 
 pub mod expand;
+pub mod library;
 pub mod parse;
 pub mod turtle;
 

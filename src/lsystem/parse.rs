@@ -20,7 +20,8 @@ pub struct Parsed {
 
 /// Reads and parses `path`; `dialect` None detects it from the content ([`detect`]).
 pub fn read_file(path: &Path, dialect: Option<Dialect>) -> Result<Parsed, LsystemError> {
-    let bytes = std::fs::read(path).map_err(|source| LsystemError::Read { path: path.to_path_buf(), source })?;
+    // `builtin:<name>` is a library source (crate::lsystem::library), not a file
+    let bytes = super::library::read_bytes(path).map_err(|source| LsystemError::Read { path: path.to_path_buf(), source })?;
     parse_bytes(&bytes, path, dialect)
 }
 

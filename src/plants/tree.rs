@@ -980,6 +980,23 @@ pub struct TreeReport {
     pub seconds: TreeSeconds,
 }
 
+/// Heights outside this range (m) at the L-system's own scale are reported: no real plant is
+/// taller than 120 m, and a tree under 5 cm is a scale mistake (lparser 4 files at 1 cm per step).
+pub const PLAUSIBLE_HEIGHT_M: [f64; 2] = [0.05, 120.0];
+
+/// A warning when a tree left at its L-system's own scale (no `--height`) came out at an
+/// implausible size: fern-plant.ls grows 732 m tall at 1 m per step.
+pub fn size_warning(stats: &TreeStats, options: &TreeOptions) -> Option<String> {
+    let h = stats.height_m;
+    if options.height_m.is_some() || (PLAUSIBLE_HEIGHT_M[0]..=PLAUSIBLE_HEIGHT_M[1]).contains(&h) {
+        return None;
+    }
+    Some(format!(
+        "the tree is {h:.3} m tall at the L-system's own scale ({} m per step), outside {}–{} m: pass --height METRES (e.g. --height 12) to scale it, or --step",
+        options.metres_per_step, PLAUSIBLE_HEIGHT_M[0], PLAUSIBLE_HEIGHT_M[1]
+    ))
+}
+
 /// Parses, builds and writes the tree of `job`, then re-reads and validates the file.
 pub fn run(job: &TreeJob) -> Result<TreeReport, TreeError> {
     let t0 = Instant::now();
@@ -1010,8 +1027,8 @@ pub fn run(job: &TreeJob) -> Result<TreeReport, TreeError> {
         dialect_detected: parsed.detected,
         seed: job.options.seed,
         radial_segments: job.options.radial_segments,
+        warnings: parsed.warnings.into_iter().chain(size_warning(&tree.stats, &job.options)).collect(),
         stats: tree.stats,
-        warnings: parsed.warnings,
         validation_errors: validation.errors(),
         validation_warnings: validation.warnings(),
         seconds: TreeSeconds {

@@ -1238,7 +1238,7 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
         seed: job.options.seed,
         radial_segments: job.options.radial_segments,
         stats: first.lod0.as_ref().map(|t| t.stats.clone()).unwrap_or_default(),
-        warnings: parsed.warnings,
+        warnings: parsed.warnings.into_iter().chain(first.lod0.as_ref().and_then(|t| crate::plants::tree::size_warning(&t.stats, &job.options))).collect(),
         validation_errors: errors,
         validation_warnings: warnings,
         seconds: TreeSeconds {

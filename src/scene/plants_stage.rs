@@ -84,8 +84,9 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: chain files keep their coarser levels
 /// in a second glTF scene with shared materials; flower cards inside their atlas cells. 3: bark
 /// and polygon leaves textured (procedural, tinted by their colour). 4: wind data in `_WIND` /
-/// `_WIND_BRANCH` on every plant, none in COLOR_0.
-pub const PLANTS_ALGORITHM_VERSION: u32 = 4;
+/// `_WIND_BRANCH` on every plant, none in COLOR_0. 5: a tree species without an L-system grows a
+/// built-in tree (crate::lsystem::library), not a marker.
+pub const PLANTS_ALGORITHM_VERSION: u32 = 5;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).
@@ -114,7 +115,8 @@ pub fn add_look_inputs(k: &mut KeyBuilder, name: &str, look: &PlantLook) -> Resu
         }
         _ => return Ok(()),
     };
-    let bytes = std::fs::read(input).map_err(|e| fail(format!("{}: cannot read: {e}", input.display())))?;
+    // an L-system may be a built-in one (`builtin:<name>`): its source is in the crate
+    let bytes = crate::lsystem::library::read_bytes(input).map_err(|e| fail(format!("{}: cannot read: {e}", input.display())))?;
     k.add(sha256_hex(&bytes).as_bytes());
     Ok(())
 }

@@ -22,6 +22,7 @@ use super::{
     Exclusion, Format, Placement, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesKind, SpeciesSettings,
     MeshLook, TerrainSettings, TerrainSource, TreeLook,
 };
+use crate::lsystem::library;
 use crate::plants::flower::FlowerSettings;
 use crate::plants::grass::GrassSettings;
 use crate::heightfield::{DecodeOptions, Encoding, Heightfield, DEFAULT_MAX_SAMPLES};
@@ -194,7 +195,13 @@ pub fn demo_preset() -> Preset {
                 exclusions: Vec::new(),
                 seed: 0,
                 max_instances: DEFAULT_MAX_INSTANCES,
-                look: PlantLook::Marker,
+                // the built-in broadleaf (crate::lsystem::library), 12 m before the instance scale
+                look: PlantLook::Tree(TreeLook {
+                    lsystem: library::path_of(library::find("broadleaf").expect("a library species")),
+                    height_m: Some(12.0),
+                    seed: species_look_seed(0, "tree", 0),
+                    ..TreeLook::default()
+                }),
             },
             // 75 % of the map has slopes under 35°: ≈ 3.1 km² × 0.04 ≈ 125 000 clumps
             SpeciesSettings {
@@ -337,7 +344,8 @@ lods = [1.0, 4.0, 16.0]
 # align_to_normal = 0.0      # 0 upright … 1 along the ground normal (default: grass/flower 1, else 0)
 # seed = 0                   # offset added to the scene seed for this species
 # max_instances = 5000000    # more than this is an error naming the species
-# # lsystem = "trees/pine.ls"        # grow the trees from this L-system (else a marker)
+# # lsystem = "trees/pine.ls"        # grow the trees from this L-system; "builtin:conifer" (or
+# #                                   # broadleaf, birch, bush) or none: a built-in tree
 # # tree = { variants = 3, height = 14.0 }  # see docs/presets.md, section [tree]
 #
 # [[species]]
@@ -749,6 +757,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             plants::apply_flower(&Table { ctx: &ctx, label: "[flower]".into(), span, table }, FlowerSettings::default())?
         }
     };
+    let tree_height_set = tree_section.as_ref().is_some_and(|(_, table)| table.iter().any(|(k, _)| k.get_ref() == "height"));
     let tree_defaults = match tree_section {
         None => TreeLook::default(),
         Some((span, table)) => plants::apply_tree(&Table { ctx: &ctx, label: "[tree]".into(), span, table }, TreeLook::default())?,
@@ -768,7 +777,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         }
         Some((span, table)) => Some(snow::parse_snow(&Table { ctx: &ctx, label: "[snow]".into(), span, table }, scene.seed)?),
     };
-    let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, tree: &tree_defaults, mesh: &mesh_defaults, scene_seed: scene.seed };
+    let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, tree: &tree_defaults, tree_height_set, mesh: &mesh_defaults, scene_seed: scene.seed };
     let mut species: Vec<SpeciesSettings> = Vec::new();
     if let Some((key_span, items)) = species_tables {
         if terrain.is_none() {
@@ -951,6 +960,8 @@ struct Looks<'a> {
     grass: &'a GrassSettings,
     flower: &'a FlowerSettings,
     tree: &'a TreeLook,
+    /// `[tree]` sets `height` (else a built-in tree grows to its species' own height).
+    tree_height_set: bool,
     mesh: &'a MeshLook,
     scene_seed: u64,
 }
@@ -992,18 +1003,38 @@ fn parse_look(t: &Table<'_, '_>, name: &str, kind: SpeciesKind, looks: &Looks<'_
             }
         }
         SpeciesKind::Tree => {
-            let Some(lsystem) = input_path(t, "lsystem", "lsystem = \"trees/birch.ls\"", check_inputs)? else {
-                if let Some((k, _)) = t.get("tree") {
-                    return Err(t.ctx.at(
-                        &k.span(),
-                        format!("`tree = {{ … }}` says how to grow {}'s L-system, but it names no `lsystem` file", t.label),
-                        "add `lsystem = \"trees/birch.ls\"` (a .ls file relative to this preset), or remove `tree`",
-                    ));
-                }
-                // documented: a tree species without an L-system is drawn as a marker
-                return Ok(PlantLook::Marker);
+            // `lsystem = "builtin:<name>"` or no `lsystem`: a tree of the built-in library
+            // (crate::lsystem::library), grown to its species' height unless `height` is set
+            let builtin = match t.get("lsystem") {
+                Some((_, v)) => match v.get_ref() {
+                    DeValue::String(text) if text.starts_with(library::PREFIX) => match library::named(Path::new(text.as_ref())) {
+                        Some(Ok(species)) => Some(species),
+                        _ => {
+                            return Err(t.ctx.at(
+                                &v.span(),
+                                format!("`{text}` names no built-in L-system"),
+                                format!("use one of {} as `lsystem = \"builtin:conifer\"`, or a .ls file relative to this preset", library::names()),
+                            ))
+                        }
+                    },
+                    _ => None,
+                },
+                None => Some(library::for_species_name(name)),
             };
-            let base = TreeLook { lsystem, seed: species_look_seed(looks.scene_seed, name, seed), ..looks.tree.clone() };
+            let lsystem = match builtin {
+                Some(species) => library::path_of(species),
+                None => input_path(t, "lsystem", "lsystem = \"trees/birch.ls\"", check_inputs)?.expect("`lsystem` was found above"),
+            };
+            let mut base = TreeLook { lsystem, seed: species_look_seed(looks.scene_seed, name, seed), ..looks.tree.clone() };
+            let species_sets_height = match t.get("tree") {
+                Some((_, v)) => matches!(v.get_ref(), DeValue::Table(table) if table.iter().any(|(k, _)| k.get_ref() == "height")),
+                None => false,
+            };
+            if let Some(species) = builtin {
+                if !looks.tree_height_set && !species_sets_height {
+                    base.height_m = Some(species.height_m);
+                }
+            }
             let look = match t.get("tree") {
                 None => base,
                 Some((_, v)) => plants::apply_tree(&plants::sub_table(t, "tree", v)?, base)?,

@@ -139,7 +139,8 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 pub const TERRAIN_ALGORITHM_VERSION: u32 = 2;
 
 /// Version of the preview stage's output for given inputs (see [`TERRAIN_ALGORITHM_VERSION`]).
-pub const PREVIEW_ALGORITHM_VERSION: u32 = 1;
+/// 2: a tree species without an L-system is drawn at its built-in tree's height.
+pub const PREVIEW_ALGORITHM_VERSION: u32 = 2;
 
 /// Cache key of the terrain stage: its settings, the formats, the input's content.
 pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageError> {

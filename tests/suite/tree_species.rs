@@ -5,7 +5,7 @@
 
 use std::collections::BTreeMap;
 use std::fs;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use verdant::scene::preset::{load_preset, parse_preset};
 use verdant::scene::PlantLook;
@@ -178,14 +178,44 @@ fn tree_tables_are_read_with_defaults_and_overrides() {
     assert_eq!((b.variants, b.height_m, b.radial_segments, b.lods, b.atlas_px), (2, None, 5, 3, 512));
     assert_eq!(b.dialect, Some(verdant::lsystem::Dialect::LparserV4));
     assert_ne!(a.seed, b.seed, "each species its own seed");
-    assert_eq!(p.species[2].look, PlantLook::Marker, "a tree without an L-system is a marker (documented)");
+    // no `lsystem`: a built-in tree picked by the name ("c" hints at nothing: a broadleaf), grown
+    // to [tree]'s height since [tree] sets one
+    let PlantLook::Tree(c) = &p.species[2].look else { panic!("c: {:?}", p.species[2].look) };
+    assert_eq!((c.lsystem.as_path(), c.height_m), (Path::new("builtin:broadleaf"), Some(15.0)));
+}
+
+#[test]
+fn a_tree_without_a_file_grows_from_the_built_in_library() {
+    // the name picks the species, at its own height unless the preset sets one
+    let text = format!("{HEAD}[[species]]\nname = \"scots-pine\"\nkind = \"tree\"\nmax_density = 0.01\n\
+                        [[species]]\nname = \"b\"\nkind = \"tree\"\nmax_density = 0.01\nlsystem = \"builtin:birch\"\ntree = {{ height = 9.0, variants = 2 }}\n\
+                        [[species]]\nname = \"hedge\"\nkind = \"tree\"\nmax_density = 0.01\ntree = {{ variants = 1 }}\n");
+    let p = parse_preset(&text, Path::new("dir/p.toml")).unwrap_or_else(|e| panic!("{e}"));
+    let looks: Vec<(PathBuf, Option<f64>, usize)> = p
+        .species
+        .iter()
+        .map(|s| match &s.look {
+            PlantLook::Tree(t) => (t.lsystem.clone(), t.height_m, t.variants),
+            other => panic!("{}: {other:?}", s.name),
+        })
+        .collect();
+    assert_eq!(
+        looks,
+        vec![
+            (PathBuf::from("builtin:conifer"), Some(18.0), 3),
+            (PathBuf::from("builtin:birch"), Some(9.0), 2),
+            (PathBuf::from("builtin:bush"), Some(2.5), 1),
+        ]
+    );
+    // an unknown built-in name is a positioned error listing the library
+    let e = error_of(&species("kind = \"tree\"\nlsystem = \"builtin:palm\""));
+    assert!(e.contains("p.toml:") && e.contains("builtin:palm") && e.contains("conifer, broadleaf, birch, bush"), "{e}");
 }
 
 #[test]
 fn tree_preset_mistakes_are_positioned_errors_with_a_remedy() {
     let cases: &[(&str, &str, &str)] = &[
         ("kind = \"grass\"\nlsystem = \"a.ls\"", "p.toml:9:1", "set `kind = \"tree\"`"),
-        ("kind = \"tree\"\ntree = { variants = 2 }", "names no `lsystem` file", "add `lsystem ="),
         ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { atlas_size = 1000 }", "not a multiple of 16", "atlas_size = 1024"),
         ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { dialect = \"v6\" }", "dialect", "allowed: auto, ls, v4, v5"),
         ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { varients = 2 }", "varients", "variants"),
