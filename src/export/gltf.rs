@@ -8,7 +8,9 @@
 //!
 //! The scene is compacted first ([`super::compact`]): objects nothing shows are left out, equal
 //! materials and textures are written once, and nodes shown only as MSFT_lod levels form a second,
-//! non-default glTF scene (scene 0 is the one every viewer shows).
+//! non-default glTF scene (scene 0 is the one every viewer shows). In a GLB with MSFT_lod, what each
+//! finer level needs first is in a buffer of its own, a base64 `data:` URI ([`super::streaming`]):
+//! Babylon.js then streams the levels coarse to fine instead of racing them.
 
 use std::collections::BTreeSet;
 
@@ -19,6 +21,7 @@ use json::Index;
 use serde_json::{Map, Value};
 
 use super::compact::compact;
+use super::streaming::{base64, load_groups};
 use super::{check_scene, SceneProblem};
 use crate::mesh::{AlphaMode, PrimitiveMode, Scene};
 
@@ -94,19 +97,24 @@ fn uri_encode(name: &str) -> String {
     s
 }
 
-/// The binary buffer under construction and its views.
+/// The binary buffers under construction (one per load group: 0 the GLB chunk or `.bin`) and
+/// their views.
 struct Bin {
-    data: Vec<u8>,
+    groups: Vec<Vec<u8>>,
+    /// Which group the next views go to.
+    group: usize,
     views: Vec<json::buffer::View>,
 }
 
 impl Bin {
     fn push_view(&mut self, bytes: &[u8], target: Option<json::buffer::Target>) -> Index<json::buffer::View> {
-        self.data.resize(self.data.len().next_multiple_of(4), 0);
-        let offset = self.data.len();
-        self.data.extend_from_slice(bytes);
+        let data = &mut self.groups[self.group];
+        data.resize(data.len().next_multiple_of(4), 0);
+        let offset = data.len();
+        data.extend_from_slice(bytes);
         self.views.push(json::buffer::View {
-            buffer: Index::new(0),
+            // the group for now: `build` renumbers to the buffers written
+            buffer: Index::new(self.group as u32),
             byte_length: USize64::from(bytes.len()),
             byte_offset: if offset == 0 { None } else { Some(USize64::from(offset)) },
             byte_stride: None,
@@ -189,13 +197,16 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
         asset: json::Asset { generator: Some(GENERATOR.to_string()), version: "2.0".into(), ..Default::default() },
         ..Default::default()
     };
-    let mut bin = Bin { data: Vec::new(), views: Vec::new() };
+    // a GLB streams MSFT_lod levels from buffers of their own; a .gltf keeps one .bin
+    let groups = if bin_uri.is_none() { load_groups(scene) } else { None };
+    let mut bin = Bin { groups: vec![Vec::new(); groups.as_ref().map_or(1, |g| g.groups)], group: 0, views: Vec::new() };
     let mut extensions_used = BTreeSet::new();
     // an instanced node shown without instancing would be one wrong copy: loaders must support it
     let mut extensions_required = BTreeSet::new();
 
     // meshes: one view per attribute and per index list
-    for mesh in &scene.meshes {
+    for (mi, mesh) in scene.meshes.iter().enumerate() {
+        bin.group = groups.as_ref().map_or(0, |g| g.mesh[mi]);
         let mut primitives = Vec::with_capacity(mesh.primitives.len());
         for p in &mesh.primitives {
             let mut attributes = std::collections::BTreeMap::new();
@@ -284,6 +295,7 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
     }
 
     // nodes, with instancing accessors appended after the mesh data
+    bin.group = 0;
     for node in &scene.nodes {
         let mut ext = Map::new();
         if let Some(inst) = node.instances.as_ref().filter(|i| !i.is_empty()) {
@@ -342,7 +354,8 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
             wrap_t: Valid(json::texture::WrappingMode::Repeat),
             ..Default::default()
         });
-        for t in &scene.textures {
+        for (ti, t) in scene.textures.iter().enumerate() {
+            bin.group = groups.as_ref().map_or(0, |g| g.texture[ti]);
             let view = bin.push_view(&t.png, None);
             let image = root.push(json::Image {
                 buffer_view: Some(view),
@@ -384,20 +397,34 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
             });
         }
     }
-    bin.data.resize(bin.data.len().next_multiple_of(4), 0);
-    if !bin.data.is_empty() {
+    // buffers: group 0 is the GLB chunk (or the .bin), the other non-empty groups data: URIs
+    let mut chunk = Vec::new();
+    let mut buffer_of = vec![0u32; bin.groups.len()];
+    for (g, mut data) in bin.groups.into_iter().enumerate() {
+        data.resize(data.len().next_multiple_of(4), 0);
+        if data.is_empty() {
+            continue;
+        }
+        buffer_of[g] = root.buffers.len() as u32;
+        let uri = if g == 0 { bin_uri.map(str::to_string) } else { Some(format!("data:application/octet-stream;base64,{}", base64(&data))) };
         root.buffers.push(json::Buffer {
-            byte_length: USize64::from(bin.data.len()),
-            name: None,
-            uri: bin_uri.map(str::to_string),
+            byte_length: USize64::from(data.len()),
+            name: (g > 0).then(|| format!("MSFT_lod level {g} from the coarsest")),
+            uri,
             extensions: None,
             extras: None,
         });
+        if g == 0 {
+            chunk = data;
+        }
+    }
+    for v in &mut bin.views {
+        v.buffer = Index::new(buffer_of[v.buffer.value()]);
     }
     root.buffer_views = bin.views;
     root.extensions_used = extensions_used.into_iter().map(str::to_string).collect();
     root.extensions_required = extensions_required.into_iter().map(str::to_string).collect();
-    Ok((root, bin.data))
+    Ok((root, chunk))
 }
 
 #[cfg(test)]

@@ -8,6 +8,7 @@
 pub mod compact;
 pub mod gltf;
 pub mod obj;
+pub mod streaming;
 pub mod table;
 
 use std::ffi::OsStr;

@@ -85,8 +85,9 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// in a second glTF scene with shared materials; flower cards inside their atlas cells. 3: bark
 /// and polygon leaves textured (procedural, tinted by their colour). 4: wind data in `_WIND` /
 /// `_WIND_BRANCH` on every plant, none in COLOR_0. 5: a tree species without an L-system grows a
-/// built-in tree (crate::lsystem::library), not a marker.
-pub const PLANTS_ALGORITHM_VERSION: u32 = 5;
+/// built-in tree (crate::lsystem::library), not a marker. 6: chain files keep each finer level's
+/// data in a buffer of its own (export::streaming), so Babylon streams them in order.
+pub const PLANTS_ALGORITHM_VERSION: u32 = 6;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).

@@ -532,3 +532,59 @@ fn empty_scene_writes_valid_files_without_buffers() {
     }
     run_khronos_validator(&files);
 }
+
+#[test]
+fn a_lod_chain_glb_streams_each_finer_level_from_its_own_buffer() {
+    // a three-level chain, finest first: node 0 (mesh 0) with MSFT_lod levels node 1 (mesh 1) and
+    // node 2 (mesh 2). Babylon.js streams the coarsest first and, with its default options, defers a
+    // level only when its data comes through a URI: so the coarsest level's data is in the GLB
+    // chunk, each finer level's in a data: URI buffer of its own (the old single-chunk files made
+    // 5 of 10 chains fail to load there)
+    let tri = |y: f32| Primitive { positions: vec![[0.0, y, 0.0], [1.0, y, 0.0], [0.0, y, 1.0]], indices: vec![0, 2, 1], material: Some(0), ..Primitive::default() };
+    let mesh = |name: &str, y: f32| Mesh { name: name.into(), primitives: vec![tri(y)], extras: None };
+    let scene = Scene {
+        meshes: vec![mesh("lod0", 0.0), mesh("lod1", 1.0), mesh("lod2", 2.0)],
+        materials: vec![Material::default()],
+        nodes: vec![
+            Node { name: "t_LOD0".into(), mesh: Some(0), lods: vec![1, 2], lod_screen_coverage: vec![0.5, 0.2, 0.05], ..Node::default() },
+            Node { name: "t_LOD1".into(), mesh: Some(1), ..Node::default() },
+            Node { name: "t_LOD2".into(), mesh: Some(2), ..Node::default() },
+        ],
+        roots: vec![0],
+        ..Scene::default()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("chain.glb");
+    write_scene(&scene, &path).unwrap();
+    let bytes = fs::read(&path).unwrap();
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let buffers = doc["buffers"].as_array().unwrap();
+    assert_eq!(buffers.len(), 3, "{buffers:?}");
+    assert!(buffers[0].get("uri").is_none(), "the coarsest level is in the GLB chunk");
+    for b in &buffers[1..] {
+        assert!(b["uri"].as_str().unwrap().starts_with("data:application/octet-stream;base64,"));
+    }
+    // each mesh's POSITION lives in its level's buffer: LoD2 (coarsest) 0, LoD1 1, LoD0 2
+    let buffer_of_mesh = |m: usize| {
+        let a = doc["meshes"][m]["primitives"][0]["attributes"]["POSITION"].as_u64().unwrap() as usize;
+        let v = doc["accessors"][a]["bufferView"].as_u64().unwrap() as usize;
+        doc["bufferViews"][v]["buffer"].as_u64().unwrap()
+    };
+    let by_name: Vec<(String, u64)> = (0..3).map(|m| (doc["meshes"][m]["name"].as_str().unwrap().to_string(), buffer_of_mesh(m))).collect();
+    for (name, buffer) in by_name {
+        let want = match name.as_str() { "lod2" => 0, "lod1" => 1, "lod0" => 2, other => panic!("{other}") };
+        assert_eq!(buffer, want, "{name}");
+    }
+    // every reader gets the same scene back, and the file is valid glTF
+    let back = read_scene(&path).unwrap();
+    assert_eq!(back.meshes.len(), 3);
+    let mut names: Vec<&str> = back.meshes.iter().map(|m| m.name.as_str()).collect();
+    names.sort();
+    assert_eq!(names, ["lod0", "lod1", "lod2"]);
+    for m in &back.meshes {
+        let orig = scene.meshes.iter().find(|o| o.name == m.name).unwrap();
+        assert_eq!(m.primitives, orig.primitives);
+    }
+    run_khronos_validator(&[path]);
+}
