@@ -371,6 +371,17 @@ else
   fail "no species chain files to import into Blender"
 fi
 
+section "5d2. Blender (bpy) imports every scene through scripts/blender_import.py: one object per mesh, every placement an instance, positions and frames as the tables say"
+for scene in "${SCENES[@]}"; do
+  dir="$BUILD_OUT/$scene"
+  [ -f "$dir/scene.glb" ] || continue
+  if "$BPY" scripts/blender_import.py "$dir" --check 2>&1 | grep -v ' | INFO: \|^$' | tee "$OUT/blender_import_$scene.log" | grep -q '^ok '; then
+    pass
+  else
+    fail "blender_import.py $scene (see $OUT/blender_import_$scene.log)"
+  fi
+done
+
 section "5e. Babylon.js (headless Chromium, default loader options) loads every species file without an error or warning, MSFT_lod levels in order; grass is seen green"
 # thumbnails of what Babylon drew go to out/check/babylon/
 green_files=()
