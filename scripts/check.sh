@@ -375,7 +375,9 @@ section "5d2. Blender (bpy) imports every scene through scripts/blender_import.p
 for scene in "${SCENES[@]}"; do
   dir="$BUILD_OUT/$scene"
   [ -f "$dir/scene.glb" ] || continue
-  if "$BPY" scripts/blender_import.py "$dir" --check 2>&1 | grep -v ' | INFO: \|^$' | tee "$OUT/blender_import_$scene.log" | grep -q '^ok '; then
+  "$BPY" scripts/blender_import.py "$dir" --check 2>&1 | grep -v ' | INFO: \|^$' > "$OUT/blender_import_$scene.log" || true
+  cat "$OUT/blender_import_$scene.log"
+  if grep -q '^ok ' "$OUT/blender_import_$scene.log"; then
     pass
   else
     fail "blender_import.py $scene (see $OUT/blender_import_$scene.log)"

@@ -70,6 +70,8 @@ pub struct Material {
     pub base_color: [f32; 4],
     /// Index into [`Scene::textures`].
     pub base_color_texture: Option<usize>,
+    /// A tangent-space normal map (glTF normalTexture, TEXCOORD_0), index into [`Scene::textures`].
+    pub normal_texture: Option<usize>,
     pub metallic: f32,
     pub roughness: f32,
     pub alpha_mode: AlphaMode,
@@ -82,11 +84,24 @@ impl Default for Material {
             name: String::new(),
             base_color: [1.0, 1.0, 1.0, 1.0],
             base_color_texture: None,
+            normal_texture: None,
             metallic: 0.0,
             roughness: 1.0,
             alpha_mode: AlphaMode::Opaque,
             double_sided: false,
         }
+    }
+}
+
+impl Material {
+    /// The texture indices it samples: base colour, then the normal map.
+    pub fn textures(&self) -> impl Iterator<Item = usize> {
+        self.base_color_texture.into_iter().chain(self.normal_texture)
+    }
+
+    /// The material with every texture index mapped by `f` (None: that texture is dropped).
+    pub fn with_textures(&self, f: impl Fn(usize) -> Option<usize>) -> Material {
+        Material { base_color_texture: self.base_color_texture.and_then(&f), normal_texture: self.normal_texture.and_then(&f), ..self.clone() }
     }
 }
 

@@ -252,6 +252,7 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
             name: m.name().unwrap_or("").to_string(),
             base_color: pbr.base_color_factor(),
             base_color_texture: pbr.base_color_texture().map(|i| i.texture().index()),
+            normal_texture: m.normal_texture().map(|n| n.texture().index()),
             metallic: pbr.metallic_factor(),
             roughness: pbr.roughness_factor(),
             alpha_mode,

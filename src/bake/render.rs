@@ -21,6 +21,13 @@ pub enum Shading {
     /// triangle's own) moved to world space. Double-sided materials use |n·l|: a leaf is lit on both
     /// faces. `ambient` is clamped to 0..1.
     Lambert { light_dir: [f32; 3], ambient: f32 },
+    /// Instead of a colour, the surface normal in a card's frame (unit `right`, `up`, `toward` the
+    /// viewer, world space) as a glTF tangent-space normal-map texel: rgb = n/2 + ½ with +X right,
+    /// +Y up, +Z towards the viewer, alpha 1. What a lit billboard needs: an engine lights the card
+    /// with these normals as it lights the 3-D levels. Double-sided surfaces show the side that
+    /// faces the viewer; the interpolated vertex normal is used (else the triangle's own), and one
+    /// leaning away from the viewer (near a silhouette) is laid into the card's plane.
+    CardNormals { right: [f32; 3], up: [f32; 3], toward: [f32; 3] },
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -66,8 +73,13 @@ pub fn render_mesh(
         let lighting = match opts.shading {
             Shading::Unlit => None,
             Shading::Lambert { light_dir, ambient } => Some(Lighting::new(prim, &normal_matrix, light_dir, ambient)),
+            Shading::CardNormals { .. } => Some(Lighting::new(prim, &normal_matrix, [0.0, 1.0, 0.0], 0.0)),
         };
-        let shader = |f: &Fragment| shade(f, material, texture, opts.use_vertex_colors, lighting.as_ref());
+        let card = match opts.shading {
+            Shading::CardNormals { right, up, toward } => Some([right, up, toward]),
+            _ => None,
+        };
+        let shader = |f: &Fragment| shade(f, material, texture, opts.use_vertex_colors, lighting.as_ref(), card.as_ref());
         let stats = if opts.parallel {
             canvas.draw_camera_par(cam, object_to_world, prim, &draw, shader)
         } else {
@@ -90,6 +102,7 @@ fn shade(
     texture: Option<&Image>,
     use_vertex_colors: bool,
     lighting: Option<&Lighting>,
+    card: Option<&[[f32; 3]; 3]>,
 ) -> Option<[f32; 4]> {
     let mut c = material.base_color;
     if let Some(t) = texture {
@@ -107,6 +120,20 @@ fn shade(
     // A NaN alpha is discarded too.
     if cutoff.is_some_and(|cut| c[3].is_nan() || c[3] < cut) {
         return None;
+    }
+    if let (Some(light), Some(axes)) = (lighting, card) {
+        let n = light.world_normal(f).unwrap_or([axes[2][0] as f64, axes[2][1] as f64, axes[2][2] as f64]);
+        let mut t = axes.map(|a| (a[0] as f64 * n[0] + a[1] as f64 * n[1] + a[2] as f64 * n[2]) as f32);
+        if t[2] < 0.0 && material.double_sided {
+            t = t.map(|x| -x);
+        }
+        if t[2] < 0.0 {
+            // a front face whose interpolated normal leans past the silhouette: seen edge-on
+            t[2] = 0.0;
+            let len = (t[0] * t[0] + t[1] * t[1]).sqrt();
+            t = if len > 1e-6 { [t[0] / len, t[1] / len, 0.0] } else { [0.0, 0.0, 1.0] };
+        }
+        return Some([t[0] * 0.5 + 0.5, t[1] * 0.5 + 0.5, t[2] * 0.5 + 0.5, 1.0]);
     }
     if let Some(light) = lighting {
         let k = light.factor(f, material.double_sided);
@@ -148,7 +175,8 @@ impl Lighting {
         Lighting { normal_matrix: *normal_matrix, light, ambient, face_normals }
     }
 
-    fn factor(&self, f: &Fragment, double_sided: bool) -> f32 {
+    /// The fragment's unit world-space normal, None when it has no usable one.
+    fn world_normal(&self, f: &Fragment) -> Option<[f64; 3]> {
         let n = match &self.face_normals {
             Some(faces) => faces.get(f.triangle as usize).copied().unwrap_or([0.0; 3]),
             None => f.normal,
@@ -156,11 +184,14 @@ impl Lighting {
         let m = &self.normal_matrix;
         let nw = [0, 1, 2].map(|r| m[r][0] * n[0] as f64 + m[r][1] * n[1] as f64 + m[r][2] * n[2] as f64);
         let len = (nw[0] * nw[0] + nw[1] * nw[1] + nw[2] * nw[2]).sqrt();
-        let cos = if len > 0.0 && len.is_finite() {
-            (nw[0] * self.light[0] + nw[1] * self.light[1] + nw[2] * self.light[2]) / len
-        } else {
+        (len > 0.0 && len.is_finite()).then(|| nw.map(|v| v / len))
+    }
+
+    fn factor(&self, f: &Fragment, double_sided: bool) -> f32 {
+        let cos = match self.world_normal(f) {
+            Some(nw) => nw[0] * self.light[0] + nw[1] * self.light[1] + nw[2] * self.light[2],
             // No usable normal: light it fully rather than paint it black.
-            1.0
+            None => 1.0,
         };
         let diffuse = if double_sided { cos.abs() } else { cos.max(0.0) } as f32;
         self.ambient + (1.0 - self.ambient) * diffuse
@@ -216,6 +247,32 @@ mod tests {
     fn cofactor_of_a_scale_is_the_inverse_transpose_up_to_scale() {
         let m = [[2.0, 0.0, 0.0, 5.0], [0.0, 3.0, 0.0, 0.0], [0.0, 0.0, 4.0, 0.0]];
         assert_eq!(cofactor3(&m), [[12.0, 0.0, 0.0], [0.0, 8.0, 0.0], [0.0, 0.0, 6.0]]);
+    }
+
+    #[test]
+    fn card_normals_are_tangent_space_texels_facing_the_viewer() {
+        // the card frame of front_view: right +X, up +Y, toward the viewer +Z
+        let opts = RenderOptions {
+            shading: Shading::CardNormals { right: [1.0, 0.0, 0.0], up: [0.0, 1.0, 0.0], toward: [0.0, 0.0, 1.0] },
+            ..RenderOptions::default()
+        };
+        let texel = |normal: [f32; 3], double_sided: bool| {
+            let mut q = quad(1.0);
+            q.normals = vec![normal; 4];
+            let mut c = front_view().canvas([0.0; 4]).unwrap();
+            let mat = Material { base_color: [0.2, 0.9, 0.1, 1.0], double_sided, ..Material::default() };
+            render_mesh(&mut c, &front_view(), &IDENTITY, &Mesh { primitives: vec![q], ..Mesh::default() }, &[mat], &[], &opts);
+            c.color[5]
+        };
+        let close = |a: [f32; 4], b: [f32; 4]| a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-5);
+        // tilted up: green (the image's up) above ½, the colour ignored
+        assert!(close(texel([0.0, 0.6, 0.8], false), [0.5, 0.8, 0.9, 1.0]), "{:?}", texel([0.0, 0.6, 0.8], false));
+        // tilted right: red above ½
+        assert!(close(texel([0.6, 0.0, 0.8], false), [0.8, 0.5, 0.9, 1.0]));
+        // a double-sided leaf turned away shows its other side, facing the viewer
+        assert!(close(texel([0.0, 0.6, -0.8], true), [0.5, 0.2, 0.9, 1.0]));
+        // unnormalised normals come out unit length
+        assert!(close(texel([0.0, 0.0, 3.0], false), [0.5, 0.5, 1.0, 1.0]));
     }
 
     #[test]

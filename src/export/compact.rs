@@ -71,7 +71,7 @@ pub fn compact(scene: &Scene) -> (Compacted<'_>, CompactFigures) {
     let remapped_materials: Vec<_> = scene
         .materials
         .iter()
-        .map(|m| crate::mesh::Material { base_color_texture: m.base_color_texture.map(|t| texture_canon[t]), ..m.clone() })
+        .map(|m| m.with_textures(|t| Some(texture_canon[t])))
         .collect();
     let material_canon: Vec<usize> = (0..remapped_materials.len())
         .map(|m| (0..m).find(|&k| remapped_materials[k] == remapped_materials[m]).unwrap_or(m))
@@ -96,8 +96,10 @@ pub fn compact(scene: &Scene) -> (Compacted<'_>, CompactFigures) {
     }
     let mut texture_used = vec![false; scene.textures.len()];
     for (k, m) in remapped_materials.iter().enumerate() {
-        if let (true, Some(t)) = (material_used[k], m.base_color_texture) {
-            texture_used[t] = true;
+        if material_used[k] {
+            for t in m.textures() {
+                texture_used[t] = true;
+            }
         }
     }
 
@@ -139,10 +141,7 @@ pub fn compact(scene: &Scene) -> (Compacted<'_>, CompactFigures) {
         .iter()
         .zip(&material_used)
         .filter(|(_, &u)| u)
-        .map(|(m, _)| crate::mesh::Material {
-            base_color_texture: m.base_color_texture.map(|t| texture_at[t].expect("a used material's texture is kept")),
-            ..m.clone()
-        })
+        .map(|(m, _)| m.with_textures(|t| Some(texture_at[t].expect("a used material's texture is kept"))))
         .collect();
     out.meshes = scene
         .meshes

@@ -281,6 +281,13 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
             alpha_mode: Valid(alpha_mode),
             double_sided: m.double_sided,
             name: opt_name(&m.name),
+            normal_texture: m.normal_texture.map(|t| json::material::NormalTexture {
+                index: Index::new(t as u32),
+                scale: 1.0,
+                tex_coord: 0,
+                extensions: None,
+                extras: None,
+            }),
             pbr_metallic_roughness: json::material::PbrMetallicRoughness {
                 base_color_factor: json::material::PbrBaseColorFactor(m.base_color),
                 base_color_texture,

@@ -184,7 +184,7 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneProblem> {
     }
     for (mi, m) in scene.materials.iter().enumerate() {
         let what = format!("material {mi} ({:?})", m.name);
-        if let Some(t) = m.base_color_texture {
+        for t in m.textures() {
             if t >= scene.textures.len() {
                 return bad(format!("{what} uses texture {t}, but the scene has {}", scene.textures.len()));
             }

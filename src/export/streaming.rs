@@ -57,7 +57,7 @@ pub fn load_groups(scene: &Scene) -> Option<LoadGroups> {
     let mut texture = vec![usize::MAX; scene.textures.len()];
     for (m, g) in scene.meshes.iter().zip(&mesh) {
         for p in &m.primitives {
-            if let Some(t) = p.material.and_then(|k| scene.materials.get(k)).and_then(|mat| mat.base_color_texture) {
+            for t in p.material.and_then(|k| scene.materials.get(k)).into_iter().flat_map(|mat| mat.textures()) {
                 texture[t] = texture[t].min(*g);
             }
         }

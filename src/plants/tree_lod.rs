@@ -229,12 +229,42 @@ impl CardFrame {
 }
 
 /// Renders `mesh` into a `px` square through `frame` at BAKE_SUPERSAMPLE×, resolved.
-fn bake(frame: &CardFrame, px: u32, mesh: &Mesh, materials: &[Material], textures: &[Image]) -> Result<(Image, u64), RasterError> {
+fn bake(frame: &CardFrame, px: u32, mesh: &Mesh, materials: &[Material], textures: &[Image], shading: Shading) -> Result<(Image, u64), RasterError> {
     let cam = Camera::Ortho(frame.ortho(px * BAKE_SUPERSAMPLE));
     let mut canvas = cam.canvas([0.0; 4])?;
-    let opts = RenderOptions { use_vertex_colors: false, shading: Shading::Unlit, parallel: false };
+    let opts = RenderOptions { use_vertex_colors: false, shading, parallel: false };
     let fragments = render_mesh(&mut canvas, &cam, &IDENTITY, mesh, materials, textures, &opts).fragments;
     Ok((resolve_supersampled(&Image::from_canvas_owned(canvas), BAKE_SUPERSAMPLE), fragments))
+}
+
+/// A normal-map texel of a surface facing the viewer: (0, 0, 1) encoded, alpha 0 (nothing drawn).
+const FLAT_NORMAL: [f32; 4] = [0.5, 0.5, 1.0, 0.0];
+
+/// The blitted normal views made a normal map: each drawn texel's (supersample-averaged) normal
+/// renormalised, the gutters and empty texels given their nearest drawn texel's normal (as the
+/// colour atlas is dilated, so filtering at a card's edge reads no foreign normal), alpha 1 (a
+/// normal map's alpha means nothing in glTF; the colour atlas' alpha cuts the card out).
+fn finish_normal_atlas(mut img: Image) -> Image {
+    let mut drawn = false;
+    for p in &mut img.pixels {
+        if p[3] >= 0.5 {
+            // the resolve averaged the supersamples' normals (weighted by coverage): unit length again
+            let n = [0, 1, 2].map(|k| p[k].clamp(0.0, 1.0) * 2.0 - 1.0);
+            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let n = if len > 1e-6 { n.map(|v| v / len) } else { [0.0, 0.0, 1.0] };
+            *p = [n[0] * 0.5 + 0.5, n[1] * 0.5 + 0.5, n[2] * 0.5 + 0.5, p[3]];
+            drawn = true;
+        }
+    }
+    // every other texel takes its nearest drawn texel's normal (alpha is left as it was)
+    dilate(&mut img, 0.5);
+    for p in &mut img.pixels {
+        if !drawn {
+            *p = FLAT_NORMAL;
+        }
+        p[3] = 1.0;
+    }
+    img
 }
 
 /// `a` with `b`'s vertices and triangles after its own (positions, normals, uvs and the custom
@@ -573,6 +603,9 @@ pub struct TreeLods {
     /// `<name>.glb`: LoD0 with MSFT_lod to the coarser levels.
     pub chain: Scene,
     pub atlas: Vec<MipLevel>,
+    /// The atlas' normals (glTF tangent-space normal map, level 0: engines make its mips), which
+    /// the card levels' material samples as normalTexture.
+    pub normal_atlas: Option<Image>,
     pub impostor_cells: Vec<AtlasCell>,
     pub report: TreeLodReport,
     /// The L-system tree LoD0 shows (None for a mesh asset).
@@ -589,10 +622,12 @@ fn single_mesh_scene(name: &str, mesh: Mesh, materials: Vec<Material>, textures:
     scene
 }
 
+/// The cards' material: the colour atlas, lit through the normal atlas (`texture + 1`).
 fn atlas_material(texture: usize) -> Material {
     Material {
         name: "tree_atlas".into(),
         base_color_texture: Some(texture),
+        normal_texture: Some(texture + 1),
         roughness: 0.8,
         alpha_mode: AlphaMode::Mask { cutoff: ATLAS_ALPHA_CUTOFF },
         double_sided: true,
@@ -724,8 +759,8 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
         coarse,
         started,
     };
-    let (name, levels, chain, atlas, impostor_cells, report) = build_chain(input, options)?;
-    Ok(TreeLods { name, levels, chain, atlas, impostor_cells, report, lod0: Some(lod0) })
+    let (name, levels, chain, atlas, normal_atlas, impostor_cells, report) = build_chain(input, options)?;
+    Ok(TreeLods { name, levels, chain, atlas, normal_atlas, impostor_cells, report, lod0: Some(lod0) })
 }
 
 /// Builds the LoD chain of a loaded mesh (an OBJ tree or rock): LoD0 the mesh, LoD1 meshoptimizer
@@ -755,11 +790,11 @@ pub fn build_mesh_lods(source: &SourceMesh, name: &str, options: &TreeLodOptions
         coarse: CoarseLevel::Sloppy,
         started,
     };
-    let (name, levels, chain, atlas, impostor_cells, report) = build_chain(input, options)?;
-    Ok(TreeLods { name, levels, chain, atlas, impostor_cells, report, lod0: None })
+    let (name, levels, chain, atlas, normal_atlas, impostor_cells, report) = build_chain(input, options)?;
+    Ok(TreeLods { name, levels, chain, atlas, normal_atlas, impostor_cells, report, lod0: None })
 }
 
-type Chain = (String, Vec<TreeLod>, Scene, Vec<MipLevel>, Vec<AtlasCell>, TreeLodReport);
+type Chain = (String, Vec<TreeLod>, Scene, Vec<MipLevel>, Option<Image>, Vec<AtlasCell>, TreeLodReport);
 
 /// The levels after LoD1, the atlas, the analyzer and the MSFT_lod scene, for any source.
 fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, TreeLodError> {
@@ -817,7 +852,20 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
             }
         }
     }
-    let rendered: Vec<Result<(Image, u64), RasterError>> = jobs.par_iter().map(|(cell, frame, mesh)| bake(frame, cell.inner_px(), mesh, &materials0, &reference_images)).collect();
+    let rendered: Vec<Result<(Image, u64), RasterError>> = jobs.par_iter().map(|(cell, frame, mesh)| bake(frame, cell.inner_px(), mesh, &materials0, &reference_images, Shading::Unlit)).collect();
+    // the same views as normals in each card's frame: the normal atlas lit cards sample
+    let normals: Vec<Result<(Image, u64), RasterError>> = jobs
+        .par_iter()
+        .map(|(cell, frame, mesh)| {
+            let (toward, right) = frame.axes();
+            let shading = Shading::CardNormals { right: right.as_vec3().to_array(), up: [0.0, 1.0, 0.0], toward: toward.as_vec3().to_array() };
+            bake(frame, cell.inner_px(), mesh, &materials0, &reference_images, shading)
+        })
+        .collect();
+    let mut normal_atlas = Image { width: px, height: px, pixels: vec![FLAT_NORMAL; (px as usize) * (px as usize)] };
+    for ((cell, _, _), r) in jobs.iter().zip(normals) {
+        normal_atlas.blit(&r?.0, cell.x + ATLAS_GUTTER_PX, cell.y + ATLAS_GUTTER_PX);
+    }
     let mut atlas = Image { width: px, height: px, pixels: vec![[0.0; 4]; (px as usize) * (px as usize)] };
     let mut fragments = 0;
     for ((cell, _, _), r) in jobs.iter().zip(rendered) {
@@ -831,6 +879,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
     } else {
         Vec::new()
     };
+    let normal_atlas = (wanted > 2).then(|| finish_normal_atlas(normal_atlas));
     let seconds_bake = bake_started.elapsed().as_secs_f64();
 
     // the textured levels
@@ -838,7 +887,13 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         Some(level0) => Some(Texture { name: format!("{name}_atlas"), png: level0.image.encode_png().map_err(|e| TreeLodError::Texture(e.to_string()))? }),
         None => None,
     };
-    if let (Some((lod1_materials, lod1_textures)), Some(atlas_tex), Some(atlas0)) = (&lod1_source, &atlas_texture, atlas_chain.first()) {
+    let normal_texture = match &normal_atlas {
+        Some(img) => Some(Texture { name: format!("{name}_atlas_normal"), png: img.encode_png().map_err(|e| TreeLodError::Texture(e.to_string()))? }),
+        None => None,
+    };
+    if let (Some((lod1_materials, lod1_textures)), Some(atlas_tex), Some(atlas0), Some(normal_tex), Some(normal_img)) =
+        (&lod1_source, &atlas_texture, atlas_chain.first(), &normal_texture, &normal_atlas)
+    {
         let lod1_triangles = levels[1].triangles();
         let (mesh, materials, textures, images) = match &coarse {
             CoarseLevel::Cards { kept, .. } => {
@@ -867,6 +922,8 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
                     textures.push(atlas_tex.clone());
                     images.push(atlas0.image.clone());
                     materials.push(atlas_material(textures.len() - 1));
+                    textures.push(normal_tex.clone());
+                    images.push(normal_img.clone());
                     cards.material = Some(materials.len() - 1);
                     mesh.primitives.push(cards);
                 }
@@ -897,8 +954,8 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         levels.push(TreeLod {
             level: 3,
             kind: "billboards",
-            scene: single_mesh_scene(&format!("{name}_LOD3"), mesh, vec![atlas_material(0)], vec![atlas_tex.clone()]),
-            images: vec![atlas0.image.clone()],
+            scene: single_mesh_scene(&format!("{name}_LOD3"), mesh, vec![atlas_material(0)], vec![atlas_tex.clone(), normal_tex.clone()]),
+            images: vec![atlas0.image.clone(), normal_img.clone()],
         });
         // LoD4: the impostor quad facing +Z (view 0), the others' cells in the extras
         let quad = tree_frame(0).quad(impostor_cells[0].uv);
@@ -913,8 +970,8 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
             "cells_uv": impostor_cells.iter().map(|c| c.uv).collect::<Vec<_>>(),
         }});
         let mesh = Mesh { name: String::new(), primitives: vec![quad], extras: Some(extras) };
-        let scene = single_mesh_scene(&format!("{name}_LOD4"), mesh, vec![atlas_material(0)], vec![atlas_tex.clone()]);
-        levels.push(TreeLod { level: 4, kind: "impostor", scene, images: vec![atlas0.image.clone()] });
+        let scene = single_mesh_scene(&format!("{name}_LOD4"), mesh, vec![atlas_material(0)], vec![atlas_tex.clone(), normal_tex.clone()]);
+        levels.push(TreeLod { level: 4, kind: "impostor", scene, images: vec![atlas0.image.clone(), normal_img.clone()] });
     }
     levels.truncate(wanted);
     let (levels, left_out) = without_levels_that_save_nothing(&name, levels);
@@ -1033,7 +1090,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         seconds_analyze,
         raster_fragments: fragments,
     };
-    Ok((name, levels, chain, atlas_chain, impostor_cells, report))
+    Ok((name, levels, chain, atlas_chain, normal_atlas, impostor_cells, report))
 }
 
 /// A level built but not written: it would have drawn no fewer triangles than the level before it
@@ -1097,7 +1154,7 @@ fn chain_scene(name: &str, levels: &[TreeLod], lods: &[TreeLodFigures]) -> Scene
             })
             .collect();
         let material_base = scene.materials.len();
-        scene.materials.extend(src.materials.iter().map(|m| Material { base_color_texture: m.base_color_texture.and_then(|t| texture_map.get(t).copied()), ..m.clone() }));
+        scene.materials.extend(src.materials.iter().map(|m| m.with_textures(|t| texture_map.get(t).copied())));
         let mut mesh = src.meshes[0].clone();
         for p in &mut mesh.primitives {
             p.material = p.material.map(|m| m + material_base);
@@ -1181,6 +1238,12 @@ fn write_chain(chain: &TreeLods, dir: &Path, file_stem: &str, written: &mut Writ
     if !chain.atlas.is_empty() {
         let pngs = write_mip_pngs(dir, &format!("{file_stem}_atlas"), &chain.atlas).map_err(|e| TreeLodError::Texture(e.to_string()))?;
         written.files.extend(pngs);
+    }
+    if let Some(normals) = &chain.normal_atlas {
+        let path = dir.join(format!("{file_stem}_atlas_normal.png"));
+        let png = normals.encode_png().map_err(|e| TreeLodError::Texture(e.to_string()))?;
+        export::write_atomic(&path, &png).map_err(|e| TreeLodError::Texture(e.to_string()))?;
+        written.files.push(path);
     }
     let (e, w) = write_glb(&chain.chain, &dir.join(format!("{file_stem}.glb")), &mut written.files)?;
     written.errors += e;

@@ -86,8 +86,9 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// and polygon leaves textured (procedural, tinted by their colour). 4: wind data in `_WIND` /
 /// `_WIND_BRANCH` on every plant, none in COLOR_0. 5: a tree species without an L-system grows a
 /// built-in tree (crate::lsystem::library), not a marker. 6: chain files keep each finer level's
-/// data in a buffer of its own (export::streaming), so Babylon streams them in order.
-pub const PLANTS_ALGORITHM_VERSION: u32 = 6;
+/// data in a buffer of its own (export::streaming), so Babylon streams them in order. 7: tree card
+/// levels lit through a baked normal atlas (atlases/<stem>_normal.png, normalTexture).
+pub const PLANTS_ALGORITHM_VERSION: u32 = 7;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).
@@ -158,6 +159,12 @@ fn write_chain(chain: &TreeLods, dir: &Path, stem: &str, files: &mut Vec<PathBuf
     write(&chain.chain, dir, file.clone(), files)?;
     if !chain.atlas.is_empty() {
         write_mips(dir, stem, &chain.atlas, files)?;
+    }
+    if let Some(normals) = &chain.normal_atlas {
+        let png = normals.encode_png().map_err(|e| fail(format!("{stem}: {e}")))?;
+        let rel = PathBuf::from("atlases").join(format!("{stem}_normal.png"));
+        export::write_atomic(&dir.join(&rel), &png).map_err(|e| fail(e.to_string()))?;
+        files.push(rel);
     }
     Ok(file)
 }
@@ -381,7 +388,7 @@ fn append_scene(out: &mut InstanceMeshes, scene: crate::mesh::Scene) {
         .materials
         .into_iter()
         .map(|m| {
-            let m = Material { base_color_texture: m.base_color_texture.map(|i| textures[i]), ..m };
+            let m = m.with_textures(|i| Some(textures[i]));
             match out.materials.iter().position(|o| *o == m) {
                 Some(i) => i,
                 None => {

@@ -9,7 +9,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::export::{self, table};
-use crate::mesh::{Instances, Material, Mesh, Node, Scene};
+use crate::mesh::{Instances, Mesh, Node, Scene};
 use crate::plants::marker;
 use crate::scatter::density::DensityMap;
 use crate::scatter::stats::{analyze, SpeciesStats};
@@ -224,7 +224,7 @@ pub fn instanced_scene(terrain: &Scene, placed: &[Placed], extent: [f64; 4]) -> 
                 scene.materials.extend(
                     g.materials
                         .into_iter()
-                        .map(|m| Material { base_color_texture: m.base_color_texture.map(|t| t + texture_base), ..m }),
+                        .map(|m| m.with_textures(|t| Some(t + texture_base))),
                 );
                 let first = scene.meshes.len();
                 for mut m in g.meshes {

@@ -165,6 +165,7 @@ pub fn terrain_material() -> Material {
         name: "terrain".to_string(),
         base_color: [0.30, 0.36, 0.26, 1.0],
         base_color_texture: None,
+        normal_texture: None,
         metallic: 0.0,
         roughness: 1.0,
         alpha_mode: AlphaMode::Opaque,

@@ -73,6 +73,29 @@ fn check_cards(what: &str, scene: &Scene, cells: &[[f32; 4]]) -> usize {
     checked
 }
 
+/// Lit cards: every material drawing a tree atlas also has the atlas' normal map as its
+/// normalTexture, and that map holds unit normals facing the viewer (tangent space, +Z towards it).
+fn check_normal_maps(what: &str, scene: &Scene) -> usize {
+    let mut checked = 0;
+    for m in &scene.materials {
+        let Some(t) = m.base_color_texture else { continue };
+        if !scene.textures[t].name.ends_with("_atlas") {
+            continue;
+        }
+        let n = m.normal_texture.unwrap_or_else(|| panic!("{what}: material {} draws an atlas without a normal map", m.name));
+        assert!(scene.textures[n].name.ends_with("_atlas_normal"), "{what}: normal map {}", scene.textures[n].name);
+        let img = verdant::bake::image::Image::from_png(&scene.textures[n].png).unwrap();
+        for p in &img.pixels {
+            let v = [p[0] * 2.0 - 1.0, p[1] * 2.0 - 1.0, p[2] * 2.0 - 1.0];
+            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            // 8-bit texels: each component within 1/255
+            assert!((len - 1.0).abs() < 0.02 && v[2] >= -0.01, "{what}: normal texel {p:?} (length {len})");
+        }
+        checked += 1;
+    }
+    checked
+}
+
 /// A tree or mesh chain: the MSFT_lod file and every level against the tree atlas' cells.
 fn check_chain(what: &str, chain: &TreeLods, atlas_px: u32, sways: bool) {
     let cells = atlas_cell_rects(atlas_px);
@@ -86,6 +109,9 @@ fn check_chain(what: &str, chain: &TreeLods, atlas_px: u32, sways: bool) {
             (true, _) => Expect::Sway,
         };
         check_plant_scene(&format!("{what} LOD{}", level.level), &level.scene, expect);
+        if matches!(level.kind, "cards" | "billboards" | "impostor") {
+            assert!(check_normal_maps(&format!("{what} LOD{}", level.level), &level.scene) > 0, "{what} LOD{}: no lit card material", level.level);
+        }
     }
     assert!(n > 0, "{what}: no atlas cards checked");
 }

@@ -63,6 +63,8 @@ fn sample_scene() -> Scene {
                 name: "leaf".into(),
                 base_color: [0.5, 0.8, 0.3, 1.0],
                 base_color_texture: Some(0),
+                // the same image as its normal map: the round trip keeps normalTexture
+                normal_texture: Some(0),
                 metallic: 0.0,
                 roughness: 0.75,
                 alpha_mode: AlphaMode::Mask { cutoff: 0.7 },
