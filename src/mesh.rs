@@ -14,6 +14,9 @@ pub struct Primitive {
     pub normals: Vec<[f32; 3]>,
     /// Texture coordinates (glTF convention: v down from the image's top), one per position, or empty.
     pub uvs: Vec<[f32; 2]>,
+    /// glTF TANGENT (unit xyz along +u, w = ±1 the bitangent's sign), one per position, or empty:
+    /// written where a material has a normal map, so no engine has to guess the tangent space.
+    pub tangents: Vec<[f32; 4]>,
     /// Linear RGBA vertex colours in 0..1, one per position, or empty.
     pub colors: Vec<[f32; 4]>,
     /// Application-specific per-vertex data written as glTF custom attributes (names start with `_`,
@@ -91,6 +94,32 @@ impl Default for Material {
             double_sided: false,
         }
     }
+}
+
+/// The glTF tangent of a flat textured quad (corners 0, 1, 3 span it): xyz along +u, w the sign
+/// that makes cross(normal, tangent)·w point up the image (towards smaller v), as glTF's normal-map
+/// convention (+Y up) needs.
+pub fn quad_tangent(corners: [[f32; 3]; 4], uvs: [[f32; 2]; 4], normal: [f32; 3]) -> [f32; 4] {
+    let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let (e1, e2) = (sub(corners[1], corners[0]), sub(corners[3], corners[0]));
+    let (du1, dv1, du2, dv2) = (uvs[1][0] - uvs[0][0], uvs[1][1] - uvs[0][1], uvs[3][0] - uvs[0][0], uvs[3][1] - uvs[0][1]);
+    let det = du1 * dv2 - du2 * dv1;
+    if det == 0.0 || !det.is_finite() {
+        return [1.0, 0.0, 0.0, 1.0];
+    }
+    let dpdu = [0, 1, 2].map(|k| (e1[k] * dv2 - e2[k] * dv1) / det);
+    let dpdv = [0, 1, 2].map(|k| (e2[k] * du1 - e1[k] * du2) / det);
+    // Gram-Schmidt against the normal, unit length
+    let d = dpdu[0] * normal[0] + dpdu[1] * normal[1] + dpdu[2] * normal[2];
+    let t = [0, 1, 2].map(|k| dpdu[k] - normal[k] * d);
+    let len = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
+    if len == 0.0 || !len.is_finite() {
+        return [1.0, 0.0, 0.0, 1.0];
+    }
+    let t = t.map(|x| x / len);
+    let b = [normal[1] * t[2] - normal[2] * t[1], normal[2] * t[0] - normal[0] * t[2], normal[0] * t[1] - normal[1] * t[0]];
+    let up_the_image = -(b[0] * dpdv[0] + b[1] * dpdv[1] + b[2] * dpdv[2]);
+    [t[0], t[1], t[2], if up_the_image >= 0.0 { 1.0 } else { -1.0 }]
 }
 
 impl Material {
@@ -275,6 +304,7 @@ impl Primitive {
         apply(&mut self.positions, &remap, new_count);
         apply(&mut self.normals, &remap, new_count);
         apply(&mut self.uvs, &remap, new_count);
+        apply(&mut self.tangents, &remap, new_count);
         apply(&mut self.colors, &remap, new_count);
         for c in &mut self.custom {
             apply(&mut c.values, &remap, new_count);
@@ -369,6 +399,19 @@ mod tests {
         for (q, uv) in p.positions.iter().zip(&p.uvs) {
             assert_eq!([q[0] / 2.0, q[2] / 2.0], *uv, "attributes moved together");
         }
+    }
+
+    #[test]
+    fn quad_tangents_point_along_u_with_the_bitangent_up_the_image() {
+        // a card facing +Z, u to the right (+X), v down the image (−Y): tangent +X, w = +1
+        let corners = [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+        let uvs = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
+        assert_eq!(quad_tangent(corners, uvs, [0.0, 0.0, 1.0]), [1.0, 0.0, 0.0, 1.0]);
+        // the image mirrored left-right: tangent −X; cross(N, −X) = −Y points down the image, so w = −1
+        let mirrored = [[1.0, 1.0], [0.0, 1.0], [0.0, 0.0], [1.0, 0.0]];
+        assert_eq!(quad_tangent(corners, mirrored, [0.0, 0.0, 1.0]), [-1.0, 0.0, 0.0, -1.0]);
+        // no uv area: a unit default, never NaN
+        assert_eq!(quad_tangent(corners, [[0.5, 0.5]; 4], [0.0, 0.0, 1.0]), [1.0, 0.0, 0.0, 1.0]);
     }
 
     #[test]

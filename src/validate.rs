@@ -407,6 +407,9 @@ fn read_primitive(
     if let Some((_, v)) = read(issues, "TEXCOORD_0", prim.get(&Semantic::TexCoords(0)), &[2]) {
         p.uvs = v.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
     }
+    if let Some((_, v)) = read(issues, "TANGENT", prim.get(&Semantic::Tangents), &[4]) {
+        p.tangents = v.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+    }
     if let Some((d, v)) = read(issues, "COLOR_0", prim.get(&Semantic::Colors(0)), &[3, 4]) {
         p.colors = v.chunks_exact(d).map(|c| [c[0], c[1], c[2], if d == 4 { c[3] } else { 1.0 }]).collect();
     }
@@ -430,7 +433,7 @@ fn read_primitive(
         None => p.indices = (0..p.positions.len() as u32).collect(),
     }
     let custom = p.custom.iter().map(|c| (c.name.as_str(), c.values.len()));
-    for (name, len) in [("NORMAL", p.normals.len()), ("TEXCOORD_0", p.uvs.len()), ("COLOR_0", p.colors.len())].into_iter().chain(custom) {
+    for (name, len) in [("NORMAL", p.normals.len()), ("TEXCOORD_0", p.uvs.len()), ("TANGENT", p.tangents.len()), ("COLOR_0", p.colors.len())].into_iter().chain(custom) {
         if len != 0 && len != p.positions.len() {
             issues.push(issue(Severity::Error, loc, format!("{name} has {len} elements for {} positions", p.positions.len())));
         }

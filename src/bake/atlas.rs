@@ -19,6 +19,36 @@ use crate::bake::image::Image;
 /// Alpha below which a mip texel counts as empty when re-dilating: it encodes as 0 in 8 bits.
 pub const MIP_DILATE_ALPHA_MIN: f32 = 0.5 / 255.0;
 
+/// A normal-map texel of a surface facing the viewer: (0, 0, 1) encoded, alpha 0 (nothing drawn).
+pub const FLAT_NORMAL: [f32; 4] = [0.5, 0.5, 1.0, 0.0];
+
+/// The blitted normal views made a normal map: each drawn texel's (supersample-averaged) normal
+/// renormalised, the gutters and empty texels given their nearest drawn texel's normal (as the
+/// colour atlas is dilated, so filtering at a card's edge reads no foreign normal), alpha 1 (a
+/// normal map's alpha means nothing in glTF; the colour atlas' alpha cuts the card out).
+pub fn finish_normal_atlas(mut img: Image) -> Image {
+    let mut drawn = false;
+    for p in &mut img.pixels {
+        if p[3] >= 0.5 {
+            // the resolve averaged the supersamples' normals (weighted by coverage): unit length again
+            let n = [0, 1, 2].map(|k| p[k].clamp(0.0, 1.0) * 2.0 - 1.0);
+            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let n = if len > 1e-6 { n.map(|v| v / len) } else { [0.0, 0.0, 1.0] };
+            *p = [n[0] * 0.5 + 0.5, n[1] * 0.5 + 0.5, n[2] * 0.5 + 0.5, p[3]];
+            drawn = true;
+        }
+    }
+    // every other texel takes its nearest drawn texel's normal (alpha is left as it was)
+    dilate(&mut img, 0.5);
+    for p in &mut img.pixels {
+        if !drawn {
+            *p = FLAT_NORMAL;
+        }
+        p[3] = 1.0;
+    }
+    img
+}
+
 /// Rows of no seed in [`dilate`]'s column pass.
 const NO_SEED: u32 = u32::MAX;
 

@@ -30,6 +30,14 @@ pub enum Shading {
     CardNormals { right: [f32; 3], up: [f32; 3], toward: [f32; 3] },
 }
 
+impl Shading {
+    /// [`Shading::CardNormals`] for a card seen through `view`: its right, its up, towards the viewer.
+    pub fn card_normals(view: &crate::bake::raster::OrthoView) -> Shading {
+        let f = |v: [f64; 3]| v.map(|x| x as f32);
+        Shading::CardNormals { right: f(view.right), up: f(view.up), toward: f(view.forward.map(|x| -x)) }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderOptions {
     /// Multiply by COLOR_0 (vertex-coloured models: flowers, snow). Off by default: textured plants

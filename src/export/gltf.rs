@@ -224,6 +224,10 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
                 let a = float_accessor(&mut root, &mut bin, &p.uvs, Some(ARRAY_BUFFER));
                 attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), a);
             }
+            if !p.tangents.is_empty() {
+                let a = float_accessor(&mut root, &mut bin, &p.tangents, Some(ARRAY_BUFFER));
+                attributes.insert(Valid(json::mesh::Semantic::Tangents), a);
+            }
             if !p.colors.is_empty() {
                 let a = float_accessor(&mut root, &mut bin, &p.colors, Some(ARRAY_BUFFER));
                 attributes.insert(Valid(json::mesh::Semantic::Colors(0)), a);

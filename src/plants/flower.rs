@@ -4,7 +4,7 @@
 
 use serde::Serialize;
 
-use crate::bake::atlas::{dilate, mip_chain, resolve_supersampled, MipLevel};
+use crate::bake::atlas::{dilate, finish_normal_atlas, mip_chain, resolve_supersampled, MipLevel, FLAT_NORMAL};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
@@ -189,6 +189,8 @@ pub struct FlowerCell {
 pub struct FlowerAsset {
     pub scene: Scene,
     pub atlas: Vec<MipLevel>,
+    /// The atlas' normals (glTF tangent-space normal map), the cards' normalTexture.
+    pub normal_atlas: Image,
     /// Each variant's atlas cell and the part of it its cards show.
     pub cells: Vec<FlowerCell>,
     pub report: FlowerReport,
@@ -218,6 +220,7 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
     let ppm = (cell_w as f64 / card_w as f64).min(cell_h as f64 / card_h as f64);
     let (window_w, window_h) = (cell_w as f64 / ppm, cell_h as f64 / ppm);
     let mut atlas = Image { width: atlas_w, height: atlas_h, pixels: vec![[0.0; 4]; (atlas_w * atlas_h) as usize] };
+    let mut normal_atlas = Image { width: atlas_w, height: atlas_h, pixels: vec![FLAT_NORMAL; (atlas_w * atlas_h) as usize] };
     let materials = [Material { name: "flower_model".into(), double_sided: true, ..Material::default() }];
     let opts = RenderOptions { use_vertex_colors: true, shading: Shading::Unlit, ..RenderOptions::default() };
     let mut model_triangles = 0;
@@ -244,6 +247,11 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
         // resolved from BAKE_SUPERSAMPLE× (anti-aliased alpha, which the coverage-keeping mips need)
         let (x, y) = (v as u32 * (cell_w + 2 * g) + g, g);
         atlas.blit(&resolve_supersampled(&Image::from_canvas(&canvas), ss), x, y);
+        // the same view's normals in the card's frame: the lit cards' normal atlas
+        let mut canvas = cam.canvas([0.0; 4])?;
+        let normal_opts = RenderOptions { use_vertex_colors: false, shading: Shading::card_normals(&view), ..RenderOptions::default() };
+        render_mesh(&mut canvas, &cam, &IDENTITY, &mesh, &materials, &[], &normal_opts);
+        normal_atlas.blit(&resolve_supersampled(&Image::from_canvas(&canvas), ss), x, y);
         // the card's rectangle inside the cell: centred, bottom-aligned
         let (shown_w, shown_h) = (card_w as f64 * ppm, card_h as f64 * ppm);
         let (aw, ah) = (atlas_w as f64, atlas_h as f64);
@@ -259,17 +267,20 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
     dilate(&mut atlas, s.alpha_cutoff);
     let chain = mip_chain(&atlas, s.alpha_cutoff);
     let png = chain[0].image.encode_png().map_err(|e| RasterError::Encode(e.to_string()))?;
+    let normal_atlas = finish_normal_atlas(normal_atlas);
+    let normal_png = normal_atlas.encode_png().map_err(|e| RasterError::Encode(e.to_string()))?;
     let mut scene = Scene {
         name: name.into(),
         materials: vec![Material {
             name: "flower".into(),
             base_color_texture: Some(0),
+            normal_texture: Some(1),
             roughness: 0.8,
             alpha_mode: AlphaMode::Mask { cutoff: s.alpha_cutoff },
             double_sided: true,
             ..Material::default()
         }],
-        textures: vec![Texture { name: format!("{name}_atlas"), png }],
+        textures: vec![Texture { name: format!("{name}_atlas"), png }, Texture { name: format!("{name}_atlas_normal"), png: normal_png }],
         ..Scene::default()
     };
     let mut per_flower = 0;
@@ -291,7 +302,7 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
         atlas_coverage: chain.iter().map(|m| m.coverage).collect(),
         seconds: started.elapsed().as_secs_f64(),
     };
-    Ok(FlowerAsset { scene, atlas: chain, cells, report })
+    Ok(FlowerAsset { scene, atlas: chain, normal_atlas, cells, report })
 }
 
 /// Two crossed vertical cards `width` × `height` showing `rect` ([u0, v0, u1, v1], v down).
@@ -304,10 +315,13 @@ fn crossed_cards(width: f32, height: f32, rect: [f32; 4]) -> Primitive {
         ([[0.0, 0.0, h], [0.0, 0.0, -h], [0.0, height, -h], [0.0, height, h]], [1.0, 0.0, 0.0]),
     ] {
         let base = p.positions.len() as u32;
-        for (k, c) in corners.iter().enumerate() {
+        let uvs: [[f32; 2]; 4] = std::array::from_fn(|k| [if k == 1 || k == 2 { u1 } else { u0 }, if k >= 2 { v0 } else { v1 }]);
+        let tangent = crate::mesh::quad_tangent(corners, uvs, normal);
+        for (c, uv) in corners.iter().zip(uvs) {
             p.positions.push(*c);
             p.normals.push(normal);
-            p.uvs.push([if k == 1 || k == 2 { u1 } else { u0 }, if k >= 2 { v0 } else { v1 }]);
+            p.uvs.push(uv);
+            p.tangents.push(tangent);
         }
         p.indices.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
     }

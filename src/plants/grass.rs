@@ -469,10 +469,12 @@ fn push_card(p: &mut Primitive, settings: &GrassSettings, corners: [[f32; 3]; 4]
         column: 0,
         rank: 0.0,
     };
+    let tangent = crate::mesh::quad_tangent(corners, uvs, normal);
     for k in 0..4 {
         p.positions.push(corners[k]);
         p.normals.push(normal);
         p.uvs.push(uvs[k]);
+        p.tangents.push(tangent);
         push_wind(p, &card, corners[k][1] / settings.max_height_m());
     }
     p.indices.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);

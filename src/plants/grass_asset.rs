@@ -8,7 +8,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::bake::atlas::{dilate, mip_chain, mip_figures, resolve_supersampled, MipFigures, MipLevel};
+use crate::bake::atlas::{dilate, finish_normal_atlas, mip_chain, mip_figures, resolve_supersampled, MipFigures, MipLevel, FLAT_NORMAL};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
@@ -119,6 +119,8 @@ pub struct GrassAsset {
     pub far: Scene,
     pub atlas: Vec<MipLevel>,
     pub density_atlas: Image,
+    /// The atlas' normals (glTF tangent-space normal map), the card levels' normalTexture.
+    pub normal_atlas: Image,
     pub blade: Vec<MipLevel>,
     pub cells: Vec<AtlasCell>,
     pub report: GrassReport,
@@ -152,8 +154,9 @@ fn blade_material(settings: &GrassSettings, texture: usize) -> Material {
     }
 }
 
+/// The card levels' material: the atlas, lit through its normal atlas (`texture + 1`).
 fn atlas_material(settings: &GrassSettings, texture: usize) -> Material {
-    Material { name: "grass_atlas".into(), ..blade_material(settings, texture) }
+    Material { name: "grass_atlas".into(), normal_texture: Some(texture + 1), ..blade_material(settings, texture) }
 }
 
 /// Object → world matrix of a clump turned by `quarter` quarter turns about +Y and moved to (x, z).
@@ -239,8 +242,8 @@ fn clump_name(name: &str, c: &Clump) -> String {
 
 /// A scene holding one node per clump (laid out on a grid 1.5 clump sizes apart, so a viewer shows
 /// them side by side; each mesh has its origin at the clump centre), one material, one texture.
-fn clump_scene(name: &str, clumps: &[Clump], meshes: Vec<Mesh>, material: Material, texture: Texture, spacing: f32) -> Scene {
-    let mut scene = Scene { name: name.into(), materials: vec![material], textures: vec![texture], ..Scene::default() };
+fn clump_scene(name: &str, clumps: &[Clump], meshes: Vec<Mesh>, material: Material, textures: Vec<Texture>, spacing: f32) -> Scene {
+    let mut scene = Scene { name: name.into(), materials: vec![material], textures, ..Scene::default() };
     for (c, mesh) in clumps.iter().zip(meshes) {
         let node = scene.add_mesh_node(mesh);
         let n = &mut scene.nodes[node];
@@ -329,7 +332,7 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
     // every clump view (4 slices + top), drawn in parallel and blitted in order: the same bytes at
     // any thread count
     let views: Vec<(usize, usize)> = (0..clumps.len()).flat_map(|ci| (0..5).map(move |k| (ci, k))).collect();
-    let rendered: Vec<Result<(Image, Image, u64), RasterError>> = views
+    let rendered: Vec<Result<(Image, Image, Image, u64), RasterError>> = views
         .par_iter()
         .map(|&(ci, k)| {
             let c = &clumps[ci];
@@ -342,17 +345,21 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
             } else {
                 (top_view(s, cell.width), lod0[ci].clone(), rank_colored(&lod0[ci], c, |_| true))
             };
-            let (colour, f) = render(view, &[(IDENTITY, &lod_mesh(String::new(), prim))], &blade_materials, &textures, &opts)?;
+            let (colour, f) = render(view, &[(IDENTITY, &lod_mesh(String::new(), prim.clone()))], &blade_materials, &textures, &opts)?;
             let (rank, _) = render(view, &[(IDENTITY, &lod_mesh(String::new(), ranked))], &rank_material, &[], &rank_opts)?;
-            Ok((colour, rank, f))
+            let normal_opts = RenderOptions { shading: Shading::card_normals(&view), ..unlit() };
+            let (normals, _) = render(view, &[(IDENTITY, &lod_mesh(String::new(), prim))], &blade_materials, &textures, &normal_opts)?;
+            Ok((colour, rank, normals, f))
         })
         .collect();
+    let mut normal_atlas = Image { width: atlas_w, height: atlas_h, pixels: vec![FLAT_NORMAL; (atlas_w * atlas_h) as usize] };
     for (&(ci, k), r) in views.iter().zip(rendered) {
-        let (colour, rank, f) = r?;
+        let (colour, rank, normals, f) = r?;
         let cell = cells[ci * 5 + k];
         fragments += f;
         atlas.blit(&colour, cell.x, cell.y);
         density.blit(&rank, cell.x, cell.y);
+        normal_atlas.blit(&normals, cell.x, cell.y);
     }
     let far_cell = *cells.last().expect("the far-field cell is always packed");
     let densest = s.density_levels - 1;
@@ -360,9 +367,13 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
         .into_iter()
         .map(|(variant, quarter, [x, z])| (placed(quarter, x, z), &lod0_meshes[densest * s.variants + variant]))
         .collect();
-    let (img, f) = render(far_view(s, far_cell.width, far_cell.height), &block, &blade_materials, &textures, &opts)?;
+    let far_v = far_view(s, far_cell.width, far_cell.height);
+    let (img, f) = render(far_v, &block, &blade_materials, &textures, &opts)?;
     fragments += f;
     atlas.blit(&img, far_cell.x, far_cell.y);
+    let (img, _) = render(far_v, &block, &blade_materials, &textures, &RenderOptions { shading: Shading::card_normals(&far_v), ..unlit() })?;
+    normal_atlas.blit(&img, far_cell.x, far_cell.y);
+    let normal_atlas = finish_normal_atlas(normal_atlas);
 
     // density atlas: colour of the atlas, alpha = 1 − rank where the atlas is opaque, else 0
     let seconds_render = bake_started.elapsed().as_secs_f64();
@@ -384,6 +395,7 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
     let spacing = 1.5 * s.clump_size_m;
     let blade_tex = Texture { name: format!("{name}_blade"), png: png(&blade_chain[0].image)? };
     let atlas_tex = Texture { name: format!("{name}_atlas"), png: png(&atlas_chain[0].image)? };
+    let normal_tex = Texture { name: format!("{name}_atlas_normal"), png: png(&normal_atlas)? };
     let slice_rects = |ci: usize| -> [UvRect; 4] { std::array::from_fn(|k| cells[ci * 5 + k].uv) };
     let lod2: Vec<Primitive> = clumps.iter().enumerate().map(|(ci, c)| grass::lod2(s, c, &slice_rects(ci), cells[ci * 5 + 4].uv, 0)).collect();
     let lod3: Vec<Primitive> = clumps.iter().enumerate().map(|(ci, c)| grass::lod3(s, c, cells[ci * 5 + 4].uv, 0)).collect();
@@ -391,12 +403,12 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
     let mut lod_scenes = Vec::with_capacity(GRASS_LODS);
     for (n, prims) in levels.iter().enumerate() {
         let meshes = clumps.iter().zip(prims).map(|(c, p)| lod_mesh(format!("{}_LOD{n}", clump_name(name, c)), p.clone())).collect();
-        let (material, texture) = if n < 2 { (blade_material(s, 0), blade_tex.clone()) } else { (atlas_material(s, 0), atlas_tex.clone()) };
-        lod_scenes.push(clump_scene(&format!("{name}_LOD{n}"), &clumps, meshes, material, texture, spacing));
+        let (material, textures) = if n < 2 { (blade_material(s, 0), vec![blade_tex.clone()]) } else { (atlas_material(s, 0), vec![atlas_tex.clone(), normal_tex.clone()]) };
+        lod_scenes.push(clump_scene(&format!("{name}_LOD{n}"), &clumps, meshes, material, textures, spacing));
     }
     let far_prim = grass::far_field(s, far_cell.uv, 0);
     let far_triangles = far_prim.triangle_count();
-    let far = clump_scene(&format!("{name}_far"), &clumps[..1], vec![lod_mesh(format!("{name}_far"), far_prim)], atlas_material(s, 0), atlas_tex.clone(), 0.0);
+    let far = clump_scene(&format!("{name}_far"), &clumps[..1], vec![lod_mesh(format!("{name}_far"), far_prim)], atlas_material(s, 0), vec![atlas_tex.clone(), normal_tex.clone()], 0.0);
 
     // analyzer: the densest first variant against its LoD0, from 8 azimuths × 3 elevations
     let analyze_started = Instant::now();
@@ -405,7 +417,7 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
     let reference_mesh = lod_mesh(String::new(), levels[0][probe].clone());
     let reference = Renderable { mesh: &reference_mesh, materials: &blade_materials, textures: &textures };
     let atlas_materials = [atlas_material(s, 0)];
-    let atlas_textures = [atlas_level0];
+    let atlas_textures = [atlas_level0, normal_atlas.clone()];
     let view = screen_view();
     let radius = bounding_radius(&levels[0][probe]);
     let mut lods = Vec::with_capacity(GRASS_LODS);
@@ -490,6 +502,7 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
         far,
         atlas: atlas_chain,
         density_atlas: density,
+        normal_atlas,
         blade: blade_chain,
         cells,
         report,
@@ -518,11 +531,12 @@ fn bounding_radius(p: &Primitive) -> f64 {
 fn lod_chain_scene(name: &str, clumps: &[Clump], lod_scenes: &[Scene], lods: &[LodFigures], spacing: f32) -> Scene {
     let mut scene = Scene { name: name.into(), ..Scene::default() };
     // materials and textures: the blade ones (LoD0/1) then the atlas ones (LoD2/3)
-    scene.textures = vec![lod_scenes[0].textures[0].clone(), lod_scenes[2].textures[0].clone()];
+    scene.textures = vec![lod_scenes[0].textures[0].clone(), lod_scenes[2].textures[0].clone(), lod_scenes[2].textures[1].clone()];
     let mut blade = lod_scenes[0].materials[0].clone();
     blade.base_color_texture = Some(0);
     let mut atlas = lod_scenes[2].materials[0].clone();
     atlas.base_color_texture = Some(1);
+    atlas.normal_texture = Some(2);
     scene.materials = vec![blade, atlas];
     let mut coverage: Vec<f32> = lods.iter().skip(1).map(|l| l.screen_coverage as f32).collect();
     coverage.push(0.0);

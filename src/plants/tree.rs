@@ -207,6 +207,7 @@ impl TreeMesh {
                 positions: p.positions[..v_end].to_vec(),
                 normals: p.normals[..cut(p.normals.len())].to_vec(),
                 uvs: p.uvs[..cut(p.uvs.len())].to_vec(),
+                tangents: p.tangents[..cut(p.tangents.len())].to_vec(),
                 colors: p.colors[..cut(p.colors.len())].to_vec(),
                 indices: p.indices[..i_end].to_vec(),
                 material: p.material,

@@ -21,7 +21,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::json;
 
-use crate::bake::atlas::{dilate, mip_chain, mip_figures, resolve_supersampled, write_mip_pngs, MipFigures, MipLevel};
+use crate::bake::atlas::{dilate, finish_normal_atlas, mip_chain, mip_figures, resolve_supersampled, write_mip_pngs, MipFigures, MipLevel, FLAT_NORMAL};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
@@ -218,10 +218,13 @@ impl CardFrame {
         let h = self.side_m / 2.0;
         let corner = |r: f64, u: f64| (self.centre + right * (r * h) + DVec3::Y * (u * h)).as_vec3().to_array();
         let n = toward.as_vec3().to_array();
+        let positions = [corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
+        let uvs = [[uv[0], uv[3]], [uv[2], uv[3]], [uv[2], uv[1]], [uv[0], uv[1]]];
         Primitive {
-            positions: vec![corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)],
+            positions: positions.to_vec(),
             normals: vec![n; 4],
-            uvs: vec![[uv[0], uv[3]], [uv[2], uv[3]], [uv[2], uv[1]], [uv[0], uv[1]]],
+            uvs: uvs.to_vec(),
+            tangents: vec![crate::mesh::quad_tangent(positions, uvs, n); 4],
             indices: vec![0, 1, 2, 0, 2, 3],
             ..Primitive::default()
         }
@@ -235,36 +238,6 @@ fn bake(frame: &CardFrame, px: u32, mesh: &Mesh, materials: &[Material], texture
     let opts = RenderOptions { use_vertex_colors: false, shading, parallel: false };
     let fragments = render_mesh(&mut canvas, &cam, &IDENTITY, mesh, materials, textures, &opts).fragments;
     Ok((resolve_supersampled(&Image::from_canvas_owned(canvas), BAKE_SUPERSAMPLE), fragments))
-}
-
-/// A normal-map texel of a surface facing the viewer: (0, 0, 1) encoded, alpha 0 (nothing drawn).
-const FLAT_NORMAL: [f32; 4] = [0.5, 0.5, 1.0, 0.0];
-
-/// The blitted normal views made a normal map: each drawn texel's (supersample-averaged) normal
-/// renormalised, the gutters and empty texels given their nearest drawn texel's normal (as the
-/// colour atlas is dilated, so filtering at a card's edge reads no foreign normal), alpha 1 (a
-/// normal map's alpha means nothing in glTF; the colour atlas' alpha cuts the card out).
-fn finish_normal_atlas(mut img: Image) -> Image {
-    let mut drawn = false;
-    for p in &mut img.pixels {
-        if p[3] >= 0.5 {
-            // the resolve averaged the supersamples' normals (weighted by coverage): unit length again
-            let n = [0, 1, 2].map(|k| p[k].clamp(0.0, 1.0) * 2.0 - 1.0);
-            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            let n = if len > 1e-6 { n.map(|v| v / len) } else { [0.0, 0.0, 1.0] };
-            *p = [n[0] * 0.5 + 0.5, n[1] * 0.5 + 0.5, n[2] * 0.5 + 0.5, p[3]];
-            drawn = true;
-        }
-    }
-    // every other texel takes its nearest drawn texel's normal (alpha is left as it was)
-    dilate(&mut img, 0.5);
-    for p in &mut img.pixels {
-        if !drawn {
-            *p = FLAT_NORMAL;
-        }
-        p[3] = 1.0;
-    }
-    img
 }
 
 /// `a` with `b`'s vertices and triangles after its own (positions, normals, uvs and the custom
@@ -283,6 +256,7 @@ fn appended(mut a: Primitive, b: &Primitive) -> Primitive {
     a.positions.extend_from_slice(&b.positions);
     a.normals.extend_from_slice(&b.normals);
     a.uvs.extend_from_slice(&b.uvs);
+    a.tangents.extend_from_slice(&b.tangents);
     a.indices.extend(b.indices.iter().map(|i| i + base));
     a
 }
@@ -350,6 +324,9 @@ fn subset(p: &Primitive, keep: impl Fn(usize) -> bool) -> Primitive {
                 }
                 if let Some(uv) = p.uvs.get(i) {
                     out.uvs.push(*uv);
+                }
+                if let Some(t) = p.tangents.get(i) {
+                    out.tangents.push(*t);
                 }
                 if let Some(c) = p.colors.get(i) {
                     out.colors.push(*c);
@@ -857,9 +834,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
     let normals: Vec<Result<(Image, u64), RasterError>> = jobs
         .par_iter()
         .map(|(cell, frame, mesh)| {
-            let (toward, right) = frame.axes();
-            let shading = Shading::CardNormals { right: right.as_vec3().to_array(), up: [0.0, 1.0, 0.0], toward: toward.as_vec3().to_array() };
-            bake(frame, cell.inner_px(), mesh, &materials0, &reference_images, shading)
+            bake(frame, cell.inner_px(), mesh, &materials0, &reference_images, Shading::card_normals(&frame.ortho(1)))
         })
         .collect();
     let mut normal_atlas = Image { width: px, height: px, pixels: vec![FLAT_NORMAL; (px as usize) * (px as usize)] };

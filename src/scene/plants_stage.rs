@@ -87,8 +87,9 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// `_WIND_BRANCH` on every plant, none in COLOR_0. 5: a tree species without an L-system grows a
 /// built-in tree (crate::lsystem::library), not a marker. 6: chain files keep each finer level's
 /// data in a buffer of its own (export::streaming), so Babylon streams them in order. 7: tree card
-/// levels lit through a baked normal atlas (atlases/<stem>_normal.png, normalTexture).
-pub const PLANTS_ALGORITHM_VERSION: u32 = 7;
+/// levels lit through a baked normal atlas (atlases/<stem>_normal.png, normalTexture). 8: grass and
+/// flower cards too; every card with a normal map carries TANGENT.
+pub const PLANTS_ALGORITHM_VERSION: u32 = 8;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).
@@ -161,12 +162,18 @@ fn write_chain(chain: &TreeLods, dir: &Path, stem: &str, files: &mut Vec<PathBuf
         write_mips(dir, stem, &chain.atlas, files)?;
     }
     if let Some(normals) = &chain.normal_atlas {
-        let png = normals.encode_png().map_err(|e| fail(format!("{stem}: {e}")))?;
-        let rel = PathBuf::from("atlases").join(format!("{stem}_normal.png"));
-        export::write_atomic(&dir.join(&rel), &png).map_err(|e| fail(e.to_string()))?;
-        files.push(rel);
+        write_normal_atlas(dir, stem, normals, files)?;
     }
     Ok(file)
+}
+
+/// `atlases/<stem>_normal.png`: a card atlas' normal map (level 0; engines make its mips).
+fn write_normal_atlas(dir: &Path, stem: &str, normals: &crate::bake::image::Image, files: &mut Vec<PathBuf>) -> Result<(), StageError> {
+    let png = normals.encode_png().map_err(|e| fail(format!("{stem}: {e}")))?;
+    let rel = PathBuf::from("atlases").join(format!("{stem}_normal.png"));
+    export::write_atomic(&dir.join(&rel), &png).map_err(|e| fail(e.to_string()))?;
+    files.push(rel);
+    Ok(())
 }
 
 /// What the plants stage made of a mesh species: the model as loaded and its chain's figures.
@@ -273,12 +280,14 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
                 let png = asset.density_atlas.encode_png().map_err(|e| fail(e.to_string()))?;
                 export::write_atomic(&scene_dir.join(&density), &png).map_err(|e| fail(e.to_string()))?;
                 files.push(density);
+                write_normal_atlas(scene_dir, name, &asset.normal_atlas, &mut files)?;
                 (Some(asset.report), None)
             }
             PlantLook::Flower(f) => {
                 let asset = build_flower(name, f).map_err(|e| fail(format!("species `{name}`: {e}")))?;
                 write(&asset.scene, scene_dir, PathBuf::from("species").join(format!("{name}.glb")), &mut files)?;
                 write_mips(scene_dir, name, &asset.atlas, &mut files)?;
+                write_normal_atlas(scene_dir, name, &asset.normal_atlas, &mut files)?;
                 (None, Some(asset.report))
             }
         };

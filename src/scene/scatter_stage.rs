@@ -58,8 +58,8 @@ impl ScatterStageReport {
 /// Version of what the scatter stage writes for given inputs: part of its cache key (see
 /// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: scene.glb holds no unused mesh; 3: its terrain is textured; 4:
 /// its plants carry wind in `_WIND`, not COLOR_0; 5: a tree without an L-system instances a
-/// built-in tree.
-pub const SCATTER_ALGORITHM_VERSION: u32 = 5;
+/// built-in tree; 6: flower cards lit by a normal atlas (with TANGENT).
+pub const SCATTER_ALGORITHM_VERSION: u32 = 6;
 
 /// Cache key: the terrain's key, the species and scatter settings, the scene seed, the maps' bytes.
 pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageError> {

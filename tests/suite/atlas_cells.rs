@@ -139,6 +139,9 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                     }
                     check_plant_scene(&format!("{what} chain"), &asset.chain, Expect::Sway);
                     check_plant_scene(&format!("{what} far field"), &asset.far, Expect::Sway);
+                    // lit cards: LoD2, LoD3, the far field and the chain's atlas material
+                    let lit: usize = [&asset.lod_scenes[2], &asset.lod_scenes[3], &asset.far, &asset.chain].iter().map(|sc| check_normal_maps(&what, sc)).sum();
+                    assert!(lit >= 4, "{what}: {lit} lit card materials");
                     kinds.insert("grass");
                 }
                 PlantLook::Flower(f) => {
@@ -146,6 +149,7 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                     let cells: Vec<[f32; 4]> = asset.cells.iter().map(|c| c.uv).collect();
                     assert!(check_cards(&what, &asset.scene, &cells) > 0, "{what}: no atlas cards checked");
                     assert!(check_plant_scene(&what, &asset.scene, Expect::Sway) > 0);
+                    assert_eq!(check_normal_maps(&what, &asset.scene), 1, "{what}: the flower cards are lit");
                     for (v, c) in asset.cells.iter().enumerate() {
                         // the card's bottom (y = 0) samples the cell's bottom row: the stem meets the ground
                         assert!((c.card_uv[3] - c.uv[3]).abs() < EPS, "{what} v{v}: card bottom {} vs cell bottom {}", c.card_uv[3], c.uv[3]);
