@@ -87,33 +87,24 @@ else
   echo "venv: ready in $(elapsed "$t")"
 fi
 
-# npm: gltf-validator from the committed lock file; `npm ci` only when the lock changed.
-npm_stamp="$ROOT/scripts/node_modules/.verdant-check-lock"
-lock_sum="$(sha256sum "$ROOT/scripts/package-lock.json" | cut -d' ' -f1)"
-if [ -f "$npm_stamp" ] && [ "$(cat "$npm_stamp")" = "$lock_sum" ] \
-   && [ -f "$ROOT/scripts/node_modules/gltf-validator/package.json" ]; then
-  echo "npm: gltf-validator up to date (scripts/node_modules)"
-else
-  t=$SECONDS
-  echo "npm: npm ci in scripts/"
-  (cd "$ROOT/scripts" && npm ci --no-audit --no-fund --loglevel=error)
-  echo "$lock_sum" > "$npm_stamp"
-  echo "npm: ready in $(elapsed "$t")"
-fi
-
-# npm: Babylon.js + puppeteer-core for the engine check (scripts/engines, its own lock file).
-engines_stamp="$ROOT/scripts/engines/node_modules/.verdant-check-lock"
-engines_sum="$(sha256sum "$ROOT/scripts/engines/package-lock.json" | cut -d' ' -f1)"
-if [ -f "$engines_stamp" ] && [ "$(cat "$engines_stamp")" = "$engines_sum" ] \
-   && [ -f "$ROOT/scripts/engines/node_modules/babylonjs/package.json" ]; then
-  echo "npm: Babylon.js up to date (scripts/engines/node_modules)"
-else
-  t=$SECONDS
-  echo "npm: npm ci in scripts/engines/"
-  (cd "$ROOT/scripts/engines" && npm ci --no-audit --no-fund --loglevel=error)
-  echo "$engines_sum" > "$engines_stamp"
-  echo "npm: Babylon.js ready in $(elapsed "$t")"
-fi
+# npm_ci DIR PACKAGE LABEL: `npm ci` in DIR from its committed lock file, only when the lock changed
+# (a stamp file in DIR/node_modules) or PACKAGE is missing.
+npm_ci() {
+  local dir="$ROOT/$1" stamp="$ROOT/$1/node_modules/.verdant-check-lock" sum t
+  sum="$(sha256sum "$dir/package-lock.json" | cut -d' ' -f1)"
+  if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$sum" ] && [ -f "$dir/node_modules/$2/package.json" ]; then
+    echo "npm: $3 up to date ($1/node_modules)"
+  else
+    t=$SECONDS
+    echo "npm: npm ci in $1/"
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
+    echo "$sum" > "$stamp"
+    echo "npm: $3 ready in $(elapsed "$t")"
+  fi
+}
+# the Khronos glTF Validator; Babylon.js + puppeteer-core for the engine check (step 5e)
+npm_ci scripts gltf-validator gltf-validator
+npm_ci scripts/engines babylonjs Babylon.js
 
 # Blender as a Python module (PyPI bpy) for the import checks; its wheel needs CPython 3.11, so it gets
 # a venv of its own (.venv-blender), made with a python3.11 from PATH or pyenv.
@@ -384,8 +375,8 @@ for scene in "${SCENES[@]}"; do
   fi
 done
 
-section "5e. Babylon.js (headless Chromium, default loader options) loads every species file without an error or warning, MSFT_lod levels in order; grass is seen green"
-# thumbnails of what Babylon drew go to out/check/babylon/
+section "5e. Babylon.js (default loader options) and three.js (GLTFLoader) in headless Chromium load every species file without an error or warning, show LoD0 (Babylon: MSFT_lod levels in order), and see the grass green"
+# thumbnails of what each engine drew go to out/check/engines/
 green_files=()
 other_files=()
 for f in "${FILES[@]}"; do
@@ -399,15 +390,17 @@ for f in "${FILES[@]}"; do
   esac
 done
 if ((${#green_files[@]})) && ((${#other_files[@]})); then
-  for group in green other; do
-    if [ "$group" = green ]; then args=(--green "${green_files[@]}"); n=${#green_files[@]}; else args=("${other_files[@]}"); n=${#other_files[@]}; fi
-    log="$OUT/check_babylon_$group.log"
-    # Babylon's defaults (no range requests): what a user gets loading the file as it is
-    node scripts/engines/check_babylon.mjs --no-range-requests --thumbs "$OUT/babylon" "${args[@]}" > "$log" 2>&1 || true
-    grep -v '^Babylon.js' "$log" | sed 's|'"$OUT"'/||' || true
-    oks=$(grep -c '^ok ' "$log" || true)
-    for _ in $(seq 1 "$oks"); do pass; done
-    if [ "$oks" -ne "$n" ]; then fail "Babylon.js: $((n - oks)) of $n $group species files failed (see $log)"; fi
+  for engine in babylon three; do
+    for group in green other; do
+      if [ "$group" = green ]; then args=(--green "${green_files[@]}"); n=${#green_files[@]}; else args=("${other_files[@]}"); n=${#other_files[@]}; fi
+      log="$OUT/check_${engine}_$group.log"
+      # Babylon's defaults (no range requests): what a user gets loading the file as it is
+      node scripts/engines/check_babylon.mjs --engine "$engine" --no-range-requests --thumbs "$OUT/engines" "${args[@]}" > "$log" 2>&1 || true
+      sed 's|'"$OUT"'/||' "$log" || true
+      oks=$(grep -c '^ok ' "$log" || true)
+      for _ in $(seq 1 "$oks"); do pass; done
+      if [ "$oks" -ne "$n" ]; then fail "$engine: $((n - oks)) of $n $group species files failed (see $log)"; fi
+    done
   done
 else
   fail "no grass or other species files to load in Babylon.js"

@@ -1,6 +1,9 @@
-// Loads glb files in Babylon.js (headless Chromium, WebGL through SwiftShader) and checks what a
-// person would see: no loader error or warning, no page error, and for MSFT_lod chains every level
-// arriving in order with exactly the default scene's LoD0 meshes enabled at the end.
+// Loads glb files in Babylon.js or three.js (headless Chromium, WebGL through SwiftShader) and checks
+// what a person would see: no loader error or warning, no page error, and for MSFT_lod chains, in
+// Babylon every level arriving in order with exactly the default scene's LoD0 meshes enabled at the
+// end, in three.js (which ignores MSFT_lod) only LoD0 shown.
+//
+//   --engine babylon (default) | three
 //
 //   node scripts/engines/check_babylon.mjs [--thumbs DIR] [--no-range-requests] [--green] FILE.glb...
 //
@@ -23,11 +26,13 @@ const args = process.argv.slice(2);
 let thumbs = null;
 let rangeRequests = true;
 let expectGreen = false;
+let engine = 'babylon';
 const files = [];
 for (let i = 0; i < args.length; i++) {
   if (args[i] === '--thumbs') thumbs = args[++i];
   else if (args[i] === '--no-range-requests') rangeRequests = false;
   else if (args[i] === '--green') expectGreen = true;
+  else if (args[i] === '--engine') engine = args[++i];
   else files.push(path.resolve(args[i]));
 }
 if (!files.length) {
@@ -41,6 +46,7 @@ const server = http.createServer((req, res) => {
   const url = decodeURIComponent(req.url.split('?')[0]);
   let file;
   if (url === '/') file = path.join(here, 'babylon.html');
+  else if (url === '/three.html') file = path.join(here, 'three.html');
   else if (url.startsWith('/node_modules/')) file = path.join(here, url);
   else if (url.startsWith('/files/') && allowed.has(url.slice('/files'.length))) file = url.slice('/files'.length);
   if (!file) { res.writeHead(url === '/favicon.ico' ? 204 : 404); res.end(); return; }
@@ -87,8 +93,14 @@ const browser = await puppeteer.launch({
     '--disable-background-networking', '--disable-component-update', '--disable-sync', '--disable-quic'],
 });
 let failed = 0;
-console.log(`Babylon.js ${JSON.parse(fs.readFileSync(path.join(here, 'node_modules/babylonjs/package.json'))).version}, ` +
-  `MSFT_lod files with range requests ${rangeRequests ? 'on' : 'off (Babylon defaults)'}`);
+if (!['babylon', 'three'].includes(engine)) {
+  console.error(`--engine ${engine}: use babylon or three`);
+  process.exit(2);
+}
+const engineName = engine === 'three' ? 'three.js' : 'Babylon.js';
+const version = (pkg) => JSON.parse(fs.readFileSync(path.join(here, `node_modules/${pkg}/package.json`))).version;
+console.log(engine === 'three' ? `three.js ${version('three')} (GLTFLoader; MSFT_lod is not read: the default scene is shown)`
+  : `Babylon.js ${version('babylonjs')}, MSFT_lod files with range requests ${rangeRequests ? 'on' : 'off (Babylon defaults)'}`);
 for (const file of files) {
   const want = expected(file);
   const page = await browser.newPage();
@@ -98,7 +110,8 @@ for (const file of files) {
     if ((t === 'error' || t === 'warn' || t === 'warning') && !/GL Driver Message/.test(m.text())) pageErrors.push(m.text());
   });
   page.on('pageerror', (e) => pageErrors.push(String(e)));
-  await page.goto(`http://127.0.0.1:${port}/`);
+  await page.goto(`http://127.0.0.1:${port}/${engine === 'three' ? 'three.html' : ''}`);
+  if (engine === 'three') await page.waitForFunction('window.threeReady === true', { timeout: 60000 });
   let r;
   try {
     r = await page.evaluate((url, options) => window.loadGlb(url, options), `/files${file}`,
@@ -110,7 +123,10 @@ for (const file of files) {
   const problems = [];
   if (!r.ok) problems.push(r.error);
   problems.push(...(r.errors ?? []), ...pageErrors);
-  if (r.ok && want.chain) {
+  if (r.ok && want.chain && engine === 'three') {
+    const coarser = r.enabled.filter((n) => /_LOD[1-9]/.test(n));
+    if (coarser.length) problems.push(`levels other than LoD0 shown: ${coarser.join(', ')}`);
+  } else if (r.ok && want.chain) {
     const inOrder = r.lodLevels.length === want.levels && r.lodLevels.every((l, k) => l === k);
     if (!inOrder) problems.push(`MSFT_lod levels arrived as ${JSON.stringify(r.lodLevels)}, expected 0..${want.levels - 1} in order`);
     if (r.enabled.some((n) => !/_LOD0(_primitive\d+)?$/.test(n))) problems.push(`levels other than LoD0 left enabled: ${r.enabled.join(', ')}`);
@@ -122,7 +138,7 @@ for (const file of files) {
   if (thumbs && r.ok) {
     fs.mkdirSync(thumbs, { recursive: true });
     const canvas = await page.$('#c');
-    await canvas.screenshot({ path: path.join(thumbs, `babylon_${path.basename(path.dirname(path.dirname(file)))}_${path.basename(file, '.glb')}.png`) });
+    await canvas.screenshot({ path: path.join(thumbs, `${engine}_${path.basename(path.dirname(path.dirname(file)))}_${path.basename(file, '.glb')}.png`) });
   }
   failed += problems.length > 0;
   const colour = seen ? `, frame ${(100 * seen.covered).toFixed(1)} % covered, mean rgb ${seen.mean.map((v) => v.toFixed(2)).join(' ')}, green ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %` : '';
@@ -132,5 +148,5 @@ for (const file of files) {
 }
 await browser.close();
 server.close();
-console.log(`Babylon.js: ${files.length - failed} of ${files.length} files load without errors`);
+console.log(`${engineName}: ${files.length - failed} of ${files.length} files load without errors`);
 process.exit(failed ? 1 : 0);

@@ -28,7 +28,7 @@ pub enum Stage {
     /// `[snow]` → snow/: flake atlas, emitter.json, particle frame, cover mask, snow layer, and the
     /// terrain with the `_SNOW` weight (skipped without `[snow]`).
     Snow,
-    /// Grass and flower species → their meshes with LoDs (species/) and baked atlases (atlases/).
+    /// Grass, flower, tree and mesh species → their meshes with LoDs (species/) and baked atlases (atlases/).
     Plants,
     /// [[species]] → placements on the terrain: tables and scene.glb with GPU instancing.
     Scatter,
