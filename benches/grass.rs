@@ -26,7 +26,7 @@ fn main() {
     let mut asset = None;
     for _ in 0..runs {
         let (t, c) = (Instant::now(), cpu_seconds());
-        let a = build_grass_with("bench", &settings, None, false).expect("default settings build");
+        let a = build_grass_with("bench", &settings, None, false, &verdant::lod::LodView::default()).expect("default settings build");
         let total = t.elapsed().as_secs_f64();
         if total < best_total {
             best_total = total;
@@ -42,7 +42,7 @@ fn main() {
     let (mut best_analyze, mut analyzed) = (f64::MAX, None);
     for _ in 0..runs.min(3) {
         let t = Instant::now();
-        let a = build_grass_with("bench", &settings, None, true).expect("default settings build");
+        let a = build_grass_with("bench", &settings, None, true, &verdant::lod::LodView::default()).expect("default settings build");
         let total = t.elapsed().as_secs_f64();
         best_analyze = best_analyze.min(a.report.seconds_analyze.min(total));
         analyzed = Some(a);

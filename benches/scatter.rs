@@ -64,6 +64,7 @@ fn species(name: &str, placement: Placement, max_density: f64, min_spacing_m: f6
         exclusions: vec![],
         seed: 0,
         max_instances: 100_000_000,
+        cull_distance_m: None,
         look: verdant::scene::PlantLook::Marker,
     }
 }

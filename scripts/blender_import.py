@@ -13,7 +13,7 @@ Points" modifier over its prototype (hidden). Coordinates follow the importer: g
 Blender +Z up ((x, y, z) → (x, −z, y)).
 
 --check: afterwards, count the instances Blender's evaluated scene holds and compare them with
-manifest.json's placement counts and, for a sample, with the placement tables' positions
+what manifest.json says the first view draws and, for a sample, with the placement tables' rows
 (exit 1 on a mismatch). Prints the seconds and the object and instance counts either way.
 """
 
@@ -241,11 +241,13 @@ def build(scene_dir):
 
 
 def check(scene_dir, per_mesh):
-    """Evaluated instances against manifest.json's counts and the tables' positions; problems."""
+    """Evaluated instances against what manifest.json says the first view draws, and a sample of them
+    against the placement tables' rows at their positions (position and frame); problems."""
     problems = []
     manifest = json.load(open(os.path.join(scene_dir, "manifest.json")))
     species = manifest.get("scatter", {}).get("species", [])
-    want = sum(s["count"] for s in species)
+    view = (manifest.get("view") or {}).get("views", [{}])[0]
+    want = sum(s.get("drawn", 0) for s in view.get("species", []))
     depsgraph = bpy.context.evaluated_depsgraph_get()
     positions, frames = [], []
     for inst in depsgraph.object_instances:
@@ -254,30 +256,35 @@ def check(scene_dir, per_mesh):
             positions.append(tuple(m.translation))
             frames.append([[m[r][c] for c in range(3)] for r in range(3)])
     if len(positions) != want or sum(per_mesh.values()) != want:
-        problems.append(f"{len(positions)} instances evaluated, {sum(per_mesh.values())} points, manifest placements {want}")
-    # a sample of each table: every row's position is an instance's (Blender axes)
-    have = np.array(positions) if positions else np.zeros((0, 3))
+        problems.append(f"{len(positions)} instances evaluated, {sum(per_mesh.values())} points, the first view draws {want}")
+    # every table row, in Blender axes, with its frame
+    rows_p, rows_f = [], []
+    c = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
     for s in species:
         with open(os.path.join(scene_dir, s["table"])) as f:
-            rows = list(csv.DictReader(f))
-        for r in rows[:: max(1, len(rows) // 50)]:
-            p = np.array([float(r["x"]), -float(r["z"]), float(r["y"])])
-            if len(have) == 0 or np.min(np.abs(have - p).max(axis=1)) > 1e-2:
-                problems.append(f"{s['name']}: no instance at the table's ({r['x']}, {r['y']}, {r['z']})")
-                break
-            # and its frame: a model vertex v (glTF) must land at C·(R(q)·S·v + t), C the axis change
-            k = int(np.argmin(np.abs(have - p).max(axis=1)))
-            q = np.array([float(r[c]) for c in ("qx", "qy", "qz", "qw")])
-            sc = np.array([float(r[c]) for c in ("sx", "sy", "sz")])
-            x, y, z, w = q
-            rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-            c = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
-            want_frame = c @ rot @ np.diag(sc) @ c.T
-            if np.abs(np.array(frames[k]) - want_frame).max() > 1e-3:
-                problems.append(f"{s['name']}: the instance at ({r['x']}, {r['y']}, {r['z']}) is turned or scaled unlike the table's")
-                break
+            for r in csv.DictReader(f):
+                rows_p.append((float(r["x"]), -float(r["z"]), float(r["y"])))
+                x, y, z, w = (float(r[k]) for k in ("qx", "qy", "qz", "qw"))
+                sc = np.array([float(r[k]) for k in ("sx", "sy", "sz")])
+                rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+                # a model vertex v (glTF) must land at C·(R(q)·S·v + t), C the axis change
+                rows_f.append(c @ rot @ np.diag(sc) @ c.T)
+    table = np.array(rows_p) if rows_p else np.zeros((0, 3))
+    # a sample of Blender's instances: each stands where a table row is, turned and scaled like it
+    for k in range(0, len(positions), max(1, len(positions) // 200)):
+        p = np.array(positions[k])
+        if len(table) == 0:
+            problems.append("instances but no placement rows")
+            break
+        j = int(np.argmin(np.abs(table - p).max(axis=1)))
+        if np.abs(table[j] - p).max() > 1e-2:
+            problems.append(f"an instance at {tuple(p)} (Blender axes) is at no table row's position")
+            break
+        if np.abs(np.array(frames[k]) - rows_f[j]).max() > 1e-3:
+            problems.append(f"the instance at {tuple(p)} is turned or scaled unlike its table row")
+            break
     return problems
 
 
@@ -297,7 +304,7 @@ def main(argv):
             print(f"FAIL {p}")
         status = 1 if problems else 0
         if not problems:
-            print("ok   every placement is an instance in Blender's evaluated scene")
+            print("ok   every instance the view draws is an instance in Blender's evaluated scene, where its table row says")
     if "--save" in argv:
         out = argv[argv.index("--save") + 1]
         bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(out))

@@ -406,6 +406,22 @@ else
   fail "no grass or other species files to load in Babylon.js"
 fi
 
+section "5f. three.js draws every scene.glb from its first [[view]] with exactly the triangles and draw calls the view stage reported (renderer.info)"
+scene_files=()
+for dir in "$OUT"/build/*/; do
+  [ -f "$dir/scene.glb" ] && scene_files+=("$dir/scene.glb")
+done
+if ((${#scene_files[@]})); then
+  log="$OUT/check_three_views.log"
+  node scripts/engines/check_babylon.mjs --engine three --view --thumbs "$OUT/engines/views" "${scene_files[@]}" > "$log" 2>&1 || true
+  sed 's|'"$OUT"'/||' "$log" || true
+  oks=$(grep -c '^ok ' "$log" || true)
+  for _ in $(seq 1 "$oks"); do pass; done
+  if [ "$oks" -ne "${#scene_files[@]}" ]; then fail "three.js views: $((${#scene_files[@]} - oks)) of ${#scene_files[@]} scenes differ from the report (see $log)"; fi
+else
+  fail "no scene.glb to draw in three.js"
+fi
+
 for f in "${FILES[@]}"; do
   if [ -z "${IS_BUILD[$f]:-}" ]; then continue; fi
   scene="${SCENE_OF[$f]}"

@@ -1007,10 +1007,62 @@ def ray_heights(terrain: trimesh.Trimesh, xz: np.ndarray) -> np.ndarray:
     return out
 
 
+def mix64(z: np.ndarray) -> np.ndarray:
+    """verdant's synth::mix64 (splitmix64's finaliser) on uint64 arrays (numpy wraps like Rust)."""
+    with np.errstate(over="ignore"):
+        z = z + np.uint64(0x9E3779B97F4A7C15)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+def variants_of(x: np.ndarray, z: np.ndarray, n: int) -> np.ndarray:
+    """The variant each row shows: mix64(bits(x) ^ mix64(bits(z))), scaled to n (docs/scene.md)."""
+    h = mix64(np.ascontiguousarray(x, dtype=np.float64).view(np.uint64)
+              ^ mix64(np.ascontiguousarray(z, dtype=np.float64).view(np.uint64)))
+    with np.errstate(over="ignore"):
+        return (((h >> np.uint64(32)) * np.uint64(n)) >> np.uint64(32)).astype(np.int64)
+
+
+def rotate_up(q: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(n, 3): each unit quaternion q (x, y, z, w) applied to (0, up, 0)."""
+    x, y, z, w = (q[:, k] for k in range(4))
+    return np.stack([2 * (x * y - w * z) * up, (1 - 2 * (x * x + z * z)) * up, 2 * (y * z + w * x) * up], 1)
+
+
+def replay_view(rows: np.ndarray, chain: dict, view: dict, cull: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What the first view draws of a species, recomputed from its table rows: per row the variant,
+    the level (-1: culled), the distance, and the distance to the nearest threshold (relative), so
+    rows exactly at a switch may go either way."""
+    n = len(rows)
+    variants = variants_of(rows[:, 0], rows[:, 2], len(chain["variants"]))
+    p = rows[:, 0:3].astype(np.float32).astype(np.float64)
+    q = rows[:, 3:7].astype(np.float32).astype(np.float64)
+    s = rows[:, 8].astype(np.float32).astype(np.float64)
+    centre = p + rotate_up(q, chain["centre_y_m"] * s)
+    d = np.linalg.norm(centre - np.asarray(view["camera"]["eye"], dtype=np.float64), axis=1)
+    factor = view["distance_factor"]
+    limit = cull["distance_m"] * factor * s if cull["scales_with_view"] else np.full(n, cull["distance_m"])
+    level = np.zeros(n, dtype=np.int64)
+    margin = np.abs(d - limit) / np.maximum(d, 1e-9)
+    for v, levels in enumerate(chain["variants"]):
+        sel = variants == v
+        for k, lv in enumerate(levels):
+            if k == 0:
+                continue
+            t = lv["switch_distance_m"] * factor * s[sel]
+            level[np.nonzero(sel)[0][t <= d[sel]]] = k
+            margin[sel] = np.minimum(margin[sel], np.abs(d[sel] - t) / np.maximum(d[sel], 1e-9))
+    level[d > limit] = -1
+    return variants, level, d, margin
+
+
 def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict | None = None,
                      verbose: bool = True) -> list[str]:
-    """Check scene.glb's EXT_mesh_gpu_instancing nodes against placements/<species>.csv and .json,
-    ray-cast the instances onto the terrain, and check Poisson spacing and exclusions. Returns facts."""
+    """Check placements/<species>.csv and .json (counts, tiles, AABBs, spacing, exclusions, heights on the
+    terrain as written), then replay the first view from the tables: every row's variant, level and cull
+    recomputed here from manifest.view (camera, chains, cull distances) must give exactly scene.glb's
+    EXT_mesh_gpu_instancing nodes (mesh per node, transforms per instance as f32). Returns facts."""
     import pygltflib
     from scipy.spatial import cKDTree
 
@@ -1021,13 +1073,17 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
     scatter = manifest.get("scatter")
     if not scatter:
         raise CheckFailed("manifest.json has no scatter section")
+    view_m = manifest.get("view")
+    if not view_m:
+        raise CheckFailed("manifest.json has a scatter section but no view section (scene.glb)")
     settings = {s["name"]: s for s in manifest.get("settings", {}).get("species", [])}
     listed = [s["name"] for s in scatter["species"]]
     if listed != list(settings):
         raise CheckFailed(f"manifest scatter species {listed} differ from settings.species {list(settings)}")
-    glb_path = scene_dir / scatter.get("scene", "scene.glb")
+    glb_path = scene_dir / view_m.get("scene", "scene.glb")
     gltf = pygltflib.GLTF2().load(str(glb_path))
     buffers = gltf_buffers(gltf, glb_path)
+    view = view_m["views"][0]
 
     # the extension is declared used and required (a viewer without it would draw one instance)
     used, required = set(gltf.extensionsUsed or []), set(gltf.extensionsRequired or [])
@@ -1070,76 +1126,102 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
             raise CheckFailed(f"node {node.name!r} has {INSTANCING} but no mesh")
         instances[i] = (arrays["TRANSLATION"], arrays["ROTATION"], arrays["SCALE"])
 
-    terrain = terrain_of_scene(gltf, buffers)
-    want_tris = (manifest.get("terrain") or {}).get("output_triangles")
-    if want_tris is not None and len(terrain.faces) != want_tris:
-        raise CheckFailed(f"{glb_path.name}: the terrain has {len(terrain.faces)} triangles, manifest "
-                          f"terrain.output_triangles says {want_tris}")
+    # the view's terrain (chunks at their levels) has the triangles the report counts; heights are
+    # checked against the finest terrain as written (terrain.files), which the placements lie on
+    drawn_terrain = terrain_of_scene(gltf, buffers)
+    want_tris = view["terrain"]["triangles"]
+    if len(drawn_terrain.faces) != want_tris:
+        raise CheckFailed(f"{glb_path.name}: the terrain has {len(drawn_terrain.faces)} triangles, manifest "
+                          f"view.views[0].terrain.triangles says {want_tris}")
+    terrain = drawn_terrain
+    terrain_files = [f for f in (manifest.get("terrain") or {}).get("files", []) if f.endswith((".glb", ".gltf"))]
+    if terrain_files and view["terrain"]["chunks_per_level"][1:] and any(view["terrain"]["chunks_per_level"][1:]):
+        t_path = scene_dir / terrain_files[0]
+        t_gltf = pygltflib.GLTF2().load(str(t_path))
+        terrain = terrain_of_scene(t_gltf, gltf_buffers(t_gltf, t_path))
 
     facts, xz_of, claimed = [], {}, set()
     report_species = {s["name"]: s for s in ((report or {}).get("stages", {}).get("scatter") or {}).get("species", [])}
+    view_species = {s["name"]: s for s in view["species"]}
+    drawn_total = 0
     for entry in scatter["species"]:
         name = entry["name"]
         spec = settings[name]
-        root = roots.get(name)
-        if root is None:
-            raise CheckFailed(f"{glb_path.name}: no root node named {name!r} (roots: {sorted(roots)})")
-        # tile children in ascending tile order, named <species>_tile_<t>, with identity transforms
-        tiles_glb, parts = [], []
-        for c in gltf.nodes[root].children or []:
-            child = gltf.nodes[c]
-            prefix = f"{name}_tile_"
-            # <species>_tile_<t>, or <species>_tile_<t>_<mesh> when a species shows several meshes
-            tile_part = child.name[len(prefix):].split("_")[0]
-            if c not in instances or not child.name.startswith(prefix) or not tile_part.isdigit():
-                raise CheckFailed(f"{name}: child node {child.name!r} is not an instanced {prefix}<t>[_<mesh>] node")
-            tiles_glb.append(int(tile_part))
-            parts.append(instances[c])
-            claimed.add(c)
-        if tiles_glb != sorted(tiles_glb):
-            raise CheckFailed(f"{name}: tile nodes are not in ascending tile order: {tiles_glb}")
-        for n in [root] + list(gltf.nodes[root].children or []):
-            if not np.allclose(node_matrix(gltf.nodes[n]), np.eye(4), atol=0):
-                raise CheckFailed(f"{name}: node {gltf.nodes[n].name!r} has a transform; instances are world positions")
-        if root in parent_of:
-            raise CheckFailed(f"{name}: species node is not a root node")
-        glb_t = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, 3), np.float32)
-        glb_r = np.concatenate([p[1] for p in parts]) if parts else np.zeros((0, 4), np.float32)
-        glb_s = np.concatenate([p[2] for p in parts]) if parts else np.zeros((0, 3), np.float32)
-        glb_tile = np.concatenate([np.full(len(p[0]), t) for t, p in zip(tiles_glb, parts)]) if parts else np.zeros(0, np.int64)
-
         csv_path = scene_dir / entry.get("table", f"placements/{name}.csv")
         values, tiles = read_placements_csv(csv_path)
         n = len(values)
-        if len(glb_t) != n:
-            raise CheckFailed(f"{name}: scene.glb has {len(glb_t)} instances, {csv_path.name} has {n} rows")
-        # the writer groups a species' instances by tile (ascending) and, within a tile, by mesh:
-        # compare both sides sorted by (tile, x, y, z, rotation, scale)
-        order = np.argsort(tiles, kind="stable")
-        in_tile_order = bool(np.all(order == np.arange(n)))
-        csv_f32 = values[:, 0:10].astype(np.float32)
-        order = np.lexsort(tuple(csv_f32[:, k] for k in reversed(range(10))) + (tiles,))
-        v, t = values[order], tiles[order]
-        glb_all = np.concatenate([glb_t, glb_r, glb_s], axis=1)
-        g_order = np.lexsort(tuple(glb_all[:, k] for k in reversed(range(10))) + (glb_tile,))
-        glb_t, glb_r, glb_s, glb_tile = glb_t[g_order], glb_r[g_order], glb_s[g_order], glb_tile[g_order]
-        if not np.array_equal(glb_tile, t):
-            raise CheckFailed(f"{name}: the instances' tiles in scene.glb differ from the CSV's tile column")
-        for label, got, want in (("translation", glb_t, v[:, 0:3].astype(np.float32)),
-                                 ("rotation", glb_r, v[:, 3:7].astype(np.float32)),
-                                 ("scale", glb_s, v[:, 7:10].astype(np.float32))):
-            bad = np.nonzero(np.any(got != want, axis=1))[0]
-            if len(bad):
-                k = int(bad[0])
-                raise CheckFailed(f"{name}: {len(bad)} instances' {label} differ from the CSV rows (f32); first: "
-                                  f"glb {got[k].tolist()} vs CSV {want[k].tolist()} (tile {t[k]})")
-        if n and np.max(np.abs(np.linalg.norm(v[:, 3:7], axis=1) - 1)) > 1e-5:
+
+        # the first view, replayed from the table
+        chain = view_m.get("chains", {}).get(name)
+        vs = view_species.get(name)
+        root = roots.get(name)
+        if chain is None or vs is None or vs.get("cull") is None:
+            if root is not None and gltf.nodes[root].children:
+                raise CheckFailed(f"{name}: has no chain in the manifest but instanced nodes in scene.glb")
+            drawn = 0
+        else:
+            if root is None:
+                raise CheckFailed(f"{glb_path.name}: no root node named {name!r} (roots: {sorted(roots)})")
+            if root in parent_of:
+                raise CheckFailed(f"{name}: species node is not a root node")
+            variants, level, _, margin = replay_view(values, chain, view, vs["cull"])
+            expected = {}
+            for v in range(len(chain["variants"])):
+                for k in range(len(chain["variants"][v])):
+                    sel = (variants == v) & (level == k)
+                    if sel.any():
+                        expected[(v, k)] = values[sel]
+            got = {}
+            for c in gltf.nodes[root].children or []:
+                child = gltf.nodes[c]
+                ex = child.extras or {}
+                if c not in instances or ex.get("species") != name or "variant" not in ex or "level" not in ex:
+                    raise CheckFailed(f"{name}: child node {child.name!r} is not an instanced node with extras "
+                                      f"species/variant/level")
+                v, k = int(ex["variant"]), int(ex["level"])
+                want_mesh = chain["variants"][v][k]["mesh"]
+                if gltf.meshes[child.mesh].name != want_mesh or ex.get("mesh") != want_mesh:
+                    raise CheckFailed(f"{name}: node {child.name!r} (variant {v}, LOD{k}) shows mesh "
+                                      f"{gltf.meshes[child.mesh].name!r}, the chain says {want_mesh!r}")
+                if not np.allclose(node_matrix(child), np.eye(4), atol=0):
+                    raise CheckFailed(f"{name}: node {child.name!r} has a transform; instances are world positions")
+                if (v, k) in got:
+                    raise CheckFailed(f"{name}: two nodes for variant {v} LOD{k}")
+                got[(v, k)] = np.concatenate(instances[c], axis=1)
+                claimed.add(c)
+            borderline = int((margin < 1e-9).sum())
+            keys = sorted(set(expected) | set(got))
+            mismatched = []
+            for key in keys:
+                want = expected.get(key, np.zeros((0, 11)))
+                want32 = want[:, 0:10].astype(np.float32)
+                have = got.get(key, np.zeros((0, 10), np.float32))
+                a = want32[np.lexsort(want32.T[::-1])]
+                b = have[np.lexsort(have.T[::-1])]
+                if a.shape != b.shape or not np.array_equal(a, b):
+                    mismatched.append((key, len(a), len(b)))
+            moved = sum(abs(x[1] - x[2]) for x in mismatched)
+            if mismatched and (moved > 2 * borderline or any(w == h for _, w, h in mismatched)):
+                key, w, h = mismatched[0]
+                raise CheckFailed(f"{name}: replaying the table gives {w} instances at variant {key[0]} LOD{key[1]}, "
+                                  f"scene.glb has {h} ({len(mismatched)} groups differ, {borderline} rows at a threshold)")
+            drawn = sum(len(x) for x in got.values())
+            if drawn != vs["drawn"] or n - drawn != vs["culled"]:
+                raise CheckFailed(f"{name}: scene.glb draws {drawn} of {n} rows, the report says {vs['drawn']} drawn, "
+                                  f"{vs['culled']} culled")
+            glb_all = np.concatenate(list(got.values())) if got else np.zeros((0, 10), np.float32)
+        drawn_total += drawn
+
+        # the table itself
+        if n and np.max(np.abs(np.linalg.norm(values[:, 3:7], axis=1) - 1)) > 1e-5:
             raise CheckFailed(f"{name}: CSV quaternions are not unit length")
-        if n and (np.any(v[:, 7:10] <= 0)):
+        if n and (np.any(values[:, 7:10] <= 0)):
             raise CheckFailed(f"{name}: CSV has non-positive scales")
         lo_s, hi_s = spec["scale"]
-        if n and (v[:, 7:10].min() < np.float32(lo_s) * (1 - 1e-6) or v[:, 7:10].max() > np.float32(hi_s) * (1 + 1e-6)):
-            raise CheckFailed(f"{name}: scales {v[:, 7:10].min():.4g}..{v[:, 7:10].max():.4g} outside {spec['scale']}")
+        if n and (values[:, 7:10].min() < np.float32(lo_s) * (1 - 1e-6) or values[:, 7:10].max() > np.float32(hi_s) * (1 + 1e-6)):
+            raise CheckFailed(f"{name}: scales {values[:, 7:10].min():.4g}..{values[:, 7:10].max():.4g} outside {spec['scale']}")
+        order = np.argsort(tiles, kind="stable")
+        in_tile_order = bool(np.all(order == np.arange(n)))
 
         # the JSON summary: count, per-tile counts and AABBs
         summary = json.loads((scene_dir / entry.get("summary", f"placements/{name}.json")).read_text())
@@ -1161,22 +1243,22 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
         if entry.get("tiles") is not None and entry["tiles"] < len(csv_tiles):
             raise CheckFailed(f"{name}: manifest says {entry['tiles']} tiles, the CSV uses {len(csv_tiles)}")
 
-        # on the surface: a ray straight down at (x, z) hits the terrain at y
+        # on the surface: a ray straight down at (x, z) hits the terrain at y (CSV f64 and glb f32)
         if n:
             sample = np.unique(np.linspace(0, n - 1, min(n, RAY_SAMPLE)).round().astype(np.int64))
-            hits = ray_heights(terrain, v[sample][:, [0, 2]])
+            hits = ray_heights(terrain, values[sample][:, [0, 2]])
             missed = np.isnan(hits)
             if missed.any():
                 k = sample[np.argmax(missed)]
                 raise CheckFailed(f"{name}: {int(missed.sum())} of {len(sample)} sampled instances are not above the "
-                                  f"terrain, e.g. ({v[k, 0]:.3f}, {v[k, 2]:.3f})")
-            err_glb = float(np.max(np.abs(glb_t[sample][:, 1].astype(np.float64) - hits)))
-            err_csv = float(np.max(np.abs(v[sample][:, 1] - hits)))
+                                  f"terrain, e.g. ({values[k, 0]:.3f}, {values[k, 2]:.3f})")
+            err_glb = float(np.max(np.abs(values[sample][:, 1].astype(np.float32).astype(np.float64) - hits)))
+            err_csv = float(np.max(np.abs(values[sample][:, 1] - hits)))
             if err_glb > HEIGHT_TOL_GLB_M or err_csv > HEIGHT_TOL_CSV_M:
-                k = sample[int(np.argmax(np.abs(v[sample][:, 1] - hits)))]
+                k = sample[int(np.argmax(np.abs(values[sample][:, 1] - hits)))]
                 raise CheckFailed(f"{name}: instances are off the terrain: max |y - hit| {err_glb:.3g} m (glb, "
                                   f"limit {HEIGHT_TOL_GLB_M:g}), {err_csv:.3g} m (CSV, limit {HEIGHT_TOL_CSV_M:g}); "
-                                  f"worst at ({v[k, 0]:.3f}, {v[k, 2]:.3f})")
+                                  f"worst at ({values[k, 0]:.3f}, {values[k, 2]:.3f})")
         else:
             sample, err_glb, err_csv = np.zeros(0), 0.0, 0.0
 
@@ -1205,7 +1287,8 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
         rs = report_species.get(name)
         if rs is not None and rs.get("count") != n:
             raise CheckFailed(f"{name}: report.json count {rs.get('count')}, CSV {n}")
-        line = (f"{name}: {n} instances in {len(csv_tiles)} tiles = CSV (f32){'' if in_tile_order else ' (sorted by tile)'}; "
+        line = (f"{name}: {n} rows in {len(csv_tiles)} tiles{'' if in_tile_order else ' (not in tile order)'}, "
+                f"first view draws {drawn} (replayed from the table = scene.glb); "
                 f"ray-cast {len(sample)}: max |dy| glb {err_glb:.2e} m, CSV {err_csv:.2e} m; "
                 f"min pair {min_pair:.4f} m" + (f" >= {spec['min_spacing_m']}" if spec["placement"] == "poisson" else "")
                 + (f"; exclusion {', '.join(excl_facts)}" if excl_facts else ""))
@@ -1217,15 +1300,57 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
         raise CheckFailed(f"{glb_path.name}: instanced nodes outside the species nodes: "
                           f"{[gltf.nodes[i].name for i in stray][:5]}")
     total = sum(len(x) for x in xz_of.values())
-    return [f"placements of {len(xz_of)} species ({total} instances) match scene.glb, on the terrain"]
+    return [f"placements of {len(xz_of)} species ({total} rows) on the terrain; the first view "
+            f"({view['triangles']} triangles, {view['draw_calls']} draw calls) replayed from the tables = "
+            f"scene.glb's {drawn_total} instances"]
+
+
+SELF_TEST_EYE = [16.0, 12.0, 40.0]
+SELF_TEST_CHAINS = {
+    # name: (variants × level switch distances, centre_y, cull (distance, scales_with_view))
+    "tree": ([[0.0, 20.0], [0.0, 24.0]], 1.0, (1000.0, False)),
+    "grass": ([[0.0, 25.0]], 0.1, (24.0, True)),
+}
+
+
+def self_test_selection(row: np.ndarray, switch_by_variant: list[list[float]], centre_y: float,
+                        cull: tuple[float, bool]) -> tuple[int, int]:
+    """(variant, level or -1 when culled) of one row for the synthetic scene, written out scalar by scalar
+    (the checker's vectorised replay must agree with it)."""
+    import struct
+    m = (1 << 64) - 1
+
+    def mix(z: int) -> int:
+        z = (z + 0x9E3779B97F4A7C15) & m
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & m
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & m
+        return z ^ (z >> 31)
+
+    bits = lambda v: struct.unpack("<Q", struct.pack("<d", float(v)))[0]  # noqa: E731
+    h = mix(bits(row[0]) ^ mix(bits(row[2])))
+    variant = ((h >> 32) * len(switch_by_variant)) >> 32
+    f32 = lambda v: float(np.float32(v))  # noqa: E731
+    x, y, z, w = (f32(c) for c in row[3:7])
+    s = f32(row[8])
+    up = centre_y * s
+    centre = [f32(row[0]) + 2 * (x * y - w * z) * up, f32(row[1]) + (1 - 2 * (x * x + z * z)) * up,
+              f32(row[2]) + 2 * (y * z + w * x) * up]
+    d = math.dist(centre, SELF_TEST_EYE)
+    limit = cull[0] * s if cull[1] else cull[0]
+    if d > limit:
+        return variant, -1
+    level = max(k for k, t in enumerate(switch_by_variant[variant]) if t * s <= d)
+    return variant, level
 
 
 def write_instanced_scene(d: Path, species: list[dict], required: bool = True, json_delta: int = 0,
-                          glb_shift: float = 0.0) -> Path:
-    """A tiny scene folder as `verdant build` writes it (terrain on the plane y = 0.1 x + 0.05 z + 3,
-    scene.glb with one instanced node per species per tile, placements CSV/JSON, manifest) for the
-    self-test. `species`: dicts with name, placement, min_spacing_m, exclusions, rows ((n, 11) f64
-    x..yaw_deg), tiles ((n,) int). `glb_shift` moves the first instance in scene.glb only."""
+                          glb_shift: float = 0.0, wrong_level: bool = False, draw_culled: bool = False) -> Path:
+    """A tiny scene folder as `verdant build` writes it (terrain on the plane y = 0.1 x + 0.05 z + 3;
+    placements CSV/JSON; scene.glb as the first view draws them: one instanced node per species, variant
+    and level; a manifest with the view and the chains) for the self-test. `species`: dicts with name,
+    placement, min_spacing_m, exclusions, rows ((n, 11) f64 x..yaw_deg), tiles ((n,) int). Broken on
+    purpose: `glb_shift` moves the first drawn instance, `wrong_level` draws one at the next level,
+    `draw_culled` draws a culled row."""
     import pygltflib
 
     d.mkdir(parents=True, exist_ok=True)
@@ -1253,30 +1378,52 @@ def write_instanced_scene(d: Path, species: list[dict], required: bool = True, j
 
     pos = add(verts, "VEC3", 5126, 34962)
     idx = add(faces.astype(np.uint32).ravel(), "SCALAR", 5125, 34963)
-    meshes = [pygltflib.Mesh(primitives=[pygltflib.Primitive(attributes=pygltflib.Attributes(POSITION=pos), indices=idx)])]
+    meshes = [pygltflib.Mesh(name="terrain", primitives=[pygltflib.Primitive(attributes=pygltflib.Attributes(POSITION=pos), indices=idx)])]
     marker = np.array([[0, 0, 0], [0.2, 0, 0], [0, 1, 0]], dtype=np.float32)
     mpos = add(marker, "VEC3", 5126, 34962)
-    meshes.append(pygltflib.Mesh(primitives=[pygltflib.Primitive(attributes=pygltflib.Attributes(POSITION=mpos))]))
     nodes = [pygltflib.Node(name="terrain", mesh=0)]
     roots = [0]
-    scatter, settings = [], []
+    scatter, settings, chains, view_species = [], [], {}, []
+    shifted = False
     for sp in species:
         rows, tiles = sp["rows"], sp["tiles"]
+        switch, centre_y, cull = SELF_TEST_CHAINS[sp["name"]]
+        chain = dict(variants=[[dict(file="species/x.glb", mesh=f"{sp['name']}_v{v}_LOD{k}", triangles=1, switch_distance_m=t)
+                                for k, t in enumerate(levels)] for v, levels in enumerate(switch)],
+                     height_m=2 * centre_y, centre_y_m=centre_y)
+        chains[sp["name"]] = chain
+        groups: dict[tuple[int, int], list[np.ndarray]] = {}
+        culled = 0
+        for r in rows:
+            v, k = self_test_selection(r, switch, centre_y, cull)
+            if k < 0 and draw_culled and sp["name"] == "grass":
+                k, draw_culled = 0, False
+            if k < 0:
+                culled += 1
+                continue
+            if wrong_level and sp["name"] == "tree" and len(switch[v]) > 1:
+                k, wrong_level = 1 - k, False
+            groups.setdefault((v, k), []).append(r)
         children = []
-        first = True
-        for t in sorted(set(tiles.tolist())):
-            sel = rows[tiles == t]
+        for (v, k), sel in sorted(groups.items()):
+            sel = np.array(sel)
             tr = sel[:, 0:3].astype(np.float32)
-            if first and glb_shift:
+            if glb_shift and not shifted:
                 tr[0, 1] += glb_shift
-                first = False
+                shifted = True
+            meshes.append(pygltflib.Mesh(name=f"{sp['name']}_v{v}_LOD{k}",
+                                         primitives=[pygltflib.Primitive(attributes=pygltflib.Attributes(POSITION=mpos))]))
             ext = {"attributes": {"TRANSLATION": add(tr, "VEC3", 5126),
                                   "ROTATION": add(sel[:, 3:7].astype(np.float32), "VEC4", 5126),
                                   "SCALE": add(sel[:, 7:10].astype(np.float32), "VEC3", 5126)}}
-            nodes.append(pygltflib.Node(name=f"{sp['name']}_tile_{t}", mesh=1, extensions={INSTANCING: ext}))
+            nodes.append(pygltflib.Node(name=f"{sp['name']}_v{v}_LOD{k}", mesh=len(meshes) - 1, extensions={INSTANCING: ext},
+                                        extras=dict(species=sp["name"], variant=v, level=k, mesh=f"{sp['name']}_v{v}_LOD{k}")))
             children.append(len(nodes) - 1)
         nodes.append(pygltflib.Node(name=sp["name"], children=children))
         roots.append(len(nodes) - 1)
+        drawn = sum(len(g) for g in groups.values())
+        view_species.append(dict(name=sp["name"], placed=len(rows), drawn=drawn, culled=len(rows) - drawn,
+                                 cull=dict(distance_m=cull[0], scales_with_view=cull[1])))
         lines = [PLACEMENT_HEADER] + [",".join([*(repr(float(v)) for v in r), str(int(t))]) for r, t in zip(rows, tiles)]
         (d / "placements" / f"{sp['name']}.csv").write_text("\n".join(lines) + "\n")
         per_tile = [dict(tile=int(t), count=int((tiles == t).sum()),
@@ -1294,9 +1441,12 @@ def write_instanced_scene(d: Path, species: list[dict], required: bool = True, j
                          bufferViews=views, accessors=accessors)
     gl.set_binary_blob(bytes(blob))
     gl.save_binary(str(d / "scene.glb"))
+    view = dict(camera=dict(name="view0", eye=SELF_TEST_EYE, forward=[0, 0, -1], fov_y_deg=60, size_px=[1920, 1080]),
+                distance_factor=1.0, terrain=dict(chunks_per_level=[1], triangles=len(faces), full_detail_triangles=len(faces)),
+                species=view_species, triangles=0, draw_calls=0, full_detail_triangles=0, full_detail_draw_calls=0)
     (d / "manifest.json").write_text(json.dumps(dict(
         scene=d.name, scatter=dict(scene="scene.glb", species=scatter), terrain=dict(output_triangles=len(faces)),
-        settings=dict(species=settings))))
+        view=dict(scene="scene.glb", bytes=0, views=[view], chains=chains), settings=dict(species=settings))))
     return d
 
 
@@ -1330,6 +1480,8 @@ def placement_self_test(d: Path) -> list[tuple[str, bool, str]]:
         ("placements good, CSV not in tile order", write_instanced_scene(d / "shuffled", species(shuffle=True)), True),
         ("placements not required", write_instanced_scene(d / "notreq", species(), required=False), False),
         ("placements glb != CSV", write_instanced_scene(d / "shift", species(), glb_shift=0.01), False),
+        ("placements drawn at the wrong level", write_instanced_scene(d / "level", species(), wrong_level=True), False),
+        ("placements culled row drawn", write_instanced_scene(d / "culled", species(), draw_culled=True), False),
         ("placements off the terrain", write_instanced_scene(d / "off", species(tree_dy=0.01)), False),
         ("placements poisson too close", write_instanced_scene(d / "close", species(trees=close_trees)), False),
         ("placements exclusion broken", write_instanced_scene(d / "excl", species(grass=grass_near_tree)), False),

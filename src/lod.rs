@@ -19,8 +19,15 @@ use crate::terrain::error::{measure, ErrorStats};
 use crate::terrain::tin::{tin, TinOptions};
 use crate::terrain::{SampleMesh, TerrainError};
 
-/// The viewer the switch distances are computed for.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Screen-space error budget of the default policy (`[lod] max_pixel_error`): 2 px on a
+/// 1080-px-high screen with a 60° vertical field of view. Chosen so levels switch where engines
+/// switch them: a 12–15 m tree reaches its impostor at roughly 250–330 m, grass clumps their cards
+/// at 10–20 m, and the coarsest level of a species is culled where its height spans 2 px.
+pub const DEFAULT_MAX_PIXEL_ERROR: f64 = 2.0;
+
+/// The viewer the switch distances are computed for: the scene's LoD policy (`[lod]`), shared by
+/// the terrain chain, every plant chain and the cull distances.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LodView {
     /// Height of the screen (or render target) in pixels.
     pub screen_height_px: f64,
@@ -34,7 +41,7 @@ pub struct LodView {
 
 impl Default for LodView {
     fn default() -> Self {
-        LodView { screen_height_px: 1080.0, fov_y_deg: 60.0, max_screen_error_px: 1.0, aspect: 16.0 / 9.0 }
+        LodView { screen_height_px: 1080.0, fov_y_deg: 60.0, max_screen_error_px: DEFAULT_MAX_PIXEL_ERROR, aspect: 16.0 / 9.0 }
     }
 }
 
@@ -53,6 +60,34 @@ impl LodView {
     /// Pixels an error of `error_m` covers at `distance_m` (the inverse of [`LodView::switch_distance`]).
     pub fn projected_error_px(&self, error_m: f64, distance_m: f64) -> f64 {
         error_m * self.pixels_per_metre_at_1m() / distance_m
+    }
+
+    /// The same viewer as the image analyzer's [`ScreenView`] (screen width and horizontal field of
+    /// view, the same pixel budget).
+    pub fn screen_view(&self) -> crate::bake::ScreenView {
+        let fov_x = 2.0 * ((self.fov_y_deg.to_radians() * 0.5).tan() * self.aspect).atan();
+        crate::bake::ScreenView {
+            width_px: self.screen_height_px * self.aspect,
+            fov_x_deg: fov_x.to_degrees().min(179.0),
+            max_error_px: self.max_screen_error_px,
+        }
+    }
+
+    /// Distance at which something `size_m` tall spans `max_screen_error_px` pixels: the default
+    /// cull distance of a species (its coarsest level is then within the error budget of nothing).
+    pub fn cull_distance(&self, size_m: f64) -> f64 {
+        self.switch_distance(size_m.max(0.0))
+    }
+
+    /// MSFT_lod screen coverage ([`lod_screen_coverage`]) when the eye is `centre_distance_m` from
+    /// the bounding-sphere centre (the plant analyzers measure distances to the centre).
+    pub fn coverage_at_centre_distance(&self, radius_m: f64, centre_distance_m: f64) -> f64 {
+        lod_screen_coverage(radius_m, (centre_distance_m - radius_m).max(0.0), self)
+    }
+
+    /// Checks the view (every field finite and in range); the message names the bad field.
+    pub fn validate(&self) -> Result<(), String> {
+        self.check().map_err(|e| e.to_string())
     }
 
     fn check(&self) -> Result<(), LodError> {
@@ -212,7 +247,7 @@ mod tests {
 
     #[test]
     fn formula_matches_the_definition() {
-        let v = LodView::default();
+        let v = LodView { max_screen_error_px: 1.0, ..LodView::default() };
         // 1080 px, 60°: H / (2 tan 30°) = 1080 / 1.1547 = 935.3 px per metre at 1 m.
         let d = v.switch_distance(1.0);
         assert!((d - 1080.0 / (2.0 * (30.0f64).to_radians().tan())).abs() < 1e-9);
@@ -220,6 +255,29 @@ mod tests {
         assert!((v.projected_error_px(1.0, d) - 1.0).abs() < 1e-12);
         let v2 = LodView { max_screen_error_px: 2.0, ..v };
         assert!((v2.switch_distance(1.0) - d / 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn switch_distances_rise_with_level_and_fall_as_the_budget_grows() {
+        let hf = crate::synth::fractal(65, 65, 2.0, 40.0, 0.5, 3);
+        let errors = [0.1, 0.5, 2.0, 8.0];
+        let mut previous: Option<Vec<f64>> = None;
+        for budget in [0.5, 1.0, 2.0, 4.0, 8.0] {
+            let view = LodView { max_screen_error_px: budget, ..LodView::default() };
+            let chain = terrain_lod_chain(&hf, &errors, None, &view).unwrap();
+            let d: Vec<f64> = chain.iter().map(|l| l.switch_distance_m).collect();
+            assert_eq!(d[0], 0.0);
+            assert!(d.windows(2).all(|w| w[1] > w[0]), "budget {budget}: {d:?}");
+            // at its switch distance each level's measured error projects to the budget
+            for l in chain.iter().skip(1) {
+                let px = view.projected_error_px(l.stats.max_error_m, l.switch_distance_m);
+                assert!(px <= budget * (1.0 + 1e-9), "{px} px > {budget}");
+            }
+            if let Some(p) = &previous {
+                assert!(d.iter().zip(p).skip(1).all(|(now, before)| now < before), "{d:?} vs {p:?}");
+            }
+            previous = Some(d);
+        }
     }
 
     #[test]

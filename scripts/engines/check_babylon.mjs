@@ -6,6 +6,11 @@
 //   --engine babylon (default) | three
 //
 //   node scripts/engines/check_babylon.mjs [--thumbs DIR] [--no-range-requests] [--green] FILE.glb...
+//   node scripts/engines/check_babylon.mjs --engine three --view [--thumbs DIR] out/<scene>/scene.glb...
+//
+// --view (three.js): each file is a built scene's scene.glb, rendered from its first [[view]]
+// (manifest.json beside it) without frustum culling; three.js' renderer.info must count exactly
+// the triangles and draw calls the view stage reported.
 //
 // Every file's frame is measured where it is not the sky (covered share, mean colour, dark and
 // green-leading shares). --green: the files are grass, which a person must see as green: at least
@@ -27,12 +32,14 @@ let thumbs = null;
 let rangeRequests = true;
 let expectGreen = false;
 let engine = 'babylon';
+let viewMode = false;
 const files = [];
 for (let i = 0; i < args.length; i++) {
   if (args[i] === '--thumbs') thumbs = args[++i];
   else if (args[i] === '--no-range-requests') rangeRequests = false;
   else if (args[i] === '--green') expectGreen = true;
   else if (args[i] === '--engine') engine = args[++i];
+  else if (args[i] === '--view') viewMode = true;
   else files.push(path.resolve(args[i]));
 }
 if (!files.length) {
@@ -114,9 +121,14 @@ for (const file of files) {
   await page.goto(`http://127.0.0.1:${port}/${engine === 'three' ? 'three.html' : ''}`);
   if (engine === 'three') await page.waitForFunction('window.threeReady === true', { timeout: 60000 });
   let r;
+  let view = null;
+  if (viewMode) {
+    const manifest = JSON.parse(fs.readFileSync(path.join(path.dirname(file), 'manifest.json'), 'utf8'));
+    view = manifest.view?.views?.[0] ?? null;
+  }
   try {
     r = await page.evaluate((url, options) => window.loadGlb(url, options), `/files${file}`,
-      { rangeRequests: want.chain && rangeRequests, timeoutMs: 60000 });
+      { rangeRequests: want.chain && rangeRequests, timeoutMs: 120000, view: view?.camera });
   } catch (e) {
     r = { ok: false, error: String(e) };
   }
@@ -132,6 +144,11 @@ for (const file of files) {
     if (!inOrder) problems.push(`MSFT_lod levels arrived as ${JSON.stringify(r.lodLevels)}, expected 0..${want.levels - 1} in order`);
     if (r.enabled.some((n) => !/_LOD0(_primitive\d+)?$/.test(n))) problems.push(`levels other than LoD0 left enabled: ${r.enabled.join(', ')}`);
   }
+  if (viewMode && !view) problems.push('no view in manifest.json beside the file');
+  if (viewMode && view && engine !== 'three') problems.push('--view needs --engine three');
+  if (r.ok && view && r.info && (r.info.triangles !== view.triangles || r.info.calls !== view.draw_calls)) {
+    problems.push(`three.js draws ${r.info.triangles} triangles in ${r.info.calls} calls, the view stage reported ${view.triangles} in ${view.draw_calls}`);
+  }
   const seen = r.pixels;
   if (r.ok && expectGreen && seen && !(seen.covered >= 0.002 && seen.green >= 0.5 && seen.dark <= 0.2)) {
     problems.push(`not seen as green grass: ${(100 * seen.covered).toFixed(1)} % of the frame covered, green leading on ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %`);
@@ -139,11 +156,13 @@ for (const file of files) {
   if (thumbs && r.ok) {
     fs.mkdirSync(thumbs, { recursive: true });
     const canvas = await page.$('#c');
-    await canvas.screenshot({ path: path.join(thumbs, `${engine}_${path.basename(path.dirname(path.dirname(file)))}_${path.basename(file, '.glb')}.png`) });
+    const owner = path.basename(path.dirname(viewMode ? file : path.dirname(file)));
+    await canvas.screenshot({ path: path.join(thumbs, `${engine}_${owner}_${path.basename(file, '.glb')}.png`) });
   }
   failed += problems.length > 0;
   const colour = seen ? `, frame ${(100 * seen.covered).toFixed(1)} % covered, mean rgb ${seen.mean.map((v) => v.toFixed(2)).join(' ')}, green ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %` : '';
-  const what = r.ok ? `${r.meshes} meshes, ${r.enabled.length} enabled${want.chain ? `, LoD levels ${JSON.stringify(r.lodLevels)}` : ''}${colour}` : '';
+  const drawn = r.ok && view && r.info ? `view ${view.camera.name}: ${r.info.triangles} triangles, ${r.info.calls} draw calls (report: ${view.triangles}, ${view.draw_calls}), ` : '';
+  const what = r.ok ? `${drawn}${r.meshes} meshes, ${r.enabled.length} enabled${want.chain ? `, LoD levels ${JSON.stringify(r.lodLevels)}` : ''}${colour}` : '';
   console.log(`${problems.length ? 'FAIL' : 'ok  '}  ${file}: ${what}${problems.length ? ' — ' + problems.join(' | ') : ''}`);
   await page.close();
 }

@@ -434,22 +434,6 @@ fn switch_distance(rows: &[DistanceError], max_error_px: f64) -> (f64, bool) {
 }
 
 
-/// The viewer plant LoD switch distances are computed for: 1920 × 1080, 60° horizontal field of
-/// view, 1 px of silhouette error.
-pub fn plant_screen_view() -> ScreenView {
-    ScreenView { width_px: 1920.0, fov_x_deg: 60.0, max_error_px: 1.0 }
-}
-
-/// MSFT_lod screen coverage (Babylon's form, [`crate::lod::lod_screen_coverage`]) for that viewer
-/// when the eye is `centre_distance_m` from the object's bounding-sphere centre (the switch
-/// search's distances; `lod_screen_coverage` takes the distance to the nearest point).
-pub fn plant_screen_coverage(radius_m: f64, centre_distance_m: f64) -> f64 {
-    let aspect = 16.0 / 9.0;
-    let fov_y = 2.0 * ((30f64).to_radians().tan() / aspect).atan();
-    let view = crate::lod::LodView { screen_height_px: 1080.0, fov_y_deg: fov_y.to_degrees(), max_screen_error_px: 1.0, aspect };
-    crate::lod::lod_screen_coverage(radius_m, (centre_distance_m - radius_m).max(0.0), &view)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -394,6 +394,45 @@ fn format_batch<R: ToPlacementRow + Sync>(rows: &[R], first: usize, bufs: &mut V
     results.into_iter().collect()
 }
 
+/// Reads a placement table back (the CSV [`write_placements_csv`] writes): the header must name
+/// [`PLACEMENT_COLUMNS`]; every number is parsed exactly (the writer's shortest round-trip form),
+/// so the rows equal those written. Errors name the line.
+pub fn read_placements_csv(path: &Path) -> Result<Vec<PlacementRow>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read: {e}"))?;
+    parse_placements_csv(&text)
+}
+
+/// [`read_placements_csv`] on the text of a table.
+pub fn parse_placements_csv(text: &str) -> Result<Vec<PlacementRow>, String> {
+    let mut lines = text.lines();
+    let header = lines.next().unwrap_or("");
+    if header.split(',').collect::<Vec<_>>() != PLACEMENT_COLUMNS {
+        return Err(format!("line 1: the header is `{header}`, expected `{}`", PLACEMENT_COLUMNS.join(",")));
+    }
+    let mut rows = Vec::new();
+    for (n, line) in lines.enumerate() {
+        if line.is_empty() {
+            continue;
+        }
+        let at = n + 2;
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() != PLACEMENT_COLUMNS.len() {
+            return Err(format!("line {at}: {} fields, expected {}", f.len(), PLACEMENT_COLUMNS.len()));
+        }
+        let num64 = |k: usize| f[k].parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| format!("line {at}, column `{}`: `{}` is not a finite number", PLACEMENT_COLUMNS[k], f[k]));
+        // f32 columns parsed as f32: their shortest form rounds to the same f32 (via f64 it might not)
+        let num32 = |k: usize| f[k].parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| format!("line {at}, column `{}`: `{}` is not a finite number", PLACEMENT_COLUMNS[k], f[k]));
+        rows.push(PlacementRow {
+            position: [num64(0)?, num64(1)?, num64(2)?],
+            rotation: [num32(3)?, num32(4)?, num32(5)?, num32(6)?],
+            scale: [num32(7)?, num32(8)?, num32(9)?],
+            yaw_deg: num32(10)?,
+            tile: f[11].parse::<u32>().map_err(|_| format!("line {at}, column `tile`: `{}` is not a tile number", f[11]))?,
+        });
+    }
+    Ok(rows)
+}
+
 /// The table as CSV bytes: a header line, then one line per row. Non-finite numbers are refused
 /// (a placement bug, not something to write). Built by the streaming writer into one growing
 /// buffer, so only two batches of chunk buffers exist besides it (fresh pages are costly).

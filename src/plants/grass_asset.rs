@@ -12,7 +12,8 @@ use crate::bake::atlas::{dilate, finish_normal_atlas, mip_chain, mip_figures, re
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
-use crate::bake::views::{self, plant_screen_coverage, plant_screen_view, DistanceError, LodImageOptions, Renderable, ScreenView, SwitchSearch};
+use crate::bake::views::{self, DistanceError, LodImageOptions, Renderable, ScreenView, SwitchSearch};
+use crate::lod::LodView;
 use crate::mesh::{AlphaMode, Material, Mesh, Node, Primitive, Scene, Texture};
 use crate::plants::grass::{self, clump, far_block, Clump, GrassSettings, Slice, UvRect};
 use crate::plants::texture;
@@ -257,20 +258,27 @@ fn png(image: &Image) -> Result<Vec<u8>, GrassAssetError> {
     image.encode_png().map_err(|e| GrassAssetError::Texture(e.to_string()))
 }
 
-/// The viewer LoD switch distances are computed for (shared with trees).
-pub fn screen_view() -> ScreenView {
-    plant_screen_view()
+/// The viewer LoD switch distances are computed for by default (the default `[lod]` policy,
+/// shared with trees and terrain).
+pub fn screen_view() -> LodView {
+    LodView::default()
 }
 
 /// Builds, bakes and measures one grass species. `user_blade` replaces the procedural blade
 /// texture (its alpha is kept).
 pub fn build_grass(name: &str, settings: &GrassSettings, user_blade: Option<&Image>) -> Result<GrassAsset, GrassAssetError> {
-    build_grass_with(name, settings, user_blade, true)
+    build_grass_with(name, settings, user_blade, true, &screen_view())
 }
 
 /// [`build_grass`], with the image analyzer optional (`analyze = false`: no switch distances, the
 /// MSFT_lod coverages are then all 0 — for benchmarking generation and baking alone).
-pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option<&Image>, analyze: bool) -> Result<GrassAsset, GrassAssetError> {
+pub fn build_grass_with(
+    name: &str,
+    settings: &GrassSettings,
+    user_blade: Option<&Image>,
+    analyze: bool,
+    policy: &LodView,
+) -> Result<GrassAsset, GrassAssetError> {
     settings.check()?;
     let started = Instant::now();
     let s = settings;
@@ -418,7 +426,7 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
     let reference = Renderable { mesh: &reference_mesh, materials: &blade_materials, textures: &textures };
     let atlas_materials = [atlas_material(s, 0)];
     let atlas_textures = [atlas_level0, normal_atlas.clone()];
-    let view = screen_view();
+    let view = policy.screen_view();
     let radius = bounding_radius(&levels[0][probe]);
     let mut lods = Vec::with_capacity(GRASS_LODS);
     for (n, prims) in levels.iter().enumerate() {
@@ -462,7 +470,7 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
             f.measured = rows;
             f.switch_distance_m = switch_m;
             f.never_passes = never;
-            f.screen_coverage = plant_screen_coverage(radius, switch_m);
+            f.screen_coverage = policy.coverage_at_centre_distance(radius, switch_m);
         }
         lods.push(f);
     }
@@ -470,7 +478,7 @@ pub fn build_grass_with(name: &str, settings: &GrassSettings, user_blade: Option
     for n in 1..lods.len() {
         if lods[n].switch_distance_m < lods[n - 1].switch_distance_m {
             lods[n].switch_distance_m = lods[n - 1].switch_distance_m;
-            lods[n].screen_coverage = plant_screen_coverage(radius, lods[n].switch_distance_m);
+            lods[n].screen_coverage = policy.coverage_at_centre_distance(radius, lods[n].switch_distance_m);
         }
     }
     let seconds_analyze = analyze_started.elapsed().as_secs_f64();

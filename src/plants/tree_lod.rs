@@ -25,7 +25,8 @@ use crate::bake::atlas::{dilate, finish_normal_atlas, mip_chain, mip_figures, re
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
-use crate::bake::views::{lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, ScreenView, SwitchSearch, plant_screen_coverage, plant_screen_view};
+use crate::bake::views::{lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, SwitchSearch};
+use crate::lod::LodView;
 use crate::export::{self, ExportError};
 use crate::lsystem::{parse, Dialect, LSystem};
 use crate::mesh::{AlphaMode, Bounds, CustomAttribute, Material, Mesh, Node, Primitive, Scene, Texture};
@@ -109,6 +110,8 @@ pub struct TreeLodOptions {
     pub hausdorff_samples: usize,
     /// How the image analyzer renders (8 azimuths × 3 elevations).
     pub image: LodImageOptions,
+    /// The LoD policy switch distances are found for (`[lod]`: pixel budget and screen).
+    pub policy: LodView,
 }
 
 impl Default for TreeLodOptions {
@@ -119,6 +122,7 @@ impl Default for TreeLodOptions {
             analyze: true,
             hausdorff_samples: DEFAULT_HAUSDORFF_SAMPLES,
             image: LodImageOptions { max_side_px: 96, supersample: 2, ..LodImageOptions::default() },
+            policy: LodView::default(),
         }
     }
 }
@@ -612,10 +616,6 @@ fn atlas_material(texture: usize) -> Material {
     }
 }
 
-/// The viewer switch distances are computed for (as the grass species').
-pub fn screen_view() -> ScreenView {
-    plant_screen_view()
-}
 
 /// `mesh` turned by `angle_deg` about the vertical axis through `axis` (positions and normals).
 fn rotated(mesh: &Mesh, axis: DVec3, angle_deg: f64) -> Mesh {
@@ -954,7 +954,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
     // analyzer
     let analyze_started = Instant::now();
     let grid = TriangleGrid::new(reference);
-    let view = screen_view();
+    let view = options.policy.screen_view();
     let range = SwitchSearch { far_m: radius * 1024.0, near_m: radius * 2.0, bisections: 3 };
     let reference_view = Renderable { mesh: reference, materials: &materials0, textures: &reference_images };
     let mut lods = Vec::with_capacity(levels.len());
@@ -1023,7 +1023,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
             f.measured = rows;
             f.switch_distance_m = switch_m;
             f.never_passes = never;
-            f.screen_coverage = plant_screen_coverage(radius, switch_m);
+            f.screen_coverage = options.policy.coverage_at_centre_distance(radius, switch_m);
         }
         lods.push(f);
     }
@@ -1031,7 +1031,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
     for n in 1..lods.len() {
         if lods[n].switch_distance_m < lods[n - 1].switch_distance_m {
             lods[n].switch_distance_m = lods[n - 1].switch_distance_m;
-            lods[n].screen_coverage = plant_screen_coverage(radius, lods[n].switch_distance_m);
+            lods[n].screen_coverage = options.policy.coverage_at_centre_distance(radius, lods[n].switch_distance_m);
         }
     }
     let seconds_analyze = analyze_started.elapsed().as_secs_f64();

@@ -376,6 +376,7 @@ mod tests {
             exclusions: vec![],
             seed: 0,
             max_instances: 10_000_000,
+            cull_distance_m: None,
             look: crate::scene::PlantLook::Marker,
         }
     }

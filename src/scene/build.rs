@@ -21,6 +21,7 @@ use crate::scene::preview::{footprint_m, PreviewLayer};
 use crate::scene::scatter_stage::{self, ScatterStageReport};
 use crate::scene::snow_stage::{self, SnowStageReport};
 use crate::scene::stages::{self, PreviewStageReport, Stage};
+use crate::scene::view_stage::{self, ViewStageReport};
 use crate::scene::Preset;
 use crate::validate::read_scene;
 
@@ -265,22 +266,20 @@ fn reimport(dir: &Path, rel: &Path) -> Result<Scene, SceneBuildError> {
     read_scene(&path).map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })
 }
 
-/// Positions of the instanced nodes under each species root of a scene.glb (as f32, as stored).
-fn placements_from_scene(scene: &Scene, preset: &Preset) -> Vec<PreviewLayer> {
+/// Positions of every species' placements as scene.glb stores them (f32), read from the tables.
+fn placements_from_tables(dir: &Path, tables: &[(String, PathBuf)], preset: &Preset) -> Result<Vec<PreviewLayer>, SceneBuildError> {
     preset
         .species
         .iter()
         .enumerate()
         .map(|(index, s)| {
             let mut points = Vec::new();
-            if let Some(root) = scene.nodes.iter().find(|n| n.name == s.name && n.mesh.is_none()) {
-                for &c in &root.children {
-                    if let Some(inst) = scene.nodes.get(c).and_then(|n| n.instances.as_ref()) {
-                        points.extend(inst.translations.iter().map(|t| [t[0] as f64, t[1] as f64, t[2] as f64]));
-                    }
-                }
+            if let Some((_, rel)) = tables.iter().find(|(n, _)| *n == s.name) {
+                let path = dir.join(rel);
+                let rows = crate::export::table::read_placements_csv(&path).map_err(|message| SceneBuildError::Io { path: path.clone(), message })?;
+                points.extend(rows.iter().map(|r| r.position.map(|v| v as f32 as f64)));
             }
-            PreviewLayer { color: marker::species_color(s.kind, index), kind: s.kind, footprint_m: footprint_m(s), positions: points }
+            Ok(PreviewLayer { color: marker::species_color(s.kind, index), kind: s.kind, footprint_m: footprint_m(s), positions: points })
         })
         .collect()
 }
@@ -297,7 +296,10 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
     let mut known = CacheUse::default();
     // what later stages need: the terrain scene and the placements (as stored: f32 positions)
     let mut terrain: Option<(LazyScene, String)> = None;
-    let mut placements: Option<(Option<Vec<PreviewLayer>>, PathBuf, String)> = None;
+    let mut placements: Option<(Option<Vec<PreviewLayer>>, Vec<(String, PathBuf)>, String)> = None;
+    // what the view stage reads: the terrain's LoD levels, the plants stage's chains
+    let mut terrain_lods: Vec<crate::scene::stages::LodInfo> = Vec::new();
+    let mut plants: Option<(PlantsStageReport, String)> = None;
 
     if let (true, Some(t)) = (wants(Stage::Terrain), &preset.terrain) {
         let t0 = Instant::now();
@@ -318,6 +320,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             }
             terrain = Some((lazy, key));
         }
+        terrain_lods = report.lods.clone();
         runs.push(StageRun::Terrain { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
     }
 
@@ -351,6 +354,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             || Ok((plants_stage::run_plants(preset, dir)?, ())),
             &say,
         )?;
+        plants = Some((report.clone(), key));
         runs.push(StageRun::Plants { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
     }
 
@@ -368,6 +372,23 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             || scatter_stage::run_scatter_with_snow(preset, scene.get()?, dir, cover.as_ref().map(|(m, _)| m)).map_err(SceneBuildError::from),
             &say,
         )?;
+        let tables: Vec<(String, PathBuf)> = report.species.iter().map(|s| (s.name.clone(), s.csv.clone())).collect();
+        if wants(Stage::View) {
+            let t0 = Instant::now();
+            let plants_key = plants.as_ref().map_or("", |(_, k)| k.as_str());
+            let vkey = view_stage::view_key(preset, &[tkey, plants_key, &key]);
+            let main = scene.main.clone();
+            let (vreport, _, vhit) = cached_stage(
+                &cache, force, "view", &vkey, dir, &mut known,
+                ViewStageReport::files,
+                || {
+                    let input = view_stage::TerrainInput { main: &main, lods: &terrain_lods };
+                    Ok((view_stage::run_view(preset, &input, plants.as_ref().map(|(r, _)| r), &tables, dir)?, ()))
+                },
+                &say,
+            )?;
+            runs.push(StageRun::View { report: vreport, cached: vhit, seconds: t0.elapsed().as_secs_f64() });
+        }
         if wants(Stage::Preview) {
             // positions as stored (f32), so a preview drawn after a cached scatter is the same
             // (None when cached: read back from scene.glb only if the preview runs)
@@ -380,7 +401,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
                     })
                     .collect::<Vec<_>>()
             });
-            placements = Some((layers, report.scene_file.clone(), key));
+            placements = Some((layers, tables, key));
         }
         runs.push(StageRun::Scatter { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
     }
@@ -402,7 +423,7 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             || {
                 let layers = match &placements {
                     Some((Some(layers), _, _)) => layers.clone(),
-                    Some((None, scene_file, _)) => placements_from_scene(&reimport(dir, scene_file)?, preset),
+                    Some((None, tables, _)) => placements_from_tables(dir, tables, preset)?,
                     None => Vec::new(),
                 };
                 Ok((stages::run_preview(scene.get()?, &layers, cover.as_ref().map(|(m, _)| m), dir)?, ()))

@@ -24,6 +24,7 @@ pub enum StageRun {
     Scatter { report: ScatterStageReport, cached: bool, seconds: f64 },
     Preview { report: PreviewStageReport, cached: bool, seconds: f64 },
     Snow { report: SnowStageReport, cached: bool, seconds: f64 },
+    View { report: crate::scene::view_stage::ViewStageReport, cached: bool, seconds: f64 },
 }
 
 impl StageRun {
@@ -34,6 +35,7 @@ impl StageRun {
             StageRun::Scatter { .. } => Stage::Scatter,
             StageRun::Preview { .. } => Stage::Preview,
             StageRun::Snow { .. } => Stage::Snow,
+            StageRun::View { .. } => Stage::View,
         }
     }
     pub fn cached(&self) -> bool {
@@ -42,7 +44,8 @@ impl StageRun {
             | StageRun::Plants { cached, .. }
             | StageRun::Scatter { cached, .. }
             | StageRun::Preview { cached, .. }
-            | StageRun::Snow { cached, .. } => *cached,
+            | StageRun::Snow { cached, .. }
+            | StageRun::View { cached, .. } => *cached,
         }
     }
     pub fn seconds(&self) -> f64 {
@@ -51,7 +54,8 @@ impl StageRun {
             | StageRun::Plants { seconds, .. }
             | StageRun::Scatter { seconds, .. }
             | StageRun::Preview { seconds, .. }
-            | StageRun::Snow { seconds, .. } => *seconds,
+            | StageRun::Snow { seconds, .. }
+            | StageRun::View { seconds, .. } => *seconds,
         }
     }
 }
@@ -72,8 +76,19 @@ struct Manifest<'a> {
     plants: Option<Vec<PlantManifest>>,
     scatter: Option<ScatterManifest>,
     snow: Option<SnowManifest<'a>>,
+    /// The view stage: scene.glb, what each view draws, and the chains it drew with (so a
+    /// checker or an engine can replay the selection from the placement tables).
+    view: Option<ViewManifest<'a>>,
     preview: Option<String>,
     settings: &'a Preset,
+}
+
+#[derive(Serialize)]
+struct ViewManifest<'a> {
+    scene: String,
+    bytes: u64,
+    views: &'a [crate::scene::view_stage::ViewReport],
+    chains: std::collections::BTreeMap<&'a str, &'a crate::scene::plants_stage::SpeciesChain>,
 }
 
 #[derive(Serialize)]
@@ -181,6 +196,10 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
         StageRun::Plants { report, .. } => Some(report),
         _ => None,
     });
+    let view = runs.iter().find_map(|r| match r {
+        StageRun::View { report, .. } => Some(report),
+        _ => None,
+    });
     let preview = runs.iter().find_map(|r| match r {
         StageRun::Preview { report, .. } => Some(report),
         _ => None,
@@ -226,7 +245,7 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
                 .collect()
         }),
         scatter: scatter.map(|s| ScatterManifest {
-            scene: s.scene_file.to_string_lossy().replace('\\', "/"),
+            scene: "scene.glb".into(),
             tile_m: s.tile_m,
             species: s
                 .species
@@ -247,6 +266,12 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
             particles: s.particles,
             layer_triangles: s.layer_triangles,
             analysis: &s.analysis,
+        }),
+        view: view.map(|v| ViewManifest {
+            scene: v.scene_file.to_string_lossy().replace('\\', "/"),
+            bytes: v.scene_bytes,
+            views: &v.views,
+            chains: plants.map(|p| p.species.iter().map(|s| (s.name.as_str(), &s.chain)).collect()).unwrap_or_default(),
         }),
         preview: preview.map(|p| p.file.to_string_lossy().replace('\\', "/")),
         settings: preset,
@@ -291,6 +316,13 @@ fn report_json(preset: &Preset, runs: &[StageRun]) -> String {
             }
             StageRun::Preview { report, cached, seconds } => ("preview", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
             StageRun::Snow { report, cached, seconds } => ("snow", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
+            StageRun::View { report, cached, seconds } => {
+                let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
+                if let Some(o) = v.as_object_mut() {
+                    o.remove("seconds");
+                }
+                ("view", v, *cached, *seconds)
+            }
             StageRun::Plants { report, cached, seconds } => {
                 let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
                 if let Some(list) = v.get_mut("species").and_then(Value::as_array_mut) {
@@ -369,7 +401,7 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
                 s += "\n";
             }
             StageRun::Scatter { report: sc, .. } => {
-                s += &format!("## Scatter\n\n`{}` (terrain + one instanced node per species per tile), tiles of {} m\n\n", sc.scene_file.display(), sc.tile_m);
+                s += &format!("## Scatter\n\nPlacement tables (`placements/`), tiles of {} m; `scene.glb` (the view stage) draws them\n\n", sc.tile_m);
                 s += "| species | kind | instances | expected | ratio | min pair distance (m) | min_spacing (m) | max \\|y − terrain\\| scene.glb, f32 (m) | max \\|y − terrain\\| CSV (m) | snow-thinned | tiles |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
                 for sp in &sc.species {
                     let spacing = preset.species.iter().find(|x| x.name == sp.name).map_or(0.0, |x| x.min_spacing_m);
@@ -392,6 +424,7 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
             }
             StageRun::Plants { report: pl, .. } => s += &plants_md(pl),
             StageRun::Snow { report: sn, .. } => s += &snow_md(sn),
+            StageRun::View { report: v, .. } => s += &view_section(v),
             StageRun::Preview { report: p, .. } => {
                 s += &format!("## Preview\n\n`{}`, {}×{} px, shaded relief drawn from the terrain mesh\n\n", p.file.display(), p.width_px, p.height_px);
             }
@@ -447,7 +480,7 @@ fn plant_lods(sp: &crate::scene::plants_stage::PlantReport) -> Vec<serde_json::V
 }
 
 const CHAIN_NOTE: &str = "The chain's speed/error table: geometric error = one-sided Hausdorff distance LoD_k → LoD0 (sampled); \
-     image error from 8 azimuths × 3 elevations; switch distance = where the silhouette error stays ≤ 1 px (1920 px, 60°).";
+     image error from 8 azimuths × 3 elevations; switch distance = where the silhouette error stays within the `[lod]` pixel budget (see the view section).";
 const CHAIN_HEADER: &str = "| model | level | kind | triangles | bytes | Hausdorff max (m) | IoU at switch | switch distance (m) | screen coverage |\n\
                             |---|---|---|---|---|---|---|---|---|\n";
 
@@ -524,7 +557,7 @@ fn plants_md(report: &PlantsStageReport) -> String {
         if let Some(g) = &sp.grass {
             s += &format!(
                 "### {} (grass: {} clumps, {} blades)\n\nImage error of the densest clump against its LoD0, rendered by the baker from 8 azimuths × 3 elevations; \
-                 switch distance = where the silhouette error stays ≤ 1 px in a 1920-px-wide, 60° view.\n\n",
+                 switch distance = where the silhouette error stays within the `[lod]` pixel budget.\n\n",
                 sp.name, g["clumps"], g["blades_total"]
             );
             s += "| level | triangles | vertices | bytes | IoU near | RMSE near | IoU at switch | edge error at switch (px) | switch distance (m) | screen coverage |\n|---|---|---|---|---|---|---|---|---|---|\n";
@@ -577,4 +610,42 @@ fn plants_md(report: &PlantsStageReport) -> String {
         }
     }
     s
+}
+
+/// report.md's view section: per view, what is drawn against full detail, then per species and
+/// level the switch distances and what each level draws.
+fn view_section(v: &crate::scene::view_stage::ViewStageReport) -> String {
+    let mut s = format!(
+        "## Scene view\n\n`{}` ({:.1} MB) is the scene as drawn from the first view: terrain chunks and instances at the level their distance selects, instances beyond their species' cull distance left out.\n\n",
+        v.scene_file.display(),
+        v.scene_bytes as f64 / 1e6
+    );
+    s += "| view | eye (m) | looking along | fov | image | triangles | draw calls | full-detail triangles | full-detail draw calls | triangle ratio |\n|---|---|---|---|---|---|---|---|---|---|\n";
+    for r in &v.views {
+        let c = &r.camera;
+        s += &format!(
+            "| {} | ({:.1}, {:.1}, {:.1}) | ({:.3}, {:.3}, {:.3}) | {:.0}° | {}×{} | {} | {} | {} | {} | {:.2e} |\n",
+            c.name, c.eye[0], c.eye[1], c.eye[2], c.forward[0], c.forward[1], c.forward[2], c.fov_y_deg, c.size_px[0], c.size_px[1],
+            r.triangles, r.draw_calls, r.full_detail_triangles, r.full_detail_draw_calls,
+            r.triangles as f64 / (r.full_detail_triangles.max(1)) as f64
+        );
+    }
+    for r in &v.views {
+        s += &format!("\n### {}\n\nterrain chunks per level: {:?} ({} triangles, {} at full detail)\n\n", r.camera.name, r.terrain.chunks_per_level, r.terrain.triangles, r.terrain.full_detail_triangles);
+        s += "| species | level | switch distance (m, per variant) | instances | triangles |\n|---|---|---|---|---|\n";
+        for sp in &r.species {
+            for l in &sp.levels {
+                let d: Vec<String> = l.switch_distance_m.iter().map(|d| format!("{:.1}", d * r.distance_factor)).collect();
+                s += &format!("| {} | LOD{} | {} | {} | {} |\n", sp.name, l.level, d.join(", "), l.instances, l.triangles);
+            }
+            match &sp.cull {
+                Some(c) => {
+                    let how = if c.scales_with_view { "from the budget, × instance scale" } else { "set by the preset" };
+                    s += &format!("| {} | culled | beyond {:.1} m ({how}) | {} of {} | — |\n", sp.name, if c.scales_with_view { c.distance_m * r.distance_factor } else { c.distance_m }, sp.culled, sp.placed);
+                }
+                None => s += &format!("| {} | — | no mesh: placement table only | {} | — |\n", sp.name, sp.placed),
+            }
+        }
+    }
+    s + "\n"
 }

@@ -12,6 +12,7 @@ pub mod plants_stage;
 pub mod scatter_stage;
 pub mod snow_stage;
 pub mod stages;
+pub mod view_stage;
 
 use std::path::PathBuf;
 
@@ -22,6 +23,7 @@ use crate::synth::NoiseKind;
 use crate::terrain::job::MeshMode;
 
 pub mod preset;
+pub mod view;
 
 /// Output formats of a scene's meshes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
@@ -93,6 +95,11 @@ pub struct Preset {
     pub scatter: ScatterSettings,
     /// `[snow]`: flakes, emitter, cover and plant thinning; `None` without the section.
     pub snow: Option<crate::snow::SnowSettings>,
+    /// `[lod]`: the pixel budget and reference screen every switch and cull distance is chosen for.
+    pub lod: crate::lod::LodView,
+    /// `[[view]]`, in file order (at least one: the default view when the preset has none);
+    /// `scene.glb` is the scene as drawn from the first.
+    pub views: Vec<view::ViewSettings>,
 }
 
 /// `[scatter]`: how placement is split into tiles.
@@ -169,6 +176,9 @@ pub struct SpeciesSettings {
     pub seed: u64,
     /// Explicit limit; exceeding it is an error naming the species and the remedy.
     pub max_instances: usize,
+    /// `cull_distance` (m): instances farther from the eye are not drawn; `None`: from the LoD
+    /// budget (where the coarsest level spans the pixel budget, [`view::cull_distance`]).
+    pub cull_distance_m: Option<f64>,
     /// What its instances show: a generated grass clump or flower, or a marker mesh.
     pub look: PlantLook,
 }

@@ -10,16 +10,16 @@ use serde::{Deserialize, Serialize};
 use crate::bake::atlas::write_mip_pngs;
 use crate::bake::image::Image;
 use crate::export;
-use crate::mesh::{Material, Mesh, Texture};
-use crate::plants::flower::{build_flower, FlowerReport, FlowerSettings};
-use crate::plants::grass::{self, GrassSettings};
-use crate::plants::grass_asset::{build_grass, GrassReport};
-use crate::plants::texture;
+use crate::mesh::Mesh;
+use crate::plants::flower::{build_flower, FlowerReport};
+use crate::plants::grass::GrassSettings;
+use crate::plants::grass_asset::{build_grass_with, GrassAsset, GrassReport};
+use crate::lod::LodView;
 use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::stages::StageError;
 use crate::lsystem::parse;
 use crate::lsystem::LSystem;
-use crate::plants::tree::{build_tree, TreeOptions, TreeStats};
+use crate::plants::tree::{TreeOptions, TreeStats};
 use crate::plants::mesh_asset::{load_obj, MeshAssetStats, ObjOptions, SourceMesh};
 use crate::plants::tree_lod::{build_mesh_lods, build_tree_lods, variant_seed, TreeLodOptions, TreeLodReport, TreeLods};
 use crate::scene::{MeshLook, PlantLook, Preset, TreeLook};
@@ -42,7 +42,69 @@ pub struct PlantReport {
     /// A mesh species: [`MeshSpeciesReport`].
     #[serde(default)]
     pub mesh: Option<serde_json::Value>,
+    /// What the view stage draws the species' instances with (typed: the view stage reads it).
+    pub chain: SpeciesChain,
     pub seconds: f64,
+}
+
+/// A species' meshes as the plants stage wrote them, for the view stage: per variant, each level's
+/// file and mesh, and the switch distance the analyzer measured for the `[lod]` policy.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
+pub struct SpeciesChain {
+    /// Instances pick variant `mix64(x, z) mod len` (see the view stage).
+    pub variants: Vec<Vec<ChainLevel>>,
+    /// Height of the LoD0 meshes above their origin (largest over the variants, m).
+    pub height_m: f64,
+    /// Height of the LoD0 bounding-box centre above the origin (m): distances are measured to it.
+    pub centre_y_m: f64,
+}
+
+/// One level of one variant.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ChainLevel {
+    /// Scene-relative file holding the mesh.
+    pub file: PathBuf,
+    /// Name of the mesh in that file.
+    pub mesh: String,
+    pub triangles: usize,
+    /// Used from this distance on (eye to the bounding-sphere centre, unit instance scale,
+    /// reference screen of `[lod]`); 0 for LoD0.
+    pub switch_distance_m: f64,
+}
+
+impl SpeciesChain {
+    fn with_bounds(variants: Vec<Vec<ChainLevel>>, lod0: &[&Mesh]) -> SpeciesChain {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for m in lod0 {
+            for p in &m.primitives {
+                for v in &p.positions {
+                    lo = lo.min(v[1] as f64);
+                    hi = hi.max(v[1] as f64);
+                }
+            }
+        }
+        if !(lo <= hi) {
+            (lo, hi) = (0.0, 0.0);
+        }
+        SpeciesChain { variants, height_m: hi.max(0.0), centre_y_m: 0.5 * (lo + hi) }
+    }
+}
+
+/// A chain's levels for the view stage; only LoD0 when the analyzer did not run (`analyze =
+/// false`: no switch distance was measured, so no coarser level may stand in for it).
+fn tree_levels(chain: &TreeLods, stem: &str, analyzed: bool) -> Vec<ChainLevel> {
+    chain
+        .levels
+        .iter()
+        .zip(&chain.report.lods)
+        .take(if analyzed { usize::MAX } else { 1 })
+        .map(|(level, f)| ChainLevel {
+            file: PathBuf::from("species").join(format!("{stem}_LOD{}.glb", level.level)),
+            mesh: level.scene.meshes.first().map(|m| m.name.clone()).unwrap_or_default(),
+            triangles: f.triangles,
+            switch_distance_m: f.switch_distance_m,
+        })
+        .collect()
 }
 
 /// One variant of a tree species: its seed, what the L-system grew and its chain's figures.
@@ -88,13 +150,15 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// built-in tree (crate::lsystem::library), not a marker. 6: chain files keep each finer level's
 /// data in a buffer of its own (export::streaming), so Babylon streams them in order. 7: tree card
 /// levels lit through a baked normal atlas (atlases/<stem>_normal.png, normalTexture). 8: grass and
-/// flower cards too; every card with a normal map carries TANGENT.
-pub const PLANTS_ALGORITHM_VERSION: u32 = 8;
+/// flower cards too; every card with a normal map carries TANGENT. 9: switch distances for the
+/// `[lod]` policy (2 px on 1080 px, 60° vertical by default); the report carries the typed chain.
+pub const PLANTS_ALGORITHM_VERSION: u32 = 9;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).
 pub fn plants_key(preset: &Preset) -> Result<String, StageError> {
     let mut k = KeyBuilder::new("plants", PLANTS_ALGORITHM_VERSION);
+    k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
     for s in &preset.species {
         k.add(s.name.as_bytes());
         k.add(serde_json::to_string(&s.look).unwrap_or_default().as_bytes());
@@ -192,38 +256,45 @@ fn load_model(name: &str, look: &MeshLook) -> Result<SourceMesh, StageError> {
 
 /// Builds and writes a mesh species' chain: `species/<name>.glb`, `species/<name>_LOD<n>.glb`,
 /// `atlases/<name>*.png`.
-fn run_mesh(name: &str, look: &MeshLook, dir: &Path, files: &mut Vec<PathBuf>) -> Result<MeshSpeciesReport, StageError> {
-    let (source, chain) = mesh_chain(name, look)?;
+fn run_mesh(name: &str, look: &MeshLook, policy: &LodView, dir: &Path, files: &mut Vec<PathBuf>) -> Result<(MeshSpeciesReport, SpeciesChain), StageError> {
+    let (source, chain) = mesh_chain(name, look, policy)?;
     let file = write_chain(&chain, dir, name, files)?;
-    Ok(MeshSpeciesReport { obj: look.obj.clone(), file, stats: source.stats, chain: chain.report })
+    let lod0: Vec<&Mesh> = chain.levels.first().and_then(|l| l.scene.meshes.first()).into_iter().collect();
+    let draw = SpeciesChain::with_bounds(vec![tree_levels(&chain, name, look.analyze)], &lod0);
+    Ok((MeshSpeciesReport { obj: look.obj.clone(), file, stats: source.stats, chain: chain.report }, draw))
 }
 
 /// A mesh species' model as loaded and the LoD chain the plants stage writes for it.
-pub fn mesh_chain(name: &str, look: &MeshLook) -> Result<(SourceMesh, TreeLods), StageError> {
+pub fn mesh_chain(name: &str, look: &MeshLook, policy: &LodView) -> Result<(SourceMesh, TreeLods), StageError> {
     let source = load_model(name, look)?;
-    let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, ..TreeLodOptions::default() };
+    let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, policy: *policy, ..TreeLodOptions::default() };
     let chain = build_mesh_lods(&source, name, &lod).map_err(|e| fail(format!("species `{name}`: {}: {e}", look.obj.display())))?;
     Ok((source, chain))
 }
 
 /// Variant `k`'s LoD chain of a tree species, as the plants stage writes it.
-pub fn tree_chain(name: &str, look: &TreeLook, system: &LSystem, k: usize) -> Result<TreeLods, StageError> {
-    let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, ..TreeLodOptions::default() };
+pub fn tree_chain(name: &str, look: &TreeLook, system: &LSystem, k: usize, policy: &LodView) -> Result<TreeLods, StageError> {
+    let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, policy: *policy, ..TreeLodOptions::default() };
     build_tree_lods(system, &tree_options(name, look, k), &lod).map_err(|e| fail(format!("species `{name}`: {}: {e}", look.lsystem.display())))
 }
 
 /// Builds and writes every variant's chain: `species/<name>_v<k>.glb` (MSFT_lod),
 /// `species/<name>_v<k>_LOD<n>.glb` and `atlases/<name>_v<k>*.png`.
-fn run_tree(name: &str, look: &TreeLook, dir: &Path, files: &mut Vec<PathBuf>) -> Result<TreeSpeciesReport, StageError> {
+fn run_tree(name: &str, look: &TreeLook, policy: &LodView, dir: &Path, files: &mut Vec<PathBuf>) -> Result<(TreeSpeciesReport, SpeciesChain), StageError> {
     let system = read_lsystem(name, look)?;
     let count = distinct_variants(&system, look);
     let mut variants = Vec::with_capacity(count);
+    let (mut levels, mut lod0) = (Vec::with_capacity(count), Vec::with_capacity(count));
     for k in 0..count {
-        let chain = tree_chain(name, look, &system, k)?;
-        let file = write_chain(&chain, dir, &format!("{name}_v{k}"), files)?;
+        let chain = tree_chain(name, look, &system, k, policy)?;
+        let stem = format!("{name}_v{k}");
+        let file = write_chain(&chain, dir, &stem, files)?;
+        levels.push(tree_levels(&chain, &stem, look.analyze));
+        lod0.extend(chain.levels.first().and_then(|l| l.scene.meshes.first()).cloned());
         variants.push(TreeVariantReport { file, seed: variant_seed(look.seed, k), stats: chain.lod0.as_ref().map(|t| t.stats.clone()).unwrap_or_default(), chain: chain.report });
     }
-    Ok(TreeSpeciesReport { lsystem: look.lsystem.clone(), dialect: system.dialect, variants_asked: look.variants, variants })
+    let draw = SpeciesChain::with_bounds(levels, &lod0.iter().collect::<Vec<_>>());
+    Ok((TreeSpeciesReport { lsystem: look.lsystem.clone(), dialect: system.dialect, variants_asked: look.variants, variants }, draw))
 }
 
 /// The user's blade image, if the settings name one.
@@ -256,19 +327,23 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
         let mut files = Vec::new();
         let name = &s.name;
         let (mut tree_report, mut mesh_report) = (None, None);
+        let draw;
         let (grass_report, flower_report) = match &s.look {
             PlantLook::Marker => continue,
             PlantLook::Tree(t) => {
-                tree_report = Some(run_tree(name, t, scene_dir, &mut files)?);
+                let (report, chain) = run_tree(name, t, &preset.lod, scene_dir, &mut files)?;
+                (tree_report, draw) = (Some(report), chain);
                 (None, None)
             }
             PlantLook::Mesh(m) => {
-                mesh_report = Some(run_mesh(name, m, scene_dir, &mut files)?);
+                let (report, chain) = run_mesh(name, m, &preset.lod, scene_dir, &mut files)?;
+                (mesh_report, draw) = (Some(report), chain);
                 (None, None)
             }
             PlantLook::Grass(g) => {
                 let blade = user_blade(g)?;
-                let asset = build_grass(name, g, blade.as_ref()).map_err(|e| fail(format!("species `{name}`: {e}")))?;
+                let asset = build_grass_with(name, g, blade.as_ref(), true, &preset.lod).map_err(|e| fail(format!("species `{name}`: {e}")))?;
+                draw = grass_chain(name, g, &asset);
                 for (n, scene) in asset.lod_scenes.iter().enumerate() {
                     write(scene, scene_dir, PathBuf::from("species").join(format!("{name}_LOD{n}.glb")), &mut files)?;
                 }
@@ -285,7 +360,15 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
             }
             PlantLook::Flower(f) => {
                 let asset = build_flower(name, f).map_err(|e| fail(format!("species `{name}`: {e}")))?;
-                write(&asset.scene, scene_dir, PathBuf::from("species").join(format!("{name}.glb")), &mut files)?;
+                let file = PathBuf::from("species").join(format!("{name}.glb"));
+                let levels = asset
+                    .scene
+                    .meshes
+                    .iter()
+                    .map(|m| vec![ChainLevel { file: file.clone(), mesh: m.name.clone(), triangles: m.triangle_count(), switch_distance_m: 0.0 }])
+                    .collect();
+                draw = SpeciesChain::with_bounds(levels, &asset.scene.meshes.iter().collect::<Vec<_>>());
+                write(&asset.scene, scene_dir, file, &mut files)?;
                 write_mips(scene_dir, name, &asset.atlas, &mut files)?;
                 write_normal_atlas(scene_dir, name, &asset.normal_atlas, &mut files)?;
                 (None, Some(asset.report))
@@ -298,119 +381,40 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
             flower: flower_report.map(|r: FlowerReport| serde_json::to_value(r).unwrap_or_default()),
             tree: tree_report.map(|r| serde_json::to_value(r).unwrap_or_default()),
             mesh: mesh_report.map(|r| serde_json::to_value(r).unwrap_or_default()),
+            chain: draw,
             seconds: t1.elapsed().as_secs_f64(),
         });
     }
     Ok(PlantsStageReport { species, seconds: t0.elapsed().as_secs_f64() })
 }
 
-/// The meshes scene.glb instances for a species with a generated look: grass LoD0 clumps (index
-/// level · variants + variant) with the blade material, the flower variants' crossed cards, or
-/// the tree variants' LoD0 meshes. Primitives index `materials`, materials index `textures`.
-pub struct InstanceMeshes {
-    pub meshes: Vec<Mesh>,
-    pub materials: Vec<Material>,
-    pub textures: Vec<Texture>,
-    /// Grass: density levels (clumps are chosen by local density); flowers and trees: 1.
-    pub levels: usize,
-    pub variants: usize,
-}
 
-pub fn instance_meshes(name: &str, look: &PlantLook) -> Result<Option<InstanceMeshes>, StageError> {
-    match look {
-        PlantLook::Marker => Ok(None),
-        PlantLook::Grass(g) => {
-            g.check().map_err(|e| fail(format!("species `{name}`: {e}")))?;
-            let blade = match user_blade(g)? {
-                Some(u) => texture::blade_texture_from(g, &u),
-                None => texture::blade_texture(g),
-            };
-            let mut level0 = blade;
-            crate::bake::atlas::dilate(&mut level0, g.alpha_cutoff);
-            let png = level0.encode_png().map_err(|e| fail(e.to_string()))?;
-            let mut meshes = Vec::new();
-            for level in 0..g.density_levels {
-                for variant in 0..g.variants {
-                    let c = grass::clump(g, level, variant);
-                    let mut prim = grass::lod0(g, &c, 0);
-                    prim.material = Some(0);
-                    meshes.push(Mesh { name: format!("{name}_d{level}v{variant}"), primitives: vec![prim], extras: None });
-                }
-            }
-            let material = Material {
-                name: format!("{name}_blade"),
-                base_color_texture: Some(0),
-                roughness: 0.9,
-                alpha_mode: crate::mesh::AlphaMode::Mask { cutoff: g.alpha_cutoff },
-                double_sided: true,
-                ..Material::default()
-            };
-            Ok(Some(InstanceMeshes {
-                meshes,
-                materials: vec![material],
-                textures: vec![Texture { name: format!("{name}_blade"), png }],
-                levels: g.density_levels,
-                variants: g.variants,
-            }))
-        }
-        PlantLook::Flower(f) => {
-            let f: &FlowerSettings = f;
-            let asset = build_flower(name, f).map_err(|e| fail(format!("species `{name}`: {e}")))?;
-            let scene = asset.scene;
-            Ok(Some(InstanceMeshes { meshes: scene.meshes, materials: scene.materials, textures: scene.textures, levels: 1, variants: f.variants }))
-        }
-        PlantLook::Tree(t) => {
-            let system = read_lsystem(name, t)?;
-            let variants = distinct_variants(&system, t);
-            let mut out = InstanceMeshes { meshes: Vec::new(), materials: Vec::new(), textures: Vec::new(), levels: 1, variants };
-            for k in 0..variants {
-                let tree = build_tree(&system, &tree_options(name, t, k))
-                    .map_err(|e| fail(format!("species `{name}`: {}: {e}", t.lsystem.display())))?;
-                append_scene(&mut out, tree.scene);
-            }
-            Ok(Some(out))
-        }
-        PlantLook::Mesh(m) => {
-            let source = load_model(name, m)?;
-            let mut out = InstanceMeshes { meshes: Vec::new(), materials: Vec::new(), textures: Vec::new(), levels: 1, variants: 1 };
-            append_scene(&mut out, source.scene);
-            Ok(Some(out))
-        }
-    }
-}
-
-/// Appends a scene's meshes, renumbering its materials and textures; a texture or material equal
-/// to one already held is shared (the variants of a tree use the same leaf texture and bark).
-fn append_scene(out: &mut InstanceMeshes, scene: crate::mesh::Scene) {
-    let textures: Vec<usize> = scene
-        .textures
-        .into_iter()
-        .map(|t| match out.textures.iter().position(|o| o.png == t.png) {
-            Some(i) => i,
-            None => {
-                out.textures.push(t);
-                out.textures.len() - 1
-            }
+/// A grass species' chain: the densest clumps (density is applied once, by the scatter's
+/// thinning; the clump's density level is not chosen by the map again), one variant each, with
+/// the levels of `species/<name>_LOD<n>.glb`.
+fn grass_chain(name: &str, g: &GrassSettings, asset: &GrassAsset) -> SpeciesChain {
+    let densest = g.density_levels.saturating_sub(1);
+    let clumps: Vec<usize> = (0..g.variants).map(|v| densest * g.variants + v).collect();
+    let variants = clumps
+        .iter()
+        .map(|&c| {
+            asset
+                .lod_scenes
+                .iter()
+                .zip(&asset.report.lods)
+                .enumerate()
+                .filter_map(|(n, (scene, f))| {
+                    let mesh = scene.meshes.get(c)?;
+                    Some(ChainLevel {
+                        file: PathBuf::from("species").join(format!("{name}_LOD{n}.glb")),
+                        mesh: mesh.name.clone(),
+                        triangles: mesh.triangle_count(),
+                        switch_distance_m: f.switch_distance_m,
+                    })
+                })
+                .collect()
         })
         .collect();
-    let materials: Vec<usize> = scene
-        .materials
-        .into_iter()
-        .map(|m| {
-            let m = m.with_textures(|i| Some(textures[i]));
-            match out.materials.iter().position(|o| *o == m) {
-                Some(i) => i,
-                None => {
-                    out.materials.push(m);
-                    out.materials.len() - 1
-                }
-            }
-        })
-        .collect();
-    for mut mesh in scene.meshes {
-        for p in &mut mesh.primitives {
-            p.material = p.material.map(|i| materials[i]);
-        }
-        out.meshes.push(mesh);
-    }
+    let lod0: Vec<&Mesh> = clumps.iter().filter_map(|&c| asset.lod_scenes.first()?.meshes.get(c)).collect();
+    SpeciesChain::with_bounds(variants, &lod0)
 }

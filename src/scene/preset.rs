@@ -14,9 +14,11 @@ use toml::Spanned;
 
 mod plants;
 mod snow;
+mod view;
 
 pub use plants::{FLOWER_KEYS, GRASS_KEYS, MESH_KEYS, TREE_KEYS};
 pub use snow::{default_snow_seed, SNOW_KEYS};
+pub use view::{LOD_KEYS, VIEW_KEYS};
 
 use super::{
     Exclusion, Format, Placement, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesKind, SpeciesSettings,
@@ -31,7 +33,7 @@ use crate::terrain::job::MeshMode;
 
 /// The sections a preset may have, in the order the docs list them (`species` is an array of
 /// tables, `[[species]]`).
-pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower", "tree", "mesh", "snow"];
+pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower", "tree", "mesh", "snow", "lod", "view"];
 /// Keys of `[scene]`.
 pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats"];
 /// Keys of `[terrain]`.
@@ -71,6 +73,7 @@ pub const SPECIES_KEYS: &[&str] = &[
     "exclusion",
     "seed",
     "max_instances",
+    "cull_distance",
     "grass",
     "flower",
     "lsystem",
@@ -195,6 +198,7 @@ pub fn demo_preset() -> Preset {
                 exclusions: Vec::new(),
                 seed: 0,
                 max_instances: DEFAULT_MAX_INSTANCES,
+                cull_distance_m: None,
                 // the built-in broadleaf (crate::lsystem::library), 12 m before the instance scale
                 look: PlantLook::Tree(TreeLook {
                     lsystem: library::path_of(library::find("broadleaf").expect("a library species")),
@@ -221,11 +225,14 @@ pub fn demo_preset() -> Preset {
                 exclusions: vec![Exclusion { species: "tree".into(), radius_m: 1.5 }],
                 seed: 0,
                 max_instances: DEFAULT_MAX_INSTANCES,
+                cull_distance_m: None,
                 look: PlantLook::Grass(GrassSettings { seed: species_look_seed(0, "grass", 0), ..GrassSettings::default() }),
             },
         ],
         scatter: ScatterSettings::default(),
         snow: None,
+        lod: crate::lod::LodView::default(),
+        views: vec![crate::scene::view::ViewSettings::default_view()],
     }
 }
 
@@ -251,7 +258,7 @@ pub fn check_species_name(name: &str) -> Result<(), String> {
     check_safe_name("species", "file", name)
 }
 
-fn check_safe_name(what: &str, used_as: &str, name: &str) -> Result<(), String> {
+pub(super) fn check_safe_name(what: &str, used_as: &str, name: &str) -> Result<(), String> {
     if name.is_empty() {
         return Err(format!("the {what} name is empty"));
     }
@@ -658,8 +665,25 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
     let mut tree_section = None;
     let mut mesh_section = None;
     let mut snow_section = None;
+    let mut lod_section = None;
+    let mut view_tables = None;
     for (key, value) in entries {
         let name: &str = key.get_ref();
+        if name == "view" {
+            match value.get_ref() {
+                DeValue::Array(items) if items.iter().all(|i| matches!(i.get_ref(), DeValue::Table(_))) => {
+                    view_tables = Some((key.span(), items));
+                    continue;
+                }
+                _ => {
+                    return Err(ctx.at(
+                        &key.span(),
+                        "`view` must be an array of tables, one per camera",
+                        "write the header with double brackets, `[[view]]`, once before each view",
+                    ));
+                }
+            }
+        }
         if name == "species" {
             // `[[species]]`: an array of tables (inline `species = [{ … }]` is the same to TOML)
             let species_example = "[[species]]\nname = \"oak\"\nkind = \"tree\"\nmax_density = 0.01";
@@ -726,6 +750,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             "tree" => tree_section = Some((key.span(), table)),
             "mesh" => mesh_section = Some((key.span(), table)),
             "snow" => snow_section = Some((key.span(), table)),
+            "lod" => lod_section = Some((key.span(), table)),
             _ => return Err(unknown_section(&ctx, &key.span(), &format!("[{name}]"), name)),
         }
     }
@@ -811,7 +836,26 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             species.push(s);
         }
     }
-    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain, species, scatter, snow })
+    let lod = match lod_section {
+        None => crate::lod::LodView::default(),
+        Some((span, table)) => view::parse_lod(&Table { ctx: &ctx, label: "[lod]".into(), span, table })?,
+    };
+    let mut views = Vec::new();
+    if let Some((_, items)) = view_tables {
+        for (index, item) in items.iter().enumerate() {
+            let DeValue::Table(table) = item.get_ref() else { continue };
+            let t = Table { ctx: &ctx, label: "[[view]]".into(), span: item.span(), table };
+            let v = view::parse_view(&t, index)?;
+            if views.iter().any(|e: &crate::scene::view::ViewSettings| e.name == v.name) {
+                return Err(ctx.at(&item.span(), format!("view `{}` is declared twice", v.name), "give each [[view]] its own name"));
+            }
+            views.push(v);
+        }
+    }
+    if views.is_empty() {
+        views.push(crate::scene::view::ViewSettings::default_view());
+    }
+    Ok(Preset { path: Some(path.to_path_buf()), scene, terrain, species, scatter, snow, lod, views })
 }
 
 fn unknown_section(ctx: &Ctx<'_>, span: &Range<usize>, header: &str, name: &str) -> PresetError {
@@ -824,8 +868,8 @@ fn unknown_section(ctx: &Ctx<'_>, span: &Range<usize>, header: &str, name: &str)
 
 /// How a section's header is written: `[scene]`, `[[species]]`.
 fn section_header(name: &str) -> String {
-    if name == "species" {
-        "[[species]]".to_string()
+    if name == "species" || name == "view" {
+        format!("[[{name}]]")
     } else {
         format!("[{name}]")
     }
@@ -1206,6 +1250,7 @@ fn parse_species(
     let max_instances = t
         .integer("max_instances", 1..=MAX_MAX_INSTANCES, "max_instances = 5000000")?
         .map_or(DEFAULT_MAX_INSTANCES, |(n, _)| n as usize);
+    let cull_distance_m = t.number("cull_distance", "cull_distance = 80.0", positive)?.map(|(x, _)| x);
     let look = parse_look(t, name, kind, looks, seed, check_inputs)?;
 
     let species = SpeciesSettings {
@@ -1225,6 +1270,7 @@ fn parse_species(
         exclusions,
         seed,
         max_instances,
+        cull_distance_m,
         look,
     };
     Ok((species, name_span))

@@ -1,15 +1,14 @@
 //! The scatter stage: places every `[[species]]` on the exported terrain surface (in preset order,
-//! so exclusions see the species before them), writes `placements/<species>.csv` and `.json`, and
-//! `scene.glb`: the terrain plus one EXT_mesh_gpu_instancing node per species per tile.
+//! so exclusions see the species before them) and writes `placements/<species>.csv` and `.json`.
+//! The view stage draws them (scene.glb).
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
 use crate::export::{self, table};
-use crate::mesh::{Instances, Mesh, Node, Scene};
+use crate::mesh::Scene;
 use crate::plants::marker;
 use crate::scatter::density::DensityMap;
 use crate::scatter::stats::{analyze, SpeciesStats};
@@ -38,7 +37,6 @@ pub struct SpeciesReport {
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct ScatterStageReport {
-    pub scene_file: PathBuf,
     pub tile_m: f64,
     pub species: Vec<SpeciesReport>,
     pub seconds: f64,
@@ -46,7 +44,7 @@ pub struct ScatterStageReport {
 
 impl ScatterStageReport {
     pub fn files(&self) -> Vec<PathBuf> {
-        let mut files = vec![self.scene_file.clone()];
+        let mut files = Vec::new();
         for s in &self.species {
             files.push(s.csv.clone());
             files.push(s.csv.with_extension("json"));
@@ -58,8 +56,9 @@ impl ScatterStageReport {
 /// Version of what the scatter stage writes for given inputs: part of its cache key (see
 /// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: scene.glb holds no unused mesh; 3: its terrain is textured; 4:
 /// its plants carry wind in `_WIND`, not COLOR_0; 5: a tree without an L-system instances a
-/// built-in tree; 6: flower cards lit by a normal atlas (with TANGENT).
-pub const SCATTER_ALGORITHM_VERSION: u32 = 6;
+/// built-in tree; 6: flower cards lit by a normal atlas (with TANGENT); 7: scene.glb moved to the
+/// view stage (tables only).
+pub const SCATTER_ALGORITHM_VERSION: u32 = 7;
 
 /// Cache key: the terrain's key, the species and scatter settings, the scene seed, the maps' bytes.
 pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageError> {
@@ -164,10 +163,7 @@ pub fn run_scatter_with_snow(
         reports.push(report);
         placed.push(Placed { species: species.clone(), color: marker::species_color(species.kind, index), instances: result.instances });
     }
-    let scene = instanced_scene(terrain, &placed, extent)?;
-    let scene_file = PathBuf::from("scene.glb");
-    export::write_scene(&scene, &scene_dir.join(&scene_file)).map_err(|e| fail(e.to_string()))?;
-    let report = ScatterStageReport { scene_file, tile_m: preset.scatter.tile_m, species: reports, seconds: t0.elapsed().as_secs_f64() };
+    let report = ScatterStageReport { tile_m: preset.scatter.tile_m, species: reports, seconds: t0.elapsed().as_secs_f64() };
     Ok((report, placed))
 }
 
@@ -186,131 +182,5 @@ struct SpeciesSummary<'a> {
 impl<'a> From<&'a SpeciesReport> for SpeciesSummary<'a> {
     fn from(r: &'a SpeciesReport) -> Self {
         SpeciesSummary { species: &r.name, kind: r.kind, count: r.count, table: &r.csv, rules: &r.rules, stats: &r.stats }
-    }
-}
-
-/// Which generated mesh an instance shows: the clump density level from the density map at its
-/// position (sparse clumps where the map is low; the densest level without a map) and a variant
-/// from a hash of its position, so neighbouring clumps differ and the choice is reproducible.
-fn mesh_choice(i: &Instance, levels: usize, variants: usize, density: Option<&DensityMap>, extent: [f64; 4]) -> usize {
-    let level = match density {
-        None => levels - 1,
-        Some(m) => {
-            let u = (i.position[0] - extent[0]) / (extent[2] - extent[0]);
-            let v = (i.position[2] - extent[1]) / (extent[3] - extent[1]);
-            let d = m.sample(u, v).clamp(0.0, 1.0) as f64;
-            ((d * levels as f64) as usize).min(levels - 1)
-        }
-    };
-    let h = crate::synth::mix64(i.position[0].to_bits() ^ crate::synth::mix64(i.position[2].to_bits()));
-    level * variants + (((h >> 32) * variants as u64) >> 32) as usize
-}
-
-/// The terrain scene plus, per species, its meshes (generated grass clumps or flowers, else a
-/// marker) and one instanced node per tile and mesh (grouped under a node named after the species).
-pub fn instanced_scene(terrain: &Scene, placed: &[Placed], extent: [f64; 4]) -> Result<Scene, StageError> {
-    let mut scene = terrain.clone();
-    for p in placed {
-        let generated = crate::scene::plants_stage::instance_meshes(&p.species.name, &p.species.look)?;
-        let density = match &generated {
-            Some(g) if g.levels > 1 => load_map(&p.species.density_map)?,
-            _ => None,
-        };
-        let (mesh_indices, levels, variants) = match generated {
-            Some(g) => {
-                let texture_base = scene.textures.len();
-                scene.textures.extend(g.textures);
-                let material_base = scene.materials.len();
-                scene.materials.extend(
-                    g.materials
-                        .into_iter()
-                        .map(|m| m.with_textures(|t| Some(t + texture_base))),
-                );
-                let first = scene.meshes.len();
-                for mut m in g.meshes {
-                    for prim in &mut m.primitives {
-                        prim.material = prim.material.map(|i| i + material_base);
-                    }
-                    scene.meshes.push(m);
-                }
-                ((first..scene.meshes.len()).collect::<Vec<_>>(), g.levels, g.variants)
-            }
-            None => {
-                let (mesh, materials) = marker::marker(p.species.kind, &p.species.name, p.color);
-                let material_base = scene.materials.len();
-                scene.materials.extend(materials);
-                let mesh = Mesh {
-                    primitives: mesh
-                        .primitives
-                        .into_iter()
-                        .map(|mut prim| {
-                            prim.material = prim.material.map(|m| m + material_base);
-                            prim
-                        })
-                        .collect(),
-                    ..mesh
-                };
-                scene.meshes.push(mesh);
-                (vec![scene.meshes.len() - 1], 1, 1)
-            }
-        };
-        let mut by_tile: BTreeMap<(u32, usize), Instances> = BTreeMap::new();
-        for i in &p.instances {
-            let choice = if mesh_indices.len() > 1 { mesh_choice(i, levels, variants, density.as_ref(), extent) } else { 0 };
-            let inst = by_tile.entry((i.tile, choice)).or_default();
-            inst.translations.push([i.position[0] as f32, i.position[1] as f32, i.position[2] as f32]);
-            inst.rotations.push(i.rotation);
-            inst.scales.push(i.scale);
-        }
-        let mut children = Vec::new();
-        for ((tile, choice), instances) in by_tile {
-            let mesh = mesh_indices[choice];
-            let name = if mesh_indices.len() > 1 {
-                format!("{}_tile_{tile}_{}", p.species.name, scene.meshes[mesh].name)
-            } else {
-                format!("{}_tile_{tile}", p.species.name)
-            };
-            scene.nodes.push(Node {
-                name,
-                mesh: Some(mesh),
-                instances: Some(instances),
-                extras: Some(serde_json::json!({ "species": p.species.name, "tile": tile, "mesh": scene.meshes[mesh].name })),
-                ..Node::default()
-            });
-            children.push(scene.nodes.len() - 1);
-        }
-        scene.nodes.push(Node { name: p.species.name.clone(), children, ..Node::default() });
-        scene.roots.push(scene.nodes.len() - 1);
-    }
-    Ok(scene)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn at(x: f64, z: f64) -> Instance {
-        Instance { position: [x, 0.0, z], rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0; 3], yaw_deg: 0.0, tile: 0 }
-    }
-
-    #[test]
-    fn clumps_follow_the_density_map_and_variants_mix() {
-        // left half of the extent at density 0.2, right half at 0.9; 3 levels × 2 variants
-        let map = DensityMap::from_fn(2, 1, |i, _| if i == 0 { 0.2 } else { 0.9 });
-        let extent = [0.0, 0.0, 100.0, 100.0];
-        let mut variants = [0usize; 2];
-        for k in 0..200 {
-            let z = k as f64 * 0.37;
-            let left = mesh_choice(&at(10.0 + k as f64 * 0.1, z), 3, 2, Some(&map), extent);
-            let right = mesh_choice(&at(90.0 - k as f64 * 0.1, z), 3, 2, Some(&map), extent);
-            assert_eq!(left / 2, 0, "sparse clumps where the map is low");
-            assert_eq!(right / 2, 2, "dense clumps where it is high");
-            variants[left % 2] += 1;
-        }
-        assert!(variants.iter().all(|&n| n > 60), "both variants used: {variants:?}");
-        // no map: the densest level
-        assert_eq!(mesh_choice(&at(1.0, 2.0), 3, 2, None, extent) / 2, 2);
-        // the same instance, the same choice
-        assert_eq!(mesh_choice(&at(3.5, 7.25), 3, 2, Some(&map), extent), mesh_choice(&at(3.5, 7.25), 3, 2, Some(&map), extent));
     }
 }

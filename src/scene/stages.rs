@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::export;
 use crate::heightfield::{self, Heightfield};
-use crate::lod::{terrain_lod_chain, LodView};
+use crate::lod::terrain_lod_chain;
 use crate::mesh::{Bounds, Scene};
 use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::preset::procedural_heightfield;
@@ -30,20 +30,24 @@ pub enum Stage {
     Snow,
     /// Grass, flower, tree and mesh species → their meshes with LoDs (species/) and baked atlases (atlases/).
     Plants,
-    /// [[species]] → placements on the terrain: tables and scene.glb with GPU instancing.
+    /// [[species]] → placements on the terrain: tables (placements/).
     Scatter,
+    /// The first `[[view]]` → scene.glb: terrain chunks and instances at the levels their
+    /// distances select, culled beyond each species' cull distance; per view, what is drawn.
+    View,
     /// preview.png: a shaded relief drawn from the terrain mesh.
     Preview,
 }
 
 impl Stage {
-    pub const ALL: [Stage; 5] = [Stage::Terrain, Stage::Snow, Stage::Plants, Stage::Scatter, Stage::Preview];
+    pub const ALL: [Stage; 6] = [Stage::Terrain, Stage::Snow, Stage::Plants, Stage::Scatter, Stage::View, Stage::Preview];
     pub fn name(self) -> &'static str {
         match self {
             Stage::Terrain => "terrain",
             Stage::Snow => "snow",
             Stage::Plants => "plants",
             Stage::Scatter => "scatter",
+            Stage::View => "view",
             Stage::Preview => "preview",
         }
     }
@@ -135,8 +139,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// Version of what the terrain stage writes for given inputs: part of its cache key. Bump it in
 /// the commit that changes the stage's output bytes (tests/suite/scene_build.rs pins a digest of a
 /// reference build per version and fails until it is bumped). 2: base-colour texture from the
-/// material layers, terrain_layers.png.
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 2;
+/// material layers, terrain_layers.png. 3: LoD switch distances for the `[lod]` policy (2 px by
+/// default, was 1 px).
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 3;
 
 /// Version of the preview stage's output for given inputs (see [`TERRAIN_ALGORITHM_VERSION`]).
 /// 2: a tree species without an L-system is drawn at its built-in tree's height.
@@ -147,6 +152,9 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
     let mut k = KeyBuilder::new("terrain", TERRAIN_ALGORITHM_VERSION);
     k.add(serde_json::to_string(t).unwrap_or_default().as_bytes());
     k.add(serde_json::to_string(&preset.scene.formats).unwrap_or_default().as_bytes());
+    if !t.lods.is_empty() {
+        k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
+    }
     if let TerrainSource::Heightmap { path, .. } = &t.source {
         let bytes = std::fs::read(path)
             .map_err(|e| fail(Stage::Terrain)(format!("{}: cannot read the heightmap: {e}", path.display())))?;
@@ -185,7 +193,7 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
     let chain = if t.lods.is_empty() {
         Vec::new()
     } else {
-        terrain_lod_chain(&hf, &t.lods, t.max_triangles, &LodView::default()).map_err(|e| f(e.to_string()))?
+        terrain_lod_chain(&hf, &t.lods, t.max_triangles, &preset.lod).map_err(|e| f(e.to_string()))?
     };
     let chain_s = t1.elapsed().as_secs_f64();
     let shared = chain.iter().find(|l| t.mode == MeshMode::Tin && l.max_error_requested_m == t.max_error_m);

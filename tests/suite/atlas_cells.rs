@@ -164,11 +164,11 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                 }
                 PlantLook::Tree(t) => {
                     let system = read_lsystem(&s.name, t).unwrap();
-                    check_chain(&what, &tree_chain(&s.name, t, &system, 0).unwrap(), t.atlas_px, true);
+                    check_chain(&what, &tree_chain(&s.name, t, &system, 0, &preset.lod).unwrap(), t.atlas_px, true);
                     kinds.insert("tree");
                 }
                 PlantLook::Mesh(m) => {
-                    check_chain(&what, &mesh_chain(&s.name, m).unwrap().1, m.atlas_px, false);
+                    check_chain(&what, &mesh_chain(&s.name, m, &preset.lod).unwrap().1, m.atlas_px, false);
                     kinds.insert("mesh");
                 }
             }

@@ -16,6 +16,7 @@ mod preview_lod;
 mod scatter_build;
 mod scatter_cases;
 mod scene_build;
+mod scene_view;
 mod snow;
 mod snow_build;
 mod terrain_cases;

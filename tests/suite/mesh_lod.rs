@@ -206,7 +206,10 @@ fn rock_chain_is_valid_reimports_as_built_and_decreases() {
     for w in lods.windows(2) {
         assert!(w[1].switch_distance_m >= w[0].switch_distance_m);
     }
-    assert!(lods[1].switch_distance_m > radius, "the image analyzer measured LoD1");
+    // the image analyzer measured LoD1: every measured distance from its switch on is within the budget
+    assert!(!lods[1].measured.is_empty(), "the image analyzer measured LoD1");
+    assert!(lods[1].measured.iter().filter(|r| r.distance_m >= lods[1].switch_distance_m).all(|r| r.passes));
+    assert!(lods[4].switch_distance_m > radius, "the impostor switches in beyond the rock's size");
 }
 
 #[test]

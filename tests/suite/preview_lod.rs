@@ -39,10 +39,10 @@ fn lod_chain_is_monotone_bounded_and_switches_by_measured_error() {
         assert!(coarse.switch_distance_m > fine.switch_distance_m, "distances increase");
         // d = ε · H / (2 tan(fov/2) · τ) from the measured ε
         let e = coarse.stats.max_error_m;
-        let d = e * 1080.0 / (2.0 * 30f64.to_radians().tan() * 1.0);
+        let d = e * 1080.0 / (2.0 * 30f64.to_radians().tan() * view.max_screen_error_px);
         assert!((coarse.switch_distance_m - d).abs() <= 1e-9 * d);
         // at that distance the error is exactly the tolerance on screen
-        assert!((view.projected_error_px(e, coarse.switch_distance_m) - 1.0).abs() < 1e-9);
+        assert!((view.projected_error_px(e, coarse.switch_distance_m) - view.max_screen_error_px).abs() < 1e-9);
     }
     assert!(levels[3].mesh.triangles.len() < levels[0].mesh.triangles.len() / 4, "coarse levels are much smaller");
 

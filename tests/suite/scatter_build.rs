@@ -1,6 +1,7 @@
 //! The scatter stage inside `verdant build` (issue 4), driven through the binary: placement tables and
 //! the instanced scene.glb are byte-identical across runs, `--threads` and `--jobs`; scene.glb's
-//! EXT_mesh_gpu_instancing nodes equal the CSV rows; the JSON summaries and report.json agree with
+//! EXT_mesh_gpu_instancing nodes equal the CSV rows the first view draws, at their levels (replayed
+//! here from the tables and the manifest); the JSON summaries and report.json agree with
 //! the tables; spacing and exclusions hold; stage selection; the scatter cache (settings, density
 //! maps); `max_instances` fails the scene alone; a species no rule allows writes empty, valid files.
 //!
@@ -155,44 +156,57 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
         assert!(rows.len() > if species == "tree" { 200 } else { 10_000 }, "{species}: only {} rows", rows.len());
         counts.insert(species, rows.len());
 
-        // the species' root node and its tile children: translations are the CSV's f64 as f32,
-        // rotations and scales equal, grouped by tile in ascending order, CSV order within a tile
+        // the first view, replayed here from the table and manifest.json's view section: each
+        // row's variant (the documented hash), distance to its centre, cull and level; scene.glb's
+        // node per (variant, level) holds exactly those rows, in CSV order
         let root = scene.roots.iter().map(|&r| &scene.nodes[r]).find(|n| n.name == species).unwrap_or_else(|| panic!("no root node {species}"));
+        let view = &manifest["view"]["views"][0];
+        let chain = &manifest["view"]["chains"][species];
+        let cull = &view["species"][k]["cull"];
+        let eye: Vec<f64> = view["camera"]["eye"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let factor = view["distance_factor"].as_f64().unwrap();
+        let centre_y = chain["centre_y_m"].as_f64().unwrap();
+        let variants = chain["variants"].as_array().unwrap();
+        let key = |t: [f32; 3], q: [f32; 4], s: [f32; 3]| format!("{t:?}{q:?}{s:?}");
+        let mut want: BTreeMap<(u64, u64), Vec<String>> = BTreeMap::new();
+        let mut culled = 0;
+        for r in &rows {
+            let v = verdant::scene::view_stage::variant_of(r.pos, variants.len());
+            let s = r.scale[1] as f64;
+            let [x, y, z, w] = r.rot.map(|c| c as f64);
+            let up = centre_y * s;
+            let c = [r.pos[0] as f32 as f64 + 2.0 * (x * y - w * z) * up, r.pos[1] as f32 as f64 + (1.0 - 2.0 * (x * x + z * z)) * up, r.pos[2] as f32 as f64 + 2.0 * (y * z + w * x) * up];
+            let d = ((c[0] - eye[0]).powi(2) + (c[1] - eye[1]).powi(2) + (c[2] - eye[2]).powi(2)).sqrt();
+            let limit = cull["distance_m"].as_f64().unwrap() * if cull["scales_with_view"].as_bool().unwrap() { factor * s } else { 1.0 };
+            if d > limit {
+                culled += 1;
+                continue;
+            }
+            let level = variants[v].as_array().unwrap().iter().enumerate().filter(|(_, l)| l["switch_distance_m"].as_f64().unwrap() * factor * s <= d).map(|(n, _)| n).max().unwrap();
+            want.entry((v as u64, level as u64)).or_default().push(key([r.pos[0] as f32, r.pos[1] as f32, r.pos[2] as f32], r.rot, r.scale));
+        }
+        assert_eq!(view["species"][k]["culled"].as_u64(), Some(culled), "{species}: culled rows");
+        let mut got: BTreeMap<(u64, u64), Vec<String>> = BTreeMap::new();
+        for &c in &root.children {
+            let node = &scene.nodes[c];
+            let e = node.extras.as_ref().unwrap_or_else(|| panic!("{}: no extras", node.name));
+            let (v, level) = (e["variant"].as_u64().unwrap(), e["level"].as_u64().unwrap());
+            let mesh = &scene.meshes[node.mesh.unwrap_or_else(|| panic!("{}: no mesh", node.name))];
+            assert_eq!(mesh.name, variants[v as usize][level as usize]["mesh"].as_str().unwrap(), "{}: the chain's mesh", node.name);
+            assert_eq!(node.name, format!("{species}_{}", mesh.name));
+            let inst = node.instances.as_ref().unwrap_or_else(|| panic!("{} is not instanced", node.name));
+            assert_eq!(inst.translations.len(), inst.rotations.len());
+            assert_eq!(inst.translations.len(), inst.scales.len());
+            let keys: Vec<String> = (0..inst.translations.len()).map(|i| key(inst.translations[i], inst.rotations[i], inst.scales[i])).collect();
+            assert!(got.insert((v, level), keys).is_none(), "{species}: two nodes for variant {v} LOD{level}");
+        }
+        assert_eq!(got, want, "{species}: scene.glb = the table replayed for the first view (CSV order within a node)");
+        assert!(got.len() > 1, "{species}: more than one mesh and level drawn: {:?}", got.keys().collect::<Vec<_>>());
         let mut by_tile: BTreeMap<u32, Vec<Row>> = BTreeMap::new();
         for r in &rows {
             by_tile.entry(r.tile).or_default().push(*r);
         }
-        // grass instances a clump mesh per (tile, density level, variant): one node each, named
-        // after the tile and the mesh; CSV order within a node
-        let mut nodes_by_tile: BTreeMap<u32, Vec<&verdant::mesh::Node>> = BTreeMap::new();
-        for &c in &root.children {
-            let node = &scene.nodes[c];
-            let tile = node.extras.as_ref().and_then(|e| e["tile"].as_u64()).unwrap_or_else(|| panic!("{}: no tile in extras", node.name)) as u32;
-            assert!(node.name.starts_with(&format!("{species}_tile_{tile}")), "{}", node.name);
-            assert!(node.mesh.is_some(), "{}: no mesh", node.name);
-            nodes_by_tile.entry(tile).or_default().push(node);
-        }
-        assert_eq!(nodes_by_tile.keys().collect::<Vec<_>>(), by_tile.keys().collect::<Vec<_>>(), "{species}: nodes for exactly the non-empty tiles");
         assert!(by_tile.len() > 4, "{species}: instances in only {} tiles", by_tile.len());
-        for (tile, tile_rows) in &by_tile {
-            let key = |t: [f32; 3], q: [f32; 4], s: [f32; 3]| format!("{t:?}{q:?}{s:?}");
-            let mut want: Vec<String> = tile_rows.iter().map(|r| key([r.pos[0] as f32, r.pos[1] as f32, r.pos[2] as f32], r.rot, r.scale)).collect();
-            let mut got = Vec::new();
-            for node in &nodes_by_tile[tile] {
-                let inst = node.instances.as_ref().unwrap_or_else(|| panic!("{} is not instanced", node.name));
-                assert_eq!(inst.translations.len(), inst.rotations.len());
-                assert_eq!(inst.translations.len(), inst.scales.len());
-                // within a node, the CSV's order
-                let order: Vec<usize> = (0..inst.translations.len())
-                    .map(|i| want.iter().position(|w| *w == key(inst.translations[i], inst.rotations[i], inst.scales[i])).expect("instance is a CSV row"))
-                    .collect();
-                assert!(order.windows(2).all(|w| w[0] < w[1]), "{}: not in CSV order", node.name);
-                got.extend((0..inst.translations.len()).map(|i| key(inst.translations[i], inst.rotations[i], inst.scales[i])));
-            }
-            want.sort();
-            got.sort();
-            assert_eq!(got, want, "{species} tile {tile}: instances = CSV rows");
-        }
         for r in &rows {
             let n = r.rot.iter().map(|v| (*v as f64).powi(2)).sum::<f64>().sqrt();
             assert!((n - 1.0).abs() < 1e-5, "{species}: rotation {:?} not unit", r.rot);
@@ -263,10 +277,11 @@ fn only_terrain_scatter_writes_placements_without_preview_and_scatter_alone_is_a
     write(d, "p/a.toml", &forest("a", 3));
     ok(&verdant_in(d, &["build", "p/a.toml", "--only", "terrain,scatter", "--out", "o"]));
     let s = d.join("o/a");
-    for f in ["placements/tree.csv", "placements/grass.json", "scene.glb", "terrain/terrain.glb"] {
+    for f in ["placements/tree.csv", "placements/grass.json", "terrain/terrain.glb"] {
         assert!(s.join(f).is_file(), "{f} missing");
     }
-    assert!(!s.join("preview.png").exists());
+    // scene.glb is the view stage's
+    assert!(!s.join("preview.png").exists() && !s.join("scene.glb").exists());
     let m = read_json(&s.join("manifest.json"));
     assert!(m["preview"].is_null());
     assert!(m["files"].as_array().unwrap().iter().any(|f| f["path"] == "placements/tree.csv"));

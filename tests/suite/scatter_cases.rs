@@ -48,6 +48,7 @@ fn species(name: &str, placement: Placement) -> SpeciesSettings {
         exclusions: vec![],
         seed: 0,
         max_instances: 10_000_000,
+        cull_distance_m: None,
         look: verdant::scene::PlantLook::Marker,
     }
 }

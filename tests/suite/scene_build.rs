@@ -679,10 +679,11 @@ fn concurrent_stores_of_one_cache_entry_stay_complete() {
 /// `*_ALGORITHM_VERSION` (its cache key then changes, so an older `out/.cache` is never served to
 /// the new binary) and put the new digest here; the test prints the whole table to copy.
 const PINNED: &[(&str, u32, &str)] = &[
-    ("terrain", 2, "8ede27b74341dd54"),
-    ("plants", 8, "82743804af1a0552"),
+    ("terrain", 3, "8ede27b74341dd54"),
+    ("plants", 9, "3a551370ac071657"),
     ("snow", 2, "afe32471f9508a26"),
-    ("scatter", 6, "1d8b6b38e483a194"),
+    ("scatter", 7, "adc595be82dcf951"),
+    ("view", 1, "6a8add05b144e382"),
     ("preview", 2, "86951c482cf66dd9"),
 ];
 
@@ -692,7 +693,8 @@ fn stage_of(rel: &str) -> Option<&'static str> {
         "terrain" => Some("terrain"),
         "species" | "atlases" => Some("plants"),
         "snow" => Some("snow"),
-        "placements" | "scene.glb" => Some("scatter"),
+        "placements" => Some("scatter"),
+        "scene.glb" => Some("view"),
         "preview.png" => Some("preview"),
         _ => None,
     }
@@ -700,12 +702,13 @@ fn stage_of(rel: &str) -> Option<&'static str> {
 
 #[test]
 fn stage_outputs_match_their_pinned_algorithm_versions() {
-    use verdant::scene::{plants_stage, scatter_stage, snow_stage, stages};
+    use verdant::scene::{plants_stage, scatter_stage, snow_stage, stages, view_stage};
     let versions = [
         ("terrain", stages::TERRAIN_ALGORITHM_VERSION),
         ("plants", plants_stage::PLANTS_ALGORITHM_VERSION),
         ("snow", snow_stage::SNOW_ALGORITHM_VERSION),
         ("scatter", scatter_stage::SCATTER_ALGORITHM_VERSION),
+        ("view", view_stage::VIEW_ALGORITHM_VERSION),
         ("preview", stages::PREVIEW_ALGORITHM_VERSION),
     ];
     let dir = tempfile::tempdir().unwrap();

@@ -60,10 +60,10 @@ fn variants_are_built_as_chains_and_instanced_by_position() {
     }
     assert!(!s.join("species/bush_v2.glb").exists(), "only the variants asked for");
 
-    // scene.glb: the two variants' LoD0 meshes, instanced; instances = CSV rows; both used
+    // scene.glb: the two variants' LoD0 meshes (no analysis: no coarser level may stand in), instanced; instances = CSV rows; both used
     let scene = verdant::validate::read_scene(&s.join("scene.glb")).expect("scene.glb re-imports");
     let mesh_index = |name: &str| scene.meshes.iter().position(|m| m.name == name).unwrap_or_else(|| panic!("scene.glb has no mesh {name}"));
-    let variants = [mesh_index("bush_v0"), mesh_index("bush_v1")];
+    let variants = [mesh_index("bush_v0_LOD0"), mesh_index("bush_v1_LOD0")];
     assert_ne!(
         scene.meshes[variants[0]].primitives[0].positions,
         scene.meshes[variants[1]].primitives[0].positions,

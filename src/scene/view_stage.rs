@@ -1,0 +1,498 @@
+//! The view stage: `scene.glb` as drawn from the preset's first `[[view]]` — every terrain chunk
+//! at the level its distance selects, every placed instance at the level of its own distance
+//! (its species' chain, as the plants stage wrote it), instances beyond their species' cull
+//! distance left out — and, per view, what is drawn: triangles and draw calls against the same
+//! scene at full detail.
+//!
+//! Inputs are the files the other stages wrote (terrain levels, species level files, placement
+//! tables), read back, so a build after cached stages writes the same bytes. Instances of one
+//! mesh at one level share one EXT_mesh_gpu_instancing node (one draw call per primitive), in
+//! table order.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::export::{self, table};
+use crate::mesh::{Instances, Material, Mesh, Node, Scene, Texture};
+use crate::scatter::surface::SurfaceIndex;
+use crate::scene::cache::KeyBuilder;
+use crate::scene::plants_stage::{PlantsStageReport, SpeciesChain};
+use crate::scene::stages::{LodInfo, StageError};
+use crate::scene::view::{cull_distance, level_at, view_distance_factor, Camera, CullDistance};
+use crate::scene::Preset;
+use crate::validate::read_scene;
+
+fn fail(message: String) -> StageError {
+    StageError::Failed { stage: "view", message }
+}
+
+/// Version of what the view stage writes for given inputs (part of its cache key, see
+/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]).
+pub const VIEW_ALGORITHM_VERSION: u32 = 1;
+
+/// What one view draws.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ViewReport {
+    pub camera: Camera,
+    /// Switch and budget-derived cull distances are the reference screen's times this (times the
+    /// instance's scale), see [`view_distance_factor`].
+    pub distance_factor: f64,
+    pub terrain: TerrainDraw,
+    pub species: Vec<SpeciesDraw>,
+    /// Drawn: terrain chunks at their levels plus every drawn instance's level triangles.
+    pub triangles: u64,
+    /// One per primitive of each terrain chunk and of each instanced (mesh, level) node.
+    pub draw_calls: usize,
+    /// The same scene at full detail: every placed instance at LoD0, the finest terrain, nothing
+    /// culled (what scene.glb was before views).
+    pub full_detail_triangles: u64,
+    pub full_detail_draw_calls: usize,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct TerrainDraw {
+    /// Chunks drawn at each level (finest first).
+    pub chunks_per_level: Vec<usize>,
+    pub triangles: u64,
+    pub full_detail_triangles: u64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct SpeciesDraw {
+    pub name: String,
+    /// Rows of the placement table.
+    pub placed: usize,
+    pub drawn: usize,
+    pub culled: usize,
+    /// `None` for a species without meshes (placement tables only).
+    pub cull: Option<CullDistance>,
+    pub levels: Vec<LevelDraw>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct LevelDraw {
+    pub level: usize,
+    /// Reference-screen switch distance of each variant (m).
+    pub switch_distance_m: Vec<f64>,
+    pub instances: usize,
+    pub triangles: u64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ViewStageReport {
+    pub scene_file: PathBuf,
+    /// Bytes of scene.glb.
+    pub scene_bytes: u64,
+    pub views: Vec<ViewReport>,
+    pub seconds: f64,
+}
+
+impl ViewStageReport {
+    pub fn files(&self) -> Vec<PathBuf> {
+        vec![self.scene_file.clone()]
+    }
+}
+
+/// Cache key: the upstream stages' keys (terrain, plants, scatter) and the views and policy.
+pub fn view_key(preset: &Preset, upstream: &[&str]) -> String {
+    let mut k = KeyBuilder::new("view", VIEW_ALGORITHM_VERSION);
+    for u in upstream {
+        k.add(u.as_bytes()).add(b"|");
+    }
+    k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
+    k.add(serde_json::to_string(&preset.views).unwrap_or_default().as_bytes());
+    for s in &preset.species {
+        k.add(s.name.as_bytes()).add(serde_json::to_string(&s.cull_distance_m).unwrap_or_default().as_bytes());
+    }
+    k.finish()
+}
+
+/// Which variant an instance shows: a hash of its position (f64 bits), so neighbours differ and
+/// the choice is reproducible from the table alone.
+pub fn variant_of(position: [f64; 3], variants: usize) -> usize {
+    let h = crate::synth::mix64(position[0].to_bits() ^ crate::synth::mix64(position[2].to_bits()));
+    (((h >> 32) * variants as u64) >> 32) as usize
+}
+
+/// Files read once and shared; meshes, materials and textures appended once, equal textures
+/// and materials stored once (every level file of a tree carries the same atlas).
+struct Assembler<'a> {
+    dir: &'a Path,
+    files: BTreeMap<PathBuf, Scene>,
+    scene: Scene,
+    /// (file, mesh index in it) → mesh index in `scene`.
+    meshes: BTreeMap<(PathBuf, usize), usize>,
+}
+
+impl<'a> Assembler<'a> {
+    fn file(&mut self, rel: &Path) -> Result<&Scene, StageError> {
+        if !self.files.contains_key(rel) {
+            let path = self.dir.join(rel);
+            let s = read_scene(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?;
+            self.files.insert(rel.to_path_buf(), s);
+        }
+        Ok(&self.files[rel])
+    }
+
+    fn texture(&mut self, t: &Texture) -> usize {
+        match self.scene.textures.iter().position(|o| o.png == t.png) {
+            Some(i) => i,
+            None => {
+                self.scene.textures.push(t.clone());
+                self.scene.textures.len() - 1
+            }
+        }
+    }
+
+    fn material(&mut self, m: &Material, textures: &[Texture]) -> usize {
+        let mut map = BTreeMap::new();
+        for i in m.textures() {
+            if let Some(t) = textures.get(i) {
+                map.insert(i, self.texture(t));
+            }
+        }
+        let m = m.with_textures(|i| map.get(&i).copied());
+        match self.scene.materials.iter().position(|o| *o == m) {
+            Some(i) => i,
+            None => {
+                self.scene.materials.push(m);
+                self.scene.materials.len() - 1
+            }
+        }
+    }
+
+    /// The mesh `index` of file `rel`, appended once; its index in the assembled scene.
+    fn mesh(&mut self, rel: &Path, index: usize) -> Result<usize, StageError> {
+        if let Some(&i) = self.meshes.get(&(rel.to_path_buf(), index)) {
+            return Ok(i);
+        }
+        let src = self.file(rel)?;
+        let Some(mesh) = src.meshes.get(index).cloned() else {
+            return Err(fail(format!("{}: has no mesh #{index}", rel.display())));
+        };
+        let (materials, textures) = (src.materials.clone(), src.textures.clone());
+        let mut mesh: Mesh = mesh;
+        for p in &mut mesh.primitives {
+            p.material = match p.material {
+                Some(m) => match materials.get(m) {
+                    Some(mat) => Some(self.material(mat, &textures)),
+                    None => None,
+                },
+                None => None,
+            };
+        }
+        self.scene.meshes.push(mesh);
+        let i = self.scene.meshes.len() - 1;
+        self.meshes.insert((rel.to_path_buf(), index), i);
+        Ok(i)
+    }
+
+    fn mesh_named(&mut self, rel: &Path, name: &str) -> Result<usize, StageError> {
+        let index = self
+            .file(rel)?
+            .meshes
+            .iter()
+            .position(|m| m.name == name)
+            .ok_or_else(|| fail(format!("{}: has no mesh named `{name}` (rebuild with --force)", rel.display())))?;
+        self.mesh(rel, index)
+    }
+}
+
+/// The terrain as the view stage draws it: the main mesh file's chunks and, per LoD level, the
+/// file holding the same chunks at that level.
+pub struct TerrainInput<'a> {
+    pub main: &'a Path,
+    pub lods: &'a [LodInfo],
+}
+
+fn first_mesh_file(files: &[PathBuf]) -> Option<&PathBuf> {
+    files.iter().find(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("glb" | "gltf" | "obj")))
+}
+
+fn mesh_bounds(m: &Mesh) -> Option<([f64; 3], [f64; 3])> {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in &m.primitives {
+        for v in &p.positions {
+            for a in 0..3 {
+                lo[a] = lo[a].min(v[a] as f64);
+                hi[a] = hi[a].max(v[a] as f64);
+            }
+        }
+    }
+    (lo[0] <= hi[0]).then_some((lo, hi))
+}
+
+/// Rotates `v` by the unit quaternion `q` (x, y, z, w).
+fn rotate(q: [f32; 4], v: [f64; 3]) -> [f64; 3] {
+    let [x, y, z, w] = q.map(|c| c as f64);
+    let t = [2.0 * (y * v[2] - z * v[1]), 2.0 * (z * v[0] - x * v[2]), 2.0 * (x * v[1] - y * v[0])];
+    [
+        v[0] + w * t[0] + (y * t[2] - z * t[1]),
+        v[1] + w * t[1] + (z * t[0] - x * t[2]),
+        v[2] + w * t[2] + (x * t[1] - y * t[0]),
+    ]
+}
+
+/// Where the view measures an instance's distance from: its chain's bounding-box centre, placed,
+/// rotated and scaled like the instance (as f32, as scene.glb stores it).
+pub fn instance_centre(row: &table::PlacementRow, centre_y_m: f64) -> [f64; 3] {
+    let p = row.position.map(|v| v as f32 as f64);
+    let up = rotate(row.rotation, [0.0, centre_y_m * row.scale[1] as f64, 0.0]);
+    [p[0] + up[0], p[1] + up[1], p[2] + up[2]]
+}
+
+/// Runs the view stage into `scene_dir`: writes scene.glb for the first view and measures every
+/// view.
+pub fn run_view(
+    preset: &Preset,
+    terrain: &TerrainInput<'_>,
+    plants: Option<&PlantsStageReport>,
+    tables: &[(String, PathBuf)],
+    scene_dir: &Path,
+) -> Result<ViewStageReport, StageError> {
+    let t0 = Instant::now();
+    let mut asm = Assembler { dir: scene_dir, files: BTreeMap::new(), scene: Scene::default(), meshes: BTreeMap::new() };
+    let main = asm.file(terrain.main)?.clone();
+    let surface = {
+        let parts: Vec<(&[[f32; 3]], &[u32])> =
+            main.meshes.iter().flat_map(|m| m.primitives.iter().map(|p| (&p.positions[..], &p.indices[..]))).collect();
+        SurfaceIndex::from_parts(&parts)
+    };
+    let extent = surface.bounds();
+    let cameras: Vec<Camera> = preset
+        .views
+        .iter()
+        .map(|v| v.resolve(extent, |x, z| surface.height_at(x, z).map(|(h, _)| h)))
+        .collect::<Result<_, _>>()
+        .map_err(fail)?;
+
+    // terrain levels: per level, its file (same chunk layout as the main mesh) and switch distance
+    let mut levels: Vec<(PathBuf, f64)> = Vec::new();
+    for l in terrain.lods {
+        if let Some(f) = first_mesh_file(&l.files) {
+            levels.push((f.clone(), l.switch_distance_m));
+        }
+    }
+    let chunked = !levels.is_empty()
+        && levels.iter().try_fold(true, |ok, (f, _)| Ok::<bool, StageError>(ok && asm.file(f)?.meshes.len() == main.meshes.len()))?;
+
+    // placements and chains
+    let chains: BTreeMap<&str, &SpeciesChain> =
+        plants.map(|p| p.species.iter().map(|s| (s.name.as_str(), &s.chain)).collect()).unwrap_or_default();
+    let mut rows_of: Vec<Vec<table::PlacementRow>> = Vec::with_capacity(preset.species.len());
+    for s in &preset.species {
+        let rel = tables.iter().find(|(n, _)| *n == s.name).map(|(_, p)| p.clone()).unwrap_or_else(|| PathBuf::from("placements").join(format!("{}.csv", s.name)));
+        let path = scene_dir.join(&rel);
+        rows_of.push(table::read_placements_csv(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?);
+    }
+
+    let mut reports = Vec::with_capacity(cameras.len());
+    for (view_index, camera) in cameras.iter().enumerate() {
+        let write = view_index == 0;
+        let factor = view_distance_factor(camera, &preset.lod);
+
+        // terrain: each chunk at the level its nearest point's distance selects
+        let switch: Vec<f64> = std::iter::once(0.0).chain(levels.iter().skip(1).map(|(_, d)| *d)).collect();
+        let mut chunks_per_level = vec![0usize; levels.len().max(1)];
+        let (mut t_tris, mut t_full, mut t_calls) = (0u64, 0u64, 0usize);
+        let mut terrain_children = Vec::new();
+        for (c, m) in main.meshes.iter().enumerate() {
+            t_full += m.triangle_count() as u64;
+            let level = match (chunked, mesh_bounds(m)) {
+                (true, Some((lo, hi))) => level_at(camera.distance_to_box(lo, hi), &switch, factor),
+                _ => 0,
+            };
+            chunks_per_level[level] += 1;
+            let (file, index) = if chunked { (levels[level].0.clone(), c) } else { (terrain.main.to_path_buf(), c) };
+            let mesh = asm.file(&file)?.meshes[index].clone();
+            t_tris += mesh.triangle_count() as u64;
+            t_calls += mesh.primitives.len();
+            if write {
+                let mi = asm.mesh(&file, index)?;
+                asm.scene.nodes.push(Node { name: asm.scene.meshes[mi].name.clone(), mesh: Some(mi), ..Node::default() });
+                terrain_children.push(asm.scene.nodes.len() - 1);
+            }
+        }
+        if write {
+            asm.scene.nodes.push(Node { name: "terrain".into(), children: terrain_children, ..Node::default() });
+            asm.scene.roots.push(asm.scene.nodes.len() - 1);
+        }
+        let (mut triangles, mut draw_calls) = (t_tris, t_calls);
+        let (mut full_triangles, mut full_calls) = (t_full, main.meshes.iter().map(|m| m.primitives.len()).sum::<usize>());
+
+        let mut species_reports = Vec::with_capacity(preset.species.len());
+        for (s, rows) in preset.species.iter().zip(&rows_of) {
+            let Some(chain) = chains.get(s.name.as_str()).filter(|c| !c.variants.is_empty()) else {
+                species_reports.push(SpeciesDraw { name: s.name.clone(), placed: rows.len(), drawn: 0, culled: 0, cull: None, levels: Vec::new() });
+                continue;
+            };
+            let nlevels = chain.variants.iter().map(Vec::len).max().unwrap_or(0);
+            let last_switch = chain.variants.iter().filter_map(|v| v.last()).map(|l| l.switch_distance_m).fold(0.0, f64::max);
+            let cull = cull_distance(s.cull_distance_m, chain.height_m, last_switch, &preset.lod);
+            // (variant, level) → instances
+            let mut groups: BTreeMap<(usize, usize), Instances> = BTreeMap::new();
+            let mut culled = 0usize;
+            for row in rows {
+                let variant = variant_of(row.position, chain.variants.len());
+                let v = &chain.variants[variant];
+                let scale = row.scale[1] as f64;
+                let d = camera.distance_to(instance_centre(row, chain.centre_y_m));
+                if cull.culls(d, factor, scale) {
+                    culled += 1;
+                    continue;
+                }
+                let switch: Vec<f64> = v.iter().map(|l| l.switch_distance_m).collect();
+                let level = level_at(d, &switch, factor * scale);
+                let g = groups.entry((variant, level)).or_default();
+                g.translations.push(row.position.map(|x| x as f32));
+                g.rotations.push(row.rotation);
+                g.scales.push(row.scale);
+            }
+            let mut level_draws: Vec<LevelDraw> = (0..nlevels)
+                .map(|level| LevelDraw {
+                    level,
+                    switch_distance_m: chain.variants.iter().filter_map(|v| v.get(level)).map(|l| l.switch_distance_m).collect(),
+                    instances: 0,
+                    triangles: 0,
+                })
+                .collect();
+            let mut children = Vec::new();
+            for ((variant, level), inst) in groups {
+                let l = &chain.variants[variant][level];
+                let n = inst.translations.len();
+                level_draws[level].instances += n;
+                level_draws[level].triangles += (n * l.triangles) as u64;
+                triangles += (n * l.triangles) as u64;
+                let mi = asm.mesh_named(&l.file, &l.mesh)?;
+                draw_calls += asm.scene.meshes[mi].primitives.len();
+                if write {
+                    asm.scene.nodes.push(Node {
+                        name: format!("{}_{}", s.name, l.mesh),
+                        mesh: Some(mi),
+                        instances: Some(inst),
+                        extras: Some(serde_json::json!({
+                            "species": s.name, "variant": variant, "level": level, "mesh": l.mesh, "file": l.file,
+                        })),
+                        ..Node::default()
+                    });
+                    children.push(asm.scene.nodes.len() - 1);
+                }
+            }
+            // full detail: every row at its variant's LoD0, one node per variant
+            let mut variants_used = vec![0usize; chain.variants.len()];
+            for row in rows {
+                variants_used[variant_of(row.position, chain.variants.len())] += 1;
+            }
+            for (variant, &n) in variants_used.iter().enumerate() {
+                if n == 0 {
+                    continue;
+                }
+                let l0 = &chain.variants[variant][0];
+                full_triangles += (n * l0.triangles) as u64;
+                let mi = asm.mesh_named(&l0.file, &l0.mesh)?;
+                full_calls += asm.scene.meshes[mi].primitives.len();
+            }
+            if write {
+                asm.scene.nodes.push(Node { name: s.name.clone(), children, ..Node::default() });
+                asm.scene.roots.push(asm.scene.nodes.len() - 1);
+            }
+            let drawn = rows.len() - culled;
+            species_reports.push(SpeciesDraw { name: s.name.clone(), placed: rows.len(), drawn, culled, cull: Some(cull), levels: level_draws });
+        }
+        reports.push(ViewReport {
+            camera: camera.clone(),
+            distance_factor: factor,
+            terrain: TerrainDraw { chunks_per_level, triangles: t_tris, full_detail_triangles: t_full },
+            species: species_reports,
+            triangles,
+            draw_calls,
+            full_detail_triangles: full_triangles,
+            full_detail_draw_calls: full_calls,
+        });
+    }
+
+    // meshes appended only for the full-detail count are not instanced by any node: drop them
+    let mut scene = asm.scene;
+    prune_unused_meshes(&mut scene);
+    scene.name = preset.scene.name.clone();
+    scene.extras = Some(serde_json::json!({ "verdant_view": reports.first().map(|r| &r.camera) }));
+    let scene_file = PathBuf::from("scene.glb");
+    export::write_scene(&scene, &scene_dir.join(&scene_file)).map_err(|e| fail(e.to_string()))?;
+    let scene_bytes = std::fs::metadata(scene_dir.join(&scene_file)).map(|m| m.len()).unwrap_or(0);
+    Ok(ViewStageReport { scene_file, scene_bytes, views: reports, seconds: t0.elapsed().as_secs_f64() })
+}
+
+/// Keeps the items `used` marks, in order; returns them and each old index's new one.
+fn keep_used<T>(items: Vec<T>, used: &[bool]) -> (Vec<T>, Vec<Option<usize>>) {
+    let mut remap = vec![None; items.len()];
+    let mut kept = Vec::new();
+    for (i, item) in items.into_iter().enumerate() {
+        if used[i] {
+            remap[i] = Some(kept.len());
+            kept.push(item);
+        }
+    }
+    (kept, remap)
+}
+
+/// Removes meshes no node references (and then materials and textures no mesh uses), keeping
+/// the order of the rest.
+fn prune_unused_meshes(scene: &mut Scene) {
+    let mut used = vec![false; scene.meshes.len()];
+    for m in scene.nodes.iter().filter_map(|n| n.mesh) {
+        used[m] = true;
+    }
+    let (meshes, remap) = keep_used(std::mem::take(&mut scene.meshes), &used);
+    scene.meshes = meshes;
+    for n in &mut scene.nodes {
+        n.mesh = n.mesh.and_then(|m| remap[m]);
+    }
+    let mut used = vec![false; scene.materials.len()];
+    for i in scene.meshes.iter().flat_map(|m| m.primitives.iter().filter_map(|p| p.material)) {
+        used[i] = true;
+    }
+    let (materials, remap) = keep_used(std::mem::take(&mut scene.materials), &used);
+    for p in scene.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()) {
+        p.material = p.material.and_then(|i| remap[i]);
+    }
+    let mut used = vec![false; scene.textures.len()];
+    for t in materials.iter().flat_map(|m| m.textures()) {
+        used[t] = true;
+    }
+    let (textures, remap) = keep_used(std::mem::take(&mut scene.textures), &used);
+    scene.materials = materials.into_iter().map(|m| m.with_textures(|i| remap[i])).collect();
+    scene.textures = textures;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_centre_follows_rotation_and_scale() {
+        let row = table::PlacementRow { position: [1.0, 2.0, 3.0], rotation: [0.0, 0.0, 0.0, 1.0], scale: [2.0; 3], yaw_deg: 0.0, tile: 0 };
+        assert_eq!(instance_centre(&row, 5.0), [1.0, 12.0, 3.0]);
+        // tipped 90° about +Z: up becomes −X
+        let h = std::f32::consts::FRAC_1_SQRT_2;
+        let tipped = table::PlacementRow { rotation: [0.0, 0.0, h, h], scale: [1.0; 3], ..row };
+        let c = instance_centre(&tipped, 5.0);
+        assert!((c[0] - (1.0 - 5.0)).abs() < 1e-5 && (c[1] - 2.0).abs() < 1e-5, "{c:?}");
+    }
+
+    #[test]
+    fn variants_mix_and_repeat() {
+        let mut counts = [0usize; 3];
+        for k in 0..300 {
+            let p = [k as f64 * 0.37, 0.0, k as f64 * 1.91];
+            let v = variant_of(p, 3);
+            assert_eq!(v, variant_of(p, 3));
+            counts[v] += 1;
+        }
+        assert!(counts.iter().all(|&n| n > 60), "{counts:?}");
+        assert_eq!(variant_of([1.0, 2.0, 3.0], 1), 0);
+    }
+}

@@ -1,0 +1,138 @@
+//! The view stage (issue 14): scene.glb as drawn from the first `[[view]]` — a tile beyond the cull
+//! distance contributes no instance, a larger pixel budget switches nearer and draws fewer
+//! triangles, switch distances rise with the level, the default view, bad views refused with a
+//! position.
+
+use std::path::Path;
+
+use crate::common::*;
+
+/// fbm 129² with 2 m cells (256 m across), 64² chunks with a two-level terrain chain, grass only
+/// (the cheapest chain to measure), the given extra sections.
+fn meadow(name: &str, extra: &str, grass: &str) -> String {
+    format!(
+        "[scene]\nname = \"{name}\"\nseed = 5\n\n[terrain]\nprocedural = {{ kind = \"fbm\", size = 129, seed = 3, relief = 30.0 }}\n\
+         cell_size = 2.0\nmax_error = 0.1\nchunk = 64\nskirt = 1.0\nlods = [0.1, 0.8]\n\n[scatter]\ntile = 32.0\n\n{extra}\n\
+         [[species]]\nname = \"grass\"\nkind = \"grass\"\nmax_density = 0.3\nscale = [0.8, 1.2]\n{grass}\n"
+    )
+}
+
+fn build(d: &Path, name: &str, text: &str) -> serde_json::Value {
+    write(d, &format!("p/{name}.toml"), text);
+    ok(&verdant_in(d, &["build", &format!("p/{name}.toml"), "--out", "o"]));
+    read_json(&d.join(format!("o/{name}/manifest.json")))
+}
+
+fn eye(manifest: &serde_json::Value) -> [f64; 3] {
+    let e = &manifest["view"]["views"][0]["camera"]["eye"];
+    [0, 1, 2].map(|k| e[k].as_f64().unwrap())
+}
+
+#[test]
+fn a_tile_beyond_the_cull_distance_contributes_no_instance() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let view = "[[view]]\nname = \"corner\"\nposition = [10.0, 40.0, 10.0]\ntarget = [128.0, 10.0, 128.0]\n";
+    let m = build(d, "cull", &meadow("cull", view, "cull_distance = 60.0"));
+    let e = eye(&m);
+    assert_eq!(m["view"]["views"][0]["camera"]["name"], "corner");
+    let scene = verdant::validate::read_scene(&d.join("o/cull/scene.glb")).unwrap();
+    let json = read_json(&d.join("o/cull/placements/grass.json"));
+    let centre_y = m["view"]["chains"]["grass"]["centre_y_m"].as_f64().unwrap();
+    // every drawn instance within 60 m (to its centre, at most centre_y·scale above its base)
+    let mut drawn = Vec::new();
+    for n in &scene.nodes {
+        if let Some(inst) = &n.instances {
+            for t in &inst.translations {
+                let d2 = (t[0] as f64 - e[0]).powi(2) + (t[1] as f64 - e[1]).powi(2) + (t[2] as f64 - e[2]).powi(2);
+                assert!(d2.sqrt() <= 60.0 + 1.2 * centre_y.abs() + 1e-3, "{}: an instance {} m from the eye", n.name, d2.sqrt());
+                drawn.push(*t);
+            }
+        }
+    }
+    // tiles whose nearest point is beyond 60 m (+ the centre offset): none of their rows is drawn
+    let mut far_tiles = 0;
+    for t in json["stats"]["per_tile"].as_array().unwrap() {
+        let (lo, hi) = (&t["aabb_min"], &t["aabb_max"]);
+        if t["count"].as_u64().unwrap() == 0 {
+            continue;
+        }
+        let gap: f64 = (0..3)
+            .map(|k| {
+                let (a, b) = (lo[k].as_f64().unwrap(), hi[k].as_f64().unwrap());
+                let g = if e[k] < a { a - e[k] } else if e[k] > b { e[k] - b } else { 0.0 };
+                g * g
+            })
+            .sum::<f64>()
+            .sqrt();
+        if gap > 60.0 + 2.0 {
+            far_tiles += 1;
+            let inside = drawn.iter().any(|p| (0..3).all(|k| (p[k] as f64) >= lo[k].as_f64().unwrap() - 1e-3 && (p[k] as f64) <= hi[k].as_f64().unwrap() + 1e-3));
+            assert!(!inside, "tile {} lies beyond the cull distance but has a drawn instance", t["tile"]);
+        }
+    }
+    assert!(far_tiles > 10, "only {far_tiles} tiles beyond the cull distance");
+    let sp = &m["view"]["views"][0]["species"][0];
+    assert!(sp["culled"].as_u64().unwrap() > 1000 && sp["drawn"].as_u64().unwrap() > 100, "{sp}");
+    assert_eq!(sp["cull"]["distance_m"].as_f64(), Some(60.0));
+    assert_eq!(sp["drawn"].as_u64().unwrap() as usize, drawn.len());
+    // the table keeps every row
+    assert_eq!(sp["placed"], m["scatter"]["species"][0]["count"]);
+}
+
+#[test]
+fn a_larger_budget_switches_nearer_and_draws_fewer_triangles() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut runs = Vec::new();
+    for (name, px) in [("fine", 1.0), ("coarse", 4.0)] {
+        let m = build(d, name, &meadow(name, &format!("[lod]\nmax_pixel_error = {px}\n"), ""));
+        let switch: Vec<f64> = m["view"]["chains"]["grass"]["variants"][0].as_array().unwrap().iter().map(|l| l["switch_distance_m"].as_f64().unwrap()).collect();
+        let terrain: Vec<f64> = m["terrain"]["lods"].as_array().unwrap().iter().map(|l| l["switch_distance_m"].as_f64().unwrap()).collect();
+        let view = &m["view"]["views"][0];
+        runs.push((switch, terrain, view["triangles"].as_u64().unwrap(), view["full_detail_triangles"].as_u64().unwrap()));
+    }
+    let (fine, coarse) = (&runs[0], &runs[1]);
+    for (s, t, _, _) in &runs {
+        assert_eq!(s[0], 0.0);
+        assert!(s.windows(2).all(|w| w[1] >= w[0]), "grass switch distances rise with the level: {s:?}");
+        assert!(t.windows(2).all(|w| w[1] > w[0]), "terrain: {t:?}");
+    }
+    for k in 1..fine.0.len() {
+        assert!(coarse.0[k] < fine.0[k], "grass LOD{k}: {} m at 4 px, {} m at 1 px", coarse.0[k], fine.0[k]);
+    }
+    assert!(coarse.1[1] < fine.1[1] / 3.0, "terrain LOD1: {} vs {}", coarse.1[1], fine.1[1]);
+    assert!(coarse.2 < fine.2, "4 px draws {} triangles, 1 px {}", coarse.2, fine.2);
+    assert_eq!(coarse.3, fine.3, "full detail does not depend on the budget");
+    assert!(fine.2 < fine.3, "the view draws less than full detail");
+}
+
+#[test]
+fn the_default_view_and_bad_views() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let m = build(d, "plain", &meadow("plain", "", ""));
+    let view = &m["view"]["views"][0];
+    assert_eq!(view["camera"]["name"], "view0");
+    // 5 % in from the +Z edge (256 m), on the centre line, looking towards −Z
+    let e = eye(&m);
+    assert!((e[0] - 128.0).abs() < 1e-9 && (e[2] - (256.0 - 12.8)).abs() < 1e-9, "{e:?}");
+    assert!(view["camera"]["forward"][2].as_f64().unwrap() < -0.9);
+    let scene = verdant::validate::read_scene(&d.join("o/plain/scene.glb")).unwrap();
+    assert_eq!(scene.extras.as_ref().unwrap()["verdant_view"]["name"], "view0");
+
+    // both target and yaw: refused where it is written, exit 2
+    write(d, "p/bad.toml", &meadow("bad", "[[view]]\ntarget = [1.0, 2.0, 3.0]\nyaw = 10.0\n", ""));
+    let o = verdant_in(d, &["build", "p/bad.toml", "--out", "o"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("bad.toml:") && text(&o).contains("either `target` or `yaw`"), "{}", text(&o));
+    write(d, "p/bad2.toml", &meadow("bad2", "[lod]\nmax_pixel_eror = 2.0\n", ""));
+    let o = verdant_in(d, &["build", "p/bad2.toml", "--out", "o"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("did you mean `max_pixel_error`"), "{}", text(&o));
+    // the eye on the target: the build fails naming the view
+    write(d, "p/bad3.toml", &meadow("bad3", "[[view]]\nname = \"stuck\"\nposition = [5.0, 5.0, 5.0]\ntarget = [5.0, 5.0, 5.0]\n", ""));
+    let o = verdant_in(d, &["build", "p/bad3.toml", "--out", "o"]);
+    assert_ne!(o.status.code(), Some(0));
+    assert!(text(&o).contains("view `stuck`"), "{}", text(&o));
+}
