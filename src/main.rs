@@ -541,6 +541,14 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
             for f in &files {
                 match preset::load_preset(f) {
                     Ok(p) => {
+                        for (name, estimate, limit) in preset::instance_estimates_over_limit(&p) {
+                            eprintln!(
+                                "warning: {}: species `{name}` may place up to ~{estimate:.0} instances (max_density over the whole terrain), \
+                                 above its max_instances {limit}: the build fails if its rules allow more than {limit}; \
+                                 lower max_density, narrow the rules or raise max_instances",
+                                f.display()
+                            );
+                        }
                         if !quiet {
                             println!("{}: ok (scene `{}`)", f.display(), p.scene.name);
                         }

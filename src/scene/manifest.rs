@@ -80,7 +80,27 @@ struct Manifest<'a> {
     /// checker or an engine can replay the selection from the placement tables).
     view: Option<ViewManifest<'a>>,
     preview: Option<String>,
+    /// Bytes written, in all and per top-level folder or file (manifest and reports not counted).
+    bytes: Sizes,
     settings: &'a Preset,
+}
+
+/// What a scene folder weighs.
+#[derive(Serialize, Clone)]
+pub struct Sizes {
+    pub total: u64,
+    pub files: usize,
+    /// `terrain`, `species`, `atlases`, `placements`, `snow`, `scene.glb`, `preview.png`.
+    pub by_part: std::collections::BTreeMap<String, u64>,
+}
+
+fn sizes(files: &[FileEntry]) -> Sizes {
+    let mut by_part = std::collections::BTreeMap::new();
+    for f in files {
+        let part = f.path.split('/').next().unwrap_or(&f.path).to_string();
+        *by_part.entry(part).or_insert(0) += f.bytes;
+    }
+    Sizes { total: files.iter().map(|f| f.bytes).sum(), files: files.len(), by_part }
 }
 
 #[derive(Serialize)]
@@ -184,6 +204,7 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
         };
         files.push(FileEntry { path: rel, bytes, sha256 });
     }
+    let bytes = sizes(&files);
     let terrain = runs.iter().find_map(|r| match r {
         StageRun::Terrain { report, .. } => Some(report),
         _ => None,
@@ -274,13 +295,14 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
             chains: plants.map(|p| p.species.iter().map(|s| (s.name.as_str(), &s.chain)).collect()).unwrap_or_default(),
         }),
         preview: preview.map(|p| p.file.to_string_lossy().replace('\\', "/")),
+        bytes,
         settings: preset,
     };
     let n_files = manifest.files.len() + 3;
     write_atomic(&dir.join("manifest.json"), pretty(&manifest).as_bytes()).map_err(|e| io(dir, e.to_string()))?;
-    let report = report_json(preset, runs);
+    let report = report_json(preset, runs, &manifest.bytes);
     write_atomic(&dir.join("report.json"), report.as_bytes()).map_err(|e| io(dir, e.to_string()))?;
-    write_atomic(&dir.join("report.md"), report_md(preset, runs).as_bytes()).map_err(|e| io(dir, e.to_string()))?;
+    write_atomic(&dir.join("report.md"), report_md(preset, runs, &manifest.bytes).as_bytes()).map_err(|e| io(dir, e.to_string()))?;
     Ok(n_files)
 }
 
@@ -291,7 +313,7 @@ fn pretty<T: Serialize>(v: &T) -> String {
 }
 
 /// report.json: measured figures per stage, then `timing` (the only part that varies run to run).
-fn report_json(preset: &Preset, runs: &[StageRun]) -> String {
+fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
     use serde_json::{json, Map, Value};
     let mut stages = Map::new();
     let mut timing = Map::new();
@@ -365,13 +387,14 @@ fn report_json(preset: &Preset, runs: &[StageRun]) -> String {
         "scene": preset.scene.name,
         "verdant_version": env!("CARGO_PKG_VERSION"),
         "stages": stages,
+        "bytes": bytes,
         "timing": timing,
     });
     pretty(&v)
 }
 
 /// report.md: the same figures for people.
-fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
+fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
     let mut s = format!("# {} — build report\n\nverdant {}\n\n", preset.scene.name, env!("CARGO_PKG_VERSION"));
     for r in runs {
         match r {
@@ -430,7 +453,11 @@ fn report_md(preset: &Preset, runs: &[StageRun]) -> String {
             }
         }
     }
-    s += "## Timing\n\n| stage | cached | seconds |\n|---|---|---|\n";
+    s += &format!("## Output\n\n{} files, {:.1} MB in all (manifest and reports aside)\n\n| part | MB |\n|---|---|\n", bytes.files, bytes.total as f64 / 1e6);
+    for (part, b) in &bytes.by_part {
+        s += &format!("| {part} | {:.2} |\n", *b as f64 / 1e6);
+    }
+    s += "\n## Timing\n\n| stage | cached | seconds |\n|---|---|---|\n";
     for r in runs {
         s += &format!("| {} | {} | {:.3} |\n", r.stage().name(), if r.cached() { "yes" } else { "no" }, r.seconds());
     }

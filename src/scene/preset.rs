@@ -236,6 +236,44 @@ pub fn demo_preset() -> Preset {
     }
 }
 
+/// Side lengths (m) of the terrain a preset meshes, known without decoding the heights: from the
+/// procedural size, or from a heightmap's header (`None` when the header cannot be read).
+pub fn terrain_extent_m(t: &TerrainSettings) -> Option<[f64; 2]> {
+    match &t.source {
+        TerrainSource::Fbm { size, cell_size_m, .. } => Some([(*size as f64 - 1.0) * cell_size_m; 2]),
+        TerrainSource::Heightmap { path, decode } => {
+            let (w, h) = match image::image_dimensions(path) {
+                Ok(d) => d,
+                // raw grids (.hgt, .r16): square, two bytes a sample
+                Err(_) => {
+                    let side = ((std::fs::metadata(path).ok()?.len() / 2) as f64).sqrt().floor() as u32;
+                    (side, side)
+                }
+            };
+            let cell = decode.cell_size_m;
+            Some([(w.max(1) as f64 - 1.0) * cell, (h.max(1) as f64 - 1.0) * cell])
+        }
+    }
+}
+
+/// Upper estimates of each species' count before any work: `max_density` (capped by the Poisson
+/// packing for `poisson`) over the whole terrain; (name, estimate, max_instances) for the species
+/// whose estimate is above its `max_instances` (the build fails if the rules allow that many).
+pub fn instance_estimates_over_limit(p: &Preset) -> Vec<(String, f64, usize)> {
+    let Some(area) = p.terrain.as_ref().and_then(terrain_extent_m).map(|[w, h]| w * h) else { return Vec::new() };
+    p.species
+        .iter()
+        .filter_map(|s| {
+            let density = match s.placement {
+                Placement::Poisson if s.min_spacing_m > 0.0 => s.max_density.min(crate::scatter::POISSON_PACKING / (s.min_spacing_m * s.min_spacing_m)),
+                _ => s.max_density,
+            };
+            let estimate = density * area;
+            (estimate > s.max_instances as f64).then(|| (s.name.clone(), estimate, s.max_instances))
+        })
+        .collect()
+}
+
 /// Generates the heights of a procedural source; `None` for a heightmap file.
 pub fn procedural_heightfield(source: &TerrainSource) -> Option<Heightfield> {
     match *source {

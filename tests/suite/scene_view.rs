@@ -136,3 +136,33 @@ fn the_default_view_and_bad_views() {
     assert_ne!(o.status.code(), Some(0));
     assert!(text(&o).contains("view `stuck`"), "{}", text(&o));
 }
+
+#[test]
+fn preset_check_warns_before_any_work_when_a_species_may_exceed_max_instances() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/dense.toml", &meadow("dense", "", "max_instances = 1000"));
+    let o = verdant_in(d, &["preset", "check", "p/dense.toml"]);
+    assert_eq!(o.status.code(), Some(0), "a warning, not an error: {}", text(&o));
+    let t = text(&o);
+    // 0.3 per m² over 256 m × 256 m ≈ 19 661
+    assert!(t.contains("warning:") && t.contains("species `grass` may place up to ~19661") && t.contains("max_instances 1000"), "{t}");
+    write(d, "p/ok.toml", &meadow("fine", "", ""));
+    assert!(!text(&verdant_in(d, &["preset", "check", "p/ok.toml"])).contains("warning"));
+}
+
+#[test]
+fn output_bytes_are_in_the_manifest_and_the_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let m = build(d, "sizes", &meadow("sizes", "", ""));
+    let listed: u64 = m["files"].as_array().unwrap().iter().map(|f| f["bytes"].as_u64().unwrap()).sum();
+    assert_eq!(m["bytes"]["total"].as_u64(), Some(listed));
+    let parts: u64 = m["bytes"]["by_part"].as_object().unwrap().values().map(|v| v.as_u64().unwrap()).sum();
+    assert_eq!(parts, listed);
+    assert_eq!(m["bytes"]["by_part"]["scene.glb"].as_u64(), m["view"]["bytes"].as_u64());
+    let md = std::fs::read_to_string(d.join("o/sizes/report.md")).unwrap();
+    assert!(md.contains("## Output") && md.contains(&format!("{:.1} MB in all", listed as f64 / 1e6)), "{md}");
+    let r = read_json(&d.join("o/sizes/report.json"));
+    assert_eq!(r["bytes"]["total"].as_u64(), Some(listed));
+}
