@@ -172,7 +172,8 @@ pub fn load(path: &Path, opts: &DecodeOptions) -> Result<Decoded, HeightfieldErr
             message: "--height-scale and --height-offset must be finite".into(),
         });
     }
-    let bytes = std::fs::read(path).map_err(|source| HeightfieldError::Io { path: path.to_owned(), source })?;
+    let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+        .map_err(|e| HeightfieldError::Io { path: path.to_owned(), source: e.into_io() })?;
     decode(path, &bytes, opts)
 }
 

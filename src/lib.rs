@@ -11,6 +11,7 @@
 pub mod bake;
 pub mod export;
 pub mod heightfield;
+pub mod input;
 pub mod lod;
 pub mod lsystem;
 pub mod mesh;

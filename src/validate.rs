@@ -198,7 +198,15 @@ fn issue(severity: Severity, location: impl Into<String>, message: impl Into<Str
 
 fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
     let parse = |problem: String| ValidateError::Parse { path: path.to_path_buf(), problem };
-    let bytes = fs::read(path).map_err(|source| ValidateError::Read { path: path.to_path_buf(), source })?;
+    let bytes = crate::input::read_limited(path, crate::input::MAX_GLTF_BYTES, "a glTF file")
+        .map_err(|e| ValidateError::Read { path: path.to_path_buf(), source: e.into_io() })?;
+    // a GLB's header states the file's length (the Khronos validator's GLB_LENGTH_MISMATCH)
+    if bytes.starts_with(b"glTF") && bytes.len() >= 12 {
+        let declared = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
+        if declared != bytes.len() {
+            return Err(parse(format!("the GLB header says the file is {declared} bytes, it is {} (truncated or padded?)", bytes.len())));
+        }
+    }
     // the gltf crate refuses required extensions it does not implement; the ones verdant writes
     // (EXT_mesh_gpu_instancing) are checked here instead, so validate with that one exception
     let gltf = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| parse(format!("not valid glTF: {e}")))?;
@@ -220,10 +228,35 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
     }
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let doc = gltf.document;
+    // buffer files: inside the file's folder, regular files within the size limit, named when
+    // missing (checked before the gltf crate reads them)
+    for buffer in doc.buffers() {
+        if let gltf::buffer::Source::Uri(uri) = buffer.source() {
+            if uri.starts_with("data:") {
+                continue;
+            }
+            let checked = crate::input::resolve_inside(base, uri).and_then(|file| {
+                let meta = fs::metadata(&file).map_err(|e| format!("{}: {e}", file.display()))?;
+                if !meta.is_file() {
+                    return Err(format!("{} is not a regular file", file.display()));
+                }
+                if meta.len() > crate::input::MAX_GLTF_BYTES {
+                    return Err(format!("{}: {} bytes, more than the {}-byte limit for a glTF buffer", file.display(), meta.len(), crate::input::MAX_GLTF_BYTES));
+                }
+                if (meta.len() as usize) < buffer.length() {
+                    return Err(format!("{}: {} bytes, the buffer declares byteLength {}", file.display(), meta.len(), buffer.length()));
+                }
+                Ok(())
+            });
+            if let Err(e) = checked {
+                return Err(parse(format!("buffer {} (uri `{}`): {e}", buffer.index(), crate::input::escape(uri))));
+            }
+        }
+    }
     let buffers = gltf::import_buffers(&doc, Some(base), gltf.blob)
         .map_err(|e| parse(format!("cannot load its buffers: {e}")))?;
     let buffers: Vec<&[u8]> = buffers.iter().map(|b| &b.0[..]).collect();
-    let mut issues = Vec::new();
+    let mut issues = node_graph_issues(&doc);
     let mut scene = Scene::default();
     let mut declared_bounds = Vec::new();
 
@@ -276,11 +309,15 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
                     issues.push(issue(Severity::Warning, &loc, "data: URI images are not checked"));
                     Vec::new()
                 } else {
-                    let file = base.join(uri);
-                    fs::read(&file).unwrap_or_else(|e| {
-                        issues.push(issue(Severity::Error, &loc, format!("cannot read {}: {e}", file.display())));
-                        Vec::new()
-                    })
+                    match crate::input::resolve_inside(base, uri)
+                        .and_then(|file| crate::input::read_limited(&file, crate::input::MAX_TEXTURE_BYTES, "an image").map_err(|e| e.to_string()))
+                    {
+                        Ok(bytes) => bytes,
+                        Err(e) => {
+                            issues.push(issue(Severity::Error, &loc, format!("image URI: {e}")));
+                            Vec::new()
+                        }
+                    }
                 }
             }
         };
@@ -555,18 +592,51 @@ fn read_indices(acc: &gltf::Accessor, buffers: &[&[u8]]) -> Result<Vec<u32>, Str
     }
 }
 
+/// The node hierarchy must be a forest (glTF 2.0 §3.5.3): no node is its own ancestor and no
+/// node has two parents; otherwise a viewer walking it loops or draws a node twice.
+fn node_graph_issues(doc: &gltf::Document) -> Vec<Issue> {
+    let n = doc.nodes().len();
+    let mut parent: Vec<Option<usize>> = vec![None; n];
+    let mut issues = Vec::new();
+    for node in doc.nodes() {
+        for child in node.children() {
+            let c = child.index();
+            if let Some(p) = parent[c] {
+                issues.push(issue(Severity::Error, format!("node {c}"), format!("has two parents, nodes {p} and {}", node.index())));
+            } else {
+                parent[c] = Some(node.index());
+            }
+        }
+    }
+    for start in 0..n {
+        // walk up from every node: more than n steps means a cycle
+        let (mut at, mut steps) = (start, 0);
+        while let Some(p) = parent[at] {
+            at = p;
+            steps += 1;
+            if steps > n {
+                issues.push(issue(Severity::Error, format!("node {start}"), "is its own ancestor: the node hierarchy has a cycle"));
+                return issues;
+            }
+        }
+    }
+    issues
+}
+
 // ---------------------------------------------------------------------------------------------
 // OBJ
 
 fn load_obj(path: &Path) -> Result<Loaded, ValidateError> {
-    let text = fs::read(path).map_err(|source| ValidateError::Read { path: path.to_path_buf(), source })?;
+    let text = crate::input::read_limited(path, crate::input::MAX_OBJ_BYTES, "an OBJ model")
+        .map_err(|e| ValidateError::Read { path: path.to_path_buf(), source: e.into_io() })?;
     // tobj rejects out-of-range faces without saying where; find them ourselves, with line numbers
     let issues = scan_obj_faces(&String::from_utf8_lossy(&text));
     if !issues.is_empty() {
         return Ok(Loaded { scene: Scene::default(), issues, declared_bounds: Vec::new() });
     }
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
-    let (models, materials) = tobj::load_obj(path, &opts)
+    let (models, materials) = crate::input::load_obj_bounded(path, &text, &opts)
+        .0
         .map_err(|e| ValidateError::Parse { path: path.to_path_buf(), problem: format!("not valid OBJ: {e}") })?;
     let mut issues = Vec::new();
     let mut scene = Scene::default();
@@ -584,8 +654,9 @@ fn load_obj(path: &Path) -> Result<Loaded, ValidateError> {
                     ..Material::default()
                 };
                 if let Some(tex) = &m.diffuse_texture {
-                    let file = base.join(tex);
-                    match fs::read(&file) {
+                    let read = crate::input::resolve_inside(base, tex)
+                        .and_then(|file| crate::input::read_limited(&file, crate::input::MAX_TEXTURE_BYTES, "a texture").map_err(|e| e.to_string()));
+                    match read {
                         Ok(png) => {
                             let name = Path::new(tex).file_stem().and_then(|s| s.to_str()).unwrap_or("").to_string();
                             scene.textures.push(Texture { name, png });
@@ -594,7 +665,7 @@ fn load_obj(path: &Path) -> Result<Loaded, ValidateError> {
                         Err(e) => issues.push(issue(
                             Severity::Warning,
                             format!("material {:?}", m.name),
-                            format!("cannot read texture {}: {e}", file.display()),
+                            format!("cannot read texture: {e}"),
                         )),
                     }
                 }

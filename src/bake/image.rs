@@ -55,7 +55,8 @@ impl Image {
 
     /// Reads and decodes a PNG file (see [`Image::from_png`]); errors name the file.
     pub fn read_png(path: &Path) -> Result<Image, BakeError> {
-        let bytes = std::fs::read(path).map_err(|source| BakeError::Read { path: path.to_path_buf(), source })?;
+        let bytes = crate::input::read_limited(path, crate::input::MAX_IMAGE_BYTES, "an image")
+            .map_err(|e| BakeError::Read { path: path.to_path_buf(), source: e.into_io() })?;
         Image::decode_png(&bytes, &path.display().to_string())
     }
 

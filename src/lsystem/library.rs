@@ -82,7 +82,9 @@ pub fn read_bytes(path: &Path) -> std::io::Result<std::borrow::Cow<'static, [u8]
     match named(path) {
         Some(Ok(s)) => Ok(std::borrow::Cow::Borrowed(s.source)),
         Some(Err(names)) => Err(std::io::Error::new(std::io::ErrorKind::NotFound, format!("no built-in L-system of that name (built-in: {names})"))),
-        None => std::fs::read(path).map(std::borrow::Cow::Owned),
+        None => crate::input::read_limited(path, crate::input::MAX_LSYSTEM_BYTES, "an L-system")
+            .map(std::borrow::Cow::Owned)
+            .map_err(crate::input::ReadError::into_io),
     }
 }
 

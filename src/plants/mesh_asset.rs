@@ -224,7 +224,7 @@ struct LoadedTexture {
 
 fn load_texture(mtl: &Path, material: &str, texture: &Path) -> Result<LoadedTexture, MeshAssetError> {
     let missing = |problem: String| MeshAssetError::MissingTexture { mtl: mtl.to_path_buf(), material: material.to_string(), texture: texture.to_path_buf(), problem };
-    let bytes = std::fs::read(texture).map_err(|e| missing(e.to_string()))?;
+    let bytes = crate::input::read_limited(texture, crate::input::MAX_TEXTURE_BYTES, "a texture").map_err(|e| missing(e.into_io().to_string()))?;
     let image = image::load_from_memory(&bytes).map_err(|e| missing(format!("not a PNG or JPEG image: {e}")))?;
     if image.width().max(image.height()) > MAX_TEXTURE_SIDE_PX || image.width() == 0 || image.height() == 0 {
         return Err(missing(format!("{}×{} px; textures must be 1 to {MAX_TEXTURE_SIDE_PX} px a side", image.width(), image.height())));
@@ -236,18 +236,20 @@ fn load_texture(mtl: &Path, material: &str, texture: &Path) -> Result<LoadedText
 }
 
 /// The texture file `name` (from a `map_Kd` line) names, relative to the MTL folders tried in
-/// order; with options before the file name (`-s 1 1 1 bark.png`), the last word.
-fn texture_path(name: &str, mtl_dirs: &[PathBuf]) -> PathBuf {
+/// order; with options before the file name (`-s 1 1 1 bark.png`), the last word. Only paths inside
+/// an MTL's folder are read ([`crate::input::resolve_inside`]): an absolute or escaping name is an error.
+fn texture_path(name: &str, mtl_dirs: &[PathBuf]) -> Result<PathBuf, String> {
     let candidates: Vec<&str> = [name.trim(), name.split_whitespace().last().unwrap_or("")].into_iter().filter(|c| !c.is_empty()).collect();
     for c in &candidates {
         for dir in mtl_dirs {
-            let p = dir.join(c);
-            if p.is_file() {
-                return p;
+            if let Ok(p) = crate::input::resolve_inside(dir, c) {
+                if p.is_file() {
+                    return Ok(p);
+                }
             }
         }
     }
-    mtl_dirs.first().cloned().unwrap_or_default().join(candidates.first().copied().unwrap_or(name))
+    crate::input::resolve_inside(&mtl_dirs.first().cloned().unwrap_or_default(), candidates.first().copied().unwrap_or(name))
 }
 
 /// Angle-weighted vertex normals, accumulated over vertices at the same position so UV seams do
@@ -281,18 +283,19 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
     if !(options.scale.is_finite() && options.scale > 0.0) {
         return Err(MeshAssetError::Options(format!("--scale {} must be a positive number (metres per file unit)", options.scale)));
     }
-    let text = std::fs::read(path).map_err(|e| MeshAssetError::Read { path: path.to_path_buf(), problem: e.to_string() })?;
+    let text = crate::input::read_limited(path, crate::input::MAX_OBJ_BYTES, "an OBJ model")
+        .map_err(|e| MeshAssetError::Read { path: path.to_path_buf(), problem: e.into_io().to_string() })?;
     let mtllibs = scan(path, &text, options)?;
     let obj_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let load_options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
-    let (models, materials) = tobj::load_obj(path, &load_options).map_err(|e| MeshAssetError::Load { path: path.to_path_buf(), problem: e.to_string() })?;
+    let (loaded, mtl_failed) = crate::input::load_obj_bounded(path, &text, &load_options);
+    let (models, materials) = loaded.map_err(|e| MeshAssetError::Load { path: path.to_path_buf(), problem: e.to_string() })?;
     let mtl_paths: Vec<PathBuf> = mtllibs.iter().map(|m| obj_dir.join(m)).collect();
     let materials = match materials {
         Ok(m) => m,
         Err(e) if !mtl_paths.is_empty() => {
-            let missing = mtl_paths.iter().find(|m| !m.is_file()).unwrap_or(&mtl_paths[0]).clone();
-            let problem = if missing.is_file() { e.to_string() } else { "no such file".into() };
-            return Err(MeshAssetError::MissingMaterialLibrary { obj: path.to_path_buf(), mtl: missing, problem });
+            let (mtl, problem) = mtl_failed.unwrap_or_else(|| (mtl_paths[0].clone(), e.to_string()));
+            return Err(MeshAssetError::MissingMaterialLibrary { obj: path.to_path_buf(), mtl, problem });
         }
         Err(_) => Vec::new(),
     };
@@ -309,7 +312,12 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
         let mut material = Material { name: m.name.clone(), base_color: [clamp(kd[0]), clamp(kd[1]), clamp(kd[2]), clamp(d)], roughness: 0.9, ..Material::default() };
         let mut textured_alpha = false;
         if let Some(name) = m.diffuse_texture.as_deref().filter(|n| !n.trim().is_empty()) {
-            let file = texture_path(name, &mtl_dirs);
+            let file = texture_path(name, &mtl_dirs).map_err(|problem| MeshAssetError::MissingTexture {
+                mtl: first_mtl.clone(),
+                material: m.name.clone(),
+                texture: PathBuf::from(name),
+                problem,
+            })?;
             let (id, has_alpha) = match texture_ids.get(&file) {
                 Some(&v) => v,
                 None => {

@@ -143,7 +143,20 @@ impl PresetError {
 
 /// Reads, parses and resolves the preset at `path`, and checks that the input files it names exist.
 pub fn load_preset(path: &Path) -> Result<Preset, PresetError> {
-    let text = std::fs::read_to_string(path).map_err(|source| PresetError::Read { file: path.to_path_buf(), source })?;
+    let bytes = crate::input::read_limited(path, crate::input::MAX_PRESET_BYTES, "a preset")
+        .map_err(|e| PresetError::Read { file: path.to_path_buf(), source: e.into_io() })?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let text = String::from_utf8_lossy(e.as_bytes());
+        let (line, column) = line_column(&text, at);
+        PresetError::At {
+            file: path.to_path_buf(),
+            line,
+            column,
+            problem: format!("byte {at} is not UTF-8 text"),
+            remedy: "save the preset as UTF-8 (TOML files are UTF-8)".into(),
+        }
+    })?;
     parse(&text, path, true)
 }
 

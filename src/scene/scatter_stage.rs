@@ -70,7 +70,7 @@ pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageEr
         k.add(serde_json::to_string(s).unwrap_or_default().as_bytes());
         crate::scene::plants_stage::add_look_inputs(&mut k, &s.name, &s.look)?;
         for map in [&s.density_map, &s.mask].into_iter().flatten() {
-            let bytes = std::fs::read(map).map_err(|e| fail(format!("{}: cannot read: {e}", map.display())))?;
+            let bytes = crate::input::read_limited(map, crate::input::MAX_IMAGE_BYTES, "a density map or mask").map_err(|e| fail(e.to_string()))?;
             k.add(sha256_hex(&bytes).as_bytes());
         }
     }

@@ -125,7 +125,7 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
     let f = fail(Stage::Terrain);
     match &t.source {
         TerrainSource::Heightmap { path, decode } => {
-            let bytes = std::fs::read(path).map_err(|e| f(format!("{}: cannot read the heightmap: {e}", path.display())))?;
+            let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap").map_err(|e| f(e.to_string()))?;
             let d = heightfield::decode(path, &bytes, decode).map_err(|e| f(e.to_string()))?;
             Ok((d.heightfield, d.voids_filled, Some(sha256_hex(&bytes))))
         }
@@ -156,8 +156,7 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
         k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
     }
     if let TerrainSource::Heightmap { path, .. } = &t.source {
-        let bytes = std::fs::read(path)
-            .map_err(|e| fail(Stage::Terrain)(format!("{}: cannot read the heightmap: {e}", path.display())))?;
+        let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap").map_err(|e| fail(Stage::Terrain)(e.to_string()))?;
         k.add(sha256_hex(&bytes).as_bytes());
     }
     Ok(k.finish())

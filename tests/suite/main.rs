@@ -8,6 +8,7 @@ mod bake;
 mod cli;
 mod export_roundtrip;
 mod grass;
+mod limits;
 mod heightfield_decode;
 mod lsystem;
 mod mesh_lod;

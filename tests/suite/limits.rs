@@ -1,0 +1,89 @@
+//! Bad inputs meet limits before work (issue 21): readers refuse folders, devices and oversized
+//! files before reading; references inside files stay inside their folder; the validator reports
+//! node cycles and inconsistent GLB lengths; `--threads` is capped; a preset that is not UTF-8 is
+//! refused at the byte.
+
+use std::fs;
+
+use crate::common::*;
+
+fn glb(json: &str) -> Vec<u8> {
+    let mut js = json.as_bytes().to_vec();
+    while js.len() % 4 != 0 {
+        js.push(b' ');
+    }
+    let mut out = Vec::new();
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&((12 + 8 + js.len()) as u32).to_le_bytes());
+    out.extend_from_slice(&(js.len() as u32).to_le_bytes());
+    out.extend_from_slice(&0x4E4F_534Au32.to_le_bytes());
+    out.extend_from_slice(&js);
+    out
+}
+
+fn refused(o: &std::process::Output, code: i32, needle: &str) {
+    let t = text(o);
+    assert_eq!(o.status.code(), Some(code), "{t}");
+    assert!(t.contains(needle), "expected `{needle}` in: {t}");
+    assert!(!t.contains("panicked"), "{t}");
+}
+
+#[cfg(unix)]
+#[test]
+fn devices_and_folders_are_refused_before_reading() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // an L-system, a heightmap, a preset, a glTF: /dev/zero would grow memory without bound
+    refused(&verdant_in(d, &["tree", "/dev/zero"]), 2, "not a regular file");
+    refused(&verdant_in(d, &["terrain", "/dev/zero", "--encoding", "r16", "--size", "4x4", "-o", "t.glb"]), 2, "not a regular file");
+    refused(&verdant_in(d, &["preset", "check", "/dev/zero"]), 2, "not a regular file");
+    std::os::unix::fs::symlink("/dev/zero", d.join("zero.glb")).unwrap();
+    refused(&verdant_in(d, &["validate", "zero.glb"]), 2, "not a regular file");
+    fs::create_dir_all(d.join("folder.toml")).unwrap();
+    refused(&verdant_in(d, &["preset", "check", "folder.toml"]), 2, "is a folder");
+    // an OBJ whose material library is a device: an error naming the library, no abort
+    write(d, "m/a.obj", "mtllib /dev/zero\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let o = verdant_in(d, &["mesh", "m/a.obj", "-o", "m/out.glb"]);
+    assert!(o.status.code() == Some(2) || o.status.code() == Some(1), "{}", text(&o));
+    assert!(text(&o).contains("/dev/zero") && text(&o).contains("absolute path"), "{}", text(&o));
+}
+
+#[test]
+fn a_preset_that_is_not_utf8_is_refused_at_the_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    fs::write(d.join("p.toml"), b"[scene]\nname = \"a\xff\"\n").unwrap();
+    refused(&verdant_in(d, &["preset", "check", "p.toml"]), 2, "p.toml:2:10: byte 17 is not UTF-8 text");
+}
+
+#[test]
+fn the_validator_reports_cycles_lengths_and_escaping_uris() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let cycle = glb(r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"children":[1]},{"children":[0]}]}"#);
+    fs::write(d.join("cycle.glb"), &cycle).unwrap();
+    refused(&verdant_in(d, &["validate", "cycle.glb"]), 1, "the node hierarchy has a cycle");
+    let two = glb(r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0,1]}],"nodes":[{"children":[2]},{"children":[2]},{}]}"#);
+    fs::write(d.join("two.glb"), &two).unwrap();
+    refused(&verdant_in(d, &["validate", "two.glb"]), 1, "has two parents");
+    let mut short = glb(r#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"scene":0}"#);
+    short[8..12].copy_from_slice(&20u32.to_le_bytes());
+    fs::write(d.join("short.glb"), &short).unwrap();
+    refused(&verdant_in(d, &["validate", "short.glb"]), 2, "the GLB header says the file is 20 bytes");
+    for uri in ["../outside.bin", "/etc/passwd"] {
+        write(d, "g/a.gltf", &format!(r#"{{"asset":{{"version":"2.0"}},"buffers":[{{"uri":"{uri}","byteLength":4}}]}}"#));
+        refused(&verdant_in(d, &["validate", "g/a.gltf"]), 2, "buffer 0");
+    }
+    write(d, "g/b.gltf", r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"missing.bin","byteLength":4}]}"#);
+    refused(&verdant_in(d, &["validate", "g/b.gltf"]), 2, "missing.bin");
+    // what verdant writes still passes
+    ok(&verdant_in(d, &["terrain", "--demo", "-o", "t.glb"]));
+    ok(&verdant_in(d, &["validate", "t.glb"]));
+}
+
+#[test]
+fn threads_are_capped() {
+    let dir = tempfile::tempdir().unwrap();
+    refused(&verdant_in(dir.path(), &["--threads", "5000", "preset", "check", "x.toml"]), 2, "per core");
+}
