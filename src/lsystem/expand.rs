@@ -17,8 +17,45 @@
 use super::{Item, LSystem, LsystemError, Recursion};
 use crate::synth::mix64;
 
-/// Default budget of expanded symbols.
-pub const DEFAULT_MAX_SYMBOLS: u64 = 1_000_000_000;
+/// Default budget of expanded symbols: 5·10⁷, about 12 times what lparser itself can hold (it caps
+/// the string at 2–4 MiB), and about 3 s of expansion on this project's reference machine (10⁹
+/// took a minute).
+pub const DEFAULT_MAX_SYMBOLS: u64 = 50_000_000;
+
+/// The fewest symbols any derivation of a single-stage system can have (each step's shortest
+/// successor taken everywhere), saturating; `None` for per-level recursion. Lets a budget refuse
+/// `A=AA` at depth 60 at once instead of after expanding 10⁹ symbols.
+pub fn fewest_symbols(system: &LSystem) -> Option<u128> {
+    let steps = system.recursion.stage_steps();
+    if steps.len() != 1 {
+        return None;
+    }
+    let mut rule_of = [usize::MAX; 256];
+    for (k, rule) in system.rules.iter().enumerate() {
+        if rule_of[rule.predecessor as usize] == usize::MAX && !rule.variants.is_empty() {
+            rule_of[rule.predecessor as usize] = k;
+        }
+    }
+    let cap = u128::MAX / 4;
+    let length = |items: &[Item], len: &[u128; 256]| -> u128 {
+        items.iter().fold(0u128, |acc, it| match it {
+            Item::Symbol(b) => acc.saturating_add(len[*b as usize]).min(cap),
+            Item::Arg(_) => acc,
+        })
+    };
+    // len[b]: the shortest expansion of symbol b after t more steps
+    let mut len = [1u128; 256];
+    for _ in 0..steps[0] {
+        let mut next = len;
+        for (b, &k) in rule_of.iter().enumerate() {
+            if k != usize::MAX {
+                next[b] = system.rules[k].variants.iter().map(|v| length(&v.successor, &len)).min().unwrap_or(1);
+            }
+        }
+        len = next;
+    }
+    Some(length(&system.axiom, &len))
+}
 
 /// The position id of the axiom's (virtual) parent.
 const ROOT_ID: u64 = 0x243F_6A88_85A3_08D3;
@@ -140,6 +177,11 @@ impl<'a> Expander<'a> {
                 return Err(LsystemError::Settings(format!("recursion depth {n} is not a number ≥ 0")));
             }
         }
+        if let Some(fewest) = fewest_symbols(system) {
+            if fewest > max_symbols as u128 {
+                return Err(LsystemError::TooManySymbols { limit: max_symbols, at_least: Some(fewest.min(u64::MAX as u128) as u64) });
+            }
+        }
         let mut rule_of = [0u16; 256];
         for (k, rule) in system.rules.iter().enumerate().take(u16::MAX as usize - 1) {
             if rule_of[rule.predecessor as usize] == 0 && !rule.variants.is_empty() {
@@ -238,7 +280,7 @@ impl<'a> Expander<'a> {
                 continue;
             }
             if self.counts.symbols >= self.max_symbols {
-                return Err(LsystemError::TooManySymbols { limit: self.max_symbols });
+                return Err(LsystemError::TooManySymbols { limit: self.max_symbols, at_least: None });
             }
             self.counts.symbols += 1;
             self.counts.string_bytes += 1;

@@ -193,8 +193,12 @@ pub enum LsystemError {
     /// A positioned problem in the file: `file:line:column: message`, the line, a caret, the remedy.
     #[error("{0}")]
     Syntax(Box<SyntaxError>),
-    #[error("the expansion exceeds {limit} symbols (--max-symbols); lower the recursion depth or raise the limit")]
-    TooManySymbols { limit: u64 },
+    #[error(
+        "the expansion {} the budget of {limit} symbols; lower the recursion depth, or raise the budget \
+         (`--max-symbols N` for `verdant tree`, `max_symbols = N` in a preset's `[tree]` or a species' `tree = {{ … }}`)",
+        match at_least { Some(n) => format!("has at least {n} symbols, over"), None => "exceeds".to_string() }
+    )]
+    TooManySymbols { limit: u64, at_least: Option<u64> },
     #[error("invalid expansion settings: {0}")]
     Settings(String),
 }

@@ -242,6 +242,8 @@ pub struct TreeLook {
     pub lods: usize,
     pub atlas_px: u32,
     pub max_segments: u64,
+    /// Budget of expanded L-system symbols (see [`crate::lsystem::expand::DEFAULT_MAX_SYMBOLS`]).
+    pub max_symbols: u64,
     /// Measure image errors and switch distances (the MSFT_lod coverages need them).
     pub analyze: bool,
     /// Seed of variant 0 (see [`preset::species_look_seed`]).
@@ -259,6 +261,7 @@ impl Default for TreeLook {
             lods: crate::plants::tree_lod::TREE_LODS,
             atlas_px: 1024,
             max_segments: 200_000,
+            max_symbols: crate::lsystem::expand::DEFAULT_MAX_SYMBOLS,
             analyze: true,
             seed: 0,
         }

@@ -208,6 +208,7 @@ fn tree_options(name: &str, look: &TreeLook, k: usize) -> TreeOptions {
         seed: variant_seed(look.seed, k),
         radial_segments: look.radial_segments,
         max_segments: look.max_segments,
+        max_symbols: look.max_symbols,
         height_m: look.height_m,
         name: format!("{name}_v{k}"),
         ..TreeOptions::default()

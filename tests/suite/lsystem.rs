@@ -898,7 +898,7 @@ fn tokens_carry_arguments_after_their_symbol() {
     assert!(matches!(tokens[1], Token::Arg { value, .. } if value == 19.47));
     assert_eq!(tokens.len(), 2);
     let e: LsystemError = expand::count(&system, 0, 0).unwrap_err();
-    assert!(matches!(e, LsystemError::TooManySymbols { limit: 0 }));
+    assert!(matches!(e, LsystemError::TooManySymbols { limit: 0, .. }));
 }
 
 #[test]
@@ -924,4 +924,23 @@ fn files_lparser_accepts_build_with_positioned_warnings() {
     // what cannot mean anything is still refused, with its position
     let e = parse_bytes(b"3\n20\n10\nA\nA=F(2\n@\n", Path::new("bad.ls"), None).unwrap_err().to_string();
     assert!(e.starts_with("bad.ls:5:4: `(` is never closed"), "{e}");
+}
+
+#[test]
+fn a_doubling_rule_at_depth_60_is_refused_before_any_expansion() {
+    // the 18-byte `A=AA` at recursion 60 would be 2^60 symbols: refused at once, naming both ways
+    // to raise the budget
+    let system = sys("recursion 60\naxiom A\nrule A = AA\n");
+    assert_eq!(verdant::lsystem::expand::fewest_symbols(&system), Some(1u128 << 60));
+    let started = std::time::Instant::now();
+    let e = Expander::new(&system, 0, verdant::lsystem::expand::DEFAULT_MAX_SYMBOLS).err().expect("refused");
+    assert!(started.elapsed().as_secs_f64() < 0.1);
+    let msg = e.to_string();
+    assert!(msg.contains("at least 1152921504606846976 symbols") && msg.contains("--max-symbols") && msg.contains("max_symbols = N"), "{msg}");
+    // a stochastic system: the shortest alternative bounds it from below
+    let s = sys("3\n30\n20\nX(100)=A\nA(50)=AAA\nA(100)=A\n@\n");
+    assert_eq!(verdant::lsystem::expand::fewest_symbols(&s), Some(1));
+    // what the budget allows still expands
+    let ok = sys("recursion 10\naxiom A\nrule A = AA\n");
+    assert_eq!(expand::count(&ok, 0, 1024).unwrap().symbols, 1024);
 }

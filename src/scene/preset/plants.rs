@@ -31,7 +31,7 @@ pub const GRASS_KEYS: &[&str] = &[
     "blade_texture",
 ];
 /// Keys of `[tree]` and `tree = { … }` (the L-system file itself is the species' `lsystem`).
-pub const TREE_KEYS: &[&str] = &["variants", "height", "radial_segments", "lods", "atlas_size", "max_segments", "dialect", "analysis"];
+pub const TREE_KEYS: &[&str] = &["variants", "height", "radial_segments", "lods", "atlas_size", "max_segments", "max_symbols", "dialect", "analysis"];
 /// Keys of `[mesh]` and `mesh = { … }` (the model itself is the species' `obj`).
 pub const MESH_KEYS: &[&str] = &["scale", "up_axis", "lods", "atlas_size", "analysis"];
 /// Keys of `[flower]` and `flower = { … }`.
@@ -235,6 +235,9 @@ pub(super) fn apply_tree(t: &Table<'_, '_>, mut tree: TreeLook) -> Result<TreeLo
         tree.radial_segments = n as u32;
     }
     chain_keys(t, &mut tree.lods, &mut tree.atlas_px, &mut tree.analyze)?;
+    if let Some((n, _)) = t.integer("max_symbols", 1..=10_000_000_000, "max_symbols = 50000000")? {
+        tree.max_symbols = n;
+    }
     if let Some((n, _)) = t.integer("max_segments", 1..=100_000_000, "max_segments = 200000")? {
         tree.max_segments = n;
     }
