@@ -720,6 +720,8 @@ def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int, str
         stage = report.get("stages", {}).get("preview", {})
         size = (stage["width_px"], stage["height_px"]) if "width_px" in stage else None
         facts.append(check_preview(scene_dir / preview, size))
+        if stage.get("map"):
+            facts.append("map: " + check_preview(scene_dir / stage["map"], None))
     return f"{manifest.get('scene')}: " + "; ".join(facts), tris, verts, placements
 
 

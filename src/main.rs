@@ -219,6 +219,11 @@ struct BuildArgs {
     /// Ignore the cache and recompute every stage.
     #[arg(long)]
     force: bool,
+    /// Also render each scene's first view at full detail (every instance at LoD0, nothing culled)
+    /// and report the share of pixels that differ from the view with LoD, and the colour RMSE.
+    /// Skipped above 400 M full-detail triangles (said in the report).
+    #[arg(long)]
+    compare_full_detail: bool,
 }
 
 #[derive(Subcommand)]
@@ -530,7 +535,7 @@ fn build(a: BuildArgs, quiet: bool) -> i32 {
     } else {
         a.presets.iter().cloned().map(PresetSource::File).collect()
     };
-    let settings = BuildSettings { out_dir: a.out.clone(), stages, force: a.force };
+    let settings = BuildSettings { out_dir: a.out.clone(), stages, force: a.force, compare_full_detail: a.compare_full_detail };
     let progress = scene_build::ProgressView::new(quiet);
     let outcomes = scene_build::build_batch(&sources, &settings, a.jobs, &|scene: &str, msg: &str| progress.update(scene, msg));
     progress.finish();

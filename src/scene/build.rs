@@ -31,11 +31,14 @@ pub struct BuildSettings {
     pub out_dir: PathBuf,
     pub stages: Vec<Stage>,
     pub force: bool,
+    /// Render each scene's first view with LoD and at full detail and report how the images differ
+    /// (`--compare-full-detail`; full detail can be billions of triangles, so it is asked for).
+    pub compare_full_detail: bool,
 }
 
 impl Default for BuildSettings {
     fn default() -> Self {
-        BuildSettings { out_dir: PathBuf::from("out"), stages: Stage::ALL.to_vec(), force: false }
+        BuildSettings { out_dir: PathBuf::from("out"), stages: Stage::ALL.to_vec(), force: false, compare_full_detail: false }
     }
 }
 
@@ -300,6 +303,8 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
     // what the view stage reads: the terrain's LoD levels, the plants stage's chains
     let mut terrain_lods: Vec<crate::scene::stages::LodInfo> = Vec::new();
     let mut plants: Option<(PlantsStageReport, String)> = None;
+    // the view stage's report and key, for the perspective preview
+    let mut drawn: Option<(ViewStageReport, String)> = None;
 
     if let (true, Some(t)) = (wants(Stage::Terrain), &preset.terrain) {
         let t0 = Instant::now();
@@ -376,17 +381,19 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         if wants(Stage::View) {
             let t0 = Instant::now();
             let plants_key = plants.as_ref().map_or("", |(_, k)| k.as_str());
-            let vkey = view_stage::view_key(preset, &[tkey, plants_key, &key]);
+            let compare = if settings.compare_full_detail { "compare" } else { "" };
+            let vkey = view_stage::view_key(preset, &[tkey, plants_key, &key, compare]);
             let main = scene.main.clone();
             let (vreport, _, vhit) = cached_stage(
                 &cache, force, "view", &vkey, dir, &mut known,
                 ViewStageReport::files,
                 || {
                     let input = view_stage::TerrainInput { main: &main, lods: &terrain_lods };
-                    Ok((view_stage::run_view(preset, &input, plants.as_ref().map(|(r, _)| r), &tables, dir)?, ()))
+                    Ok((view_stage::run_view(preset, &input, plants.as_ref().map(|(r, _)| r), &tables, dir, settings.compare_full_detail)?, ()))
                 },
                 &say,
             )?;
+            drawn = Some((vreport.clone(), vkey));
             runs.push(StageRun::View { report: vreport, cached: vhit, seconds: t0.elapsed().as_secs_f64() });
         }
         if wants(Stage::Preview) {
@@ -416,17 +423,29 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         if let Some((_, snow_key)) = &cover {
             k.add(b"snow").add(snow_key.as_bytes());
         }
+        if let Some((_, vkey)) = &drawn {
+            k.add(b"view").add(vkey.as_bytes());
+        }
         let key = k.finish();
         let (report, _, hit) = cached_stage(
             &cache, force, "preview", &key, dir, &mut known,
-            |r: &PreviewStageReport| vec![r.file.clone()],
+            |r: &PreviewStageReport| std::iter::once(r.file.clone()).chain(r.map.clone()).collect(),
             || {
                 let layers = match &placements {
                     Some((Some(layers), _, _)) => layers.clone(),
                     Some((None, tables, _)) => placements_from_tables(dir, tables, preset)?,
                     None => Vec::new(),
                 };
-                Ok((stages::run_preview(scene.get()?, &layers, cover.as_ref().map(|(m, _)| m), dir)?, ()))
+                // the perspective preview draws scene.glb as written (cached or not, the same bytes)
+                let view = match &drawn {
+                    Some((report, _)) => match report.views.first() {
+                        Some(v) => Some((reimport(dir, &report.scene_file)?, v.camera.clone())),
+                        None => None,
+                    },
+                    None => None,
+                };
+                let view = view.as_ref().map(|(s, c)| (s, c));
+                Ok((stages::run_preview(scene.get()?, &layers, cover.as_ref().map(|(m, _)| m), view, dir)?, ()))
             },
             &say,
         )?;

@@ -449,7 +449,13 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
             StageRun::Snow { report: sn, .. } => s += &snow_md(sn),
             StageRun::View { report: v, .. } => s += &view_section(v),
             StageRun::Preview { report: p, .. } => {
-                s += &format!("## Preview\n\n`{}`, {}×{} px, shaded relief drawn from the terrain mesh\n\n", p.file.display(), p.width_px, p.height_px);
+                s += &match (&p.map, &p.view) {
+                    (Some(map), Some(v)) => format!(
+                        "## Preview\n\n`{}`, {}×{} px: scene.glb rendered from view `{}` ({} instances); `{}`: the shaded relief from above with the placements\n\n",
+                        p.file.display(), p.width_px, p.height_px, v.camera, v.instances, map.display()
+                    ),
+                    _ => format!("## Preview\n\n`{}`, {}×{} px, shaded relief drawn from the terrain mesh\n\n", p.file.display(), p.width_px, p.height_px),
+                };
             }
         }
     }
@@ -659,6 +665,15 @@ fn view_section(v: &crate::scene::view_stage::ViewStageReport) -> String {
     }
     for r in &v.views {
         s += &format!("\n### {}\n\nterrain chunks per level: {:?} ({} triangles, {} at full detail)\n\n", r.camera.name, r.terrain.chunks_per_level, r.terrain.triangles, r.terrain.full_detail_triangles);
+        if let Some(c) = &r.image {
+            s += &match &c.skipped {
+                Some(why) => format!("Image against full detail: not rendered ({why}).\n\n"),
+                None => format!(
+                    "Image against full detail ({}×{} px, the project's rasterizer): {:.2} % of pixels differ by more than {} (linear), colour RMSE {:.4}; {:.1} s.\n\n",
+                    c.size_px[0], c.size_px[1], 100.0 * c.differing, c.threshold, c.color_rmse, c.seconds
+                ),
+            };
+        }
         s += "| species | level | switch distance (m, per variant) | instances | triangles |\n|---|---|---|---|---|\n";
         for sp in &r.species {
             for l in &sp.levels {

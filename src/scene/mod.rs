@@ -13,6 +13,7 @@ pub mod scatter_stage;
 pub mod snow_stage;
 pub mod stages;
 pub mod view_stage;
+pub mod view_render;
 
 use std::path::PathBuf;
 

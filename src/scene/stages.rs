@@ -144,8 +144,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 pub const TERRAIN_ALGORITHM_VERSION: u32 = 3;
 
 /// Version of the preview stage's output for given inputs (see [`TERRAIN_ALGORITHM_VERSION`]).
-/// 2: a tree species without an L-system is drawn at its built-in tree's height.
-pub const PREVIEW_ALGORITHM_VERSION: u32 = 2;
+/// 2: a tree species without an L-system is drawn at its built-in tree's height. 3: preview.png is
+/// the first view's perspective render of scene.glb, the top-down drawing moved to map.png.
+pub const PREVIEW_ALGORITHM_VERSION: u32 = 3;
 
 /// Cache key of the terrain stage: its settings, the formats, the input's content.
 pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageError> {
@@ -308,7 +309,21 @@ pub struct PreviewStageReport {
     pub file: PathBuf,
     pub width_px: u32,
     pub height_px: u32,
+    /// The top-down map (`map.png`) when `preview.png` is the first view's perspective render.
+    #[serde(default)]
+    pub map: Option<PathBuf>,
+    /// What the perspective render drew (scene.glb from the first view), when it is one.
+    #[serde(default)]
+    pub view: Option<PreviewViewFigures>,
     pub seconds: f64,
+}
+
+/// The perspective preview's figures.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct PreviewViewFigures {
+    pub camera: String,
+    pub triangles: u64,
+    pub instances: u64,
 }
 
 pub const PREVIEW_SIZE_PX: u32 = 1024;
@@ -319,17 +334,39 @@ pub fn run_preview(
     terrain: &Scene,
     placements: &[crate::scene::preview::PreviewLayer],
     cover: Option<&crate::snow::CoverMask>,
+    view: Option<(&Scene, &crate::scene::view::Camera)>,
     scene_dir: &Path,
 ) -> Result<PreviewStageReport, StageError> {
     let t0 = Instant::now();
+    let f = fail(Stage::Preview);
     let mut canvas = crate::scene::preview::terrain_preview(terrain, PREVIEW_SIZE_PX);
-    if let Some(view) = crate::scene::preview::preview_view(terrain, PREVIEW_SIZE_PX) {
+    if let Some(v) = crate::scene::preview::preview_view(terrain, PREVIEW_SIZE_PX) {
         if let Some(mask) = cover {
-            crate::scene::preview::draw_cover(&mut canvas, &view, mask);
+            crate::scene::preview::draw_cover(&mut canvas, &v, mask);
         }
-        crate::scene::preview::draw_placements(&mut canvas, &view, placements);
+        crate::scene::preview::draw_placements(&mut canvas, &v, placements);
     }
     let file = PathBuf::from("preview.png");
-    crate::scene::preview::write_png(&canvas, &scene_dir.join(&file)).map_err(|e| fail(Stage::Preview)(e.to_string()))?;
-    Ok(PreviewStageReport { file, width_px: canvas.width, height_px: canvas.height, seconds: t0.elapsed().as_secs_f64() })
+    let Some((scene, camera)) = view else {
+        crate::scene::preview::write_png(&canvas, &scene_dir.join(&file)).map_err(|e| f(e.to_string()))?;
+        return Ok(PreviewStageReport { file, width_px: canvas.width, height_px: canvas.height, map: None, view: None, seconds: t0.elapsed().as_secs_f64() });
+    };
+    // the map keeps the top-down drawing; preview.png is the scene as the first view sees it
+    let map = PathBuf::from("map.png");
+    crate::scene::preview::write_png(&canvas, &scene_dir.join(&map)).map_err(|e| f(e.to_string()))?;
+    let scale = (PREVIEW_VIEW_WIDTH_PX as f64 / camera.size_px[0] as f64).min(1.0);
+    let (w, h) = ((camera.size_px[0] as f64 * scale).round().max(16.0) as u32, (camera.size_px[1] as f64 * scale).round().max(16.0) as u32);
+    let (render, figures) = crate::scene::view_render::render_view(scene, camera, w, h).map_err(|e| f(format!("scene.glb: {e}")))?;
+    crate::scene::preview::write_png(&render, &scene_dir.join(&file)).map_err(|e| f(e.to_string()))?;
+    Ok(PreviewStageReport {
+        file,
+        width_px: w,
+        height_px: h,
+        map: Some(map),
+        view: Some(PreviewViewFigures { camera: camera.name.clone(), triangles: figures.triangles, instances: figures.instances }),
+        seconds: t0.elapsed().as_secs_f64(),
+    })
 }
+
+/// Width of the perspective preview (the view's aspect kept; smaller views at their own size).
+pub const PREVIEW_VIEW_WIDTH_PX: u32 = 1280;

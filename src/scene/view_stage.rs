@@ -50,7 +50,32 @@ pub struct ViewReport {
     /// culled (what scene.glb was before views).
     pub full_detail_triangles: u64,
     pub full_detail_draw_calls: usize,
+    /// The view rendered with LoD against full detail (`--compare-full-detail`, first view only).
+    #[serde(default)]
+    pub image: Option<ImageComparison>,
 }
+
+/// How the view with LoD differs from the same view at full detail, rendered by the project's
+/// rasterizer at `size_px`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ImageComparison {
+    pub size_px: [u32; 2],
+    /// Share of pixels where some channel differs by more than `threshold` (linear 0..1).
+    pub differing: f64,
+    pub threshold: f32,
+    pub color_rmse: f64,
+    /// Why it was not rendered, when it was not (too many full-detail triangles).
+    pub skipped: Option<String>,
+    pub seconds: f64,
+}
+
+/// Most full-detail triangles `--compare-full-detail` renders.
+pub const MAX_COMPARE_TRIANGLES: u64 = 400_000_000;
+/// Size of the comparison renders (pixels).
+pub const COMPARE_SIZE_PX: [u32; 2] = [960, 540];
+/// A pixel differs when a channel moves by more than this (linear colour: about 8/255 in sRGB
+/// mid-tones).
+pub const COMPARE_THRESHOLD: f32 = 0.03;
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct TerrainDraw {
@@ -253,6 +278,7 @@ pub fn run_view(
     plants: Option<&PlantsStageReport>,
     tables: &[(String, PathBuf)],
     scene_dir: &Path,
+    compare_full_detail: bool,
 ) -> Result<ViewStageReport, StageError> {
     let t0 = Instant::now();
     let mut asm = Assembler { dir: scene_dir, files: BTreeMap::new(), scene: Scene::default(), meshes: BTreeMap::new() };
@@ -288,6 +314,35 @@ pub fn run_view(
         let rel = tables.iter().find(|(n, _)| *n == s.name).map(|(_, p)| p.clone()).unwrap_or_else(|| PathBuf::from("placements").join(format!("{}.csv", s.name)));
         let path = scene_dir.join(&rel);
         rows_of.push(table::read_placements_csv(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?);
+    }
+
+    // full detail (first view, when compared): the main terrain, every row at its variant's LoD0
+    let mut full = Assembler { dir: scene_dir, files: BTreeMap::new(), scene: Scene::default(), meshes: BTreeMap::new() };
+    if compare_full_detail {
+        let mut children = Vec::new();
+        for c in 0..main.meshes.len() {
+            let mi = full.mesh(terrain.main, c)?;
+            full.scene.nodes.push(Node { mesh: Some(mi), ..Node::default() });
+            children.push(full.scene.nodes.len() - 1);
+        }
+        for (s, rows) in preset.species.iter().zip(&rows_of) {
+            let Some(chain) = chains.get(s.name.as_str()).filter(|c| !c.variants.is_empty()) else { continue };
+            let mut groups: BTreeMap<usize, Instances> = BTreeMap::new();
+            for row in rows {
+                let g = groups.entry(variant_of(row.position, chain.variants.len())).or_default();
+                g.translations.push(row.position.map(|x| x as f32));
+                g.rotations.push(row.rotation);
+                g.scales.push(row.scale);
+            }
+            for (v, inst) in groups {
+                let l0 = &chain.variants[v][0];
+                let mi = full.mesh_named(&l0.file, &l0.mesh)?;
+                full.scene.nodes.push(Node { mesh: Some(mi), instances: Some(inst), ..Node::default() });
+                children.push(full.scene.nodes.len() - 1);
+            }
+        }
+        full.scene.nodes.push(Node { children, ..Node::default() });
+        full.scene.roots.push(full.scene.nodes.len() - 1);
     }
 
     let mut reports = Vec::with_capacity(cameras.len());
@@ -412,7 +467,24 @@ pub fn run_view(
             draw_calls,
             full_detail_triangles: full_triangles,
             full_detail_draw_calls: full_calls,
+            image: None,
         });
+    }
+    if compare_full_detail {
+        if let Some(first) = reports.first_mut() {
+            let t = Instant::now();
+            let [w, h] = COMPARE_SIZE_PX;
+            let mut c = ImageComparison { size_px: [w, h], differing: 0.0, threshold: COMPARE_THRESHOLD, color_rmse: 0.0, skipped: None, seconds: 0.0 };
+            if first.full_detail_triangles > MAX_COMPARE_TRIANGLES {
+                c.skipped = Some(format!("{} full-detail triangles, over the {MAX_COMPARE_TRIANGLES} the comparison renders", first.full_detail_triangles));
+            } else {
+                let render = |s: &Scene| crate::scene::view_render::render_view(s, &first.camera, w, h).map(|(canvas, _)| canvas).map_err(fail);
+                let (lod, detail) = (render(&asm.scene)?, render(&full.scene)?);
+                (c.differing, c.color_rmse) = crate::scene::view_render::image_difference(&lod, &detail, COMPARE_THRESHOLD);
+            }
+            c.seconds = t.elapsed().as_secs_f64();
+            first.image = Some(c);
+        }
     }
 
     // meshes appended only for the full-detail count are not instanced by any node: drop them

@@ -511,7 +511,16 @@ fn preview_has_the_reported_size_and_shows_something() {
     let (w, h) = (r["stages"]["preview"]["width_px"].as_u64().unwrap(), r["stages"]["preview"]["height_px"].as_u64().unwrap());
     let img = image::open(scene.join("preview.png")).expect("preview.png decodes").to_rgba8();
     assert_eq!((img.width() as u64, img.height() as u64), (w, h));
-    assert_eq!(w.max(h), 1024, "the preview is 1024 px on its long side");
+    if scene.join("scene.glb").is_file() {
+        // the first view's perspective render (1920×1080 views at 1280×720); the map beside it
+        assert_eq!((w, h), (1280, 720));
+        assert_eq!(r["stages"]["preview"]["map"], "map.png");
+        let map = image::open(scene.join("map.png")).expect("map.png decodes");
+        assert_eq!(map.width().max(map.height()), 1024, "the map is 1024 px on its long side");
+        assert!(r["stages"]["preview"]["view"]["instances"].as_u64().unwrap() > 0);
+    } else {
+        assert_eq!(w.max(h), 1024, "the preview is 1024 px on its long side");
+    }
     let mut colours = std::collections::HashMap::new();
     for p in img.pixels() {
         *colours.entry(p.0).or_insert(0usize) += 1;
@@ -615,7 +624,7 @@ fn library_batch_keeps_order_and_reports_failures() {
         t.source = load_preset(&good).unwrap().terrain.unwrap().source;
         t.chunk = Some(64);
     }
-    let settings = BuildSettings { out_dir: d.join("out"), stages: Stage::ALL.to_vec(), force: false };
+    let settings = BuildSettings { out_dir: d.join("out"), stages: Stage::ALL.to_vec(), force: false, compare_full_detail: false };
     let sources = vec![PresetSource::File(bad.clone()), PresetSource::Resolved(Box::new(demo.clone())), PresetSource::File(good.clone())];
     let lines = std::sync::Mutex::new(Vec::<String>::new());
     let progress = |scene: &str, msg: &str| lines.lock().unwrap().push(format!("{scene}: {msg}"));
@@ -684,7 +693,7 @@ const PINNED: &[(&str, u32, &str)] = &[
     ("snow", 2, "afe32471f9508a26"),
     ("scatter", 7, "adc595be82dcf951"),
     ("view", 1, "6a8add05b144e382"),
-    ("preview", 2, "86951c482cf66dd9"),
+    ("preview", 3, "b4bf9586dd134853"),
 ];
 
 /// The stage a scene file belongs to (manifest and reports carry timings: not digested).
@@ -695,7 +704,7 @@ fn stage_of(rel: &str) -> Option<&'static str> {
         "snow" => Some("snow"),
         "placements" => Some("scatter"),
         "scene.glb" => Some("view"),
-        "preview.png" => Some("preview"),
+        "preview.png" | "map.png" => Some("preview"),
         _ => None,
     }
 }

@@ -166,3 +166,28 @@ fn output_bytes_are_in_the_manifest_and_the_report() {
     let r = read_json(&d.join("o/sizes/report.json"));
     assert_eq!(r["bytes"]["total"].as_u64(), Some(listed));
 }
+
+#[test]
+fn the_preview_is_the_first_view_and_full_detail_can_be_compared() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/cmp.toml", &meadow("cmp", "", ""));
+    ok(&verdant_in(d, &["build", "p/cmp.toml", "--out", "o", "--compare-full-detail"]));
+    let r = read_json(&d.join("o/cmp/report.json"));
+    let img = &r["stages"]["view"]["views"][0]["image"];
+    let differing = img["differing"].as_f64().unwrap_or_else(|| panic!("no comparison: {img}"));
+    assert!(img["skipped"].is_null() && (0.0..=1.0).contains(&differing), "{img}");
+    assert!(img["color_rmse"].as_f64().unwrap().is_finite());
+    // LoD changes what is drawn but the picture stays close: well under a tenth of the pixels
+    assert!(differing < 0.1, "{differing}");
+    // preview.png: the perspective render, not the map; the map beside it
+    let preview = image::open(d.join("o/cmp/preview.png")).unwrap().to_rgba8();
+    assert_eq!(preview.dimensions(), (1280, 720));
+    let sky = preview.get_pixel(640, 2).0;
+    assert!(sky[2] > sky[0] && sky[2] > 180, "the top of the view is sky: {sky:?}");
+    assert!(d.join("o/cmp/map.png").is_file());
+    assert!(std::fs::read_to_string(d.join("o/cmp/report.md")).unwrap().contains("Image against full detail"));
+    // without the flag: no comparison
+    ok(&verdant_in(d, &["build", "p/cmp.toml", "--out", "o2"]));
+    assert!(read_json(&d.join("o2/cmp/report.json"))["stages"]["view"]["views"][0]["image"].is_null());
+}

@@ -1,0 +1,157 @@
+//! Renders a scene (as scene.glb holds it) from a view with the project's rasterizer: every node's
+//! mesh at its transform, every EXT_mesh_gpu_instancing instance at its own, base colour ×
+//! texture with the alpha tests, Lambert-lit under a fixed sun, over a sky colour. What
+//! `preview.png` shows, and what a view's image comparison (LoD against full detail) measures.
+
+use crate::bake::image::Image;
+use crate::bake::raster::{Camera as RasterCamera, Canvas, PerspectiveView};
+use crate::bake::render::{render_mesh, RenderOptions, Shading};
+use crate::mesh::{Node, Scene};
+use crate::scene::view::Camera;
+
+/// Sky colour (linear RGBA) behind the scene.
+pub const SKY: [f32; 4] = [0.55, 0.7, 0.9, 1.0];
+/// Towards the sun (world space, normalised by the shader) and the ambient share of the light.
+const SUN: [f32; 3] = [0.3, 1.0, 0.2];
+const AMBIENT: f32 = 0.35;
+/// Nearest distance drawn (m).
+const NEAR_M: f64 = 0.1;
+/// Meshes with more triangles are drawn in parallel bands; smaller ones (most instances) serially.
+const PARALLEL_TRIANGLES: usize = 4096;
+
+/// The rasterizer's camera for `camera` at `width` × `height` pixels (the view's aspect kept by
+/// the caller).
+pub fn raster_camera(camera: &Camera, width: u32, height: u32) -> RasterCamera {
+    let aspect = width as f64 / height.max(1) as f64;
+    let fov_x = 2.0 * ((camera.fov_y_deg.to_radians() * 0.5).tan() * aspect).atan();
+    let f = camera.forward;
+    // an up that is not parallel to the view axis
+    let up = if f[1].abs() > 0.999 { [0.0, 0.0, -1.0] } else { [0.0, 1.0, 0.0] };
+    RasterCamera::Perspective(PerspectiveView {
+        eye: camera.eye,
+        target: [camera.eye[0] + f[0], camera.eye[1] + f[1], camera.eye[2] + f[2]],
+        up,
+        fov_x_deg: fov_x.to_degrees().min(179.0),
+        width,
+        height,
+        near: NEAR_M,
+    })
+}
+
+/// 3×4 object-to-world matrix (rows; 4th column the translation) of a translation, unit
+/// quaternion (x, y, z, w) and scale.
+pub fn trs_matrix(t: [f32; 3], q: [f32; 4], s: [f32; 3]) -> [[f64; 4]; 3] {
+    let [x, y, z, w] = q.map(|c| c as f64);
+    let r = [
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
+        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
+        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+    ];
+    let s = s.map(|c| c as f64);
+    std::array::from_fn(|row| [r[row][0] * s[0], r[row][1] * s[1], r[row][2] * s[2], t[row] as f64])
+}
+
+fn mul(a: &[[f64; 4]; 3], b: &[[f64; 4]; 3]) -> [[f64; 4]; 3] {
+    std::array::from_fn(|r| {
+        let mut row = [0.0; 4];
+        for (c, out) in row.iter_mut().enumerate() {
+            *out = (0..3).map(|k| a[r][k] * b[k][c]).sum::<f64>() + if c == 3 { a[r][3] } else { 0.0 };
+        }
+        row
+    })
+}
+
+/// What a render drew.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RenderFigures {
+    pub triangles: u64,
+    pub instances: u64,
+}
+
+/// Renders `scene` from `camera` at `width` × `height`.
+pub fn render_view(scene: &Scene, camera: &Camera, width: u32, height: u32) -> Result<(Canvas, RenderFigures), String> {
+    let mut canvas = Canvas::new(width, height, SKY).map_err(|e| e.to_string())?;
+    let textures: Vec<Image> = scene
+        .textures
+        .iter()
+        .map(|t| Image::from_png(&t.png).map_err(|e| format!("texture `{}`: {e}", t.name)))
+        .collect::<Result<_, _>>()?;
+    let cam = raster_camera(camera, width, height);
+    let mut figures = RenderFigures::default();
+    let identity = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+    let mut stack: Vec<(usize, [[f64; 4]; 3])> = scene.roots.iter().rev().map(|&r| (r, identity)).collect();
+    let mut visited = vec![false; scene.nodes.len()];
+    while let Some((index, parent)) = stack.pop() {
+        let Some(node) = scene.nodes.get(index) else { continue };
+        if std::mem::replace(&mut visited[index], true) {
+            continue;
+        }
+        let world = mul(&parent, &node_matrix(node));
+        if let Some(mesh) = node.mesh.and_then(|m| scene.meshes.get(m)) {
+            let opts = RenderOptions {
+                shading: Shading::Lambert { light_dir: SUN, ambient: AMBIENT },
+                parallel: mesh.triangle_count() > PARALLEL_TRIANGLES,
+                ..RenderOptions::default()
+            };
+            match &node.instances {
+                Some(inst) => {
+                    for k in 0..inst.translations.len() {
+                        let m = mul(&world, &trs_matrix(inst.translations[k], inst.rotations[k], inst.scales[k]));
+                        figures.triangles += render_mesh(&mut canvas, &cam, &m, mesh, &scene.materials, &textures, &opts).triangles as u64;
+                        figures.instances += 1;
+                    }
+                }
+                None => figures.triangles += render_mesh(&mut canvas, &cam, &world, mesh, &scene.materials, &textures, &opts).triangles as u64,
+            }
+        }
+        stack.extend(node.children.iter().rev().map(|&c| (c, world)));
+    }
+    Ok((canvas, figures))
+}
+
+fn node_matrix(n: &Node) -> [[f64; 4]; 3] {
+    trs_matrix(n.translation, n.rotation, n.scale)
+}
+
+/// How two renders of one view differ: the share of pixels whose colour differs by more than
+/// `threshold` in any channel (0..1), and the colour RMSE over all pixels and channels.
+pub fn image_difference(a: &Canvas, b: &Canvas, threshold: f32) -> (f64, f64) {
+    let n = a.color.len().min(b.color.len()).max(1);
+    let (mut differing, mut sq) = (0usize, 0.0f64);
+    for (p, q) in a.color.iter().zip(&b.color) {
+        let d = (0..3).map(|c| (p[c] - q[c]).abs()).fold(0.0f32, f32::max);
+        if d > threshold {
+            differing += 1;
+        }
+        sq += (0..3).map(|c| ((p[c] - q[c]) as f64).powi(2)).sum::<f64>();
+    }
+    (differing as f64 / n as f64, (sq / (3 * n) as f64).sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn trs_matches_the_rotation_and_scale() {
+        let h = std::f32::consts::FRAC_1_SQRT_2;
+        // 90° about +Y: +X goes to −Z
+        let m = trs_matrix([1.0, 2.0, 3.0], [0.0, h, 0.0, h], [2.0; 3]);
+        let x = [m[0][0], m[1][0], m[2][0]];
+        assert!((x[0]).abs() < 1e-6 && (x[2] + 2.0).abs() < 1e-6, "{x:?}");
+        assert_eq!([m[0][3], m[1][3], m[2][3]], [1.0, 2.0, 3.0]);
+        let id = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+        assert_eq!(mul(&id, &m), m);
+    }
+
+    #[test]
+    fn identical_renders_do_not_differ() {
+        let c = Canvas::new(4, 4, SKY).unwrap();
+        assert_eq!(image_difference(&c, &c, 0.05), (0.0, 0.0));
+        let mut d = c.clone();
+        d.color[0] = [0.0, 0.0, 0.0, 1.0];
+        let (share, rmse) = image_difference(&c, &d, 0.05);
+        assert_eq!(share, 1.0 / 16.0);
+        assert!(rmse > 0.0);
+    }
+}
