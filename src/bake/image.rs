@@ -60,6 +60,35 @@ impl Image {
         Image::decode_png(&bytes, &path.display().to_string())
     }
 
+    /// Decodes PNG bytes that hold data, not colour (a glTF normalTexture): values as stored,
+    /// 0..1, no sRGB decoding (the inverse of [`Image::encode_png_data`]).
+    pub fn from_png_data(bytes: &[u8]) -> Result<Image, BakeError> {
+        let mut img = Image::decode_png(bytes, "the PNG data")?;
+        for p in &mut img.pixels {
+            for c in p.iter_mut().take(3) {
+                *c = crate::bake::raster::linear_to_srgb(*c);
+            }
+        }
+        // 8-bit values exactly: the sRGB round trip may be off by a rounding step
+        for p in &mut img.pixels {
+            for c in p.iter_mut().take(3) {
+                *c = (*c * 255.0).round() / 255.0;
+            }
+        }
+        Ok(img)
+    }
+
+    /// PNG bytes of an image that holds data, not colour (a glTF normalTexture, which glTF reads as
+    /// linear values): each channel written as stored, no sRGB encoding. Deterministic.
+    pub fn encode_png_data(&self) -> Result<Vec<u8>, BakeError> {
+        if !self.is_well_formed() {
+            return Err(self.malformed());
+        }
+        let to_u8 = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+        let raw: Vec<u8> = self.pixels.iter().flat_map(|c| [to_u8(c[0]), to_u8(c[1]), to_u8(c[2]), to_u8(c[3])]).collect();
+        crate::bake::raster::encode_rgba8_png(&raw, self.width, self.height).map_err(BakeError::Encode)
+    }
+
     fn decode_png(bytes: &[u8], source_name: &str) -> Result<Image, BakeError> {
         let png_err =
             |e: image::ImageError| BakeError::Png { source_name: source_name.to_string(), reason: e.to_string() };
@@ -183,6 +212,17 @@ fn check_size(source_name: &str, width: u64, height: u64) -> Result<(), BakeErro
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn data_pngs_keep_their_values() {
+        // a flat normal is (128, 128, 255) in the file, not its sRGB encoding (188, 188, 255)
+        let img = Image::new(1, 1, [0.5, 0.5, 1.0, 1.0]).unwrap();
+        let png = img.encode_png_data().unwrap();
+        let decoded = image::load_from_memory(&png).unwrap().to_rgba8();
+        assert_eq!(decoded.get_pixel(0, 0).0, [128, 128, 255, 255]);
+        let back = Image::from_png_data(&png).unwrap();
+        assert!((back.pixels[0][0] - 128.0 / 255.0).abs() < 1e-6 && back.pixels[0][2] == 1.0);
+    }
+
     use super::*;
     use crate::bake::raster::linear_to_srgb;
 

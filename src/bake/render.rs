@@ -80,7 +80,11 @@ pub fn render_mesh(
         let draw = DrawOptions { cull, ..DrawOptions::default() };
         let lighting = match opts.shading {
             Shading::Unlit => None,
-            Shading::Lambert { light_dir, ambient } => Some(Lighting::new(prim, &normal_matrix, light_dir, ambient)),
+            Shading::Lambert { light_dir, ambient } => {
+                // lit as an engine lights it: through the material's normal map where there is one
+                let normal_map = material.normal_texture.and_then(|t| textures.get(t));
+                Some(Lighting::new(prim, &normal_matrix, light_dir, ambient).with_normal_map(prim, normal_map))
+            }
             Shading::CardNormals { .. } => Some(Lighting::new(prim, &normal_matrix, [0.0, 1.0, 0.0], 0.0)),
         };
         let card = match opts.shading {
@@ -109,7 +113,7 @@ fn shade(
     material: &Material,
     texture: Option<&Image>,
     use_vertex_colors: bool,
-    lighting: Option<&Lighting>,
+    lighting: Option<&Lighting<'_>>,
     card: Option<&[[f32; 3]; 3]>,
 ) -> Option<[f32; 4]> {
     let mut c = material.base_color;
@@ -151,7 +155,7 @@ fn shade(
 }
 
 /// What the Lambert term needs, prepared once per primitive.
-struct Lighting {
+struct Lighting<'a> {
     /// Object → world for normals: the cofactor matrix of the linear part (the inverse transpose
     /// up to a positive scale, which the normalisation removes; defined for singular matrices too).
     normal_matrix: [[f64; 3]; 3],
@@ -159,10 +163,54 @@ struct Lighting {
     ambient: f32,
     /// Per-triangle object-space normals when the primitive has no vertex normals.
     face_normals: Option<Vec<[f32; 3]>>,
+    /// A tangent-space normal map with the primitive's vertex normals, tangents (xyz, w the
+    /// bitangent's sign) and indices (glTF normalTexture on TEXCOORD_0).
+    normal_map: Option<NormalMap<'a>>,
 }
 
-impl Lighting {
-    fn new(prim: &Primitive, normal_matrix: &[[f64; 3]; 3], light_dir: [f32; 3], ambient: f32) -> Lighting {
+struct NormalMap<'a> {
+    image: &'a Image,
+    normals: &'a [[f32; 3]],
+    tangents: &'a [[f32; 4]],
+    indices: &'a [u32],
+}
+
+impl<'a> Lighting<'a> {
+    /// Lights through `image` (a glTF tangent-space normal map) when the primitive has vertex
+    /// normals and tangents for every vertex; unchanged otherwise.
+    fn with_normal_map(mut self, prim: &'a Primitive, image: Option<&'a Image>) -> Lighting<'a> {
+        let n = prim.positions.len();
+        if let Some(image) = image {
+            if prim.normals.len() == n && prim.tangents.len() == n {
+                self.normal_map = Some(NormalMap { image, normals: &prim.normals, tangents: &prim.tangents, indices: &prim.indices });
+            }
+        }
+        self
+    }
+
+    /// The normal-mapped object-space normal at `f`, when a normal map applies.
+    fn mapped_normal(&self, f: &Fragment) -> Option<[f32; 3]> {
+        let m = self.normal_map.as_ref()?;
+        let t = f.triangle as usize;
+        let idx = m.indices.get(3 * t..3 * t + 3)?;
+        let (mut n, mut tg, mut w) = ([0.0f32; 3], [0.0f32; 3], 0.0f32);
+        for (k, &i) in idx.iter().enumerate() {
+            let (vn, vt) = (m.normals.get(i as usize)?, m.tangents.get(i as usize)?);
+            let b = f.bary[k];
+            for a in 0..3 {
+                n[a] += b * vn[a];
+                tg[a] += b * vt[a];
+            }
+            w += b * vt[3];
+        }
+        let s = m.image.sample_bilinear(f.uv);
+        let (x, y, z) = (2.0 * s[0] - 1.0, 2.0 * s[1] - 1.0, 2.0 * s[2] - 1.0);
+        let sign = if w < 0.0 { -1.0 } else { 1.0 };
+        let bt = [sign * (n[1] * tg[2] - n[2] * tg[1]), sign * (n[2] * tg[0] - n[0] * tg[2]), sign * (n[0] * tg[1] - n[1] * tg[0])];
+        Some([0, 1, 2].map(|a| x * tg[a] + y * bt[a] + z * n[a]))
+    }
+
+    fn new(prim: &Primitive, normal_matrix: &[[f64; 3]; 3], light_dir: [f32; 3], ambient: f32) -> Lighting<'a> {
         let l = light_dir.map(|v| v as f64);
         let len = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
         // A zero or broken light direction lights from straight above.
@@ -180,14 +228,15 @@ impl Lighting {
                 .collect()
         });
         let ambient = if ambient.is_nan() { 0.0 } else { ambient.clamp(0.0, 1.0) };
-        Lighting { normal_matrix: *normal_matrix, light, ambient, face_normals }
+        Lighting { normal_matrix: *normal_matrix, light, ambient, face_normals, normal_map: None }
     }
 
     /// The fragment's unit world-space normal, None when it has no usable one.
     fn world_normal(&self, f: &Fragment) -> Option<[f64; 3]> {
-        let n = match &self.face_normals {
-            Some(faces) => faces.get(f.triangle as usize).copied().unwrap_or([0.0; 3]),
-            None => f.normal,
+        let n = match (&self.face_normals, self.mapped_normal(f)) {
+            (_, Some(mapped)) => mapped,
+            (Some(faces), None) => faces.get(f.triangle as usize).copied().unwrap_or([0.0; 3]),
+            (None, None) => f.normal,
         };
         let m = &self.normal_matrix;
         let nw = [0, 1, 2].map(|r| m[r][0] * n[0] as f64 + m[r][1] * n[1] as f64 + m[r][2] * n[2] as f64);
@@ -281,6 +330,24 @@ mod tests {
         assert!(close(texel([0.0, 0.6, -0.8], true), [0.5, 0.2, 0.9, 1.0]));
         // unnormalised normals come out unit length
         assert!(close(texel([0.0, 0.0, 3.0], false), [0.5, 0.5, 1.0, 1.0]));
+    }
+
+    #[test]
+    fn lambert_lights_through_the_normal_map() {
+        // a quad facing +Z, tangent +X; the map turns every normal to +X; the light comes from +X
+        let opts = RenderOptions { shading: Shading::Lambert { light_dir: [1.0, 0.0, 0.0], ambient: 0.25 }, ..RenderOptions::default() };
+        let mut prim = quad(1.0);
+        prim.tangents = vec![[1.0, 0.0, 0.0, 1.0]; 4];
+        let mesh = Mesh { primitives: vec![prim], ..Mesh::default() };
+        let map = Image::new(2, 2, [1.0, 0.5, 0.5, 1.0]).unwrap();
+        let with = Material { normal_texture: Some(0), ..Material::default() };
+        let mut c = front_view().canvas([0.0; 4]).unwrap();
+        render_mesh(&mut c, &front_view(), &IDENTITY, &mesh, &[with], &[map], &opts);
+        assert!((c.color[5][0] - 1.0).abs() < 1e-5, "lit through the map: {:?}", c.color[5]);
+        // without the map the same light grazes the quad: ambient only
+        let mut c = front_view().canvas([0.0; 4]).unwrap();
+        render_mesh(&mut c, &front_view(), &IDENTITY, &mesh, &[Material::default()], &[], &opts);
+        assert!((c.color[5][0] - 0.25).abs() < 1e-5, "{:?}", c.color[5]);
     }
 
     #[test]

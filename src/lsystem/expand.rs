@@ -359,7 +359,7 @@ mod tests {
         let s = sys("10\n10\n10\nF\nF=FF\n@\n");
         assert_eq!(count(&s, 0, u64::MAX).unwrap().symbols, 1024);
         let e = count(&s, 0, 1000).unwrap_err();
-        assert!(matches!(e, LsystemError::TooManySymbols { limit: 1000 }), "{e}");
+        assert!(matches!(e, LsystemError::TooManySymbols { limit: 1000, .. }), "{e}");
     }
 
     #[test]

@@ -268,7 +268,7 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
     let chain = mip_chain(&atlas, s.alpha_cutoff);
     let png = chain[0].image.encode_png().map_err(|e| RasterError::Encode(e.to_string()))?;
     let normal_atlas = finish_normal_atlas(normal_atlas);
-    let normal_png = normal_atlas.encode_png().map_err(|e| RasterError::Encode(e.to_string()))?;
+    let normal_png = normal_atlas.encode_png_data().map_err(|e| RasterError::Encode(e.to_string()))?;
     let mut scene = Scene {
         name: name.into(),
         materials: vec![Material {

@@ -403,7 +403,7 @@ pub fn build_grass_with(
     let spacing = 1.5 * s.clump_size_m;
     let blade_tex = Texture { name: format!("{name}_blade"), png: png(&blade_chain[0].image)? };
     let atlas_tex = Texture { name: format!("{name}_atlas"), png: png(&atlas_chain[0].image)? };
-    let normal_tex = Texture { name: format!("{name}_atlas_normal"), png: png(&normal_atlas)? };
+    let normal_tex = Texture { name: format!("{name}_atlas_normal"), png: normal_atlas.encode_png_data().map_err(|e| GrassAssetError::Texture(e.to_string()))? };
     let slice_rects = |ci: usize| -> [UvRect; 4] { std::array::from_fn(|k| cells[ci * 5 + k].uv) };
     let lod2: Vec<Primitive> = clumps.iter().enumerate().map(|(ci, c)| grass::lod2(s, c, &slice_rects(ci), cells[ci * 5 + 4].uv, 0)).collect();
     let lod3: Vec<Primitive> = clumps.iter().enumerate().map(|(ci, c)| grass::lod3(s, c, cells[ci * 5 + 4].uv, 0)).collect();

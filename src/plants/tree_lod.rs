@@ -863,7 +863,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         None => None,
     };
     let normal_texture = match &normal_atlas {
-        Some(img) => Some(Texture { name: format!("{name}_atlas_normal"), png: img.encode_png().map_err(|e| TreeLodError::Texture(e.to_string()))? }),
+        Some(img) => Some(Texture { name: format!("{name}_atlas_normal"), png: img.encode_png_data().map_err(|e| TreeLodError::Texture(e.to_string()))? }),
         None => None,
     };
     if let (Some((lod1_materials, lod1_textures)), Some(atlas_tex), Some(atlas0), Some(normal_tex), Some(normal_img)) =
@@ -1216,7 +1216,7 @@ fn write_chain(chain: &TreeLods, dir: &Path, file_stem: &str, written: &mut Writ
     }
     if let Some(normals) = &chain.normal_atlas {
         let path = dir.join(format!("{file_stem}_atlas_normal.png"));
-        let png = normals.encode_png().map_err(|e| TreeLodError::Texture(e.to_string()))?;
+        let png = normals.encode_png_data().map_err(|e| TreeLodError::Texture(e.to_string()))?;
         export::write_atomic(&path, &png).map_err(|e| TreeLodError::Texture(e.to_string()))?;
         written.files.push(path);
     }

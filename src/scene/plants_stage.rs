@@ -152,7 +152,8 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// levels lit through a baked normal atlas (atlases/<stem>_normal.png, normalTexture). 8: grass and
 /// flower cards too; every card with a normal map carries TANGENT. 9: switch distances for the
 /// `[lod]` policy (2 px on 1080 px, 60° vertical by default); the report carries the typed chain.
-pub const PLANTS_ALGORITHM_VERSION: u32 = 9;
+/// 10: normal atlases written as linear data (glTF normalTexture), not sRGB-encoded.
+pub const PLANTS_ALGORITHM_VERSION: u32 = 10;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).
@@ -234,7 +235,7 @@ fn write_chain(chain: &TreeLods, dir: &Path, stem: &str, files: &mut Vec<PathBuf
 
 /// `atlases/<stem>_normal.png`: a card atlas' normal map (level 0; engines make its mips).
 fn write_normal_atlas(dir: &Path, stem: &str, normals: &crate::bake::image::Image, files: &mut Vec<PathBuf>) -> Result<(), StageError> {
-    let png = normals.encode_png().map_err(|e| fail(format!("{stem}: {e}")))?;
+    let png = normals.encode_png_data().map_err(|e| fail(format!("{stem}: {e}")))?;
     let rel = PathBuf::from("atlases").join(format!("{stem}_normal.png"));
     export::write_atomic(&dir.join(&rel), &png).map_err(|e| fail(e.to_string()))?;
     files.push(rel);

@@ -145,8 +145,9 @@ pub const TERRAIN_ALGORITHM_VERSION: u32 = 3;
 
 /// Version of the preview stage's output for given inputs (see [`TERRAIN_ALGORITHM_VERSION`]).
 /// 2: a tree species without an L-system is drawn at its built-in tree's height. 3: preview.png is
-/// the first view's perspective render of scene.glb, the top-down drawing moved to map.png.
-pub const PREVIEW_ALGORITHM_VERSION: u32 = 3;
+/// the first view's perspective render of scene.glb, the top-down drawing moved to map.png. 4: lit
+/// through the materials' normal maps.
+pub const PREVIEW_ALGORITHM_VERSION: u32 = 4;
 
 /// Cache key of the terrain stage: its settings, the formats, the input's content.
 pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageError> {

@@ -71,10 +71,13 @@ pub struct RenderFigures {
 /// Renders `scene` from `camera` at `width` × `height`.
 pub fn render_view(scene: &Scene, camera: &Camera, width: u32, height: u32) -> Result<(Canvas, RenderFigures), String> {
     let mut canvas = Canvas::new(width, height, SKY).map_err(|e| e.to_string())?;
+    // normal maps hold data (glTF reads them as linear values), colour textures sRGB
+    let is_data: Vec<bool> = (0..scene.textures.len()).map(|t| scene.materials.iter().any(|m| m.normal_texture == Some(t))).collect();
     let textures: Vec<Image> = scene
         .textures
         .iter()
-        .map(|t| Image::from_png(&t.png).map_err(|e| format!("texture `{}`: {e}", t.name)))
+        .zip(&is_data)
+        .map(|(t, &data)| if data { Image::from_png_data(&t.png) } else { Image::from_png(&t.png) }.map_err(|e| format!("texture `{}`: {e}", t.name)))
         .collect::<Result<_, _>>()?;
     let cam = raster_camera(camera, width, height);
     let mut figures = RenderFigures::default();

@@ -31,7 +31,8 @@ fn fail(message: String) -> StageError {
 
 /// Version of what the view stage writes for given inputs (part of its cache key, see
 /// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]).
-pub const VIEW_ALGORITHM_VERSION: u32 = 1;
+/// 2: the species' normal atlases are linear data.
+pub const VIEW_ALGORITHM_VERSION: u32 = 2;
 
 /// What one view draws.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

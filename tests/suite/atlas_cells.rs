@@ -84,7 +84,8 @@ fn check_normal_maps(what: &str, scene: &Scene) -> usize {
         }
         let n = m.normal_texture.unwrap_or_else(|| panic!("{what}: material {} draws an atlas without a normal map", m.name));
         assert!(scene.textures[n].name.ends_with("_atlas_normal"), "{what}: normal map {}", scene.textures[n].name);
-        let img = verdant::bake::image::Image::from_png(&scene.textures[n].png).unwrap();
+        // glTF reads a normalTexture as linear data: the bytes as stored, not sRGB-decoded
+        let img = verdant::bake::image::Image::from_png_data(&scene.textures[n].png).unwrap();
         for p in &img.pixels {
             let v = [p[0] * 2.0 - 1.0, p[1] * 2.0 - 1.0, p[2] * 2.0 - 1.0];
             let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();

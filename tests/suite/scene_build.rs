@@ -689,11 +689,11 @@ fn concurrent_stores_of_one_cache_entry_stay_complete() {
 /// the new binary) and put the new digest here; the test prints the whole table to copy.
 const PINNED: &[(&str, u32, &str)] = &[
     ("terrain", 3, "8ede27b74341dd54"),
-    ("plants", 9, "3a551370ac071657"),
+    ("plants", 10, "93758c43a60273f6"),
     ("snow", 2, "afe32471f9508a26"),
     ("scatter", 7, "adc595be82dcf951"),
-    ("view", 1, "6a8add05b144e382"),
-    ("preview", 3, "b4bf9586dd134853"),
+    ("view", 2, "fb672cba10c970dd"),
+    ("preview", 4, "26309c0ca2a1c422"),
 ];
 
 /// The stage a scene file belongs to (manifest and reports carry timings: not digested).
