@@ -117,6 +117,10 @@ pub fn build_preset(preset: &Preset, settings: &BuildSettings, progress: Progres
             )));
         }
     }
+    // scene.glb draws the placements: the view stage runs with the scatter stage
+    if settings.stages.contains(&Stage::View) && !settings.stages.contains(&Stage::Scatter) && !preset.species.is_empty() {
+        return Err(SceneBuildError::Usage("the view stage draws the placements: select the scatter stage too (--only terrain,scatter,view)".into()));
+    }
     fs::create_dir_all(out).map_err(io_err(out))?;
     let final_dir = out.join(name);
     remove_stale_folders(out, name);

@@ -191,3 +191,13 @@ fn the_preview_is_the_first_view_and_full_detail_can_be_compared() {
     ok(&verdant_in(d, &["build", "p/cmp.toml", "--out", "o2"]));
     assert!(read_json(&d.join("o2/cmp/report.json"))["stages"]["view"]["views"][0]["image"].is_null());
 }
+
+#[test]
+fn the_view_stage_alone_says_it_needs_the_placements() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/v.toml", &meadow("v", "", ""));
+    let o = verdant_in(d, &["build", "p/v.toml", "--only", "terrain,view", "--out", "o"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("select the scatter stage too"), "{}", text(&o));
+}
