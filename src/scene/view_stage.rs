@@ -364,7 +364,7 @@ pub fn run_view(
             };
             chunks_per_level[level] += 1;
             let (file, index) = if chunked { (levels[level].0.clone(), c) } else { (terrain.main.to_path_buf(), c) };
-            let mesh = asm.file(&file)?.meshes[index].clone();
+            let mesh = &asm.file(&file)?.meshes[index];
             t_tris += mesh.triangle_count() as u64;
             t_calls += mesh.primitives.len();
             if write {
