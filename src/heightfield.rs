@@ -100,6 +100,11 @@ impl fmt::Display for Encoding {
 /// for a fine TIN). Raise it with `--max-samples` on a machine that has the memory.
 pub const DEFAULT_MAX_SAMPLES: usize = 8193 * 8193;
 
+/// Heights beyond ±1,000 km are refused at decoding: no terrain reaches them (Earth spans −11 km
+/// to 9 km, Olympus Mons 22 km), and near f32's range (±3.4·10³⁸) differences of heights overflow
+/// and every error figure loses its meaning (a float TIFF of 10³⁰ m "met" a 1 m bound by 10²⁴ m).
+pub const MAX_ABS_HEIGHT_M: f32 = 1.0e6;
+
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DecodeOptions {
     pub encoding: Encoding,
@@ -197,12 +202,23 @@ pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
         _ => decode_image(path, bytes, encoding, opts)?,
     };
     decoded.heightfield.cell_size_m = opts.cell_size_m;
-    if let Some(k) = decoded.heightfield.heights.iter().position(|h| !h.is_finite()) {
+    if let Some(k) = decoded.heightfield.heights.iter().position(|h| !(h.is_finite() && h.abs() <= MAX_ABS_HEIGHT_M)) {
         let w = decoded.heightfield.width;
-        return Err(HeightfieldError::format(
-            path,
-            format!("sample (column {}, row {}) is not a finite height; fix or fill the map before meshing", k % w, k / w),
-        ));
+        let h = decoded.heightfield.heights[k];
+        let what = if h.is_finite() { format!("is {h:e} m, beyond the ±{MAX_ABS_HEIGHT_M:e} m terrain heights are limited to") } else { "is not a finite height".into() };
+        // gray and r16 heights are the scale and offset applied to the samples: those are to blame
+        let remedy = match decoded.encoding {
+            Encoding::Gray | Encoding::R16 => {
+                let metres = |m: f64| if m != 0.0 && !(1e-3..1e9).contains(&m.abs()) { format!("{m:e}") } else { format!("{m}") };
+                format!(
+                    "--height-scale {} and --height-offset {} take heights there; use metres that fit",
+                    metres(opts.height_scale_m),
+                    metres(opts.height_offset_m)
+                )
+            }
+            _ => "fix or fill the map before meshing (or check --encoding)".into(),
+        };
+        return Err(HeightfieldError::format(path, format!("sample (column {}, row {}) {what}; {remedy}", k % w, k / w)));
     }
     Ok(decoded)
 }

@@ -117,7 +117,10 @@ pub fn load_obj_bounded(path: &Path, text: &[u8], options: &tobj::LoadOptions) -
         let read = resolve_inside(&base, &name).and_then(|file| {
             read_limited(&file, MAX_MTL_BYTES, "a material library").map(|b| (file, b)).map_err(|e| e.into_io().to_string())
         });
-        match read {
+        match read.and_then(|(file, bytes)| match mtl_problem(&bytes) {
+            Some(problem) => Err(format!("{}: {problem}", file.display())),
+            None => Ok((file, bytes)),
+        }) {
             Ok((_, bytes)) => tobj::load_mtl_buf(&mut std::io::BufReader::new(&bytes[..])),
             Err(problem) => {
                 failed.borrow_mut().get_or_insert((base.join(mtl), problem));
@@ -127,6 +130,22 @@ pub fn load_obj_bounded(path: &Path, text: &[u8], options: &tobj::LoadOptions) -
     };
     let result = tobj::load_obj_buf(&mut std::io::BufReader::new(text), options, loader);
     (result, failed.into_inner())
+}
+
+/// A material-library line tobj 4.0.5 would panic on (its `parse_float3` unwraps: `Kd 0.5 0.35`
+/// aborts the whole load), as "line N: …"; tobj reports the other malformed lines itself.
+fn mtl_problem(bytes: &[u8]) -> Option<String> {
+    let text = String::from_utf8_lossy(bytes);
+    for (n, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        if let Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) = words.next() {
+            let found = words.count();
+            if found < 3 {
+                return Some(format!("line {}: `{key}` needs three numbers (r g b), found {found}", n + 1));
+            }
+        }
+    }
+    None
 }
 
 /// `text` with control characters escaped (`\u{1b}` for ESC), safe to print on a terminal.

@@ -633,7 +633,9 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
     };
     let glb = job.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     let lods = a.lods.unwrap_or(if glb { tree_lod::TREE_LODS } else { 1 });
-    if lods > 1 || a.variants > 1 || a.lods.is_some() {
+    // `--lods 1` on a .glb still writes the (one-level) chain and its report; on .gltf/.obj it is
+    // the single mesh, as the chain's own error message suggests
+    if lods > 1 || a.variants > 1 || (a.lods.is_some() && glb) {
         let lod_job = TreeLodJob {
             input: job.input.clone(),
             output: job.output.clone(),

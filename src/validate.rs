@@ -182,11 +182,65 @@ struct Loaded {
 
 fn load(path: &Path) -> Result<Loaded, ValidateError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    // the glTF crates index arrays a damaged file may not have (gltf-json's mesh hook, the image
+    // source): the checks in `gltf_json_problems` come first; a panic that still escapes them is
+    // the last resort, turned into a parse error naming the file instead of ending the process
+    let guarded = |f: fn(&Path) -> Result<Loaded, ValidateError>| {
+        std::panic::catch_unwind(|| f(path)).unwrap_or_else(|panic| {
+            let what = panic.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| panic.downcast_ref::<String>().cloned());
+            Err(ValidateError::Parse {
+                path: path.to_path_buf(),
+                problem: format!("a glTF/OBJ library failed on it ({})", what.unwrap_or_else(|| "no message".into())),
+            })
+        })
+    };
     match ext.as_str() {
-        "glb" | "gltf" => load_gltf(path),
-        "obj" => load_obj(path),
+        "glb" | "gltf" => guarded(load_gltf),
+        "obj" => guarded(load_obj),
         _ => Err(ValidateError::Unsupported { path: path.to_path_buf(), ext }),
     }
+}
+
+/// References gltf-json's validation or the gltf crate follow without a bounds check: every
+/// primitive's attribute and morph-target accessors (gltf-json 1.4.1 mesh.rs:151 indexes the
+/// POSITION accessor before validating it) and each image's source (gltf 1.4.1 image.rs:125–128
+/// unwraps `mimeType` for a bufferView image and `uri` when there is no bufferView). Checked on
+/// the JSON before either crate looks at them; each problem is "json path: what is wrong".
+fn gltf_json_problems(root: &gltf::json::Root) -> Vec<String> {
+    let mut problems = Vec::new();
+    let accessors = root.accessors.len();
+    for (mi, mesh) in root.meshes.iter().enumerate() {
+        for (pi, prim) in mesh.primitives.iter().enumerate() {
+            let at = format!("meshes[{mi}].primitives[{pi}]");
+            for (semantic, index) in &prim.attributes {
+                if index.value() >= accessors {
+                    let name = match semantic {
+                        gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                        gltf::json::validation::Checked::Invalid => "?".into(),
+                    };
+                    problems.push(format!("{at}.attributes.{name}: accessor {} does not exist ({accessors} accessors)", index.value()));
+                }
+            }
+            for (ti, target) in prim.targets.iter().flatten().enumerate() {
+                for (name, index) in [("POSITION", &target.positions), ("NORMAL", &target.normals), ("TANGENT", &target.tangents)] {
+                    if let Some(index) = (*index).filter(|i| i.value() >= accessors) {
+                        problems.push(format!("{at}.targets[{ti}].{name}: accessor {} does not exist ({accessors} accessors)", index.value()));
+                    }
+                }
+            }
+        }
+    }
+    for (ii, image) in root.images.iter().enumerate() {
+        match (&image.buffer_view, &image.uri) {
+            (Some(_), Some(_)) => problems.push(format!("images[{ii}]: both a uri and a bufferView; an image has exactly one")),
+            (Some(_), None) if image.mime_type.is_none() => {
+                problems.push(format!("images[{ii}]: an image in a bufferView needs a mimeType (image/png or image/jpeg)"))
+            }
+            (None, None) => problems.push(format!("images[{ii}]: neither a uri nor a bufferView")),
+            _ => {}
+        }
+    }
+    problems
 }
 
 fn issue(severity: Severity, location: impl Into<String>, message: impl Into<String>) -> Issue {
@@ -213,6 +267,10 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
     {
         use gltf::json::validation::{Error as JsonError, Validate};
         let root = gltf.document.as_json();
+        let problems = gltf_json_problems(root);
+        if !problems.is_empty() {
+            return Err(parse(format!("not valid glTF: {}", problems.join("; "))));
+        }
         let mut problems = Vec::new();
         root.validate(root, gltf::json::Path::new, &mut |path, error| {
             let at = path().to_string();

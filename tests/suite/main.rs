@@ -7,6 +7,7 @@ mod atlas_cells;
 mod bake;
 mod cli;
 mod export_roundtrip;
+mod fuzz_regressions;
 mod grass;
 mod limits;
 mod heightfield_decode;
