@@ -119,7 +119,7 @@ fn roundtrip_glb(scene: &crate::mesh::Scene, what: &str) {
     }
 }
 
-/// A folder of its own per call (process id, thread and a counter), removed when dropped.
+/// A folder of its own per call (process id and a counter), removed when dropped.
 struct Scratch(PathBuf);
 
 impl Scratch {

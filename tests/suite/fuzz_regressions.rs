@@ -11,31 +11,6 @@ use verdant::validate::{validate_file, ValidateError, ValidateOptions};
 
 use crate::common::*;
 
-fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
-    let mut js = json.as_bytes().to_vec();
-    while js.len() % 4 != 0 {
-        js.push(b' ');
-    }
-    let mut bin = bin.to_vec();
-    while bin.len() % 4 != 0 {
-        bin.push(0);
-    }
-    let total = 12 + 8 + js.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };
-    let mut out = Vec::new();
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(js.len() as u32).to_le_bytes());
-    out.extend_from_slice(&0x4E4F_534Au32.to_le_bytes());
-    out.extend_from_slice(&js);
-    if !bin.is_empty() {
-        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-        out.extend_from_slice(&0x004E_4942u32.to_le_bytes());
-        out.extend_from_slice(&bin);
-    }
-    out
-}
-
 /// A one-triangle glTF whose JSON is patched by `edit` (the buffer is a data: URI).
 fn triangle_gltf(edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
     let mut v = serde_json::json!({
@@ -175,16 +150,13 @@ fn the_shared_bad_inputs_pass_their_harness_entries() {
 // ---------------------------------------------------------------------------------------------
 // a small fuzzer of our own: seeded mutations of valid inputs through every harness entry
 
-/// splitmix64: the mutations are the same on every run.
+/// A counter through the project's mix64: the mutations are the same on every run.
 struct Stream(u64);
 
 impl Stream {
     fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0 = self.0.wrapping_add(1);
+        verdant::synth::mix64(self.0)
     }
     fn below(&mut self, n: usize) -> usize {
         (self.next() % n.max(1) as u64) as usize

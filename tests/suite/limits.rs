@@ -7,21 +7,6 @@ use std::fs;
 
 use crate::common::*;
 
-fn glb(json: &str) -> Vec<u8> {
-    let mut js = json.as_bytes().to_vec();
-    while js.len() % 4 != 0 {
-        js.push(b' ');
-    }
-    let mut out = Vec::new();
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&((12 + 8 + js.len()) as u32).to_le_bytes());
-    out.extend_from_slice(&(js.len() as u32).to_le_bytes());
-    out.extend_from_slice(&0x4E4F_534Au32.to_le_bytes());
-    out.extend_from_slice(&js);
-    out
-}
-
 fn refused(o: &std::process::Output, code: i32, needle: &str) {
     let t = text(o);
     assert_eq!(o.status.code(), Some(code), "{t}");
@@ -61,13 +46,13 @@ fn a_preset_that_is_not_utf8_is_refused_at_the_byte() {
 fn the_validator_reports_cycles_lengths_and_escaping_uris() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let cycle = glb(r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"children":[1]},{"children":[0]}]}"#);
+    let cycle = glb(r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"children":[1]},{"children":[0]}]}"#, &[]);
     fs::write(d.join("cycle.glb"), &cycle).unwrap();
     refused(&verdant_in(d, &["validate", "cycle.glb"]), 1, "the node hierarchy has a cycle");
-    let two = glb(r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0,1]}],"nodes":[{"children":[2]},{"children":[2]},{}]}"#);
+    let two = glb(r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0,1]}],"nodes":[{"children":[2]},{"children":[2]},{}]}"#, &[]);
     fs::write(d.join("two.glb"), &two).unwrap();
     refused(&verdant_in(d, &["validate", "two.glb"]), 1, "has two parents");
-    let mut short = glb(r#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"scene":0}"#);
+    let mut short = glb(r#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"scene":0}"#, &[]);
     short[8..12].copy_from_slice(&20u32.to_le_bytes());
     fs::write(d.join("short.glb"), &short).unwrap();
     refused(&verdant_in(d, &["validate", "short.glb"]), 2, "the GLB header says the file is 20 bytes");

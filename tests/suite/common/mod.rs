@@ -69,3 +69,29 @@ pub fn timing_cached(scene_dir: &Path, stage: &str) -> bool {
     let r = read_json(&scene_dir.join("report.json"));
     r["timing"][stage]["cached"].as_bool().unwrap_or_else(|| panic!("report.json timing.{stage}.cached missing: {r}"))
 }
+
+/// A GLB of `json` and, when `bin` is not empty, a BIN chunk (both padded to 4 bytes).
+pub fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
+    let mut js = json.as_bytes().to_vec();
+    while js.len() % 4 != 0 {
+        js.push(b' ');
+    }
+    let mut bin = bin.to_vec();
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + js.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };
+    let mut out = Vec::new();
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(js.len() as u32).to_le_bytes());
+    out.extend_from_slice(&0x4E4F_534Au32.to_le_bytes());
+    out.extend_from_slice(&js);
+    if !bin.is_empty() {
+        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+        out.extend_from_slice(&0x004E_4942u32.to_le_bytes());
+        out.extend_from_slice(&bin);
+    }
+    out
+}
