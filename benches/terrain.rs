@@ -13,7 +13,7 @@ use std::process::Command;
 use std::time::Instant;
 
 use verdant::heightfield::Heightfield;
-use verdant::terrain::error::measure;
+use verdant::terrain::error::{measure, measure_exact};
 use verdant::terrain::tin::{tin, tin_spade, TinOptions};
 use verdant::terrain::SampleMesh;
 
@@ -30,12 +30,15 @@ fn data_dir() -> PathBuf {
     std::env::var_os("VERDANT_DATA").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared/data"))
 }
 
-/// Loads the 16-bit Puget Sound map: value · 0.1 m, 160 m between samples.
+/// Loads the 16-bit Puget Sound map: value · 0.1 m, 160 m between samples. Decimetres are not f32
+/// values: the heights are kept exactly (f64) beside their f32 rounding, as the decoder does, so
+/// the error is measured as written against the map's own heights.
 fn load_puget(dir: &Path) -> Result<Heightfield, String> {
     let path = dir.join(PUGET);
     let img = image::open(&path).map_err(|e| format!("{}: {e}", path.display()))?.into_luma16();
     let (w, h) = (img.width() as usize, img.height() as usize);
-    Ok(Heightfield { width: w, height: h, heights: img.into_raw().iter().map(|&v| v as f32 * 0.1).collect(), cell_size_m: 160.0 })
+    let heights: Vec<f64> = img.into_raw().iter().map(|&v| v as f64 * 0.1).collect();
+    Ok(Heightfield::from_f64(w, h, &heights, 160.0))
 }
 
 fn load(input: &str) -> Result<Heightfield, String> {
@@ -83,11 +86,11 @@ fn cpu_seconds() -> f64 {
 }
 
 /// Child: builds one case several times, prints `triangles measured_max_error best_seconds
-/// best_cpu_seconds peak_bytes build_bytes` on one line.
+/// best_cpu_seconds peak_bytes build_bytes measured_f64` on one line.
 fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
     let hf = load(input)?;
-    // delatin takes f64 heights: converting them is input preparation, not part of its build.
-    let heights64: Vec<f64> = if which == "delatin" { hf.heights.iter().map(|&h| h as f64).collect() } else { Vec::new() };
+    // delatin takes f64 heights (the map's own, exact ones): input preparation, not part of its build.
+    let heights64: Vec<f64> = if which == "delatin" { (0..hf.heights.len()).map(|k| hf.reference(k)).collect() } else { Vec::new() };
     // Reset the high-water mark so it covers the builds only (plus what is already resident).
     let _ = std::fs::write("/proc/self/clear_refs", "5");
     let (rss_before, _) = memory();
@@ -116,13 +119,15 @@ fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
     if stats.samples_covered != hf.width * hf.height {
         eprintln!("warning: {which} covers {} of {} samples", stats.samples_covered, hf.width * hf.height);
     }
-    println!("{} {} {} {} {} {}", mesh.triangles.len(), stats.max_error_m, best, best_cpu, peak, peak.saturating_sub(rss_before));
+    let f64_error = measure_exact(&hf, &mesh).max_error_m;
+    println!("{} {} {} {} {} {} {}", mesh.triangles.len(), stats.max_error_m, best, best_cpu, peak, peak.saturating_sub(rss_before), f64_error);
     Ok(())
 }
 
 struct Row {
     triangles: usize,
     measured: f64,
+    measured_f64: f64,
     seconds: f64,
     cpu: f64,
     peak: u64,
@@ -144,6 +149,7 @@ fn spawn_case(input: &str, max_error_m: f64, which: &str) -> Result<Row, String>
     Ok(Row {
         triangles: parse(0)? as usize,
         measured: parse(1)?,
+        measured_f64: parse(6)?,
         seconds: parse(2)?,
         cpu: parse(3)?,
         peak: parse(4)? as u64,
@@ -179,13 +185,15 @@ fn main() {
     cases.retain(|c| c.0.contains(&filter));
 
     println!(
-        "best of {} runs per case, one process per case; seconds = wall, cpu = CPU seconds of the build \
-         (10 ms resolution); peak = VmHWM during the first build (input included), build = peak − RSS before",
+        "best of {} runs per case, one process per case; as written = max error of the mesh with f32 vertices \
+         against the map's exact heights, f64 = with exact vertices (same analyzer for every impl); seconds = \
+         wall, cpu = CPU seconds of the build (10 ms resolution); peak = VmHWM during the first build (input \
+         included), build = peak − RSS before",
         runs()
     );
     println!(
-        "{:<12} {:>7} {:<8} {:>10} {:>10} {:>8} {:>6} {:>8} {:>9} {:>9}",
-        "input", "max_err", "impl", "triangles", "measured", "seconds", "cpu", "peak MB", "build MB", "B/sample"
+        "{:<12} {:>7} {:<8} {:>10} {:>12} {:>12} {:>8} {:>6} {:>8} {:>9} {:>9}",
+        "input", "max_err", "impl", "triangles", "as written", "f64", "seconds", "cpu", "peak MB", "build MB", "B/sample"
     );
     for (input, err, samples) in cases {
         let mut rows: Vec<Row> = Vec::new();
@@ -194,17 +202,19 @@ fn main() {
             match spawn_case(input, err, which) {
                 Ok(r) => {
                     println!(
-                        "{:<12} {:>7} {:<8} {:>10} {:>10.4} {:>8.3} {:>6.2} {:>8.1} {:>9.1} {:>9.1}",
+                        "{:<12} {:>7} {:<8} {:>10} {:>12.7} {:>12.7} {:>8.3} {:>6.2} {:>8.1} {:>9.1} {:>9.1}{}",
                         input,
                         err,
                         which,
                         r.triangles,
                         r.measured,
+                        r.measured_f64,
                         r.seconds,
                         r.cpu,
                         r.peak as f64 / 1048576.0,
                         r.build as f64 / 1048576.0,
-                        r.build as f64 / samples as f64
+                        r.build as f64 / samples as f64,
+                        if r.measured > err { "  OVER the bound as written" } else { "" }
                     );
                     rows.push(r);
                 }

@@ -15,9 +15,14 @@ use std::path::{Path, PathBuf};
 pub struct Heightfield {
     pub width: usize,
     pub height: usize,
-    /// Row-major heights in metres, `width * height` finite values.
+    /// Row-major heights in metres, `width * height` finite values: the heights the terrain's
+    /// vertices store (glTF and OBJ hold 32-bit floats).
     pub heights: Vec<f32>,
     pub cell_size_m: f64,
+    /// The heights as the map's encoding defines them, where 32-bit floats cannot hold them exactly
+    /// (Terrain-RGB's decimetres, a gray map's scale): `None` when `heights` are the exact values.
+    /// Terrain error is measured against these, so a bound holds for the map, not for its rounding.
+    pub exact: Option<std::sync::Arc<[f64]>>,
 }
 
 impl Heightfield {
@@ -25,6 +30,32 @@ impl Heightfield {
     #[inline]
     pub fn at(&self, i: usize, j: usize) -> f32 {
         self.heights[j * self.width + i]
+    }
+
+    /// Builds a heightfield from heights in f64, keeping them as [`Heightfield::exact`] when any
+    /// of them is not exactly a 32-bit float.
+    pub fn from_f64(width: usize, height: usize, heights: &[f64], cell_size_m: f64) -> Heightfield {
+        let narrow: Vec<f32> = heights.iter().map(|&h| h as f32).collect();
+        let exact = narrow.iter().zip(heights).any(|(&n, &h)| n as f64 != h).then(|| heights.into());
+        Heightfield { width, height, heights: narrow, cell_size_m, exact }
+    }
+
+    /// The reference height of sample k (row-major): exact where the encoding's values are not
+    /// 32-bit floats, else the stored height.
+    #[inline]
+    pub fn reference(&self, k: usize) -> f64 {
+        match &self.exact {
+            Some(e) => e[k],
+            None => self.heights[k] as f64,
+        }
+    }
+
+    /// Largest |stored − reference| height over all samples (0 when the heights are exact).
+    pub fn rounding_m(&self) -> f64 {
+        match &self.exact {
+            Some(e) => e.iter().zip(&self.heights).fold(0.0f64, |m, (&x, &h)| m.max((x - h as f64).abs())),
+            None => 0.0,
+        }
     }
 
     /// World position of sample (i, j), the one place the axis contract is written down.
@@ -235,7 +266,7 @@ fn check_size(path: &Path, width: usize, height: usize, opts: &DecodeOptions) ->
 }
 
 fn heightfield(width: usize, height: usize, heights: Vec<f32>) -> Heightfield {
-    Heightfield { width, height, heights, cell_size_m: 1.0 }
+    Heightfield { width, height, heights, cell_size_m: 1.0, exact: None }
 }
 
 /// SRTM .hgt: a square of big-endian int16 metres; −32768 marks a void.
@@ -359,11 +390,9 @@ fn decode_r16(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
         ));
     }
     let (scale, offset) = (opts.height_scale_m, opts.height_offset_m);
-    let heights = bytes
-        .chunks_exact(2)
-        .map(|c| (offset + u16::from_le_bytes([c[0], c[1]]) as f64 / 65535.0 * scale) as f32)
-        .collect();
-    Ok(Decoded { heightfield: heightfield(width, height, heights), encoding: Encoding::R16, voids_filled: 0 })
+    let heights: Vec<f64> =
+        bytes.chunks_exact(2).map(|c| offset + u16::from_le_bytes([c[0], c[1]]) as f64 / 65535.0 * scale).collect();
+    Ok(Decoded { heightfield: Heightfield::from_f64(width, height, &heights, 1.0), encoding: Encoding::R16, voids_filled: 0 })
 }
 
 fn image_error(path: &Path, e: impl fmt::Display) -> HeightfieldError {
@@ -395,7 +424,7 @@ fn decode_image(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOpti
     let img = reader.decode().map_err(|e| image_error(path, e))?;
     let (w, h) = (width as usize, height as usize);
     use image::DynamicImage as D;
-    let gray_scale = |v: f64, vmax: f64| (opts.height_offset_m + v / vmax * opts.height_scale_m) as f32;
+    let gray_scale = |v: f64, vmax: f64| opts.height_offset_m + v / vmax * opts.height_scale_m;
     let channels_differ = |rgb: &dyn Fn(usize) -> [u32; 3]| {
         (0..w * h).map(rgb).position(|p| p[0] != p[1] || p[1] != p[2])
     };
@@ -453,7 +482,7 @@ fn decode_image(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOpti
             } else {
                 |r, g, b| r * 256.0 + g + b / 256.0 - 32768.0
             };
-            (encoding, raw.chunks_exact(3).map(|c| decode_px(c[0] as f64, c[1] as f64, c[2] as f64) as f32).collect())
+            (encoding, raw.chunks_exact(3).map(|c| decode_px(c[0] as f64, c[1] as f64, c[2] as f64)).collect())
         }
         (_, e) => {
             return Err(HeightfieldError::format(
@@ -462,7 +491,8 @@ fn decode_image(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOpti
             ));
         }
     };
-    Ok(Decoded { heightfield: heightfield(w, h, heights), encoding, voids_filled: 0 })
+    let heights: Vec<f64> = heights;
+    Ok(Decoded { heightfield: Heightfield::from_f64(w, h, &heights, 1.0), encoding, voids_filled: 0 })
 }
 
 /// 32-bit float single-channel TIFF in metres. Returns Ok(None) for TIFFs of other sample types,

@@ -291,7 +291,7 @@ mod tests {
         let hf = crate::synth::fractal(9, 9, 1.0, 10.0, 0.5, 1);
         let bad_view = LodView { fov_y_deg: 180.0, ..LodView::default() };
         assert!(matches!(terrain_lod_chain(&hf, &[1.0], None, &bad_view), Err(LodError::InvalidView { .. })));
-        let tiny = Heightfield { width: 1, height: 1, heights: vec![0.0], cell_size_m: 1.0 };
+        let tiny = Heightfield { width: 1, height: 1, heights: vec![0.0], cell_size_m: 1.0, exact: None };
         assert!(matches!(
             terrain_lod_chain(&tiny, &[1.0], None, &LodView::default()),
             Err(LodError::Terrain { level: 0, .. })

@@ -464,15 +464,16 @@ fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
             if !quiet {
                 let out = report.output.as_ref();
                 println!(
-                    "{}: {}×{} samples ({}) → {} triangles ({:.2}% of the full grid), max error {:.3} m (requested {}), rms {:.3} m, {:.2} s",
+                    "{}: {}×{} samples ({}) → {} triangles ({:.2}% of the full grid), max error {} m as written (requested {}; {} m in f64), rms {:.3} m, {:.2} s",
                     report.input,
                     report.width,
                     report.height,
                     report.encoding,
                     report.triangles,
                     100.0 * report.triangles as f64 / report.full_grid_triangles.max(1) as f64,
-                    report.max_error,
+                    metres(report.max_error),
                     report.max_error_requested.map_or("—".to_string(), |e| format!("{e} m")),
+                    metres(report.max_error_f64),
                     report.rms_error,
                     report.seconds.total
                 );
@@ -776,5 +777,15 @@ fn print_tree_summary(report: &tree_job::TreeReport) {
     );
     for w in &report.warnings {
         println!("  warning: {w}");
+    }
+}
+
+/// A measured error for a terminal: six significant digits, so a figure just over a bound shows.
+fn metres(m: f64) -> String {
+    if m == 0.0 {
+        "0".into()
+    } else {
+        let digits = (5 - m.abs().log10().floor() as i32).clamp(0, 12) as usize;
+        format!("{m:.digits$}")
     }
 }

@@ -93,11 +93,13 @@ pub fn fractal(width: usize, height: usize, cell_size_m: f64, relief_m: f64, rou
     let lo = out.iter().cloned().fold(f64::INFINITY, f64::min);
     let hi = out.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
     let scale = if hi > lo { relief_m / (hi - lo) } else { 0.0 };
+    // Synthetic heights are defined as their f32 values: no exact copy.
     Heightfield {
         width,
         height,
         heights: out.iter().map(|&v| ((v - lo) * scale) as f32).collect(),
         cell_size_m,
+        exact: None,
     }
 }
 
@@ -217,6 +219,7 @@ pub fn noise_map(kind: NoiseKind, size: usize, cell_size_m: f64, relief_m: f64, 
         height: side,
         heights: raw.iter().map(|&v| (((v - lo) * scale) as f32).clamp(0.0, relief_m as f32)).collect(),
         cell_size_m,
+        exact: None,
     }
 }
 

@@ -302,7 +302,7 @@ mod tests {
                 40.0 * (-(i * i + j * j) / (c * c * 0.3)).exp()
             })
             .collect();
-        Heightfield { width: n, height: n, heights, cell_size_m: 2.0 }
+        Heightfield { width: n, height: n, heights, cell_size_m: 2.0, exact: None }
     }
 
     fn luminance(c: [f32; 4]) -> f32 {
@@ -359,7 +359,7 @@ mod tests {
         let c = terrain_preview(&Scene::default(), 10);
         assert_eq!((c.width, c.height), (10, 10));
         assert!(c.color.iter().all(|&p| p == BACKGROUND));
-        let hf = Heightfield { width: 9, height: 5, heights: vec![1.0; 45], cell_size_m: 1.0 };
+        let hf = Heightfield { width: 9, height: 5, heights: vec![1.0; 45], cell_size_m: 1.0, exact: None };
         let scene = build_scene(&hf, &grid(&hf, 1).unwrap(), &BuildOptions::default()).unwrap();
         let v = preview_view(&scene, 80).unwrap();
         assert_eq!((v.width, v.height), (80, 40));

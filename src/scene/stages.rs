@@ -92,7 +92,10 @@ pub struct TerrainStageReport {
     pub input_sha256: Option<String>,
     pub mode: MeshMode,
     pub max_error_requested_m: Option<f64>,
+    /// Measured on the vertices as written (f32) against the map's heights; the bound applies to it.
     pub max_error_m: f64,
+    /// The same with the vertices exactly at their samples (f64).
+    pub max_error_f64_m: f64,
     pub rms_error_m: f64,
     pub worst_sample: [u32; 2],
     pub hit_triangle_limit: bool,
@@ -140,8 +143,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// the commit that changes the stage's output bytes (tests/suite/scene_build.rs pins a digest of a
 /// reference build per version and fails until it is bumped). 2: base-colour texture from the
 /// material layers, terrain_layers.png. 3: LoD switch distances for the `[lod]` policy (2 px by
-/// default, was 1 px).
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 3;
+/// default, was 1 px). 4: the error is measured on the vertices as written (f32) against the map's
+/// exact heights, and the TIN refines until that is within the bound; `max_error_f64_m` beside it.
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 4;
 
 /// Version of the preview stage's output for given inputs (see [`TERRAIN_ALGORITHM_VERSION`]).
 /// 2: a tree species without an L-system is drawn at its built-in tree's height. 3: preview.png is
@@ -271,6 +275,7 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
         mode: t.mode,
         max_error_requested_m: (t.mode == MeshMode::Tin).then_some(t.max_error_m),
         max_error_m: stats.max_error_m,
+        max_error_f64_m: crate::terrain::error::exact_max_error(&hf, &mesh, &stats),
         rms_error_m: stats.rms_error_m,
         worst_sample: stats.worst_sample,
         hit_triangle_limit,

@@ -861,7 +861,7 @@ mod tests {
     #[test]
     fn base_of_a_flat_map_is_a_box_of_the_right_volume() {
         // 7×4 samples, 2 m cells, all at 10 m, base 5 m deep → a 12 m × 6 m × 5 m box
-        let hf = Heightfield { width: 7, height: 4, heights: vec![10.0; 28], cell_size_m: 2.0 };
+        let hf = Heightfield { width: 7, height: 4, heights: vec![10.0; 28], cell_size_m: 2.0, exact: None };
         for (m, chunk) in [(grid_mesh(7, 4, 1), None), (grid_mesh(7, 4, 2), Some(2)), (grid_mesh(7, 4, 6), None)] {
             let scene = build_scene(&hf, &m, &opts(chunk, None, Some(5.0))).unwrap();
             let volume = check_watertight(&scene);
@@ -920,7 +920,7 @@ mod tests {
         assert_eq!(err(opts(None, Some(1.0), Some(1.0))), BuildError::SkirtWithBase);
         assert_eq!(err(BuildOptions { name: " ".into(), ..BuildOptions::default() }), BuildError::EmptyName);
         // depths f32 cannot represent at this height
-        let high = Heightfield { width: 2, height: 2, heights: vec![5000.0; 4], cell_size_m: 1.0 };
+        let high = Heightfield { width: 2, height: 2, heights: vec![5000.0; 4], cell_size_m: 1.0, exact: None };
         let m2 = grid_mesh(2, 2, 1);
         for o in [opts(None, Some(1e-6), None), opts(None, None, Some(1e-6)), opts(None, None, Some(1e300))] {
             assert!(matches!(build_scene(&high, &m2, &o), Err(BuildError::DepthNotRepresentable { .. })));
@@ -969,7 +969,7 @@ mod tests {
         let scene = build_scene(&hf, &m, &o).unwrap();
         assert_eq!(check_crack_free(&hf, &scene), m.triangles.len());
 
-        let tiny = Heightfield { width: 1, height: 3, heights: vec![0.0; 3], cell_size_m: 1.0 };
+        let tiny = Heightfield { width: 1, height: 3, heights: vec![0.0; 3], cell_size_m: 1.0, exact: None };
         assert!(matches!(run(&tiny, &good), BuildError::HeightfieldTooSmall { .. }));
         let short = Heightfield { heights: vec![0.0; 7], ..hf.clone() };
         assert!(matches!(run(&short, &good), BuildError::HeightfieldShape { len: 7, .. }));
@@ -982,7 +982,7 @@ mod tests {
 
     #[test]
     fn a_2x2_map_works_with_every_option() {
-        let hf = Heightfield { width: 2, height: 2, heights: vec![1.0, 2.0, 3.0, 5.0], cell_size_m: 0.5 };
+        let hf = Heightfield { width: 2, height: 2, heights: vec![1.0, 2.0, 3.0, 5.0], cell_size_m: 0.5, exact: None };
         let m = grid_mesh(2, 2, 1);
         for o in [
             opts(None, None, None),

@@ -14,6 +14,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use rayon::prelude::*;
 
 use crate::heightfield::Heightfield;
+use crate::terrain::stored::Storage;
 use crate::terrain::SampleMesh;
 
 /// Largest width or height the meshers accept: keeps every edge function (products of two sample
@@ -43,6 +44,12 @@ pub enum TerrainError {
     InvalidMaxError { value: f64 },
     #[error("triangle limit {limit} is below 2: the two triangles of the corner rectangle are the coarsest terrain")]
     TriangleLimitTooSmall { limit: usize },
+    #[error(
+        "--max-error {max_error_m} m is finer than the file can store the terrain's heights: at sample (column {i}, \
+         row {j}), {height_m} m, 32-bit floats are {step_m:e} m apart, so the written surface is {achieved_m:e} m \
+         off there even with every sample a vertex; use a bound of at least {achieved_m:e} m"
+    )]
+    BelowStoragePrecision { max_error_m: f64, achieved_m: f64, i: usize, j: usize, height_m: f64, step_m: f64 },
     #[error("internal error: the triangulation could not take sample (column {i}, row {j}); please report this with the heightmap")]
     Internal { i: usize, j: usize },
 }
@@ -94,12 +101,44 @@ pub struct ErrorStats {
 /// Triangles measured per parallel task: large enough to amortise scheduling, small enough to balance.
 const TRIANGLES_PER_TASK: usize = 4096;
 
-/// Measures the vertical error of `mesh` against `hf` at every sample.
+/// Which surface is measured against the map's reference heights ([`Heightfield::reference`]).
+#[derive(Clone, Copy)]
+enum Surface<'a> {
+    /// The vertices as the file stores them.
+    Stored(&'a Storage),
+    /// The vertices exactly at their samples (reference heights, x = i·cell, z = j·cell): the f64
+    /// figure, what the triangulation achieves before any rounding.
+    Exact,
+}
+
+/// Measures the vertical error of `mesh` as written (vertices at f32 positions, see
+/// [`Storage::f32`]) against `hf`'s reference heights at every sample: the figure a bound is
+/// promised on.
 ///
 /// A sample on an edge or vertex shared by several triangles takes the largest error among them.
 /// Triangles with vertex indices out of range, vertices outside the heightfield or zero area cover
 /// nothing (so they show as missing coverage rather than a panic). Deterministic at any thread count.
 pub fn measure(hf: &Heightfield, mesh: &SampleMesh) -> ErrorStats {
+    measure_surface(hf, mesh, Surface::Stored(&Storage::f32(hf)))
+}
+
+/// The same measure with the vertices exactly at their samples, in f64 (equal to [`measure`] when
+/// the heights and cell positions are exact in f32).
+pub fn measure_exact(hf: &Heightfield, mesh: &SampleMesh) -> ErrorStats {
+    measure_surface(hf, mesh, Surface::Exact)
+}
+
+/// The f64 figure beside `stored` (what [`measure`] found for `mesh`): measured again only when
+/// the storage rounds anything, else it is the same number.
+pub fn exact_max_error(hf: &Heightfield, mesh: &SampleMesh, stored: &ErrorStats) -> f64 {
+    if Storage::f32(hf).is_exact() {
+        stored.max_error_m
+    } else {
+        measure_exact(hf, mesh).max_error_m
+    }
+}
+
+fn measure_surface(hf: &Heightfield, mesh: &SampleMesh, surface: Surface) -> ErrorStats {
     let empty = ErrorStats { max_error_m: 0.0, rms_error_m: 0.0, worst_sample: [0, 0], samples_covered: 0 };
     let (w, h) = (hf.width, hf.height);
     if w == 0 || h == 0 || w.checked_mul(h) != Some(hf.heights.len()) || w > MAX_SIDE_SAMPLES || h > MAX_SIDE_SAMPLES {
@@ -112,7 +151,7 @@ pub fn measure(hf: &Heightfield, mesh: &SampleMesh) -> ErrorStats {
     mesh.triangles.par_chunks(TRIANGLES_PER_TASK).for_each(|chunk| {
         for tri in chunk {
             let Some(corners) = triangle_corners(mesh, tri, w, h) else { continue };
-            scan_triangle(hf, corners, &slots);
+            scan_triangle(hf, corners, surface, &slots);
         }
     });
 
@@ -183,11 +222,14 @@ fn orient(a: [i64; 2], b: [i64; 2], p: [i64; 2]) -> i64 {
 
 /// Visits every sample of the triangle's bounding box, keeps those inside the closed triangle and
 /// records their error.
-fn scan_triangle(hf: &Heightfield, c: [[i64; 2]; 3], slots: &[AtomicU64]) {
+fn scan_triangle(hf: &Heightfield, c: [[i64; 2]; 3], surface: Surface, slots: &[AtomicU64]) {
     let w = hf.width;
     let sign = orient(c[0], c[1], c[2]).signum();
     let area = orient(c[0], c[1], c[2]) * sign;
-    let hc = c.map(|p| hf.at(p[0] as usize, p[1] as usize) as f64);
+    let hc = match surface {
+        Surface::Stored(_) => c.map(|p| hf.at(p[0] as usize, p[1] as usize) as f64),
+        Surface::Exact => c.map(|p| hf.reference(p[1] as usize * w + p[0] as usize)),
+    };
     let (i0, i1) = (c.iter().map(|p| p[0]).min().unwrap_or(0), c.iter().map(|p| p[0]).max().unwrap_or(0));
     let (j0, j1) = (c[0][1], c[2][1]);
     for j in j0..=j1 {
@@ -198,7 +240,12 @@ fn scan_triangle(hf: &Heightfield, c: [[i64; 2]; 3], slots: &[AtomicU64]) {
                 continue;
             }
             let k = j as usize * w + i as usize;
-            let err = (plane_height(wts, hc, area) - hf.heights[k] as f64).abs();
+            let surface_m = match surface {
+                Surface::Stored(storage) if storage.xz_exact() => plane_height(wts, hc, area),
+                Surface::Stored(storage) => storage.height_at(c, hc, p),
+                Surface::Exact => plane_height(wts, hc, area),
+            };
+            let err = (surface_m - hf.reference(k)).abs();
             slots[k].fetch_max(err.to_bits() + 1, Ordering::Relaxed);
         }
     }
@@ -209,7 +256,7 @@ mod tests {
     use super::*;
 
     fn hf(width: usize, height: usize, heights: Vec<f32>) -> Heightfield {
-        Heightfield { width, height, heights, cell_size_m: 1.0 }
+        Heightfield { width, height, heights, cell_size_m: 1.0, exact: None }
     }
 
     #[test]

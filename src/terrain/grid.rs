@@ -57,7 +57,7 @@ mod tests {
 
     fn noise(w: usize, h: usize) -> Heightfield {
         let heights = (0..w * h).map(|k| (crate::synth::mix64(k as u64) % 1000) as f32 * 0.25).collect();
-        Heightfield { width: w, height: h, heights, cell_size_m: 1.0 }
+        Heightfield { width: w, height: h, heights, cell_size_m: 1.0, exact: None }
     }
 
     #[test]
@@ -88,7 +88,7 @@ mod tests {
 
     #[test]
     fn rejects_bad_input() {
-        let line = Heightfield { width: 1, height: 9, heights: vec![0.0; 9], cell_size_m: 1.0 };
+        let line = Heightfield { width: 1, height: 9, heights: vec![0.0; 9], cell_size_m: 1.0, exact: None };
         assert_eq!(grid(&line, 1), Err(TerrainError::ZeroArea { width: 1, height: 9 }));
         assert_eq!(grid(&noise(3, 3), 0), Err(TerrainError::ZeroStep { step: 0 }));
     }

@@ -11,7 +11,7 @@ use crate::heightfield::{self, DecodeOptions, Decoded, Encoding, Heightfield, He
 use crate::mesh::{Bounds, Scene};
 use crate::terrain::layers::{bake_layers, LayerReport};
 use crate::terrain::build::{build_scene, BuildError, BuildOptions};
-use crate::terrain::error::{measure, ErrorStats};
+use crate::terrain::error::{exact_max_error, measure, ErrorStats};
 use crate::terrain::grid::grid;
 use crate::terrain::tin::{tin, TinOptions};
 use crate::terrain::{SampleMesh, TerrainError};
@@ -113,8 +113,12 @@ pub struct TerrainReport {
     pub max_error_requested: Option<f64>,
     pub max_triangles: Option<usize>,
     pub hit_triangle_limit: bool,
-    /// Largest vertical error over every sample, measured by the analyzer (metres).
+    /// Largest vertical error over every sample, measured by the analyzer on the vertices as the
+    /// file stores them (f32) against the map's heights as its encoding defines them (metres): the
+    /// figure `--max-error` bounds.
     pub max_error: f64,
+    /// The same with the vertices exactly at their samples (f64), before the file's rounding.
+    pub max_error_f64: f64,
     pub worst_sample: [u32; 2],
     pub rms_error: f64,
     /// Terrain surface triangulation (before skirts and base).
@@ -224,6 +228,7 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
         max_triangles: job.max_triangles,
         hit_triangle_limit: hit_limit,
         max_error: stats.max_error_m,
+        max_error_f64: exact_max_error(hf, &mesh, &stats),
         worst_sample: stats.worst_sample,
         rms_error: stats.rms_error_m,
         vertices: mesh.vertices.len(),

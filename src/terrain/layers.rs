@@ -196,7 +196,7 @@ mod tests {
         let (w, h) = (65, 33);
         let cell = 1.0;
         let heights: Vec<f32> = (0..w * h).map(|k| { let i = k % w; if i < 32 { 0.0 } else { (i - 32) as f32 * 1.732 } }).collect();
-        let hf = Heightfield { width: w, height: h, cell_size_m: cell, heights };
+        let hf = Heightfield { width: w, height: h, cell_size_m: cell, heights, exact: None };
         let layers = bake_layers(&hf);
         assert_eq!(layers.report.map_px, [64, 32]);
         let at = |x: usize, y: usize| layers.weights[y * 64 + x];

@@ -8,6 +8,7 @@ pub mod grid;
 pub mod job;
 pub mod layers;
 pub mod solid;
+pub mod stored;
 pub mod tin;
 
 pub use error::TerrainError;

@@ -19,7 +19,8 @@ use spade::handles::FixedVertexHandle;
 use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use crate::heightfield::Heightfield;
-use crate::terrain::error::{check_heightfield, plane_height, TerrainError};
+use crate::terrain::error::{check_heightfield, measure, plane_height, TerrainError};
+use crate::terrain::stored::Storage;
 use crate::terrain::SampleMesh;
 
 /// What to build.
@@ -924,10 +925,17 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
     dt.set_triangle(1, [0, 2, 3], [2, NO_EDGE, NO_EDGE]);
     let mut faces: Vec<FaceSlot> = Vec::new();
     let mut queue = FaceQueue::default();
+    // The file stores f32 positions: where they can differ from the samples, faces near the bound
+    // are measured again as stored.
+    let storage = Storage::f32(hf);
+    let as_stored = !storage.is_exact();
     let rescan = |dt: &GreedyDelaunay, faces: &mut Vec<FaceSlot>, queue: &mut FaceQueue, t: u32| {
         let e = 3 * t as usize;
         let corners = [corner(dt.tri[e], dt), corner(dt.tri[e + 1], dt), corner(dt.tri[e + 2], dt)];
-        let scan = find_candidate(hf, corners, opts.max_error_m);
+        let mut scan = find_candidate(hf, corners, opts.max_error_m);
+        if as_stored {
+            scan = recheck_stored(&storage, hf, corners, scan, opts.max_error_m);
+        }
         record_scan(faces, queue, t, &scan, w as u32);
     };
     for t in 0..2 {
@@ -960,8 +968,49 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
         // Counter-clockwise in (i, j) is clockwise seen from +Y: swap two corners.
         triangles: dt.tri.chunks_exact(3).map(|c| [c[0], c[2], c[1]]).collect(),
     };
-    let max_error_m = achieved_error(hf, &faces, 0, &mesh);
-    Ok(TinResult { mesh, max_error_m, hit_triangle_limit })
+    if !as_stored {
+        let max_error_m = achieved_error(hf, &faces, 0, &mesh);
+        return Ok(TinResult { mesh, max_error_m, hit_triangle_limit });
+    }
+    // Every face's samples other than its corners are within the bound as stored; what is left
+    // over is at vertices, whose stored heights the bound is finer than.
+    let stats = measure(hf, &mesh);
+    if stats.max_error_m > opts.max_error_m && !hit_triangle_limit {
+        let [i, j] = stats.worst_sample;
+        let height_m = hf.reference(j as usize * hf.width + i as usize);
+        return Err(TerrainError::BelowStoragePrecision {
+            max_error_m: opts.max_error_m,
+            achieved_m: stats.max_error_m,
+            i: i as usize,
+            j: j as usize,
+            height_m,
+            step_m: ulp_f32(height_m),
+        });
+    }
+    Ok(TinResult { mesh, max_error_m: stats.max_error_m, hit_triangle_limit })
+}
+
+/// Distance between neighbouring 32-bit floats at `x`.
+fn ulp_f32(x: f64) -> f64 {
+    let f = (x as f32).abs();
+    (f.next_up() - f) as f64
+}
+
+/// A face's scan as stored (see [`Storage`]): a face the mesher found above the bound stays
+/// queued; one within it whose stored error may still exceed the bound (within the margin of the
+/// storage's rounding) is scanned again as stored, and queued if a sample other than a corner is
+/// over the bound there.
+fn recheck_stored(storage: &Storage, hf: &Heightfield, corners: [Corner; 3], scan: Scan, floor: f64) -> Scan {
+    if scan.candidate.is_some() {
+        return scan;
+    }
+    let c = corners.map(|k| [k.x, k.y]);
+    let margin = storage.margin(c, corners.map(|k| k.h as f64));
+    if scan.upper + margin <= floor {
+        return Scan { candidate: None, upper: scan.upper + margin };
+    }
+    let (candidate, all) = storage.scan(hf, c, floor);
+    Scan { candidate, upper: all }
 }
 
 #[cfg(test)]
@@ -1020,7 +1069,7 @@ pub(crate) mod tests {
                 heights.push(f(i, j));
             }
         }
-        Heightfield { width: w, height: h, heights, cell_size_m: 1.0 }
+        Heightfield { width: w, height: h, heights, cell_size_m: 1.0, exact: None }
     }
 
     fn noise(w: usize, h: usize, seed: u64, range: u64, scale: f32) -> Heightfield {

@@ -298,7 +298,7 @@ fn mutated_gltf_files_never_panic() {
     let mut seeds: Vec<Vec<u8>> = gltf_reproducers().into_iter().map(|(_, bytes, _)| bytes).collect();
     seeds.push(triangle_gltf(|_| {}));
     // a file verdant writes: a small terrain
-    let hf = verdant::heightfield::Heightfield { width: 9, height: 9, heights: (0..81).map(|k| (k % 7) as f32).collect(), cell_size_m: 1.0 };
+    let hf = verdant::heightfield::Heightfield { width: 9, height: 9, heights: (0..81).map(|k| (k % 7) as f32).collect(), cell_size_m: 1.0, exact: None };
     let tin = verdant::terrain::tin::tin(&hf, &verdant::terrain::tin::TinOptions::default()).unwrap();
     let scene = verdant::terrain::build::build_scene(&hf, &tin.mesh, &Default::default()).unwrap();
     seeds.push(verdant::export::gltf::to_glb(&scene).unwrap());

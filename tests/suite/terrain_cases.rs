@@ -221,3 +221,73 @@ fn the_terrain_is_textured_from_its_layers() {
     assert_eq!(report.layers.layers, ["grass", "scree", "rock", "snow"]);
     assert!((c.iter().sum::<f64>() - 1.0).abs() < 1e-9 && c[0] > 0.3 && c[2] > 0.3, "{c:?}");
 }
+
+/// A Terrain-RGB tile near 9,000 m (decimetre heights no f32 holds exactly), cells of 30.87 m (not
+/// exact in f32 either): at a bound of a decimetre, re-read from the written file,
+/// the surface through the stored f32 vertices stays within the bound at every sample, measured
+/// against the PNG's heights decoded in f64 — and a bound below the f32 step is refused.
+#[test]
+fn the_bound_holds_in_the_bytes_written_at_high_altitude() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (97u32, 83u32);
+    // decimetres above −10 000 m: 8 450 .. 8 950 m of smooth relief
+    let dm = |i: u32, j: u32| -> u32 {
+        let (x, z) = (i as f64 / 7.0, j as f64 / 5.0);
+        let m = 8700.0 + 250.0 * (x.sin() * z.cos());
+        ((m + 10000.0) * 10.0).round() as u32
+    };
+    let path = dir.path().join("high.png");
+    image::RgbImage::from_fn(w, h, |i, j| {
+        let v = dm(i, j);
+        image::Rgb([(v >> 16) as u8, (v >> 8 & 255) as u8, (v & 255) as u8])
+    })
+    .save(&path)
+    .unwrap();
+    let cell = 30.87;
+    let mut job = job_for(&path, 0.1);
+    job.decode = DecodeOptions { encoding: Encoding::TerrainRgb, cell_size_m: cell, ..DecodeOptions::default() };
+    let (report, _) = run_checked(&job, dir.path(), "glb");
+    assert!(report.max_error <= 0.1, "{} over the bound as written", report.max_error);
+
+    // Independently: the file's triangles, located by their vertices' samples, evaluated through
+    // the stored f32 positions at each sample's place.
+    let back = read_scene(&dir.path().join("out.glb")).unwrap();
+    let prim = &back.meshes[0].primitives[0];
+    let truth = |i: i64, j: i64| dm(i as u32, j as u32) as f64 * 0.1 - 10000.0;
+    let (mut worst, mut covered) = (0.0f64, std::collections::HashSet::new());
+    for t in prim.indices.chunks_exact(3) {
+        let p = [t[0], t[1], t[2]].map(|k| prim.positions[k as usize].map(|c| c as f64));
+        let ij = p.map(|q| [(q[0] / cell).round() as i64, (q[2] / cell).round() as i64]);
+        let d = (p[1][0] - p[0][0]) * (p[2][2] - p[0][2]) - (p[2][0] - p[0][0]) * (p[1][2] - p[0][2]);
+        let (i0, i1) = (ij.iter().map(|q| q[0]).min().unwrap(), ij.iter().map(|q| q[0]).max().unwrap());
+        let (j0, j1) = (ij.iter().map(|q| q[1]).min().unwrap(), ij.iter().map(|q| q[1]).max().unwrap());
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let o = |a: [i64; 2], b: [i64; 2]| (b[0] - a[0]) * (j - a[1]) - (b[1] - a[1]) * (i - a[0]);
+                let s = [o(ij[1], ij[2]), o(ij[2], ij[0]), o(ij[0], ij[1])];
+                if !(s.iter().all(|&v| v >= 0) || s.iter().all(|&v| v <= 0)) {
+                    continue;
+                }
+                let (x, z) = (i as f64 * cell, j as f64 * cell);
+                let l1 = ((x - p[0][0]) * (p[2][2] - p[0][2]) - (p[2][0] - p[0][0]) * (z - p[0][2])) / d;
+                let l2 = ((p[1][0] - p[0][0]) * (z - p[0][2]) - (x - p[0][0]) * (p[1][2] - p[0][2])) / d;
+                let y = p[0][1] + l1 * (p[1][1] - p[0][1]) + l2 * (p[2][1] - p[0][1]);
+                worst = worst.max((y - truth(i, j)).abs());
+                covered.insert((i, j));
+            }
+        }
+    }
+    assert_eq!(covered.len(), (w * h) as usize, "every sample under a triangle of the file");
+    assert!(worst <= 0.1, "the written surface is {worst} m off the map");
+    assert!((worst - report.max_error).abs() < 1e-9, "independent {worst} vs reported {}", report.max_error);
+    // the f32 rounding is really at play here: the exact triangulation alone is not the figure
+    assert!(report.max_error_f64 != report.max_error, "{} {}", report.max_error_f64, report.max_error);
+
+    // 0.0002 m is below half the f32 step at 8 900 m (4.9e-4 m): no triangulation can meet it.
+    job.max_error_m = 0.0002;
+    let err = job::run(&job, Some(&dir.path().join("fine.glb"))).unwrap_err();
+    assert_eq!(err.exit_code(), 2);
+    let msg = err.to_string();
+    assert!(msg.contains("32-bit floats") && msg.contains("--max-error 0.0002"), "{msg}");
+    assert!(!dir.path().join("fine.glb").exists());
+}

@@ -1,0 +1,166 @@
+//! The terrain as the written file holds it: every vertex at its sample's position rounded to
+//! 32-bit floats (x = i·cell, y = the height, z = j·cell), and the vertical error of that surface
+//! measured against the map's reference heights (the values its encoding defines, in f64).
+//!
+//! The mesher's own measure works on the f32 heights in the (i, j) plane; the stored measure can
+//! exceed it by the rounding of the heights (half an ulp: 3·10⁻⁵ m at 1 km, 5·10⁻⁴ m at 8 km) and, on
+//! cells that are not exact in f32, by the slope times the rounding of x and z. [`Storage`] bounds
+//! that difference per face, so only faces within it of the bound are measured again as stored
+//! ([`Storage::scan`]); the mesher refines until the stored measure is within the bound.
+
+use crate::heightfield::Heightfield;
+use crate::terrain::error::plane_height;
+
+/// Where the file puts the samples, and how far that can move the surface from the mesher's.
+#[derive(Debug, Clone)]
+pub struct Storage {
+    /// Stored x of column i and z of row j (exact values of the f32s written).
+    xs: Vec<f64>,
+    zs: Vec<f64>,
+    /// Nominal x of column i (i·cell), the place each sample is measured at.
+    cell_size_m: f64,
+    /// Every stored x and z equals i·cell and j·cell exactly: the plane can be evaluated with the
+    /// canonical integer weights.
+    xz_exact: bool,
+    /// Largest horizontal distance between a stored vertex and its sample, metres.
+    pub xz_shift_m: f64,
+    /// Largest |reference − stored| height over all samples, metres.
+    pub height_shift_m: f64,
+}
+
+impl Storage {
+    /// Positions as 32-bit floats, as every writer stores them today.
+    pub fn f32(hf: &Heightfield) -> Storage {
+        let cell = hf.cell_size_m;
+        let axis = |n: usize| -> Vec<f64> { (0..n).map(|i| (i as f64 * cell) as f32 as f64).collect() };
+        let (xs, zs) = (axis(hf.width), axis(hf.height));
+        let shift = |v: &[f64]| v.iter().enumerate().fold(0.0f64, |m, (i, &x)| m.max((x - i as f64 * cell).abs()));
+        let xz_shift_m = shift(&xs).max(shift(&zs));
+        Storage { xs, zs, cell_size_m: cell, xz_exact: xz_shift_m == 0.0, xz_shift_m, height_shift_m: hf.rounding_m() }
+    }
+
+    /// True when the stored measure is the mesher's own (exact heights, exact x and z): nothing to
+    /// check again.
+    pub fn is_exact(&self) -> bool {
+        self.xz_exact && self.height_shift_m == 0.0
+    }
+
+    /// Every stored x and z is exactly i·cell and j·cell.
+    pub fn xz_exact(&self) -> bool {
+        self.xz_exact
+    }
+
+    /// Stored height of the triangle `c` (corners as (i, j) in ascending sample index order, `hc`
+    /// their stored heights) at sample `p`'s nominal place: the one formula the mesher's re-check
+    /// and the analyzer share. With exact x and z it is [`plane_height`] itself.
+    #[inline]
+    pub(crate) fn height_at(&self, c: [[i64; 2]; 3], hc: [f64; 3], p: [i64; 2]) -> f64 {
+        if self.xz_exact {
+            let sign = orient(c[0], c[1], c[2]).signum();
+            let w = [orient(c[1], c[2], p) * sign, orient(c[2], c[0], p) * sign, orient(c[0], c[1], p) * sign];
+            return plane_height(w, hc, w[0] + w[1] + w[2]);
+        }
+        let x = |k: usize| self.xs[c[k][0] as usize];
+        let z = |k: usize| self.zs[c[k][1] as usize];
+        let (px, pz) = (p[0] as f64 * self.cell_size_m, p[1] as f64 * self.cell_size_m);
+        let (x1, z1, x2, z2) = (x(1) - x(0), z(1) - z(0), x(2) - x(0), z(2) - z(0));
+        let (dx, dz) = (px - x(0), pz - z(0));
+        let d = x1 * z2 - x2 * z1;
+        let l1 = (dx * z2 - x2 * dz) / d;
+        let l2 = (x1 * dz - dx * z1) / d;
+        hc[0] + l1 * (hc[1] - hc[0]) + l2 * (hc[2] - hc[0])
+    }
+
+    /// How much the stored error of a face can exceed the mesher's (f32 heights, (i, j) plane) at
+    /// any of its samples: the heights' rounding, plus the face's slope times twice the largest
+    /// horizontal shift, plus f64 rounding.
+    pub(crate) fn margin(&self, c: [[i64; 2]; 3], hc: [f64; 3]) -> f64 {
+        let magnitude = hc.iter().fold(0.0f64, |m, h| m.max(h.abs()));
+        let mut m = 2.0 * self.height_shift_m + 1e-9 * (1.0 + magnitude);
+        if !self.xz_exact {
+            // gradient of the plane in metres per metre, from the (i, j) plane
+            let area = orient(c[0], c[1], c[2]) as f64;
+            let gi = ((c[1][1] - c[2][1]) as f64 * hc[0] + (c[2][1] - c[0][1]) as f64 * hc[1] + (c[0][1] - c[1][1]) as f64 * hc[2]) / area;
+            let gj = ((c[2][0] - c[1][0]) as f64 * hc[0] + (c[0][0] - c[2][0]) as f64 * hc[1] + (c[1][0] - c[0][0]) as f64 * hc[2]) / area;
+            m += 2.0 * (gi.abs() + gj.abs()) / self.cell_size_m * self.xz_shift_m * 1.5;
+        }
+        m
+    }
+
+    /// Scans a face as stored: the worst sample that is not a corner (error, i, j) if above `floor`,
+    /// and the largest error of all its samples, corners included.
+    pub(crate) fn scan(&self, hf: &Heightfield, mut c: [[i64; 2]; 3], floor: f64) -> (Option<(f64, u32, u32)>, f64) {
+        c.sort_unstable_by_key(|p| (p[1], p[0]));
+        let w = hf.width;
+        let hc = c.map(|p| hf.at(p[0] as usize, p[1] as usize) as f64);
+        let sign = orient(c[0], c[1], c[2]).signum();
+        if sign == 0 {
+            return (None, 0.0);
+        }
+        let (i0, i1) = (c.iter().map(|p| p[0]).min().unwrap_or(0), c.iter().map(|p| p[0]).max().unwrap_or(0));
+        let (mut best, mut found, mut all) = (floor, None, 0.0f64);
+        for j in c[0][1]..=c[2][1] {
+            for i in i0..=i1 {
+                let p = [i, j];
+                if [orient(c[1], c[2], p), orient(c[2], c[0], p), orient(c[0], c[1], p)].iter().any(|&o| o * sign < 0) {
+                    continue;
+                }
+                let err = (self.height_at(c, hc, p) - hf.reference(j as usize * w + i as usize)).abs();
+                all = all.max(err);
+                if err > best && !c.contains(&p) {
+                    best = err;
+                    found = Some((err, i as u32, j as u32));
+                }
+            }
+        }
+        (found, all)
+    }
+}
+
+/// Twice the signed area of (a, b, p) in the (i, j) plane.
+#[inline]
+fn orient(a: [i64; 2], b: [i64; 2], p: [i64; 2]) -> i64 {
+    (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn field(cell: f64, heights: Vec<f64>, w: usize) -> Heightfield {
+        let h = heights.len() / w;
+        Heightfield::from_f64(w, h, &heights, cell)
+    }
+
+    #[test]
+    fn exact_heights_and_cells_need_no_second_measure() {
+        let hf = field(10.0, vec![0.0, 1.0, 2.0, 3.0], 2);
+        let s = Storage::f32(&hf);
+        assert!(s.is_exact(), "{s:?}");
+        assert_eq!(s.xz_shift_m, 0.0);
+    }
+
+    #[test]
+    fn decimetre_heights_and_inexact_cells_are_measured_as_stored() {
+        // 1023.7 m is no f32; 0.1 m cells are not exact in f32 either.
+        let hf = field(0.1, vec![1023.7, 1023.8, 1023.9, 1024.1], 2);
+        let s = Storage::f32(&hf);
+        assert!(!s.is_exact());
+        assert!(s.height_shift_m > 0.0 && s.height_shift_m < 3.1e-5, "{}", s.height_shift_m);
+        assert!(s.xz_shift_m > 0.0 && s.xz_shift_m < 1e-8, "{}", s.xz_shift_m);
+        // a corner's stored error is its height's rounding
+        let (_, all) = s.scan(&hf, [[0, 0], [1, 0], [1, 1]], 0.0);
+        assert!(all > 0.0 && all <= s.margin([[0, 0], [1, 0], [1, 1]], [1023.7, 1023.8, 1024.1]), "{all}");
+    }
+
+    #[test]
+    fn the_stored_plane_with_exact_cells_is_the_canonical_one() {
+        let hf = field(2.0, vec![1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0], 3);
+        let s = Storage::f32(&hf);
+        let c = [[0, 0], [2, 0], [0, 2]];
+        let hc = [1.0, 4.0, 64.0];
+        // weights at (1, 0): 1 of corner 0, 1 of corner 1 over an area of 4, i.e. (2·1 + 2·4)/4
+        assert_eq!(s.height_at(c, hc, [1, 0]), 2.5);
+        assert_eq!(s.height_at(c, hc, [0, 0]), 1.0);
+    }
+}
