@@ -320,6 +320,24 @@ while IFS=$'\t' read -r name status tris verts; do
   if [ "$status" = ok ]; then CHECKED[$name]="ok $tris tris $verts verts"; else CHECKED[$name]="FAIL"; fi
 done < "$OUT/check_outputs.tsv"
 
+section "5a2. the terrain bound holds in the bytes written (check_terrain_bound.py: f32 vertices vs the map decoded in f64)"
+# Terrain-RGB decimetres are not f32 values: the bound must hold for the file, not for the f32 rounding.
+if [ -f "$FUJI" ]; then
+  for bound in 5 0.5; do
+    name="fuji_bound_$bound"
+    if "$BIN" terrain "$FUJI" --encoding terrain-rgb --cell-size 30 --max-error "$bound" \
+         -o "$OUT/$name.glb" --report "$OUT/$name.json" --quiet \
+       && "$PY" scripts/check_terrain_bound.py "$OUT/$name.glb" --heightmap "$FUJI" --encoding terrain-rgb \
+         --cell-size 30 --max-error "$bound" --expect-report "$OUT/$name.json"; then
+      pass
+    else
+      fail "the terrain bound $bound m does not hold in $name.glb"
+    fi
+  done
+else
+  echo "skip: $FUJI not found, no bound-as-written check"
+fi
+
 section "5b. check_outputs.py --scene (manifest sha256/sizes, triangle counts, bounds, LoDs, thumbnail, preview; placements vs scene.glb instancing, ray-cast onto the terrain, spacing)"
 : > "$OUT/check_scenes.tsv"
 for scene in "${SCENES[@]}"; do

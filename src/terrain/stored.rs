@@ -72,11 +72,12 @@ impl Storage {
     }
 
     /// How much the stored error of a face can exceed the mesher's (f32 heights, (i, j) plane) at
-    /// any of its samples: the heights' rounding, plus the face's slope times twice the largest
-    /// horizontal shift, plus f64 rounding.
+    /// any of its samples: the heights' rounding (the vertices store the f32 heights the mesher
+    /// uses, the samples are compared with the reference), plus the face's slope times the vertices'
+    /// horizontal shifts (3× the largest, a first-order bound with room to spare), plus f64 rounding.
     pub(crate) fn margin(&self, c: [[i64; 2]; 3], hc: [f64; 3]) -> f64 {
         let magnitude = hc.iter().fold(0.0f64, |m, h| m.max(h.abs()));
-        let mut m = 2.0 * self.height_shift_m + 1e-9 * (1.0 + magnitude);
+        let mut m = self.height_shift_m + 1e-9 * (1.0 + magnitude);
         if !self.xz_exact {
             // gradient of the plane in metres per metre, from the (i, j) plane
             let area = orient(c[0], c[1], c[2]) as f64;
@@ -88,7 +89,8 @@ impl Storage {
     }
 
     /// Scans a face as stored: the worst sample that is not a corner (error, i, j) if above `floor`,
-    /// and the largest error of all its samples, corners included.
+    /// and the largest error of all its samples, corners included. Rows are walked over the span
+    /// the three edge functions allow (exact integer bounds), in sample order.
     pub(crate) fn scan(&self, hf: &Heightfield, mut c: [[i64; 2]; 3], floor: f64) -> (Option<(f64, u32, u32)>, f64) {
         c.sort_unstable_by_key(|p| (p[1], p[0]));
         let w = hf.width;
@@ -97,15 +99,37 @@ impl Storage {
         if sign == 0 {
             return (None, 0.0);
         }
-        let (i0, i1) = (c.iter().map(|p| p[0]).min().unwrap_or(0), c.iter().map(|p| p[0]).max().unwrap_or(0));
+        let area = orient(c[0], c[1], c[2]) * sign;
+        // edge k's function at (i, j) is a[k]·i + b[k]·j + k0[k], ≥ 0 inside (times `sign`)
+        let edges = [(c[1], c[2]), (c[2], c[0]), (c[0], c[1])];
+        let coef = edges.map(|(p, q)| {
+            let a = -(q[1] - p[1]) * sign;
+            let b = (q[0] - p[0]) * sign;
+            (a, b, -(a * p[0] + b * p[1]))
+        });
+        let (xmin, xmax) = (c.iter().map(|p| p[0]).min().unwrap_or(0), c.iter().map(|p| p[0]).max().unwrap_or(0));
         let (mut best, mut found, mut all) = (floor, None, 0.0f64);
         for j in c[0][1]..=c[2][1] {
-            for i in i0..=i1 {
-                let p = [i, j];
-                if [orient(c[1], c[2], p), orient(c[2], c[0], p), orient(c[0], c[1], p)].iter().any(|&o| o * sign < 0) {
-                    continue;
+            let (mut lo, mut hi) = (xmin, xmax);
+            for &(a, b, k0) in &coef {
+                let r = b * j + k0; // a·i + r ≥ 0
+                if a > 0 {
+                    lo = lo.max((-r).div_euclid(a) + ((-r).rem_euclid(a) != 0) as i64);
+                } else if a < 0 {
+                    hi = hi.min(r.div_euclid(-a));
+                } else if r < 0 {
+                    hi = lo - 1;
                 }
-                let err = (self.height_at(c, hc, p) - hf.reference(j as usize * w + i as usize)).abs();
+            }
+            for i in lo..=hi {
+                let p = [i, j];
+                let surface = if self.xz_exact {
+                    let wt = coef.map(|(a, b, k0)| a * i + b * j + k0);
+                    plane_height(wt, hc, area)
+                } else {
+                    self.height_at(c, hc, p)
+                };
+                let err = (surface - hf.reference(j as usize * w + i as usize)).abs();
                 all = all.max(err);
                 if err > best && !c.contains(&p) {
                     best = err;

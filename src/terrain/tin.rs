@@ -1312,5 +1312,44 @@ pub(crate) mod tests {
             let hf = noise(w, h, seed, levels, 0.5);
             checked(&hf, max_error_m, None);
         }
+
+        /// High-altitude decimetre heights (no f32 holds them) on cells that are not exact in f32:
+        /// whenever the mesher accepts a bound, the surface as stored keeps it at every sample; when
+        /// it refuses one, the storage really cannot meet it at a vertex.
+        #[test]
+        fn bound_holds_as_stored_on_high_altitude_maps(
+            w in 2usize..24,
+            h in 2usize..24,
+            seed in any::<u64>(),
+            base_dm in 80_000u64..90_000,
+            relief_dm in 1u64..400,
+            cell in prop_oneof![Just(1.0f64), Just(0.3), Just(30.87), Just(92.6)],
+            steps in prop_oneof![Just(1.5f64), Just(3.0), Just(10.0), Just(200.0), Just(2000.0)],
+        ) {
+            let heights: Vec<f64> = (0..w * h)
+                .map(|k| (base_dm + crate::synth::mix64(seed ^ k as u64) % relief_dm) as f64 * 0.1)
+                .collect();
+            let hf = Heightfield::from_f64(w, h, &heights, cell);
+            // a bound of some f32 steps at these heights (~9.8e-4 m)
+            let bound = steps * 0.5 * 9.765625e-4;
+            match tin(&hf, &TinOptions { max_error_m: bound, max_triangles: None }) {
+                Ok(r) => {
+                    check_mesh(&hf, &r.mesh);
+                    let s = measure(&hf, &r.mesh);
+                    prop_assert!(s.max_error_m <= bound, "{} > {bound}", s.max_error_m);
+                    prop_assert_eq!(s.max_error_m, r.max_error_m);
+                }
+                Err(TerrainError::BelowStoragePrecision { achieved_m, .. }) => {
+                    prop_assert!(achieved_m > bound);
+                    // with cells exact in f32 a vertex is off by its height's rounding alone, in any
+                    // triangulation: the full grid cannot meet it either
+                    if cell == 1.0 {
+                        let full = crate::terrain::grid::grid(&hf, 1).unwrap();
+                        prop_assert!(measure(&hf, &full).max_error_m > bound);
+                    }
+                }
+                Err(e) => prop_assert!(false, "{e}"),
+            }
+        }
     }
 }
