@@ -556,7 +556,10 @@ fn output(dt: &Dt) -> SampleMesh {
 /// The largest vertical error of the final triangulation, exactly as the analyzer computes it. Every
 /// face holds an upper bound of its error from its last scan; only faces whose bound reaches the best
 /// exact error found so far are rescanned, most likely first.
-fn achieved_error(hf: &Heightfield, faces: &[FaceSlot], first_face: usize, mesh: &SampleMesh) -> f64 {
+///
+/// With a `storage` that rounds, the faces' bounds cover the stored error (see [`recheck_stored`])
+/// and the exact figure is the stored one, corners included.
+fn achieved_error(hf: &Heightfield, faces: &[FaceSlot], first_face: usize, mesh: &SampleMesh, storage: Option<&Storage>) -> f64 {
     // Face slot f holds output triangle f − first_face.
     let faces = &faces[..faces.len().min(mesh.triangles.len() + first_face)];
     let exact = |f: usize, floor: f64| {
@@ -564,7 +567,10 @@ fn achieved_error(hf: &Heightfield, faces: &[FaceSlot], first_face: usize, mesh:
             let [i, j] = mesh.vertices[v as usize];
             Corner { x: i as i64, y: j as i64, h: hf.at(i as usize, j as usize) }
         });
-        find_candidate(hf, corners, floor).candidate.map_or(floor, |c| c.0)
+        match storage {
+            Some(s) => s.scan(hf, corners.map(|k| [k.x, k.y]), floor).1.max(floor),
+            None => find_candidate(hf, corners, floor).candidate.map_or(floor, |c| c.0),
+        }
     };
     // The face with the largest bound first: its exact error rules out almost every other face.
     let Some(first) = (first_face..faces.len()).max_by(|&a, &b| faces[a].upper.total_cmp(&faces[b].upper).then(b.cmp(&a)))
@@ -692,7 +698,7 @@ pub fn tin_spade(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, Terra
         m.rescan_star(v);
     }
     let mesh = output(&m.dt);
-    let max_error_m = achieved_error(hf, &m.faces, 1, &mesh);
+    let max_error_m = achieved_error(hf, &m.faces, 1, &mesh, None);
     Ok(TinResult { mesh, max_error_m, hit_triangle_limit })
 }
 
@@ -968,26 +974,23 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
         // Counter-clockwise in (i, j) is clockwise seen from +Y: swap two corners.
         triangles: dt.tri.chunks_exact(3).map(|c| [c[0], c[2], c[1]]).collect(),
     };
-    if !as_stored {
-        let max_error_m = achieved_error(hf, &faces, 0, &mesh);
+    let max_error_m = achieved_error(hf, &faces, 0, &mesh, as_stored.then_some(&storage));
+    if !as_stored || max_error_m <= opts.max_error_m || hit_triangle_limit {
         return Ok(TinResult { mesh, max_error_m, hit_triangle_limit });
     }
     // Every face's samples other than its corners are within the bound as stored; what is left
     // over is at vertices, whose stored heights the bound is finer than.
     let stats = measure(hf, &mesh);
-    if stats.max_error_m > opts.max_error_m && !hit_triangle_limit {
-        let [i, j] = stats.worst_sample;
-        let height_m = hf.reference(j as usize * hf.width + i as usize);
-        return Err(TerrainError::BelowStoragePrecision {
-            max_error_m: opts.max_error_m,
-            achieved_m: stats.max_error_m,
-            i: i as usize,
-            j: j as usize,
-            height_m,
-            step_m: ulp_f32(height_m),
-        });
-    }
-    Ok(TinResult { mesh, max_error_m: stats.max_error_m, hit_triangle_limit })
+    let [i, j] = stats.worst_sample;
+    let height_m = hf.reference(j as usize * hf.width + i as usize);
+    Err(TerrainError::BelowStoragePrecision {
+        max_error_m: opts.max_error_m,
+        achieved_m: stats.max_error_m,
+        i: i as usize,
+        j: j as usize,
+        height_m,
+        step_m: ulp_f32(height_m),
+    })
 }
 
 /// Distance between neighbouring 32-bit floats at `x`.
