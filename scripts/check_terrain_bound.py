@@ -2,7 +2,8 @@
 """Independent check that a terrain file keeps its error bound in the bytes written.
 
 Reads the positions and triangles of every primitive of a .glb written by `verdant terrain`
-(pygltflib, float32 as stored), decodes the heightmap in float64 exactly as its encoding defines it
+(pygltflib; float32, or 16-bit integers placed by their node's scale and translation as
+KHR_mesh_quantization stores them, evaluated in float64), decodes the heightmap in float64 exactly as its encoding defines it
 (Terrain-RGB: (R·65536 + G·256 + B)·0.1 − 10000 m; Terrarium: R·256 + G + B/256 − 32768 m), and for
 every sample under a triangle evaluates the stored surface at the sample's place (x = i·cell,
 z = j·cell) by barycentric interpolation through the stored vertices. Prints the largest error and
@@ -64,9 +65,22 @@ def main() -> int:
     worst, worst_at = 0.0, None
     covered = np.zeros((rows, cols), dtype=bool)
     cell = a.cell_size
-    for mesh in gltf.meshes:
+    # each mesh as its node places it: translation + scale·position (KHR_mesh_quantization puts the
+    # dequantization there); rotations are not expected on a terrain
+    placement = {}
+    for node in gltf.nodes:
+        if node.mesh is not None:
+            if node.rotation not in (None, [0, 0, 0, 1]) or node.matrix is not None:
+                raise SystemExit(f"node {node.name!r} is rotated: not a terrain file")
+            placement[node.mesh] = (np.array(node.translation or [0, 0, 0], dtype=np.float64),
+                                    np.array(node.scale or [1, 1, 1], dtype=np.float64))
+    for mi, mesh in enumerate(gltf.meshes):
+        t, sc = placement.get(mi, (np.zeros(3), np.ones(3)))
         for prim in mesh.primitives:
-            p = read_accessor(gltf, blob, prim.attributes.POSITION).astype(np.float64)
+            acc = gltf.accessors[prim.attributes.POSITION]
+            if acc.normalized:
+                raise SystemExit("normalized positions are not expected on a terrain")
+            p = t + sc * read_accessor(gltf, blob, prim.attributes.POSITION).astype(np.float64)
             tri = read_accessor(gltf, blob, prim.indices).reshape(-1, 3).astype(np.int64)
             ij = np.rint(p[:, [0, 2]] / cell).astype(np.int64)
             # every (triangle, sample of its bounding box) pair at once

@@ -317,6 +317,16 @@ struct TerrainArgs {
     /// Output file: .glb, .gltf (+ .bin) or .obj (+ .mtl). Default: out/<input name>.glb.
     #[arg(short, long, value_name = "FILE")]
     output: Option<PathBuf>,
+    /// glb/gltf: store positions as 16-bit integers (KHR_mesh_quantization; x, z by the cell, y
+    /// over the height range), normals and UVs as 16-bit; --max-error holds for the quantized
+    /// vertices. About 40 % smaller files; every engine we test reads them.
+    #[arg(long)]
+    quantize: bool,
+    /// glb/gltf: --quantize, then compress vertex and index data with meshoptimizer's codecs
+    /// (EXT_meshopt_compression: lossless, several times smaller; loaders need its decoder:
+    /// three.js setMeshoptDecoder, Babylon.js built in, Unity glTFast, Godot 4.2+, Blender 3.6+).
+    #[arg(long)]
+    compress: bool,
     /// Write a JSON report: sizes, measured max and RMS error, counts and seconds per step.
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
@@ -433,6 +443,8 @@ fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
             base_depth_m: a.base,
             name: name.clone(),
         },
+        quantize: a.quantize || a.compress,
+        meshopt: a.compress,
     };
     if let Some(thresholds) = &a.sweep {
         return match job::sweep(&job, thresholds) {
@@ -454,6 +466,12 @@ fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
         };
     }
     let output = a.output.clone().unwrap_or_else(|| PathBuf::from("out").join(format!("{name}.glb")));
+    if (a.quantize || a.compress) && output.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) {
+        return fail(
+            &format!("{}: --quantize and --compress store glTF integer positions (KHR_mesh_quantization), which an .obj cannot hold; write .glb or .gltf, or leave them out", output.display()),
+            2,
+        );
+    }
     match job::run(&job, Some(&output)) {
         Ok((report, _scene)) => {
             if let Some(path) = &a.report {

@@ -15,7 +15,7 @@ use glam::{DMat4, DQuat, DVec3};
 use serde_json::Value;
 use thiserror::Error;
 
-use crate::export::gltf::{EXT_INSTANCING, EXT_LOD, LOD_COVERAGE_KEY};
+use crate::export::gltf::{EXT_INSTANCING, EXT_LOD, EXT_MESHOPT, KHR_QUANTIZATION, LOD_COVERAGE_KEY};
 use crate::mesh::{AlphaMode, Bounds, Instances, Material, Mesh, Node, Primitive, PrimitiveMode, Scene, Texture};
 
 /// |length − 1| above which a normal is reported.
@@ -274,8 +274,11 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
         let mut problems = Vec::new();
         root.validate(root, gltf::json::Path::new, &mut |path, error| {
             let at = path().to_string();
-            let ours = matches!(error, JsonError::Unsupported) && at.starts_with("extensionsRequired")
-                && root.extensions_required.iter().any(|e| e == EXT_INSTANCING && at.contains(EXT_INSTANCING));
+            let ours = matches!(error, JsonError::Unsupported)
+                && at.starts_with("extensionsRequired")
+                && [EXT_INSTANCING, KHR_QUANTIZATION, EXT_MESHOPT]
+                    .iter()
+                    .any(|ext| root.extensions_required.iter().any(|e| e == ext) && at.contains(ext));
             if !ours {
                 problems.push(format!("{at}: {error}"));
             }
@@ -311,20 +314,28 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
             }
         }
     }
-    let buffers = gltf::import_buffers(&doc, Some(base), gltf.blob)
-        .map_err(|e| parse(format!("cannot load its buffers: {e}")))?;
-    let buffers: Vec<&[u8]> = buffers.iter().map(|b| &b.0[..]).collect();
+    let buffers: Vec<Vec<u8>> = if doc.extensions_used().any(|e| e == EXT_MESHOPT) {
+        meshopt_buffers(&doc, base, gltf.blob).map_err(parse)?
+    } else {
+        gltf::import_buffers(&doc, Some(base), gltf.blob)
+            .map_err(|e| parse(format!("cannot load its buffers: {e}")))?
+            .into_iter()
+            .map(|b| b.0)
+            .collect()
+    };
+    let buffers: Vec<&[u8]> = buffers.iter().map(|b| &b[..]).collect();
     let mut issues = node_graph_issues(&doc);
     let mut scene = Scene::default();
     let mut declared_bounds = Vec::new();
 
+    let quantization_used = doc.extensions_used().any(|e| e == KHR_QUANTIZATION);
     for mesh in doc.meshes() {
         let mesh_name = mesh.name().unwrap_or("").to_string();
         let mut out = Mesh { name: mesh_name.clone(), primitives: Vec::new(), extras: parse_extras(mesh.extras()) };
         let mut declared = Vec::new();
         for (pi, prim) in mesh.primitives().enumerate() {
             let loc = format!("mesh {} {:?} primitive {pi}", mesh.index(), mesh_name);
-            let (p, bounds) = read_primitive(&prim, &buffers, &loc, &mut issues);
+            let (p, bounds) = read_primitive(&prim, &buffers, &loc, quantization_used, &mut issues);
             out.primitives.push(p);
             declared.push(bounds);
         }
@@ -450,6 +461,7 @@ fn read_primitive(
     prim: &gltf::Primitive,
     buffers: &[&[u8]],
     loc: &str,
+    quantization_used: bool,
     issues: &mut Vec<Issue>,
 ) -> (Primitive, Option<Bounds>) {
     use gltf::Semantic;
@@ -480,8 +492,15 @@ fn read_primitive(
     match prim.get(&Semantic::Positions) {
         None => issues.push(issue(Severity::Error, loc, "no POSITION attribute")),
         Some(acc) => {
-            if acc.data_type() != gltf::accessor::DataType::F32 {
-                issues.push(issue(Severity::Error, loc, "POSITION is not FLOAT"));
+            // KHR_mesh_quantization allows (normalized) byte and short positions too
+            use gltf::accessor::DataType;
+            let quantized = matches!(acc.data_type(), DataType::U8 | DataType::I8 | DataType::U16 | DataType::I16);
+            if acc.data_type() != DataType::F32 && !(quantized && quantization_used) {
+                issues.push(issue(
+                    Severity::Error,
+                    loc,
+                    if quantized { "POSITION is not FLOAT and the file does not use KHR_mesh_quantization" } else { "POSITION is not FLOAT" },
+                ));
             }
             let bound = |v: Option<Value>| -> Option<[f32; 3]> {
                 let a = v?.as_array()?.iter().map(|x| x.as_f64().map(|x| x as f32)).collect::<Option<Vec<f32>>>()?;
@@ -577,6 +596,80 @@ fn view_bytes<'b>(view: &gltf::buffer::View, buffers: &[&'b [u8]]) -> Result<&'b
     buffer
         .get(view.offset()..end)
         .ok_or_else(|| format!("bufferView {} ends at byte {end}, past its buffer's {} bytes", view.index(), buffer.len()))
+}
+
+/// The buffers of a file using EXT_meshopt_compression: the GLB chunk or `.bin` files as stored,
+/// each fallback buffer (no data of its own) filled by decoding every compressed bufferView into
+/// its range with meshoptimizer's decoders, so accessors then read the views as if uncompressed.
+fn meshopt_buffers(doc: &gltf::Document, base: &Path, blob: Option<Vec<u8>>) -> Result<Vec<Vec<u8>>, String> {
+    let mut blob = blob;
+    let mut buffers = Vec::new();
+    for buffer in doc.buffers() {
+        let at = format!("buffer {}", buffer.index());
+        let fallback = buffer.extension_value(EXT_MESHOPT).and_then(|e| e.get("fallback")).and_then(Value::as_bool) == Some(true);
+        let data = match buffer.source() {
+            _ if fallback => vec![0; buffer.length()],
+            gltf::buffer::Source::Bin => blob.take().ok_or(format!("{at}: refers to the GLB binary chunk, which is missing or taken"))?,
+            gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                return Err(format!("{at}: data: URIs beside {EXT_MESHOPT} are not read by verdant"))
+            }
+            gltf::buffer::Source::Uri(uri) => crate::input::resolve_inside(base, uri)
+                .and_then(|f| crate::input::read_limited(&f, crate::input::MAX_GLTF_BYTES, "a glTF buffer").map_err(|e| e.to_string()))
+                .map_err(|e| format!("{at}: {e}"))?,
+        };
+        if data.len() < buffer.length() {
+            return Err(format!("{at}: {} bytes, the buffer declares byteLength {}", data.len(), buffer.length()));
+        }
+        buffers.push(data);
+    }
+    for view in doc.views() {
+        let Some(ext) = view.extension_value(EXT_MESHOPT) else { continue };
+        let at = format!("bufferView {} {EXT_MESHOPT}", view.index());
+        let field = |k: &str| ext.get(k).and_then(Value::as_u64).map(|v| v as usize).ok_or(format!("{at}: no {k}"));
+        let (source, offset, length, stride, count) =
+            (field("buffer")?, field("byteOffset").unwrap_or(0), field("byteLength")?, field("byteStride")?, field("count")?);
+        if ext.get("filter").and_then(Value::as_str).is_some_and(|f| f != "NONE") {
+            return Err(format!("{at}: filters are not read by verdant (it writes none)"));
+        }
+        let encoded = buffers
+            .get(source)
+            .and_then(|b| b.get(offset..offset.checked_add(length)?))
+            .ok_or(format!("{at}: bytes {offset}..+{length} are not in buffer {source}"))?
+            .to_vec();
+        let fail = |e: meshopt::Error| format!("{at}: cannot decode: {e}");
+        let decoded: Vec<u8> = match (ext.get("mode").and_then(Value::as_str), stride) {
+            (Some("ATTRIBUTES"), 4) => decode_elements::<4>(&encoded, count).map_err(fail)?,
+            (Some("ATTRIBUTES"), 8) => decode_elements::<8>(&encoded, count).map_err(fail)?,
+            (Some("ATTRIBUTES"), 12) => decode_elements::<12>(&encoded, count).map_err(fail)?,
+            (Some("ATTRIBUTES"), 16) => decode_elements::<16>(&encoded, count).map_err(fail)?,
+            (Some("TRIANGLES"), 2) => meshopt::decode_index_buffer::<u16>(&encoded, count).map_err(fail)?.iter().flat_map(|i| i.to_le_bytes()).collect(),
+            (Some("TRIANGLES"), 4) => meshopt::decode_index_buffer::<u32>(&encoded, count).map_err(fail)?.iter().flat_map(|i| i.to_le_bytes()).collect(),
+            (mode, _) => return Err(format!("{at}: mode {mode:?} with byteStride {stride} is not read by verdant")),
+        };
+        let target = view.buffer().index();
+        let range = view.offset()..view.offset() + decoded.len().min(view.length());
+        let dest = buffers.get_mut(target).and_then(|b| b.get_mut(range)).ok_or(format!("{at}: the view lies outside buffer {target}"))?;
+        let n = dest.len();
+        dest.copy_from_slice(&decoded[..n]);
+    }
+    Ok(buffers)
+}
+
+/// Decodes `count` elements of N = 4·K bytes (as K native words, so the bytes come back as they
+/// were encoded).
+fn decode_elements<const N: usize>(encoded: &[u8], count: usize) -> Result<Vec<u8>, meshopt::Error> {
+    fn words<const K: usize>(encoded: &[u8], count: usize) -> Result<Vec<u8>, meshopt::Error>
+    where
+        [u32; K]: Default,
+    {
+        Ok(meshopt::decode_vertex_buffer::<[u32; K]>(encoded, count)?.into_iter().flatten().flat_map(u32::to_ne_bytes).collect())
+    }
+    match N {
+        4 => words::<1>(encoded, count),
+        8 => words::<2>(encoded, count),
+        12 => words::<3>(encoded, count),
+        _ => words::<4>(encoded, count),
+    }
 }
 
 /// Elements of an accessor as byte slices (each `size` bytes long).

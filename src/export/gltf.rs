@@ -24,6 +24,7 @@ use super::compact::compact;
 use super::streaming::{base64, load_groups};
 use super::{check_scene, SceneProblem};
 use crate::mesh::{AlphaMode, PrimitiveMode, Scene};
+pub use crate::terrain::stored::PositionGrid;
 
 /// `asset.generator` of every file written.
 pub const GENERATOR: &str = concat!("verdant ", env!("CARGO_PKG_VERSION"));
@@ -41,10 +42,43 @@ pub const MAX_U16_INDEX: u32 = 65534;
 const ARRAY_BUFFER: json::buffer::Target = json::buffer::Target::ArrayBuffer;
 const ELEMENT_ARRAY_BUFFER: json::buffer::Target = json::buffer::Target::ElementArrayBuffer;
 
+/// KHR_mesh_quantization: integer vertex attributes, dequantized by the node transform.
+pub const KHR_QUANTIZATION: &str = "KHR_mesh_quantization";
+
+/// How vertex data is stored.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct WriteOptions {
+    /// Store every mesh's positions as 16-bit integers on this grid (KHR_mesh_quantization): the
+    /// node holding a mesh gets the grid's scale and translation, normals become 16-bit normalized
+    /// (pre-scaled so the node's scale turns them back), UVs within 0..1 16-bit normalized.
+    pub position_grid: Option<PositionGrid>,
+    /// Compress vertex and index data with meshoptimizer's codecs (EXT_meshopt_compression,
+    /// lossless; required by the file, so loaders need its decoder). MSFT_lod levels then stay in
+    /// the one binary chunk (no streaming buffers).
+    pub meshopt: bool,
+}
+
+/// EXT_meshopt_compression: bufferViews decoded by meshoptimizer's vertex and index codecs.
+pub const EXT_MESHOPT: &str = "EXT_meshopt_compression";
+
+/// How a bufferView's bytes can be compressed.
+#[derive(Debug, Clone, Copy)]
+enum Codec {
+    /// Vertex data: `count` elements of `stride` bytes (a multiple of 4).
+    Attributes { stride: usize, count: usize },
+    /// A triangle list of `count` indices of `size` bytes.
+    Triangles { size: usize, count: usize },
+}
+
 /// The scene as one GLB file.
 pub fn to_glb(scene: &Scene) -> Result<Vec<u8>, SceneProblem> {
-    let (root, bin) = build(scene, None)?;
-    let json = root.to_vec().map_err(|e| SceneProblem(format!("cannot serialise the glTF JSON: {e}")))?;
+    to_glb_with(scene, &WriteOptions::default())
+}
+
+/// [`to_glb`] with storage options.
+pub fn to_glb_with(scene: &Scene, opts: &WriteOptions) -> Result<Vec<u8>, SceneProblem> {
+    let (root, bin) = build(scene, None, opts)?;
+    let json = json_bytes(&root, false, opts)?;
     glb_container(&json, &bin)
 }
 
@@ -52,11 +86,39 @@ pub fn to_glb(scene: &Scene) -> Result<Vec<u8>, SceneProblem> {
 /// `bin_name` (a file name in the same folder). The bin is empty, and not referenced, when the
 /// scene holds no data.
 pub fn to_gltf(scene: &Scene, bin_name: &str) -> Result<(Vec<u8>, Vec<u8>), SceneProblem> {
-    let (root, bin) = build(scene, Some(&uri_encode(bin_name)))?;
-    let mut json =
-        root.to_vec_pretty().map_err(|e| SceneProblem(format!("cannot serialise the glTF JSON: {e}")))?;
+    to_gltf_with(scene, bin_name, &WriteOptions::default())
+}
+
+/// [`to_gltf`] with storage options.
+pub fn to_gltf_with(scene: &Scene, bin_name: &str, opts: &WriteOptions) -> Result<(Vec<u8>, Vec<u8>), SceneProblem> {
+    let (root, bin) = build(scene, Some(&uri_encode(bin_name)), opts)?;
+    let mut json = json_bytes(&root, true, opts)?;
     json.push(b'\n');
     Ok((json, bin))
+}
+
+/// The JSON text. With quantized positions, every node's translation and scale (which carry the
+/// dequantization) are written as the exact values of their f32s, so a reader in f64 (JavaScript)
+/// and one in f32 get the same numbers: the shortest f32 decimal would differ in f64 by up to half
+/// an f32 step, times 65,535 across the grid.
+fn json_bytes(root: &json::Root, pretty: bool, opts: &WriteOptions) -> Result<Vec<u8>, SceneProblem> {
+    let fail = |e: serde_json::Error| SceneProblem(format!("cannot serialise the glTF JSON: {e}"));
+    if opts.position_grid.is_none() {
+        return if pretty { root.to_vec_pretty() } else { root.to_vec() }.map_err(fail);
+    }
+    let mut value = serde_json::to_value(root).map_err(fail)?;
+    for node in value.get_mut("nodes").and_then(Value::as_array_mut).into_iter().flatten() {
+        for key in ["translation", "scale"] {
+            if let Some(Value::Array(xs)) = node.get_mut(key) {
+                for x in xs.iter_mut() {
+                    if let Some(v) = x.as_f64() {
+                        *x = exact(v as f32);
+                    }
+                }
+            }
+        }
+    }
+    if pretty { serde_json::to_vec_pretty(&value) } else { serde_json::to_vec(&value) }.map_err(fail)
 }
 
 /// Wraps JSON and binary chunks in the GLB container: 12-byte header, JSON chunk padded with
@@ -104,6 +166,8 @@ struct Bin {
     /// Which group the next views go to.
     group: usize,
     views: Vec<json::buffer::View>,
+    /// Per view: how its bytes compress, if they are vertex or index data.
+    codecs: Vec<Option<Codec>>,
 }
 
 impl Bin {
@@ -123,7 +187,180 @@ impl Bin {
             extensions: None,
             extras: None,
         });
+        self.codecs.push(None);
         Index::new(self.views.len() as u32 - 1)
+    }
+}
+
+/// EXT_meshopt_compression over the one group of `bin`: every vertex and index view's bytes are
+/// encoded (vertex codec version 0, index codec version 1, as the extension specifies) into buffer
+/// 0, which also keeps the other views (images) as they are; the views themselves move to buffer
+/// 1, a fallback buffer without data that the decoder fills. Returns buffer 0's bytes.
+fn compress_views(root: &mut json::Root, bin: &mut Bin, bin_uri: Option<&str>) -> Result<Vec<u8>, SceneProblem> {
+    let data = std::mem::take(&mut bin.groups[0]);
+    let (mut out, mut fallback_len) = (Vec::with_capacity(data.len() / 2), 0usize);
+    let fail = |e: meshopt::Error| SceneProblem(format!("meshoptimizer could not encode a buffer: {e}"));
+    for (view, codec) in bin.views.iter_mut().zip(&bin.codecs) {
+        let offset = view.byte_offset.map_or(0, |o| o.0 as usize);
+        let bytes = &data[offset..offset + view.byte_length.0 as usize];
+        out.resize(out.len().next_multiple_of(4), 0);
+        let Some(codec) = codec else {
+            view.byte_offset = (!out.is_empty()).then(|| USize64::from(out.len()));
+            view.buffer = Index::new(0);
+            out.extend_from_slice(bytes);
+            continue;
+        };
+        let (encoded, mode, stride, count) = match *codec {
+            Codec::Attributes { stride, count } => (encode_vertices(bytes, stride).map_err(fail)?, "ATTRIBUTES", stride, count),
+            Codec::Triangles { size, count } => {
+                let indices: Vec<u32> = match size {
+                    2 => bytes.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]]) as u32).collect(),
+                    _ => bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
+                };
+                let vertex_count = indices.iter().max().map_or(0, |&m| m as usize + 1);
+                (meshopt::encode_index_buffer(&indices, vertex_count).map_err(fail)?, "TRIANGLES", size, count)
+            }
+        };
+        let mut ext = Map::new();
+        ext.insert(
+            EXT_MESHOPT.into(),
+            serde_json::json!({
+                "buffer": 0, "byteOffset": out.len(), "byteLength": encoded.len(),
+                "byteStride": stride, "count": count, "mode": mode,
+            }),
+        );
+        view.extensions = Some(json::extensions::buffer::View { others: ext });
+        out.extend_from_slice(&encoded);
+        fallback_len = fallback_len.next_multiple_of(4);
+        view.byte_offset = (fallback_len > 0).then(|| USize64::from(fallback_len));
+        view.buffer = Index::new(1);
+        fallback_len += view.byte_length.0 as usize;
+    }
+    out.resize(out.len().next_multiple_of(4), 0);
+    root.buffers.push(json::Buffer {
+        byte_length: USize64::from(out.len()),
+        name: None,
+        uri: bin_uri.map(str::to_string),
+        extensions: None,
+        extras: None,
+    });
+    let mut ext = Map::new();
+    ext.insert(EXT_MESHOPT.into(), serde_json::json!({ "fallback": true }));
+    root.buffers.push(json::Buffer {
+        byte_length: USize64::from(fallback_len.next_multiple_of(4)),
+        name: Some("EXT_meshopt_compression fallback (no data: decoded on load)".into()),
+        uri: None,
+        extensions: Some(json::extensions::buffer::Buffer { others: ext }),
+        extras: None,
+    });
+    Ok(out)
+}
+
+/// meshoptimizer's vertex codec (version 0, the one EXT_meshopt_compression reads) over elements
+/// of `stride` bytes.
+fn encode_vertices(bytes: &[u8], stride: usize) -> Result<Vec<u8>, meshopt::Error> {
+    fn typed<const N: usize>(bytes: &[u8]) -> Result<Vec<u8>, meshopt::Error> {
+        let elements: Vec<[u8; N]> = bytes.chunks_exact(N).map(|c| c.try_into().unwrap_or([0; N])).collect();
+        meshopt::encode_vertex_buffer_level(&elements, 2, Some(0))
+    }
+    match stride {
+        4 => typed::<4>(bytes),
+        8 => typed::<8>(bytes),
+        12 => typed::<12>(bytes),
+        16 => typed::<16>(bytes),
+        _ => Err(meshopt::Error::Memory(format!("no vertex codec for {stride}-byte elements").into())),
+    }
+}
+
+/// The KHR_mesh_quantization attribute writers.
+mod quantized {
+    use super::*;
+
+    /// A view of `stride`-byte elements for vertex data.
+    fn strided_view(bin: &mut Bin, bytes: &[u8], stride: usize) -> Index<json::buffer::View> {
+        let view = bin.push_view(bytes, Some(ARRAY_BUFFER));
+        bin.views[view.value()].byte_stride = Some(json::buffer::Stride(stride));
+        bin.codecs[view.value()] = Some(Codec::Attributes { stride, count: bytes.len() / stride });
+        view
+    }
+
+    /// POSITION as UNSIGNED_SHORT VEC3 on `grid` (8-byte elements), min/max the integers.
+    pub(super) fn positions(
+        root: &mut json::Root,
+        bin: &mut Bin,
+        positions: &[[f32; 3]],
+        grid: &PositionGrid,
+    ) -> Result<Index<json::Accessor>, SceneProblem> {
+        let mut bytes = Vec::with_capacity(positions.len() * 8);
+        let (mut lo, mut hi) = ([u16::MAX; 3], [0u16; 3]);
+        for p in positions {
+            for a in 0..3 {
+                let q = grid.quantize(a, p[a]);
+                let q = u16::try_from(q).map_err(|_| {
+                    SceneProblem(format!("position {p:?} lies outside the 16-bit grid {grid:?}: write without quantization"))
+                })?;
+                lo[a] = lo[a].min(q);
+                hi[a] = hi[a].max(q);
+                bytes.extend_from_slice(&q.to_le_bytes());
+            }
+            bytes.extend_from_slice(&[0, 0]);
+        }
+        let view = strided_view(bin, &bytes, 8);
+        let mut acc = accessor(view, positions.len(), json::accessor::ComponentType::U16, json::accessor::Type::Vec3);
+        acc.min = Some(Value::Array(lo.iter().map(|&q| Value::from(q)).collect()));
+        acc.max = Some(Value::Array(hi.iter().map(|&q| Value::from(q)).collect()));
+        Ok(root.push(acc))
+    }
+
+    /// NORMAL as normalized SHORT VEC3: each normal scaled by the grid's steps and renormalised,
+    /// so that the node's (non-uniform) scale, applied to normals by its inverse transpose, gives
+    /// the normal back. 16 bits, as the scale can make the stored normal nearly flat.
+    pub(super) fn normals(root: &mut json::Root, bin: &mut Bin, normals: &[[f32; 3]], grid: &PositionGrid) -> Index<json::Accessor> {
+        let mut bytes = Vec::with_capacity(normals.len() * 8);
+        for n in normals {
+            let v = [0, 1, 2].map(|a| n[a] as f64 * grid.step[a] as f64);
+            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(f64::MIN_POSITIVE);
+            for c in v {
+                bytes.extend_from_slice(&(((c / len) * 32767.0).round() as i16).to_le_bytes());
+            }
+            bytes.extend_from_slice(&[0, 0]);
+        }
+        let view = strided_view(bin, &bytes, 8);
+        let mut acc = accessor(view, normals.len(), json::accessor::ComponentType::I16, json::accessor::Type::Vec3);
+        acc.normalized = true;
+        root.push(acc)
+    }
+
+    /// TEXCOORD_0 within 0..1 as normalized UNSIGNED_SHORT VEC2.
+    pub(super) fn unit_uvs(root: &mut json::Root, bin: &mut Bin, uvs: &[[f32; 2]]) -> Index<json::Accessor> {
+        let bytes: Vec<u8> =
+            uvs.iter().flatten().flat_map(|&u| ((u as f64 * 65535.0).round() as u16).to_le_bytes()).collect();
+        let view = strided_view(bin, &bytes, 4);
+        let mut acc = accessor(view, uvs.len(), json::accessor::ComponentType::U16, json::accessor::Type::Vec2);
+        acc.normalized = true;
+        root.push(acc)
+    }
+
+    /// Tangents follow the node's matrix: divided by the grid's steps (renormalised) so it gives
+    /// them back; handedness kept.
+    pub(super) fn tangents_in_grid_space(tangents: &[[f32; 4]], grid: &PositionGrid) -> Vec<[f32; 4]> {
+        tangents
+            .iter()
+            .map(|t| {
+                let v = [0, 1, 2].map(|a| t[a] as f64 / grid.step[a] as f64);
+                let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(f64::MIN_POSITIVE);
+                [(v[0] / len) as f32, (v[1] / len) as f32, (v[2] / len) as f32, t[3]]
+            })
+            .collect()
+    }
+
+    /// The node transform T·R·S followed by the grid's Tr(origin)·Sc(step), as one TRS:
+    /// translation T + R(S∘origin), scale S∘step (rotation unchanged).
+    pub(super) fn place(rotation: [f32; 4], translation: [f32; 3], scale: [f32; 3], grid: &PositionGrid) -> ([f32; 3], [f32; 3]) {
+        let so = [0, 1, 2].map(|a| scale[a] * grid.origin[a]);
+        let r = glam::Quat::from_array(rotation).mul_vec3(glam::Vec3::from_array(so));
+        let t = [translation[0] + r.x, translation[1] + r.y, translation[2] + r.z];
+        (t, [0, 1, 2].map(|a| scale[a] * grid.step[a]))
     }
 }
 
@@ -168,6 +405,9 @@ fn float_accessor<const N: usize>(
         _ => Type::Scalar,
     };
     let view = bin.push_view(&f32_bytes(values), target);
+    if target == Some(ARRAY_BUFFER) {
+        bin.codecs[view.value()] = Some(Codec::Attributes { stride: 4 * N, count: values.len() });
+    }
     root.push(accessor(view, values.len(), json::accessor::ComponentType::F32, type_))
 }
 
@@ -187,7 +427,7 @@ fn opt_name(name: &str) -> Option<String> {
 /// Builds the glTF document and its binary buffer (`bin_uri`: None for GLB).
 // `..Default::default()` on the node extension: gltf-json adds a field with KHR_lights_punctual.
 #[allow(clippy::needless_update)]
-fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), SceneProblem> {
+fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(json::Root, Vec<u8>), SceneProblem> {
     use json::accessor::{ComponentType, Type};
     check_scene(scene)?;
     let (compacted, _) = compact(scene);
@@ -198,8 +438,13 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
         ..Default::default()
     };
     // a GLB streams MSFT_lod levels from buffers of their own; a .gltf keeps one .bin
-    let groups = if bin_uri.is_none() { load_groups(scene) } else { None };
-    let mut bin = Bin { groups: vec![Vec::new(); groups.as_ref().map_or(1, |g| g.groups)], group: 0, views: Vec::new() };
+    let groups = if bin_uri.is_none() && !opts.meshopt { load_groups(scene) } else { None };
+    let mut bin = Bin {
+        groups: vec![Vec::new(); groups.as_ref().map_or(1, |g| g.groups)],
+        group: 0,
+        views: Vec::new(),
+        codecs: Vec::new(),
+    };
     let mut extensions_used = BTreeSet::new();
     // an instanced node shown without instancing would be one wrong copy: loaders must support it
     let mut extensions_required = BTreeSet::new();
@@ -210,22 +455,40 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
         let mut primitives = Vec::with_capacity(mesh.primitives.len());
         for p in &mesh.primitives {
             let mut attributes = std::collections::BTreeMap::new();
-            let pos = float_accessor(&mut root, &mut bin, &p.positions, Some(ARRAY_BUFFER));
-            let bounds = p.bounds().ok_or_else(|| SceneProblem("a primitive has no positions".into()))?;
-            let acc = &mut root.accessors[pos.value()];
-            acc.min = Some(Value::Array(bounds.min.iter().map(|&x| exact(x)).collect()));
-            acc.max = Some(Value::Array(bounds.max.iter().map(|&x| exact(x)).collect()));
+            let pos = match &opts.position_grid {
+                None => {
+                    let pos = float_accessor(&mut root, &mut bin, &p.positions, Some(ARRAY_BUFFER));
+                    let bounds = p.bounds().ok_or_else(|| SceneProblem("a primitive has no positions".into()))?;
+                    let acc = &mut root.accessors[pos.value()];
+                    acc.min = Some(Value::Array(bounds.min.iter().map(|&x| exact(x)).collect()));
+                    acc.max = Some(Value::Array(bounds.max.iter().map(|&x| exact(x)).collect()));
+                    pos
+                }
+                Some(grid) => quantized::positions(&mut root, &mut bin, &p.positions, grid)?,
+            };
             attributes.insert(Valid(json::mesh::Semantic::Positions), pos);
             if !p.normals.is_empty() {
-                let a = float_accessor(&mut root, &mut bin, &p.normals, Some(ARRAY_BUFFER));
+                let a = match &opts.position_grid {
+                    None => float_accessor(&mut root, &mut bin, &p.normals, Some(ARRAY_BUFFER)),
+                    Some(grid) => quantized::normals(&mut root, &mut bin, &p.normals, grid),
+                };
                 attributes.insert(Valid(json::mesh::Semantic::Normals), a);
             }
             if !p.uvs.is_empty() {
-                let a = float_accessor(&mut root, &mut bin, &p.uvs, Some(ARRAY_BUFFER));
+                let unit = p.uvs.iter().flatten().all(|&u| (0.0..=1.0).contains(&u));
+                let a = if opts.position_grid.is_some() && unit {
+                    quantized::unit_uvs(&mut root, &mut bin, &p.uvs)
+                } else {
+                    float_accessor(&mut root, &mut bin, &p.uvs, Some(ARRAY_BUFFER))
+                };
                 attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), a);
             }
             if !p.tangents.is_empty() {
-                let a = float_accessor(&mut root, &mut bin, &p.tangents, Some(ARRAY_BUFFER));
+                let tangents = match &opts.position_grid {
+                    None => p.tangents.clone(),
+                    Some(grid) => quantized::tangents_in_grid_space(&p.tangents, grid),
+                };
+                let a = float_accessor(&mut root, &mut bin, &tangents, Some(ARRAY_BUFFER));
                 attributes.insert(Valid(json::mesh::Semantic::Tangents), a);
             }
             if !p.colors.is_empty() {
@@ -247,6 +510,10 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
                     (p.indices.iter().flat_map(|&i| i.to_le_bytes()).collect(), ComponentType::U32)
                 };
                 let view = bin.push_view(&bytes, Some(ELEMENT_ARRAY_BUFFER));
+                if p.mode == PrimitiveMode::Triangles && !p.indices.is_empty() && p.indices.len().is_multiple_of(3) {
+                    let size = bytes.len() / p.indices.len();
+                    bin.codecs[view.value()] = Some(Codec::Triangles { size, count: p.indices.len() });
+                }
                 Some(root.push(accessor(view, p.indices.len(), component, Type::Scalar)))
             };
             let mode = match p.mode {
@@ -341,6 +608,19 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
                 extras = Some(Value::Object(map));
             }
         }
+        // a quantized mesh is placed by its node: the grid's scale and origin join its transform
+        let (mut translation, mut scale) = (node.translation, node.scale);
+        if let (Some(grid), Some(_)) = (&opts.position_grid, node.mesh) {
+            if !node.children.is_empty() || node.instances.is_some() {
+                return Err(SceneProblem(format!(
+                    "node {:?} holds a mesh and children or instances: quantized positions need the node to itself; write without quantization",
+                    node.name
+                )));
+            }
+            (translation, scale) = quantized::place(node.rotation, translation, scale, grid);
+            extensions_used.insert(KHR_QUANTIZATION);
+            extensions_required.insert(KHR_QUANTIZATION);
+        }
         let is = |v: &[f32], identity: &[f32]| v == identity;
         root.push(json::Node {
             children: (!node.children.is_empty())
@@ -350,8 +630,8 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
             mesh: node.mesh.map(|m| Index::new(m as u32)),
             name: opt_name(&node.name),
             rotation: (!is(&node.rotation, &[0.0, 0.0, 0.0, 1.0])).then_some(json::scene::UnitQuaternion(node.rotation)),
-            scale: (!is(&node.scale, &[1.0; 3])).then_some(node.scale),
-            translation: (!is(&node.translation, &[0.0; 3])).then_some(node.translation),
+            scale: (!is(&scale, &[1.0; 3])).then_some(scale),
+            translation: (!is(&translation, &[0.0; 3])).then_some(translation),
             ..Default::default()
         });
     }
@@ -407,6 +687,17 @@ fn build(scene: &Scene, bin_uri: Option<&str>) -> Result<(json::Root, Vec<u8>), 
                 nodes: lod_roots.iter().map(|&r| Index::new(r as u32)).collect(),
             });
         }
+    }
+    if opts.meshopt {
+        let chunk = compress_views(&mut root, &mut bin, bin_uri)?;
+        if bin.views.iter().any(|v| v.extensions.is_some()) {
+            extensions_used.insert(EXT_MESHOPT);
+            extensions_required.insert(EXT_MESHOPT);
+        }
+        root.buffer_views = bin.views;
+        root.extensions_used = extensions_used.into_iter().map(str::to_string).collect();
+        root.extensions_required = extensions_required.into_iter().map(str::to_string).collect();
+        return Ok((root, chunk));
     }
     // buffers: group 0 is the GLB chunk (or the .bin), the other non-empty groups data: URIs
     let mut chunk = Vec::new();

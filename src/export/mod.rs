@@ -69,6 +69,12 @@ impl SceneProblem {
 /// * `.obj` — OBJ plus `<stem>.mtl` (when the scene has materials) and `<stem>_<n>[_<name>].png`
 ///   for each texture. Node transforms are applied and instances expanded; see [`obj`].
 pub fn write_scene(scene: &Scene, path: &Path) -> Result<Vec<PathBuf>, ExportError> {
+    write_scene_with(scene, path, &gltf::WriteOptions::default())
+}
+
+/// [`write_scene`] with storage options for glTF (`.glb`, `.gltf`); an `.obj` cannot take a
+/// position grid (its numbers are text), which is refused.
+pub fn write_scene_with(scene: &Scene, path: &Path, opts: &gltf::WriteOptions) -> Result<Vec<PathBuf>, ExportError> {
     let ext = path.extension().and_then(OsStr::to_str).unwrap_or("").to_ascii_lowercase();
     let stem = match path.file_stem().and_then(OsStr::to_str) {
         Some(s) if !s.is_empty() => s.to_string(),
@@ -83,18 +89,24 @@ pub fn write_scene(scene: &Scene, path: &Path) -> Result<Vec<PathBuf>, ExportErr
     // Build everything first, write afterwards: a scene error never touches the disk.
     let files: Vec<(PathBuf, Vec<u8>)> = match ext.as_str() {
         "glb" => {
-            let bytes = gltf::to_glb(scene).map_err(SceneProblem::at(path))?;
+            let bytes = gltf::to_glb_with(scene, opts).map_err(SceneProblem::at(path))?;
             vec![(path.to_path_buf(), bytes)]
         }
         "gltf" => {
             let bin_name = format!("{stem}.bin");
-            let (json, bin) = gltf::to_gltf(scene, &bin_name).map_err(SceneProblem::at(path))?;
+            let (json, bin) = gltf::to_gltf_with(scene, &bin_name, opts).map_err(SceneProblem::at(path))?;
             let mut files = Vec::new();
             if !bin.is_empty() {
                 files.push((sibling(&bin_name), bin));
             }
             files.push((path.to_path_buf(), json));
             files
+        }
+        "obj" if opts.position_grid.is_some() => {
+            return Err(ExportError::InvalidScene {
+                path: path.to_path_buf(),
+                problem: "quantized positions (--quantize) are a glTF feature (KHR_mesh_quantization); write .glb or .gltf, or leave --quantize out".into(),
+            })
         }
         "obj" => {
             let out = obj::to_obj(scene, &stem).map_err(SceneProblem::at(path))?;

@@ -169,7 +169,7 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
 }
 
 fn mesh_at(t: &TerrainSettings, hf: &Heightfield, max_error_m: f64) -> Result<(SampleMesh, bool), StageError> {
-    mesh_samples(hf, t.mode, t.grid_step, max_error_m, t.max_triangles).map_err(|e| fail(Stage::Terrain)(e.to_string()))
+    mesh_samples(hf, t.mode, t.grid_step, max_error_m, t.max_triangles, &crate::terrain::stored::Storage::f32(hf)).map_err(|e| fail(Stage::Terrain)(e.to_string()))
 }
 
 fn write_formats(preset: &Preset, scene: &Scene, scene_dir: &Path, stem: &str) -> Result<Vec<PathBuf>, StageError> {
@@ -275,7 +275,7 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
         mode: t.mode,
         max_error_requested_m: (t.mode == MeshMode::Tin).then_some(t.max_error_m),
         max_error_m: stats.max_error_m,
-        max_error_f64_m: crate::terrain::error::exact_max_error(&hf, &mesh, &stats),
+        max_error_f64_m: crate::terrain::error::exact_max_error(&hf, &mesh, &stats, &crate::terrain::stored::Storage::f32(&hf)),
         rms_error_m: stats.rms_error_m,
         worst_sample: stats.worst_sample,
         hit_triangle_limit,

@@ -46,10 +46,10 @@ pub enum TerrainError {
     TriangleLimitTooSmall { limit: usize },
     #[error(
         "--max-error {max_error_m} m is finer than the file can store the terrain's heights: at sample (column {i}, \
-         row {j}), {height_m} m, 32-bit floats are {step_m:e} m apart, so the written surface is {achieved_m:e} m \
+         row {j}), {height_m} m, {storage} are {step_m:e} m apart, so the written surface is {achieved_m:e} m \
          off there even with every sample a vertex; use a bound of at least {achieved_m:e} m"
     )]
-    BelowStoragePrecision { max_error_m: f64, achieved_m: f64, i: usize, j: usize, height_m: f64, step_m: f64 },
+    BelowStoragePrecision { max_error_m: f64, achieved_m: f64, i: usize, j: usize, height_m: f64, step_m: f64, storage: &'static str },
     #[error("internal error: the triangulation could not take sample (column {i}, row {j}); please report this with the heightmap")]
     Internal { i: usize, j: usize },
 }
@@ -122,16 +122,21 @@ pub fn measure(hf: &Heightfield, mesh: &SampleMesh) -> ErrorStats {
     measure_surface(hf, mesh, Surface::Stored(&Storage::f32(hf)))
 }
 
+/// The same measure for vertices stored as `storage` says (e.g. quantized).
+pub fn measure_stored(hf: &Heightfield, mesh: &SampleMesh, storage: &Storage) -> ErrorStats {
+    measure_surface(hf, mesh, Surface::Stored(storage))
+}
+
 /// The same measure with the vertices exactly at their samples, in f64 (equal to [`measure`] when
 /// the heights and cell positions are exact in f32).
 pub fn measure_exact(hf: &Heightfield, mesh: &SampleMesh) -> ErrorStats {
     measure_surface(hf, mesh, Surface::Exact)
 }
 
-/// The f64 figure beside `stored` (what [`measure`] found for `mesh`): measured again only when
-/// the storage rounds anything, else it is the same number.
-pub fn exact_max_error(hf: &Heightfield, mesh: &SampleMesh, stored: &ErrorStats) -> f64 {
-    if Storage::f32(hf).is_exact() {
+/// The f64 figure beside `stored` (what [`measure_stored`] found for `mesh` as `storage` holds
+/// it): measured again only when the storage rounds anything, else it is the same number.
+pub fn exact_max_error(hf: &Heightfield, mesh: &SampleMesh, stored: &ErrorStats, storage: &Storage) -> f64 {
+    if storage.is_exact() {
         stored.max_error_m
     } else {
         measure_exact(hf, mesh).max_error_m
@@ -227,7 +232,7 @@ fn scan_triangle(hf: &Heightfield, c: [[i64; 2]; 3], surface: Surface, slots: &[
     let sign = orient(c[0], c[1], c[2]).signum();
     let area = orient(c[0], c[1], c[2]) * sign;
     let hc = match surface {
-        Surface::Stored(_) => c.map(|p| hf.at(p[0] as usize, p[1] as usize) as f64),
+        Surface::Stored(storage) => c.map(|p| storage.stored_y(hf.at(p[0] as usize, p[1] as usize))),
         Surface::Exact => c.map(|p| hf.reference(p[1] as usize * w + p[0] as usize)),
     };
     let (i0, i1) = (c.iter().map(|p| p[0]).min().unwrap_or(0), c.iter().map(|p| p[0]).max().unwrap_or(0));

@@ -11,9 +11,11 @@ use crate::heightfield::{self, DecodeOptions, Decoded, Encoding, Heightfield, He
 use crate::mesh::{Bounds, Scene};
 use crate::terrain::layers::{bake_layers, LayerReport};
 use crate::terrain::build::{build_scene, BuildError, BuildOptions};
-use crate::terrain::error::{exact_max_error, measure, ErrorStats};
+use crate::export::gltf::WriteOptions;
+use crate::terrain::error::{exact_max_error, measure_stored, ErrorStats};
+use crate::terrain::stored::{PositionGrid, Storage};
 use crate::terrain::grid::grid;
-use crate::terrain::tin::{tin, TinOptions};
+use crate::terrain::tin::{tin_stored, TinOptions};
 use crate::terrain::{SampleMesh, TerrainError};
 
 /// Where the heights come from.
@@ -51,6 +53,10 @@ pub struct TerrainJob {
     pub max_error_m: f64,
     pub max_triangles: Option<usize>,
     pub build: BuildOptions,
+    /// Store positions as 16-bit integers (KHR_mesh_quantization); the bound holds as quantized.
+    pub quantize: bool,
+    /// Also compress vertex and index data (EXT_meshopt_compression; lossless); needs `quantize`.
+    pub meshopt: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -154,19 +160,20 @@ pub fn mesh_samples(
     grid_step: usize,
     max_error_m: f64,
     max_triangles: Option<usize>,
+    storage: &Storage,
 ) -> Result<(SampleMesh, bool), TerrainError> {
     match mode {
         MeshMode::Grid => Ok((grid(hf, grid_step)?, false)),
         MeshMode::Tin => {
-            let r = tin(hf, &TinOptions { max_error_m, max_triangles })?;
+            let r = tin_stored(hf, &TinOptions { max_error_m, max_triangles }, storage)?;
             Ok((r.mesh, r.hit_triangle_limit))
         }
     }
 }
 
 /// Meshes `hf` as the job asks, at `max_error_m`.
-pub fn mesh_heightfield(job: &TerrainJob, hf: &Heightfield, max_error_m: f64) -> Result<(SampleMesh, bool), JobError> {
-    mesh_samples(hf, job.mode, job.grid_step, max_error_m, job.max_triangles)
+pub fn mesh_heightfield(job: &TerrainJob, hf: &Heightfield, max_error_m: f64, storage: &Storage) -> Result<(SampleMesh, bool), JobError> {
+    mesh_samples(hf, job.mode, job.grid_step, max_error_m, job.max_triangles, storage)
         .map_err(|error| JobError::Terrain { source_label: job.source.label(), error })
 }
 
@@ -183,6 +190,23 @@ fn check_options(job: &TerrainJob) -> Result<(), JobError> {
     Ok(())
 }
 
+/// The 16-bit grid of a quantized terrain: x and z by the cell, y from the lowest point written
+/// (the base's bottom or the skirts' below the lowest sample) to the highest sample.
+fn position_grid(job: &TerrainJob, hf: &Heightfield) -> Result<PositionGrid, JobError> {
+    let lowest = hf.height_range().map_or(0.0, |r| r.0);
+    let depth = job.build.base_depth_m.or(job.build.skirt_depth_m);
+    let bottom = match depth {
+        Some(d) => crate::terrain::solid::lowered(lowest, d).unwrap_or(lowest),
+        None => lowest,
+    };
+    PositionGrid::terrain(hf, bottom).ok_or_else(|| {
+        JobError::Options(format!(
+            "--quantize stores x and z as 16-bit sample numbers, but the map is {}×{} samples (at most 65536 a side); leave --quantize out",
+            hf.width, hf.height
+        ))
+    })
+}
+
 /// Runs the job; writes the scene to `output` when given.
 pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Scene), JobError> {
     check_options(job)?;
@@ -191,12 +215,16 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
     let hf = &decoded.heightfield;
     let t_decode = t0.elapsed().as_secs_f64();
 
+    // how the file stores the vertices: the bound holds for that
+    let grid = if job.quantize { Some(position_grid(job, hf)?) } else { None };
+    let storage = grid.map_or_else(|| Storage::f32(hf), |g| Storage::quantized(hf, g));
+
     let t = Instant::now();
-    let (mesh, hit_limit) = mesh_heightfield(job, hf, job.max_error_m)?;
+    let (mesh, hit_limit) = mesh_heightfield(job, hf, job.max_error_m, &storage)?;
     let t_mesh = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let stats: ErrorStats = measure(hf, &mesh);
+    let stats: ErrorStats = measure_stored(hf, &mesh, &storage);
     let t_analyze = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -208,7 +236,7 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
     let t = Instant::now();
     let output_summary = match output {
         Some(path) => {
-            let files = export::write_scene(&scene, path)?;
+            let files = export::write_scene_with(&scene, path, &WriteOptions { position_grid: grid, meshopt: job.meshopt && grid.is_some() })?;
             Some(summarize(&scene, files.iter().map(|f| f.display().to_string()).collect()))
         }
         None => None,
@@ -228,7 +256,7 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
         max_triangles: job.max_triangles,
         hit_triangle_limit: hit_limit,
         max_error: stats.max_error_m,
-        max_error_f64: exact_max_error(hf, &mesh, &stats),
+        max_error_f64: exact_max_error(hf, &mesh, &stats, &storage),
         worst_sample: stats.worst_sample,
         rms_error: stats.rms_error_m,
         vertices: mesh.vertices.len(),
@@ -294,12 +322,14 @@ pub fn sweep(job: &TerrainJob, thresholds_m: &[f64]) -> Result<(Decoded, Vec<Swe
     }
     let decoded = load_source(job)?;
     let hf = &decoded.heightfield;
+    let grid = if job.quantize { Some(position_grid(job, hf)?) } else { None };
+    let storage = grid.map_or_else(|| Storage::f32(hf), |g| Storage::quantized(hf, g));
     let mut rows = Vec::with_capacity(thresholds_m.len());
     for &max_error_m in thresholds_m {
         let t = Instant::now();
-        let (mesh, hit_triangle_limit) = mesh_heightfield(job, hf, max_error_m)?;
+        let (mesh, hit_triangle_limit) = mesh_heightfield(job, hf, max_error_m, &storage)?;
         let seconds = t.elapsed().as_secs_f64();
-        let stats = measure(hf, &mesh);
+        let stats = measure_stored(hf, &mesh, &storage);
         rows.push(SweepRow {
             max_error_requested: max_error_m,
             triangles: mesh.triangles.len(),

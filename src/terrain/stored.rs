@@ -1,6 +1,7 @@
 //! The terrain as the written file holds it: every vertex at its sample's position rounded to
-//! 32-bit floats (x = i·cell, y = the height, z = j·cell), and the vertical error of that surface
-//! measured against the map's reference heights (the values its encoding defines, in f64).
+//! 32-bit floats (x = i·cell, y = the height, z = j·cell), or on a 16-bit grid (`--quantize`,
+//! KHR_mesh_quantization), and the vertical error of that surface measured against the map's
+//! reference heights (the values its encoding defines, in f64).
 //!
 //! The mesher's own measure works on the f32 heights in the (i, j) plane; the stored measure can
 //! exceed it by the rounding of the heights (half an ulp: 3·10⁻⁵ m at 1 km, 5·10⁻⁴ m at 8 km) and, on
@@ -11,10 +12,46 @@
 use crate::heightfield::Heightfield;
 use crate::terrain::error::plane_height;
 
+/// A 16-bit position grid (KHR_mesh_quantization): a vertex is stored as integers q, and the file's
+/// node transform puts it at `origin + step·q` (per axis). For a terrain, x and z step by the cell
+/// (q = i, j: exact) and y by the height range over 65,535.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PositionGrid {
+    pub origin: [f32; 3],
+    pub step: [f32; 3],
+}
+
+impl PositionGrid {
+    /// The grid of a terrain over `hf` whose lowest stored point is `lowest_m` (the lowest sample,
+    /// or a skirt's or base's bottom below it); `None` when the map is too wide for 16 bits.
+    pub fn terrain(hf: &Heightfield, lowest_m: f32) -> Option<PositionGrid> {
+        if hf.width > 65536 || hf.height > 65536 {
+            return None;
+        }
+        let highest = hf.height_range()?.1.max(lowest_m);
+        let cell = hf.cell_size_m as f32;
+        // the step rounds up, so the highest point's integer stays within 65,535
+        let step_y = (((highest as f64 - lowest_m as f64) / 65535.0) as f32).next_up().max(f32::MIN_POSITIVE);
+        Some(PositionGrid { origin: [0.0, lowest_m, 0.0], step: [cell, step_y, cell] })
+    }
+
+    /// The integer a coordinate is stored as on `axis`.
+    #[inline]
+    pub fn quantize(&self, axis: usize, v: f32) -> i64 {
+        ((v as f64 - self.origin[axis] as f64) / self.step[axis] as f64).round() as i64
+    }
+
+    /// What the file holds for integer `q` on `axis`: origin + step·q, exactly (f64).
+    #[inline]
+    pub fn dequantize(&self, axis: usize, q: i64) -> f64 {
+        self.origin[axis] as f64 + self.step[axis] as f64 * q as f64
+    }
+}
+
 /// Where the file puts the samples, and how far that can move the surface from the mesher's.
 #[derive(Debug, Clone)]
 pub struct Storage {
-    /// Stored x of column i and z of row j (exact values of the f32s written).
+    /// Stored x of column i and z of row j (exact values of what the file holds).
     xs: Vec<f64>,
     zs: Vec<f64>,
     /// Nominal x of column i (i·cell), the place each sample is measured at.
@@ -22,27 +59,74 @@ pub struct Storage {
     /// Every stored x and z equals i·cell and j·cell exactly: the plane can be evaluated with the
     /// canonical integer weights.
     xz_exact: bool,
+    /// Heights on a 16-bit grid, or as f32 (`None`).
+    grid: Option<PositionGrid>,
     /// Largest horizontal distance between a stored vertex and its sample, metres.
     pub xz_shift_m: f64,
-    /// Largest |reference − stored| height over all samples, metres.
+    /// Largest |reference − f32| height over all samples, metres.
     pub height_shift_m: f64,
+    /// Largest |stored − f32| vertex height over all samples (the quantization), metres.
+    pub vertex_shift_m: f64,
 }
 
 impl Storage {
-    /// Positions as 32-bit floats, as every writer stores them today.
+    /// Positions as 32-bit floats, as every writer stores them by default.
     pub fn f32(hf: &Heightfield) -> Storage {
         let cell = hf.cell_size_m;
         let axis = |n: usize| -> Vec<f64> { (0..n).map(|i| (i as f64 * cell) as f32 as f64).collect() };
-        let (xs, zs) = (axis(hf.width), axis(hf.height));
+        Storage::new(hf, axis(hf.width), axis(hf.height), None)
+    }
+
+    /// Positions on a 16-bit grid (`--quantize`): x, z and heights as the grid stores them.
+    pub fn quantized(hf: &Heightfield, grid: PositionGrid) -> Storage {
+        let axis = |n: usize, a: usize| -> Vec<f64> { (0..n).map(|i| grid.dequantize(a, i as i64)).collect() };
+        Storage::new(hf, axis(hf.width, 0), axis(hf.height, 2), Some(grid))
+    }
+
+    fn new(hf: &Heightfield, xs: Vec<f64>, zs: Vec<f64>, grid: Option<PositionGrid>) -> Storage {
+        let cell = hf.cell_size_m;
         let shift = |v: &[f64]| v.iter().enumerate().fold(0.0f64, |m, (i, &x)| m.max((x - i as f64 * cell).abs()));
         let xz_shift_m = shift(&xs).max(shift(&zs));
-        Storage { xs, zs, cell_size_m: cell, xz_exact: xz_shift_m == 0.0, xz_shift_m, height_shift_m: hf.rounding_m() }
+        let mut s = Storage {
+            xs,
+            zs,
+            cell_size_m: cell,
+            xz_exact: xz_shift_m == 0.0,
+            grid,
+            xz_shift_m,
+            height_shift_m: hf.rounding_m(),
+            vertex_shift_m: 0.0,
+        };
+        if grid.is_some() {
+            s.vertex_shift_m = hf.heights.iter().fold(0.0f64, |m, &h| m.max((s.stored_y(h) - h as f64).abs()));
+        }
+        s
+    }
+
+    /// The height the file stores for a vertex whose f32 height is `h`.
+    #[inline]
+    pub fn stored_y(&self, h: f32) -> f64 {
+        match &self.grid {
+            None => h as f64,
+            Some(g) => g.dequantize(1, g.quantize(1, h)),
+        }
+    }
+
+    /// Distance between neighbouring stored heights near `h`, and what sets it.
+    pub fn height_step(&self, h: f64) -> (f64, &'static str) {
+        match &self.grid {
+            None => {
+                let f = (h as f32).abs();
+                ((f.next_up() - f) as f64, "32-bit floats")
+            }
+            Some(g) => (g.step[1] as f64, "16-bit quantized positions (--quantize)"),
+        }
     }
 
     /// True when the stored measure is the mesher's own (exact heights, exact x and z): nothing to
     /// check again.
     pub fn is_exact(&self) -> bool {
-        self.xz_exact && self.height_shift_m == 0.0
+        self.xz_exact && self.height_shift_m == 0.0 && self.vertex_shift_m == 0.0
     }
 
     /// Every stored x and z is exactly i·cell and j·cell.
@@ -77,7 +161,7 @@ impl Storage {
     /// horizontal shifts (3× the largest, a first-order bound with room to spare), plus f64 rounding.
     pub(crate) fn margin(&self, c: [[i64; 2]; 3], hc: [f64; 3]) -> f64 {
         let magnitude = hc.iter().fold(0.0f64, |m, h| m.max(h.abs()));
-        let mut m = self.height_shift_m + 1e-9 * (1.0 + magnitude);
+        let mut m = self.height_shift_m + self.vertex_shift_m + 1e-9 * (1.0 + magnitude);
         if !self.xz_exact {
             // gradient of the plane in metres per metre, from the (i, j) plane
             let area = orient(c[0], c[1], c[2]) as f64;
@@ -94,7 +178,7 @@ impl Storage {
     pub(crate) fn scan(&self, hf: &Heightfield, mut c: [[i64; 2]; 3], floor: f64) -> (Option<(f64, u32, u32)>, f64) {
         c.sort_unstable_by_key(|p| (p[1], p[0]));
         let w = hf.width;
-        let hc = c.map(|p| hf.at(p[0] as usize, p[1] as usize) as f64);
+        let hc = c.map(|p| self.stored_y(hf.at(p[0] as usize, p[1] as usize)));
         let sign = orient(c[0], c[1], c[2]).signum();
         if sign == 0 {
             return (None, 0.0);

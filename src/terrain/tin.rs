@@ -19,7 +19,7 @@ use spade::handles::FixedVertexHandle;
 use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use crate::heightfield::Heightfield;
-use crate::terrain::error::{check_heightfield, measure, plane_height, TerrainError};
+use crate::terrain::error::{check_heightfield, measure_stored, plane_height, TerrainError};
 use crate::terrain::stored::Storage;
 use crate::terrain::SampleMesh;
 
@@ -916,6 +916,12 @@ impl GreedyDelaunay {
 /// Builds a TIN of `hf` whose vertical error at every sample is at most `opts.max_error_m` (unless
 /// `opts.max_triangles` stops it first). Deterministic; heights are only read.
 pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainError> {
+    tin_stored(hf, opts, &Storage::f32(hf))
+}
+
+/// [`tin`] for a file that stores the vertices as `storage` says (f32, or a 16-bit grid): the
+/// bound holds for the surface as stored.
+pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Result<TinResult, TerrainError> {
     check_input(hf, opts)?;
     let (w, h) = (hf.width, hf.height);
     let (xm, ym) = ((w - 1) as u32, (h - 1) as u32);
@@ -933,14 +939,13 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
     let mut queue = FaceQueue::default();
     // The file stores f32 positions: where they can differ from the samples, faces near the bound
     // are measured again as stored.
-    let storage = Storage::f32(hf);
     let as_stored = !storage.is_exact();
     let rescan = |dt: &GreedyDelaunay, faces: &mut Vec<FaceSlot>, queue: &mut FaceQueue, t: u32| {
         let e = 3 * t as usize;
         let corners = [corner(dt.tri[e], dt), corner(dt.tri[e + 1], dt), corner(dt.tri[e + 2], dt)];
         let mut scan = find_candidate(hf, corners, opts.max_error_m);
         if as_stored {
-            scan = recheck_stored(&storage, hf, corners, scan, opts.max_error_m);
+            scan = recheck_stored(storage, hf, corners, scan, opts.max_error_m);
         }
         record_scan(faces, queue, t, &scan, w as u32);
     };
@@ -974,29 +979,25 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
         // Counter-clockwise in (i, j) is clockwise seen from +Y: swap two corners.
         triangles: dt.tri.chunks_exact(3).map(|c| [c[0], c[2], c[1]]).collect(),
     };
-    let max_error_m = achieved_error(hf, &faces, 0, &mesh, as_stored.then_some(&storage));
+    let max_error_m = achieved_error(hf, &faces, 0, &mesh, as_stored.then_some(storage));
     if !as_stored || max_error_m <= opts.max_error_m || hit_triangle_limit {
         return Ok(TinResult { mesh, max_error_m, hit_triangle_limit });
     }
     // Every face's samples other than its corners are within the bound as stored; what is left
     // over is at vertices, whose stored heights the bound is finer than.
-    let stats = measure(hf, &mesh);
+    let stats = measure_stored(hf, &mesh, storage);
     let [i, j] = stats.worst_sample;
     let height_m = hf.reference(j as usize * hf.width + i as usize);
+    let (step_m, storage_kind) = storage.height_step(height_m);
     Err(TerrainError::BelowStoragePrecision {
         max_error_m: opts.max_error_m,
         achieved_m: stats.max_error_m,
         i: i as usize,
         j: j as usize,
         height_m,
-        step_m: ulp_f32(height_m),
+        step_m,
+        storage: storage_kind,
     })
-}
-
-/// Distance between neighbouring 32-bit floats at `x`.
-fn ulp_f32(x: f64) -> f64 {
-    let f = (x as f32).abs();
-    (f.next_up() - f) as f64
 }
 
 /// A face's scan as stored (see [`Storage`]): a face the mesher found above the bound stays

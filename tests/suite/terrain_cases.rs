@@ -25,6 +25,8 @@ fn job_for(path: &Path, max_error_m: f64) -> TerrainJob {
         max_error_m,
         max_triangles: None,
         build: BuildOptions { chunk_samples: None, skirt_depth_m: None, base_depth_m: None, name: "t".into() },
+        quantize: false,
+        meshopt: false,
     }
 }
 
@@ -250,34 +252,10 @@ fn the_bound_holds_in_the_bytes_written_at_high_altitude() {
     assert!(report.max_error <= 0.1, "{} over the bound as written", report.max_error);
 
     // Independently: the file's triangles, located by their vertices' samples, evaluated through
-    // the stored f32 positions at each sample's place.
-    let back = read_scene(&dir.path().join("out.glb")).unwrap();
-    let prim = &back.meshes[0].primitives[0];
+    // the stored f32 vertices at each sample's place.
     let truth = |i: i64, j: i64| dm(i as u32, j as u32) as f64 * 0.1 - 10000.0;
-    let (mut worst, mut covered) = (0.0f64, std::collections::HashSet::new());
-    for t in prim.indices.chunks_exact(3) {
-        let p = [t[0], t[1], t[2]].map(|k| prim.positions[k as usize].map(|c| c as f64));
-        let ij = p.map(|q| [(q[0] / cell).round() as i64, (q[2] / cell).round() as i64]);
-        let d = (p[1][0] - p[0][0]) * (p[2][2] - p[0][2]) - (p[2][0] - p[0][0]) * (p[1][2] - p[0][2]);
-        let (i0, i1) = (ij.iter().map(|q| q[0]).min().unwrap(), ij.iter().map(|q| q[0]).max().unwrap());
-        let (j0, j1) = (ij.iter().map(|q| q[1]).min().unwrap(), ij.iter().map(|q| q[1]).max().unwrap());
-        for j in j0..=j1 {
-            for i in i0..=i1 {
-                let o = |a: [i64; 2], b: [i64; 2]| (b[0] - a[0]) * (j - a[1]) - (b[1] - a[1]) * (i - a[0]);
-                let s = [o(ij[1], ij[2]), o(ij[2], ij[0]), o(ij[0], ij[1])];
-                if !(s.iter().all(|&v| v >= 0) || s.iter().all(|&v| v <= 0)) {
-                    continue;
-                }
-                let (x, z) = (i as f64 * cell, j as f64 * cell);
-                let l1 = ((x - p[0][0]) * (p[2][2] - p[0][2]) - (p[2][0] - p[0][0]) * (z - p[0][2])) / d;
-                let l2 = ((p[1][0] - p[0][0]) * (z - p[0][2]) - (x - p[0][0]) * (p[1][2] - p[0][2])) / d;
-                let y = p[0][1] + l1 * (p[1][1] - p[0][1]) + l2 * (p[2][1] - p[0][1]);
-                worst = worst.max((y - truth(i, j)).abs());
-                covered.insert((i, j));
-            }
-        }
-    }
-    assert_eq!(covered.len(), (w * h) as usize, "every sample under a triangle of the file");
+    let (worst, covered) = error_in_file(&dir.path().join("out.glb"), cell, &truth);
+    assert_eq!(covered, (w * h) as usize, "every sample under a triangle of the file");
     assert!(worst <= 0.1, "the written surface is {worst} m off the map");
     assert!((worst - report.max_error).abs() < 1e-9, "independent {worst} vs reported {}", report.max_error);
     // the f32 rounding is really at play here: the exact triangulation alone is not the figure
@@ -290,4 +268,113 @@ fn the_bound_holds_in_the_bytes_written_at_high_altitude() {
     let msg = err.to_string();
     assert!(msg.contains("32-bit floats") && msg.contains("--max-error 0.0002"), "{msg}");
     assert!(!dir.path().join("fine.glb").exists());
+}
+
+/// The largest |surface − truth| over the samples under the surface triangles of a terrain file
+/// as written, and how many samples are covered, computed independently of the library: every
+/// mesh placed by its node (translation + scale · position, as KHR_mesh_quantization stores it;
+/// identity for f32 files), vertices mapped back to samples by x/cell and z/cell, the stored
+/// triangle evaluated at each sample's place (i·cell, j·cell) in f64. Triangles facing sideways or
+/// down (skirts, base) are skipped.
+fn error_in_file(path: &Path, cell: f64, truth: &dyn Fn(i64, i64) -> f64) -> (f64, usize) {
+    let back = read_scene(path).unwrap();
+    let (mut worst, mut covered) = (0.0f64, std::collections::HashSet::new());
+    for node in back.nodes.iter().filter(|n| n.mesh.is_some()) {
+        assert_eq!(node.rotation, [0.0, 0.0, 0.0, 1.0], "terrain nodes are not rotated");
+        let (t, sc) = (node.translation.map(|c| c as f64), node.scale.map(|c| c as f64));
+        for prim in &back.meshes[node.mesh.unwrap()].primitives {
+            let world: Vec<[f64; 3]> = prim.positions.iter().map(|p| [0, 1, 2].map(|a| t[a] + sc[a] * p[a] as f64)).collect();
+            for tri in prim.indices.chunks_exact(3) {
+                let p = [tri[0], tri[1], tri[2]].map(|k| world[k as usize]);
+                let d = (p[1][0] - p[0][0]) * (p[2][2] - p[0][2]) - (p[2][0] - p[0][0]) * (p[1][2] - p[0][2]);
+                // counter-clockwise from +Y is a negative d in (x, z); skirts and the base are not surface
+                if d >= 0.0 {
+                    continue;
+                }
+                let ij = p.map(|q| [(q[0] / cell).round() as i64, (q[2] / cell).round() as i64]);
+                let (i0, i1) = (ij.iter().map(|q| q[0]).min().unwrap(), ij.iter().map(|q| q[0]).max().unwrap());
+                let (j0, j1) = (ij.iter().map(|q| q[1]).min().unwrap(), ij.iter().map(|q| q[1]).max().unwrap());
+                for j in j0..=j1 {
+                    for i in i0..=i1 {
+                        let o = |a: [i64; 2], b: [i64; 2]| (b[0] - a[0]) * (j - a[1]) - (b[1] - a[1]) * (i - a[0]);
+                        let s = [o(ij[1], ij[2]), o(ij[2], ij[0]), o(ij[0], ij[1])];
+                        if !(s.iter().all(|&v| v >= 0) || s.iter().all(|&v| v <= 0)) {
+                            continue;
+                        }
+                        let (x, z) = (i as f64 * cell, j as f64 * cell);
+                        let l1 = ((x - p[0][0]) * (p[2][2] - p[0][2]) - (p[2][0] - p[0][0]) * (z - p[0][2])) / d;
+                        let l2 = ((p[1][0] - p[0][0]) * (z - p[0][2]) - (x - p[0][0]) * (p[1][2] - p[0][2])) / d;
+                        let y = p[0][1] + l1 * (p[1][1] - p[0][1]) + l2 * (p[2][1] - p[0][1]);
+                        worst = worst.max((y - truth(i, j)).abs());
+                        covered.insert((i, j));
+                    }
+                }
+            }
+        }
+    }
+    (worst, covered.len())
+}
+
+/// `--quantize` (KHR_mesh_quantization) and `--compress` (plus EXT_meshopt_compression) on a
+/// chunked terrain with skirts: the bound holds for the 16-bit vertices as the file places them,
+/// the compressed file reads back equal to the quantized one and is smaller, both validate, and
+/// an .obj is refused.
+#[test]
+fn quantized_and_compressed_terrains_keep_the_bound_as_stored() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (130u32, 90u32);
+    let v = |i: u32, j: u32| -> u16 {
+        let (x, z) = (i as f64 / 9.0, j as f64 / 6.0);
+        (30000.0 + 20000.0 * (x.sin() * z.cos()) + 900.0 * ((i * 5 + j * 3) % 7) as f64) as u16
+    };
+    let path = write_png(dir.path(), "q.png", w, h, v);
+    // gray: offset + v / 65535 · scale, a decimal scale no f32 holds exactly
+    let (scale, offset, cell) = (2345.6, 812.3, 7.5);
+    let truth = |i: i64, j: i64| offset + v(i as u32, j as u32) as f64 / 65535.0 * scale;
+    let mut job = job_for(&path, 0.25);
+    job.decode = DecodeOptions { encoding: Encoding::Gray, height_scale_m: scale, height_offset_m: offset, cell_size_m: cell, ..DecodeOptions::default() };
+    job.build = BuildOptions { chunk_samples: Some(32), skirt_depth_m: Some(4.0), base_depth_m: None, name: "q".into() };
+    let mut sizes = Vec::new();
+    let mut scenes = Vec::new();
+    for (name, quantize, meshopt) in [("f32.glb", false, false), ("quantized.glb", true, false), ("compressed.glb", true, true)] {
+        let (mut job, out) = (job.clone(), dir.path().join(name));
+        (job.quantize, job.meshopt) = (quantize, meshopt);
+        let (report, _) = job::run(&job, Some(&out)).unwrap();
+        assert!(report.max_error <= 0.25, "{name}: {} as written", report.max_error);
+        let (worst, covered) = error_in_file(&out, cell, &truth);
+        assert_eq!(covered, (w * h) as usize, "{name}");
+        assert!(worst <= 0.25, "{name}: the file is {worst} m off the map");
+        assert!((worst - report.max_error).abs() < 1e-9, "{name}: independent {worst} vs reported {}", report.max_error);
+        let v = validate_file(&out, &ValidateOptions { up_facing: false }).unwrap();
+        assert!(v.ok(), "{name}: {v}");
+        sizes.push(std::fs::metadata(&out).unwrap().len());
+        scenes.push(read_scene(&out).unwrap());
+    }
+    for (a, b) in scenes[1].meshes.iter().zip(&scenes[2].meshes) {
+        for (pa, pb) in a.primitives.iter().zip(&b.primitives) {
+            assert_eq!(pa.positions, pb.positions, "{}: positions", a.name);
+            assert_eq!(pa.normals, pb.normals, "{}: normals", a.name);
+            assert_eq!(pa.uvs, pb.uvs, "{}: uvs", a.name);
+            // meshoptimizer's index codec may rotate a triangle's corners (winding kept)
+            let rotated = |t: &[u32]| {
+                let k = (0..3).min_by_key(|&k| t[k]).unwrap();
+                [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+            };
+            let (ta, tb): (Vec<_>, Vec<_>) = (pa.indices.chunks(3).map(rotated).collect(), pb.indices.chunks(3).map(rotated).collect());
+            assert_eq!(ta, tb, "{}: the same triangles in the same order and winding", a.name);
+        }
+    }
+    let mut without_indices = scenes.clone();
+    for s in without_indices.iter_mut() {
+        s.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()).for_each(|p| p.indices.clear());
+    }
+    assert_eq!(without_indices[1], without_indices[2], "the compressed file reads back as the quantized one");
+    assert!(sizes[1] < sizes[0] && sizes[2] * 2 < sizes[1], "sizes f32, quantized, compressed: {sizes:?}");
+    let json = String::from_utf8_lossy(&std::fs::read(dir.path().join("compressed.glb")).unwrap()).to_string();
+    assert!(json.contains("KHR_mesh_quantization") && json.contains("EXT_meshopt_compression"));
+
+    let mut obj = job.clone();
+    obj.quantize = true;
+    let err = job::run(&obj, Some(&dir.path().join("q.obj"))).unwrap_err();
+    assert!(err.to_string().contains("glTF"), "{err}");
 }
