@@ -320,19 +320,39 @@ while IFS=$'\t' read -r name status tris verts; do
   if [ "$status" = ok ]; then CHECKED[$name]="ok $tris tris $verts verts"; else CHECKED[$name]="FAIL"; fi
 done < "$OUT/check_outputs.tsv"
 
-section "5a2. the terrain bound holds in the bytes written (check_terrain_bound.py: f32 vertices vs the map decoded in f64)"
-# Terrain-RGB decimetres are not f32 values: the bound must hold for the file, not for the f32 rounding.
+section "5a2. the terrain bound holds in the bytes written, f32 and quantized (check_terrain_bound.py: stored vertices vs the map decoded in f64); --quantize/--compress files validate (verdant, Khronos) and load in three.js and Babylon.js"
+# Terrain-RGB decimetres are not f32 values: the bound must hold for the file, not for the f32 rounding;
+# a quantized file holds 16-bit vertices placed by the node's scale and translation.
 if [ -f "$FUJI" ]; then
-  for bound in 5 0.5; do
-    name="fuji_bound_$bound"
-    if "$BIN" terrain "$FUJI" --encoding terrain-rgb --cell-size 30 --max-error "$bound" \
-         -o "$OUT/$name.glb" --report "$OUT/$name.json" --quiet \
-       && "$PY" scripts/check_terrain_bound.py "$OUT/$name.glb" --heightmap "$FUJI" --encoding terrain-rgb \
+  compact=()
+  for variant in "5" "0.5" "0.5 --quantize" "0.5 --compress"; do
+    read -r bound flag <<<"$variant"
+    name="fuji_bound_$bound${flag:+_${flag#--}}"
+    if ! "$BIN" terrain "$FUJI" --encoding terrain-rgb --cell-size 30 --max-error "$bound" ${flag:+"$flag"} \
+         -o "$OUT/$name.glb" --report "$OUT/$name.json" --quiet; then
+      fail "verdant terrain $name failed"; continue
+    fi
+    if [ -n "$flag" ]; then
+      compact+=("$OUT/$name.glb")
+      if "$BIN" validate --quiet --up-facing "$OUT/$name.glb"; then pass; else fail "verdant validate $name.glb"; fi
+    fi
+    # the python check reads float and quantized positions; a --compress file is checked equal to
+    # its --quantize twin by the Rust tests (terrain_cases::quantized_and_compressed_…)
+    if [ "$flag" = "--compress" ]; then continue; fi
+    if "$PY" scripts/check_terrain_bound.py "$OUT/$name.glb" --heightmap "$FUJI" --encoding terrain-rgb \
          --cell-size 30 --max-error "$bound" --expect-report "$OUT/$name.json"; then
       pass
     else
       fail "the terrain bound $bound m does not hold in $name.glb"
     fi
+  done
+  if node scripts/gltf_validate.mjs "${compact[@]}"; then pass; else fail "Khronos glTF Validator on ${compact[*]##*/}"; fi
+  for engine in babylon three; do
+    log="$OUT/check_${engine}_terrain.log"
+    node scripts/engines/check_babylon.mjs --engine "$engine" --thumbs "$OUT/engines" "$OUT/fuji_bound_0.5.glb" "${compact[@]}" > "$log" 2>&1 || true
+    sed 's|'"$OUT"'/||' "$log" || true
+    n=$((1 + ${#compact[@]})); oks=$(grep -c '^ok ' "$log" || true)
+    if [ "$oks" -eq "$n" ]; then pass; else fail "$engine: $((n - oks)) of $n terrain files (f32, --quantize, --compress) failed (see $log)"; fi
   done
 else
   echo "skip: $FUJI not found, no bound-as-written check"

@@ -4,7 +4,8 @@
 Reads the positions and triangles of every primitive of a .glb written by `verdant terrain`
 (pygltflib; float32, or 16-bit integers placed by their node's scale and translation as
 KHR_mesh_quantization stores them, evaluated in float64), decodes the heightmap in float64 exactly as its encoding defines it
-(Terrain-RGB: (R·65536 + G·256 + B)·0.1 − 10000 m; Terrarium: R·256 + G + B/256 − 32768 m), and for
+(Terrain-RGB: (R·65536 + G·256 + B)·0.1 − 10000 m; Terrarium: R·256 + G + B/256 − 32768 m; gray:
+offset + v/vmax·scale), and for
 every sample under a triangle evaluates the stored surface at the sample's place (x = i·cell,
 z = j·cell) by barycentric interpolation through the stored vertices. Prints the largest error and
 fails when it exceeds --max-error, or when a sample is left uncovered.
@@ -38,7 +39,13 @@ def read_accessor(gltf: pygltflib.GLTF2, blob: bytes, index: int) -> np.ndarray:
     return np.ascontiguousarray(rows).view(dtype).reshape(acc.count, n)
 
 
-def decode(path: str, encoding: str) -> np.ndarray:
+def decode(path: str, encoding: str, scale: float = 100.0, offset: float = 0.0) -> np.ndarray:
+    if encoding == "gray":
+        # offset + v / vmax · scale, as verdant's --encoding gray (8- or 16-bit single channel)
+        img = Image.open(path)
+        v = np.asarray(img, dtype=np.float64)
+        vmax = 65535.0 if img.mode in ("I;16", "I;16B", "I", "I;16L") else 255.0
+        return offset + v / vmax * scale
     rgb = np.asarray(Image.open(path).convert("RGB"), dtype=np.float64)
     r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
     if encoding == "terrain-rgb":
@@ -52,13 +59,15 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("file")
     ap.add_argument("--heightmap", required=True)
-    ap.add_argument("--encoding", required=True, choices=["terrain-rgb", "terrarium"])
+    ap.add_argument("--encoding", required=True, choices=["terrain-rgb", "terrarium", "gray"])
+    ap.add_argument("--height-scale", type=float, default=100.0, help="gray: metres over the full range")
+    ap.add_argument("--height-offset", type=float, default=0.0, help="gray: metres added")
     ap.add_argument("--cell-size", type=float, required=True)
     ap.add_argument("--max-error", type=float, required=True)
     ap.add_argument("--expect-report", help="the run's --report: its max_error must equal this measure")
     a = ap.parse_args()
 
-    heights = decode(a.heightmap, a.encoding)
+    heights = decode(a.heightmap, a.encoding, a.height_scale, a.height_offset)
     rows, cols = heights.shape
     gltf = pygltflib.GLTF2().load(a.file)
     blob = gltf.binary_blob()

@@ -55,6 +55,7 @@ const server = http.createServer((req, res) => {
   if (url === '/') file = path.join(here, 'babylon.html');
   else if (url === '/three.html') file = path.join(here, 'three.html');
   else if (url === '/frame_stats.js') file = path.join(here, 'frame_stats.js');
+  else if (url === '/meshopt_shim.js') file = path.join(here, 'meshopt_shim.js');
   else if (url.startsWith('/node_modules/')) file = path.join(here, url);
   else if (url.startsWith('/files/') && allowed.has(url.slice('/files'.length))) file = url.slice('/files'.length);
   if (!file) { res.writeHead(url === '/favicon.ico' ? 204 : 404); res.end(); return; }

@@ -1,0 +1,98 @@
+#!/usr/bin/env bash
+# Compact terrain outputs against gltfpack (npm `gltfpack`), on the same inputs, at equal or smaller
+# error as written (issue 17 item 3). Every file's error is measured the same way, independently
+# (scripts/check_terrain_bound.py: the stored vertices — f32, or 16-bit integers placed by their
+# node — against the heightmap decoded in f64, at every sample).
+#
+# Per input and bound B: verdant's f32 file, `--quantize` (KHR_mesh_quantization) and `--compress`
+# (+ EXT_meshopt_compression), all within B by construction; gltfpack run on verdant's f32 mesh
+# with 16-bit positions (-vp 16: its default 14 bits breaks any bound finer than its grid step),
+# uncompressed and with -c. gltfpack re-quantizes positions on one uniform grid over the whole
+# bounding box, which moves vertices off their samples and so adds error: its input mesh is made
+# finer (B·k for k = 1, 0.8, 0.6, …) until its output is within B. Ratios are verdant / gltfpack.
+#
+#   scripts/bench_compact.sh            (Fuji and Puget Sound from ../shared/data; skipped if absent)
+#
+# Installs gltfpack into .tools/gltfpack and numpy/pillow/pygltflib into .tools/bench-venv once.
+# VERDANT_BIN=path/to/verdant uses that binary instead of building target/release/verdant.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+DATA="${VERDANT_DATA:-../shared/data}"
+
+if [ -n "${VERDANT_BIN:-}" ]; then BIN="$VERDANT_BIN"; else cargo build --release --quiet; BIN="$PWD/target/release/verdant"; fi
+GLTFPACK="$PWD/.tools/gltfpack/node_modules/.bin/gltfpack"
+if [ ! -x "$GLTFPACK" ]; then
+  echo "installing gltfpack 1.3.0 into .tools/gltfpack"
+  npm install --silent --no-audit --no-fund --prefix .tools/gltfpack gltfpack@1.3.0 >/dev/null
+fi
+PY="$PWD/.tools/bench-venv/bin/python"
+if [ ! -x "$PY" ]; then
+  echo "creating .tools/bench-venv (numpy, pillow, pygltflib)"
+  python3 -m venv .tools/bench-venv
+  "$PY" -m pip install -q --disable-pip-version-check numpy==2.4.6 pillow==12.3.0 pygltflib==1.16.5
+fi
+TMP="$(mktemp -d "${TMPDIR:-/tmp}/verdant-bench-compact.XXXXXX")"
+trap 'rm -rf "$TMP"' EXIT
+
+# name | file | verdant decode flags | bounds
+cases=(
+  "fuji|heightmaps/martini_fuji.png|--encoding terrain-rgb --cell-size 30|5 0.5"
+  "puget|heightmaps/diligent_ps_height_1k.png|--encoding gray --height-scale 6553.5 --cell-size 160|10"
+)
+
+# error as written of FILE (prints the metres); $1 file, $2 map, $3 bound, rest: decode flags
+measure() {
+  local file="$1" map="$2" bound="$3"
+  shift 3
+  local enc=() cell=""
+  while (($#)); do
+    case "$1" in
+      --encoding) enc+=(--encoding "$2"); shift 2 ;;
+      --height-scale) enc+=(--height-scale "$2"); shift 2 ;;
+      --cell-size) cell="$2"; shift 2 ;;
+      *) shift ;;
+    esac
+  done
+  "$PY" scripts/check_terrain_bound.py "$file" --heightmap "$map" "${enc[@]}" --cell-size "$cell" --max-error "$bound" \
+    | sed -n 's/.*largest error as written \([^ ]*\) m.*/\1/p'
+}
+triangles() { "$PY" -c "import pygltflib,sys; g=pygltflib.GLTF2().load(sys.argv[1]); print(sum(g.accessors[p.indices].count//3 for m in g.meshes for p in m.primitives))" "$1"; }
+
+printf '%-6s %6s  %-34s %10s %12s %8s %14s  %s\n' input bound file triangles bytes ratio "as written m" "within bound"
+for c in "${cases[@]}"; do
+  IFS='|' read -r name file flags bounds <<<"$c"
+  map="$DATA/$file"
+  if [ ! -f "$map" ]; then echo "skip $name: $map not found (set VERDANT_DATA)"; continue; fi
+  read -ra decode <<<"$flags"
+  for b in $bounds; do
+    row() { # label file [bytes of ours to compare with] [uncompressed twin: meshopt is lossless, the twin is measured]
+      local err; err=$(measure "${4:-$2}" "$map" "$b" "${decode[@]}")
+      local ok; ok=$(awk -v e="$err" -v b="$b" 'BEGIN { print (e <= b) ? "yes" : "NO" }')
+      local bytes; bytes=$(stat -c %s "$2")
+      local ratio="-"
+      if [ -n "${3:-}" ]; then ratio=$(awk -v a="$3" -v g="$bytes" 'BEGIN { printf "%.3f", a / g }'); fi
+      printf '%-6s %6s  %-34s %10s %12s %8s %14.7f  %s\n' "$name" "$b" "$1" "$(triangles "${4:-$2}")" "$bytes" "$ratio" "$err" "$ok"
+    }
+    "$BIN" -q terrain "$map" "${decode[@]}" --max-error "$b" -o "$TMP/f32.glb"
+    "$BIN" -q terrain "$map" "${decode[@]}" --max-error "$b" --quantize -o "$TMP/q.glb"
+    "$BIN" -q terrain "$map" "${decode[@]}" --max-error "$b" --compress -o "$TMP/c.glb"
+    row "verdant (f32)" "$TMP/f32.glb"
+    row "verdant --quantize" "$TMP/q.glb"
+    row "verdant --compress" "$TMP/c.glb" "" "$TMP/q.glb"
+    # gltfpack on the same mesh, then on finer meshes until its output keeps the bound
+    for k in 1 0.8 0.6 0.5 0.4 0.3; do
+      bk=$(awk -v b="$b" -v k="$k" 'BEGIN { print b * k }')
+      "$BIN" -q terrain "$map" "${decode[@]}" --max-error "$bk" -o "$TMP/in.glb"
+      "$GLTFPACK" -i "$TMP/in.glb" -o "$TMP/gp.glb" -vp 16 >/dev/null
+      "$GLTFPACK" -i "$TMP/in.glb" -o "$TMP/gpc.glb" -vp 16 -c >/dev/null
+      err=$(measure "$TMP/gp.glb" "$map" "$b" "${decode[@]}")
+      within=$(awk -v e="$err" -v b="$b" 'BEGIN { print (e <= b) ? 1 : 0 }')
+      if [ "$k" = 1 ] || [ "$within" = 1 ]; then
+        row "gltfpack -vp 16 (input at ${bk} m)" "$TMP/gp.glb" "$(stat -c %s "$TMP/q.glb")"
+        row "gltfpack -vp 16 -c (input ${bk} m)" "$TMP/gpc.glb" "$(stat -c %s "$TMP/c.glb")" "$TMP/gp.glb"
+      fi
+      if [ "$within" = 1 ]; then break; fi
+    done
+  done
+done
+echo "ratio: verdant --quantize / gltfpack -vp 16 and verdant --compress / gltfpack -vp 16 -c, bytes"
