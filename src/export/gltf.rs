@@ -744,7 +744,7 @@ mod tests {
     }
 
     fn index_component(scene: &Scene) -> json::accessor::ComponentType {
-        let (root, _) = build(scene, None).unwrap();
+        let (root, _) = build(scene, None, &WriteOptions::default()).unwrap();
         let acc = root.meshes[0].primitives[0].indices.unwrap();
         match root.accessors[acc.value()].component_type {
             Valid(t) => t.0,
@@ -756,6 +756,34 @@ mod tests {
     fn index_width_switches_above_65534() {
         assert_eq!(index_component(&triangle_scene(65534)), json::accessor::ComponentType::U16);
         assert_eq!(index_component(&triangle_scene(65535)), json::accessor::ComponentType::U32);
+    }
+
+    /// Folding the grid into a rotated, scaled, translated node places a quantized vertex where the
+    /// node put the float one: T·R·S·(origin + step∘q) = T'·R·S'·q.
+    #[test]
+    fn the_grid_folds_into_any_node_transform() {
+        let grid = PositionGrid { origin: [1.5, -20.0, 3.0], step: [0.5, 0.25, 2.0] };
+        let rotation = glam::Quat::from_euler(glam::EulerRot::YXZ, 0.7, -0.3, 0.2).to_array();
+        let (t, s) = ([10.0, 5.0, -2.0], [2.0, 0.5, 1.5]);
+        let (t2, s2) = quantized::place(rotation, t, s, &grid);
+        let r = glam::Quat::from_array(rotation);
+        for q in [[0.0f32, 0.0, 0.0], [3.0, 7.0, 11.0], [65535.0, 1.0, 2.0]] {
+            let local = glam::Vec3::from_array([0, 1, 2].map(|a| grid.origin[a] + grid.step[a] * q[a]));
+            let want = glam::Vec3::from_array(t) + r * (glam::Vec3::from_array(s) * local);
+            let got = glam::Vec3::from_array(t2) + r * (glam::Vec3::from_array(s2) * glam::Vec3::from_array(q));
+            assert!((want - got).length() < 1e-3 * (1.0 + want.length()), "{want} vs {got}");
+        }
+    }
+
+    #[test]
+    fn positions_off_the_grid_are_refused() {
+        let grid = PositionGrid { origin: [0.0; 3], step: [1.0; 3] };
+        let opts = WriteOptions { position_grid: Some(grid), meshopt: false };
+        assert!(to_glb_with(&triangle_scene(2), &opts).is_ok());
+        let mut far = triangle_scene(2);
+        far.meshes[0].primitives[0].positions[0] = [70000.0, 0.0, 0.0];
+        let err = to_glb_with(&far, &opts).unwrap_err();
+        assert!(err.0.contains("outside the 16-bit grid"), "{}", err.0);
     }
 
     #[test]
