@@ -373,8 +373,29 @@ fn quantized_and_compressed_terrains_keep_the_bound_as_stored() {
     let json = String::from_utf8_lossy(&std::fs::read(dir.path().join("compressed.glb")).unwrap()).to_string();
     assert!(json.contains("KHR_mesh_quantization") && json.contains("EXT_meshopt_compression"));
 
+    // .gltf + .bin: the compressed data in the .bin, read back equal to the .glb
+    let mut gltf = job.clone();
+    (gltf.quantize, gltf.meshopt) = (true, true);
+    job::run(&gltf, Some(&dir.path().join("compressed.gltf"))).unwrap();
+    let back = read_scene(&dir.path().join("compressed.gltf")).unwrap();
+    assert_eq!(back.meshes, scenes[2].meshes, "the .gltf reads back as the .glb");
+    assert!(validate_file(&dir.path().join("compressed.gltf"), &ValidateOptions { up_facing: false }).unwrap().ok());
+
     let mut obj = job.clone();
     obj.quantize = true;
     let err = job::run(&obj, Some(&dir.path().join("q.obj"))).unwrap_err();
     assert!(err.to_string().contains("glTF"), "{err}");
+}
+
+/// A map wider than 16-bit sample numbers cannot be quantized on its own grid: refused up front.
+#[test]
+fn quantizing_a_map_over_65536_samples_wide_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "wide.png", 65537, 2, |i, _| (i % 5000) as u16);
+    let mut job = job_for(&path, 1.0);
+    job.quantize = true;
+    let err = job::run(&job, Some(&dir.path().join("wide.glb"))).unwrap_err();
+    assert_eq!(err.exit_code(), 2);
+    assert!(err.to_string().contains("65536"), "{err}");
+    assert!(!dir.path().join("wide.glb").exists());
 }
