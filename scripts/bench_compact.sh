@@ -68,6 +68,7 @@ for c in "${cases[@]}"; do
     row() { # label file [bytes of ours to compare with] [uncompressed twin: meshopt is lossless, the twin is measured]
       local err; err=$(measure "${4:-$2}" "$map" "$b" "${decode[@]}")
       local ok; ok=$(awk -v e="$err" -v b="$b" 'BEGIN { print (e <= b) ? "yes" : "NO" }')
+      if ! [[ $err =~ ^[0-9.eE+-]+$ ]]; then err=nan; ok="ERROR: not measured"; fi
       local bytes; bytes=$(stat -c %s "$2")
       local ratio="-"
       if [ -n "${3:-}" ]; then ratio=$(awk -v a="$3" -v g="$bytes" 'BEGIN { printf "%.3f", a / g }'); fi
@@ -87,6 +88,7 @@ for c in "${cases[@]}"; do
       "$GLTFPACK" -i "$TMP/in.glb" -o "$TMP/gpc.glb" -vp 16 -c >/dev/null
       err=$(measure "$TMP/gp.glb" "$map" "$b" "${decode[@]}")
       within=$(awk -v e="$err" -v b="$b" 'BEGIN { print (e <= b) ? 1 : 0 }')
+      if ! [[ $err =~ ^[0-9.eE+-]+$ ]]; then within=0; fi
       if [ "$k" = 1 ] || [ "$within" = 1 ]; then
         row "gltfpack -vp 16 (input at ${bk} m)" "$TMP/gp.glb" "$(stat -c %s "$TMP/q.glb")"
         row "gltfpack -vp 16 -c (input ${bk} m)" "$TMP/gpc.glb" "$(stat -c %s "$TMP/c.glb")" "$TMP/gp.glb"

@@ -328,7 +328,9 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
     let mut scene = Scene::default();
     let mut declared_bounds = Vec::new();
 
-    let quantization_used = doc.extensions_used().any(|e| e == KHR_QUANTIZATION);
+    // KHR_mesh_quantization must be required where positions are not float (a reader without it
+    // would misread them)
+    let quantization_used = doc.extensions_required().any(|e| e == KHR_QUANTIZATION);
     for mesh in doc.meshes() {
         let mesh_name = mesh.name().unwrap_or("").to_string();
         let mut out = Mesh { name: mesh_name.clone(), primitives: Vec::new(), extras: parse_extras(mesh.extras()) };
@@ -604,11 +606,25 @@ fn view_bytes<'b>(view: &gltf::buffer::View, buffers: &[&'b [u8]]) -> Result<&'b
 fn meshopt_buffers(doc: &gltf::Document, base: &Path, blob: Option<Vec<u8>>) -> Result<Vec<Vec<u8>>, String> {
     let mut blob = blob;
     let mut buffers = Vec::new();
+    // a fallback buffer is allocated only as far as its views reach (its byteLength is the file's word)
+    let mut reach = vec![0usize; doc.buffers().len()];
+    for view in doc.views() {
+        let end = view.offset().checked_add(view.length()).ok_or(format!("bufferView {} range overflows", view.index()))?;
+        if let Some(r) = reach.get_mut(view.buffer().index()) {
+            *r = (*r).max(end);
+        }
+    }
     for buffer in doc.buffers() {
         let at = format!("buffer {}", buffer.index());
         let fallback = buffer.extension_value(EXT_MESHOPT).and_then(|e| e.get("fallback")).and_then(Value::as_bool) == Some(true);
         let data = match buffer.source() {
-            _ if fallback => vec![0; buffer.length()],
+            _ if fallback => {
+                let len = buffer.length().min(reach[buffer.index()]);
+                if len as u64 > crate::input::MAX_GLTF_BYTES {
+                    return Err(format!("{at}: a fallback buffer of {len} bytes, over the {}-byte limit", crate::input::MAX_GLTF_BYTES));
+                }
+                vec![0; len]
+            }
             gltf::buffer::Source::Bin => blob.take().ok_or(format!("{at}: refers to the GLB binary chunk, which is missing or taken"))?,
             gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
                 return Err(format!("{at}: data: URIs beside {EXT_MESHOPT} are not read by verdant"))
@@ -617,7 +633,7 @@ fn meshopt_buffers(doc: &gltf::Document, base: &Path, blob: Option<Vec<u8>>) -> 
                 .and_then(|f| crate::input::read_limited(&f, crate::input::MAX_GLTF_BYTES, "a glTF buffer").map_err(|e| e.to_string()))
                 .map_err(|e| format!("{at}: {e}"))?,
         };
-        if data.len() < buffer.length() {
+        if data.len() < buffer.length() && !fallback {
             return Err(format!("{at}: {} bytes, the buffer declares byteLength {}", data.len(), buffer.length()));
         }
         buffers.push(data);
@@ -628,6 +644,21 @@ fn meshopt_buffers(doc: &gltf::Document, base: &Path, blob: Option<Vec<u8>>) -> 
         let field = |k: &str| ext.get(k).and_then(Value::as_u64).map(|v| v as usize).ok_or(format!("{at}: no {k}"));
         let (source, offset, length, stride, count) =
             (field("buffer")?, field("byteOffset").unwrap_or(0), field("byteLength")?, field("byteStride")?, field("count")?);
+        // what the decoders would write must be the view, exactly: meshoptimizer's C code asserts
+        // on some of these (a triangle list whose count is not a multiple of 3) and allocates count
+        // elements
+        let mode = ext.get("mode").and_then(Value::as_str);
+        let shape_ok = match mode {
+            Some("ATTRIBUTES") => stride.is_multiple_of(4) && (4..=16).contains(&stride),
+            Some("TRIANGLES") => (stride == 2 || stride == 4) && count.is_multiple_of(3),
+            _ => false,
+        };
+        if !shape_ok {
+            return Err(format!("{at}: mode {mode:?} with byteStride {stride} and count {count} is not one verdant reads (ATTRIBUTES of 4–16-byte elements, or TRIANGLES of 2- or 4-byte indices, a multiple of 3)"));
+        }
+        if count.checked_mul(stride) != Some(view.length()) {
+            return Err(format!("{at}: count {count} × byteStride {stride} is not the view's byteLength {}", view.length()));
+        }
         if ext.get("filter").and_then(Value::as_str).is_some_and(|f| f != "NONE") {
             return Err(format!("{at}: filters are not read by verdant (it writes none)"));
         }
@@ -637,7 +668,7 @@ fn meshopt_buffers(doc: &gltf::Document, base: &Path, blob: Option<Vec<u8>>) -> 
             .ok_or(format!("{at}: bytes {offset}..+{length} are not in buffer {source}"))?
             .to_vec();
         let fail = |e: meshopt::Error| format!("{at}: cannot decode: {e}");
-        let decoded: Vec<u8> = match (ext.get("mode").and_then(Value::as_str), stride) {
+        let decoded: Vec<u8> = match (mode, stride) {
             (Some("ATTRIBUTES"), 4) => decode_elements::<4>(&encoded, count).map_err(fail)?,
             (Some("ATTRIBUTES"), 8) => decode_elements::<8>(&encoded, count).map_err(fail)?,
             (Some("ATTRIBUTES"), 12) => decode_elements::<12>(&encoded, count).map_err(fail)?,
@@ -647,10 +678,12 @@ fn meshopt_buffers(doc: &gltf::Document, base: &Path, blob: Option<Vec<u8>>) -> 
             (mode, _) => return Err(format!("{at}: mode {mode:?} with byteStride {stride} is not read by verdant")),
         };
         let target = view.buffer().index();
-        let range = view.offset()..view.offset() + decoded.len().min(view.length());
+        let range = view.offset()..view.offset() + view.length();
         let dest = buffers.get_mut(target).and_then(|b| b.get_mut(range)).ok_or(format!("{at}: the view lies outside buffer {target}"))?;
-        let n = dest.len();
-        dest.copy_from_slice(&decoded[..n]);
+        if decoded.len() != dest.len() {
+            return Err(format!("{at}: decoded {} bytes for a {}-byte view", decoded.len(), dest.len()));
+        }
+        dest.copy_from_slice(&decoded);
     }
     Ok(buffers)
 }

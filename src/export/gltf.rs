@@ -464,7 +464,11 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
                     acc.max = Some(Value::Array(bounds.max.iter().map(|&x| exact(x)).collect()));
                     pos
                 }
-                Some(grid) => quantized::positions(&mut root, &mut bin, &p.positions, grid)?,
+                Some(grid) => {
+                    extensions_used.insert(KHR_QUANTIZATION);
+                    extensions_required.insert(KHR_QUANTIZATION);
+                    quantized::positions(&mut root, &mut bin, &p.positions, grid)?
+                }
             };
             attributes.insert(Valid(json::mesh::Semantic::Positions), pos);
             if !p.normals.is_empty() {
@@ -618,8 +622,6 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
                 )));
             }
             (translation, scale) = quantized::place(node.rotation, translation, scale, grid);
-            extensions_used.insert(KHR_QUANTIZATION);
-            extensions_required.insert(KHR_QUANTIZATION);
         }
         let is = |v: &[f32], identity: &[f32]| v == identity;
         root.push(json::Node {
@@ -688,12 +690,11 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
             });
         }
     }
-    if opts.meshopt {
+    // (a scene with no vertex or index data has nothing to compress)
+    if opts.meshopt && bin.codecs.iter().any(Option::is_some) {
         let chunk = compress_views(&mut root, &mut bin, bin_uri)?;
-        if bin.views.iter().any(|v| v.extensions.is_some()) {
-            extensions_used.insert(EXT_MESHOPT);
-            extensions_required.insert(EXT_MESHOPT);
-        }
+        extensions_used.insert(EXT_MESHOPT);
+        extensions_required.insert(EXT_MESHOPT);
         root.buffer_views = bin.views;
         root.extensions_used = extensions_used.into_iter().map(str::to_string).collect();
         root.extensions_required = extensions_required.into_iter().map(str::to_string).collect();

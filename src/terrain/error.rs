@@ -47,7 +47,7 @@ pub enum TerrainError {
     #[error(
         "--max-error {max_error_m} m is finer than the file can store the terrain's heights: at sample (column {i}, \
          row {j}), {height_m} m, {storage} are {step_m:e} m apart, so the written surface is {achieved_m:e} m \
-         off there even with every sample a vertex; use a bound of at least {achieved_m:e} m"
+         off there, at a vertex no further refinement moves; use a bound of at least {achieved_m:e} m"
     )]
     BelowStoragePrecision { max_error_m: f64, achieved_m: f64, i: usize, j: usize, height_m: f64, step_m: f64, storage: &'static str },
     #[error("internal error: the triangulation could not take sample (column {i}, row {j}); please report this with the heightmap")]

@@ -73,13 +73,18 @@ pub enum JobError {
     Options(String),
     #[error("cannot encode the terrain's base-colour texture: {0}")]
     Texture(String),
+    #[error(
+        "{source_label}: internal error: as written the terrain is {measured_m} m off the map at sample (column {i}, \
+         row {j}), over --max-error {bound_m} m; nothing was written; please report this with the heightmap"
+    )]
+    BoundBroken { source_label: String, measured_m: f64, bound_m: f64, i: u32, j: u32 },
 }
 
 impl JobError {
     /// Process exit code: 2 for bad input or usage, 1 for a failure while building or writing.
     pub fn exit_code(&self) -> i32 {
         match self {
-            JobError::Export(_) | JobError::Texture(_) => 1,
+            JobError::Export(_) | JobError::Texture(_) | JobError::BoundBroken { .. } => 1,
             _ => 2,
         }
     }
@@ -226,6 +231,11 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
     let t = Instant::now();
     let stats: ErrorStats = measure_stored(hf, &mesh, &storage);
     let t_analyze = t.elapsed().as_secs_f64();
+    // the analyzer has the last word: a TIN over its bound as written is never written
+    if job.mode == MeshMode::Tin && !hit_limit && stats.max_error_m > job.max_error_m {
+        let [i, j] = stats.worst_sample;
+        return Err(JobError::BoundBroken { source_label: job.source.label(), measured_m: stats.max_error_m, bound_m: job.max_error_m, i, j });
+    }
 
     let t = Instant::now();
     let mut scene = build_scene(hf, &mesh, &job.build)?;

@@ -31,7 +31,9 @@ impl PositionGrid {
         let highest = hf.height_range()?.1.max(lowest_m);
         let cell = hf.cell_size_m as f32;
         // the step rounds up, so the highest point's integer stays within 65,535
-        let step_y = (((highest as f64 - lowest_m as f64) / 65535.0) as f32).next_up().max(f32::MIN_POSITIVE);
+        let range = highest as f64 - lowest_m as f64;
+        // a flat map still needs a scale an engine can invert
+        let step_y = if range > 0.0 { ((range / 65535.0) as f32).next_up() } else { 1.0 };
         Some(PositionGrid { origin: [0.0, lowest_m, 0.0], step: [cell, step_y, cell] })
     }
 
@@ -155,19 +157,32 @@ impl Storage {
         hc[0] + l1 * (hc[1] - hc[0]) + l2 * (hc[2] - hc[0])
     }
 
-    /// How much the stored error of a face can exceed the mesher's (f32 heights, (i, j) plane) at
-    /// any of its samples: the heights' rounding (the vertices store the f32 heights the mesher
-    /// uses, the samples are compared with the reference), plus the face's slope times the vertices'
-    /// horizontal shifts (3× the largest, a first-order bound with room to spare), plus f64 rounding.
+    /// How much the stored error of a face can exceed the mesher's (f32 heights at the nominal
+    /// places, in the (i, j) plane) at any of its samples, `hc` being the corners' f32 heights.
+    /// With P′ the plane through the stored vertices (X′ₖ = xₖ + δₖ, Y′ₖ) and P″ the one through the
+    /// stored heights at the nominal places, P′(x) − P″(x) = −Σ λₖ g′·δₖ exactly (λ the barycentric
+    /// weights of x, in [0, 1] inside, g′ the stored triangle's gradient), and |P″ − P| ≤ the largest
+    /// |Y′ − h| of a vertex; the sample's own reference is within the heights' rounding of h. So: the
+    /// heights' rounding + the vertices' + (|g′x| + |g′z|) · the largest horizontal shift, plus f64
+    /// rounding.
     pub(crate) fn margin(&self, c: [[i64; 2]; 3], hc: [f64; 3]) -> f64 {
         let magnitude = hc.iter().fold(0.0f64, |m, h| m.max(h.abs()));
         let mut m = self.height_shift_m + self.vertex_shift_m + 1e-9 * (1.0 + magnitude);
         if !self.xz_exact {
-            // gradient of the plane in metres per metre, from the (i, j) plane
-            let area = orient(c[0], c[1], c[2]) as f64;
-            let gi = ((c[1][1] - c[2][1]) as f64 * hc[0] + (c[2][1] - c[0][1]) as f64 * hc[1] + (c[0][1] - c[1][1]) as f64 * hc[2]) / area;
-            let gj = ((c[2][0] - c[1][0]) as f64 * hc[0] + (c[0][0] - c[2][0]) as f64 * hc[1] + (c[1][0] - c[0][0]) as f64 * hc[2]) / area;
-            m += 2.0 * (gi.abs() + gj.abs()) / self.cell_size_m * self.xz_shift_m * 1.5;
+            let x = |k: usize| self.xs[c[k][0] as usize];
+            let z = |k: usize| self.zs[c[k][1] as usize];
+            let y = |k: usize| self.stored_y(hc[k] as f32);
+            let (x1, z1, y1) = (x(1) - x(0), z(1) - z(0), y(1) - y(0));
+            let (x2, z2, y2) = (x(2) - x(0), z(2) - z(0), y(2) - y(0));
+            let d = x1 * z2 - x2 * z1;
+            // gradient of the stored plane: y = y0 + gx·(x − x0) + gz·(z − z0)
+            let gx = (y1 * z2 - y2 * z1) / d;
+            let gz = (x1 * y2 - x2 * y1) / d;
+            // twice the first-order bound: the products and the division round too
+            m += 2.0 * (gx.abs() + gz.abs()) * self.xz_shift_m;
+            if !m.is_finite() {
+                return f64::INFINITY;
+            }
         }
         m
     }

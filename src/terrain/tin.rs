@@ -1005,11 +1005,13 @@ pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Res
 /// storage's rounding) is scanned again as stored, and queued if a sample other than a corner is
 /// over the bound there.
 fn recheck_stored(storage: &Storage, hf: &Heightfield, corners: [Corner; 3], scan: Scan, floor: f64) -> Scan {
-    if scan.candidate.is_some() {
-        return scan;
-    }
     let c = corners.map(|k| [k.x, k.y]);
     let margin = storage.margin(c, corners.map(|k| k.h as f64));
+    if scan.candidate.is_some() {
+        // queued as it is; its bound covers the stored error (the final figure relies on it when
+        // the triangle limit stops refinement)
+        return Scan { candidate: scan.candidate, upper: scan.upper + margin };
+    }
     if scan.upper + margin <= floor {
         return Scan { candidate: None, upper: scan.upper + margin };
     }

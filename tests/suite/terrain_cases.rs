@@ -399,3 +399,43 @@ fn quantizing_a_map_over_65536_samples_wide_is_refused() {
     assert!(err.to_string().contains("65536"), "{err}");
     assert!(!dir.path().join("wide.glb").exists());
 }
+
+/// A damaged EXT_meshopt_compression file (found by review): a triangle list whose count is not a
+/// multiple of 3 made meshoptimizer's C decoder abort the process, and counts or a fallback length
+/// of 2^40…2^62 made it allocate without bound. Each is now a parse error naming the view.
+#[test]
+fn damaged_meshopt_views_are_refused_not_aborted() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_png(dir.path(), "m.png", 40, 30, |i, j| ((i * 97 + j * 31) % 400) as u16 * 50);
+    let mut job = job_for(&path, 2.0);
+    (job.quantize, job.meshopt) = (true, true);
+    job::run(&job, Some(&dir.path().join("m.gltf"))).unwrap();
+    let text = std::fs::read_to_string(dir.path().join("m.gltf")).unwrap();
+    let good: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert!(validate_file(&dir.path().join("m.gltf"), &ValidateOptions { up_facing: false }).unwrap().ok());
+    let views = good["bufferViews"].as_array().unwrap();
+    let ext = |v: &serde_json::Value| v["extensions"]["EXT_meshopt_compression"].clone();
+    let tri = views.iter().position(|v| ext(v)["mode"] == "TRIANGLES").unwrap();
+    let attr = views.iter().position(|v| ext(v)["mode"] == "ATTRIBUTES").unwrap();
+    let fallback = good["buffers"].as_array().unwrap().iter().position(|b| b.get("extensions").is_some()).unwrap();
+    let cases: Vec<(&str, Box<dyn Fn(&mut serde_json::Value)>)> = vec![
+        ("count not a multiple of 3", Box::new(move |j| { let c = j["bufferViews"][tri]["extensions"]["EXT_meshopt_compression"]["count"].as_u64().unwrap(); j["bufferViews"][tri]["extensions"]["EXT_meshopt_compression"]["count"] = (c + 1).into(); })),
+        ("a count of 2^40", Box::new(move |j| j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["count"] = (1u64 << 40).into())),
+        ("a count of 2^60", Box::new(move |j| j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["count"] = (1u64 << 60).into())),
+        ("a stride of 6", Box::new(move |j| j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["byteStride"] = 6.into())),
+        ("compressed bytes past the buffer", Box::new(move |j| j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["byteOffset"] = (1u64 << 40).into())),
+    ];
+    for (what, damage) in cases {
+        let mut j = good.clone();
+        damage(&mut j);
+        let bad = dir.path().join("bad.gltf");
+        std::fs::write(&bad, serde_json::to_vec(&j).unwrap()).unwrap();
+        let err = validate_file(&bad, &ValidateOptions { up_facing: false }).err().unwrap_or_else(|| panic!("{what}: accepted"));
+        assert!(err.to_string().contains("EXT_meshopt_compression"), "{what}: {err}");
+    }
+    // a fallback buffer declaring 2^62 bytes is read only as far as its views reach
+    let mut j = good.clone();
+    j["buffers"][fallback]["byteLength"] = (1u64 << 62).into();
+    std::fs::write(dir.path().join("bad.gltf"), serde_json::to_vec(&j).unwrap()).unwrap();
+    let _ = validate_file(&dir.path().join("bad.gltf"), &ValidateOptions { up_facing: false });
+}
