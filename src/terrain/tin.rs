@@ -1329,7 +1329,7 @@ pub(crate) mod tests {
             seed in any::<u64>(),
             base_dm in 80_000u64..90_000,
             relief_dm in 1u64..400,
-            cell in prop_oneof![Just(1.0f64), Just(0.3), Just(30.87), Just(92.6)],
+            cell in prop_oneof![Just(1.0f64), Just(0.3), Just(30.87), Just(92.6), Just(3087.3), Just(927.7)],
             steps in prop_oneof![Just(1.5f64), Just(3.0), Just(10.0), Just(200.0), Just(2000.0)],
         ) {
             let heights: Vec<f64> = (0..w * h)
@@ -1354,6 +1354,36 @@ pub(crate) mod tests {
                         prop_assert!(measure(&hf, &full).max_error_m > bound);
                     }
                 }
+                Err(e) => prop_assert!(false, "{e}"),
+            }
+        }
+
+        /// The same on a 16-bit position grid (`--quantize`): heights rounded to the grid's step,
+        /// x and z by the cell in f32; accepted bounds hold for the quantized surface.
+        #[test]
+        fn bound_holds_on_the_quantized_grid(
+            w in 2usize..24,
+            h in 2usize..24,
+            seed in any::<u64>(),
+            relief_dm in 1u64..40_000,
+            cell in prop_oneof![Just(1.0f64), Just(0.3), Just(30.87), Just(92.6), Just(3087.3), Just(927.7)],
+            steps in prop_oneof![Just(0.6f64), Just(1.5), Just(4.0), Just(40.0)],
+        ) {
+            let heights: Vec<f64> = (0..w * h)
+                .map(|k| (20_000 + crate::synth::mix64(seed ^ k as u64) % relief_dm) as f64 * 0.1)
+                .collect();
+            let hf = Heightfield::from_f64(w, h, &heights, cell);
+            let grid = crate::terrain::stored::PositionGrid::terrain(&hf, hf.height_range().unwrap().0).unwrap();
+            let storage = Storage::quantized(&hf, grid);
+            let bound = steps * grid.step[1] as f64;
+            match tin_stored(&hf, &TinOptions { max_error_m: bound, max_triangles: None }, &storage) {
+                Ok(r) => {
+                    check_mesh(&hf, &r.mesh);
+                    let s = measure_stored(&hf, &r.mesh, &storage);
+                    prop_assert!(s.max_error_m <= bound, "{} > {bound}", s.max_error_m);
+                    prop_assert_eq!(s.max_error_m, r.max_error_m);
+                }
+                Err(TerrainError::BelowStoragePrecision { achieved_m, .. }) => prop_assert!(achieved_m > bound),
                 Err(e) => prop_assert!(false, "{e}"),
             }
         }
