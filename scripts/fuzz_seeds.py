@@ -167,6 +167,10 @@ def gltfs(verdant, tmp, maps):
     for name in ("terrain.glb", "terrain.gltf"):
         subprocess.run([verdant, "-q", "terrain", str(src), "--max-error", "0.5", "-o", str(tmp / name)], check=True)
         seeds[name] = (tmp / name).read_bytes()
+    # KHR_mesh_quantization and EXT_meshopt_compression: the validator decodes both
+    for name, flag in (("terrain_quantized.glb", "--quantize"), ("terrain_compressed.glb", "--compress")):
+        subprocess.run([verdant, "-q", "terrain", str(src), "--max-error", "0.5", flag, "-o", str(tmp / name)], check=True)
+        seeds[name] = (tmp / name).read_bytes()
     subprocess.run([verdant, "-q", "tree", "builtin:bush", "--lods", "1", "-o", str(tmp / "bush.glb")], check=True)
     seeds["bush.glb"] = (tmp / "bush.glb").read_bytes()
     # a triangle in a data: buffer (3 f32 positions, then 3 u16 indices)
