@@ -71,6 +71,9 @@ pub struct PrimitiveReport {
 pub struct MeshReport {
     pub name: String,
     pub primitives: Vec<PrimitiveReport>,
+    /// Bounds in metres as the first (unrotated) node holding the mesh places it, where that node
+    /// scales or moves it: a quantized mesh's positions are integers (KHR_mesh_quantization).
+    pub placed: Option<Bounds>,
 }
 
 impl MeshReport {
@@ -120,9 +123,10 @@ impl fmt::Display for ValidationReport {
             if m.points() > 0 {
                 write!(f, ", {} points", m.points())?;
             }
-            match m.bounds() {
-                Some(b) => writeln!(f, ", bounds {:?} .. {:?}", b.min, b.max)?,
-                None => writeln!(f)?,
+            match (m.bounds(), m.placed) {
+                (Some(b), Some(p)) => writeln!(f, ", bounds {:?} .. {:?} as stored, {:?} .. {:?} as placed by its node", b.min, b.max, p.min, p.max)?,
+                (Some(b), None) => writeln!(f, ", bounds {:?} .. {:?}", b.min, b.max)?,
+                _ => writeln!(f)?,
             }
         }
         for i in &self.issues {
@@ -140,6 +144,19 @@ impl fmt::Display for ValidationReport {
     }
 }
 
+/// The mesh's bounds as the first node holding it places them, when that node scales or moves it
+/// without rotating.
+fn placed_bounds(scene: &Scene, mesh: usize, m: &Mesh) -> Option<Bounds> {
+    let node = scene.nodes.iter().find(|n| n.mesh == Some(mesh))?;
+    if node.rotation != [0.0, 0.0, 0.0, 1.0] || (node.scale == [1.0; 3] && node.translation == [0.0; 3]) {
+        return None;
+    }
+    let points: Vec<[f32; 3]> = m.primitives.iter().filter_map(|p| p.bounds()).flat_map(|b| [b.min, b.max]).collect();
+    let b = Bounds::of(&points)?;
+    let place = |p: [f32; 3]| [0, 1, 2].map(|a| (node.translation[a] as f64 + node.scale[a] as f64 * p[a] as f64) as f32);
+    Bounds::of(&[place(b.min), place(b.max)])
+}
+
 /// Validates one `.glb`, `.gltf` or `.obj` file.
 pub fn validate_file(path: &Path, opts: &ValidateOptions) -> Result<ValidationReport, ValidateError> {
     let loaded = load(path)?;
@@ -149,7 +166,9 @@ pub fn validate_file(path: &Path, opts: &ValidateOptions) -> Result<ValidationRe
         .scene
         .meshes
         .iter()
-        .map(|m| MeshReport {
+        .enumerate()
+        .map(|(mi, m)| MeshReport {
+            placed: placed_bounds(&loaded.scene, mi, m),
             name: m.name.clone(),
             primitives: m
                 .primitives
