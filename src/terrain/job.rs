@@ -212,6 +212,13 @@ fn position_grid(job: &TerrainJob, hf: &Heightfield) -> Result<PositionGrid, Job
     })
 }
 
+/// How the job's file stores the vertices (f32, or the 16-bit grid with `quantize`): the bound
+/// holds for that.
+fn storage_for(job: &TerrainJob, hf: &Heightfield) -> Result<(Option<PositionGrid>, Storage), JobError> {
+    let grid = if job.quantize { Some(position_grid(job, hf)?) } else { None };
+    Ok((grid, grid.map_or_else(|| Storage::f32(hf), |g| Storage::quantized(hf, g))))
+}
+
 /// Runs the job; writes the scene to `output` when given.
 pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Scene), JobError> {
     check_options(job)?;
@@ -220,9 +227,7 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
     let hf = &decoded.heightfield;
     let t_decode = t0.elapsed().as_secs_f64();
 
-    // how the file stores the vertices: the bound holds for that
-    let grid = if job.quantize { Some(position_grid(job, hf)?) } else { None };
-    let storage = grid.map_or_else(|| Storage::f32(hf), |g| Storage::quantized(hf, g));
+    let (grid, storage) = storage_for(job, hf)?;
 
     let t = Instant::now();
     let (mesh, hit_limit) = mesh_heightfield(job, hf, job.max_error_m, &storage)?;
@@ -332,8 +337,7 @@ pub fn sweep(job: &TerrainJob, thresholds_m: &[f64]) -> Result<(Decoded, Vec<Swe
     }
     let decoded = load_source(job)?;
     let hf = &decoded.heightfield;
-    let grid = if job.quantize { Some(position_grid(job, hf)?) } else { None };
-    let storage = grid.map_or_else(|| Storage::f32(hf), |g| Storage::quantized(hf, g));
+    let (_, storage) = storage_for(job, hf)?;
     let mut rows = Vec::with_capacity(thresholds_m.len());
     for &max_error_m in thresholds_m {
         let t = Instant::now();
