@@ -36,7 +36,12 @@ fn runs() -> usize {
 fn memory() -> (u64, u64) {
     let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
     let field = |name: &str| {
-        status.lines().find(|l| l.starts_with(name)).and_then(|l| l.split_whitespace().nth(1)).and_then(|v| v.parse::<u64>().ok()).map_or(0, |kb| kb * 1024)
+        status
+            .lines()
+            .find(|l| l.starts_with(name))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse::<u64>().ok())
+            .map_or(0, |kb| kb * 1024)
     };
     (field("VmRSS:"), field("VmHWM:"))
 }
@@ -97,7 +102,9 @@ fn instances_digest(s: &verdant::scatter::Scatter) -> u64 {
         eat(i.tile as u64);
     }
     let c = &s.counts;
-    [c.candidates, c.density, c.mask, c.off_surface, c.water, c.altitude, c.slope, c.exclusion, c.placed].iter().for_each(|&v| eat(v));
+    [c.candidates, c.density, c.mask, c.off_surface, c.water, c.altitude, c.slope, c.exclusion, c.placed]
+        .iter()
+        .for_each(|&v| eat(v));
     h
 }
 
@@ -128,7 +135,10 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let no_scipy = args.iter().any(|a| a == "--no-scipy");
     let threads = rayon::current_num_threads();
-    let load = std::fs::read_to_string("/proc/loadavg").ok().and_then(|l| l.split_whitespace().next().map(str::to_string)).unwrap_or_default();
+    let load = std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|l| l.split_whitespace().next().map(str::to_string))
+        .unwrap_or_default();
     println!("scatter benchmark: {SIZE}² fBm terrain (1 m cells), TIN at {MAX_ERROR_M} m, tiles of {TILE_M} m, {threads} threads");
 
     let t = Instant::now();
@@ -164,7 +174,9 @@ fn main() {
     ];
     // `--case k`: run case k only and print its row as numbers (the parent's child process), so
     // VmHWM is this case's own peak and not memory the allocator kept from an earlier case
-    if let Some(k) = args.iter().position(|a| a == "--case").and_then(|p| args.get(p + 1)).and_then(|v| v.parse::<usize>().ok()) {
+    if let Some(k) =
+        args.iter().position(|a| a == "--case").and_then(|p| args.get(p + 1)).and_then(|v| v.parse::<usize>().ok())
+    {
         let (name, sp) = &cases[k];
         let mut best: Option<Row> = None;
         let mut totals = Vec::new();
@@ -172,7 +184,9 @@ fn main() {
         for _ in 0..runs() {
             reset_peak();
             let (rss0, _) = memory();
-            let (out, generate_s, generate_cpu) = timed(|| scatter_species_detailed(&surface, extent, sp, Some(&density), None, &[], TILE_M, 1).expect("scatter"));
+            let (out, generate_s, generate_cpu) = timed(|| {
+                scatter_species_detailed(&surface, extent, sp, Some(&density), None, &[], TILE_M, 1).expect("scatter")
+            });
             // the product's path first (its peak is the case's memory), then the in-memory table;
             // the previous run's file is removed first: the product writes into a fresh build folder,
             // and replacing a 0.9 GB file would time the kernel freeing its pages
@@ -208,20 +222,35 @@ fn main() {
                     let g = pick((b.generate_s, b.generate_cpu), (row.generate_s, row.generate_cpu));
                     let f = pick((b.format_s, b.format_cpu), (row.format_s, row.format_cpu));
                     let w = pick((b.write_s, b.write_cpu), (row.write_s, row.write_cpu));
-                    Row { generate_s: g.0, generate_cpu: g.1, format_s: f.0, format_cpu: f.1, write_s: w.0, write_cpu: w.1, peak_bytes: b.peak_bytes.min(row.peak_bytes), ..row }
+                    Row {
+                        generate_s: g.0,
+                        generate_cpu: g.1,
+                        format_s: f.0,
+                        format_cpu: f.1,
+                        write_s: w.0,
+                        write_cpu: w.1,
+                        peak_bytes: b.peak_bytes.min(row.peak_bytes),
+                        ..row
+                    }
                 }
             });
         }
         let mut r = best.expect("at least one run");
         totals.sort_by(f64::total_cmp);
         r.total_best_s = totals[0];
-        r.total_median_s = if totals.len() % 2 == 1 { totals[totals.len() / 2] } else { 0.5 * (totals[totals.len() / 2 - 1] + totals[totals.len() / 2]) };
+        r.total_median_s = if totals.len() % 2 == 1 {
+            totals[totals.len() / 2]
+        } else {
+            0.5 * (totals[totals.len() / 2 - 1] + totals[totals.len() / 2])
+        };
         let _ = std::fs::remove_file(&tmp);
         println!("DIGEST {:016x} {name}", digest.unwrap_or(0));
         // the analyzer, as every build runs it (its height check samples at most 2^19 instances)
-        let out = scatter_species_detailed(&surface, extent, sp, Some(&density), None, &[], TILE_M, 1).expect("scatter");
+        let out =
+            scatter_species_detailed(&surface, extent, sp, Some(&density), None, &[], TILE_M, 1).expect("scatter");
         let t = Instant::now();
-        let stats = analyze(&surface, extent, sp, Some(&density), None, None, &out.instances, TILE_M, 0.0).expect("analyze");
+        let stats =
+            analyze(&surface, extent, sp, Some(&density), None, None, &out.instances, TILE_M, 0.0).expect("analyze");
         println!(
             "ANALYZE {name}: {:.3} s for {} instances; height checked on {} ({} off the mesh): max |y − terrain| {:.2e} m as scene.glb stores it (f32), {:.2e} m in the CSV (f64)",
             t.elapsed().as_secs_f64(),
@@ -233,7 +262,19 @@ fn main() {
         );
         println!(
             "ROW {} {} {} {} {} {} {} {} {} {} {} {} {}",
-            r.instances, r.candidates, r.generate_s, r.generate_cpu, r.format_s, r.format_cpu, r.write_s, r.write_cpu, r.csv_bytes, r.peak_bytes, r.total_best_s, r.total_median_s, name
+            r.instances,
+            r.candidates,
+            r.generate_s,
+            r.generate_cpu,
+            r.format_s,
+            r.format_cpu,
+            r.write_s,
+            r.write_cpu,
+            r.csv_bytes,
+            r.peak_bytes,
+            r.total_best_s,
+            r.total_median_s,
+            name
         );
         return;
     }
@@ -241,7 +282,10 @@ fn main() {
     let mut analyzer_lines = Vec::new();
     let mut run_lines = Vec::new();
     for k in 0..cases.len() {
-        let out = Command::new(std::env::current_exe().expect("own path")).args(["--case", &k.to_string()]).output().expect("child");
+        let out = Command::new(std::env::current_exe().expect("own path"))
+            .args(["--case", &k.to_string()])
+            .output()
+            .expect("child");
         let text = String::from_utf8_lossy(&out.stdout);
         analyzer_lines.extend(text.lines().filter_map(|l| l.strip_prefix("ANALYZE ")).map(str::to_string));
         run_lines.extend(text.lines().filter_map(|l| l.strip_prefix("RUN ")).map(str::to_string));
@@ -339,7 +383,10 @@ fn main() {
         let mut n = 0;
         for _ in 0..runs() {
             let t = Instant::now();
-            n = scatter_species_detailed(&surface, extent, &sp, None, None, &[], TILE_M, 1).expect("scatter").instances.len();
+            n = scatter_species_detailed(&surface, extent, &sp, None, None, &[], TILE_M, 1)
+                .expect("scatter")
+                .instances
+                .len();
             best = best.min(t.elapsed().as_secs_f64());
         }
         (n, best)
@@ -358,9 +405,22 @@ fn main() {
             println!("| sampler | points | seconds | points/s | points per r² |");
             println!("|---|---:|---:|---:|---:|");
             let area = side * side / (r * r);
-            println!("| verdant poisson (uniform density, on the TIN, slope ≤ 60°) | {} | {:.3} | {:.0} | {:.3} |", ours.0, ours.1, ours.0 as f64 / ours.1, ours.0 as f64 / area);
-            println!("| scipy qmc.PoissonDisk (unit square, 1 thread) | {n} | {s:.3} | {:.0} | {:.3} |", n / s, n / area);
-            println!("speed ratio verdant / scipy: {:.0}× (verdant packing constant {POISSON_PACKING}/r²)", (ours.0 as f64 / ours.1) / (n / s));
+            println!(
+                "| verdant poisson (uniform density, on the TIN, slope ≤ 60°) | {} | {:.3} | {:.0} | {:.3} |",
+                ours.0,
+                ours.1,
+                ours.0 as f64 / ours.1,
+                ours.0 as f64 / area
+            );
+            println!(
+                "| scipy qmc.PoissonDisk (unit square, 1 thread) | {n} | {s:.3} | {:.0} | {:.3} |",
+                n / s,
+                n / area
+            );
+            println!(
+                "speed ratio verdant / scipy: {:.0}× (verdant packing constant {POISSON_PACKING}/r²)",
+                (ours.0 as f64 / ours.1) / (n / s)
+            );
         }
         Ok(o) => println!("scipy peer failed: {}", String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("")),
         Err(e) => println!("scipy peer skipped: {e}"),

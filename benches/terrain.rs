@@ -90,7 +90,8 @@ fn cpu_seconds() -> f64 {
 fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
     let hf = load(input)?;
     // delatin takes f64 heights (the map's own, exact ones): input preparation, not part of its build.
-    let heights64: Vec<f64> = if which == "delatin" { (0..hf.heights.len()).map(|k| hf.reference(k)).collect() } else { Vec::new() };
+    let heights64: Vec<f64> =
+        if which == "delatin" { (0..hf.heights.len()).map(|k| hf.reference(k)).collect() } else { Vec::new() };
     // Reset the high-water mark so it covers the builds only (plus what is already resident).
     let _ = std::fs::write("/proc/self/clear_refs", "5");
     let (rss_before, _) = memory();
@@ -104,7 +105,9 @@ fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
         let c = cpu_seconds();
         mesh = match which {
             "verdant" => tin(&hf, &TinOptions { max_error_m, max_triangles: None }).map_err(|e| e.to_string())?.mesh,
-            "spade" => tin_spade(&hf, &TinOptions { max_error_m, max_triangles: None }).map_err(|e| e.to_string())?.mesh,
+            "spade" => {
+                tin_spade(&hf, &TinOptions { max_error_m, max_triangles: None }).map_err(|e| e.to_string())?.mesh
+            }
             "delatin" => delatin_mesh(&hf, &heights64, max_error_m),
             other => return Err(format!("unknown implementation {other}")),
         };
@@ -120,7 +123,16 @@ fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
         eprintln!("warning: {which} covers {} of {} samples", stats.samples_covered, hf.width * hf.height);
     }
     let f64_error = measure_exact(&hf, &mesh).max_error_m;
-    println!("{} {} {} {} {} {} {}", mesh.triangles.len(), stats.max_error_m, best, best_cpu, peak, peak.saturating_sub(rss_before), f64_error);
+    println!(
+        "{} {} {} {} {} {} {}",
+        mesh.triangles.len(),
+        stats.max_error_m,
+        best,
+        best_cpu,
+        peak,
+        peak.saturating_sub(rss_before),
+        f64_error
+    );
     Ok(())
 }
 
@@ -145,7 +157,8 @@ fn spawn_case(input: &str, max_error_m: f64, which: &str) -> Result<Row, String>
     }
     let text = String::from_utf8_lossy(&out.stdout);
     let f: Vec<&str> = text.split_whitespace().collect();
-    let parse = |k: usize| f.get(k).and_then(|s| s.parse::<f64>().ok()).ok_or_else(|| format!("bad child output: {text}"));
+    let parse =
+        |k: usize| f.get(k).and_then(|s| s.parse::<f64>().ok()).ok_or_else(|| format!("bad child output: {text}"));
     Ok(Row {
         triangles: parse(0)? as usize,
         measured: parse(1)?,
@@ -193,7 +206,17 @@ fn main() {
     );
     println!(
         "{:<12} {:>7} {:<8} {:>10} {:>12} {:>12} {:>8} {:>6} {:>8} {:>9} {:>9}",
-        "input", "max_err", "impl", "triangles", "as written", "f64", "seconds", "cpu", "peak MB", "build MB", "B/sample"
+        "input",
+        "max_err",
+        "impl",
+        "triangles",
+        "as written",
+        "f64",
+        "seconds",
+        "cpu",
+        "peak MB",
+        "build MB",
+        "B/sample"
     );
     for (input, err, samples) in cases {
         let mut rows: Vec<Row> = Vec::new();
@@ -236,7 +259,9 @@ fn main() {
             if let (Some(ours), Some(&(_, reference))) = (rows.first(), PUGET_REFERENCE.iter().find(|r| r.0 == err)) {
                 println!(
                     "{:<12} {:>7} {:<8} reference {} triangles; verdant {:+.2} %",
-                    "", "", "ref",
+                    "",
+                    "",
+                    "ref",
                     reference,
                     (ours.triangles as f64 / reference as f64 - 1.0) * 100.0
                 );

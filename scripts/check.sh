@@ -147,6 +147,10 @@ section "1b. Self-test of check_outputs.py (good samples pass, broken ones fail)
 
 if ((SETUP_ONLY)); then exit 0; fi
 
+section "1c. cargo fmt --check (rustfmt.toml)"
+if ! cargo fmt --version >/dev/null 2>&1; then rustup component add rustfmt; fi
+if ! cargo fmt --check; then echo "!! code is not rustfmt-formatted: run \`cargo fmt\` and commit" >&2; exit 1; fi
+
 # ---------------------------------------------------------------------------------------------------------
 # Release for both: the tests then share compiled dependencies with the release build (one compile of
 # the dependency tree instead of two on 2 cores), and property tests and big maps run fast.

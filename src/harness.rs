@@ -30,7 +30,15 @@ pub fn lsystem(data: &[u8]) {
 /// Heightmap bytes decoded with every encoding (an `.r16` as one row, as `--size N×1` would);
 /// a decoded map holds only finite heights, and a small one meshes within its error bound.
 pub fn heightmap(data: &[u8]) {
-    let encodings = [Encoding::Auto, Encoding::Gray, Encoding::TerrainRgb, Encoding::Terrarium, Encoding::Hgt, Encoding::R16, Encoding::Float];
+    let encodings = [
+        Encoding::Auto,
+        Encoding::Gray,
+        Encoding::TerrainRgb,
+        Encoding::Terrarium,
+        Encoding::Hgt,
+        Encoding::R16,
+        Encoding::Float,
+    ];
     for encoding in encodings {
         let opts = DecodeOptions { encoding, size: Some((data.len() / 2, 1)), ..DecodeOptions::default() };
         let Ok(decoded) = heightfield::decode(Path::new("fuzz.png"), data, &opts) else { continue };
@@ -103,17 +111,20 @@ pub fn placements(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else { return };
     let Ok(rows) = crate::export::table::parse_placements_csv(text) else { return };
     let bytes = crate::export::table::placements_csv(&rows).expect("finite rows that were read must format");
-    let again = crate::export::table::parse_placements_csv(std::str::from_utf8(&bytes).expect("the writer writes UTF-8"))
-        .expect("a table the writer wrote must read back");
+    let again =
+        crate::export::table::parse_placements_csv(std::str::from_utf8(&bytes).expect("the writer writes UTF-8"))
+            .expect("a table the writer wrote must read back");
     assert!(again == rows, "a placement table does not read back as it was written");
 }
 
 /// Writes `scene` as GLB, reads it back and validates it: the promise every writer makes.
 fn roundtrip_glb(scene: &crate::mesh::Scene, what: &str) {
-    let bytes = crate::export::gltf::to_glb(scene).unwrap_or_else(|e| panic!("{what} was built but does not export: {e}"));
+    let bytes =
+        crate::export::gltf::to_glb(scene).unwrap_or_else(|e| panic!("{what} was built but does not export: {e}"));
     let dir = Scratch::new("roundtrip");
     let path = dir.write("out.glb", &bytes);
-    let report = validate::validate_file(&path, &ValidateOptions::default()).unwrap_or_else(|e| panic!("{what} does not re-import: {e}"));
+    let report = validate::validate_file(&path, &ValidateOptions::default())
+        .unwrap_or_else(|e| panic!("{what} does not re-import: {e}"));
     if let Some(i) = report.issues.iter().find(|i| i.severity == Severity::Error) {
         panic!("{what} re-imports with a validation error: {}: {}", i.location, i.message);
     }
@@ -128,7 +139,8 @@ impl Scratch {
         static NEXT: AtomicU64 = AtomicU64::new(0);
         let n = NEXT.fetch_add(1, Ordering::Relaxed);
         let dir = std::env::temp_dir().join(format!("verdant-harness-{what}-{}-{n}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("cannot make the scratch folder {}: {e}", dir.display()));
+        std::fs::create_dir_all(&dir)
+            .unwrap_or_else(|e| panic!("cannot make the scratch folder {}: {e}", dir.display()));
         Scratch(dir)
     }
 

@@ -236,11 +236,21 @@ pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
     if let Some(k) = decoded.heightfield.heights.iter().position(|h| !(h.is_finite() && h.abs() <= MAX_ABS_HEIGHT_M)) {
         let w = decoded.heightfield.width;
         let h = decoded.heightfield.heights[k];
-        let what = if h.is_finite() { format!("is {h:e} m, beyond the ±{MAX_ABS_HEIGHT_M:e} m terrain heights are limited to") } else { "is not a finite height".into() };
+        let what = if h.is_finite() {
+            format!("is {h:e} m, beyond the ±{MAX_ABS_HEIGHT_M:e} m terrain heights are limited to")
+        } else {
+            "is not a finite height".into()
+        };
         // gray and r16 heights are the scale and offset applied to the samples: those are to blame
         let remedy = match decoded.encoding {
             Encoding::Gray | Encoding::R16 => {
-                let metres = |m: f64| if m != 0.0 && !(1e-3..1e9).contains(&m.abs()) { format!("{m:e}") } else { format!("{m}") };
+                let metres = |m: f64| {
+                    if m != 0.0 && !(1e-3..1e9).contains(&m.abs()) {
+                        format!("{m:e}")
+                    } else {
+                        format!("{m}")
+                    }
+                };
                 format!(
                     "--height-scale {} and --height-offset {} take heights there; use metres that fit",
                     metres(opts.height_scale_m),
@@ -249,7 +259,10 @@ pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
             }
             _ => "fix or fill the map before meshing (or check --encoding)".into(),
         };
-        return Err(HeightfieldError::format(path, format!("sample (column {}, row {}) {what}; {remedy}", k % w, k / w)));
+        return Err(HeightfieldError::format(
+            path,
+            format!("sample (column {}, row {}) {what}; {remedy}", k % w, k / w),
+        ));
     }
     Ok(decoded)
 }
@@ -257,7 +270,13 @@ pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
 fn check_size(path: &Path, width: usize, height: usize, opts: &DecodeOptions) -> Result<(), HeightfieldError> {
     let samples = width as u128 * height as u128;
     if samples > opts.max_samples as u128 {
-        return Err(HeightfieldError::TooLarge { path: path.to_owned(), width, height, samples, limit: opts.max_samples });
+        return Err(HeightfieldError::TooLarge {
+            path: path.to_owned(),
+            width,
+            height,
+            samples,
+            limit: opts.max_samples,
+        });
     }
     if width == 0 || height == 0 {
         return Err(HeightfieldError::format(path, format!("the map has no samples ({width}×{height})")));
@@ -272,7 +291,13 @@ fn heightfield(width: usize, height: usize, heights: Vec<f32>) -> Heightfield {
 /// SRTM .hgt: a square of big-endian int16 metres; −32768 marks a void.
 fn decode_hgt(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded, HeightfieldError> {
     if !bytes.len().is_multiple_of(2) {
-        return Err(HeightfieldError::format(path, format!("a .hgt file holds 16-bit samples, but its size ({} bytes) is odd; the file is truncated or not SRTM", bytes.len())));
+        return Err(HeightfieldError::format(
+            path,
+            format!(
+                "a .hgt file holds 16-bit samples, but its size ({} bytes) is odd; the file is truncated or not SRTM",
+                bytes.len()
+            ),
+        ));
     }
     let n = bytes.len() / 2;
     let side = (n as f64).sqrt().round() as usize;
@@ -300,7 +325,12 @@ pub struct NothingValid;
 /// Fills samples with `valid == false` from their valid neighbours: breadth-first from the valid
 /// region, each void takes the mean of its already-known 4-neighbours (deterministic, one pass per
 /// ring). Returns the number filled, or [`NothingValid`] if no sample is valid.
-pub fn fill_voids(width: usize, height: usize, heights: &mut [f32], mut known: Vec<bool>) -> Result<usize, NothingValid> {
+pub fn fill_voids(
+    width: usize,
+    height: usize,
+    heights: &mut [f32],
+    mut known: Vec<bool>,
+) -> Result<usize, NothingValid> {
     let total_void = known.iter().filter(|&&k| !k).count();
     if total_void == 0 {
         return Ok(0);
@@ -326,9 +356,8 @@ pub fn fill_voids(width: usize, height: usize, heights: &mut [f32], mut known: V
         out
     };
     // first ring: voids touching a valid sample
-    let mut ring: Vec<usize> = (0..known.len())
-        .filter(|&k| !known[k] && neighbours(k).iter().any(|&n| n != usize::MAX && known[n]))
-        .collect();
+    let mut ring: Vec<usize> =
+        (0..known.len()).filter(|&k| !known[k] && neighbours(k).iter().any(|&n| n != usize::MAX && known[n])).collect();
     let mut in_ring = vec![false; known.len()];
     for &k in &ring {
         in_ring[k] = true;
@@ -392,7 +421,11 @@ fn decode_r16(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
     let (scale, offset) = (opts.height_scale_m, opts.height_offset_m);
     let heights: Vec<f64> =
         bytes.chunks_exact(2).map(|c| offset + u16::from_le_bytes([c[0], c[1]]) as f64 / 65535.0 * scale).collect();
-    Ok(Decoded { heightfield: Heightfield::from_f64(width, height, &heights, 1.0), encoding: Encoding::R16, voids_filled: 0 })
+    Ok(Decoded {
+        heightfield: Heightfield::from_f64(width, height, &heights, 1.0),
+        encoding: Encoding::R16,
+        voids_filled: 0,
+    })
 }
 
 fn image_error(path: &Path, e: impl fmt::Display) -> HeightfieldError {
@@ -400,7 +433,12 @@ fn image_error(path: &Path, e: impl fmt::Display) -> HeightfieldError {
 }
 
 /// PNG / TIFF (and anything else the `image` crate reads) by encoding.
-fn decode_image(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOptions) -> Result<Decoded, HeightfieldError> {
+fn decode_image(
+    path: &Path,
+    bytes: &[u8],
+    encoding: Encoding,
+    opts: &DecodeOptions,
+) -> Result<Decoded, HeightfieldError> {
     let is_tiff = bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*");
     if is_tiff {
         if let Some(decoded) = decode_float_tiff(path, bytes, encoding, opts)? {
@@ -419,15 +457,15 @@ fn decode_image(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOpti
     }
     let (width, height) = reader.into_dimensions().map_err(|e| image_error(path, e))?;
     check_size(path, width as usize, height as usize, opts)?;
-    let mut reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| image_error(path, e))?;
+    let mut reader =
+        image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| image_error(path, e))?;
     reader.no_limits(); // the size was checked against our own limit above
     let img = reader.decode().map_err(|e| image_error(path, e))?;
     let (w, h) = (width as usize, height as usize);
     use image::DynamicImage as D;
     let gray_scale = |v: f64, vmax: f64| opts.height_offset_m + v / vmax * opts.height_scale_m;
-    let channels_differ = |rgb: &dyn Fn(usize) -> [u32; 3]| {
-        (0..w * h).map(rgb).position(|p| p[0] != p[1] || p[1] != p[2])
-    };
+    let channels_differ =
+        |rgb: &dyn Fn(usize) -> [u32; 3]| (0..w * h).map(rgb).position(|p| p[0] != p[1] || p[1] != p[2]);
     // RGB(A) 8-bit and 16-bit pixels as u32 triples; None for gray images
     let rgb8 = match &img {
         D::ImageRgb8(_) | D::ImageRgba8(_) => Some(img.to_rgb8()),
@@ -447,7 +485,10 @@ fn decode_image(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOpti
             (Encoding::Gray, g.as_raw().iter().map(|&v| gray_scale(v as f64, 65535.0)).collect())
         }
         (D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageLuma16(_) | D::ImageLumaA16(_), e) => {
-            return Err(HeightfieldError::format(path, format!("--encoding {e} needs an RGB image, but this one is grayscale; use --encoding gray (or auto)")));
+            return Err(HeightfieldError::format(
+                path,
+                format!("--encoding {e} needs an RGB image, but this one is grayscale; use --encoding gray (or auto)"),
+            ));
         }
         (_, Encoding::Auto | Encoding::Gray) if rgb8.is_some() || rgb16.is_some() => {
             let (vmax, px): (f64, Box<dyn Fn(usize) -> [u32; 3]>) = if let Some(rgb) = &rgb8 {
@@ -470,11 +511,22 @@ fn decode_image(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOpti
                 }
             }
             // gray stored as RGB: the mean of the channels (equal to each channel when R = G = B)
-            (Encoding::Gray, (0..w * h).map(|k| { let p = px(k); gray_scale((p[0] + p[1] + p[2]) as f64 / 3.0, vmax) }).collect())
+            (
+                Encoding::Gray,
+                (0..w * h)
+                    .map(|k| {
+                        let p = px(k);
+                        gray_scale((p[0] + p[1] + p[2]) as f64 / 3.0, vmax)
+                    })
+                    .collect(),
+            )
         }
         (_, Encoding::TerrainRgb | Encoding::Terrarium) => {
             let Some(rgb) = &rgb8 else {
-                return Err(HeightfieldError::format(path, format!("--encoding {encoding} needs an 8-bit RGB or RGBA image")));
+                return Err(HeightfieldError::format(
+                    path,
+                    format!("--encoding {encoding} needs an 8-bit RGB or RGBA image"),
+                ));
             };
             let raw = rgb.as_raw();
             let decode_px: fn(f64, f64, f64) -> f64 = if encoding == Encoding::TerrainRgb {
@@ -497,7 +549,12 @@ fn decode_image(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOpti
 
 /// 32-bit float single-channel TIFF in metres. Returns Ok(None) for TIFFs of other sample types,
 /// which the `image` crate then decodes.
-fn decode_float_tiff(path: &Path, bytes: &[u8], encoding: Encoding, opts: &DecodeOptions) -> Result<Option<Decoded>, HeightfieldError> {
+fn decode_float_tiff(
+    path: &Path,
+    bytes: &[u8],
+    encoding: Encoding,
+    opts: &DecodeOptions,
+) -> Result<Option<Decoded>, HeightfieldError> {
     use tiff::decoder::{Decoder, DecodingResult, Limits};
     let tiff_err = |e: tiff::TiffError| image_error(path, e);
     let mut dec = Decoder::new(Cursor::new(bytes)).map_err(tiff_err)?;
@@ -510,7 +567,10 @@ fn decode_float_tiff(path: &Path, bytes: &[u8], encoding: Encoding, opts: &Decod
         return Ok(None);
     }
     if !matches!(encoding, Encoding::Auto | Encoding::Float) {
-        return Err(HeightfieldError::format(path, format!("this is a 32-bit float TIFF (metres); use --encoding float or auto, not {encoding}")));
+        return Err(HeightfieldError::format(
+            path,
+            format!("this is a 32-bit float TIFF (metres); use --encoding float or auto, not {encoding}"),
+        ));
     }
     let (w, h) = dec.dimensions().map_err(tiff_err)?;
     check_size(path, w as usize, h as usize, opts)?;
@@ -520,8 +580,14 @@ fn decode_float_tiff(path: &Path, bytes: &[u8], encoding: Encoding, opts: &Decod
         _ => return Ok(None),
     };
     if heights.len() != w as usize * h as usize {
-        return Err(HeightfieldError::format(path, "the TIFF's pixel data does not match its size; the file is damaged"));
+        return Err(HeightfieldError::format(
+            path,
+            "the TIFF's pixel data does not match its size; the file is damaged",
+        ));
     }
-    Ok(Some(Decoded { heightfield: heightfield(w as usize, h as usize, heights), encoding: Encoding::Float, voids_filled: 0 }))
+    Ok(Some(Decoded {
+        heightfield: heightfield(w as usize, h as usize, heights),
+        encoding: Encoding::Float,
+        voids_filled: 0,
+    }))
 }
-

@@ -68,7 +68,10 @@ pub fn read_limited(path: &Path, limit: u64, what: &'static str) -> Result<Vec<u
         return Err(ReadError::NotAFile { path: path.to_path_buf(), problem: "is a folder, not a file" });
     }
     if !meta.is_file() {
-        return Err(ReadError::NotAFile { path: path.to_path_buf(), problem: "is not a regular file (a device, FIFO or socket)" });
+        return Err(ReadError::NotAFile {
+            path: path.to_path_buf(),
+            problem: "is not a regular file (a device, FIFO or socket)",
+        });
     }
     if meta.len() > limit {
         return Err(ReadError::TooLarge { path: path.to_path_buf(), size: meta.len(), limit, what });
@@ -95,11 +98,17 @@ pub fn resolve_inside(base: &Path, reference: &str) -> Result<PathBuf, String> {
             Component::ParentDir => {
                 depth -= 1;
                 if depth < 0 {
-                    return Err(format!("`{}` points outside the file's folder; only files beside it or below it are read", escape(reference)));
+                    return Err(format!(
+                        "`{}` points outside the file's folder; only files beside it or below it are read",
+                        escape(reference)
+                    ));
                 }
             }
             Component::RootDir | Component::Prefix(_) => {
-                return Err(format!("`{}` is an absolute path; only relative paths inside the file's folder are read", escape(reference)));
+                return Err(format!(
+                    "`{}` is an absolute path; only relative paths inside the file's folder are read",
+                    escape(reference)
+                ));
             }
         }
     }
@@ -109,13 +118,19 @@ pub fn resolve_inside(base: &Path, reference: &str) -> Result<PathBuf, String> {
 /// tobj's OBJ loader over the bytes of `path` already read (`text`), its `mtllib` files resolved
 /// inside the OBJ's folder and read with [`MAX_MTL_BYTES`] (tobj would read any path, of any size).
 /// Returns tobj's result and, when a material library could not be read, which one and why.
-pub fn load_obj_bounded(path: &Path, text: &[u8], options: &tobj::LoadOptions) -> (tobj::LoadResult, Option<(PathBuf, String)>) {
+pub fn load_obj_bounded(
+    path: &Path,
+    text: &[u8],
+    options: &tobj::LoadOptions,
+) -> (tobj::LoadResult, Option<(PathBuf, String)>) {
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf();
     let failed: std::cell::RefCell<Option<(PathBuf, String)>> = std::cell::RefCell::new(None);
     let loader = |mtl: &Path| -> tobj::MTLLoadResult {
         let name = mtl.to_string_lossy();
         let read = resolve_inside(&base, &name).and_then(|file| {
-            read_limited(&file, MAX_MTL_BYTES, "a material library").map(|b| (file, b)).map_err(|e| e.into_io().to_string())
+            read_limited(&file, MAX_MTL_BYTES, "a material library")
+                .map(|b| (file, b))
+                .map_err(|e| e.into_io().to_string())
         });
         match read.and_then(|(file, bytes)| match mtl_problem(&bytes) {
             Some(problem) => Err(format!("{}: {problem}", file.display())),

@@ -41,7 +41,12 @@ pub struct LodView {
 
 impl Default for LodView {
     fn default() -> Self {
-        LodView { screen_height_px: 1080.0, fov_y_deg: 60.0, max_screen_error_px: DEFAULT_MAX_PIXEL_ERROR, aspect: 16.0 / 9.0 }
+        LodView {
+            screen_height_px: 1080.0,
+            fov_y_deg: 60.0,
+            max_screen_error_px: DEFAULT_MAX_PIXEL_ERROR,
+            aspect: 16.0 / 9.0,
+        }
     }
 }
 

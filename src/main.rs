@@ -8,8 +8,10 @@ use verdant::heightfield::{DecodeOptions, Encoding, DEFAULT_MAX_SAMPLES};
 use verdant::lsystem::expand::DEFAULT_MAX_SYMBOLS;
 use verdant::lsystem::Dialect;
 use verdant::plants::mesh_asset::{self, ObjOptions, UpAxis};
+use verdant::plants::tree::{
+    self as tree_job, TreeJob, TreeOptions, DEFAULT_MAX_SEGMENTS, DEFAULT_MAX_TRIANGLES, DEFAULT_RADIAL_SEGMENTS,
+};
 use verdant::plants::tree_lod::{self, MeshLodJob, TreeLodJob, TreeLodOptions};
-use verdant::plants::tree::{self as tree_job, TreeJob, TreeOptions, DEFAULT_MAX_SEGMENTS, DEFAULT_MAX_TRIANGLES, DEFAULT_RADIAL_SEGMENTS};
 use verdant::scene::build::{self as scene_build, BuildSettings, PresetSource};
 use verdant::scene::preset;
 use verdant::scene::stages::Stage;
@@ -347,10 +349,10 @@ struct ValidateArgs {
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("expected WIDTHxHEIGHT such as 1025x1025, got {s:?}"))?;
-    let parse = |v: &str| v.trim().parse::<usize>().map_err(|_| format!("expected WIDTHxHEIGHT such as 1025x1025, got {s:?}"));
+    let (w, h) =
+        s.split_once(['x', 'X']).ok_or_else(|| format!("expected WIDTHxHEIGHT such as 1025x1025, got {s:?}"))?;
+    let parse =
+        |v: &str| v.trim().parse::<usize>().map_err(|_| format!("expected WIDTHxHEIGHT such as 1025x1025, got {s:?}"));
     Ok((parse(w)?, parse(h)?))
 }
 
@@ -393,7 +395,10 @@ fn cache(cmd: CacheCommand, quiet: bool) -> i32 {
         CacheCommand::Clean { out } => (out, false),
     };
     if out.exists() && !out.is_dir() {
-        return fail(&format!("{}: not a folder; pass the output folder of `verdant build` with --out", out.display()), 2);
+        return fail(
+            &format!("{}: not a folder; pass the output folder of `verdant build` with --out", out.display()),
+            2,
+        );
     }
     let cache = verdant::scene::cache::Cache::new(out);
     let result = if pruning { cache.prune(out) } else { cache.clean() };
@@ -451,7 +456,13 @@ fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
             Ok((decoded, rows)) => {
                 if !quiet {
                     let hf = &decoded.heightfield;
-                    println!("{}: {}×{} samples, encoding {}", job.source.label(), hf.width, hf.height, decoded.encoding);
+                    println!(
+                        "{}: {}×{} samples, encoding {}",
+                        job.source.label(),
+                        hf.width,
+                        hf.height,
+                        decoded.encoding
+                    );
                     print!("{}", job::sweep_table(&rows));
                 }
                 match &a.report {
@@ -554,9 +565,11 @@ fn build(a: BuildArgs, quiet: bool) -> i32 {
     } else {
         a.presets.iter().cloned().map(PresetSource::File).collect()
     };
-    let settings = BuildSettings { out_dir: a.out.clone(), stages, force: a.force, compare_full_detail: a.compare_full_detail };
+    let settings =
+        BuildSettings { out_dir: a.out.clone(), stages, force: a.force, compare_full_detail: a.compare_full_detail };
     let progress = scene_build::ProgressView::new(quiet);
-    let outcomes = scene_build::build_batch(&sources, &settings, a.jobs, &|scene: &str, msg: &str| progress.update(scene, msg));
+    let outcomes =
+        scene_build::build_batch(&sources, &settings, a.jobs, &|scene: &str, msg: &str| progress.update(scene, msg));
     progress.finish();
     let table = scene_build::summary_table(&outcomes);
     let failed = outcomes.iter().any(|o| o.error.is_some());
@@ -598,7 +611,10 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
         PresetCommand::New { name, output } => {
             let path = output.unwrap_or_else(|| PathBuf::from("presets").join(format!("{name}.toml")));
             if path.exists() {
-                return fail(&format!("{} exists; choose another name or --output, it is not overwritten", path.display()), 2);
+                return fail(
+                    &format!("{} exists; choose another name or --output, it is not overwritten", path.display()),
+                    2,
+                );
             }
             let text = preset::template(&name);
             if let Err(e) = preset::parse_preset(&text, &path) {
@@ -621,7 +637,15 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
     // `builtin:<name>`: a tree of the built-in library, named after it and grown to its height
     let builtin = match verdant::lsystem::library::named(&a.input) {
         Some(Ok(species)) => Some(species),
-        Some(Err(names)) => return fail(&format!("{}: no built-in L-system of that name; built-in: {names} (e.g. builtin:conifer)", a.input.display()), 2),
+        Some(Err(names)) => {
+            return fail(
+                &format!(
+                    "{}: no built-in L-system of that name; built-in: {names} (e.g. builtin:conifer)",
+                    a.input.display()
+                ),
+                2,
+            )
+        }
         None => None,
     };
     let name = match builtin {
@@ -743,7 +767,12 @@ fn mesh(a: MeshArgs, quiet: bool) -> i32 {
             max_triangles: a.max_triangles,
             ..ObjOptions::default()
         },
-        lod: TreeLodOptions { lods: a.lods, atlas_px: a.atlas_size, analyze: !a.no_analysis, ..TreeLodOptions::default() },
+        lod: TreeLodOptions {
+            lods: a.lods,
+            atlas_px: a.atlas_size,
+            analyze: !a.no_analysis,
+            ..TreeLodOptions::default()
+        },
     };
     match tree_lod::run_mesh_lods(&job) {
         Ok(report) => {

@@ -62,7 +62,9 @@ pub enum AlphaMode {
     #[default]
     Opaque,
     /// Alpha test: fragments with alpha below `cutoff` are discarded (no sorting needed).
-    Mask { cutoff: f32 },
+    Mask {
+        cutoff: f32,
+    },
     Blend,
 }
 
@@ -102,7 +104,8 @@ impl Default for Material {
 pub fn quad_tangent(corners: [[f32; 3]; 4], uvs: [[f32; 2]; 4], normal: [f32; 3]) -> [f32; 4] {
     let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
     let (e1, e2) = (sub(corners[1], corners[0]), sub(corners[3], corners[0]));
-    let (du1, dv1, du2, dv2) = (uvs[1][0] - uvs[0][0], uvs[1][1] - uvs[0][1], uvs[3][0] - uvs[0][0], uvs[3][1] - uvs[0][1]);
+    let (du1, dv1, du2, dv2) =
+        (uvs[1][0] - uvs[0][0], uvs[1][1] - uvs[0][1], uvs[3][0] - uvs[0][0], uvs[3][1] - uvs[0][1]);
     let det = du1 * dv2 - du2 * dv1;
     if det == 0.0 || !det.is_finite() {
         return [1.0, 0.0, 0.0, 1.0];
@@ -117,7 +120,8 @@ pub fn quad_tangent(corners: [[f32; 3]; 4], uvs: [[f32; 2]; 4], normal: [f32; 3]
         return [1.0, 0.0, 0.0, 1.0];
     }
     let t = t.map(|x| x / len);
-    let b = [normal[1] * t[2] - normal[2] * t[1], normal[2] * t[0] - normal[0] * t[2], normal[0] * t[1] - normal[1] * t[0]];
+    let b =
+        [normal[1] * t[2] - normal[2] * t[1], normal[2] * t[0] - normal[0] * t[2], normal[0] * t[1] - normal[1] * t[0]];
     let up_the_image = -(b[0] * dpdv[0] + b[1] * dpdv[1] + b[2] * dpdv[2]);
     [t[0], t[1], t[2], if up_the_image >= 0.0 { 1.0 } else { -1.0 }]
 }
@@ -130,7 +134,11 @@ impl Material {
 
     /// The material with every texture index mapped by `f` (None: that texture is dropped).
     pub fn with_textures(&self, f: impl Fn(usize) -> Option<usize>) -> Material {
-        Material { base_color_texture: self.base_color_texture.and_then(&f), normal_texture: self.normal_texture.and_then(&f), ..self.clone() }
+        Material {
+            base_color_texture: self.base_color_texture.and_then(&f),
+            normal_texture: self.normal_texture.and_then(&f),
+            ..self.clone()
+        }
     }
 }
 
@@ -417,8 +425,12 @@ mod tests {
     #[test]
     fn optimize_drops_an_unused_vertex_in_the_middle_and_keeps_custom_attributes_aligned() {
         // vertex 1 is used by no triangle; the custom attribute carries each vertex's own position
-        let positions: Vec<[f32; 3]> = vec![[0.0, 0.0, 0.0], [9.0, 9.0, 9.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 1.0]];
-        let custom = vec![CustomAttribute { name: "_ID".into(), values: positions.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect() }];
+        let positions: Vec<[f32; 3]> =
+            vec![[0.0, 0.0, 0.0], [9.0, 9.0, 9.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 1.0]];
+        let custom = vec![CustomAttribute {
+            name: "_ID".into(),
+            values: positions.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect(),
+        }];
         let mut p = Primitive { positions, custom, indices: vec![0, 3, 2, 2, 3, 4], ..Primitive::default() };
         p.optimize_for_gpu();
         assert_eq!(p.positions.len(), 4);

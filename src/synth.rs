@@ -190,7 +190,9 @@ pub fn noise_map(kind: NoiseKind, size: usize, cell_size_m: f64, relief_m: f64, 
     let sample = |i: usize, j: usize| -> f64 {
         let (x, y) = (i as f64, j as f64);
         match kind {
-            NoiseKind::Fbm => octaves.iter().map(|&(s, ox, oy, f, a)| a * gradient_noise(s, x * f + ox, y * f + oy)).sum(),
+            NoiseKind::Fbm => {
+                octaves.iter().map(|&(s, ox, oy, f, a)| a * gradient_noise(s, x * f + ox, y * f + oy)).sum()
+            }
             NoiseKind::Ridged => {
                 // Musgrave's ridged multifractal: signal = (1 − |n|)², weighted by the previous octave
                 let mut sum = 0.0;

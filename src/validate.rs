@@ -124,7 +124,11 @@ impl fmt::Display for ValidationReport {
                 write!(f, ", {} points", m.points())?;
             }
             match (m.bounds(), m.placed) {
-                (Some(b), Some(p)) => writeln!(f, ", bounds {:?} .. {:?} as stored, {:?} .. {:?} as placed by its node", b.min, b.max, p.min, p.max)?,
+                (Some(b), Some(p)) => writeln!(
+                    f,
+                    ", bounds {:?} .. {:?} as stored, {:?} .. {:?} as placed by its node",
+                    b.min, b.max, p.min, p.max
+                )?,
                 (Some(b), None) => writeln!(f, ", bounds {:?} .. {:?}", b.min, b.max)?,
                 _ => writeln!(f)?,
             }
@@ -153,7 +157,8 @@ fn placed_bounds(scene: &Scene, mesh: usize, m: &Mesh) -> Option<Bounds> {
     }
     let points: Vec<[f32; 3]> = m.primitives.iter().filter_map(|p| p.bounds()).flat_map(|b| [b.min, b.max]).collect();
     let b = Bounds::of(&points)?;
-    let place = |p: [f32; 3]| [0, 1, 2].map(|a| (node.translation[a] as f64 + node.scale[a] as f64 * p[a] as f64) as f32);
+    let place =
+        |p: [f32; 3]| [0, 1, 2].map(|a| (node.translation[a] as f64 + node.scale[a] as f64 * p[a] as f64) as f32);
     Bounds::of(&[place(b.min), place(b.max)])
 }
 
@@ -173,7 +178,12 @@ pub fn validate_file(path: &Path, opts: &ValidateOptions) -> Result<ValidationRe
             primitives: m
                 .primitives
                 .iter()
-                .map(|p| PrimitiveReport { vertices: p.positions.len(), triangles: p.triangle_count(), points: p.point_count(), bounds: p.bounds() })
+                .map(|p| PrimitiveReport {
+                    vertices: p.positions.len(),
+                    triangles: p.triangle_count(),
+                    points: p.point_count(),
+                    bounds: p.bounds(),
+                })
                 .collect(),
         })
         .collect();
@@ -186,7 +196,10 @@ pub fn validate_file(path: &Path, opts: &ValidateOptions) -> Result<ValidationRe
 pub fn read_scene(path: &Path) -> Result<Scene, ValidateError> {
     let loaded = load(path)?;
     if let Some(i) = loaded.issues.iter().find(|i| i.severity == Severity::Error) {
-        return Err(ValidateError::Parse { path: path.to_path_buf(), problem: format!("{}: {}", i.location, i.message) });
+        return Err(ValidateError::Parse {
+            path: path.to_path_buf(),
+            problem: format!("{}: {}", i.location, i.message),
+        });
     }
     Ok(loaded.scene)
 }
@@ -206,7 +219,8 @@ fn load(path: &Path) -> Result<Loaded, ValidateError> {
     // the last resort, turned into a parse error naming the file instead of ending the process
     let guarded = |f: fn(&Path) -> Result<Loaded, ValidateError>| {
         std::panic::catch_unwind(|| f(path)).unwrap_or_else(|panic| {
-            let what = panic.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| panic.downcast_ref::<String>().cloned());
+            let what =
+                panic.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| panic.downcast_ref::<String>().cloned());
             Err(ValidateError::Parse {
                 path: path.to_path_buf(),
                 problem: format!("a glTF/OBJ library failed on it ({})", what.unwrap_or_else(|| "no message".into())),
@@ -237,13 +251,21 @@ fn gltf_json_problems(root: &gltf::json::Root) -> Vec<String> {
                         gltf::json::validation::Checked::Valid(s) => s.to_string(),
                         gltf::json::validation::Checked::Invalid => "?".into(),
                     };
-                    problems.push(format!("{at}.attributes.{name}: accessor {} does not exist ({accessors} accessors)", index.value()));
+                    problems.push(format!(
+                        "{at}.attributes.{name}: accessor {} does not exist ({accessors} accessors)",
+                        index.value()
+                    ));
                 }
             }
             for (ti, target) in prim.targets.iter().flatten().enumerate() {
-                for (name, index) in [("POSITION", &target.positions), ("NORMAL", &target.normals), ("TANGENT", &target.tangents)] {
+                for (name, index) in
+                    [("POSITION", &target.positions), ("NORMAL", &target.normals), ("TANGENT", &target.tangents)]
+                {
                     if let Some(index) = (*index).filter(|i| i.value() >= accessors) {
-                        problems.push(format!("{at}.targets[{ti}].{name}: accessor {} does not exist ({accessors} accessors)", index.value()));
+                        problems.push(format!(
+                            "{at}.targets[{ti}].{name}: accessor {} does not exist ({accessors} accessors)",
+                            index.value()
+                        ));
                     }
                 }
             }
@@ -251,10 +273,11 @@ fn gltf_json_problems(root: &gltf::json::Root) -> Vec<String> {
     }
     for (ii, image) in root.images.iter().enumerate() {
         match (&image.buffer_view, &image.uri) {
-            (Some(_), Some(_)) => problems.push(format!("images[{ii}]: both a uri and a bufferView; an image has exactly one")),
-            (Some(_), None) if image.mime_type.is_none() => {
-                problems.push(format!("images[{ii}]: an image in a bufferView needs a mimeType (image/png or image/jpeg)"))
+            (Some(_), Some(_)) => {
+                problems.push(format!("images[{ii}]: both a uri and a bufferView; an image has exactly one"))
             }
+            (Some(_), None) if image.mime_type.is_none() => problems
+                .push(format!("images[{ii}]: an image in a bufferView needs a mimeType (image/png or image/jpeg)")),
             (None, None) => problems.push(format!("images[{ii}]: neither a uri nor a bufferView")),
             _ => {}
         }
@@ -277,7 +300,10 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
     if bytes.starts_with(b"glTF") && bytes.len() >= 12 {
         let declared = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
         if declared != bytes.len() {
-            return Err(parse(format!("the GLB header says the file is {declared} bytes, it is {} (truncated or padded?)", bytes.len())));
+            return Err(parse(format!(
+                "the GLB header says the file is {declared} bytes, it is {} (truncated or padded?)",
+                bytes.len()
+            )));
         }
     }
     // the gltf crate refuses required extensions it does not implement; the ones verdant writes
@@ -321,10 +347,20 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
                     return Err(format!("{} is not a regular file", file.display()));
                 }
                 if meta.len() > crate::input::MAX_GLTF_BYTES {
-                    return Err(format!("{}: {} bytes, more than the {}-byte limit for a glTF buffer", file.display(), meta.len(), crate::input::MAX_GLTF_BYTES));
+                    return Err(format!(
+                        "{}: {} bytes, more than the {}-byte limit for a glTF buffer",
+                        file.display(),
+                        meta.len(),
+                        crate::input::MAX_GLTF_BYTES
+                    ));
                 }
                 if (meta.len() as usize) < buffer.length() {
-                    return Err(format!("{}: {} bytes, the buffer declares byteLength {}", file.display(), meta.len(), buffer.length()));
+                    return Err(format!(
+                        "{}: {} bytes, the buffer declares byteLength {}",
+                        file.display(),
+                        meta.len(),
+                        buffer.length()
+                    ));
                 }
                 Ok(())
             });
@@ -399,9 +435,10 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
                     issues.push(issue(Severity::Warning, &loc, "data: URI images are not checked"));
                     Vec::new()
                 } else {
-                    match crate::input::resolve_inside(base, uri)
-                        .and_then(|file| crate::input::read_limited(&file, crate::input::MAX_TEXTURE_BYTES, "an image").map_err(|e| e.to_string()))
-                    {
+                    match crate::input::resolve_inside(base, uri).and_then(|file| {
+                        crate::input::read_limited(&file, crate::input::MAX_TEXTURE_BYTES, "an image")
+                            .map_err(|e| e.to_string())
+                    }) {
                         Ok(bytes) => bytes,
                         Err(e) => {
                             issues.push(issue(Severity::Error, &loc, format!("image URI: {e}")));
@@ -443,7 +480,11 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
                     for id in ids {
                         match id.as_u64().map(|i| i as usize).filter(|&i| i < doc.nodes().len() && i != node.index()) {
                             Some(i) => out.lods.push(i),
-                            None => issues.push(issue(Severity::Error, &loc, format!("{EXT_LOD} id {id} is not another node"))),
+                            None => issues.push(issue(
+                                Severity::Error,
+                                &loc,
+                                format!("{EXT_LOD} id {id} is not another node"),
+                            )),
                         }
                     }
                 }
@@ -452,9 +493,16 @@ fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
             // the coverage lives in extras; take it out so extras round-trip as written
             if let Some(Value::Object(map)) = &mut out.extras {
                 if let Some(cov) = map.remove(LOD_COVERAGE_KEY) {
-                    match cov.as_array().map(|a| a.iter().map(|c| c.as_f64().map(|c| c as f32)).collect::<Option<Vec<_>>>()) {
+                    match cov
+                        .as_array()
+                        .map(|a| a.iter().map(|c| c.as_f64().map(|c| c as f32)).collect::<Option<Vec<_>>>())
+                    {
                         Some(Some(c)) => out.lod_screen_coverage = c,
-                        _ => issues.push(issue(Severity::Error, &loc, format!("{LOD_COVERAGE_KEY} is not an array of numbers"))),
+                        _ => issues.push(issue(
+                            Severity::Error,
+                            &loc,
+                            format!("{LOD_COVERAGE_KEY} is not an array of numbers"),
+                        )),
                     }
                     if map.is_empty() {
                         out.extras = None;
@@ -491,12 +539,20 @@ fn read_primitive(
         gltf::mesh::Mode::Triangles => {}
         gltf::mesh::Mode::Points => p.mode = PrimitiveMode::Points,
         mode => {
-            issues.push(issue(Severity::Warning, loc, format!("mode {mode:?} is not checked (only triangle lists and points are)")));
+            issues.push(issue(
+                Severity::Warning,
+                loc,
+                format!("mode {mode:?} is not checked (only triangle lists and points are)"),
+            ));
             return (p, None);
         }
     }
     let mut declared = None;
-    let read = |issues: &mut Vec<Issue>, sem: &str, acc: Option<gltf::Accessor>, dims: &[usize]| -> Option<(usize, Vec<f32>)> {
+    let read = |issues: &mut Vec<Issue>,
+                sem: &str,
+                acc: Option<gltf::Accessor>,
+                dims: &[usize]|
+     -> Option<(usize, Vec<f32>)> {
         let acc = acc?;
         match read_floats(&acc, buffers) {
             Ok((d, v)) if dims.contains(&d) => Some((d, v)),
@@ -520,7 +576,11 @@ fn read_primitive(
                 issues.push(issue(
                     Severity::Error,
                     loc,
-                    if quantized { "POSITION is not FLOAT and the file does not use KHR_mesh_quantization" } else { "POSITION is not FLOAT" },
+                    if quantized {
+                        "POSITION is not FLOAT and the file does not use KHR_mesh_quantization"
+                    } else {
+                        "POSITION is not FLOAT"
+                    },
                 ));
             }
             let bound = |v: Option<Value>| -> Option<[f32; 3]> {
@@ -529,7 +589,11 @@ fn read_primitive(
             };
             match (bound(acc.min()), bound(acc.max())) {
                 (Some(min), Some(max)) => declared = Some(Bounds { min, max }),
-                _ => issues.push(issue(Severity::Error, loc, "POSITION accessor lacks a 3-number min/max (glTF requires it)")),
+                _ => issues.push(issue(
+                    Severity::Error,
+                    loc,
+                    "POSITION accessor lacks a 3-number min/max (glTF requires it)",
+                )),
             }
             if let Some((_, v)) = read(issues, "POSITION", Some(acc), &[3]) {
                 p.positions = v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
@@ -568,9 +632,21 @@ fn read_primitive(
         None => p.indices = (0..p.positions.len() as u32).collect(),
     }
     let custom = p.custom.iter().map(|c| (c.name.as_str(), c.values.len()));
-    for (name, len) in [("NORMAL", p.normals.len()), ("TEXCOORD_0", p.uvs.len()), ("TANGENT", p.tangents.len()), ("COLOR_0", p.colors.len())].into_iter().chain(custom) {
+    for (name, len) in [
+        ("NORMAL", p.normals.len()),
+        ("TEXCOORD_0", p.uvs.len()),
+        ("TANGENT", p.tangents.len()),
+        ("COLOR_0", p.colors.len()),
+    ]
+    .into_iter()
+    .chain(custom)
+    {
         if len != 0 && len != p.positions.len() {
-            issues.push(issue(Severity::Error, loc, format!("{name} has {len} elements for {} positions", p.positions.len())));
+            issues.push(issue(
+                Severity::Error,
+                loc,
+                format!("{name} has {len} elements for {} positions", p.positions.len()),
+            ));
         }
     }
     (p, declared)
@@ -591,7 +667,11 @@ fn read_instances(
         match acc.map(|a| read_floats(&a, buffers)) {
             Some(Ok((d, v))) if d == dims => v,
             Some(Ok((d, _))) => {
-                issues.push(issue(Severity::Error, loc, format!("instance {name} has {d} components, expected {dims}")));
+                issues.push(issue(
+                    Severity::Error,
+                    loc,
+                    format!("instance {name} has {d} components, expected {dims}"),
+                ));
                 Vec::new()
             }
             Some(Err(e)) => {
@@ -614,9 +694,9 @@ fn read_instances(
 fn view_bytes<'b>(view: &gltf::buffer::View, buffers: &[&'b [u8]]) -> Result<&'b [u8], String> {
     let buffer = buffers.get(view.buffer().index()).ok_or("bufferView names a missing buffer")?;
     let end = view.offset().checked_add(view.length()).ok_or("bufferView range overflows")?;
-    buffer
-        .get(view.offset()..end)
-        .ok_or_else(|| format!("bufferView {} ends at byte {end}, past its buffer's {} bytes", view.index(), buffer.len()))
+    buffer.get(view.offset()..end).ok_or_else(|| {
+        format!("bufferView {} ends at byte {end}, past its buffer's {} bytes", view.index(), buffer.len())
+    })
 }
 
 /// The buffers of a file using EXT_meshopt_compression: the GLB chunk or `.bin` files as stored,
@@ -628,28 +708,38 @@ fn meshopt_buffers(doc: &gltf::Document, base: &Path, blob: Option<Vec<u8>>) -> 
     // a fallback buffer is allocated only as far as its views reach (its byteLength is the file's word)
     let mut reach = vec![0usize; doc.buffers().len()];
     for view in doc.views() {
-        let end = view.offset().checked_add(view.length()).ok_or(format!("bufferView {} range overflows", view.index()))?;
+        let end =
+            view.offset().checked_add(view.length()).ok_or(format!("bufferView {} range overflows", view.index()))?;
         if let Some(r) = reach.get_mut(view.buffer().index()) {
             *r = (*r).max(end);
         }
     }
     for buffer in doc.buffers() {
         let at = format!("buffer {}", buffer.index());
-        let fallback = buffer.extension_value(EXT_MESHOPT).and_then(|e| e.get("fallback")).and_then(Value::as_bool) == Some(true);
+        let fallback =
+            buffer.extension_value(EXT_MESHOPT).and_then(|e| e.get("fallback")).and_then(Value::as_bool) == Some(true);
         let data = match buffer.source() {
             _ if fallback => {
                 let len = buffer.length().min(reach[buffer.index()]);
                 if len as u64 > crate::input::MAX_GLTF_BYTES {
-                    return Err(format!("{at}: a fallback buffer of {len} bytes, over the {}-byte limit", crate::input::MAX_GLTF_BYTES));
+                    return Err(format!(
+                        "{at}: a fallback buffer of {len} bytes, over the {}-byte limit",
+                        crate::input::MAX_GLTF_BYTES
+                    ));
                 }
                 vec![0; len]
             }
-            gltf::buffer::Source::Bin => blob.take().ok_or(format!("{at}: refers to the GLB binary chunk, which is missing or taken"))?,
+            gltf::buffer::Source::Bin => {
+                blob.take().ok_or(format!("{at}: refers to the GLB binary chunk, which is missing or taken"))?
+            }
             gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
                 return Err(format!("{at}: data: URIs beside {EXT_MESHOPT} are not read by verdant"))
             }
             gltf::buffer::Source::Uri(uri) => crate::input::resolve_inside(base, uri)
-                .and_then(|f| crate::input::read_limited(&f, crate::input::MAX_GLTF_BYTES, "a glTF buffer").map_err(|e| e.to_string()))
+                .and_then(|f| {
+                    crate::input::read_limited(&f, crate::input::MAX_GLTF_BYTES, "a glTF buffer")
+                        .map_err(|e| e.to_string())
+                })
                 .map_err(|e| format!("{at}: {e}"))?,
         };
         if data.len() < buffer.length() && !fallback {
@@ -661,8 +751,13 @@ fn meshopt_buffers(doc: &gltf::Document, base: &Path, blob: Option<Vec<u8>>) -> 
         let Some(ext) = view.extension_value(EXT_MESHOPT) else { continue };
         let at = format!("bufferView {} {EXT_MESHOPT}", view.index());
         let field = |k: &str| ext.get(k).and_then(Value::as_u64).map(|v| v as usize).ok_or(format!("{at}: no {k}"));
-        let (source, offset, length, stride, count) =
-            (field("buffer")?, field("byteOffset").unwrap_or(0), field("byteLength")?, field("byteStride")?, field("count")?);
+        let (source, offset, length, stride, count) = (
+            field("buffer")?,
+            field("byteOffset").unwrap_or(0),
+            field("byteLength")?,
+            field("byteStride")?,
+            field("count")?,
+        );
         // what the decoders would write must be the view, exactly: meshoptimizer's C code asserts
         // on some of these (a triangle list whose count is not a multiple of 3) and allocates count
         // elements
@@ -676,7 +771,10 @@ fn meshopt_buffers(doc: &gltf::Document, base: &Path, blob: Option<Vec<u8>>) -> 
             return Err(format!("{at}: mode {mode:?} with byteStride {stride} and count {count} is not one verdant reads (ATTRIBUTES of 4–16-byte elements, or TRIANGLES of 2- or 4-byte indices, a multiple of 3)"));
         }
         if count.checked_mul(stride) != Some(view.length()) {
-            return Err(format!("{at}: count {count} × byteStride {stride} is not the view's byteLength {}", view.length()));
+            return Err(format!(
+                "{at}: count {count} × byteStride {stride} is not the view's byteLength {}",
+                view.length()
+            ));
         }
         if ext.get("filter").and_then(Value::as_str).is_some_and(|f| f != "NONE") {
             return Err(format!("{at}: filters are not read by verdant (it writes none)"));
@@ -692,13 +790,24 @@ fn meshopt_buffers(doc: &gltf::Document, base: &Path, blob: Option<Vec<u8>>) -> 
             (Some("ATTRIBUTES"), 8) => decode_elements::<8>(&encoded, count).map_err(fail)?,
             (Some("ATTRIBUTES"), 12) => decode_elements::<12>(&encoded, count).map_err(fail)?,
             (Some("ATTRIBUTES"), 16) => decode_elements::<16>(&encoded, count).map_err(fail)?,
-            (Some("TRIANGLES"), 2) => meshopt::decode_index_buffer::<u16>(&encoded, count).map_err(fail)?.iter().flat_map(|i| i.to_le_bytes()).collect(),
-            (Some("TRIANGLES"), 4) => meshopt::decode_index_buffer::<u32>(&encoded, count).map_err(fail)?.iter().flat_map(|i| i.to_le_bytes()).collect(),
+            (Some("TRIANGLES"), 2) => meshopt::decode_index_buffer::<u16>(&encoded, count)
+                .map_err(fail)?
+                .iter()
+                .flat_map(|i| i.to_le_bytes())
+                .collect(),
+            (Some("TRIANGLES"), 4) => meshopt::decode_index_buffer::<u32>(&encoded, count)
+                .map_err(fail)?
+                .iter()
+                .flat_map(|i| i.to_le_bytes())
+                .collect(),
             (mode, _) => return Err(format!("{at}: mode {mode:?} with byteStride {stride} is not read by verdant")),
         };
         let target = view.buffer().index();
         let range = view.offset()..view.offset() + view.length();
-        let dest = buffers.get_mut(target).and_then(|b| b.get_mut(range)).ok_or(format!("{at}: the view lies outside buffer {target}"))?;
+        let dest = buffers
+            .get_mut(target)
+            .and_then(|b| b.get_mut(range))
+            .ok_or(format!("{at}: the view lies outside buffer {target}"))?;
         if decoded.len() != dest.len() {
             return Err(format!("{at}: decoded {} bytes for a {}-byte view", decoded.len(), dest.len()));
         }
@@ -714,7 +823,11 @@ fn decode_elements<const N: usize>(encoded: &[u8], count: usize) -> Result<Vec<u
     where
         [u32; K]: Default,
     {
-        Ok(meshopt::decode_vertex_buffer::<[u32; K]>(encoded, count)?.into_iter().flatten().flat_map(u32::to_ne_bytes).collect())
+        Ok(meshopt::decode_vertex_buffer::<[u32; K]>(encoded, count)?
+            .into_iter()
+            .flatten()
+            .flat_map(u32::to_ne_bytes)
+            .collect())
     }
     match N {
         4 => words::<1>(encoded, count),
@@ -805,7 +918,11 @@ fn node_graph_issues(doc: &gltf::Document) -> Vec<Issue> {
         for child in node.children() {
             let c = child.index();
             if let Some(p) = parent[c] {
-                issues.push(issue(Severity::Error, format!("node {c}"), format!("has two parents, nodes {p} and {}", node.index())));
+                issues.push(issue(
+                    Severity::Error,
+                    format!("node {c}"),
+                    format!("has two parents, nodes {p} and {}", node.index()),
+                ));
             } else {
                 parent[c] = Some(node.index());
             }
@@ -818,7 +935,11 @@ fn node_graph_issues(doc: &gltf::Document) -> Vec<Issue> {
             at = p;
             steps += 1;
             if steps > n {
-                issues.push(issue(Severity::Error, format!("node {start}"), "is its own ancestor: the node hierarchy has a cycle"));
+                issues.push(issue(
+                    Severity::Error,
+                    format!("node {start}"),
+                    "is its own ancestor: the node hierarchy has a cycle",
+                ));
                 return issues;
             }
         }
@@ -857,8 +978,10 @@ fn load_obj(path: &Path) -> Result<Loaded, ValidateError> {
                     ..Material::default()
                 };
                 if let Some(tex) = &m.diffuse_texture {
-                    let read = crate::input::resolve_inside(base, tex)
-                        .and_then(|file| crate::input::read_limited(&file, crate::input::MAX_TEXTURE_BYTES, "a texture").map_err(|e| e.to_string()));
+                    let read = crate::input::resolve_inside(base, tex).and_then(|file| {
+                        crate::input::read_limited(&file, crate::input::MAX_TEXTURE_BYTES, "a texture")
+                            .map_err(|e| e.to_string())
+                    });
                     match read {
                         Ok(png) => {
                             let name = Path::new(tex).file_stem().and_then(|s| s.to_str()).unwrap_or("").to_string();
@@ -941,7 +1064,9 @@ fn scan_obj_faces(text: &str) -> Vec<Issue> {
                             issues.push(issue(
                                 Severity::Error,
                                 format!("line {}", ln + 1),
-                                format!("face corner {corner:?} names {what} {part}, but {count} are defined before it"),
+                                format!(
+                                    "face corner {corner:?} names {what} {part}, but {count} are defined before it"
+                                ),
                             ));
                         }
                     }
@@ -993,7 +1118,10 @@ fn check_scene_data(scene: &Scene, declared: &[Vec<Option<Bounds>>], opts: &Vali
                         issues.push(issue(
                             Severity::Error,
                             &loc,
-                            format!("POSITION min/max {:?}..{:?} differ from the data's {:?}..{:?}", d.min, d.max, b.min, b.max),
+                            format!(
+                                "POSITION min/max {:?}..{:?} differ from the data's {:?}..{:?}",
+                                d.min, d.max, b.min, b.max
+                            ),
                         ));
                     }
                 }
@@ -1007,18 +1135,31 @@ fn check_scene_data(scene: &Scene, declared: &[Vec<Option<Bounds>>], opts: &Vali
             if lens.iter().any(|&l| l != 0 && l != inst.len()) {
                 issues.push(issue(Severity::Error, &loc, format!("instance arrays have different lengths {lens:?}")));
             }
-            let finite = inst.translations.iter().flatten().chain(inst.rotations.iter().flatten()).chain(inst.scales.iter().flatten());
+            let finite = inst
+                .translations
+                .iter()
+                .flatten()
+                .chain(inst.rotations.iter().flatten())
+                .chain(inst.scales.iter().flatten());
             if !finite.into_iter().all(|x| x.is_finite()) {
                 issues.push(issue(Severity::Error, &loc, "instance transform is not finite"));
             }
             if let Some(k) = inst.rotations.iter().position(|r| (length(r) - 1.0).abs() > NORMAL_TOLERANCE) {
-                issues.push(issue(Severity::Error, &loc, format!("instance {k} rotation {:?} is not a unit quaternion", inst.rotations[k])));
+                issues.push(issue(
+                    Severity::Error,
+                    &loc,
+                    format!("instance {k} rotation {:?} is not a unit quaternion", inst.rotations[k]),
+                ));
             }
         }
         if !node.lod_screen_coverage.is_empty() {
             let c = &node.lod_screen_coverage;
             if c.len() != node.lods.len() && c.len() != node.lods.len() + 1 {
-                issues.push(issue(Severity::Warning, &loc, format!("{} screen coverages for {} LoD levels", c.len(), node.lods.len())));
+                issues.push(issue(
+                    Severity::Warning,
+                    &loc,
+                    format!("{} screen coverages for {} LoD levels", c.len(), node.lods.len()),
+                ));
             }
             if c.windows(2).any(|w| w[1] > w[0]) {
                 issues.push(issue(Severity::Warning, &loc, "screen coverages should decrease level by level"));
@@ -1038,7 +1179,11 @@ fn check_primitive(p: &Primitive, loc: &str, issues: &mut Vec<Issue>) {
     let n = p.positions.len();
     let points = p.mode == PrimitiveMode::Points;
     if !points && !p.indices.len().is_multiple_of(3) {
-        issues.push(issue(Severity::Error, loc, format!("{} indices is not a whole number of triangles", p.indices.len())));
+        issues.push(issue(
+            Severity::Error,
+            loc,
+            format!("{} indices is not a whole number of triangles", p.indices.len()),
+        ));
     }
     {
         let mut f = Finder { issues, loc: loc.into(), what: "indices out of range", count: 0 };
@@ -1049,7 +1194,7 @@ fn check_primitive(p: &Primitive, loc: &str, issues: &mut Vec<Issue>) {
         }
     }
     for (name, values) in [
-        ("POSITION", p.positions.iter().flat_map(|v| v.to_vec()).collect::<Vec<f32>>(), ),
+        ("POSITION", p.positions.iter().flat_map(|v| v.to_vec()).collect::<Vec<f32>>()),
         ("NORMAL", p.normals.iter().flat_map(|v| v.to_vec()).collect()),
         ("TEXCOORD_0", p.uvs.iter().flat_map(|v| v.to_vec()).collect()),
         ("COLOR_0", p.colors.iter().flat_map(|v| v.to_vec()).collect()),
@@ -1154,7 +1299,10 @@ fn check_up_facing(scene: &Scene, issues: &mut Vec<Issue>) {
                 let (a, b, c) = (w(idx[0]), w(idx[1]), w(idx[2]));
                 let normal = (b - a).cross(c - a);
                 if normal.y.is_nan() || normal.y <= 0.0 {
-                    f.found(format!("triangle {t}"), format!("faces {:?}, not up (+Y)", normal.normalize_or_zero().to_array()));
+                    f.found(
+                        format!("triangle {t}"),
+                        format!("faces {:?}, not up (+Y)", normal.normalize_or_zero().to_array()),
+                    );
                 }
             }
         }

@@ -239,7 +239,15 @@ pub struct MipFigures {
 
 /// The figures of every level of a chain.
 pub fn mip_figures(chain: &[MipLevel]) -> Vec<MipFigures> {
-    chain.iter().map(|m| MipFigures { width: m.image.width, height: m.image.height, alpha_scale: m.alpha_scale, coverage: m.coverage }).collect()
+    chain
+        .iter()
+        .map(|m| MipFigures {
+            width: m.image.width,
+            height: m.image.height,
+            alpha_scale: m.alpha_scale,
+            coverage: m.coverage,
+        })
+        .collect()
 }
 
 /// The mip chain of `level0` down to 1×1. Level 0 is the input (dilate it first) with alpha

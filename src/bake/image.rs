@@ -85,7 +85,8 @@ impl Image {
             return Err(self.malformed());
         }
         let to_u8 = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-        let raw: Vec<u8> = self.pixels.iter().flat_map(|c| [to_u8(c[0]), to_u8(c[1]), to_u8(c[2]), to_u8(c[3])]).collect();
+        let raw: Vec<u8> =
+            self.pixels.iter().flat_map(|c| [to_u8(c[0]), to_u8(c[1]), to_u8(c[2]), to_u8(c[3])]).collect();
         crate::bake::raster::encode_rgba8_png(&raw, self.width, self.height).map_err(BakeError::Encode)
     }
 

@@ -554,7 +554,12 @@ impl Canvas {
 pub fn rgba8(pixels: &[[f32; 4]]) -> Vec<u8> {
     let mut out = Vec::with_capacity(pixels.len() * 4);
     for c in pixels {
-        out.extend_from_slice(&[to_u8(linear_to_srgb(c[0])), to_u8(linear_to_srgb(c[1])), to_u8(linear_to_srgb(c[2])), to_u8(c[3])]);
+        out.extend_from_slice(&[
+            to_u8(linear_to_srgb(c[0])),
+            to_u8(linear_to_srgb(c[1])),
+            to_u8(linear_to_srgb(c[2])),
+            to_u8(c[3]),
+        ]);
     }
     out
 }

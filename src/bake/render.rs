@@ -91,7 +91,8 @@ pub fn render_mesh(
             Shading::CardNormals { right, up, toward } => Some([right, up, toward]),
             _ => None,
         };
-        let shader = |f: &Fragment| shade(f, material, texture, opts.use_vertex_colors, lighting.as_ref(), card.as_ref());
+        let shader =
+            |f: &Fragment| shade(f, material, texture, opts.use_vertex_colors, lighting.as_ref(), card.as_ref());
         let stats = if opts.parallel {
             canvas.draw_camera_par(cam, object_to_world, prim, &draw, shader)
         } else {
@@ -182,7 +183,8 @@ impl<'a> Lighting<'a> {
         let n = prim.positions.len();
         if let Some(image) = image {
             if prim.normals.len() == n && prim.tangents.len() == n {
-                self.normal_map = Some(NormalMap { image, normals: &prim.normals, tangents: &prim.tangents, indices: &prim.indices });
+                self.normal_map =
+                    Some(NormalMap { image, normals: &prim.normals, tangents: &prim.tangents, indices: &prim.indices });
             }
         }
         self
@@ -206,7 +208,11 @@ impl<'a> Lighting<'a> {
         let s = m.image.sample_bilinear(f.uv);
         let (x, y, z) = (2.0 * s[0] - 1.0, 2.0 * s[1] - 1.0, 2.0 * s[2] - 1.0);
         let sign = if w < 0.0 { -1.0 } else { 1.0 };
-        let bt = [sign * (n[1] * tg[2] - n[2] * tg[1]), sign * (n[2] * tg[0] - n[0] * tg[2]), sign * (n[0] * tg[1] - n[1] * tg[0])];
+        let bt = [
+            sign * (n[1] * tg[2] - n[2] * tg[1]),
+            sign * (n[2] * tg[0] - n[0] * tg[2]),
+            sign * (n[0] * tg[1] - n[1] * tg[0]),
+        ];
         Some([0, 1, 2].map(|a| x * tg[a] + y * bt[a] + z * n[a]))
     }
 
@@ -318,7 +324,15 @@ mod tests {
             q.normals = vec![normal; 4];
             let mut c = front_view().canvas([0.0; 4]).unwrap();
             let mat = Material { base_color: [0.2, 0.9, 0.1, 1.0], double_sided, ..Material::default() };
-            render_mesh(&mut c, &front_view(), &IDENTITY, &Mesh { primitives: vec![q], ..Mesh::default() }, &[mat], &[], &opts);
+            render_mesh(
+                &mut c,
+                &front_view(),
+                &IDENTITY,
+                &Mesh { primitives: vec![q], ..Mesh::default() },
+                &[mat],
+                &[],
+                &opts,
+            );
             c.color[5]
         };
         let close = |a: [f32; 4], b: [f32; 4]| a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-5);
@@ -335,7 +349,10 @@ mod tests {
     #[test]
     fn lambert_lights_through_the_normal_map() {
         // a quad facing +Z, tangent +X; the map turns every normal to +X; the light comes from +X
-        let opts = RenderOptions { shading: Shading::Lambert { light_dir: [1.0, 0.0, 0.0], ambient: 0.25 }, ..RenderOptions::default() };
+        let opts = RenderOptions {
+            shading: Shading::Lambert { light_dir: [1.0, 0.0, 0.0], ambient: 0.25 },
+            ..RenderOptions::default()
+        };
         let mut prim = quad(1.0);
         prim.tangents = vec![[1.0, 0.0, 0.0, 1.0]; 4];
         let mesh = Mesh { primitives: vec![prim], ..Mesh::default() };

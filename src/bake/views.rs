@@ -275,12 +275,17 @@ pub fn switch_search(
     opts: &LodImageOptions,
     range: &SwitchSearch,
 ) -> (Vec<DistanceError>, f64, bool) {
-    switch_search_by(range, |d| lod_image_error_with(reference, candidate, view, &[d], opts).distances.into_iter().next())
+    switch_search_by(range, |d| {
+        lod_image_error_with(reference, candidate, view, &[d], opts).distances.into_iter().next()
+    })
 }
 
 /// [`switch_search`] with the measurement at one distance given by `eval` (for candidates that
 /// are not one static mesh, e.g. a view-dependent impostor measured per view).
-pub fn switch_search_by(range: &SwitchSearch, eval: impl Fn(f64) -> Option<DistanceError>) -> (Vec<DistanceError>, f64, bool) {
+pub fn switch_search_by(
+    range: &SwitchSearch,
+    eval: impl Fn(f64) -> Option<DistanceError>,
+) -> (Vec<DistanceError>, f64, bool) {
     let mut rows = Vec::new();
     let (mut pass, mut fail) = (None, None);
     let mut d = range.far_m;
@@ -432,7 +437,6 @@ fn switch_distance(rows: &[DistanceError], max_error_px: f64) -> (f64, bool) {
     let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 1.0 };
     ((l_f + t * (l_p - l_f)).exp(), false)
 }
-
 
 #[cfg(test)]
 mod tests {

@@ -47,7 +47,8 @@ pub fn compact(scene: &Scene) -> (Compacted<'_>, CompactFigures) {
         }
     }
     let mut in_lods = vec![false; n];
-    let mut stack: Vec<usize> = (0..n).filter(|&i| in_tree[i]).flat_map(|i| scene.nodes[i].lods.iter().copied()).collect();
+    let mut stack: Vec<usize> =
+        (0..n).filter(|&i| in_tree[i]).flat_map(|i| scene.nodes[i].lods.iter().copied()).collect();
     while let Some(i) = stack.pop() {
         if in_tree[i] || std::mem::replace(&mut in_lods[i], true) {
             continue;
@@ -66,13 +67,11 @@ pub fn compact(scene: &Scene) -> (Compacted<'_>, CompactFigures) {
     }
 
     // equal textures and materials: each maps to its first equal one
-    let texture_canon: Vec<usize> =
-        (0..scene.textures.len()).map(|t| (0..t).find(|&u| scene.textures[u] == scene.textures[t]).unwrap_or(t)).collect();
-    let remapped_materials: Vec<_> = scene
-        .materials
-        .iter()
-        .map(|m| m.with_textures(|t| Some(texture_canon[t])))
+    let texture_canon: Vec<usize> = (0..scene.textures.len())
+        .map(|t| (0..t).find(|&u| scene.textures[u] == scene.textures[t]).unwrap_or(t))
         .collect();
+    let remapped_materials: Vec<_> =
+        scene.materials.iter().map(|m| m.with_textures(|t| Some(texture_canon[t]))).collect();
     let material_canon: Vec<usize> = (0..remapped_materials.len())
         .map(|m| (0..m).find(|&k| remapped_materials[k] == remapped_materials[m]).unwrap_or(m))
         .collect();
@@ -151,7 +150,8 @@ pub fn compact(scene: &Scene) -> (Compacted<'_>, CompactFigures) {
         .map(|(mesh, _)| {
             let mut mesh = mesh.clone();
             for p in &mut mesh.primitives {
-                p.material = p.material.map(|k| material_at[material_canon[k]].expect("a used primitive's material is kept"));
+                p.material =
+                    p.material.map(|k| material_at[material_canon[k]].expect("a used primitive's material is kept"));
             }
             mesh
         })
@@ -216,7 +216,10 @@ mod tests {
     fn drops_what_nothing_shows_and_merges_equal_materials() {
         let s = chain();
         let (c, f) = compact(&s);
-        assert_eq!(f, CompactFigures { nodes_dropped: 1, meshes_dropped: 1, materials_dropped: 2, textures_dropped: 2 });
+        assert_eq!(
+            f,
+            CompactFigures { nodes_dropped: 1, meshes_dropped: 1, materials_dropped: 2, textures_dropped: 2 }
+        );
         let out = c.scene.as_ref();
         assert_eq!(out.nodes.iter().map(|n| n.name.as_str()).collect::<Vec<_>>(), ["lod0", "lod1", "lod2"]);
         assert_eq!(out.nodes[0].lods, vec![1, 2]);
@@ -239,7 +242,10 @@ mod tests {
         s.meshes.remove(2);
         s.nodes[2].mesh = Some(2);
         s.textures.truncate(1);
-        s.materials = vec![Material { name: "bark".into(), base_color_texture: Some(0), ..Material::default() }, Material::default()];
+        s.materials = vec![
+            Material { name: "bark".into(), base_color_texture: Some(0), ..Material::default() },
+            Material::default(),
+        ];
         for (m, k) in s.meshes.iter_mut().zip([0, 0, 1]) {
             m.primitives[0].material = Some(k);
         }

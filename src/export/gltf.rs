@@ -127,8 +127,9 @@ fn glb_container(json: &[u8], bin: &[u8]) -> Result<Vec<u8>, SceneProblem> {
     let json_len = json.len().next_multiple_of(4);
     let bin_len = bin.len().next_multiple_of(4);
     let total = 12 + 8 + json_len + if bin.is_empty() { 0 } else { 8 + bin_len };
-    let total32 = u32::try_from(total)
-        .map_err(|_| SceneProblem(format!("the GLB would be {total} bytes, over the format's 4 GiB limit; split the scene")))?;
+    let total32 = u32::try_from(total).map_err(|_| {
+        SceneProblem(format!("the GLB would be {total} bytes, over the format's 4 GiB limit; split the scene"))
+    })?;
     let mut out = Vec::with_capacity(total);
     out.extend_from_slice(b"glTF");
     out.extend_from_slice(&2u32.to_le_bytes());
@@ -211,7 +212,9 @@ fn compress_views(root: &mut json::Root, bin: &mut Bin, bin_uri: Option<&str>) -
             continue;
         };
         let (encoded, mode, stride, count) = match *codec {
-            Codec::Attributes { stride, count } => (encode_vertices(bytes, stride).map_err(fail)?, "ATTRIBUTES", stride, count),
+            Codec::Attributes { stride, count } => {
+                (encode_vertices(bytes, stride).map_err(fail)?, "ATTRIBUTES", stride, count)
+            }
             Codec::Triangles { size, count } => {
                 let indices: Vec<u32> = match size {
                     2 => bytes.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]]) as u32).collect(),
@@ -297,7 +300,9 @@ mod quantized {
             for a in 0..3 {
                 let q = grid.quantize(a, p[a]);
                 let q = u16::try_from(q).map_err(|_| {
-                    SceneProblem(format!("position {p:?} lies outside the 16-bit grid {grid:?}: write without quantization"))
+                    SceneProblem(format!(
+                        "position {p:?} lies outside the 16-bit grid {grid:?}: write without quantization"
+                    ))
                 })?;
                 lo[a] = lo[a].min(q);
                 hi[a] = hi[a].max(q);
@@ -315,7 +320,12 @@ mod quantized {
     /// NORMAL as normalized SHORT VEC3: each normal scaled by the grid's steps and renormalised,
     /// so that the node's (non-uniform) scale, applied to normals by its inverse transpose, gives
     /// the normal back. 16 bits, as the scale can make the stored normal nearly flat.
-    pub(super) fn normals(root: &mut json::Root, bin: &mut Bin, normals: &[[f32; 3]], grid: &PositionGrid) -> Index<json::Accessor> {
+    pub(super) fn normals(
+        root: &mut json::Root,
+        bin: &mut Bin,
+        normals: &[[f32; 3]],
+        grid: &PositionGrid,
+    ) -> Index<json::Accessor> {
         let mut bytes = Vec::with_capacity(normals.len() * 8);
         for n in normals {
             let v = [0, 1, 2].map(|a| n[a] as f64 * grid.step[a] as f64);
@@ -356,7 +366,12 @@ mod quantized {
 
     /// The node transform T·R·S followed by the grid's Tr(origin)·Sc(step), as one TRS:
     /// translation T + R(S∘origin), scale S∘step (rotation unchanged).
-    pub(super) fn place(rotation: [f32; 4], translation: [f32; 3], scale: [f32; 3], grid: &PositionGrid) -> ([f32; 3], [f32; 3]) {
+    pub(super) fn place(
+        rotation: [f32; 4],
+        translation: [f32; 3],
+        scale: [f32; 3],
+        grid: &PositionGrid,
+    ) -> ([f32; 3], [f32; 3]) {
         let so = [0, 1, 2].map(|a| scale[a] * grid.origin[a]);
         let r = glam::Quat::from_array(rotation).mul_vec3(glam::Vec3::from_array(so));
         let t = [translation[0] + r.x, translation[1] + r.y, translation[2] + r.z];
@@ -631,7 +646,8 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
             extras: extras.as_ref().map(raw_json).transpose()?,
             mesh: node.mesh.map(|m| Index::new(m as u32)),
             name: opt_name(&node.name),
-            rotation: (!is(&node.rotation, &[0.0, 0.0, 0.0, 1.0])).then_some(json::scene::UnitQuaternion(node.rotation)),
+            rotation: (!is(&node.rotation, &[0.0, 0.0, 0.0, 1.0]))
+                .then_some(json::scene::UnitQuaternion(node.rotation)),
             scale: (!is(&scale, &[1.0; 3])).then_some(scale),
             translation: (!is(&translation, &[0.0; 3])).then_some(translation),
             ..Default::default()
@@ -709,7 +725,11 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
             continue;
         }
         buffer_of[g] = root.buffers.len() as u32;
-        let uri = if g == 0 { bin_uri.map(str::to_string) } else { Some(format!("data:application/octet-stream;base64,{}", base64(&data))) };
+        let uri = if g == 0 {
+            bin_uri.map(str::to_string)
+        } else {
+            Some(format!("data:application/octet-stream;base64,{}", base64(&data)))
+        };
         root.buffers.push(json::Buffer {
             byte_length: USize64::from(data.len()),
             name: (g > 0).then(|| format!("MSFT_lod level {g} from the coarsest")),

@@ -241,7 +241,10 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneProblem> {
                     && c.name.starts_with('_')
                     && c.name[1..].bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_');
                 if !valid_name {
-                    return bad(format!("{what}: custom attribute {ci} is named {:?}; names are `_` then letters, digits or `_`", c.name));
+                    return bad(format!(
+                        "{what}: custom attribute {ci} is named {:?}; names are `_` then letters, digits or `_`",
+                        c.name
+                    ));
                 }
                 if p.custom[..ci].iter().any(|o| o.name == c.name) {
                     return bad(format!("{what}: custom attribute {:?} appears twice", c.name));
@@ -359,13 +362,10 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneProblem> {
     Ok(())
 }
 
-
 /// A name safe for one OBJ/MTL token and a file name: ASCII letters, digits, `-`, `_` and `.`;
 /// anything else becomes `_`.
 pub(crate) fn sanitize_name(name: &str) -> String {
-    name.chars()
-        .map(|c| if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') { c } else { '_' })
-        .collect()
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') { c } else { '_' }).collect()
 }
 
 #[cfg(test)]

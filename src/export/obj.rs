@@ -77,12 +77,8 @@ pub fn to_obj(scene: &Scene, stem: &str) -> Result<ObjOutput, SceneProblem> {
             )));
         }
     }
-    let textures: Vec<(String, Vec<u8>)> = scene
-        .textures
-        .iter()
-        .enumerate()
-        .map(|(i, t)| (texture_file_name(stem, i, &t.name), t.png.clone()))
-        .collect();
+    let textures: Vec<(String, Vec<u8>)> =
+        scene.textures.iter().enumerate().map(|(i, t)| (texture_file_name(stem, i, &t.name), t.png.clone())).collect();
     let material_names = unique_names(scene.materials.iter().map(|m| m.name.as_str()), "material");
     let node_names = unique_names(scene.nodes.iter().map(|n| n.name.as_str()), "node");
 
@@ -234,7 +230,11 @@ mod tests {
     #[test]
     fn points_are_refused_with_a_remedy() {
         let mut scene = Scene::default();
-        let p = Primitive { positions: vec![[0.0; 3], [1.0, 0.0, 0.0]], mode: PrimitiveMode::Points, ..Primitive::default() };
+        let p = Primitive {
+            positions: vec![[0.0; 3], [1.0, 0.0, 0.0]],
+            mode: PrimitiveMode::Points,
+            ..Primitive::default()
+        };
         scene.add_mesh_node(Mesh { name: "leaves".into(), primitives: vec![p], extras: None });
         let e = to_obj(&scene, "t").err().expect("points refused");
         assert!(e.0.contains("points") && e.0.contains(".glb"), "{}", e.0);

@@ -95,7 +95,15 @@ mod tests {
 
     #[test]
     fn base64_matches_rfc_4648_vectors() {
-        for (plain, coded) in [("", ""), ("f", "Zg=="), ("fo", "Zm8="), ("foo", "Zm9v"), ("foob", "Zm9vYg=="), ("fooba", "Zm9vYmE="), ("foobar", "Zm9vYmFy")] {
+        for (plain, coded) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
             assert_eq!(base64(plain.as_bytes()), coded);
         }
         assert_eq!(base64(&[0xff, 0xfe, 0x00]), "//4A");
@@ -105,7 +113,12 @@ mod tests {
     fn levels_are_grouped_coarsest_first_and_shared_data_goes_with_the_coarser() {
         // node 0 (LoD0, mesh 0) with levels node 1 (mesh 1) and node 2 (mesh 2, also used by
         // node 3 outside any chain); mesh 0 and mesh 2 share texture 0, mesh 1 has texture 1
-        let prim = |m: usize| Primitive { positions: vec![[0.0; 3]; 3], indices: vec![0, 1, 2], material: Some(m), ..Primitive::default() };
+        let prim = |m: usize| Primitive {
+            positions: vec![[0.0; 3]; 3],
+            indices: vec![0, 1, 2],
+            material: Some(m),
+            ..Primitive::default()
+        };
         let mesh = |m: usize| Mesh { name: String::new(), primitives: vec![prim(m)], extras: None };
         let node = |m: usize, lods: Vec<usize>| Node { mesh: Some(m), lods, ..Node::default() };
         let scene = Scene {
@@ -126,6 +139,13 @@ mod tests {
         assert_eq!(g.mesh, vec![2, 1, 0, 0]);
         // texture 0 is first needed by the coarsest level (mesh 2 uses material 0 too)
         assert_eq!(g.texture, vec![0, 1]);
-        assert!(load_groups(&Scene { nodes: vec![node(0, vec![])], roots: vec![0], meshes: vec![mesh(2)], materials: vec![Material::default(); 3], ..Scene::default() }).is_none());
+        assert!(load_groups(&Scene {
+            nodes: vec![node(0, vec![])],
+            roots: vec![0],
+            meshes: vec![mesh(2)],
+            materials: vec![Material::default(); 3],
+            ..Scene::default()
+        })
+        .is_none());
     }
 }

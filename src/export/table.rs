@@ -195,7 +195,9 @@ const ASCII_ZEROS: u64 = 0x3030_3030_3030_3030;
 /// bytes as `ryu::Buffer::format_finite` (tested below), 20–35 % less CPU per number.
 #[inline]
 fn push_row(line: &mut Line<'_>, r: &PlacementRow) -> bool {
-    let finite = r.position.iter().all(|v| v.is_finite()) && r.rotation.iter().chain(&r.scale).all(|v| v.is_finite()) && r.yaw_deg.is_finite();
+    let finite = r.position.iter().all(|v| v.is_finite())
+        && r.rotation.iter().chain(&r.scale).all(|v| v.is_finite())
+        && r.yaw_deg.is_finite();
     if !finite {
         return false;
     }
@@ -419,15 +421,25 @@ pub fn parse_placements_csv(text: &str) -> Result<Vec<PlacementRow>, String> {
         if f.len() != PLACEMENT_COLUMNS.len() {
             return Err(format!("line {at}: {} fields, expected {}", f.len(), PLACEMENT_COLUMNS.len()));
         }
-        let num64 = |k: usize| f[k].parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| format!("line {at}, column `{}`: `{}` is not a finite number", PLACEMENT_COLUMNS[k], f[k]));
+        let num64 = |k: usize| {
+            f[k].parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| {
+                format!("line {at}, column `{}`: `{}` is not a finite number", PLACEMENT_COLUMNS[k], f[k])
+            })
+        };
         // f32 columns parsed as f32: their shortest form rounds to the same f32 (via f64 it might not)
-        let num32 = |k: usize| f[k].parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| format!("line {at}, column `{}`: `{}` is not a finite number", PLACEMENT_COLUMNS[k], f[k]));
+        let num32 = |k: usize| {
+            f[k].parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| {
+                format!("line {at}, column `{}`: `{}` is not a finite number", PLACEMENT_COLUMNS[k], f[k])
+            })
+        };
         rows.push(PlacementRow {
             position: [num64(0)?, num64(1)?, num64(2)?],
             rotation: [num32(3)?, num32(4)?, num32(5)?, num32(6)?],
             scale: [num32(7)?, num32(8)?, num32(9)?],
             yaw_deg: num32(10)?,
-            tile: f[11].parse::<u32>().map_err(|_| format!("line {at}, column `tile`: `{}` is not a tile number", f[11]))?,
+            tile: f[11]
+                .parse::<u32>()
+                .map_err(|_| format!("line {at}, column `tile`: `{}` is not a tile number", f[11]))?,
         });
     }
     Ok(rows)
@@ -459,7 +471,12 @@ pub fn write_placements_csv<R: ToPlacementRow + Sync>(path: &Path, rows: &[R]) -
 
 /// The CSV into `w` in batches of `batch` rows (the next batch formatted while this thread writes
 /// the current one); a non-finite number stops it with an error and its row in `bad`.
-fn stream_csv<R: ToPlacementRow + Sync>(w: &mut dyn std::io::Write, rows: &[R], batch: usize, bad: &mut Option<usize>) -> std::io::Result<()> {
+fn stream_csv<R: ToPlacementRow + Sync>(
+    w: &mut dyn std::io::Write,
+    rows: &[R],
+    batch: usize,
+    bad: &mut Option<usize>,
+) -> std::io::Result<()> {
     let mut refuse = |row: usize| {
         *bad = Some(row);
         std::io::Error::new(std::io::ErrorKind::InvalidData, not_finite(row))
@@ -541,7 +558,9 @@ mod tests {
             .iter()
             .map(|r| {
                 let mut f: Vec<String> = r.position.iter().map(|&v| fmt.format_finite(v).to_string()).collect();
-                f.extend(r.rotation.iter().chain(&r.scale).chain([&r.yaw_deg]).map(|&v| fmt.format_finite(v).to_string()));
+                f.extend(
+                    r.rotation.iter().chain(&r.scale).chain([&r.yaw_deg]).map(|&v| fmt.format_finite(v).to_string()),
+                );
                 f.push(r.tile.to_string());
                 f.join(",") + "\n"
             })
@@ -593,7 +612,11 @@ mod tests {
         let mut fmt = ryu::Buffer::new();
         let mut h: u64 = 0x9E37_79B9_7F4A_7C15;
         let mut out;
-        let near: Vec<f64> = (0..40).flat_map(|e| [10f64.powi(e - 20), 10f64.powi(e - 20) * (1.0 - f64::EPSILON), 9.999_999e14, 9_999_999.0, 1e7 - 0.5]).collect();
+        let near: Vec<f64> = (0..40)
+            .flat_map(|e| {
+                [10f64.powi(e - 20), 10f64.powi(e - 20) * (1.0 - f64::EPSILON), 9.999_999e14, 9_999_999.0, 1e7 - 0.5]
+            })
+            .collect();
         for &v in &near {
             for v in [v, -v] {
                 out = f64_text(v);
@@ -652,7 +675,12 @@ mod tests {
                 assert_eq!(short_f64(short as f64 / 1e6), Some(short));
                 assert_eq!(short_f64(-((short / 100) as f64) / 1e4), Some(short / 100 * 100));
             }
-            for v in [m as f64 / 1e4, m as f64 / 1e6, (m % 100_000) as f64 / 1e6, (h >> 11) as f64 / (1u64 << 53) as f64 * 4096.0] {
+            for v in [
+                m as f64 / 1e4,
+                m as f64 / 1e6,
+                (m % 100_000) as f64 / 1e6,
+                (h >> 11) as f64 / (1u64 << 53) as f64 * 4096.0,
+            ] {
                 for v in [v, -v, f64::from_bits(v.to_bits() + 1), f64::from_bits(v.to_bits().saturating_sub(1))] {
                     out = f64_text(v);
                     assert_eq!(&out[..], fmt.format_finite(v).as_bytes(), "{v:e}");
@@ -663,7 +691,9 @@ mod tests {
             out = f64_text(v);
             assert_eq!(&out[..], fmt.format_finite(v).as_bytes(), "{v:e}");
         }
-        for v in [1e-4f32, 255.9999, 256.0, 255.99998, 0.00010001, 1023.9999, 1024.0, 1023.99994, 1024.0001, 359.99, 512.0001] {
+        for v in [
+            1e-4f32, 255.9999, 256.0, 255.99998, 0.00010001, 1023.9999, 1024.0, 1023.99994, 1024.0001, 359.99, 512.0001,
+        ] {
             check32(v, &mut out);
         }
     }
@@ -709,9 +739,24 @@ mod tests {
     #[test]
     fn empty_table_has_a_header_and_nan_is_refused() {
         assert_eq!(placements_csv::<PlacementRow>(&[]).unwrap(), b"x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile\n");
-        let bad = PlacementRow { position: [f64::NAN, 0.0, 0.0], rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0; 3], yaw_deg: 0.0, tile: 0 };
+        let bad = PlacementRow {
+            position: [f64::NAN, 0.0, 0.0],
+            rotation: [0.0, 0.0, 0.0, 1.0],
+            scale: [1.0; 3],
+            yaw_deg: 0.0,
+            tile: 0,
+        };
         assert!(placements_csv(&[bad]).unwrap_err().contains("row 0"));
-        let mut rows = vec![PlacementRow { position: [1.0; 3], rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0; 3], yaw_deg: 0.0, tile: 0 }; 70_000];
+        let mut rows = vec![
+            PlacementRow {
+                position: [1.0; 3],
+                rotation: [0.0, 0.0, 0.0, 1.0],
+                scale: [1.0; 3],
+                yaw_deg: 0.0,
+                tile: 0
+            };
+            70_000
+        ];
         rows[50_001].scale[2] = f32::INFINITY;
         assert!(placements_csv(&rows).unwrap_err().contains("row 50001"));
         let mut bad = None;

@@ -66,10 +66,16 @@ const CHOICE_SALT: u64 = 0x6368_6f69_6365_0001;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Token {
     /// A symbol and its position id in the derivation (see [`child_id`]).
-    Symbol { byte: u8, id: u64 },
+    Symbol {
+        byte: u8,
+        id: u64,
+    },
     /// A numeric argument: it belongs to the symbol before it. `index` points into
     /// [`LSystem::args`] (for the text as written).
-    Arg { value: f64, index: u32 },
+    Arg {
+        value: f64,
+        index: u32,
+    },
     /// Start and end of a successor produced by the partial last step of a fractional recursion.
     PartialBegin,
     PartialEnd,
@@ -170,7 +176,10 @@ impl<'a> Expander<'a> {
         }
         let total: u64 = stage_steps.iter().map(|&s| s as u64).sum();
         if total > super::MAX_RECURSION as u64 {
-            return Err(LsystemError::Settings(format!("{total} rewriting steps is over the limit of {}", super::MAX_RECURSION)));
+            return Err(LsystemError::Settings(format!(
+                "{total} rewriting steps is over the limit of {}",
+                super::MAX_RECURSION
+            )));
         }
         if let Recursion::Steps(n) = system.recursion {
             if !(n.is_finite() && n >= 0.0) {
@@ -179,7 +188,10 @@ impl<'a> Expander<'a> {
         }
         if let Some(fewest) = fewest_symbols(system) {
             if fewest > max_symbols as u128 {
-                return Err(LsystemError::TooManySymbols { limit: max_symbols, at_least: Some(fewest.min(u64::MAX as u128) as u64) });
+                return Err(LsystemError::TooManySymbols {
+                    limit: max_symbols,
+                    at_least: Some(fewest.min(u64::MAX as u128) as u64),
+                });
             }
         }
         let mut rule_of = [0u16; 256];
@@ -202,7 +214,14 @@ impl<'a> Expander<'a> {
             max_symbols,
         };
         let axiom_steps = expander.stage_steps[0];
-        expander.frames.push(Frame { items: &system.axiom, pos: 0, remaining: axiom_steps, stage: 0, partial: false, id: ROOT_ID });
+        expander.frames.push(Frame {
+            items: &system.axiom,
+            pos: 0,
+            remaining: axiom_steps,
+            stage: 0,
+            partial: false,
+            id: ROOT_ID,
+        });
         expander.counts.peak_frames = 1;
         Ok(expander)
     }
@@ -249,7 +268,14 @@ impl<'a> Expander<'a> {
                 let v = choose_variant(&self.cumulative[k], self.seed, id);
                 let successor = &self.system.rules[k].variants[v].successor;
                 let partial = remaining == 1 && self.fraction > 0.0 && !grows_fully(symbol);
-                self.push(Frame { items: successor, pos: 0, remaining: remaining - 1, stage: stage as u8, partial, id });
+                self.push(Frame {
+                    items: successor,
+                    pos: 0,
+                    remaining: remaining - 1,
+                    stage: stage as u8,
+                    partial,
+                    id,
+                });
                 if partial {
                     return Ok(Some(Token::PartialBegin));
                 }
@@ -276,7 +302,14 @@ impl<'a> Expander<'a> {
             }
             if let Some(s) = enters_stage {
                 let single = &SINGLE_SYMBOLS[symbol as usize..symbol as usize + 1];
-                self.push(Frame { items: single, pos: 0, remaining: self.stage_steps[s], stage: s as u8, partial: false, id });
+                self.push(Frame {
+                    items: single,
+                    pos: 0,
+                    remaining: self.stage_steps[s],
+                    stage: s as u8,
+                    partial: false,
+                    id,
+                });
                 continue;
             }
             if self.counts.symbols >= self.max_symbols {
@@ -383,11 +416,15 @@ mod tests {
     #[test]
     fn per_level_recursion_rewrites_inner_branches_more() {
         // stage 0 once: FA → F[B]A ; stage 1 (depth ≥ 1) once more: B → BB inside the bracket only
-        let s = parse_bytes(b"1-1\n30\n20\nX(100)=A\nA(100)=F[B]A\nB(100)=BB\n@\n", Path::new("t.ls"), None).unwrap().system;
+        let s = parse_bytes(b"1-1\n30\n20\nX(100)=A\nA(100)=F[B]A\nB(100)=BB\n@\n", Path::new("t.ls"), None)
+            .unwrap()
+            .system;
         assert_eq!(s.dialect, Dialect::Stochastic);
         assert_eq!(expand_to_bytes(&s, 0, 100).unwrap(), b"F[BB]A");
         // 2-1: S0 = F[BB]F[B]A; stage 1 rewrites the Bs (inside brackets), not the outer A
-        let s = parse_bytes(b"2-1\n30\n20\nX(100)=A\nA(100)=F[B]A\nB(100)=BB\n@\n", Path::new("t.ls"), None).unwrap().system;
+        let s = parse_bytes(b"2-1\n30\n20\nX(100)=A\nA(100)=F[B]A\nB(100)=BB\n@\n", Path::new("t.ls"), None)
+            .unwrap()
+            .system;
         assert_eq!(expand_to_bytes(&s, 0, 100).unwrap(), b"F[BBBB]F[BB]A");
     }
 

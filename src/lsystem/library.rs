@@ -23,9 +23,24 @@ pub struct Species {
 
 /// The library, in the order `verdant` lists it.
 pub const SPECIES: &[Species] = &[
-    Species { name: "conifer", about: "a spruce-like cone of drooping whorls with needle plates", height_m: 18.0, source: include_bytes!("library/conifer.ls") },
-    Species { name: "broadleaf", about: "a round-crowned deciduous tree", height_m: 12.0, source: include_bytes!("library/broadleaf.ls") },
-    Species { name: "birch", about: "a slender white-barked tree with drooping twigs", height_m: 14.0, source: include_bytes!("library/birch.ls") },
+    Species {
+        name: "conifer",
+        about: "a spruce-like cone of drooping whorls with needle plates",
+        height_m: 18.0,
+        source: include_bytes!("library/conifer.ls"),
+    },
+    Species {
+        name: "broadleaf",
+        about: "a round-crowned deciduous tree",
+        height_m: 12.0,
+        source: include_bytes!("library/broadleaf.ls"),
+    },
+    Species {
+        name: "birch",
+        about: "a slender white-barked tree with drooping twigs",
+        height_m: 14.0,
+        source: include_bytes!("library/birch.ls"),
+    },
     Species { name: "bush", about: "a five-stemmed shrub", height_m: 2.5, source: include_bytes!("library/bush.ls") },
 ];
 
@@ -81,7 +96,10 @@ pub fn for_species_name(species_name: &str) -> &'static Species {
 pub fn read_bytes(path: &Path) -> std::io::Result<std::borrow::Cow<'static, [u8]>> {
     match named(path) {
         Some(Ok(s)) => Ok(std::borrow::Cow::Borrowed(s.source)),
-        Some(Err(names)) => Err(std::io::Error::new(std::io::ErrorKind::NotFound, format!("no built-in L-system of that name (built-in: {names})"))),
+        Some(Err(names)) => Err(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!("no built-in L-system of that name (built-in: {names})"),
+        )),
         None => crate::input::read_limited(path, crate::input::MAX_LSYSTEM_BYTES, "an L-system")
             .map(std::borrow::Cow::Owned)
             .map_err(crate::input::ReadError::into_io),
@@ -109,7 +127,8 @@ mod tests {
     #[test]
     fn every_library_source_parses_as_lparser_5_without_warnings() {
         for s in SPECIES {
-            let p = crate::lsystem::parse::parse_bytes(s.source, &path_of(s), None).unwrap_or_else(|e| panic!("{}: {e}", s.name));
+            let p = crate::lsystem::parse::parse_bytes(s.source, &path_of(s), None)
+                .unwrap_or_else(|e| panic!("{}: {e}", s.name));
             assert_eq!(p.system.dialect, crate::lsystem::Dialect::LparserV5, "{}", s.name);
             assert!(p.warnings.is_empty(), "{}: {:?}", s.name, p.warnings);
             // the seed changes the tree (variants differ)

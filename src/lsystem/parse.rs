@@ -7,7 +7,9 @@
 
 use std::path::Path;
 
-use super::{ArgText, ColorLine, Dialect, Item, LSystem, LsystemError, Recursion, Rule, SyntaxError, Variant, MAX_RECURSION};
+use super::{
+    ArgText, ColorLine, Dialect, Item, LSystem, LsystemError, Recursion, Rule, SyntaxError, Variant, MAX_RECURSION,
+};
 
 /// A parsed file and the remarks that did not stop it (shadowed rules, ignored keywords).
 #[derive(Debug, Clone, PartialEq)]
@@ -21,7 +23,8 @@ pub struct Parsed {
 /// Reads and parses `path`; `dialect` None detects it from the content ([`detect`]).
 pub fn read_file(path: &Path, dialect: Option<Dialect>) -> Result<Parsed, LsystemError> {
     // `builtin:<name>` is a library source (crate::lsystem::library), not a file
-    let bytes = super::library::read_bytes(path).map_err(|source| LsystemError::Read { path: path.to_path_buf(), source })?;
+    let bytes =
+        super::library::read_bytes(path).map_err(|source| LsystemError::Read { path: path.to_path_buf(), source })?;
     parse_bytes(&bytes, path, dialect)
 }
 
@@ -267,7 +270,12 @@ fn parse_items(
         match b {
             b'(' => {
                 let close = text[i + 1..].iter().position(|&(c, _)| c == b')').map(|k| i + 1 + k).ok_or_else(|| {
-                    source.error(line, col, format!("`(` is never closed in {what}"), "close the argument with `)`, as in `+(30)`")
+                    source.error(
+                        line,
+                        col,
+                        format!("`(` is never closed in {what}"),
+                        "close the argument with `)`, as in `+(30)`",
+                    )
                 })?;
                 let inner: Vec<u8> = text[i + 1..close].iter().map(|&(c, _)| c).collect();
                 let value = number(&inner).ok_or_else(|| {
@@ -284,7 +292,11 @@ fn parse_items(
                 continue;
             }
             b')' => {
-                warnings.push(source.warning(line, col, format!("a `)` without `(` in {what} is ignored (as lparser does)")));
+                warnings.push(source.warning(
+                    line,
+                    col,
+                    format!("a `)` without `(` in {what} is ignored (as lparser does)"),
+                ));
                 i += 1;
                 continue;
             }
@@ -378,12 +390,18 @@ fn parse_v4(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
     let (ln, col, thickness) = value("thickness", "80")?;
     let thickness_pct = check_thickness(source, ln, col, thickness)?;
     let mut args = Vec::new();
-    let axiom_line = lines
-        .next()
-        .ok_or_else(|| source.error_at_end("the file ends before the axiom line", "add the axiom (the start string) as the fourth line"))?;
+    let axiom_line = lines.next().ok_or_else(|| {
+        source
+            .error_at_end("the file ends before the axiom line", "add the axiom (the start string) as the fourth line")
+    })?;
     let (col, token) = first_token(axiom_line.bytes);
     if token.is_empty() {
-        return Err(source.error(axiom_line.number, col, "the axiom is empty", "write the start string, e.g. `c(12)A`"));
+        return Err(source.error(
+            axiom_line.number,
+            col,
+            "the axiom is empty",
+            "write the start string, e.g. `c(12)A`",
+        ));
     }
     let axiom = parse_items(source, axiom_line.number, &tagged(token, col), &mut args, "the axiom", warnings)?;
     let mut rules = Vec::new();
@@ -405,7 +423,12 @@ fn parse_v4(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
         }
         let predecessor = token[0];
         if let Some(why) = predecessor_problem(predecessor) {
-            return Err(source.error(line.number, col, format!("{} cannot be a rule's predecessor: {why}", show(predecessor)), "rewrite another symbol"));
+            return Err(source.error(
+                line.number,
+                col,
+                format!("{} cannot be a rule's predecessor: {why}", show(predecessor)),
+                "rewrite another symbol",
+            ));
         }
         let what = format!("the rule for {}", show(predecessor));
         let successor = parse_items(source, line.number, &tagged(&token[2..], col + 2), &mut args, &what, warnings)?;
@@ -413,7 +436,9 @@ fn parse_v4(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
         add_rule(&mut rules, &mut rule_lines, rule, line.number, warnings);
     }
     if !ended {
-        return Err(source.error_at_end("the rules do not end with a `@` line", "add a line holding `@` after the last rule"));
+        return Err(
+            source.error_at_end("the rules do not end with a `@` line", "add a line holding `@` after the last rule")
+        );
     }
     Ok(LSystem {
         dialect: Dialect::LparserV4,
@@ -473,10 +498,25 @@ fn parse_v5(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
         let one_number = |what: &str| -> Result<(usize, f64), LsystemError> {
             match words.as_slice() {
                 [(col, w)] => number(w).map(|v| (*col, v)).ok_or_else(|| {
-                    source.error(line.number, *col, format!("`{key_text}` needs {what}, found `{}`", String::from_utf8_lossy(w)), format!("write e.g. `{key_text} 12`"))
+                    source.error(
+                        line.number,
+                        *col,
+                        format!("`{key_text}` needs {what}, found `{}`", String::from_utf8_lossy(w)),
+                        format!("write e.g. `{key_text} 12`"),
+                    )
                 }),
-                [] => Err(source.error(line.number, rest_start, format!("`{key_text}` needs {what}"), format!("write e.g. `{key_text} 12`"))),
-                [_, (col, _), ..] => Err(source.error(line.number, *col, format!("unexpected text after `{key_text}`'s value"), "put comments after `#`")),
+                [] => Err(source.error(
+                    line.number,
+                    rest_start,
+                    format!("`{key_text}` needs {what}"),
+                    format!("write e.g. `{key_text} 12`"),
+                )),
+                [_, (col, _), ..] => Err(source.error(
+                    line.number,
+                    *col,
+                    format!("unexpected text after `{key_text}`'s value"),
+                    "put comments after `#`",
+                )),
             }
         };
         let items_text: Vec<(u8, usize)> = rest.iter().copied().filter(|&(b, _)| !is_space(b)).collect();
@@ -498,7 +538,12 @@ fn parse_v5(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
             b"switch_yz" => {
                 let (col, v) = one_number("0 or 1")?;
                 if v.fract() != 0.0 || v.abs() > 1e15 {
-                    return Err(source.error(line.number, col, "`switch_yz` needs a whole number", "write `switch_yz 1` or `switch_yz 0`"));
+                    return Err(source.error(
+                        line.number,
+                        col,
+                        "`switch_yz` needs a whole number",
+                        "write `switch_yz 1` or `switch_yz 0`",
+                    ));
                 }
                 switch_yz = Some(v as i64);
             }
@@ -514,11 +559,19 @@ fn parse_v5(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
                 }
             }
             b"trace" | b"no_wait" | b"poly_limit" => {
-                warnings.push(format!("line {}: `{key_text}` is ignored (use --max-triangles for a polygon budget)", line.number));
+                warnings.push(format!(
+                    "line {}: `{key_text}` is ignored (use --max-triangles for a polygon budget)",
+                    line.number
+                ));
             }
             b"color" => {
                 let bad = |col: usize| {
-                    source.error(line.number, col, "`color` needs an index and three channel values 0..255", "write e.g. `color 8 40 120 30`")
+                    source.error(
+                        line.number,
+                        col,
+                        "`color` needs an index and three channel values 0..255",
+                        "write e.g. `color 8 40 120 30`",
+                    )
                 };
                 if words.len() != 4 {
                     return Err(bad(words.first().map_or(rest_start, |w| w.0)));
@@ -537,7 +590,12 @@ fn parse_v5(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
             }
             b"axiom" => {
                 if items_text.is_empty() {
-                    return Err(source.error(line.number, rest_start, "the axiom is empty", "write the start string, e.g. `axiom FFA`"));
+                    return Err(source.error(
+                        line.number,
+                        rest_start,
+                        "the axiom is empty",
+                        "write the start string, e.g. `axiom FFA`",
+                    ));
                 }
                 if axiom.is_some() {
                     warnings.push(format!("line {}: a second `axiom` replaces the first", line.number));
@@ -558,7 +616,12 @@ fn parse_v5(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
                     }
                 };
                 if let Some(why) = predecessor_problem(pred) {
-                    return Err(source.error(line.number, col, format!("{} cannot be a rule's predecessor: {why}", show(pred)), "rewrite another symbol"));
+                    return Err(source.error(
+                        line.number,
+                        col,
+                        format!("{} cannot be a rule's predecessor: {why}", show(pred)),
+                        "rewrite another symbol",
+                    ));
                 }
                 let what = format!("the rule for {}", show(pred));
                 let successor = parse_items(source, line.number, &items_text[2..], &mut args, &what, warnings)?;
@@ -601,13 +664,22 @@ fn parse_stochastic(source: &Source, warnings: &mut Vec<String>) -> Result<LSyst
     const FORMAT: &str = "the stochastic .ls format is: recursion levels (e.g. 3-2-2), angle, thickness, `X(100)=axiom`, rules `C(P)=R`, `@`";
     let mut lines = source.lines.iter().filter(|l| !is_comment_or_blank(l.bytes));
     let mut next = |what: &str| {
-        lines.next().map(|l| (l, first_token(l.bytes))).ok_or_else(|| source.error_at_end(format!("the file ends before the {what} line"), FORMAT))
+        lines
+            .next()
+            .map(|l| (l, first_token(l.bytes)))
+            .ok_or_else(|| source.error_at_end(format!("the file ends before the {what} line"), FORMAT))
     };
     // recursion levels
     let (line, (col, token)) = next("recursion levels")?;
     let levels: Option<Vec<u32>> = token
         .split(|&b| b == b'-')
-        .map(|part| if part.is_empty() || !part.iter().all(u8::is_ascii_digit) { None } else { std::str::from_utf8(part).ok()?.parse::<u32>().ok() })
+        .map(|part| {
+            if part.is_empty() || !part.iter().all(u8::is_ascii_digit) {
+                None
+            } else {
+                std::str::from_utf8(part).ok()?.parse::<u32>().ok()
+            }
+        })
         .collect();
     let levels = levels.filter(|l| (1..=MAX_LEVELS).contains(&l.len())).ok_or_else(|| {
         source.error(
@@ -618,12 +690,22 @@ fn parse_stochastic(source: &Source, warnings: &mut Vec<String>) -> Result<LSyst
         )
     })?;
     if levels.iter().map(|&l| l as u64).sum::<u64>() > MAX_RECURSION as u64 {
-        return Err(source.error(line.number, col, "the recursion levels add up to too many steps", format!("keep their sum at most {MAX_RECURSION}")));
+        return Err(source.error(
+            line.number,
+            col,
+            "the recursion levels add up to too many steps",
+            format!("keep their sum at most {MAX_RECURSION}"),
+        ));
     }
     let mut value = |what: &str, example: &str| -> Result<(usize, usize, f64), LsystemError> {
         let (line, (col, token)) = next(what)?;
         let v = number(token).ok_or_else(|| {
-            source.error(line.number, col, format!("expected the {what} (a number), found `{}`", String::from_utf8_lossy(token)), format!("write the {what} as a number, e.g. {example}; {FORMAT}"))
+            source.error(
+                line.number,
+                col,
+                format!("expected the {what} (a number), found `{}`", String::from_utf8_lossy(token)),
+                format!("write the {what} as a number, e.g. {example}; {FORMAT}"),
+            )
         })?;
         Ok((line.number, col, v))
     };
@@ -639,7 +721,12 @@ fn parse_stochastic(source: &Source, warnings: &mut Vec<String>) -> Result<LSyst
         } else {
             format!("expected the axiom `X(100)=…`, found `{}`", String::from_utf8_lossy(token))
         };
-        source.error(line.number, col, message, "write the axiom as `X(100)=` followed by the start string, e.g. `X(100)=FFA`")
+        source.error(
+            line.number,
+            col,
+            message,
+            "write the axiom as `X(100)=` followed by the start string, e.g. `X(100)=FFA`",
+        )
     })?;
     if axiom_text.is_empty() {
         return Err(source.error(line.number, col + 7, "the axiom is empty", "write the start string after `X(100)=`"));
@@ -673,10 +760,19 @@ fn parse_stochastic(source: &Source, warnings: &mut Vec<String>) -> Result<LSyst
         }
         let predecessor = token[0];
         if let Some(why) = predecessor_problem(predecessor) {
-            return Err(source.error(line.number, col, format!("{} cannot be a rule's predecessor: {why}", show(predecessor)), "rewrite another symbol"));
+            return Err(source.error(
+                line.number,
+                col,
+                format!("{} cannot be a rule's predecessor: {why}", show(predecessor)),
+                "rewrite another symbol",
+            ));
         }
         let p_text = &token[2..close];
-        let cumulative = match std::str::from_utf8(p_text).ok().filter(|s| s.bytes().all(|b| b.is_ascii_digit())).and_then(|s| s.parse::<u32>().ok()) {
+        let cumulative = match std::str::from_utf8(p_text)
+            .ok()
+            .filter(|s| s.bytes().all(|b| b.is_ascii_digit()))
+            .and_then(|s| s.parse::<u32>().ok())
+        {
             Some(p) if (1..=100).contains(&p) => p as u8,
             _ => {
                 return Err(source.error(
@@ -688,7 +784,14 @@ fn parse_stochastic(source: &Source, warnings: &mut Vec<String>) -> Result<LSyst
             }
         };
         let what = format!("the rule for {}", show(predecessor));
-        let successor = parse_items(source, line.number, &tagged(&token[close + 2..], col + close + 2), &mut args, &what, warnings)?;
+        let successor = parse_items(
+            source,
+            line.number,
+            &tagged(&token[close + 2..], col + close + 2),
+            &mut args,
+            &what,
+            warnings,
+        )?;
         warn_blank_inside(source, line, col + token.len(), &what, warnings);
         match rules.iter().position(|r| r.predecessor == predecessor) {
             Some(k) => {
@@ -719,7 +822,8 @@ fn parse_stochastic(source: &Source, warnings: &mut Vec<String>) -> Result<LSyst
         }
     }
     if !ended {
-        return Err(source.error_at_end("the rules do not end with a `@` line", "add a line starting with `@` after the last rule"));
+        return Err(source
+            .error_at_end("the rules do not end with a `@` line", "add a line starting with `@` after the last rule"));
     }
     for (rule, &(line, col)) in rules.iter().zip(&last_variant_at) {
         let last = rule.variants.last().map_or(0, |v| v.cumulative);
@@ -887,7 +991,11 @@ mod tests {
 
     #[test]
     fn v4_comments_and_arguments() {
-        let p = parse("# head\n7   # depth\n22.5\n80\n#\nc(12)A # axiom\nA=[&FL!A]>(137)A\ne=(19.47)\n@\ntrailing text\n", None).unwrap();
+        let p = parse(
+            "# head\n7   # depth\n22.5\n80\n#\nc(12)A # axiom\nA=[&FL!A]>(137)A\ne=(19.47)\n@\ntrailing text\n",
+            None,
+        )
+        .unwrap();
         let s = &p.system;
         assert_eq!(s.dialect, Dialect::LparserV4);
         assert_eq!(s.recursion, Recursion::Steps(7.0));
@@ -958,9 +1066,12 @@ mod tests {
         let ok = "1-0-0\n30\n20\nX(100)=A\nA(30)=F\nA(75)=FF\nA(100)=FFF\n@\n";
         let p = parse(ok, None).unwrap();
         assert_eq!(p.system.rules[0].variants.iter().map(|v| v.cumulative).collect::<Vec<_>>(), vec![30, 75, 100]);
-        let e = parse("1\n30\n20\nX(100)=A\nA(30)=F\nA(75)=FF\n@\n", Some(Dialect::Stochastic)).unwrap_err().to_string();
+        let e =
+            parse("1\n30\n20\nX(100)=A\nA(30)=F\nA(75)=FF\n@\n", Some(Dialect::Stochastic)).unwrap_err().to_string();
         assert!(e.starts_with("t.ls:6:3: the variants of `A` end at 75; the last must be 100"), "{e}");
-        let e = parse("1\n30\n20\nX(100)=A\nA(30)=F\nA(20)=FF\nA(100)=F\n@\n", Some(Dialect::Stochastic)).unwrap_err().to_string();
+        let e = parse("1\n30\n20\nX(100)=A\nA(30)=F\nA(20)=FF\nA(100)=F\n@\n", Some(Dialect::Stochastic))
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("t.ls:6:3: the distribution 20 of `A` does not increase"), "{e}");
         let e = parse("1\n30\n20\nX(90)=A\n@\n", Some(Dialect::Stochastic)).unwrap_err().to_string();
         assert!(e.contains("must be 100"), "{e}");

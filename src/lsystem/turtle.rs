@@ -369,7 +369,28 @@ fn clamp_finite(x: f64, lo: f64, hi: f64) -> f64 {
 
 /// Commands that read an argument `(x)` right after them.
 fn takes_argument(c: u8) -> bool {
-    matches!(c, b'F' | b'Z' | b'f' | b'z' | b'g' | b'+' | b'-' | b'&' | b'^' | b'<' | b'>' | b'~' | b't' | b'"' | b'\'' | b';' | b':' | b'?' | b'!' | b'c')
+    matches!(
+        c,
+        b'F' | b'Z'
+            | b'f'
+            | b'z'
+            | b'g'
+            | b'+'
+            | b'-'
+            | b'&'
+            | b'^'
+            | b'<'
+            | b'>'
+            | b'~'
+            | b't'
+            | b'"'
+            | b'\''
+            | b';'
+            | b':'
+            | b'?'
+            | b'!'
+            | b'c'
+    )
 }
 
 impl Turtle {
@@ -485,7 +506,6 @@ impl Turtle {
             1.0
         }
     }
-
 
     /// Uniform in [−1, 1) from the seed, the symbol's position id and which draw it is.
     fn random(&self, id: u64, k: u64) -> f64 {
@@ -655,7 +675,12 @@ impl Turtle {
                     self.open_polygon_vertices -= poly.len();
                     if poly.len() >= 3 {
                         self.counts.polygons += 1;
-                        sink.polygon(&Polygon { vertices: &poly, color: self.state.color, level: self.level(), limb: self.state.limb })?;
+                        sink.polygon(&Polygon {
+                            vertices: &poly,
+                            color: self.state.color,
+                            level: self.level(),
+                            limb: self.state.limb,
+                        })?;
                     } else {
                         self.counts.polygons_skipped += 1;
                     }

@@ -220,7 +220,8 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
     let ppm = (cell_w as f64 / card_w as f64).min(cell_h as f64 / card_h as f64);
     let (window_w, window_h) = (cell_w as f64 / ppm, cell_h as f64 / ppm);
     let mut atlas = Image { width: atlas_w, height: atlas_h, pixels: vec![[0.0; 4]; (atlas_w * atlas_h) as usize] };
-    let mut normal_atlas = Image { width: atlas_w, height: atlas_h, pixels: vec![FLAT_NORMAL; (atlas_w * atlas_h) as usize] };
+    let mut normal_atlas =
+        Image { width: atlas_w, height: atlas_h, pixels: vec![FLAT_NORMAL; (atlas_w * atlas_h) as usize] };
     let materials = [Material { name: "flower_model".into(), double_sided: true, ..Material::default() }];
     let opts = RenderOptions { use_vertex_colors: true, shading: Shading::Unlit, ..RenderOptions::default() };
     let mut model_triangles = 0;
@@ -249,7 +250,11 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
         atlas.blit(&resolve_supersampled(&Image::from_canvas(&canvas), ss), x, y);
         // the same view's normals in the card's frame: the lit cards' normal atlas
         let mut canvas = cam.canvas([0.0; 4])?;
-        let normal_opts = RenderOptions { use_vertex_colors: false, shading: Shading::card_normals(&view), ..RenderOptions::default() };
+        let normal_opts = RenderOptions {
+            use_vertex_colors: false,
+            shading: Shading::card_normals(&view),
+            ..RenderOptions::default()
+        };
         render_mesh(&mut canvas, &cam, &IDENTITY, &mesh, &materials, &[], &normal_opts);
         normal_atlas.blit(&resolve_supersampled(&Image::from_canvas(&canvas), ss), x, y);
         // the card's rectangle inside the cell: centred, bottom-aligned
@@ -260,7 +265,12 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
         let v1 = (y + cell_h) as f64 / ah;
         let v0 = v1 - shown_h / ah;
         cells.push(FlowerCell {
-            uv: [x as f32 / aw as f32, y as f32 / ah as f32, (x + cell_w) as f32 / aw as f32, (y + cell_h) as f32 / ah as f32],
+            uv: [
+                x as f32 / aw as f32,
+                y as f32 / ah as f32,
+                (x + cell_w) as f32 / aw as f32,
+                (y + cell_h) as f32 / ah as f32,
+            ],
             card_uv: [u0 as f32, v0 as f32, u1 as f32, v1 as f32],
         });
     }
@@ -280,7 +290,10 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
             double_sided: true,
             ..Material::default()
         }],
-        textures: vec![Texture { name: format!("{name}_atlas"), png }, Texture { name: format!("{name}_atlas_normal"), png: normal_png }],
+        textures: vec![
+            Texture { name: format!("{name}_atlas"), png },
+            Texture { name: format!("{name}_atlas_normal"), png: normal_png },
+        ],
         ..Scene::default()
     };
     let mut per_flower = 0;
@@ -288,7 +301,8 @@ pub fn build_flower(name: &str, s: &FlowerSettings) -> Result<FlowerAsset, Raste
         let mut prim = crossed_cards(card_w, card_h, cell.card_uv);
         // the stem sways from the ground; each variant with its own phase
         let phase = Stream::new(&[s.seed, 0x77_696e64, v as u64]).unit() * std::f32::consts::TAU;
-        prim.custom = vec![wind::height_wind(&prim.positions, 0.0, card_h, phase, wind::FLOWER_SWAY_HZ, wind::FLOWER_STIFFNESS)];
+        prim.custom =
+            vec![wind::height_wind(&prim.positions, 0.0, card_h, phase, wind::FLOWER_SWAY_HZ, wind::FLOWER_STIFFNESS)];
         per_flower = prim.triangle_count();
         let node = scene.add_mesh_node(Mesh { name: format!("{name}_v{v}"), primitives: vec![prim], extras: None });
         scene.nodes[node].translation = [v as f32 * card_w * 1.5, 0.0, 0.0];
@@ -315,7 +329,8 @@ fn crossed_cards(width: f32, height: f32, rect: [f32; 4]) -> Primitive {
         ([[0.0, 0.0, h], [0.0, 0.0, -h], [0.0, height, -h], [0.0, height, h]], [1.0, 0.0, 0.0]),
     ] {
         let base = p.positions.len() as u32;
-        let uvs: [[f32; 2]; 4] = std::array::from_fn(|k| [if k == 1 || k == 2 { u1 } else { u0 }, if k >= 2 { v0 } else { v1 }]);
+        let uvs: [[f32; 2]; 4] =
+            std::array::from_fn(|k| [if k == 1 || k == 2 { u1 } else { u0 }, if k >= 2 { v0 } else { v1 }]);
         let tangent = crate::mesh::quad_tangent(corners, uvs, normal);
         for (c, uv) in corners.iter().zip(uvs) {
             p.positions.push(*c);

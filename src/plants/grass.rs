@@ -113,26 +113,44 @@ impl GrassSettings {
 
     /// Checks every setting; the generator relies on these bounds.
     pub fn check(&self) -> Result<(), GrassError> {
-        let range_ok = |r: [f32; 2], lo: f32, hi: f32| r[0].is_finite() && r[1].is_finite() && lo <= r[0] && r[0] <= r[1] && r[1] <= hi;
+        let range_ok = |r: [f32; 2], lo: f32, hi: f32| {
+            r[0].is_finite() && r[1].is_finite() && lo <= r[0] && r[0] <= r[1] && r[1] <= hi
+        };
         if !(1..=MAX_DENSITY_LEVELS).contains(&self.density_levels) {
-            return bad("density_levels", format!("is {}", self.density_levels), format!("use 1 to {MAX_DENSITY_LEVELS}"));
+            return bad(
+                "density_levels",
+                format!("is {}", self.density_levels),
+                format!("use 1 to {MAX_DENSITY_LEVELS}"),
+            );
         }
         if !(1..=MAX_VARIANTS).contains(&self.variants) {
             return bad("variants", format!("is {}", self.variants), format!("use 1 to {MAX_VARIANTS}"));
         }
         if self.blades_per_clump > MAX_BLADES_PER_CLUMP {
-            return bad("blades_per_clump", format!("is {}", self.blades_per_clump), format!("use at most {MAX_BLADES_PER_CLUMP}"));
+            return bad(
+                "blades_per_clump",
+                format!("is {}", self.blades_per_clump),
+                format!("use at most {MAX_BLADES_PER_CLUMP}"),
+            );
         }
         // LoD1 (2 triangles a blade) must stay coarser than LoD0 and finer than LoD2 (10 triangles)
         if self.blades_in_level(0) < 6 {
             return bad(
                 "blades_per_clump",
-                format!("gives {} blades in the sparsest of {} density levels", self.blades_in_level(0), self.density_levels),
+                format!(
+                    "gives {} blades in the sparsest of {} density levels",
+                    self.blades_in_level(0),
+                    self.density_levels
+                ),
                 format!("use at least {} blades (6 per level) or fewer density_levels", 6 * self.density_levels),
             );
         }
         if !(1..=MAX_SEGMENTS).contains(&self.segments) {
-            return bad("segments", format!("is {}", self.segments), format!("use 1 to {MAX_SEGMENTS} (2–5 is typical)"));
+            return bad(
+                "segments",
+                format!("is {}", self.segments),
+                format!("use 1 to {MAX_SEGMENTS} (2–5 is typical)"),
+            );
         }
         if self.segments < 2 {
             return bad("segments", "is 1: a blade of one segment is already LoD1", "use 2 or more (default 5)");
@@ -141,16 +159,35 @@ impl GrassSettings {
             return bad("clump_size", format!("is {} m", self.clump_size_m), "use 0.01 to 100 m (0.5 is typical)");
         }
         if !range_ok(self.height_m, 1e-3, 100.0) {
-            return bad("height", format!("is {:?} m", self.height_m), "give [min, max] with 0.001 ≤ min ≤ max ≤ 100 m");
+            return bad(
+                "height",
+                format!("is {:?} m", self.height_m),
+                "give [min, max] with 0.001 ≤ min ≤ max ≤ 100 m",
+            );
         }
         if !range_ok(self.width_m, 1e-4, self.clump_size_m / 2.0) {
-            return bad("width", format!("is {:?} m", self.width_m), format!("give [min, max] with 0.0001 ≤ min ≤ max ≤ half the clump size ({} m)", self.clump_size_m / 2.0));
+            return bad(
+                "width",
+                format!("is {:?} m", self.width_m),
+                format!(
+                    "give [min, max] with 0.0001 ≤ min ≤ max ≤ half the clump size ({} m)",
+                    self.clump_size_m / 2.0
+                ),
+            );
         }
         if !range_ok(self.bend_rad, 0.0, 1.5) {
-            return bad("bend", format!("is {:?} rad", self.bend_rad), "give [min, max] radians within 0 ≤ min ≤ max ≤ 1.5 (degrees ≈ rad × 57.3)");
+            return bad(
+                "bend",
+                format!("is {:?} rad", self.bend_rad),
+                "give [min, max] radians within 0 ≤ min ≤ max ≤ 1.5 (degrees ≈ rad × 57.3)",
+            );
         }
         if !range_ok(self.wind_frequency_hz, 0.0, WIND_MAX_FREQUENCY_HZ) {
-            return bad("wind_frequency", format!("is {:?} Hz", self.wind_frequency_hz), format!("give [min, max] within 0..{WIND_MAX_FREQUENCY_HZ} Hz"));
+            return bad(
+                "wind_frequency",
+                format!("is {:?} Hz", self.wind_frequency_hz),
+                format!("give [min, max] within 0..{WIND_MAX_FREQUENCY_HZ} Hz"),
+            );
         }
         if !range_ok(self.stiffness, 0.0, 1.0) {
             return bad("stiffness", format!("is {:?}", self.stiffness), "give [min, max] within 0..1");
@@ -159,11 +196,19 @@ impl GrassSettings {
         if !colour_ok(self.root_color) || !colour_ok(self.tip_color) {
             return bad("root_color/tip_color", "has a channel outside 0..1", "give linear RGB in 0..1");
         }
-        if !(self.hue_jitter.is_finite() && (0.0..=1.0).contains(&self.hue_jitter) && self.value_jitter.is_finite() && (0.0..=0.5).contains(&self.value_jitter)) {
+        if !(self.hue_jitter.is_finite()
+            && (0.0..=1.0).contains(&self.hue_jitter)
+            && self.value_jitter.is_finite()
+            && (0.0..=0.5).contains(&self.value_jitter))
+        {
             return bad("hue_jitter/value_jitter", "is out of range", "use hue_jitter 0..1 and value_jitter 0..0.5");
         }
         if !(self.alpha_cutoff.is_finite() && (0.05..=0.95).contains(&self.alpha_cutoff)) {
-            return bad("alpha_cutoff", format!("is {}", self.alpha_cutoff), "use 0.05 to 0.95 (0.75 ≈ 190/255 is typical)");
+            return bad(
+                "alpha_cutoff",
+                format!("is {}", self.alpha_cutoff),
+                "use 0.05 to 0.95 (0.75 ≈ 190/255 is typical)",
+            );
         }
         if !(16..=4096).contains(&self.atlas_px) {
             return bad("atlas_px", format!("is {}", self.atlas_px), "use 16 to 4096 pixels per view");
@@ -257,14 +302,27 @@ pub fn clump(settings: &GrassSettings, level: usize, variant: usize) -> Clump {
         let mut bend_rad = r.range(settings.bend_rad);
         // the tip's horizontal reach; bend less if it could not fit in the cell at all
         let reach = |bend: f32| {
-            let blade = Blade { root: [0.0; 2], facing, length_m, width_m, bend_rad: bend, phase: 0.0, frequency_hz: 0.0, stiffness: 0.0, column: 0, rank: 0.0 };
+            let blade = Blade {
+                root: [0.0; 2],
+                facing,
+                length_m,
+                width_m,
+                bend_rad: bend,
+                phase: 0.0,
+                frequency_hz: 0.0,
+                stiffness: 0.0,
+                column: 0,
+                rank: 0.0,
+            };
             let tip = blade.centreline(settings.segments)[settings.segments];
             (tip[0], tip[2])
         };
         let margin = width_m / 2.0;
         while bend_rad > 0.0 {
             let (dx, dz) = reach(bend_rad);
-            if dx.abs() + 2.0 * margin < settings.clump_size_m * 0.8 && dz.abs() + 2.0 * margin < settings.clump_size_m * 0.8 {
+            if dx.abs() + 2.0 * margin < settings.clump_size_m * 0.8
+                && dz.abs() + 2.0 * margin < settings.clump_size_m * 0.8
+            {
                 break;
             }
             bend_rad *= 0.8;
@@ -345,7 +403,12 @@ pub fn lod0(settings: &GrassSettings, clump: &Clump, material: usize) -> Primiti
 }
 
 /// LoD0 of the blades `keep` accepts (the baker draws one slab of the clump at a time).
-pub fn lod0_filtered(settings: &GrassSettings, clump: &Clump, material: usize, keep: impl Fn(&Blade) -> bool) -> Primitive {
+pub fn lod0_filtered(
+    settings: &GrassSettings,
+    clump: &Clump,
+    material: usize,
+    keep: impl Fn(&Blade) -> bool,
+) -> Primitive {
     let n = settings.segments;
     let mut p = wind_primitive(material);
     for blade in clump.blades.iter().filter(|b| keep(b)) {
@@ -445,7 +508,11 @@ impl Slice {
     /// The slice's image axes: `right` (u grows along it) and the plane's fixed coordinate.
     pub fn right(&self) -> [f32; 3] {
         // seen from +normal: right = up × normal … for +z: +x; for +x: −z
-        if self.normal[2] != 0.0 { [1.0, 0.0, 0.0] } else { [0.0, 0.0, -1.0] }
+        if self.normal[2] != 0.0 {
+            [1.0, 0.0, 0.0]
+        } else {
+            [0.0, 0.0, -1.0]
+        }
     }
 }
 
@@ -455,7 +522,14 @@ pub const HORIZONTAL_CARD_HEIGHT: f32 = 0.45;
 
 /// Pushes a textured quad with wind data: corners counter-clockwise seen from `normal`'s side,
 /// uvs per corner, wind weight from each corner's height.
-fn push_card(p: &mut Primitive, settings: &GrassSettings, corners: [[f32; 3]; 4], uvs: [[f32; 2]; 4], normal: [f32; 3], phase: f32) {
+fn push_card(
+    p: &mut Primitive,
+    settings: &GrassSettings,
+    corners: [[f32; 3]; 4],
+    uvs: [[f32; 2]; 4],
+    normal: [f32; 3],
+    phase: f32,
+) {
     let base = p.positions.len() as u32;
     let card = Blade {
         root: [0.0; 2],
@@ -483,12 +557,28 @@ fn push_card(p: &mut Primitive, settings: &GrassSettings, corners: [[f32; 3]; 4]
 /// A vertical card through `centre` facing `normal` (horizontal), `width` wide, from y = 0 to
 /// `height`, showing atlas rect `rect` (its left edge at −right).
 #[allow(clippy::too_many_arguments)] // plain numbers of one card; a struct would only rename them
-fn push_vertical(p: &mut Primitive, settings: &GrassSettings, centre: [f32; 3], normal: [f32; 3], width: f32, height: f32, rect: UvRect, phase: f32) {
+fn push_vertical(
+    p: &mut Primitive,
+    settings: &GrassSettings,
+    centre: [f32; 3],
+    normal: [f32; 3],
+    width: f32,
+    height: f32,
+    rect: UvRect,
+    phase: f32,
+) {
     let right = [normal[2], 0.0, -normal[0]]; // up × normal
     let h = width / 2.0;
     let at = |s: f32, y: f32| [centre[0] + s * h * right[0], y, centre[2] + s * h * right[2]];
     let [u0, v0, u1, v1] = rect;
-    push_card(p, settings, [at(-1.0, 0.0), at(1.0, 0.0), at(1.0, height), at(-1.0, height)], [[u0, v1], [u1, v1], [u1, v0], [u0, v0]], normal, phase);
+    push_card(
+        p,
+        settings,
+        [at(-1.0, 0.0), at(1.0, 0.0), at(1.0, height), at(-1.0, height)],
+        [[u0, v1], [u1, v1], [u1, v0], [u0, v0]],
+        normal,
+        phase,
+    );
 }
 
 /// A horizontal card over the clump cell at height `y`, showing the top view `rect` (x to the
@@ -509,7 +599,13 @@ fn push_horizontal(p: &mut Primitive, settings: &GrassSettings, size: f32, y: f3
 
 /// LoD2: 4 vertical slices + 1 horizontal card; `slice_rects` in [`slices`] order, `top_rect` the
 /// top view. `material` uses the clump atlas.
-pub fn lod2(settings: &GrassSettings, clump: &Clump, slice_rects: &[UvRect; 4], top_rect: UvRect, material: usize) -> Primitive {
+pub fn lod2(
+    settings: &GrassSettings,
+    clump: &Clump,
+    slice_rects: &[UvRect; 4],
+    top_rect: UvRect,
+    material: usize,
+) -> Primitive {
     let mut p = wind_primitive(material);
     let s = clump.size_m;
     let height = settings.max_height_m();
@@ -622,7 +718,12 @@ mod tests {
         // each blade keeps its length: the centreline's segments sum to it
         for b in &c.blades {
             let pts = b.centreline(s.segments);
-            let len: f32 = pts.windows(2).map(|w| ((w[1][0] - w[0][0]).powi(2) + (w[1][1] - w[0][1]).powi(2) + (w[1][2] - w[0][2]).powi(2)).sqrt()).sum();
+            let len: f32 = pts
+                .windows(2)
+                .map(|w| {
+                    ((w[1][0] - w[0][0]).powi(2) + (w[1][1] - w[0][1]).powi(2) + (w[1][2] - w[0][2]).powi(2)).sqrt()
+                })
+                .sum();
             assert!((len - b.length_m).abs() < 1e-5);
         }
     }

@@ -8,7 +8,9 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::bake::atlas::{dilate, finish_normal_atlas, mip_chain, mip_figures, resolve_supersampled, MipFigures, MipLevel, FLAT_NORMAL};
+use crate::bake::atlas::{
+    dilate, finish_normal_atlas, mip_chain, mip_figures, resolve_supersampled, MipFigures, MipLevel, FLAT_NORMAL,
+};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
@@ -30,7 +32,11 @@ pub const SEARCH_BISECTIONS: usize = 3;
 
 /// Where a level's image error stays within the view's bound (the shared 1-px search,
 /// [`crate::bake::views::switch_search`], over the grass range at 128 px, 4×4 samples).
-pub fn switch_search(reference: &Renderable, candidate: &Renderable, view: &ScreenView) -> (Vec<DistanceError>, f64, bool) {
+pub fn switch_search(
+    reference: &Renderable,
+    candidate: &Renderable,
+    view: &ScreenView,
+) -> (Vec<DistanceError>, f64, bool) {
     let opts = LodImageOptions { max_side_px: 128, supersample: 4, ..LodImageOptions::default() };
     let range = SwitchSearch { far_m: SEARCH_FAR_M, near_m: SEARCH_NEAR_M, bisections: SEARCH_BISECTIONS };
     views::switch_search(reference, candidate, view, &opts, &range)
@@ -184,9 +190,20 @@ pub const BAKE_SUPERSAMPLE: u32 = 2;
 
 /// Renders the meshes through an orthographic view at BAKE_SUPERSAMPLE× and resolves to the view's
 /// size. Returns the image and the fragments written.
-fn render(view: OrthoView, items: &[([[f64; 4]; 3], &Mesh)], materials: &[Material], textures: &[Image], opts: &RenderOptions) -> Result<(Image, u64), RasterError> {
+fn render(
+    view: OrthoView,
+    items: &[([[f64; 4]; 3], &Mesh)],
+    materials: &[Material],
+    textures: &[Image],
+    opts: &RenderOptions,
+) -> Result<(Image, u64), RasterError> {
     let ss = BAKE_SUPERSAMPLE;
-    let fine = OrthoView { pixels_per_metre: view.pixels_per_metre * ss as f64, width: view.width * ss, height: view.height * ss, ..view };
+    let fine = OrthoView {
+        pixels_per_metre: view.pixels_per_metre * ss as f64,
+        width: view.width * ss,
+        height: view.height * ss,
+        ..view
+    };
     let cam = Camera::Ortho(fine);
     let mut canvas = cam.canvas([0.0; 4])?;
     let mut fragments = 0;
@@ -243,7 +260,14 @@ fn clump_name(name: &str, c: &Clump) -> String {
 
 /// A scene holding one node per clump (laid out on a grid 1.5 clump sizes apart, so a viewer shows
 /// them side by side; each mesh has its origin at the clump centre), one material, one texture.
-fn clump_scene(name: &str, clumps: &[Clump], meshes: Vec<Mesh>, material: Material, textures: Vec<Texture>, spacing: f32) -> Scene {
+fn clump_scene(
+    name: &str,
+    clumps: &[Clump],
+    meshes: Vec<Mesh>,
+    material: Material,
+    textures: Vec<Texture>,
+    spacing: f32,
+) -> Scene {
     let mut scene = Scene { name: name.into(), materials: vec![material], textures, ..Scene::default() };
     for (c, mesh) in clumps.iter().zip(meshes) {
         let node = scene.add_mesh_node(mesh);
@@ -266,7 +290,11 @@ pub fn screen_view() -> LodView {
 
 /// Builds, bakes and measures one grass species. `user_blade` replaces the procedural blade
 /// texture (its alpha is kept).
-pub fn build_grass(name: &str, settings: &GrassSettings, user_blade: Option<&Image>) -> Result<GrassAsset, GrassAssetError> {
+pub fn build_grass(
+    name: &str,
+    settings: &GrassSettings,
+    user_blade: Option<&Image>,
+) -> Result<GrassAsset, GrassAssetError> {
     build_grass_with(name, settings, user_blade, true, &screen_view())
 }
 
@@ -282,7 +310,8 @@ pub fn build_grass_with(
     settings.check()?;
     let started = Instant::now();
     let s = settings;
-    let clumps: Vec<Clump> = (0..s.density_levels).flat_map(|l| (0..s.variants).map(move |v| (l, v))).map(|(l, v)| clump(s, l, v)).collect();
+    let clumps: Vec<Clump> =
+        (0..s.density_levels).flat_map(|l| (0..s.variants).map(move |v| (l, v))).map(|(l, v)| clump(s, l, v)).collect();
     let blade_image = match user_blade {
         Some(u) => texture::blade_texture_from(s, u),
         None => texture::blade_texture(s),
@@ -322,7 +351,12 @@ pub fn build_grass_with(
                 y,
                 width: w,
                 height: h,
-                uv: [x as f32 / atlas_w as f32, y as f32 / atlas_h as f32, (x + w) as f32 / atlas_w as f32, (y as f32 + shown_h) / atlas_h as f32],
+                uv: [
+                    x as f32 / atlas_w as f32,
+                    y as f32 / atlas_h as f32,
+                    (x + w) as f32 / atlas_w as f32,
+                    (y as f32 + shown_h) / atlas_h as f32,
+                ],
             }
         })
         .collect();
@@ -330,7 +364,8 @@ pub fn build_grass_with(
     let blade_materials = [blade_material(s, 0)];
     let textures = [blade_image.clone()];
     let opts = unlit();
-    let lod0_meshes: Vec<Mesh> = clumps.iter().zip(&lod0).map(|(c, p)| lod_mesh(clump_name(name, c), p.clone())).collect();
+    let lod0_meshes: Vec<Mesh> =
+        clumps.iter().zip(&lod0).map(|(c, p)| lod_mesh(clump_name(name, c), p.clone())).collect();
     let mut atlas = Image { width: atlas_w, height: atlas_h, pixels: vec![[0.0; 4]; (atlas_w * atlas_h) as usize] };
     let mut density = atlas.clone();
     let mut fragments = 0u64;
@@ -353,14 +388,23 @@ pub fn build_grass_with(
             } else {
                 (top_view(s, cell.width), lod0[ci].clone(), rank_colored(&lod0[ci], c, |_| true))
             };
-            let (colour, f) = render(view, &[(IDENTITY, &lod_mesh(String::new(), prim.clone()))], &blade_materials, &textures, &opts)?;
-            let (rank, _) = render(view, &[(IDENTITY, &lod_mesh(String::new(), ranked))], &rank_material, &[], &rank_opts)?;
+            let (colour, f) = render(
+                view,
+                &[(IDENTITY, &lod_mesh(String::new(), prim.clone()))],
+                &blade_materials,
+                &textures,
+                &opts,
+            )?;
+            let (rank, _) =
+                render(view, &[(IDENTITY, &lod_mesh(String::new(), ranked))], &rank_material, &[], &rank_opts)?;
             let normal_opts = RenderOptions { shading: Shading::card_normals(&view), ..unlit() };
-            let (normals, _) = render(view, &[(IDENTITY, &lod_mesh(String::new(), prim))], &blade_materials, &textures, &normal_opts)?;
+            let (normals, _) =
+                render(view, &[(IDENTITY, &lod_mesh(String::new(), prim))], &blade_materials, &textures, &normal_opts)?;
             Ok((colour, rank, normals, f))
         })
         .collect();
-    let mut normal_atlas = Image { width: atlas_w, height: atlas_h, pixels: vec![FLAT_NORMAL; (atlas_w * atlas_h) as usize] };
+    let mut normal_atlas =
+        Image { width: atlas_w, height: atlas_h, pixels: vec![FLAT_NORMAL; (atlas_w * atlas_h) as usize] };
     for (&(ci, k), r) in views.iter().zip(rendered) {
         let (colour, rank, normals, f) = r?;
         let cell = cells[ci * 5 + k];
@@ -379,7 +423,13 @@ pub fn build_grass_with(
     let (img, f) = render(far_v, &block, &blade_materials, &textures, &opts)?;
     fragments += f;
     atlas.blit(&img, far_cell.x, far_cell.y);
-    let (img, _) = render(far_v, &block, &blade_materials, &textures, &RenderOptions { shading: Shading::card_normals(&far_v), ..unlit() })?;
+    let (img, _) = render(
+        far_v,
+        &block,
+        &blade_materials,
+        &textures,
+        &RenderOptions { shading: Shading::card_normals(&far_v), ..unlit() },
+    )?;
     normal_atlas.blit(&img, far_cell.x, far_cell.y);
     let normal_atlas = finish_normal_atlas(normal_atlas);
 
@@ -403,20 +453,40 @@ pub fn build_grass_with(
     let spacing = 1.5 * s.clump_size_m;
     let blade_tex = Texture { name: format!("{name}_blade"), png: png(&blade_chain[0].image)? };
     let atlas_tex = Texture { name: format!("{name}_atlas"), png: png(&atlas_chain[0].image)? };
-    let normal_tex = Texture { name: format!("{name}_atlas_normal"), png: normal_atlas.encode_png_data().map_err(|e| GrassAssetError::Texture(e.to_string()))? };
+    let normal_tex = Texture {
+        name: format!("{name}_atlas_normal"),
+        png: normal_atlas.encode_png_data().map_err(|e| GrassAssetError::Texture(e.to_string()))?,
+    };
     let slice_rects = |ci: usize| -> [UvRect; 4] { std::array::from_fn(|k| cells[ci * 5 + k].uv) };
-    let lod2: Vec<Primitive> = clumps.iter().enumerate().map(|(ci, c)| grass::lod2(s, c, &slice_rects(ci), cells[ci * 5 + 4].uv, 0)).collect();
-    let lod3: Vec<Primitive> = clumps.iter().enumerate().map(|(ci, c)| grass::lod3(s, c, cells[ci * 5 + 4].uv, 0)).collect();
+    let lod2: Vec<Primitive> =
+        clumps.iter().enumerate().map(|(ci, c)| grass::lod2(s, c, &slice_rects(ci), cells[ci * 5 + 4].uv, 0)).collect();
+    let lod3: Vec<Primitive> =
+        clumps.iter().enumerate().map(|(ci, c)| grass::lod3(s, c, cells[ci * 5 + 4].uv, 0)).collect();
     let levels: [Vec<Primitive>; GRASS_LODS] = [lod0, lod1, lod2, lod3];
     let mut lod_scenes = Vec::with_capacity(GRASS_LODS);
     for (n, prims) in levels.iter().enumerate() {
-        let meshes = clumps.iter().zip(prims).map(|(c, p)| lod_mesh(format!("{}_LOD{n}", clump_name(name, c)), p.clone())).collect();
-        let (material, textures) = if n < 2 { (blade_material(s, 0), vec![blade_tex.clone()]) } else { (atlas_material(s, 0), vec![atlas_tex.clone(), normal_tex.clone()]) };
+        let meshes = clumps
+            .iter()
+            .zip(prims)
+            .map(|(c, p)| lod_mesh(format!("{}_LOD{n}", clump_name(name, c)), p.clone()))
+            .collect();
+        let (material, textures) = if n < 2 {
+            (blade_material(s, 0), vec![blade_tex.clone()])
+        } else {
+            (atlas_material(s, 0), vec![atlas_tex.clone(), normal_tex.clone()])
+        };
         lod_scenes.push(clump_scene(&format!("{name}_LOD{n}"), &clumps, meshes, material, textures, spacing));
     }
     let far_prim = grass::far_field(s, far_cell.uv, 0);
     let far_triangles = far_prim.triangle_count();
-    let far = clump_scene(&format!("{name}_far"), &clumps[..1], vec![lod_mesh(format!("{name}_far"), far_prim)], atlas_material(s, 0), vec![atlas_tex.clone(), normal_tex.clone()], 0.0);
+    let far = clump_scene(
+        &format!("{name}_far"),
+        &clumps[..1],
+        vec![lod_mesh(format!("{name}_far"), far_prim)],
+        atlas_material(s, 0),
+        vec![atlas_tex.clone(), normal_tex.clone()],
+        0.0,
+    );
 
     // analyzer: the densest first variant against its LoD0, from 8 azimuths × 3 elevations
     let analyze_started = Instant::now();
@@ -431,7 +501,8 @@ pub fn build_grass_with(
     let mut lods = Vec::with_capacity(GRASS_LODS);
     for (n, prims) in levels.iter().enumerate() {
         let scene_bytes = crate::export::gltf::to_glb(&lod_scenes[n]).map_err(|e| GrassAssetError::Texture(e.0))?.len();
-        let (triangles, vertices) = prims.iter().fold((0, 0), |(t, v), p| (t + p.triangle_count(), v + p.positions.len()));
+        let (triangles, vertices) =
+            prims.iter().fold((0, 0), |(t, v), p| (t + p.triangle_count(), v + p.positions.len()));
         let mut f = LodFigures {
             level: n,
             triangles,
@@ -539,7 +610,8 @@ fn bounding_radius(p: &Primitive) -> f64 {
 fn lod_chain_scene(name: &str, clumps: &[Clump], lod_scenes: &[Scene], lods: &[LodFigures], spacing: f32) -> Scene {
     let mut scene = Scene { name: name.into(), ..Scene::default() };
     // materials and textures: the blade ones (LoD0/1) then the atlas ones (LoD2/3)
-    scene.textures = vec![lod_scenes[0].textures[0].clone(), lod_scenes[2].textures[0].clone(), lod_scenes[2].textures[1].clone()];
+    scene.textures =
+        vec![lod_scenes[0].textures[0].clone(), lod_scenes[2].textures[0].clone(), lod_scenes[2].textures[1].clone()];
     let mut blade = lod_scenes[0].materials[0].clone();
     blade.base_color_texture = Some(0);
     let mut atlas = lod_scenes[2].materials[0].clone();
@@ -558,7 +630,12 @@ fn lod_chain_scene(name: &str, clumps: &[Clump], lod_scenes: &[Scene], lods: &[L
                 p.material = Some(if n < 2 { 0 } else { 1 });
             }
             scene.meshes.push(mesh);
-            scene.nodes.push(Node { name: format!("{}_LOD{n}", clump_name(name, c)), mesh: Some(scene.meshes.len() - 1), translation, ..Node::default() });
+            scene.nodes.push(Node {
+                name: format!("{}_LOD{n}", clump_name(name, c)),
+                mesh: Some(scene.meshes.len() - 1),
+                translation,
+                ..Node::default()
+            });
             let id = scene.nodes.len() - 1;
             if n == 0 {
                 first = Some(id);

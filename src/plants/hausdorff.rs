@@ -41,7 +41,11 @@ impl TriangleGrid {
         let triangles: Vec<[DVec3; 3]> = mesh
             .primitives
             .iter()
-            .flat_map(|p| p.indices.chunks_exact(3).map(move |t| [t[0], t[1], t[2]].map(|i| p.positions.get(i as usize).map(|v| DVec3::from(v.map(f64::from))))))
+            .flat_map(|p| {
+                p.indices.chunks_exact(3).map(move |t| {
+                    [t[0], t[1], t[2]].map(|i| p.positions.get(i as usize).map(|v| DVec3::from(v.map(f64::from))))
+                })
+            })
             .filter_map(|t| match t {
                 [Some(a), Some(b), Some(c)] if a.is_finite() && b.is_finite() && c.is_finite() => Some([a, b, c]),
                 _ => None,
@@ -50,7 +54,10 @@ impl TriangleGrid {
         if triangles.is_empty() {
             return None;
         }
-        let (lo, hi) = triangles.iter().flatten().fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let (lo, hi) = triangles
+            .iter()
+            .flatten()
+            .fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(lo, hi), &p| (lo.min(p), hi.max(p)));
         let extent = (hi - lo).max(DVec3::splat(1e-6));
         // about two triangles per cell, no side over MAX_GRID_SIDE
         let cell_for_count = (extent.x * extent.y * extent.z / (triangles.len() as f64 / 2.0)).cbrt();
@@ -180,12 +187,23 @@ fn unit(h: u64) -> f64 {
 /// least one; positions from a hash of `seed` and the triangle's number, so the result does not
 /// depend on evaluation order) to `reference`'s surface. Where a primitive's material is
 /// alpha-masked with a texture, samples on texels below the cutoff are skipped: they are not drawn.
-pub fn hausdorff(candidate: &Mesh, materials: &[Material], textures: &[Image], reference: &TriangleGrid, samples: usize, seed: u64) -> HausdorffError {
+pub fn hausdorff(
+    candidate: &Mesh,
+    materials: &[Material],
+    textures: &[Image],
+    reference: &TriangleGrid,
+    samples: usize,
+    seed: u64,
+) -> HausdorffError {
     let area = |p: &crate::mesh::Primitive, t: usize| {
         let c = p.triangle_cross(t);
         0.5 * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
     };
-    let total: f64 = candidate.primitives.iter().map(|p| (0..p.triangle_count()).map(|t| area(p, t)).filter(|a| a.is_finite()).sum::<f64>()).sum();
+    let total: f64 = candidate
+        .primitives
+        .iter()
+        .map(|p| (0..p.triangle_count()).map(|t| area(p, t)).filter(|a| a.is_finite()).sum::<f64>())
+        .sum();
     let mut out = HausdorffError::default();
     let mut sum = 0.0;
     let mut serial = 0u64;
@@ -210,7 +228,11 @@ pub fn hausdorff(candidate: &Mesh, materials: &[Material], textures: &[Image], r
                     (u, v) = (1.0 - u, 1.0 - v);
                 }
                 if let (Some((img, cutoff, alpha)), false) = (mask, p.uvs.is_empty()) {
-                    let uv = [0, 1].map(|k| ((1.0 - u - v) * p.uvs[ids[0]][k] as f64 + u * p.uvs[ids[1]][k] as f64 + v * p.uvs[ids[2]][k] as f64) as f32);
+                    let uv = [0, 1].map(|k| {
+                        ((1.0 - u - v) * p.uvs[ids[0]][k] as f64
+                            + u * p.uvs[ids[1]][k] as f64
+                            + v * p.uvs[ids[2]][k] as f64) as f32
+                    });
                     if img.sample_bilinear(uv)[3] * alpha < cutoff {
                         continue;
                     }

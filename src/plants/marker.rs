@@ -109,7 +109,9 @@ pub fn marker(kind: SpeciesKind, name: &str, color: [f32; 4]) -> (Mesh, Vec<Mate
             let crown = frustum(8, 0.2 * h, h, 0.25 * h, 0.0);
             (vec![trunk, crown], vec![plain("trunk", [0.25, 0.15, 0.07, 1.0], false), plain("crown", color, false)])
         }
-        SpeciesKind::Grass | SpeciesKind::Flower => (vec![crossed_cards(h, 0.6 * h)], vec![plain("cards", color, true)]),
+        SpeciesKind::Grass | SpeciesKind::Flower => {
+            (vec![crossed_cards(h, 0.6 * h)], vec![plain("cards", color, true)])
+        }
         SpeciesKind::Mesh => (vec![frustum(4, 0.0, h, 0.5 * h, 0.5 * h)], vec![plain("box", color, false)]),
     };
     let primitives = primitives

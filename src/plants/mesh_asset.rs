@@ -46,7 +46,9 @@ pub enum MeshAssetError {
     MissingTexture { mtl: PathBuf, material: String, texture: PathBuf, problem: String },
     #[error("{path}: material {material:?} has the texture {texture} but its faces have no texture coordinates (vt); export UVs or remove the map_Kd line")]
     NoTexCoords { path: PathBuf, material: String, texture: String },
-    #[error("{path}: {count} {what}, over the limit of {limit}; simplify the model first or raise the limit (max_{what})")]
+    #[error(
+        "{path}: {count} {what}, over the limit of {limit}; simplify the model first or raise the limit (max_{what})"
+    )]
     TooLarge { path: PathBuf, what: &'static str, count: usize, limit: usize },
     #[error("{path}: no faces with area; export the model's faces (f lines)")]
     Empty { path: PathBuf },
@@ -85,7 +87,13 @@ pub struct ObjOptions {
 
 impl Default for ObjOptions {
     fn default() -> Self {
-        ObjOptions { scale: 1.0, up_axis: UpAxis::Y, recentre: true, max_vertices: DEFAULT_MAX_VERTICES, max_triangles: DEFAULT_MAX_TRIANGLES }
+        ObjOptions {
+            scale: 1.0,
+            up_axis: UpAxis::Y,
+            recentre: true,
+            max_vertices: DEFAULT_MAX_VERTICES,
+            max_triangles: DEFAULT_MAX_TRIANGLES,
+        }
     }
 }
 
@@ -121,8 +129,43 @@ impl SourceMesh {
 
 /// OBJ keywords the scan accepts (geometry it does not use, such as curves, is accepted and ignored).
 const KNOWN_KEYWORDS: &[&str] = &[
-    "v", "vt", "vn", "vp", "f", "l", "p", "o", "g", "s", "usemtl", "mtllib", "cstype", "deg", "bmat", "step", "curv", "curv2", "surf", "parm", "trim",
-    "hole", "scrv", "sp", "end", "con", "mg", "lod", "shadow_obj", "trace_obj", "ctech", "stech", "maplib", "usemap", "bevel", "c_interp", "d_interp",
+    "v",
+    "vt",
+    "vn",
+    "vp",
+    "f",
+    "l",
+    "p",
+    "o",
+    "g",
+    "s",
+    "usemtl",
+    "mtllib",
+    "cstype",
+    "deg",
+    "bmat",
+    "step",
+    "curv",
+    "curv2",
+    "surf",
+    "parm",
+    "trim",
+    "hole",
+    "scrv",
+    "sp",
+    "end",
+    "con",
+    "mg",
+    "lod",
+    "shadow_obj",
+    "trace_obj",
+    "ctech",
+    "stech",
+    "maplib",
+    "usemap",
+    "bevel",
+    "c_interp",
+    "d_interp",
 ];
 
 /// Checks every line of `text`: known keyword, finite numbers where numbers belong, face corners
@@ -134,7 +177,13 @@ fn scan(path: &Path, text: &[u8], options: &ObjOptions) -> Result<Vec<String>, M
     for (n, raw) in text.split(|&b| b == b'\n').enumerate() {
         let line = String::from_utf8_lossy(raw);
         let line = line.trim_end_matches('\r');
-        let syntax = |column: usize, message: String| MeshAssetError::Syntax { path: path.to_path_buf(), line: n + 1, column, message, text: line.to_string() };
+        let syntax = |column: usize, message: String| MeshAssetError::Syntax {
+            path: path.to_path_buf(),
+            line: n + 1,
+            column,
+            message,
+            text: line.to_string(),
+        };
         let content = line.split('#').next().unwrap_or("");
         // (column, token) pairs, 1-based columns
         let mut tokens = Vec::new();
@@ -151,7 +200,10 @@ fn scan(path: &Path, text: &[u8], options: &ObjOptions) -> Result<Vec<String>, M
         }
         let Some(&(kw_col, keyword)) = tokens.first() else { continue };
         if !KNOWN_KEYWORDS.contains(&keyword) {
-            return Err(syntax(kw_col, format!("unknown statement {keyword:?} (expected v, vt, vn, f, o, g, usemtl, mtllib, …)")));
+            return Err(syntax(
+                kw_col,
+                format!("unknown statement {keyword:?} (expected v, vt, vn, f, o, g, usemtl, mtllib, …)"),
+            ));
         }
         let numbers = |min: usize, max: usize| -> Result<(), MeshAssetError> {
             let args = &tokens[1..];
@@ -171,7 +223,12 @@ fn scan(path: &Path, text: &[u8], options: &ObjOptions) -> Result<Vec<String>, M
                 numbers(3, 7)?;
                 positions += 1;
                 if positions > options.max_vertices {
-                    return Err(MeshAssetError::TooLarge { path: path.to_path_buf(), what: "vertices", count: positions, limit: options.max_vertices });
+                    return Err(MeshAssetError::TooLarge {
+                        path: path.to_path_buf(),
+                        what: "vertices",
+                        count: positions,
+                        limit: options.max_vertices,
+                    });
                 }
             }
             "vt" => {
@@ -190,23 +247,36 @@ fn scan(path: &Path, text: &[u8], options: &ObjOptions) -> Result<Vec<String>, M
                 for &(col, corner) in corners {
                     let parts: Vec<&str> = corner.split('/').collect();
                     if parts.len() > 3 || parts[0].is_empty() {
-                        return Err(syntax(col, format!("{corner:?} is not a face corner (v, v/vt, v//vn or v/vt/vn)")));
+                        return Err(syntax(
+                            col,
+                            format!("{corner:?} is not a face corner (v, v/vt, v//vn or v/vt/vn)"),
+                        ));
                     }
                     for (k, (part, count)) in parts.iter().zip([positions, texcoords, normals]).enumerate() {
                         if part.is_empty() && k > 0 {
                             continue;
                         }
                         let what = ["vertex", "texture coordinate", "normal"][k];
-                        let index: i64 = part.parse().map_err(|_| syntax(col, format!("{part:?} in {corner:?} is not a {what} index")))?;
+                        let index: i64 = part
+                            .parse()
+                            .map_err(|_| syntax(col, format!("{part:?} in {corner:?} is not a {what} index")))?;
                         let resolved = if index < 0 { count as i64 + index } else { index - 1 };
                         if index == 0 || resolved < 0 || resolved >= count as i64 {
-                            return Err(syntax(col, format!("{what} index {index} refers to none of the {count} {what}s defined above")));
+                            return Err(syntax(
+                                col,
+                                format!("{what} index {index} refers to none of the {count} {what}s defined above"),
+                            ));
                         }
                     }
                 }
                 triangles += corners.len() - 2;
                 if triangles > options.max_triangles {
-                    return Err(MeshAssetError::TooLarge { path: path.to_path_buf(), what: "triangles", count: triangles, limit: options.max_triangles });
+                    return Err(MeshAssetError::TooLarge {
+                        path: path.to_path_buf(),
+                        what: "triangles",
+                        count: triangles,
+                        limit: options.max_triangles,
+                    });
                 }
             }
             "mtllib" => mtllibs.extend(tokens[1..].iter().map(|(_, t)| t.to_string())),
@@ -223,11 +293,21 @@ struct LoadedTexture {
 }
 
 fn load_texture(mtl: &Path, material: &str, texture: &Path) -> Result<LoadedTexture, MeshAssetError> {
-    let missing = |problem: String| MeshAssetError::MissingTexture { mtl: mtl.to_path_buf(), material: material.to_string(), texture: texture.to_path_buf(), problem };
-    let bytes = crate::input::read_limited(texture, crate::input::MAX_TEXTURE_BYTES, "a texture").map_err(|e| missing(e.into_io().to_string()))?;
+    let missing = |problem: String| MeshAssetError::MissingTexture {
+        mtl: mtl.to_path_buf(),
+        material: material.to_string(),
+        texture: texture.to_path_buf(),
+        problem,
+    };
+    let bytes = crate::input::read_limited(texture, crate::input::MAX_TEXTURE_BYTES, "a texture")
+        .map_err(|e| missing(e.into_io().to_string()))?;
     let image = image::load_from_memory(&bytes).map_err(|e| missing(format!("not a PNG or JPEG image: {e}")))?;
     if image.width().max(image.height()) > MAX_TEXTURE_SIDE_PX || image.width() == 0 || image.height() == 0 {
-        return Err(missing(format!("{}×{} px; textures must be 1 to {MAX_TEXTURE_SIDE_PX} px a side", image.width(), image.height())));
+        return Err(missing(format!(
+            "{}×{} px; textures must be 1 to {MAX_TEXTURE_SIDE_PX} px a side",
+            image.width(),
+            image.height()
+        )));
     }
     let rgba = image.to_rgba8();
     let has_alpha = rgba.pixels().any(|p| p.0[3] < 255);
@@ -239,7 +319,8 @@ fn load_texture(mtl: &Path, material: &str, texture: &Path) -> Result<LoadedText
 /// order; with options before the file name (`-s 1 1 1 bark.png`), the last word. Only paths inside
 /// an MTL's folder are read ([`crate::input::resolve_inside`]): an absolute or escaping name is an error.
 fn texture_path(name: &str, mtl_dirs: &[PathBuf]) -> Result<PathBuf, String> {
-    let candidates: Vec<&str> = [name.trim(), name.split_whitespace().last().unwrap_or("")].into_iter().filter(|c| !c.is_empty()).collect();
+    let candidates: Vec<&str> =
+        [name.trim(), name.split_whitespace().last().unwrap_or("")].into_iter().filter(|c| !c.is_empty()).collect();
     for c in &candidates {
         for dir in mtl_dirs {
             if let Ok(p) = crate::input::resolve_inside(dir, c) {
@@ -249,7 +330,10 @@ fn texture_path(name: &str, mtl_dirs: &[PathBuf]) -> Result<PathBuf, String> {
             }
         }
     }
-    crate::input::resolve_inside(&mtl_dirs.first().cloned().unwrap_or_default(), candidates.first().copied().unwrap_or(name))
+    crate::input::resolve_inside(
+        &mtl_dirs.first().cloned().unwrap_or_default(),
+        candidates.first().copied().unwrap_or(name),
+    )
 }
 
 /// Angle-weighted vertex normals, accumulated over vertices at the same position so UV seams do
@@ -281,7 +365,10 @@ fn angle_weighted_normals(p: &Primitive) -> Vec<[f32; 3]> {
 /// Reads `path` (and its MTL and textures) into a [`SourceMesh`].
 pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAssetError> {
     if !(options.scale.is_finite() && options.scale > 0.0) {
-        return Err(MeshAssetError::Options(format!("--scale {} must be a positive number (metres per file unit)", options.scale)));
+        return Err(MeshAssetError::Options(format!(
+            "--scale {} must be a positive number (metres per file unit)",
+            options.scale
+        )));
     }
     let text = crate::input::read_limited(path, crate::input::MAX_OBJ_BYTES, "an OBJ model")
         .map_err(|e| MeshAssetError::Read { path: path.to_path_buf(), problem: e.into_io().to_string() })?;
@@ -289,7 +376,8 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
     let obj_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let load_options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let (loaded, mtl_failed) = crate::input::load_obj_bounded(path, &text, &load_options);
-    let (models, materials) = loaded.map_err(|e| MeshAssetError::Load { path: path.to_path_buf(), problem: e.to_string() })?;
+    let (models, materials) =
+        loaded.map_err(|e| MeshAssetError::Load { path: path.to_path_buf(), problem: e.to_string() })?;
     let mtl_paths: Vec<PathBuf> = mtllibs.iter().map(|m| obj_dir.join(m)).collect();
     let materials = match materials {
         Ok(m) => m,
@@ -299,7 +387,8 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
         }
         Err(_) => Vec::new(),
     };
-    let mtl_dirs: Vec<PathBuf> = mtl_paths.iter().map(|m| m.parent().map(Path::to_path_buf).unwrap_or_default()).collect();
+    let mtl_dirs: Vec<PathBuf> =
+        mtl_paths.iter().map(|m| m.parent().map(Path::to_path_buf).unwrap_or_default()).collect();
     let first_mtl = mtl_paths.first().cloned().unwrap_or_else(|| path.to_path_buf());
 
     // materials and their textures (each file decoded once)
@@ -309,7 +398,12 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
         let kd = m.diffuse.unwrap_or([1.0, 1.0, 1.0]);
         let d = m.dissolve.unwrap_or(1.0);
         let clamp = |x: f32| if x.is_finite() { x.clamp(0.0, 1.0) } else { 1.0 };
-        let mut material = Material { name: m.name.clone(), base_color: [clamp(kd[0]), clamp(kd[1]), clamp(kd[2]), clamp(d)], roughness: 0.9, ..Material::default() };
+        let mut material = Material {
+            name: m.name.clone(),
+            base_color: [clamp(kd[0]), clamp(kd[1]), clamp(kd[2]), clamp(d)],
+            roughness: 0.9,
+            ..Material::default()
+        };
         let mut textured_alpha = false;
         if let Some(name) = m.diffuse_texture.as_deref().filter(|n| !n.trim().is_empty()) {
             let file = texture_path(name, &mtl_dirs).map_err(|problem| MeshAssetError::MissingTexture {
@@ -349,7 +443,8 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
             continue;
         }
         let material = m.material_id.filter(|&i| i < scene.materials.len());
-        let (prim, normals_ok) = by_material.entry(material).or_insert_with(|| (Primitive { material, ..Primitive::default() }, true));
+        let (prim, normals_ok) =
+            by_material.entry(material).or_insert_with(|| (Primitive { material, ..Primitive::default() }, true));
         let base = prim.positions.len() as u32;
         prim.positions.extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
         let has_normals = m.normals.len() == 3 * n;
@@ -367,7 +462,12 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
     }
     let total_vertices: usize = by_material.values().map(|(p, _)| p.positions.len()).sum();
     if total_vertices > options.max_vertices {
-        return Err(MeshAssetError::TooLarge { path: path.to_path_buf(), what: "vertices", count: total_vertices, limit: options.max_vertices });
+        return Err(MeshAssetError::TooLarge {
+            path: path.to_path_buf(),
+            what: "vertices",
+            count: total_vertices,
+            limit: options.max_vertices,
+        });
     }
 
     // turn, scale, then recentre
@@ -387,7 +487,11 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
             hi = hi.max(w);
         }
     }
-    let offset = if options.recentre && total_vertices > 0 { DVec3::new(-(lo.x + hi.x) / 2.0, -lo.y, -(lo.z + hi.z) / 2.0) } else { DVec3::ZERO };
+    let offset = if options.recentre && total_vertices > 0 {
+        DVec3::new(-(lo.x + hi.x) / 2.0, -lo.y, -(lo.z + hi.z) / 2.0)
+    } else {
+        DVec3::ZERO
+    };
     let mut stats = MeshAssetStats { offset_m: offset.to_array(), ..MeshAssetStats::default() };
     let mut mesh = Mesh { name: scene.name.clone(), primitives: Vec::new(), extras: None };
     for (_, (mut p, normals_ok)) in by_material {
@@ -408,7 +512,13 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
         }
         // degenerate triangles (zero area after rounding to f32) would fail validation
         let before = p.indices.len() / 3;
-        let kept: Vec<u32> = p.indices.chunks_exact(3).filter(|t| !is_flat(&p.positions, [t[0], t[1], t[2]])).flatten().copied().collect();
+        let kept: Vec<u32> = p
+            .indices
+            .chunks_exact(3)
+            .filter(|t| !is_flat(&p.positions, [t[0], t[1], t[2]]))
+            .flatten()
+            .copied()
+            .collect();
         stats.degenerate_triangles_dropped += before - kept.len() / 3;
         p.indices = kept;
         if p.indices.is_empty() {
@@ -420,8 +530,16 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
         }
         if let Some(material) = p.material.map(|m| &scene.materials[m]) {
             if material.base_color_texture.is_some() && p.uvs.is_empty() {
-                let texture = materials.iter().find(|m| m.name == material.name).and_then(|m| m.diffuse_texture.clone()).unwrap_or_default();
-                return Err(MeshAssetError::NoTexCoords { path: path.to_path_buf(), material: material.name.clone(), texture });
+                let texture = materials
+                    .iter()
+                    .find(|m| m.name == material.name)
+                    .and_then(|m| m.diffuse_texture.clone())
+                    .unwrap_or_default();
+                return Err(MeshAssetError::NoTexCoords {
+                    path: path.to_path_buf(),
+                    material: material.name.clone(),
+                    texture,
+                });
             }
         }
         p.optimize_for_gpu();
@@ -432,7 +550,12 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
     }
     // faces without a material: the documented grey
     if mesh.primitives.iter().any(|p| p.material.is_none()) {
-        scene.materials.push(Material { name: "default_grey".into(), base_color: FALLBACK_GREY, roughness: 0.9, ..Material::default() });
+        scene.materials.push(Material {
+            name: "default_grey".into(),
+            base_color: FALLBACK_GREY,
+            roughness: 0.9,
+            ..Material::default()
+        });
         let grey = scene.materials.len() - 1;
         for p in mesh.primitives.iter_mut().filter(|p| p.material.is_none()) {
             p.material = Some(grey);
@@ -444,7 +567,8 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
     stats.materials = scene.materials.len();
     stats.textures = scene.textures.len();
     stats.has_uvs = mesh.primitives.iter().all(|p| !p.uvs.is_empty());
-    let corners: Vec<[f32; 3]> = mesh.primitives.iter().filter_map(|p| p.bounds()).flat_map(|b| [b.min, b.max]).collect();
+    let corners: Vec<[f32; 3]> =
+        mesh.primitives.iter().filter_map(|p| p.bounds()).flat_map(|b| [b.min, b.max]).collect();
     stats.bounds = Bounds::of(&corners);
     scene.add_mesh_node(mesh);
     Ok(SourceMesh { scene, stats })

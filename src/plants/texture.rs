@@ -51,7 +51,8 @@ pub fn blade_texture(settings: &GrassSettings) -> Image {
                 let n = streak[x as usize] * (1.0 + 0.05 * (2.0 * grain.unit() - 1.0));
                 // the midrib is a little lighter
                 let rib = 1.0 + 0.1 * (1.0 - (off / (w as f32 / 2.0)).min(1.0)).powi(4);
-                let col: [f32; 3] = std::array::from_fn(|k| ((root[k] + (tip[k] - root[k]) * grad) * n * rib).clamp(0.0, 1.0));
+                let col: [f32; 3] =
+                    std::array::from_fn(|k| ((root[k] + (tip[k] - root[k]) * grad) * n * rib).clamp(0.0, 1.0));
                 pixels[(y * width + c * w + x) as usize] = [col[0], col[1], col[2], alpha];
             }
         }

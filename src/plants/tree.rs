@@ -92,7 +92,9 @@ pub enum TreeError {
     Parse(LsystemError),
     #[error("{0}")]
     Expand(LsystemError),
-    #[error("the tree draws more than {limit} segments (--max-segments); lower the recursion depth or raise the limit")]
+    #[error(
+        "the tree draws more than {limit} segments (--max-segments); lower the recursion depth or raise the limit"
+    )]
     TooManySegments { limit: u64 },
     #[error("the tree needs more than {limit} triangles (--max-triangles); lower the recursion depth or --radial-segments, or raise the limit")]
     TooManyTriangles { limit: u64 },
@@ -200,7 +202,11 @@ impl TreeMesh {
                 continue;
             }
             let cut = |n: usize| n.min(v_end);
-            let custom = p.custom.iter().map(|c| CustomAttribute { name: c.name.clone(), values: c.values[..cut(c.values.len())].to_vec() }).collect();
+            let custom = p
+                .custom
+                .iter()
+                .map(|c| CustomAttribute { name: c.name.clone(), values: c.values[..cut(c.values.len())].to_vec() })
+                .collect();
             // every field is set, but Primitive literals end in `..Primitive::default()` (fields get added)
             #[allow(clippy::needless_update)]
             out.primitives.push(Primitive {
@@ -433,7 +439,18 @@ impl<'a> Builder<'a> {
     /// Emits a ring of R + 1 vertices (the seam twice, for the texture) around `centre` in the plane
     /// with normal `normal`; `stretch` widens it along `bend` (the elliptical cut of a mitred joint).
     #[allow(clippy::too_many_arguments)]
-    fn ring(&mut self, key: (Kind, u16), level: u32, limb: Limb, centre: DVec3, normal: DVec3, side: DVec3, radius: f64, stretch: Option<(DVec3, f64)>, v: f64) -> u32 {
+    fn ring(
+        &mut self,
+        key: (Kind, u16),
+        level: u32,
+        limb: Limb,
+        centre: DVec3,
+        normal: DVec3,
+        side: DVec3,
+        radius: f64,
+        stretch: Option<(DVec3, f64)>,
+        v: f64,
+    ) -> u32 {
         let t = normal.cross(side);
         let wind = self.wood(limb);
         let dirs = std::mem::take(&mut self.ring_dirs);
@@ -464,7 +481,16 @@ impl<'a> Builder<'a> {
 
     /// A flat cap over a ring's circle: `facing` is the cap's outward normal; `centre` its middle.
     #[allow(clippy::too_many_arguments)]
-    fn cap(&mut self, key: (Kind, u16), level: u32, limb: Limb, centre: DVec3, facing: DVec3, side: DVec3, radius: f64) -> Result<(), TreeError> {
+    fn cap(
+        &mut self,
+        key: (Kind, u16),
+        level: u32,
+        limb: Limb,
+        centre: DVec3,
+        facing: DVec3,
+        side: DVec3,
+        radius: f64,
+    ) -> Result<(), TreeError> {
         let t = facing.cross(side);
         let wind = self.wood(limb);
         let dirs = std::mem::take(&mut self.ring_dirs);
@@ -486,7 +512,17 @@ impl<'a> Builder<'a> {
     fn close_chain(&mut self, chain: OpenChain) -> Result<(), TreeError> {
         let radius = (chain.radius * self.options.tip_radius_ratio).max(self.options.min_radius_m);
         let side = transport(chain.side, chain.dir);
-        let tip = self.ring(chain.kind_color, chain.level, chain.limb, chain.end, chain.dir, side, radius, None, chain.v_at_end);
+        let tip = self.ring(
+            chain.kind_color,
+            chain.level,
+            chain.limb,
+            chain.end,
+            chain.dir,
+            side,
+            radius,
+            None,
+            chain.v_at_end,
+        );
         self.tube(chain.kind_color, chain.level, chain.ring, tip)?;
         self.cap(chain.kind_color, chain.level, chain.limb, chain.end, chain.dir, side, radius)
     }
@@ -535,14 +571,18 @@ impl Sink for Builder<'_> {
         });
         // continue the chain through a shared ring when it ends here and the bend is not too sharp
         if let Some(mut chain) = self.chains.remove(&s.chain) {
-            let joins = s.continues && chain.kind_color == key && chain.dir.dot(dir) > MIN_JOINT_COS && chain.end.distance(p0) <= 1e-9 * (1.0 + p0.length());
+            let joins = s.continues
+                && chain.kind_color == key
+                && chain.dir.dot(dir) > MIN_JOINT_COS
+                && chain.end.distance(p0) <= 1e-9 * (1.0 + p0.length());
             if joins {
                 let bisector = (chain.dir + dir).normalize();
                 let side = transport(chain.side, bisector);
                 // the cut of a cylinder by the bisector plane is an ellipse 1/cos(θ/2) wide along the bend
                 let cos_half = bisector.dot(dir).clamp(0.1, 1.0);
                 let bend = chain.dir.cross(dir);
-                let stretch = (bend.length() > 1e-9).then(|| (bisector.cross(bend.normalize()).normalize(), 1.0 / cos_half));
+                let stretch =
+                    (bend.length() > 1e-9).then(|| (bisector.cross(bend.normalize()).normalize(), 1.0 / cos_half));
                 let ring = self.ring(key, chain.level, chain.limb, p0, bisector, side, radius, stretch, chain.v_at_end);
                 self.tube(key, chain.level, chain.ring, ring)?;
                 chain.ring = ring;
@@ -564,7 +604,18 @@ impl Sink for Builder<'_> {
         self.cap(key, s.level, s.limb, p0, -dir, side, radius)?;
         self.chains.insert(
             s.chain,
-            OpenChain { kind_color: key, level: s.level, ring, side, end: p1, dir, radius, v_at_end: length / circumference, circumference, limb: end_limb },
+            OpenChain {
+                kind_color: key,
+                level: s.level,
+                ring,
+                side,
+                end: p1,
+                dir,
+                radius,
+                v_at_end: length / circumference,
+                circumference,
+                limb: end_limb,
+            },
         );
         Ok(())
     }
@@ -593,7 +644,12 @@ impl Sink for Builder<'_> {
             part.sizes.push([length as f32, width as f32, 0.0, 0.0]);
             return Ok(());
         }
-        let corners = [p - left * (width / 2.0), p + left * (width / 2.0), p + left * (width / 2.0) + heading * length, p - left * (width / 2.0) + heading * length];
+        let corners = [
+            p - left * (width / 2.0),
+            p + left * (width / 2.0),
+            p + left * (width / 2.0) + heading * length,
+            p - left * (width / 2.0) + heading * length,
+        ];
         let uvs = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
         let part = self.part(Kind::Leaf, leaf.color, leaf.level);
         let first = part.positions.len() as u32;
@@ -636,13 +692,15 @@ impl Sink for Builder<'_> {
         let n = normal / area2;
         let u_axis = transport(points[1] - points[0], n);
         let v_axis = n.cross(u_axis);
-        let flat: Vec<DVec2> = points.iter().map(|p| DVec2::new((*p - points[0]).dot(u_axis), (*p - points[0]).dot(v_axis))).collect();
+        let flat: Vec<DVec2> =
+            points.iter().map(|p| DVec2::new((*p - points[0]).dot(u_axis), (*p - points[0]).dot(v_axis))).collect();
         let triangles = triangulate(&flat);
         if triangles.is_empty() {
             self.polygons_skipped += 1;
             return Ok(());
         }
-        let (lo, hi) = flat.iter().fold((DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        let (lo, hi) =
+            flat.iter().fold((DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
         let size = (hi - lo).max(DVec2::splat(1e-12));
         // a polygon leaf is held where it starts (its first vertex, the stalk): flutter grows away from it
         let reach = points.iter().map(|p| p.distance(points[0])).fold(0.0, f64::max).max(1e-12);
@@ -759,7 +817,11 @@ fn check_options(o: &TreeOptions) -> Result<(), TreeError> {
             return bad(format!("--height {h} must be a positive number of metres"));
         }
     }
-    for (name, v) in [("minimum radius", o.min_radius_m), ("tip radius ratio", o.tip_radius_ratio), ("leaf length ratio", o.leaf_length_ratio)] {
+    for (name, v) in [
+        ("minimum radius", o.min_radius_m),
+        ("tip radius ratio", o.tip_radius_ratio),
+        ("leaf length ratio", o.leaf_length_ratio),
+    ] {
         if !(v.is_finite() && v > 0.0) {
             return bad(format!("the {name} {v} must be a positive number"));
         }
@@ -769,14 +831,24 @@ fn check_options(o: &TreeOptions) -> Result<(), TreeError> {
 
 /// Orders every primitive's pieces by branch level, drops f32-degenerate triangles, makes the
 /// materials and the scene.
-fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_bytes: u64) -> Result<TreeMesh, TreeError> {
+fn assemble(
+    mut builder: Builder,
+    turtle: TurtleCounts,
+    symbols: u64,
+    string_bytes: u64,
+) -> Result<TreeMesh, TreeError> {
     let mut chains: Vec<(u32, OpenChain)> = builder.chains.drain().collect();
     chains.sort_by_key(|(id, _)| *id);
     for (_, chain) in chains {
         builder.close_chain(chain)?;
     }
     // a uniform scale to the requested height (radii, lengths and positions alike)
-    let (lo, hi) = builder.parts.values().flat_map(|levels| levels.values()).flat_map(|p| &p.positions).fold((f64::MAX, f64::MIN), |(lo, hi), p| (lo.min(p[1] as f64), hi.max(p[1] as f64)));
+    let (lo, hi) = builder
+        .parts
+        .values()
+        .flat_map(|levels| levels.values())
+        .flat_map(|p| &p.positions)
+        .fold((f64::MAX, f64::MIN), |(lo, hi), p| (lo.min(p[1] as f64), hi.max(p[1] as f64)));
     let scale = match builder.options.height_m {
         Some(h) if hi > lo => h / (hi - lo),
         _ => 1.0,
@@ -787,7 +859,13 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
     // the top; branch weights from the trunk to the farthest tip along any limb
     let ground = ((if (lo..=hi).contains(&0.0) { 0.0 } else { lo }) * scale) as f32;
     let top = (hi * scale) as f32;
-    let longest_arc = builder.parts.values().flat_map(|levels| levels.values()).flat_map(|p| &p.wind).fold(0.0f64, |m, w| m.max(w[0] as f64)) * scale;
+    let longest_arc = builder
+        .parts
+        .values()
+        .flat_map(|levels| levels.values())
+        .flat_map(|p| &p.wind)
+        .fold(0.0f64, |m, w| m.max(w[0] as f64))
+        * scale;
     let sway_hz = wind::tree_sway_frequency_hz(((hi - lo) * scale).max(0.0));
     let mut scene = Scene { name: options.name.clone(), ..Scene::default() };
     let mut mesh = Mesh { name: options.name.clone(), primitives: Vec::new(), extras: None };
@@ -797,7 +875,10 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
     let (mut bark_texture, mut polygon_texture) = (None, None);
     for ((kind, color), levels) in std::mem::take(&mut builder.parts) {
         let points = kind == Kind::LeafPoint;
-        let mut prim = Primitive { mode: if points { PrimitiveMode::Points } else { PrimitiveMode::Triangles }, ..Primitive::default() };
+        let mut prim = Primitive {
+            mode: if points { PrimitiveMode::Points } else { PrimitiveMode::Triangles },
+            ..Primitive::default()
+        };
         let mut sizes = Vec::new();
         let mut raw_wind: Vec<[f32; 4]> = Vec::new();
         let mut ranges = LevelRanges::default();
@@ -853,11 +934,16 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
             prim.custom = vec![CustomAttribute { name: LEAF_SIZE_ATTRIBUTE.into(), values: sizes }];
         }
         let span = top - ground;
-        let sway = prim.positions.iter().map(|p| [if span > 0.0 { wind::bend_weight((p[1] - ground) / span) } else { 0.0 }, 0.0, sway_hz, 0.0]).collect();
+        let sway = prim
+            .positions
+            .iter()
+            .map(|p| [if span > 0.0 { wind::bend_weight((p[1] - ground) / span) } else { 0.0 }, 0.0, sway_hz, 0.0])
+            .collect();
         let branch = raw_wind
             .iter()
             .map(|&[arc, flutter, flutter_phase, limb_phase]| {
-                let w = if longest_arc > 0.0 { wind::bend_weight((arc as f64 * scale / longest_arc) as f32) } else { 0.0 };
+                let w =
+                    if longest_arc > 0.0 { wind::bend_weight((arc as f64 * scale / longest_arc) as f32) } else { 0.0 };
                 [w, limb_phase, flutter, flutter_phase]
             })
             .collect();
@@ -866,17 +952,31 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
         let (name, material) = match kind {
             Kind::Bark => {
                 let texture = *bark_texture.get_or_insert_with(|| {
-                    scene.textures.push(Texture { name: "bark".into(), png: crate::plants::texture::bark_texture_png() });
+                    scene
+                        .textures
+                        .push(Texture { name: "bark".into(), png: crate::plants::texture::bark_texture_png() });
                     scene.textures.len() - 1
                 });
-                (format!("bark_c{color}"), Material { base_color, base_color_texture: Some(texture), roughness: 0.9, ..Material::default() })
+                (
+                    format!("bark_c{color}"),
+                    Material { base_color, base_color_texture: Some(texture), roughness: 0.9, ..Material::default() },
+                )
             }
             Kind::Polygon => {
                 let texture = *polygon_texture.get_or_insert_with(|| {
-                    scene.textures.push(Texture { name: "leaf_surface".into(), png: crate::plants::texture::polygon_leaf_texture_png() });
+                    scene.textures.push(Texture {
+                        name: "leaf_surface".into(),
+                        png: crate::plants::texture::polygon_leaf_texture_png(),
+                    });
                     scene.textures.len() - 1
                 });
-                let m = Material { base_color, base_color_texture: Some(texture), roughness: 0.7, double_sided: true, ..Material::default() };
+                let m = Material {
+                    base_color,
+                    base_color_texture: Some(texture),
+                    roughness: 0.7,
+                    double_sided: true,
+                    ..Material::default()
+                };
                 (format!("leaf_polygon_c{color}"), m)
             }
             Kind::Leaf => {
@@ -896,7 +996,10 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
             }
             // the colour rides on COLOR_0 (per point, as the sprite shader reads it); no texture:
             // points have no texture coordinates
-            Kind::LeafPoint => (format!("leaf_points_c{color}"), Material { roughness: 0.7, double_sided: true, ..Material::default() }),
+            Kind::LeafPoint => (
+                format!("leaf_points_c{color}"),
+                Material { roughness: 0.7, double_sided: true, ..Material::default() },
+            ),
         };
         scene.materials.push(Material { name, ..material });
         prim.material = Some(scene.materials.len() - 1);
@@ -915,7 +1018,8 @@ fn assemble(mut builder: Builder, turtle: TurtleCounts, symbols: u64, string_byt
             s.radius_m = (s.radius_m as f64 * scale) as f32;
         }
     }
-    let corners: Vec<[f32; 3]> = mesh.primitives.iter().filter_map(|p| p.bounds()).flat_map(|b| [b.min, b.max]).collect();
+    let corners: Vec<[f32; 3]> =
+        mesh.primitives.iter().filter_map(|p| p.bounds()).flat_map(|b| [b.min, b.max]).collect();
     let bounds = Bounds::of(&corners);
     let max_branch_level = all_levels.iter().flat_map(|r| r.levels.iter().copied()).max().unwrap_or(0);
     mesh.extras = Some(json!({ EXTRAS_KEY: { "max_branch_level": max_branch_level, "branch_levels": all_levels } }));
@@ -1045,7 +1149,8 @@ pub fn run(job: &TreeJob) -> Result<TreeReport, TreeError> {
 
 /// Writes a report as pretty JSON (atomically).
 pub fn write_report(path: &Path, report: &TreeReport) -> Result<(), TreeError> {
-    let mut text = serde_json::to_string_pretty(report).map_err(|e| TreeError::Options(format!("cannot serialise the report: {e}")))?;
+    let mut text = serde_json::to_string_pretty(report)
+        .map_err(|e| TreeError::Options(format!("cannot serialise the report: {e}")))?;
     text.push('\n');
     export::write_atomic(path, text.as_bytes())?;
     Ok(())
@@ -1085,7 +1190,8 @@ mod tests {
     #[test]
     fn ear_clipping_handles_concave_polygons() {
         // an L shape (concave at (1, 1)): 4 triangles, total area 3, all counter-clockwise
-        let pts = [(0.0, 0.0), (2.0, 0.0), (2.0, 1.0), (1.0, 1.0), (1.0, 2.0), (0.0, 2.0)].map(|(x, y)| DVec2::new(x, y));
+        let pts =
+            [(0.0, 0.0), (2.0, 0.0), (2.0, 1.0), (1.0, 1.0), (1.0, 2.0), (0.0, 2.0)].map(|(x, y)| DVec2::new(x, y));
         let tris = triangulate(&pts);
         assert_eq!(tris.len(), 4);
         let area: f64 = tris.iter().map(|t| orient(pts[t[0]], pts[t[1]], pts[t[2]]) / 2.0).sum();

@@ -21,17 +21,22 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::json;
 
-use crate::bake::atlas::{dilate, finish_normal_atlas, mip_chain, mip_figures, resolve_supersampled, write_mip_pngs, MipFigures, MipLevel, FLAT_NORMAL};
+use crate::bake::atlas::{
+    dilate, finish_normal_atlas, mip_chain, mip_figures, resolve_supersampled, write_mip_pngs, MipFigures, MipLevel,
+    FLAT_NORMAL,
+};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
-use crate::bake::views::{lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, SwitchSearch};
-use crate::lod::LodView;
+use crate::bake::views::{
+    lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, SwitchSearch,
+};
 use crate::export::{self, ExportError};
+use crate::lod::LodView;
 use crate::lsystem::{parse, Dialect, LSystem};
 use crate::mesh::{AlphaMode, Bounds, CustomAttribute, Material, Mesh, Node, Primitive, Scene, Texture};
-use crate::plants::mesh_asset::{load_obj, MeshAssetError, MeshAssetStats, ObjOptions, SourceMesh};
 use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleGrid};
+use crate::plants::mesh_asset::{load_obj, MeshAssetError, MeshAssetStats, ObjOptions, SourceMesh};
 use crate::plants::tree::{build_tree, is_flat, TreeError, TreeMesh, TreeOptions, TreeReport, TreeSeconds};
 use crate::plants::wind::{self, WIND_ATTRIBUTE, WIND_BRANCH_ATTRIBUTE};
 use crate::synth::mix64;
@@ -161,7 +166,12 @@ pub struct AtlasCell {
 impl AtlasCell {
     fn new(atlas_px: u32, x: u32, y: u32, size: u32) -> AtlasCell {
         let (a, g) = (atlas_px as f32, ATLAS_GUTTER_PX);
-        AtlasCell { x, y, size, uv: [(x + g) as f32 / a, (y + g) as f32 / a, (x + size - g) as f32 / a, (y + size - g) as f32 / a] }
+        AtlasCell {
+            x,
+            y,
+            size,
+            uv: [(x + g) as f32 / a, (y + g) as f32 / a, (x + size - g) as f32 / a, (y + size - g) as f32 / a],
+        }
     }
 
     /// Pixels inside the gutter.
@@ -236,7 +246,14 @@ impl CardFrame {
 }
 
 /// Renders `mesh` into a `px` square through `frame` at BAKE_SUPERSAMPLE×, resolved.
-fn bake(frame: &CardFrame, px: u32, mesh: &Mesh, materials: &[Material], textures: &[Image], shading: Shading) -> Result<(Image, u64), RasterError> {
+fn bake(
+    frame: &CardFrame,
+    px: u32,
+    mesh: &Mesh,
+    materials: &[Material],
+    textures: &[Image],
+    shading: Shading,
+) -> Result<(Image, u64), RasterError> {
     let cam = Camera::Ortho(frame.ortho(px * BAKE_SUPERSAMPLE));
     let mut canvas = cam.canvas([0.0; 4])?;
     let opts = RenderOptions { use_vertex_colors: false, shading, parallel: false };
@@ -276,7 +293,11 @@ struct CardWind {
 
 impl CardWind {
     fn of(lod0: &Mesh) -> Option<CardWind> {
-        let sway_hz = lod0.primitives.iter().find_map(|p| wind::find(&p.custom, WIND_ATTRIBUTE)).and_then(|w| w.values.first())?[2];
+        let sway_hz = lod0
+            .primitives
+            .iter()
+            .find_map(|p| wind::find(&p.custom, WIND_ATTRIBUTE))
+            .and_then(|w| w.values.first())?[2];
         let positions: Vec<[f32; 3]> = lod0.primitives.iter().flat_map(|p| p.positions.iter().copied()).collect();
         let b = Bounds::of(&positions)?;
         let ground_y = if (b.min[1]..=b.max[1]).contains(&0.0) { 0.0 } else { b.min[1] };
@@ -288,7 +309,10 @@ impl CardWind {
     fn on(&self, mut card: Primitive, branch: Option<[f32; 2]>) -> Primitive {
         card.custom = vec![wind::height_wind(&card.positions, self.ground_y, self.top_y, 0.0, self.sway_hz, 0.0)];
         if let Some([weight, phase]) = branch {
-            card.custom.push(CustomAttribute { name: WIND_BRANCH_ATTRIBUTE.into(), values: vec![[weight, phase, 0.0, 0.0]; card.positions.len()] });
+            card.custom.push(CustomAttribute {
+                name: WIND_BRANCH_ATTRIBUTE.into(),
+                values: vec![[weight, phase, 0.0, 0.0]; card.positions.len()],
+            });
         }
         card
     }
@@ -296,7 +320,12 @@ impl CardWind {
 
 /// The mean branch weight of `mesh`'s vertices and the limb phase most of them have.
 fn branch_of(mesh: &Mesh) -> [f32; 2] {
-    let values: Vec<[f32; 4]> = mesh.primitives.iter().filter_map(|p| wind::find(&p.custom, WIND_BRANCH_ATTRIBUTE)).flat_map(|c| c.values.iter().copied()).collect();
+    let values: Vec<[f32; 4]> = mesh
+        .primitives
+        .iter()
+        .filter_map(|p| wind::find(&p.custom, WIND_BRANCH_ATTRIBUTE))
+        .flat_map(|c| c.values.iter().copied())
+        .collect();
     if values.is_empty() {
         return [0.0, 0.0];
     }
@@ -378,7 +407,8 @@ fn simplify(mesh: &Mesh, ratio: f64, max_error: f32) -> Mesh {
 /// `p` with the triangles `indices` (those of zero area dropped), its unused vertices removed and
 /// reordered for the vertex cache and fetch; `None` when no triangle is left.
 fn simplified(p: &Primitive, indices: &[u32]) -> Option<Primitive> {
-    let kept: Vec<u32> = indices.chunks_exact(3).filter(|t| !is_flat(&p.positions, [t[0], t[1], t[2]])).flatten().copied().collect();
+    let kept: Vec<u32> =
+        indices.chunks_exact(3).filter(|t| !is_flat(&p.positions, [t[0], t[1], t[2]])).flatten().copied().collect();
     if kept.is_empty() {
         return None;
     }
@@ -450,12 +480,16 @@ fn simplify_sloppy(mesh: &Mesh, ratio: f64) -> Mesh {
 /// Groups `dropped` by a uniform n³ grid over its triangles' centroids, n the largest of 8…1 that
 /// leaves at most `max_clusters` occupied cells (none when 0); clusters in cell order (deterministic).
 fn clusters(dropped: &Mesh, max_clusters: usize) -> Vec<Cluster> {
-    let centroid = |p: &Primitive, t: usize| (0..3).map(|k| DVec3::from(p.positions[p.indices[3 * t + k] as usize].map(f64::from))).sum::<DVec3>() / 3.0;
-    let all: Vec<DVec3> = dropped.primitives.iter().flat_map(|p| (0..p.triangle_count()).map(move |t| centroid(p, t))).collect();
+    let centroid = |p: &Primitive, t: usize| {
+        (0..3).map(|k| DVec3::from(p.positions[p.indices[3 * t + k] as usize].map(f64::from))).sum::<DVec3>() / 3.0
+    };
+    let all: Vec<DVec3> =
+        dropped.primitives.iter().flat_map(|p| (0..p.triangle_count()).map(move |t| centroid(p, t))).collect();
     if all.is_empty() || max_clusters == 0 {
         return Vec::new();
     }
-    let (lo, hi) = all.iter().fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(lo, hi), &c| (lo.min(c), hi.max(c)));
+    let (lo, hi) =
+        all.iter().fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(lo, hi), &c| (lo.min(c), hi.max(c)));
     let extent = (hi - lo).max(DVec3::splat(1e-9));
     let cell_of = |c: DVec3, n: usize| {
         let r = (c - lo) / extent * n as f64;
@@ -489,10 +523,13 @@ fn clusters(dropped: &Mesh, max_clusters: usize) -> Vec<Cluster> {
                 mesh.primitives.push(q);
             }
         }
-        let (lo, hi) = mesh.primitives.iter().flat_map(|p| &p.positions).fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(lo, hi), v| {
-            let v = DVec3::from(v.map(f64::from));
-            (lo.min(v), hi.max(v))
-        });
+        let (lo, hi) = mesh.primitives.iter().flat_map(|p| &p.positions).fold(
+            (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)),
+            |(lo, hi), v| {
+                let v = DVec3::from(v.map(f64::from));
+                (lo.min(v), hi.max(v))
+            },
+        );
         let side_m = (hi - lo).max_element().max(1e-3) * 1.02;
         out.push(Cluster { mesh, centre: (lo + hi) / 2.0, side_m });
     }
@@ -594,7 +631,10 @@ pub struct TreeLods {
 }
 
 fn decode(textures: &[Texture]) -> Result<Vec<Image>, TreeLodError> {
-    textures.iter().map(|t| Image::from_png(&t.png).map_err(|e| TreeLodError::Texture(format!("{}: {e}", t.name)))).collect()
+    textures
+        .iter()
+        .map(|t| Image::from_png(&t.png).map_err(|e| TreeLodError::Texture(format!("{}: {e}", t.name))))
+        .collect()
 }
 
 fn single_mesh_scene(name: &str, mesh: Mesh, materials: Vec<Material>, textures: Vec<Texture>) -> Scene {
@@ -615,7 +655,6 @@ fn atlas_material(texture: usize) -> Material {
         ..Material::default()
     }
 }
-
 
 /// `mesh` turned by `angle_deg` about the vertical axis through `axis` (positions and normals).
 fn rotated(mesh: &Mesh, axis: DVec3, angle_deg: f64) -> Mesh {
@@ -693,16 +732,27 @@ pub const SLOPPY_RATIO: f64 = 0.1;
 /// With `tree_options.leaf_points`, LoD0 and LoD1 draw leaves as points; the atlases, LoD2's cards
 /// and the analyzer's reference use the same tree with quad leaves (a rasteriser does not draw
 /// sprites), so the coarser levels look like those of the quad-leaf tree.
-pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &TreeLodOptions) -> Result<TreeLods, TreeLodError> {
+pub fn build_tree_lods(
+    system: &LSystem,
+    tree_options: &TreeOptions,
+    options: &TreeLodOptions,
+) -> Result<TreeLods, TreeLodError> {
     options.check()?;
     let started = Instant::now();
     let lod0 = build_tree(system, tree_options)?;
-    let quads = if tree_options.leaf_points { Some(build_tree(system, &TreeOptions { leaf_points: false, ..tree_options.clone() })?) } else { None };
+    let quads = if tree_options.leaf_points {
+        Some(build_tree(system, &TreeOptions { leaf_points: false, ..tree_options.clone() })?)
+    } else {
+        None
+    };
     let reference = quads.as_ref().unwrap_or(&lod0);
     let wanted = options.lods;
     let lod0_triangles = lod0.mesh().triangle_count();
     let half = if wanted > 1 {
-        Some(build_tree(system, &TreeOptions { radial_segments: (tree_options.radial_segments / 2).max(3), ..tree_options.clone() })?)
+        Some(build_tree(
+            system,
+            &TreeOptions { radial_segments: (tree_options.radial_segments / 2).max(3), ..tree_options.clone() },
+        )?)
     } else {
         None
     };
@@ -714,12 +764,20 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
     let max_level = lod0.stats.max_branch_level;
     let coarse = match &half {
         Some(half) if max_level > 0 && wanted > 2 => CoarseLevel::Cards {
-            kept: LevelParts { mesh: half.up_to_level(max_level - 1), materials: half.scene.materials.clone(), textures: half.scene.textures.clone() },
+            kept: LevelParts {
+                mesh: half.up_to_level(max_level - 1),
+                materials: half.scene.materials.clone(),
+                textures: half.scene.textures.clone(),
+            },
             dropped: finer_than(reference, max_level - 1),
             dropped_levels: vec![max_level],
         },
         Some(half) => CoarseLevel::Cards {
-            kept: LevelParts { mesh: half.mesh().clone(), materials: half.scene.materials.clone(), textures: half.scene.textures.clone() },
+            kept: LevelParts {
+                mesh: half.mesh().clone(),
+                materials: half.scene.materials.clone(),
+                textures: half.scene.textures.clone(),
+            },
             dropped: Mesh::default(),
             dropped_levels: Vec::new(),
         },
@@ -728,7 +786,11 @@ pub fn build_tree_lods(system: &LSystem, tree_options: &TreeOptions, options: &T
     let input = ChainInput {
         name: tree_options.name.clone(),
         seed: tree_options.seed,
-        lod0: LevelParts { mesh: lod0.mesh().clone(), materials: lod0.scene.materials.clone(), textures: lod0.scene.textures.clone() },
+        lod0: LevelParts {
+            mesh: lod0.mesh().clone(),
+            materials: lod0.scene.materials.clone(),
+            textures: lod0.scene.textures.clone(),
+        },
         reference: reference.mesh(),
         reference_materials: &reference.scene.materials,
         reference_textures: &reference.scene.textures,
@@ -759,7 +821,11 @@ pub fn build_mesh_lods(source: &SourceMesh, name: &str, options: &TreeLodOptions
     let input = ChainInput {
         name: name.to_string(),
         seed: mix64(source.stats.triangles as u64),
-        lod0: LevelParts { mesh: mesh.clone(), materials: source.scene.materials.clone(), textures: source.scene.textures.clone() },
+        lod0: LevelParts {
+            mesh: mesh.clone(),
+            materials: source.scene.materials.clone(),
+            textures: source.scene.textures.clone(),
+        },
         reference: mesh,
         reference_materials: &source.scene.materials,
         reference_textures: &source.scene.textures,
@@ -775,20 +841,31 @@ type Chain = (String, Vec<TreeLod>, Scene, Vec<MipLevel>, Option<Image>, Vec<Atl
 
 /// The levels after LoD1, the atlas, the analyzer and the MSFT_lod scene, for any source.
 fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, TreeLodError> {
-    let ChainInput { name, seed, lod0, reference, reference_materials, reference_textures, lod1, coarse, started } = input;
+    let ChainInput { name, seed, lod0, reference, reference_materials, reference_textures, lod1, coarse, started } =
+        input;
     let images0 = decode(&lod0.textures)?;
     let reference_images = decode(reference_textures)?;
     let materials0 = reference_materials.to_vec();
     let wanted = options.lods;
     let card_wind = CardWind::of(&lod0.mesh);
-    let mut levels = vec![TreeLod { level: 0, kind: "full", scene: single_mesh_scene(&format!("{name}_LOD0"), lod0.mesh, lod0.materials, lod0.textures), images: images0 }];
+    let mut levels = vec![TreeLod {
+        level: 0,
+        kind: "full",
+        scene: single_mesh_scene(&format!("{name}_LOD0"), lod0.mesh, lod0.materials, lod0.textures),
+        images: images0,
+    }];
     let lod1_source = lod1.as_ref().map(|l| (l.materials.clone(), l.textures.clone()));
     if let Some(lod1) = lod1 {
         if lod1.mesh.primitives.is_empty() {
             return Err(TreeLodError::TooSmall { name, level: 1 });
         }
         let images = decode(&lod1.textures)?;
-        levels.push(TreeLod { level: 1, kind: "simplified", scene: single_mesh_scene(&format!("{name}_LOD1"), lod1.mesh, lod1.materials, lod1.textures), images });
+        levels.push(TreeLod {
+            level: 1,
+            kind: "simplified",
+            scene: single_mesh_scene(&format!("{name}_LOD1"), lod1.mesh, lod1.materials, lod1.textures),
+            images,
+        });
     }
     let seconds_meshes = started.elapsed().as_secs_f64();
 
@@ -796,12 +873,17 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
     // footprint centre, the whole model inside
     let all_positions: Vec<[f32; 3]> = reference.primitives.iter().flat_map(|p| p.positions.iter().copied()).collect();
     let bounds = Bounds::of(&all_positions).ok_or(TreeError::Empty)?;
-    let axis = DVec3::new((bounds.min[0] + bounds.max[0]) as f64 / 2.0, 0.0, (bounds.min[2] + bounds.max[2]) as f64 / 2.0);
-    let reach = all_positions.iter().map(|v| ((v[0] as f64 - axis.x).powi(2) + (v[2] as f64 - axis.z).powi(2)).sqrt()).fold(0.0, f64::max);
+    let axis =
+        DVec3::new((bounds.min[0] + bounds.max[0]) as f64 / 2.0, 0.0, (bounds.min[2] + bounds.max[2]) as f64 / 2.0);
+    let reach = all_positions
+        .iter()
+        .map(|v| ((v[0] as f64 - axis.x).powi(2) + (v[2] as f64 - axis.z).powi(2)).sqrt())
+        .fold(0.0, f64::max);
     let height = (bounds.max[1] - bounds.min[1]) as f64;
     let centre = DVec3::new(axis.x, (bounds.min[1] + bounds.max[1]) as f64 / 2.0, axis.z);
     let tree_side = (2.0 * reach).max(height).max(1e-3) * 1.02;
-    let tree_frame = |k: usize| CardFrame { centre, azimuth_deg: k as f64 * 360.0 / IMPOSTOR_VIEWS as f64, side_m: tree_side };
+    let tree_frame =
+        |k: usize| CardFrame { centre, azimuth_deg: k as f64 * 360.0 / IMPOSTOR_VIEWS as f64, side_m: tree_side };
     let radius = all_positions.iter().map(|v| (DVec3::from(v.map(f64::from)) - centre).length()).fold(0.0, f64::max);
     drop(all_positions);
 
@@ -829,7 +911,10 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
             }
         }
     }
-    let rendered: Vec<Result<(Image, u64), RasterError>> = jobs.par_iter().map(|(cell, frame, mesh)| bake(frame, cell.inner_px(), mesh, &materials0, &reference_images, Shading::Unlit)).collect();
+    let rendered: Vec<Result<(Image, u64), RasterError>> = jobs
+        .par_iter()
+        .map(|(cell, frame, mesh)| bake(frame, cell.inner_px(), mesh, &materials0, &reference_images, Shading::Unlit))
+        .collect();
     // the same views as normals in each card's frame: the normal atlas lit cards sample
     let normals: Vec<Result<(Image, u64), RasterError>> = jobs
         .par_iter()
@@ -859,11 +944,17 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
 
     // the textured levels
     let atlas_texture = match atlas_chain.first() {
-        Some(level0) => Some(Texture { name: format!("{name}_atlas"), png: level0.image.encode_png().map_err(|e| TreeLodError::Texture(e.to_string()))? }),
+        Some(level0) => Some(Texture {
+            name: format!("{name}_atlas"),
+            png: level0.image.encode_png().map_err(|e| TreeLodError::Texture(e.to_string()))?,
+        }),
         None => None,
     };
     let normal_texture = match &normal_atlas {
-        Some(img) => Some(Texture { name: format!("{name}_atlas_normal"), png: img.encode_png_data().map_err(|e| TreeLodError::Texture(e.to_string()))? }),
+        Some(img) => Some(Texture {
+            name: format!("{name}_atlas_normal"),
+            png: img.encode_png_data().map_err(|e| TreeLodError::Texture(e.to_string()))?,
+        }),
         None => None,
     };
     if let (Some((lod1_materials, lod1_textures)), Some(atlas_tex), Some(atlas0), Some(normal_tex), Some(normal_img)) =
@@ -918,7 +1009,12 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
                 (mesh, lod1_materials.clone(), lod1_textures.clone(), levels[1].images.clone())
             }
         };
-        levels.push(TreeLod { level: 2, kind: if matches!(coarse, CoarseLevel::Sloppy) { "decimated" } else { "cards" }, scene: single_mesh_scene(&format!("{name}_LOD2"), mesh, materials, textures), images });
+        levels.push(TreeLod {
+            level: 2,
+            kind: if matches!(coarse, CoarseLevel::Sloppy) { "decimated" } else { "cards" },
+            scene: single_mesh_scene(&format!("{name}_LOD2"), mesh, materials, textures),
+            images,
+        });
         // LoD3: crossed billboards
         let mut planes = Primitive { material: Some(0), ..Primitive::default() };
         for (k, cell) in impostor_cells.iter().take(BILLBOARD_PLANES).enumerate() {
@@ -929,7 +1025,12 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         levels.push(TreeLod {
             level: 3,
             kind: "billboards",
-            scene: single_mesh_scene(&format!("{name}_LOD3"), mesh, vec![atlas_material(0)], vec![atlas_tex.clone(), normal_tex.clone()]),
+            scene: single_mesh_scene(
+                &format!("{name}_LOD3"),
+                mesh,
+                vec![atlas_material(0)],
+                vec![atlas_tex.clone(), normal_tex.clone()],
+            ),
             images: vec![atlas0.image.clone(), normal_img.clone()],
         });
         // LoD4: the impostor quad facing +Z (view 0), the others' cells in the extras
@@ -945,8 +1046,18 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
             "cells_uv": impostor_cells.iter().map(|c| c.uv).collect::<Vec<_>>(),
         }});
         let mesh = Mesh { name: String::new(), primitives: vec![quad], extras: Some(extras) };
-        let scene = single_mesh_scene(&format!("{name}_LOD4"), mesh, vec![atlas_material(0)], vec![atlas_tex.clone(), normal_tex.clone()]);
-        levels.push(TreeLod { level: 4, kind: "impostor", scene, images: vec![atlas0.image.clone(), normal_img.clone()] });
+        let scene = single_mesh_scene(
+            &format!("{name}_LOD4"),
+            mesh,
+            vec![atlas_material(0)],
+            vec![atlas_tex.clone(), normal_tex.clone()],
+        );
+        levels.push(TreeLod {
+            level: 4,
+            kind: "impostor",
+            scene,
+            images: vec![atlas0.image.clone(), normal_img.clone()],
+        });
     }
     levels.truncate(wanted);
     let (levels, left_out) = without_levels_that_save_nothing(&name, levels);
@@ -962,7 +1073,14 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         let mesh = &lod.scene.meshes[0];
         let bytes = crate::export::gltf::to_glb(&lod.scene).map_err(|e| TreeLodError::Texture(e.0))?.len();
         let geometric_error = match (&grid, lod.level) {
-            (Some(grid), n) if n > 0 => hausdorff(mesh, &lod.scene.materials, &lod.images, grid, options.hausdorff_samples, mix64(seed ^ n as u64)),
+            (Some(grid), n) if n > 0 => hausdorff(
+                mesh,
+                &lod.scene.materials,
+                &lod.images,
+                grid,
+                options.hausdorff_samples,
+                mix64(seed ^ n as u64),
+            ),
             _ => HausdorffError::default(),
         };
         let mut f = TreeLodFigures {
@@ -993,7 +1111,10 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
                     .map(|(k, cell)| {
                         let azimuth = k as f64 * 360.0 / IMPOSTOR_VIEWS as f64;
                         let quad = Primitive { material: Some(0), ..tree_frame(0).quad(cell.uv) };
-                        (rotated(reference, centre, -azimuth), Mesh { name: String::new(), primitives: vec![quad], extras: None })
+                        (
+                            rotated(reference, centre, -azimuth),
+                            Mesh { name: String::new(), primitives: vec![quad], extras: None },
+                        )
                     })
                     .collect();
                 let one_azimuth = LodImageOptions { azimuths: 1, ..options.image.clone() };
@@ -1089,7 +1210,12 @@ fn without_levels_that_save_nothing(name: &str, levels: Vec<TreeLod>) -> (Vec<Tr
         let empty = lod.scene.meshes.first().is_none_or(|m| m.primitives.is_empty());
         match kept.last().map(TreeLod::triangles) {
             Some(previous) if empty || lod.triangles() >= previous => {
-                left_out.push(LeftOutLevel { kind: lod.kind, planned_level: lod.level, triangles: lod.triangles(), previous_triangles: previous });
+                left_out.push(LeftOutLevel {
+                    kind: lod.kind,
+                    planned_level: lod.level,
+                    triangles: lod.triangles(),
+                    previous_triangles: previous,
+                });
             }
             _ => kept.push(lod),
         }
@@ -1186,7 +1312,8 @@ pub fn variant_seed(seed: u64, k: usize) -> u64 {
 
 fn write_glb(scene: &Scene, path: &Path, files: &mut Vec<PathBuf>) -> Result<(usize, usize), TreeLodError> {
     export::write_scene(scene, path)?;
-    let v = validate_file(path, &ValidateOptions::default()).map_err(|e| TreeLodError::Invalid { path: path.to_path_buf(), report: e.to_string() })?;
+    let v = validate_file(path, &ValidateOptions::default())
+        .map_err(|e| TreeLodError::Invalid { path: path.to_path_buf(), report: e.to_string() })?;
     if !v.ok() {
         return Err(TreeLodError::Invalid { path: path.to_path_buf(), report: v.to_string() });
     }
@@ -1211,7 +1338,8 @@ fn write_chain(chain: &TreeLods, dir: &Path, file_stem: &str, written: &mut Writ
         written.warnings += w;
     }
     if !chain.atlas.is_empty() {
-        let pngs = write_mip_pngs(dir, &format!("{file_stem}_atlas"), &chain.atlas).map_err(|e| TreeLodError::Texture(e.to_string()))?;
+        let pngs = write_mip_pngs(dir, &format!("{file_stem}_atlas"), &chain.atlas)
+            .map_err(|e| TreeLodError::Texture(e.to_string()))?;
         written.files.extend(pngs);
     }
     if let Some(normals) = &chain.normal_atlas {
@@ -1230,7 +1358,10 @@ fn write_chain(chain: &TreeLods, dir: &Path, file_stem: &str, written: &mut Writ
 fn check_glb_output(output: &Path) -> Result<(), TreeLodError> {
     let ext = output.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext != "glb" {
-        return Err(TreeLodError::Options(format!("{}: a LoD chain is written as .glb (MSFT_lod); use a .glb output or --lods 1", output.display())));
+        return Err(TreeLodError::Options(format!(
+            "{}: a LoD chain is written as .glb (MSFT_lod); use a .glb output or --lods 1",
+            output.display()
+        )));
     }
     Ok(())
 }
@@ -1252,9 +1383,15 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
     let suffix = |k: usize| if job.variants == 1 { String::new() } else { format!("_v{k}") };
     let mut chains = Vec::with_capacity(job.variants);
     for k in 0..job.variants {
-        let options = TreeOptions { seed: variant_seed(job.options.seed, k), name: format!("{}{}", job.options.name, suffix(k)), ..job.options.clone() };
+        let options = TreeOptions {
+            seed: variant_seed(job.options.seed, k),
+            name: format!("{}{}", job.options.name, suffix(k)),
+            ..job.options.clone()
+        };
         let chain = build_tree_lods(&parsed.system, &options, &job.lod).map_err(|e| match e {
-            TreeLodError::Tree(t) => TreeLodError::Tree(TreeError::InFile { path: job.input.clone(), source: Box::new(t) }),
+            TreeLodError::Tree(t) => {
+                TreeLodError::Tree(TreeError::InFile { path: job.input.clone(), source: Box::new(t) })
+            }
             e => e,
         })?;
         chains.push(chain);
@@ -1276,7 +1413,11 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
         seed: job.options.seed,
         radial_segments: job.options.radial_segments,
         stats: first.lod0.as_ref().map(|t| t.stats.clone()).unwrap_or_default(),
-        warnings: parsed.warnings.into_iter().chain(first.lod0.as_ref().and_then(|t| crate::plants::tree::size_warning(&t.stats, &job.options))).collect(),
+        warnings: parsed
+            .warnings
+            .into_iter()
+            .chain(first.lod0.as_ref().and_then(|t| crate::plants::tree::size_warning(&t.stats, &job.options)))
+            .collect(),
         validation_errors: errors,
         validation_warnings: warnings,
         seconds: TreeSeconds {
@@ -1347,7 +1488,8 @@ pub fn run_mesh_lods(job: &MeshLodJob) -> Result<MeshLodRunReport, TreeLodError>
 
 /// Writes any serialisable report as pretty JSON (atomically).
 pub fn write_json_report<T: Serialize>(path: &Path, report: &T) -> Result<(), TreeLodError> {
-    let mut text = serde_json::to_string_pretty(report).map_err(|e| TreeLodError::Options(format!("cannot serialise the report: {e}")))?;
+    let mut text = serde_json::to_string_pretty(report)
+        .map_err(|e| TreeLodError::Options(format!("cannot serialise the report: {e}")))?;
     text.push('\n');
     export::write_atomic(path, text.as_bytes())?;
     Ok(())
@@ -1389,7 +1531,12 @@ mod tests {
             let v = f.ortho(100);
             let tl = v.to_pixel(q.positions[3].map(f64::from));
             let br = v.to_pixel(q.positions[1].map(f64::from));
-            assert!(tl[0].abs() < 1e-3 && tl[1].abs() < 1e-3 && (br[0] - 100.0).abs() < 1e-3 && (br[1] - 100.0).abs() < 1e-3);
+            assert!(
+                tl[0].abs() < 1e-3
+                    && tl[1].abs() < 1e-3
+                    && (br[0] - 100.0).abs() < 1e-3
+                    && (br[1] - 100.0).abs() < 1e-3
+            );
             assert!(tl[2] > 0.0 && br[2] > 0.0, "in front of the camera");
         }
     }

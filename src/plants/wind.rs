@@ -59,7 +59,14 @@ pub fn phase_of(key: u64) -> f32 {
 
 /// `_WIND` for vertices swaying by height alone (cards, billboards, flowers): bend from
 /// `ground_y` to `top_y`, one phase, frequency and stiffness for all.
-pub fn height_wind(positions: &[[f32; 3]], ground_y: f32, top_y: f32, phase: f32, frequency_hz: f32, stiffness: f32) -> CustomAttribute {
+pub fn height_wind(
+    positions: &[[f32; 3]],
+    ground_y: f32,
+    top_y: f32,
+    phase: f32,
+    frequency_hz: f32,
+    stiffness: f32,
+) -> CustomAttribute {
     let span = top_y - ground_y;
     let values = positions
         .iter()
@@ -95,7 +102,9 @@ mod tests {
     fn taller_trees_sway_slower_within_limits() {
         let f: Vec<f32> = [0.5, 2.0, 10.0, 25.0, 100.0].iter().map(|&h| tree_sway_frequency_hz(h)).collect();
         assert!(f.windows(2).all(|p| p[1] < p[0]), "{f:?}");
-        assert!((0.3..0.55).contains(&tree_sway_frequency_hz(10.0)) && (0.3..0.55).contains(&tree_sway_frequency_hz(15.0)));
+        assert!(
+            (0.3..0.55).contains(&tree_sway_frequency_hz(10.0)) && (0.3..0.55).contains(&tree_sway_frequency_hz(15.0))
+        );
         assert_eq!(tree_sway_frequency_hz(0.0), 3.0);
         assert_eq!(tree_sway_frequency_hz(f64::NAN), 3.0);
         assert_eq!(tree_sway_frequency_hz(1e9), 0.1);

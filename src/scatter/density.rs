@@ -139,7 +139,12 @@ fn axis(u: f64, n: usize) -> (f32, usize, usize) {
 }
 
 /// Gray values of an RGB(A) image whose channels agree; anything else is an error naming the pixel.
-fn gray_of_rgb<T: Copy + Into<f32> + PartialEq>(raw: Vec<T>, channels: usize, max: f32, path: &Path) -> Result<Vec<f32>, ScatterError> {
+fn gray_of_rgb<T: Copy + Into<f32> + PartialEq>(
+    raw: Vec<T>,
+    channels: usize,
+    max: f32,
+    path: &Path,
+) -> Result<Vec<f32>, ScatterError> {
     let mut out = Vec::with_capacity(raw.len() / channels);
     for (k, p) in raw.chunks_exact(channels).enumerate() {
         if p[0] != p[1] || p[0] != p[2] {

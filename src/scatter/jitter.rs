@@ -8,7 +8,9 @@ use crate::synth::mix64;
 
 use super::rules::Rules;
 use super::storage::gather_in_order;
-use super::{height_bounds, on_grid, on_table_grids, Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POSITION_STEPS_PER_M};
+use super::{
+    height_bounds, on_grid, on_table_grids, Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POSITION_STEPS_PER_M,
+};
 
 /// All instances of a jittered species, sorted by tile and then by cell (row-major).
 pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterError> {
@@ -22,7 +24,12 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     // a cell's candidate belongs to the tile that contains it
     let (ncx, ncz) = (((x1 - x0) / cell).ceil(), ((z1 - z0) / cell).ceil());
     if ncx * ncz > MAX_CANDIDATES || ncx >= u32::MAX as f64 || ncz >= u32::MAX as f64 {
-        return Err(ScatterError::TooMuchWork { species: s.name.clone(), work: ncx * ncz, limit: MAX_CANDIDATES, remedy: "lower max_density".into() });
+        return Err(ScatterError::TooMuchWork {
+            species: s.name.clone(),
+            work: ncx * ncz,
+            limit: MAX_CANDIDATES,
+            remedy: "lower max_density".into(),
+        });
     }
     let (ncx, ncz) = (ncx as i64, ncz as i64);
     let tiling = rules.tiling;
@@ -36,7 +43,9 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     // those of sampling every candidate.
     const BLOCK: i64 = 32;
     // cells overlapping a tile; each candidate is kept by the one tile containing it
-    let range = |a: f64, b: f64, o: f64, n: i64| (((a - o) / cell).floor() as i64).clamp(0, n - 1)..=(((b - o) / cell).floor() as i64).clamp(0, n - 1);
+    let range = |a: f64, b: f64, o: f64, n: i64| {
+        (((a - o) / cell).floor() as i64).clamp(0, n - 1)..=(((b - o) / cell).floor() as i64).clamp(0, n - 1)
+    };
     let tile_cells = |t: usize| {
         let rect = tiling.rect(t as u32 % tiling.tiles_x, t as u32 / tiling.tiles_x);
         let (ri, rj) = (range(rect[0], rect[2], x0, ncx), range(rect[1], rect[3], z0, ncz));
@@ -44,7 +53,9 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     };
     // each tile's keep bound, and from it a bound of its instances (the result's capacity: virtual
     // until touched, so an over-estimate costs no memory)
-    let tile_keep: Vec<f64> = (0..tiling.count() as u32).map(|t| rules.max_keep_over(tiling.rect(t % tiling.tiles_x, t / tiling.tiles_x))).collect();
+    let tile_keep: Vec<f64> = (0..tiling.count() as u32)
+        .map(|t| rules.max_keep_over(tiling.rect(t % tiling.tiles_x, t / tiling.tiles_x)))
+        .collect();
     let tile_bound: Vec<usize> = (0..tiling.count())
         .map(|t| {
             let (ci0, ci1, cj0, cj1) = tile_cells(t);
@@ -55,78 +66,90 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     let total_bound = tile_bound.iter().sum::<usize>().min(s.max_instances.saturating_add(1));
     let part_bound = tile_bound.iter().copied().max().unwrap_or(0);
     // tiles in parallel, each one's instances appended in tile order as it finishes
-    let (instances, per_tile) = gather_in_order(tiling.count(), total_bound, part_bound, |t, out: &mut Vec<Instance>| {
-        let mut counts = RuleCounts::default();
-        // the triangle of the last candidate: the next one, a cell away, is most often in it
-        let mut hint = u32::MAX;
-        if tile_keep[t] <= 0.0 {
-            return counts;
-        }
-        let (ci0, ci1, cj0, cj1) = tile_cells(t);
-        let t = t as u32;
-        let (tx, tz) = (t % tiling.tiles_x, t / tiling.tiles_x);
-        // interior cells (two cells clear of the tile's border, so far from any rounding) hold
-        // candidates of this tile only: no tile test for them
-        let (ii0, ii1, ij0, ij1) = (ci0 + 2, ci1 - 2, cj0 + 2, cj1 - 2);
-        // no reallocation while pushing (a hint: a bound the system refuses leaves the buffer to grow)
-        let _ = out.try_reserve(tile_bound[t as usize]);
-        // row-major over the tile's cells (the output order), with the density bound of the
-        // blocks of each band of BLOCK rows
-        let mut bound = Vec::new();
-        for bj in (cj0..=cj1).step_by(BLOCK as usize) {
-            let bj1 = (bj + BLOCK - 1).min(cj1);
-            bound.clear();
-            bound.extend((ci0..=ci1).step_by(BLOCK as usize).map(|bi| {
-                let bi1 = (bi + BLOCK - 1).min(ci1);
-                let d = rules.max_density_over([x0 + bi as f64 * cell, z0 + bj as f64 * cell, x0 + (bi1 + 1) as f64 * cell, z0 + (bj1 + 1) as f64 * cell]);
-                if d <= 0.0 {
-                    0.0
-                } else {
-                    d.min(1.0) * (1.0 + 1e-6) * rules.keep_scale
-                }
-            }));
-            for cj in bj..=bj1 {
-                let row_inside = cj >= ij0 && cj <= ij1;
-                for ci in ci0..=ci1 {
-                    let h1 = mix64(key ^ (cj as u64 * ncx as u64 + ci as u64));
-                    // on the 0.1 mm grid (POSITION_STEPS_PER_M): short table entries
-                    let position = || {
-                        let x = on_grid(x0 + (ci as f64 + (h1 >> 32) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
-                        let z = on_grid(z0 + (cj as f64 + (h1 & 0xFFFF_FFFF) as f64 * (1.0 / 4_294_967_296.0)) * cell, POSITION_STEPS_PER_M);
-                        (x, z)
-                    };
-                    // a border cell's candidate may belong to the next tile: its position first; an
-                    // interior one's only once it passed the density bound (half are rejected before)
-                    let mut at = None;
-                    if !(row_inside && ci >= ii0 && ci <= ii1) {
-                        let (x, z) = position();
-                        if x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz) {
+    let (instances, per_tile) =
+        gather_in_order(tiling.count(), total_bound, part_bound, |t, out: &mut Vec<Instance>| {
+            let mut counts = RuleCounts::default();
+            // the triangle of the last candidate: the next one, a cell away, is most often in it
+            let mut hint = u32::MAX;
+            if tile_keep[t] <= 0.0 {
+                return counts;
+            }
+            let (ci0, ci1, cj0, cj1) = tile_cells(t);
+            let t = t as u32;
+            let (tx, tz) = (t % tiling.tiles_x, t / tiling.tiles_x);
+            // interior cells (two cells clear of the tile's border, so far from any rounding) hold
+            // candidates of this tile only: no tile test for them
+            let (ii0, ii1, ij0, ij1) = (ci0 + 2, ci1 - 2, cj0 + 2, cj1 - 2);
+            // no reallocation while pushing (a hint: a bound the system refuses leaves the buffer to grow)
+            let _ = out.try_reserve(tile_bound[t as usize]);
+            // row-major over the tile's cells (the output order), with the density bound of the
+            // blocks of each band of BLOCK rows
+            let mut bound = Vec::new();
+            for bj in (cj0..=cj1).step_by(BLOCK as usize) {
+                let bj1 = (bj + BLOCK - 1).min(cj1);
+                bound.clear();
+                bound.extend((ci0..=ci1).step_by(BLOCK as usize).map(|bi| {
+                    let bi1 = (bi + BLOCK - 1).min(ci1);
+                    let d = rules.max_density_over([
+                        x0 + bi as f64 * cell,
+                        z0 + bj as f64 * cell,
+                        x0 + (bi1 + 1) as f64 * cell,
+                        z0 + (bj1 + 1) as f64 * cell,
+                    ]);
+                    if d <= 0.0 {
+                        0.0
+                    } else {
+                        d.min(1.0) * (1.0 + 1e-6) * rules.keep_scale
+                    }
+                }));
+                for cj in bj..=bj1 {
+                    let row_inside = cj >= ij0 && cj <= ij1;
+                    for ci in ci0..=ci1 {
+                        let h1 = mix64(key ^ (cj as u64 * ncx as u64 + ci as u64));
+                        // on the 0.1 mm grid (POSITION_STEPS_PER_M): short table entries
+                        let position = || {
+                            let x = on_grid(
+                                x0 + (ci as f64 + (h1 >> 32) as f64 * (1.0 / 4_294_967_296.0)) * cell,
+                                POSITION_STEPS_PER_M,
+                            );
+                            let z = on_grid(
+                                z0 + (cj as f64 + (h1 & 0xFFFF_FFFF) as f64 * (1.0 / 4_294_967_296.0)) * cell,
+                                POSITION_STEPS_PER_M,
+                            );
+                            (x, z)
+                        };
+                        // a border cell's candidate may belong to the next tile: its position first; an
+                        // interior one's only once it passed the density bound (half are rejected before)
+                        let mut at = None;
+                        if !(row_inside && ci >= ii0 && ci <= ii1) {
+                            let (x, z) = position();
+                            if x > x1 || z > z1 || tiling.tile_xz(x, z) != (tx, tz) {
+                                continue;
+                            }
+                            at = Some((x, z));
+                        }
+                        let keep_bound = bound[((ci - ci0) / BLOCK) as usize];
+                        if keep_bound <= 0.0 {
+                            counts.candidates += 1;
+                            counts.density += 1;
                             continue;
                         }
-                        at = Some((x, z));
-                    }
-                    let keep_bound = bound[((ci - ci0) / BLOCK) as usize];
-                    if keep_bound <= 0.0 {
-                        counts.candidates += 1;
-                        counts.density += 1;
-                        continue;
-                    }
-                    let h2 = mix64(h1);
-                    let keep_u = super::unit(h2);
-                    if keep_u >= keep_bound {
-                        counts.candidates += 1;
-                        counts.density += 1;
-                        continue;
-                    }
-                    let (x, z) = at.unwrap_or_else(position);
-                    if let Some(inst) = rules.place(x, z, keep_u, h2 ^ key, t, &mut counts, &mut hint) {
-                        out.push(on_table_grids(inst, bounds));
+                        let h2 = mix64(h1);
+                        let keep_u = super::unit(h2);
+                        if keep_u >= keep_bound {
+                            counts.candidates += 1;
+                            counts.density += 1;
+                            continue;
+                        }
+                        let (x, z) = at.unwrap_or_else(position);
+                        if let Some(inst) = rules.place(x, z, keep_u, h2 ^ key, t, &mut counts, &mut hint) {
+                            out.push(on_table_grids(inst, bounds));
+                        }
                     }
                 }
             }
-        }
-        counts
-    });
+            counts
+        });
     let mut counts = RuleCounts::default();
     for c in &per_tile {
         counts.add(c);

@@ -52,7 +52,13 @@ pub struct Instance {
 impl crate::export::table::ToPlacementRow for Instance {
     #[inline]
     fn placement_row(&self) -> crate::export::table::PlacementRow {
-        crate::export::table::PlacementRow { position: self.position, rotation: self.rotation, scale: self.scale, yaw_deg: self.yaw_deg, tile: self.tile }
+        crate::export::table::PlacementRow {
+            position: self.position,
+            rotation: self.rotation,
+            scale: self.scale,
+            yaw_deg: self.yaw_deg,
+            tile: self.tile,
+        }
     }
 }
 
@@ -146,7 +152,11 @@ impl Tiling {
         let nz = if tile_m > 0.0 && tile_m.is_finite() { ((z1 - z0) / tile_m).ceil().max(1.0) } else { f64::INFINITY };
         let tiles = nx * nz;
         if tiles.is_nan() || tiles > MAX_TILES as f64 {
-            return Err(ScatterError::Tiles { tile_m, tiles: if tiles.is_finite() { tiles as u64 } else { u64::MAX }, limit: MAX_TILES });
+            return Err(ScatterError::Tiles {
+                tile_m,
+                tiles: if tiles.is_finite() { tiles as u64 } else { u64::MAX },
+                limit: MAX_TILES,
+            });
         }
         Ok(Tiling { extent, tile_m, tiles_x: nx as u32, tiles_z: nz as u32 })
     }
@@ -211,8 +221,18 @@ pub(crate) fn floor_i64(v: f64) -> i64 {
 pub(crate) fn sin_cos_0_pi(x: f64) -> (f64, f64) {
     let t = x - std::f64::consts::FRAC_PI_2; // in [−π/2, π/2]: sin x = cos t, cos x = −sin t
     let t2 = t * t;
-    let sin_t = t * (1.0 + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0 + t2 * (1.0 / 362_880.0 + t2 * (-1.0 / 39_916_800.0 + t2 / 6_227_020_800.0))))));
-    let cos_t = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24.0 + t2 * (-1.0 / 720.0 + t2 * (1.0 / 40_320.0 + t2 * (-1.0 / 3_628_800.0 + t2 * (1.0 / 479_001_600.0 - t2 / 87_178_291_200.0))))));
+    let sin_t = t
+        * (1.0
+            + t2 * (-1.0 / 6.0
+                + t2 * (1.0 / 120.0
+                    + t2 * (-1.0 / 5040.0
+                        + t2 * (1.0 / 362_880.0 + t2 * (-1.0 / 39_916_800.0 + t2 / 6_227_020_800.0))))));
+    let cos_t = 1.0
+        + t2 * (-0.5
+            + t2 * (1.0 / 24.0
+                + t2 * (-1.0 / 720.0
+                    + t2 * (1.0 / 40_320.0
+                        + t2 * (-1.0 / 3_628_800.0 + t2 * (1.0 / 479_001_600.0 - t2 / 87_178_291_200.0))))));
     (cos_t, -sin_t)
 }
 
@@ -317,14 +337,22 @@ pub fn scatter_species_snow(
     // fail fast: estimate from the density/mask/rules integral before allocating anything
     let estimate = rules::estimate(&ctx, 128) * ctx.effective_max_density * area;
     if estimate > species.max_instances as f64 * 1.02 + 8.0 {
-        return Err(ScatterError::TooManyEstimated { species: species.name.clone(), estimate, limit: species.max_instances });
+        return Err(ScatterError::TooManyEstimated {
+            species: species.name.clone(),
+            estimate,
+            limit: species.max_instances,
+        });
     }
     let (instances, counts) = match species.placement {
         Placement::Jittered => jitter::scatter(&ctx)?,
         Placement::Poisson => poisson::scatter(&ctx)?,
     };
     if instances.len() > species.max_instances {
-        return Err(ScatterError::TooMany { species: species.name.clone(), count: instances.len(), limit: species.max_instances });
+        return Err(ScatterError::TooMany {
+            species: species.name.clone(),
+            count: instances.len(),
+            limit: species.max_instances,
+        });
     }
     Ok(Scatter { instances, counts, estimate })
 }
@@ -347,7 +375,9 @@ pub fn expected_count(
     let tiling = Tiling::new(extent, (extent[2] - extent[0]).max(extent[3] - extent[1]))?;
     let mut ctx = rules::Rules::new(surface, tiling, species, density, mask, &[], 0).or_else(|e| match e {
         // exclusions are ignored here, so unknown names do not matter
-        ScatterError::UnknownExclusion { .. } => rules::Rules::without_exclusions(surface, tiling, species, density, mask, 0),
+        ScatterError::UnknownExclusion { .. } => {
+            rules::Rules::without_exclusions(surface, tiling, species, density, mask, 0)
+        }
         e => Err(e),
     })?;
     ctx.snow = snow;

@@ -192,7 +192,12 @@ impl Blocks {
     fn rect(&self, b: usize) -> [f64; 4] {
         let (bx, bz) = ((b % self.nbx) as f64, (b / self.nbx) as f64);
         let [x0, z0, x1, z1] = self.extent;
-        [x0 + bx * self.block_m, z0 + bz * self.block_m, (x0 + (bx + 1.0) * self.block_m).min(x1), (z0 + (bz + 1.0) * self.block_m).min(z1)]
+        [
+            x0 + bx * self.block_m,
+            z0 + bz * self.block_m,
+            (x0 + (bx + 1.0) * self.block_m).min(x1),
+            (z0 + (bz + 1.0) * self.block_m).min(z1),
+        ]
     }
 
     /// Bridson's algorithm inside block `b`, given the final points of its neighbours.
@@ -395,7 +400,12 @@ mod tests {
             assert!((c - n / 3.0).abs() < 4.0 * (n * 2.0 / 9.0).sqrt(), "third {k}: {c}");
         }
         for k in 0..8 {
-            let c = t.iter().filter(|o| ((o[1].atan2(o[0]) + std::f64::consts::PI) / (std::f64::consts::PI / 4.0)) as usize % 8 == k).count() as f64;
+            let c = t
+                .iter()
+                .filter(|o| {
+                    ((o[1].atan2(o[0]) + std::f64::consts::PI) / (std::f64::consts::PI / 4.0)) as usize % 8 == k
+                })
+                .count() as f64;
             assert!((c - n / 8.0).abs() < 4.0 * (n * 7.0 / 64.0).sqrt(), "octant {k}: {c}");
         }
         // distinct entries (a broken generator would repeat)

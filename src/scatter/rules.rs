@@ -5,7 +5,10 @@
 use crate::scene::{Placement, SpeciesSettings};
 use crate::synth::mix64;
 
-use super::{on_grid, poisson::POISSON_PACKING, sin_cos_0_pi, species_key, unit, DensityMap, SCALE_STEPS, YAW_STEPS_PER_DEG, Instance, RuleCounts, ScatterError, SurfaceIndex, Tiling};
+use super::{
+    on_grid, poisson::POISSON_PACKING, sin_cos_0_pi, species_key, unit, DensityMap, Instance, RuleCounts, ScatterError,
+    SurfaceIndex, Tiling, SCALE_STEPS, YAW_STEPS_PER_DEG,
+};
 
 /// Everything one species' candidates are judged by, resolved once.
 pub struct Rules<'a> {
@@ -68,7 +71,10 @@ impl<'a> Rules<'a> {
                 continue; // handled as the Poisson radius
             }
             let Some((_, instances)) = earlier.iter().find(|(name, _)| *name == ex.species) else {
-                return Err(ScatterError::UnknownExclusion { species: species.name.clone(), other: ex.species.clone() });
+                return Err(ScatterError::UnknownExclusion {
+                    species: species.name.clone(),
+                    other: ex.species.clone(),
+                });
             };
             if ex.radius_m > 0.0 && !instances.is_empty() {
                 rules.exclusions.push(ExclusionGrid::new(instances, ex.radius_m, tiling.extent));
@@ -88,17 +94,24 @@ impl<'a> Rules<'a> {
     ) -> Result<Rules<'a>, ScatterError> {
         let bad = |reason: String| ScatterError::Settings { species: species.name.clone(), reason };
         if !(species.max_density >= 0.0 && species.max_density.is_finite()) {
-            return Err(bad(format!("max_density = {} must be a finite number ≥ 0 (instances per m²)", species.max_density)));
+            return Err(bad(format!(
+                "max_density = {} must be a finite number ≥ 0 (instances per m²)",
+                species.max_density
+            )));
         }
         for ex in &species.exclusions {
             if !(ex.radius_m >= 0.0 && ex.radius_m.is_finite()) {
-                return Err(bad(format!("exclusion radius {} around `{}` must be finite and ≥ 0", ex.radius_m, ex.species)));
+                return Err(bad(format!(
+                    "exclusion radius {} around `{}` must be finite and ≥ 0",
+                    ex.radius_m, ex.species
+                )));
             }
         }
         if !species.scale.iter().all(|s| s.is_finite()) {
             return Err(bad(format!("scale {:?} must be finite", species.scale)));
         }
-        let self_radius = species.exclusions.iter().filter(|e| e.species == species.name).map(|e| e.radius_m).fold(0.0, f64::max);
+        let self_radius =
+            species.exclusions.iter().filter(|e| e.species == species.name).map(|e| e.radius_m).fold(0.0, f64::max);
         let (radius, effective, keep_scale) = match species.placement {
             Placement::Jittered => {
                 if self_radius > 0.0 {
@@ -118,7 +131,10 @@ impl<'a> Rules<'a> {
             Placement::Poisson => {
                 let r = species.min_spacing_m.max(self_radius);
                 if !(r > 0.0 && r.is_finite()) {
-                    return Err(bad(format!("min_spacing = {} must be a finite number > 0 for placement = \"poisson\"", species.min_spacing_m)));
+                    return Err(bad(format!(
+                        "min_spacing = {} must be a finite number > 0 for placement = \"poisson\"",
+                        species.min_spacing_m
+                    )));
                 }
                 let packing = POISSON_PACKING / (r * r);
                 let keep = (species.max_density / packing).min(1.0);
@@ -186,7 +202,16 @@ impl<'a> Rules<'a> {
     /// ([`SurfaceIndex::height_at_near`]).
     #[inline]
     #[allow(clippy::too_many_arguments)]
-    pub fn place(&self, x: f64, z: f64, keep_u: f64, attr: u64, tile: u32, counts: &mut RuleCounts, hint: &mut u32) -> Option<Instance> {
+    pub fn place(
+        &self,
+        x: f64,
+        z: f64,
+        keep_u: f64,
+        attr: u64,
+        tile: u32,
+        counts: &mut RuleCounts,
+        hint: &mut u32,
+    ) -> Option<Instance> {
         counts.candidates += 1;
         if keep_u >= self.density_at(x, z) * self.keep_scale {
             counts.density += 1;
@@ -269,11 +294,22 @@ impl<'a> Rules<'a> {
         let s = self.species;
         let h1 = mix64(attr);
         // yaw in whole 0.01° in [0, 360), scale in whole 10⁻⁴ within its range (short table entries)
-        let yaw_deg = if s.random_yaw { super::floor_i64(unit(h1) * 360.0 * YAW_STEPS_PER_DEG) as f64 / YAW_STEPS_PER_DEG } else { 0.0 };
-        let scale = on_grid(s.scale[0] + (s.scale[1] - s.scale[0]) * unit(mix64(h1)), SCALE_STEPS).clamp(s.scale[0], s.scale[1]) as f32;
+        let yaw_deg = if s.random_yaw {
+            super::floor_i64(unit(h1) * 360.0 * YAW_STEPS_PER_DEG) as f64 / YAW_STEPS_PER_DEG
+        } else {
+            0.0
+        };
+        let scale = on_grid(s.scale[0] + (s.scale[1] - s.scale[0]) * unit(mix64(h1)), SCALE_STEPS)
+            .clamp(s.scale[0], s.scale[1]) as f32;
         // the half angle π·yaw/360 in [0, π): a polynomial sincos
         let half = sin_cos_0_pi(yaw_deg * (std::f64::consts::PI / 360.0));
-        Instance { position, rotation: orientation_half(half, n, self.align), scale: [scale; 3], yaw_deg: yaw_deg as f32, tile }
+        Instance {
+            position,
+            rotation: orientation_half(half, n, self.align),
+            scale: [scale; 3],
+            yaw_deg: yaw_deg as f32,
+            tile,
+        }
     }
 }
 
@@ -421,7 +457,9 @@ mod tests {
     fn rotate(q: [f32; 4], v: [f64; 3]) -> [f64; 3] {
         let (x, y, z, w) = (q[0] as f64, q[1] as f64, q[2] as f64, q[3] as f64);
         // v' = v + 2w (q × v) + 2 q × (q × v)
-        let c = |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+        let c = |a: [f64; 3], b: [f64; 3]| {
+            [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+        };
         let qv = [x, y, z];
         let t = c(qv, v);
         let t = [2.0 * t[0], 2.0 * t[1], 2.0 * t[2]];

@@ -106,7 +106,12 @@ pub fn analyze(
     let heights = height_check(surface, instances, MAX_HEIGHT_CHECKS);
     let mut tiles: BTreeMap<u32, TileStat> = BTreeMap::new();
     for inst in instances {
-        let t = tiles.entry(inst.tile).or_insert(TileStat { tile: inst.tile, count: 0, aabb_min: inst.position, aabb_max: inst.position });
+        let t = tiles.entry(inst.tile).or_insert(TileStat {
+            tile: inst.tile,
+            count: 0,
+            aabb_min: inst.position,
+            aabb_max: inst.position,
+        });
         t.count += 1;
         for k in 0..3 {
             t.aabb_min[k] = t.aabb_min[k].min(inst.position[k]);

@@ -127,7 +127,8 @@ mod tests {
         let (none, s): (Vec<u64>, Vec<()>) = super::gather_in_order(0, 0, 0, |_, _| ());
         assert!(none.is_empty() && s.is_empty());
         // a reservation the system cannot grant is dropped, not an abort
-        let (all, _) = super::gather_in_order(3, usize::MAX / 64, usize::MAX / 64, |k, buf: &mut Vec<u64>| buf.push(k as u64));
+        let (all, _) =
+            super::gather_in_order(3, usize::MAX / 64, usize::MAX / 64, |k, buf: &mut Vec<u64>| buf.push(k as u64));
         assert_eq!(all, [0, 1, 2]);
         assert!(super::reserved::<u64>(usize::MAX / 16).capacity() < usize::MAX / 16);
     }

@@ -305,7 +305,12 @@ mod tests {
         let mut idx = Vec::new();
         for j in 0..n as u32 {
             for i in 0..n as u32 {
-                let (a, b, c, d) = (j * (n as u32 + 1) + i, j * (n as u32 + 1) + i + 1, (j + 1) * (n as u32 + 1) + i, (j + 1) * (n as u32 + 1) + i + 1);
+                let (a, b, c, d) = (
+                    j * (n as u32 + 1) + i,
+                    j * (n as u32 + 1) + i + 1,
+                    (j + 1) * (n as u32 + 1) + i,
+                    (j + 1) * (n as u32 + 1) + i + 1,
+                );
                 idx.extend([a, c, b, b, c, d]);
             }
         }
@@ -315,8 +320,16 @@ mod tests {
         for k in 0..20_000 {
             h = crate::synth::mix64(h);
             // a walk of small steps, every 7th query on the lattice (vertices and edges)
-            let (x, z) = if k % 7 == 0 { ((h % 25) as f64 * 1.5, ((h >> 8) % 25) as f64 * 0.75) } else { ((h >> 11) as f64 / (1u64 << 53) as f64 * 37.0 - 0.5, (h & 0xFFFF) as f64 / 65536.0 * 36.0) };
-            assert_eq!(s.height_at_near(x, z, &mut hint).map(|(y, n)| (y.to_bits(), n.map(f64::to_bits))), s.height_at(x, z).map(|(y, n)| (y.to_bits(), n.map(f64::to_bits))), "({x}, {z})");
+            let (x, z) = if k % 7 == 0 {
+                ((h % 25) as f64 * 1.5, ((h >> 8) % 25) as f64 * 0.75)
+            } else {
+                ((h >> 11) as f64 / (1u64 << 53) as f64 * 37.0 - 0.5, (h & 0xFFFF) as f64 / 65536.0 * 36.0)
+            };
+            assert_eq!(
+                s.height_at_near(x, z, &mut hint).map(|(y, n)| (y.to_bits(), n.map(f64::to_bits))),
+                s.height_at(x, z).map(|(y, n)| (y.to_bits(), n.map(f64::to_bits))),
+                "({x}, {z})"
+            );
         }
     }
 

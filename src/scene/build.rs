@@ -11,12 +11,12 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::scene::cache::{process_alive, temp_owner, Cache, FileHashes, KeyBuilder};
-use crate::scene::manifest::{write_manifest_and_report, StageRun};
-use crate::scene::preset::{load_preset, PresetError};
 use crate::mesh::Scene;
 use crate::plants::marker;
+use crate::scene::cache::{process_alive, temp_owner, Cache, FileHashes, KeyBuilder};
+use crate::scene::manifest::{write_manifest_and_report, StageRun};
 use crate::scene::plants_stage::{self, PlantsStageReport};
+use crate::scene::preset::{load_preset, PresetError};
 use crate::scene::preview::{footprint_m, PreviewLayer};
 use crate::scene::scatter_stage::{self, ScatterStageReport};
 use crate::scene::snow_stage::{self, SnowStageReport};
@@ -38,7 +38,12 @@ pub struct BuildSettings {
 
 impl Default for BuildSettings {
     fn default() -> Self {
-        BuildSettings { out_dir: PathBuf::from("out"), stages: Stage::ALL.to_vec(), force: false, compare_full_detail: false }
+        BuildSettings {
+            out_dir: PathBuf::from("out"),
+            stages: Stage::ALL.to_vec(),
+            force: false,
+            compare_full_detail: false,
+        }
     }
 }
 
@@ -103,13 +108,21 @@ pub struct SceneOutcome {
 pub type Progress<'a> = &'a (dyn Fn(&str, &str) + Sync);
 
 /// Builds one preset into `settings.out_dir/<scene>/`.
-pub fn build_preset(preset: &Preset, settings: &BuildSettings, progress: Progress) -> Result<SceneOutcome, SceneBuildError> {
+pub fn build_preset(
+    preset: &Preset,
+    settings: &BuildSettings,
+    progress: Progress,
+) -> Result<SceneOutcome, SceneBuildError> {
     let t0 = Instant::now();
     let name = &preset.scene.name;
     let out = &settings.out_dir;
     for stage in [Stage::Snow, Stage::Scatter, Stage::Preview] {
         let applies = stage != Stage::Snow || preset.snow.is_some();
-        if applies && settings.stages.contains(&stage) && !settings.stages.contains(&Stage::Terrain) && preset.terrain.is_some() {
+        if applies
+            && settings.stages.contains(&stage)
+            && !settings.stages.contains(&Stage::Terrain)
+            && preset.terrain.is_some()
+        {
             return Err(SceneBuildError::Usage(format!(
                 "the {} stage needs the terrain: select it too (--only terrain,{})",
                 stage.name(),
@@ -118,8 +131,13 @@ pub fn build_preset(preset: &Preset, settings: &BuildSettings, progress: Progres
         }
     }
     // scene.glb draws the placements: the view stage runs with the scatter stage
-    if settings.stages.contains(&Stage::View) && !settings.stages.contains(&Stage::Scatter) && !preset.species.is_empty() {
-        return Err(SceneBuildError::Usage("the view stage draws the placements: select the scatter stage too (--only terrain,scatter,view)".into()));
+    if settings.stages.contains(&Stage::View)
+        && !settings.stages.contains(&Stage::Scatter)
+        && !preset.species.is_empty()
+    {
+        return Err(SceneBuildError::Usage(
+            "the view stage draws the placements: select the scatter stage too (--only terrain,scatter,view)".into(),
+        ));
     }
     fs::create_dir_all(out).map_err(io_err(out))?;
     let final_dir = out.join(name);
@@ -274,7 +292,11 @@ fn reimport(dir: &Path, rel: &Path) -> Result<Scene, SceneBuildError> {
 }
 
 /// Positions of every species' placements as scene.glb stores them (f32), read from the tables.
-fn placements_from_tables(dir: &Path, tables: &[(String, PathBuf)], preset: &Preset) -> Result<Vec<PreviewLayer>, SceneBuildError> {
+fn placements_from_tables(
+    dir: &Path,
+    tables: &[(String, PathBuf)],
+    preset: &Preset,
+) -> Result<Vec<PreviewLayer>, SceneBuildError> {
     preset
         .species
         .iter()
@@ -283,15 +305,26 @@ fn placements_from_tables(dir: &Path, tables: &[(String, PathBuf)], preset: &Pre
             let mut points = Vec::new();
             if let Some((_, rel)) = tables.iter().find(|(n, _)| *n == s.name) {
                 let path = dir.join(rel);
-                let rows = crate::export::table::read_placements_csv(&path).map_err(|message| SceneBuildError::Io { path: path.clone(), message })?;
+                let rows = crate::export::table::read_placements_csv(&path)
+                    .map_err(|message| SceneBuildError::Io { path: path.clone(), message })?;
                 points.extend(rows.iter().map(|r| r.position.map(|v| v as f32 as f64)));
             }
-            Ok(PreviewLayer { color: marker::species_color(s.kind, index), kind: s.kind, footprint_m: footprint_m(s), positions: points })
+            Ok(PreviewLayer {
+                color: marker::species_color(s.kind, index),
+                kind: s.kind,
+                footprint_m: footprint_m(s),
+                positions: points,
+            })
         })
         .collect()
 }
 
-fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: Progress) -> Result<SceneOutcome, SceneBuildError> {
+fn build_into(
+    preset: &Preset,
+    settings: &BuildSettings,
+    dir: &Path,
+    progress: Progress,
+) -> Result<SceneOutcome, SceneBuildError> {
     let name = &preset.scene.name;
     let say = |m: &str| progress(name, m);
     let cache = Cache::new(&settings.out_dir);
@@ -314,7 +347,12 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         let t0 = Instant::now();
         let key = stages::terrain_key(preset, t)?;
         let (report, scene, hit) = cached_stage(
-            &cache, force, "terrain", &key, dir, &mut known,
+            &cache,
+            force,
+            "terrain",
+            &key,
+            dir,
+            &mut known,
             stages::terrain_files,
             || stages::run_terrain(preset, t, dir).map_err(SceneBuildError::from),
             &say,
@@ -340,7 +378,12 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         let t0 = Instant::now();
         let key = snow_stage::snow_key(snow, tkey);
         let (report, _, hit) = cached_stage(
-            &cache, force, "snow", &key, dir, &mut known,
+            &cache,
+            force,
+            "snow",
+            &key,
+            dir,
+            &mut known,
             SnowStageReport::files,
             || {
                 // always from the terrain as written (not the in-memory scene), so a snow stage
@@ -358,7 +401,12 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         let t0 = Instant::now();
         let key = plants_stage::plants_key(preset)?;
         let (report, _, hit) = cached_stage(
-            &cache, force, "plants", &key, dir, &mut known,
+            &cache,
+            force,
+            "plants",
+            &key,
+            dir,
+            &mut known,
             PlantsStageReport::files,
             || Ok((plants_stage::run_plants(preset, dir)?, ())),
             &say,
@@ -376,9 +424,17 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         };
         let key = scatter_stage::scatter_key(preset, &upstream)?;
         let (report, placed, hit) = cached_stage(
-            &cache, force, "scatter", &key, dir, &mut known,
+            &cache,
+            force,
+            "scatter",
+            &key,
+            dir,
+            &mut known,
             ScatterStageReport::files,
-            || scatter_stage::run_scatter_with_snow(preset, scene.get()?, dir, cover.as_ref().map(|(m, _)| m)).map_err(SceneBuildError::from),
+            || {
+                scatter_stage::run_scatter_with_snow(preset, scene.get()?, dir, cover.as_ref().map(|(m, _)| m))
+                    .map_err(SceneBuildError::from)
+            },
             &say,
         )?;
         let tables: Vec<(String, PathBuf)> = report.species.iter().map(|s| (s.name.clone(), s.csv.clone())).collect();
@@ -389,11 +445,26 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
             let vkey = view_stage::view_key(preset, &[tkey, plants_key, &key, compare]);
             let main = scene.main.clone();
             let (vreport, _, vhit) = cached_stage(
-                &cache, force, "view", &vkey, dir, &mut known,
+                &cache,
+                force,
+                "view",
+                &vkey,
+                dir,
+                &mut known,
                 ViewStageReport::files,
                 || {
                     let input = view_stage::TerrainInput { main: &main, lods: &terrain_lods };
-                    Ok((view_stage::run_view(preset, &input, plants.as_ref().map(|(r, _)| r), &tables, dir, settings.compare_full_detail)?, ()))
+                    Ok((
+                        view_stage::run_view(
+                            preset,
+                            &input,
+                            plants.as_ref().map(|(r, _)| r),
+                            &tables,
+                            dir,
+                            settings.compare_full_detail,
+                        )?,
+                        (),
+                    ))
                 },
                 &say,
             )?;
@@ -408,7 +479,12 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
                     .iter()
                     .map(|p| {
                         let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
-                        PreviewLayer { color: p.color, kind: p.species.kind, footprint_m: footprint_m(&p.species), positions: pts }
+                        PreviewLayer {
+                            color: p.color,
+                            kind: p.species.kind,
+                            footprint_m: footprint_m(&p.species),
+                            positions: pts,
+                        }
                     })
                     .collect::<Vec<_>>()
             });
@@ -432,7 +508,12 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
         }
         let key = k.finish();
         let (report, _, hit) = cached_stage(
-            &cache, force, "preview", &key, dir, &mut known,
+            &cache,
+            force,
+            "preview",
+            &key,
+            dir,
+            &mut known,
             |r: &PreviewStageReport| std::iter::once(r.file.clone()).chain(r.map.clone()).collect(),
             || {
                 let layers = match &placements {
@@ -459,7 +540,10 @@ fn build_into(preset: &Preset, settings: &BuildSettings, dir: &Path, progress: P
     progress(name, "manifest and report");
     let files = write_manifest_and_report(preset, dir, &runs, &known.hashes)?;
     if let Err(e) = cache.record_scene(name, &known.entries) {
-        progress(name, &format!("could not record the cache entries used ({e}); `verdant cache prune` may remove them"));
+        progress(
+            name,
+            &format!("could not record the cache entries used ({e}); `verdant cache prune` may remove them"),
+        );
     }
     let triangles = runs
         .iter()
@@ -493,7 +577,12 @@ pub enum PresetSource {
 }
 
 /// Builds every preset, `jobs` at a time; returns one outcome per preset, in the given order.
-pub fn build_batch(sources: &[PresetSource], settings: &BuildSettings, jobs: usize, progress: Progress) -> Vec<SceneOutcome> {
+pub fn build_batch(
+    sources: &[PresetSource],
+    settings: &BuildSettings,
+    jobs: usize,
+    progress: Progress,
+) -> Vec<SceneOutcome> {
     // load first, so two presets naming the same scene are caught before anything is built
     let loaded: Vec<(String, Result<Preset, SceneBuildError>)> = sources
         .iter()
@@ -560,14 +649,18 @@ pub fn build_batch(sources: &[PresetSource], settings: &BuildSettings, jobs: usi
 
 /// The end-of-batch table: scene, status, files, triangles, seconds.
 pub fn summary_table(outcomes: &[SceneOutcome]) -> String {
-    let mut s = format!("{:<16} {:<8} {:>6} {:>11} {:>8}  {}\n", "scene", "status", "files", "triangles", "seconds", "preset");
+    let mut s =
+        format!("{:<16} {:<8} {:>6} {:>11} {:>8}  {}\n", "scene", "status", "files", "triangles", "seconds", "preset");
     for o in outcomes {
         let status = match (&o.error, o.cached_stages.is_empty()) {
             (Some(_), _) => "FAILED",
             (None, true) => "built",
             (None, false) => "built*",
         };
-        s += &format!("{:<16} {:<8} {:>6} {:>11} {:>8.2}  {}\n", o.scene, status, o.files, o.triangles, o.seconds, o.preset);
+        s += &format!(
+            "{:<16} {:<8} {:>6} {:>11} {:>8.2}  {}\n",
+            o.scene, status, o.files, o.triangles, o.seconds, o.preset
+        );
     }
     if outcomes.iter().any(|o| o.error.is_none() && !o.cached_stages.is_empty()) {
         s += "built* = some stages reused from the cache (--force rebuilds them)\n";
@@ -594,7 +687,8 @@ pub struct ProgressView {
 impl ProgressView {
     pub fn new(quiet: bool) -> Self {
         use std::io::IsTerminal;
-        let bars = (!quiet && std::io::stderr().is_terminal()).then(|| (indicatif::MultiProgress::new(), Mutex::new(Vec::new())));
+        let bars = (!quiet && std::io::stderr().is_terminal())
+            .then(|| (indicatif::MultiProgress::new(), Mutex::new(Vec::new())));
         ProgressView { quiet, bars, lines: Mutex::new(()) }
     }
 

@@ -100,7 +100,9 @@ fn size_of(path: &Path) -> u64 {
 
 /// An entry folder's name: `<stage>-<32 hex digits>`.
 fn is_entry_name(name: &str) -> bool {
-    name.rsplit_once('-').is_some_and(|(stage, key)| !stage.is_empty() && !stage.starts_with('.') && key.len() == 32 && key.bytes().all(|b| b.is_ascii_hexdigit()))
+    name.rsplit_once('-').is_some_and(|(stage, key)| {
+        !stage.is_empty() && !stage.starts_with('.') && key.len() == 32 && key.bytes().all(|b| b.is_ascii_hexdigit())
+    })
 }
 
 impl Cache {
@@ -141,7 +143,8 @@ impl Cache {
             for record in records.flatten() {
                 let path = record.path();
                 let scene = path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
-                let entries: Option<Vec<String>> = fs::read_to_string(&path).ok().and_then(|t| serde_json::from_str(&t).ok());
+                let entries: Option<Vec<String>> =
+                    fs::read_to_string(&path).ok().and_then(|t| serde_json::from_str(&t).ok());
                 match entries {
                     Some(entries) if out_dir.join(&scene).join("manifest.json").is_file() => keep.extend(entries),
                     _ => {
@@ -176,7 +179,8 @@ impl Cache {
         if !self.root.exists() {
             return Ok(CacheCleanup::default());
         }
-        let entries = fs::read_dir(&self.root)?.flatten().filter(|e| is_entry_name(&e.file_name().to_string_lossy())).count();
+        let entries =
+            fs::read_dir(&self.root)?.flatten().filter(|e| is_entry_name(&e.file_name().to_string_lossy())).count();
         let bytes_freed = size_of(&self.root);
         fs::remove_dir_all(&self.root)?;
         Ok(CacheCleanup { entries_removed: entries, entries_kept: 0, bytes_freed })
@@ -192,12 +196,23 @@ impl Cache {
     /// Stores `files` (scene-relative paths, read from `scene_dir`) and the stage report,
     /// replacing an entry of the same key (which a failed lookup showed to be damaged).
     /// Returns the files' sizes and hashes.
-    pub fn store(&self, stage: &str, key: &str, scene_dir: &Path, files: &[PathBuf], stage_json: &str) -> io::Result<FileHashes> {
+    pub fn store(
+        &self,
+        stage: &str,
+        key: &str,
+        scene_dir: &Path,
+        files: &[PathBuf],
+        stage_json: &str,
+    ) -> io::Result<FileHashes> {
         static SERIAL: AtomicU64 = AtomicU64::new(0);
         let dir = self.entry(stage, key);
         fs::create_dir_all(&self.root)?;
         // unique per process and call: threads of one batch may store the same key at once
-        let tmp = self.root.join(format!(".{stage}-{key}.tmp-{}-{}", std::process::id(), SERIAL.fetch_add(1, Ordering::Relaxed)));
+        let tmp = self.root.join(format!(
+            ".{stage}-{key}.tmp-{}-{}",
+            std::process::id(),
+            SERIAL.fetch_add(1, Ordering::Relaxed)
+        ));
         let mut hashes = FileHashes::new();
         let result = (|| {
             for rel in files {
@@ -232,11 +247,13 @@ impl Cache {
     /// Links (or copies) an entry's files into `scene_dir`; returns their recorded sizes and
     /// hashes. Fails when a file is missing or its size differs from the record (a damaged entry).
     pub fn restore(entry: &Path, scene_dir: &Path, files: &[PathBuf]) -> io::Result<FileHashes> {
-        let table: FileHashes = serde_json::from_str(&fs::read_to_string(entry.join("files.json"))?).map_err(io::Error::other)?;
+        let table: FileHashes =
+            serde_json::from_str(&fs::read_to_string(entry.join("files.json"))?).map_err(io::Error::other)?;
         let mut hashes = FileHashes::new();
         for rel in files {
             let key = rel_key(rel);
-            let recorded = table.get(&key).ok_or_else(|| io::Error::other(format!("{key} is not recorded in the entry")))?;
+            let recorded =
+                table.get(&key).ok_or_else(|| io::Error::other(format!("{key} is not recorded in the entry")))?;
             let dst = scene_dir.join(rel);
             if let Some(parent) = dst.parent() {
                 fs::create_dir_all(parent)?;

@@ -191,7 +191,12 @@ fn rel_strings(files: &[PathBuf]) -> Vec<String> {
 /// the scene folder (these three included).
 /// `known` holds sizes and hashes already computed (by the cache) for some of the files; the
 /// others are read and hashed here.
-pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun], known: &FileHashes) -> Result<usize, SceneBuildError> {
+pub fn write_manifest_and_report(
+    preset: &Preset,
+    dir: &Path,
+    runs: &[StageRun],
+    known: &FileHashes,
+) -> Result<usize, SceneBuildError> {
     let io = |path: &Path, e: String| SceneBuildError::Io { path: path.to_owned(), message: e };
     let mut files = Vec::new();
     for rel in list_files(dir).map_err(|e| io(dir, e.to_string()))? {
@@ -302,7 +307,8 @@ pub fn write_manifest_and_report(preset: &Preset, dir: &Path, runs: &[StageRun],
     write_atomic(&dir.join("manifest.json"), pretty(&manifest).as_bytes()).map_err(|e| io(dir, e.to_string()))?;
     let report = report_json(preset, runs, &manifest.bytes);
     write_atomic(&dir.join("report.json"), report.as_bytes()).map_err(|e| io(dir, e.to_string()))?;
-    write_atomic(&dir.join("report.md"), report_md(preset, runs, &manifest.bytes).as_bytes()).map_err(|e| io(dir, e.to_string()))?;
+    write_atomic(&dir.join("report.md"), report_md(preset, runs, &manifest.bytes).as_bytes())
+        .map_err(|e| io(dir, e.to_string()))?;
     Ok(n_files)
 }
 
@@ -319,7 +325,9 @@ fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
     let mut timing = Map::new();
     for r in runs {
         let (name, mut value, cached, seconds) = match r {
-            StageRun::Terrain { report, cached, seconds } => ("terrain", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
+            StageRun::Terrain { report, cached, seconds } => {
+                ("terrain", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds)
+            }
             StageRun::Scatter { report, cached, seconds } => {
                 let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
                 // per-species seconds are timing too
@@ -336,8 +344,12 @@ fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
                 }
                 ("scatter", v, *cached, *seconds)
             }
-            StageRun::Preview { report, cached, seconds } => ("preview", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
-            StageRun::Snow { report, cached, seconds } => ("snow", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds),
+            StageRun::Preview { report, cached, seconds } => {
+                ("preview", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds)
+            }
+            StageRun::Snow { report, cached, seconds } => {
+                ("snow", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds)
+            }
             StageRun::View { report, cached, seconds } => {
                 let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
                 if let Some(o) = v.as_object_mut() {
@@ -415,11 +427,20 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
                 for l in &t.lods {
                     s += &format!(
                         "| LOD{} | {} | {:.4} | {:.4} | {} | {:.1} |\n",
-                        l.level, l.max_error_requested_m, l.max_error_m, l.rms_error_m, l.triangles, l.switch_distance_m
+                        l.level,
+                        l.max_error_requested_m,
+                        l.max_error_m,
+                        l.rms_error_m,
+                        l.triangles,
+                        l.switch_distance_m
                     );
                 }
                 if !t.chunks.is_empty() {
-                    s += &format!("\n{} chunks; {} triangles written in all (skirts and base included)\n", t.chunks.len(), t.output_triangles);
+                    s += &format!(
+                        "\n{} chunks; {} triangles written in all (skirts and base included)\n",
+                        t.chunks.len(),
+                        t.output_triangles
+                    );
                 }
                 s += "\n";
             }
@@ -459,7 +480,11 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
             }
         }
     }
-    s += &format!("## Output\n\n{} files, {:.1} MB in all (manifest and reports aside)\n\n| part | MB |\n|---|---|\n", bytes.files, bytes.total as f64 / 1e6);
+    s += &format!(
+        "## Output\n\n{} files, {:.1} MB in all (manifest and reports aside)\n\n| part | MB |\n|---|---|\n",
+        bytes.files,
+        bytes.total as f64 / 1e6
+    );
     for (part, b) in &bytes.by_part {
         s += &format!("| {part} | {:.2} |\n", *b as f64 / 1e6);
     }
@@ -518,7 +543,10 @@ const CHAIN_HEADER: &str = "| model | level | kind | triangles | bytes | Hausdor
                             |---|---|---|---|---|---|---|---|---|\n";
 
 fn file_name(path: &serde_json::Value) -> String {
-    path.as_str().and_then(|p| std::path::Path::new(p).file_name()).map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()
+    path.as_str()
+        .and_then(|p| std::path::Path::new(p).file_name())
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_default()
 }
 
 /// The rows of one chain's table (a TreeLodReport as JSON), the first cell naming the model.
@@ -529,14 +557,22 @@ fn chain_rows(model: &str, chain: &serde_json::Value) -> String {
         let never = if l["never_passes"].as_bool() == Some(true) { " (never ≤ 1 px in range)" } else { "" };
         s += &format!(
             "| {model} | LOD{} | {} | {} | {} | {:.3} | {:.3} | {:.1}{never} | {:.2e} |\n",
-            l["level"], l["kind"].as_str().unwrap_or(""), l["triangles"], l["bytes"],
-            num(&l["geometric_error"]["max_m"]), num(&l["switch_iou"]), num(&l["switch_distance_m"]), num(&l["screen_coverage"])
+            l["level"],
+            l["kind"].as_str().unwrap_or(""),
+            l["triangles"],
+            l["bytes"],
+            num(&l["geometric_error"]["max_m"]),
+            num(&l["switch_iou"]),
+            num(&l["switch_distance_m"]),
+            num(&l["screen_coverage"])
         );
     }
     for o in chain["left_out"].as_array().into_iter().flatten() {
         s += &format!(
             "| {model} | — | {} (left out) | {} | — | — | — | not fewer triangles than the {} before it | — |\n",
-            o["kind"].as_str().unwrap_or(""), o["triangles"], o["previous_triangles"]
+            o["kind"].as_str().unwrap_or(""),
+            o["triangles"],
+            o["previous_triangles"]
         );
     }
     s
@@ -545,13 +581,23 @@ fn chain_rows(model: &str, chain: &serde_json::Value) -> String {
 /// The snow section of report.md: counts, the fall, and the cover by slope and altitude band.
 fn snow_md(r: &SnowStageReport) -> String {
     let a = &r.analysis;
-    let mut s = String::from("## Snow
+    let mut s = String::from(
+        "## Snow
 
-");
-    let kinds = |m: &std::collections::BTreeMap<String, usize>| m.iter().map(|(k, n)| format!("{k} {n}")).collect::<Vec<_>>().join(", ");
-    s += &format!("Atlas cells by habit: {}. Particles: {} near + {} far ({}).
+",
+    );
+    let kinds = |m: &std::collections::BTreeMap<String, usize>| {
+        m.iter().map(|(k, n)| format!("{k} {n}")).collect::<Vec<_>>().join(", ")
+    };
+    s += &format!(
+        "Atlas cells by habit: {}. Particles: {} near + {} far ({}).
 
-", kinds(&a.atlas_cells_by_kind), a.near_particles, a.far_particles, kinds(&a.particles_by_kind));
+",
+        kinds(&a.atlas_cells_by_kind),
+        a.near_particles,
+        a.far_particles,
+        kinds(&a.particles_by_kind)
+    );
     s += &format!(
         "Terminal velocity v = m·g/k = {:.3} m/s, time constant {:.3} s, fall from the top in {:.1} s.
 
@@ -568,12 +614,19 @@ fn snow_md(r: &SnowStageReport) -> String {
         r.mask.metres_per_pixel,
         100.0 * a.mask_coverage.unwrap_or(0.0),
         r.terrain_file.display(),
-        r.layer_file.as_ref().map_or(String::new(), |f| format!("; snow layer `{}` ({} triangles)", f.display(), r.layer_triangles)),
+        r.layer_file.as_ref().map_or(String::new(), |f| format!(
+            "; snow layer `{}` ({} triangles)",
+            f.display(),
+            r.layer_triangles
+        )),
     );
     for (title, unit, bands) in [("slope", "°", &a.cover_by_slope), ("altitude", " m", &a.cover_by_altitude)] {
         s += &format!("| {title} band | vertices | mean weight | covered (≥ ½) |\n|---|---|---|---|\n");
         for b in bands {
-            s += &format!("| {:.1}{unit} – {:.1}{unit} | {} | {:.3} | {:.3} |\n", b.from, b.to, b.vertices, b.mean_weight, b.covered_fraction);
+            s += &format!(
+                "| {:.1}{unit} – {:.1}{unit} | {} | {:.3} | {:.3} |\n",
+                b.from, b.to, b.vertices, b.mean_weight, b.covered_fraction
+            );
         }
         s += "\n";
     }
@@ -598,8 +651,16 @@ fn plants_md(report: &PlantsStageReport) -> String {
                 let never = if l["never_passes"].as_bool() == Some(true) { " (never ≤ 1 px in range)" } else { "" };
                 s += &format!(
                     "| LOD{} | {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.2} | {:.1}{never} | {:.2e} |\n",
-                    l["level"], l["triangles"], l["vertices"], l["bytes"], num(&l["near_iou"]), num(&l["near_color_rmse"]),
-                    num(&l["switch_iou"]), num(&l["switch_edge_error_px"]), num(&l["switch_distance_m"]), num(&l["screen_coverage"])
+                    l["level"],
+                    l["triangles"],
+                    l["vertices"],
+                    l["bytes"],
+                    num(&l["near_iou"]),
+                    num(&l["near_color_rmse"]),
+                    num(&l["switch_iou"]),
+                    num(&l["switch_edge_error_px"]),
+                    num(&l["switch_distance_m"]),
+                    num(&l["screen_coverage"])
                 );
             }
             let rings = &g["thesis_rings_m"];
@@ -611,7 +672,13 @@ fn plants_md(report: &PlantsStageReport) -> String {
             );
             s += "| atlas mip | size | alpha scale | coverage |\n|---|---|---|---|\n";
             for (k, m) in g["atlas_mips"].as_array().into_iter().flatten().enumerate() {
-                s += &format!("| {k} | {}×{} | {:.3} | {:.4} |\n", m["width"], m["height"], num(&m["alpha_scale"]), num(&m["coverage"]));
+                s += &format!(
+                    "| {k} | {}×{} | {:.3} | {:.4} |\n",
+                    m["width"],
+                    m["height"],
+                    num(&m["alpha_scale"]),
+                    num(&m["coverage"])
+                );
             }
             s += "\n";
         }
@@ -625,14 +692,20 @@ fn plants_md(report: &PlantsStageReport) -> String {
             s += CHAIN_HEADER;
             for (k, v) in t["variants"].as_array().into_iter().flatten().enumerate() {
                 let parts = v["stats"]["leaves"].as_u64().unwrap_or(0) + v["stats"]["polygons"].as_u64().unwrap_or(0);
-                s += &chain_rows(&format!("{k} ({} segments, {parts} leaves + polygons)", v["stats"]["segments"]), &v["chain"]);
+                s += &chain_rows(
+                    &format!("{k} ({} segments, {parts} leaves + polygons)", v["stats"]["segments"]),
+                    &v["chain"],
+                );
             }
             s += "\n";
         }
         if let Some(m) = &sp.mesh {
             s += &format!("### {} (mesh: {})\n\n{CHAIN_NOTE}\n\n", sp.name, file_name(&m["obj"]));
             s += CHAIN_HEADER;
-            s += &chain_rows(&format!("{} vertices, {} triangles", m["stats"]["vertices"], m["stats"]["triangles"]), &m["chain"]);
+            s += &chain_rows(
+                &format!("{} vertices, {} triangles", m["stats"]["vertices"], m["stats"]["triangles"]),
+                &m["chain"],
+            );
             s += "\n";
         }
         if let Some(f) = &sp.flower {
@@ -658,13 +731,28 @@ fn view_section(v: &crate::scene::view_stage::ViewStageReport) -> String {
         let c = &r.camera;
         s += &format!(
             "| {} | ({:.1}, {:.1}, {:.1}) | ({:.3}, {:.3}, {:.3}) | {:.0}° | {}×{} | {} | {} | {} | {} | {:.2e} |\n",
-            c.name, c.eye[0], c.eye[1], c.eye[2], c.forward[0], c.forward[1], c.forward[2], c.fov_y_deg, c.size_px[0], c.size_px[1],
-            r.triangles, r.draw_calls, r.full_detail_triangles, r.full_detail_draw_calls,
+            c.name,
+            c.eye[0],
+            c.eye[1],
+            c.eye[2],
+            c.forward[0],
+            c.forward[1],
+            c.forward[2],
+            c.fov_y_deg,
+            c.size_px[0],
+            c.size_px[1],
+            r.triangles,
+            r.draw_calls,
+            r.full_detail_triangles,
+            r.full_detail_draw_calls,
             r.triangles as f64 / (r.full_detail_triangles.max(1)) as f64
         );
     }
     for r in &v.views {
-        s += &format!("\n### {}\n\nterrain chunks per level: {:?} ({} triangles, {} at full detail)\n\n", r.camera.name, r.terrain.chunks_per_level, r.terrain.triangles, r.terrain.full_detail_triangles);
+        s += &format!(
+            "\n### {}\n\nterrain chunks per level: {:?} ({} triangles, {} at full detail)\n\n",
+            r.camera.name, r.terrain.chunks_per_level, r.terrain.triangles, r.terrain.full_detail_triangles
+        );
         if let Some(c) = &r.image {
             s += &match &c.skipped {
                 Some(why) => format!("Image against full detail: not rendered ({why}).\n\n"),
@@ -677,13 +765,28 @@ fn view_section(v: &crate::scene::view_stage::ViewStageReport) -> String {
         s += "| species | level | switch distance (m, per variant) | instances | triangles |\n|---|---|---|---|---|\n";
         for sp in &r.species {
             for l in &sp.levels {
-                let d: Vec<String> = l.switch_distance_m.iter().map(|d| format!("{:.1}", d * r.distance_factor)).collect();
-                s += &format!("| {} | LOD{} | {} | {} | {} |\n", sp.name, l.level, d.join(", "), l.instances, l.triangles);
+                let d: Vec<String> =
+                    l.switch_distance_m.iter().map(|d| format!("{:.1}", d * r.distance_factor)).collect();
+                s += &format!(
+                    "| {} | LOD{} | {} | {} | {} |\n",
+                    sp.name,
+                    l.level,
+                    d.join(", "),
+                    l.instances,
+                    l.triangles
+                );
             }
             match &sp.cull {
                 Some(c) => {
-                    let how = if c.scales_with_view { "from the budget, × instance scale" } else { "set by the preset" };
-                    s += &format!("| {} | culled | beyond {:.1} m ({how}) | {} of {} | — |\n", sp.name, if c.scales_with_view { c.distance_m * r.distance_factor } else { c.distance_m }, sp.culled, sp.placed);
+                    let how =
+                        if c.scales_with_view { "from the budget, × instance scale" } else { "set by the preset" };
+                    s += &format!(
+                        "| {} | culled | beyond {:.1} m ({how}) | {} of {} | — |\n",
+                        sp.name,
+                        if c.scales_with_view { c.distance_m * r.distance_factor } else { c.distance_m },
+                        sp.culled,
+                        sp.placed
+                    );
                 }
                 None => s += &format!("| {} | — | no mesh: placement table only | {} | — |\n", sp.name, sp.placed),
             }

@@ -4,16 +4,16 @@
 //! The types here are the resolved settings every stage reads; they are written into the manifest
 //! as they are, so a build can be reproduced from its manifest alone.
 
-pub mod preview;
 pub mod build;
 pub mod cache;
 pub mod manifest;
 pub mod plants_stage;
+pub mod preview;
 pub mod scatter_stage;
 pub mod snow_stage;
 pub mod stages;
-pub mod view_stage;
 pub mod view_render;
+pub mod view_stage;
 
 use std::path::PathBuf;
 

@@ -10,18 +10,20 @@ use serde::{Deserialize, Serialize};
 use crate::bake::atlas::write_mip_pngs;
 use crate::bake::image::Image;
 use crate::export;
+use crate::lod::LodView;
+use crate::lsystem::parse;
+use crate::lsystem::LSystem;
 use crate::mesh::Mesh;
 use crate::plants::flower::{build_flower, FlowerReport};
 use crate::plants::grass::GrassSettings;
 use crate::plants::grass_asset::{build_grass_with, GrassAsset, GrassReport};
-use crate::lod::LodView;
+use crate::plants::mesh_asset::{load_obj, MeshAssetStats, ObjOptions, SourceMesh};
+use crate::plants::tree::{TreeOptions, TreeStats};
+use crate::plants::tree_lod::{
+    build_mesh_lods, build_tree_lods, variant_seed, TreeLodOptions, TreeLodReport, TreeLods,
+};
 use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::stages::StageError;
-use crate::lsystem::parse;
-use crate::lsystem::LSystem;
-use crate::plants::tree::{TreeOptions, TreeStats};
-use crate::plants::mesh_asset::{load_obj, MeshAssetStats, ObjOptions, SourceMesh};
-use crate::plants::tree_lod::{build_mesh_lods, build_tree_lods, variant_seed, TreeLodOptions, TreeLodReport, TreeLods};
 use crate::scene::{MeshLook, PlantLook, Preset, TreeLook};
 
 fn fail(message: String) -> StageError {
@@ -184,7 +186,8 @@ pub fn add_look_inputs(k: &mut KeyBuilder, name: &str, look: &PlantLook) -> Resu
         _ => return Ok(()),
     };
     // an L-system may be a built-in one (`builtin:<name>`): its source is in the crate
-    let bytes = crate::lsystem::library::read_bytes(input).map_err(|e| fail(format!("{}: cannot read: {e}", input.display())))?;
+    let bytes = crate::lsystem::library::read_bytes(input)
+        .map_err(|e| fail(format!("{}: cannot read: {e}", input.display())))?;
     k.add(sha256_hex(&bytes).as_bytes());
     Ok(())
 }
@@ -234,7 +237,12 @@ fn write_chain(chain: &TreeLods, dir: &Path, stem: &str, files: &mut Vec<PathBuf
 }
 
 /// `atlases/<stem>_normal.png`: a card atlas' normal map (level 0; engines make its mips).
-fn write_normal_atlas(dir: &Path, stem: &str, normals: &crate::bake::image::Image, files: &mut Vec<PathBuf>) -> Result<(), StageError> {
+fn write_normal_atlas(
+    dir: &Path,
+    stem: &str,
+    normals: &crate::bake::image::Image,
+    files: &mut Vec<PathBuf>,
+) -> Result<(), StageError> {
     let png = normals.encode_png_data().map_err(|e| fail(format!("{stem}: {e}")))?;
     let rel = PathBuf::from("atlases").join(format!("{stem}_normal.png"));
     export::write_atomic(&dir.join(&rel), &png).map_err(|e| fail(e.to_string()))?;
@@ -258,7 +266,13 @@ fn load_model(name: &str, look: &MeshLook) -> Result<SourceMesh, StageError> {
 
 /// Builds and writes a mesh species' chain: `species/<name>.glb`, `species/<name>_LOD<n>.glb`,
 /// `atlases/<name>*.png`.
-fn run_mesh(name: &str, look: &MeshLook, policy: &LodView, dir: &Path, files: &mut Vec<PathBuf>) -> Result<(MeshSpeciesReport, SpeciesChain), StageError> {
+fn run_mesh(
+    name: &str,
+    look: &MeshLook,
+    policy: &LodView,
+    dir: &Path,
+    files: &mut Vec<PathBuf>,
+) -> Result<(MeshSpeciesReport, SpeciesChain), StageError> {
     let (source, chain) = mesh_chain(name, look, policy)?;
     let file = write_chain(&chain, dir, name, files)?;
     let lod0: Vec<&Mesh> = chain.levels.first().and_then(|l| l.scene.meshes.first()).into_iter().collect();
@@ -269,20 +283,46 @@ fn run_mesh(name: &str, look: &MeshLook, policy: &LodView, dir: &Path, files: &m
 /// A mesh species' model as loaded and the LoD chain the plants stage writes for it.
 pub fn mesh_chain(name: &str, look: &MeshLook, policy: &LodView) -> Result<(SourceMesh, TreeLods), StageError> {
     let source = load_model(name, look)?;
-    let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, policy: *policy, ..TreeLodOptions::default() };
-    let chain = build_mesh_lods(&source, name, &lod).map_err(|e| fail(format!("species `{name}`: {}: {e}", look.obj.display())))?;
+    let lod = TreeLodOptions {
+        lods: look.lods,
+        atlas_px: look.atlas_px,
+        analyze: look.analyze,
+        policy: *policy,
+        ..TreeLodOptions::default()
+    };
+    let chain = build_mesh_lods(&source, name, &lod)
+        .map_err(|e| fail(format!("species `{name}`: {}: {e}", look.obj.display())))?;
     Ok((source, chain))
 }
 
 /// Variant `k`'s LoD chain of a tree species, as the plants stage writes it.
-pub fn tree_chain(name: &str, look: &TreeLook, system: &LSystem, k: usize, policy: &LodView) -> Result<TreeLods, StageError> {
-    let lod = TreeLodOptions { lods: look.lods, atlas_px: look.atlas_px, analyze: look.analyze, policy: *policy, ..TreeLodOptions::default() };
-    build_tree_lods(system, &tree_options(name, look, k), &lod).map_err(|e| fail(format!("species `{name}`: {}: {e}", look.lsystem.display())))
+pub fn tree_chain(
+    name: &str,
+    look: &TreeLook,
+    system: &LSystem,
+    k: usize,
+    policy: &LodView,
+) -> Result<TreeLods, StageError> {
+    let lod = TreeLodOptions {
+        lods: look.lods,
+        atlas_px: look.atlas_px,
+        analyze: look.analyze,
+        policy: *policy,
+        ..TreeLodOptions::default()
+    };
+    build_tree_lods(system, &tree_options(name, look, k), &lod)
+        .map_err(|e| fail(format!("species `{name}`: {}: {e}", look.lsystem.display())))
 }
 
 /// Builds and writes every variant's chain: `species/<name>_v<k>.glb` (MSFT_lod),
 /// `species/<name>_v<k>_LOD<n>.glb` and `atlases/<name>_v<k>*.png`.
-fn run_tree(name: &str, look: &TreeLook, policy: &LodView, dir: &Path, files: &mut Vec<PathBuf>) -> Result<(TreeSpeciesReport, SpeciesChain), StageError> {
+fn run_tree(
+    name: &str,
+    look: &TreeLook,
+    policy: &LodView,
+    dir: &Path,
+    files: &mut Vec<PathBuf>,
+) -> Result<(TreeSpeciesReport, SpeciesChain), StageError> {
     let system = read_lsystem(name, look)?;
     let count = distinct_variants(&system, look);
     let mut variants = Vec::with_capacity(count);
@@ -293,10 +333,23 @@ fn run_tree(name: &str, look: &TreeLook, policy: &LodView, dir: &Path, files: &m
         let file = write_chain(&chain, dir, &stem, files)?;
         levels.push(tree_levels(&chain, &stem, look.analyze));
         lod0.extend(chain.levels.first().and_then(|l| l.scene.meshes.first()).cloned());
-        variants.push(TreeVariantReport { file, seed: variant_seed(look.seed, k), stats: chain.lod0.as_ref().map(|t| t.stats.clone()).unwrap_or_default(), chain: chain.report });
+        variants.push(TreeVariantReport {
+            file,
+            seed: variant_seed(look.seed, k),
+            stats: chain.lod0.as_ref().map(|t| t.stats.clone()).unwrap_or_default(),
+            chain: chain.report,
+        });
     }
     let draw = SpeciesChain::with_bounds(levels, &lod0.iter().collect::<Vec<_>>());
-    Ok((TreeSpeciesReport { lsystem: look.lsystem.clone(), dialect: system.dialect, variants_asked: look.variants, variants }, draw))
+    Ok((
+        TreeSpeciesReport {
+            lsystem: look.lsystem.clone(),
+            dialect: system.dialect,
+            variants_asked: look.variants,
+            variants,
+        },
+        draw,
+    ))
 }
 
 /// The user's blade image, if the settings name one.
@@ -315,7 +368,12 @@ fn write(scene: &crate::mesh::Scene, dir: &Path, rel: PathBuf, files: &mut Vec<P
     Ok(())
 }
 
-fn write_mips(dir: &Path, stem: &str, chain: &[crate::bake::atlas::MipLevel], files: &mut Vec<PathBuf>) -> Result<(), StageError> {
+fn write_mips(
+    dir: &Path,
+    stem: &str,
+    chain: &[crate::bake::atlas::MipLevel],
+    files: &mut Vec<PathBuf>,
+) -> Result<(), StageError> {
     let written = write_mip_pngs(&dir.join("atlases"), stem, chain).map_err(|e| fail(e.to_string()))?;
     files.extend(written.into_iter().map(|p| PathBuf::from("atlases").join(p.file_name().unwrap_or_default())));
     Ok(())
@@ -344,7 +402,8 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
             }
             PlantLook::Grass(g) => {
                 let blade = user_blade(g)?;
-                let asset = build_grass_with(name, g, blade.as_ref(), true, &preset.lod).map_err(|e| fail(format!("species `{name}`: {e}")))?;
+                let asset = build_grass_with(name, g, blade.as_ref(), true, &preset.lod)
+                    .map_err(|e| fail(format!("species `{name}`: {e}")))?;
                 draw = grass_chain(name, g, &asset);
                 for (n, scene) in asset.lod_scenes.iter().enumerate() {
                     write(scene, scene_dir, PathBuf::from("species").join(format!("{name}_LOD{n}.glb")), &mut files)?;
@@ -367,7 +426,14 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
                     .scene
                     .meshes
                     .iter()
-                    .map(|m| vec![ChainLevel { file: file.clone(), mesh: m.name.clone(), triangles: m.triangle_count(), switch_distance_m: 0.0 }])
+                    .map(|m| {
+                        vec![ChainLevel {
+                            file: file.clone(),
+                            mesh: m.name.clone(),
+                            triangles: m.triangle_count(),
+                            switch_distance_m: 0.0,
+                        }]
+                    })
                     .collect();
                 draw = SpeciesChain::with_bounds(levels, &asset.scene.meshes.iter().collect::<Vec<_>>());
                 write(&asset.scene, scene_dir, file, &mut files)?;
@@ -389,7 +455,6 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
     }
     Ok(PlantsStageReport { species, seconds: t0.elapsed().as_secs_f64() })
 }
-
 
 /// A grass species' chain: the densest clumps (density is applied once, by the scatter's
 /// thinning; the clump's density level is not chosen by the map again), one variant each, with

@@ -21,19 +21,20 @@ pub use snow::{default_snow_seed, SNOW_KEYS};
 pub use view::{LOD_KEYS, VIEW_KEYS};
 
 use super::{
-    Exclusion, Format, Placement, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesKind, SpeciesSettings,
-    MeshLook, TerrainSettings, TerrainSource, TreeLook,
+    Exclusion, Format, MeshLook, Placement, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesKind,
+    SpeciesSettings, TerrainSettings, TerrainSource, TreeLook,
 };
+use crate::heightfield::{DecodeOptions, Encoding, Heightfield, DEFAULT_MAX_SAMPLES};
 use crate::lsystem::library;
 use crate::plants::flower::FlowerSettings;
 use crate::plants::grass::GrassSettings;
-use crate::heightfield::{DecodeOptions, Encoding, Heightfield, DEFAULT_MAX_SAMPLES};
 use crate::synth::{self, NoiseKind};
 use crate::terrain::job::MeshMode;
 
 /// The sections a preset may have, in the order the docs list them (`species` is an array of
 /// tables, `[[species]]`).
-pub const SECTIONS: &[&str] = &["scene", "terrain", "species", "scatter", "grass", "flower", "tree", "mesh", "snow", "lod", "view"];
+pub const SECTIONS: &[&str] =
+    &["scene", "terrain", "species", "scatter", "grass", "flower", "tree", "mesh", "snow", "lod", "view"];
 /// Keys of `[scene]`.
 pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats"];
 /// Keys of `[terrain]`.
@@ -239,7 +240,10 @@ pub fn demo_preset() -> Preset {
                 seed: 0,
                 max_instances: DEFAULT_MAX_INSTANCES,
                 cull_distance_m: None,
-                look: PlantLook::Grass(GrassSettings { seed: species_look_seed(0, "grass", 0), ..GrassSettings::default() }),
+                look: PlantLook::Grass(GrassSettings {
+                    seed: species_look_seed(0, "grass", 0),
+                    ..GrassSettings::default()
+                }),
             },
         ],
         scatter: ScatterSettings::default(),
@@ -278,7 +282,9 @@ pub fn instance_estimates_over_limit(p: &Preset) -> Vec<(String, f64, usize)> {
         .iter()
         .filter_map(|s| {
             let density = match s.placement {
-                Placement::Poisson if s.min_spacing_m > 0.0 => s.max_density.min(crate::scatter::POISSON_PACKING / (s.min_spacing_m * s.min_spacing_m)),
+                Placement::Poisson if s.min_spacing_m > 0.0 => {
+                    s.max_density.min(crate::scatter::POISSON_PACKING / (s.min_spacing_m * s.min_spacing_m))
+                }
                 _ => s.max_density,
             };
             let estimate = density * area;
@@ -483,10 +489,8 @@ pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
 /// The closest of `candidates` to `word`, if it is close enough to be a likely misspelling.
 pub fn did_you_mean<'a>(word: &str, candidates: &[&'a str]) -> Option<&'a str> {
     let w = word.to_lowercase().replace('-', "_");
-    let (distance, best) = candidates
-        .iter()
-        .map(|c| (strsim::damerau_levenshtein(&w, c), *c))
-        .min_by_key(|(d, _)| *d)?;
+    let (distance, best) =
+        candidates.iter().map(|c| (strsim::damerau_levenshtein(&w, c), *c)).min_by_key(|(d, _)| *d)?;
     if distance <= (best.chars().count() / 3).max(1) {
         return Some(best);
     }
@@ -615,8 +619,9 @@ fn integer_value(
     let DeValue::Integer(i) = v.get_ref() else {
         return Err(t.wrong_type(key, v, "an integer", example));
     };
-    let n = i64::from_str_radix(i.as_str(), i.radix())
-        .map_err(|_| t.ctx.at(&v.span(), format!("`{key}` = {i} is out of range"), format!("use a value in {range:?}")))?;
+    let n = i64::from_str_radix(i.as_str(), i.radix()).map_err(|_| {
+        t.ctx.at(&v.span(), format!("`{key}` = {i} is out of range"), format!("use a value in {range:?}"))
+    })?;
     match u64::try_from(n) {
         Ok(n) if range.contains(&n) => Ok(n),
         _ => Err(t.ctx.at(
@@ -639,11 +644,18 @@ fn number_value(
         DeValue::Float(f) => f.as_str().parse::<f64>().ok(),
         _ => return Err(t.wrong_type(key, v, "a number", example)),
     };
-    let x = x.ok_or_else(|| t.ctx.at(&v.span(), format!("`{key}` is not a number TOML can hold"), format!("write it like `{example}`")))?;
+    let x = x.ok_or_else(|| {
+        t.ctx.at(&v.span(), format!("`{key}` is not a number TOML can hold"), format!("write it like `{example}`"))
+    })?;
     if !x.is_finite() {
-        return Err(t.ctx.at(&v.span(), format!("`{key}` must be a finite number, got {x}"), format!("write it like `{example}`")));
+        return Err(t.ctx.at(
+            &v.span(),
+            format!("`{key}` must be a finite number, got {x}"),
+            format!("write it like `{example}`"),
+        ));
     }
-    valid(x).map_err(|why| t.ctx.at(&v.span(), format!("`{key}` {why}, got {x}"), format!("write it like `{example}`")))?;
+    valid(x)
+        .map_err(|why| t.ctx.at(&v.span(), format!("`{key}` {why}, got {x}"), format!("write it like `{example}`")))?;
     Ok(x)
 }
 
@@ -766,7 +778,9 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             DeValue::Table(t) => t,
             // `[[name]]` of an unknown array of tables
             DeValue::Array(items)
-                if !SECTIONS.contains(&name) && !items.is_empty() && items.iter().all(|i| matches!(i.get_ref(), DeValue::Table(_))) =>
+                if !SECTIONS.contains(&name)
+                    && !items.is_empty()
+                    && items.iter().all(|i| matches!(i.get_ref(), DeValue::Table(_))) =>
             {
                 return Err(unknown_section(&ctx, &key.span(), &format!("[[{name}]]"), name));
             }
@@ -823,24 +837,32 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
     };
     let grass_defaults = match grass_section {
         None => GrassSettings::default(),
-        Some((span, table)) => {
-            plants::apply_grass(&Table { ctx: &ctx, label: "[grass]".into(), span, table }, GrassSettings::default(), check_inputs)?
-        }
+        Some((span, table)) => plants::apply_grass(
+            &Table { ctx: &ctx, label: "[grass]".into(), span, table },
+            GrassSettings::default(),
+            check_inputs,
+        )?,
     };
     let flower_defaults = match flower_section {
         None => FlowerSettings::default(),
-        Some((span, table)) => {
-            plants::apply_flower(&Table { ctx: &ctx, label: "[flower]".into(), span, table }, FlowerSettings::default())?
-        }
+        Some((span, table)) => plants::apply_flower(
+            &Table { ctx: &ctx, label: "[flower]".into(), span, table },
+            FlowerSettings::default(),
+        )?,
     };
-    let tree_height_set = tree_section.as_ref().is_some_and(|(_, table)| table.iter().any(|(k, _)| k.get_ref() == "height"));
+    let tree_height_set =
+        tree_section.as_ref().is_some_and(|(_, table)| table.iter().any(|(k, _)| k.get_ref() == "height"));
     let tree_defaults = match tree_section {
         None => TreeLook::default(),
-        Some((span, table)) => plants::apply_tree(&Table { ctx: &ctx, label: "[tree]".into(), span, table }, TreeLook::default())?,
+        Some((span, table)) => {
+            plants::apply_tree(&Table { ctx: &ctx, label: "[tree]".into(), span, table }, TreeLook::default())?
+        }
     };
     let mesh_defaults = match mesh_section {
         None => MeshLook::default(),
-        Some((span, table)) => plants::apply_mesh(&Table { ctx: &ctx, label: "[mesh]".into(), span, table }, MeshLook::default())?,
+        Some((span, table)) => {
+            plants::apply_mesh(&Table { ctx: &ctx, label: "[mesh]".into(), span, table }, MeshLook::default())?
+        }
     };
     let snow = match snow_section {
         None => None,
@@ -851,9 +873,18 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
                 "add a `[terrain]` section (e.g. `procedural = { kind = \"fbm\", size = 513, relief = 200.0 }`)",
             ));
         }
-        Some((span, table)) => Some(snow::parse_snow(&Table { ctx: &ctx, label: "[snow]".into(), span, table }, scene.seed)?),
+        Some((span, table)) => {
+            Some(snow::parse_snow(&Table { ctx: &ctx, label: "[snow]".into(), span, table }, scene.seed)?)
+        }
     };
-    let looks = Looks { grass: &grass_defaults, flower: &flower_defaults, tree: &tree_defaults, tree_height_set, mesh: &mesh_defaults, scene_seed: scene.seed };
+    let looks = Looks {
+        grass: &grass_defaults,
+        flower: &flower_defaults,
+        tree: &tree_defaults,
+        tree_height_set,
+        mesh: &mesh_defaults,
+        scene_seed: scene.seed,
+    };
     let mut species: Vec<SpeciesSettings> = Vec::new();
     if let Some((key_span, items)) = species_tables {
         if terrain.is_none() {
@@ -898,7 +929,11 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             let t = Table { ctx: &ctx, label: "[[view]]".into(), span: item.span(), table };
             let v = view::parse_view(&t, index)?;
             if views.iter().any(|e: &crate::scene::view::ViewSettings| e.name == v.name) {
-                return Err(ctx.at(&item.span(), format!("view `{}` is declared twice", v.name), "give each [[view]] its own name"));
+                return Err(ctx.at(
+                    &item.span(),
+                    format!("view `{}` is declared twice", v.name),
+                    "give each [[view]] its own name",
+                ));
             }
             views.push(v);
         }
@@ -932,8 +967,11 @@ fn sections_list() -> String {
 
 fn parse_scene(t: &Table<'_, '_>) -> Result<SceneSettings, PresetError> {
     t.check_keys(SCENE_KEYS, &[("[terrain]", TERRAIN_KEYS), ("`procedural`", PROCEDURAL_KEYS)])?;
-    let (name, name_span) = t.string("name", "name = \"alpine-valley\"")?.ok_or_else(|| t.missing("name", "name = \"my-scene\""))?;
-    check_scene_name(name).map_err(|why| t.ctx.at(&name_span, why, "use only letters, digits, `-` and `_`, e.g. `name = \"alpine-valley\"`"))?;
+    let (name, name_span) =
+        t.string("name", "name = \"alpine-valley\"")?.ok_or_else(|| t.missing("name", "name = \"my-scene\""))?;
+    check_scene_name(name).map_err(|why| {
+        t.ctx.at(&name_span, why, "use only letters, digits, `-` and `_`, e.g. `name = \"alpine-valley\"`")
+    })?;
     let seed = t.integer("seed", 0..=i64::MAX as u64, "seed = 42")?.map_or(0, |(s, _)| s);
 
     let mut formats = Vec::new();
@@ -1006,7 +1044,8 @@ fn parse_terrain(t: &Table<'_, '_>, scene_seed: u64, check_inputs: bool) -> Resu
         Some((s, span)) => choice::<MeshMode>(t, "mode", s, &span)?,
     };
     let max_error_m = t.number("max_error", "max_error = 1.0", non_negative)?.map_or(1.0, |(x, _)| x);
-    let max_triangles = t.integer("max_triangles", 2..=u32::MAX as u64, "max_triangles = 200000")?.map(|(n, _)| n as usize);
+    let max_triangles =
+        t.integer("max_triangles", 2..=u32::MAX as u64, "max_triangles = 200000")?.map(|(n, _)| n as usize);
     let grid_step = t.integer("grid_step", 1..=1 << 20, "grid_step = 2")?.map_or(1, |(n, _)| n as usize);
     let chunk = t.integer("chunk", 2..=1 << 20, "chunk = 256")?.map(|(n, _)| n as usize);
     let skirt_m = t.number("skirt", "skirt = 10.0", positive)?.map(|(x, _)| x);
@@ -1065,18 +1104,42 @@ struct Looks<'a> {
 /// offset (two grass species of one scene differ; renaming or `seed` reshuffles one alone).
 pub fn species_look_seed(scene_seed: u64, name: &str, species_seed: u64) -> u64 {
     let name_hash = name.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3));
-    crate::synth::mix64(scene_seed ^ crate::synth::mix64(name_hash ^ crate::synth::mix64(species_seed.wrapping_add(0x6c6f_6f6b))))
+    crate::synth::mix64(
+        scene_seed ^ crate::synth::mix64(name_hash ^ crate::synth::mix64(species_seed.wrapping_add(0x6c6f_6f6b))),
+    )
 }
 
-fn parse_look(t: &Table<'_, '_>, name: &str, kind: SpeciesKind, looks: &Looks<'_>, seed: u64, check_inputs: bool) -> Result<PlantLook, PresetError> {
-    for (key, owner) in [("grass", SpeciesKind::Grass), ("flower", SpeciesKind::Flower), ("tree", SpeciesKind::Tree), ("lsystem", SpeciesKind::Tree), ("mesh", SpeciesKind::Mesh), ("obj", SpeciesKind::Mesh)] {
+fn parse_look(
+    t: &Table<'_, '_>,
+    name: &str,
+    kind: SpeciesKind,
+    looks: &Looks<'_>,
+    seed: u64,
+    check_inputs: bool,
+) -> Result<PlantLook, PresetError> {
+    for (key, owner) in [
+        ("grass", SpeciesKind::Grass),
+        ("flower", SpeciesKind::Flower),
+        ("tree", SpeciesKind::Tree),
+        ("lsystem", SpeciesKind::Tree),
+        ("mesh", SpeciesKind::Mesh),
+        ("obj", SpeciesKind::Mesh),
+    ] {
         if let Some((k, _)) = t.get(key) {
             if kind != owner {
                 let owner_name = value_name_kind(owner);
-                let what = if matches!(key, "lsystem" | "obj") { format!("`{key} = \"…\"`") } else { format!("`{key} = {{ … }}`") };
+                let what = if matches!(key, "lsystem" | "obj") {
+                    format!("`{key} = \"…\"`")
+                } else {
+                    format!("`{key} = {{ … }}`")
+                };
                 return Err(t.ctx.at(
                     &k.span(),
-                    format!("{what} describes kind = \"{owner_name}\", but {} is kind = \"{}\"", t.label, value_name_kind(kind)),
+                    format!(
+                        "{what} describes kind = \"{owner_name}\", but {} is kind = \"{}\"",
+                        t.label,
+                        value_name_kind(kind)
+                    ),
                     format!("remove `{key}` or set `kind = \"{owner_name}\"`"),
                 ));
             }
@@ -1087,7 +1150,9 @@ fn parse_look(t: &Table<'_, '_>, name: &str, kind: SpeciesKind, looks: &Looks<'_
             let base = GrassSettings { seed: species_look_seed(looks.scene_seed, name, seed), ..looks.grass.clone() };
             match t.get("grass") {
                 None => PlantLook::Grass(base),
-                Some((_, v)) => PlantLook::Grass(plants::apply_grass(&plants::sub_table(t, "grass", v)?, base, check_inputs)?),
+                Some((_, v)) => {
+                    PlantLook::Grass(plants::apply_grass(&plants::sub_table(t, "grass", v)?, base, check_inputs)?)
+                }
             }
         }
         SpeciesKind::Flower => {
@@ -1118,11 +1183,15 @@ fn parse_look(t: &Table<'_, '_>, name: &str, kind: SpeciesKind, looks: &Looks<'_
             };
             let lsystem = match builtin {
                 Some(species) => library::path_of(species),
-                None => input_path(t, "lsystem", "lsystem = \"trees/birch.ls\"", check_inputs)?.expect("`lsystem` was found above"),
+                None => input_path(t, "lsystem", "lsystem = \"trees/birch.ls\"", check_inputs)?
+                    .expect("`lsystem` was found above"),
             };
-            let mut base = TreeLook { lsystem, seed: species_look_seed(looks.scene_seed, name, seed), ..looks.tree.clone() };
+            let mut base =
+                TreeLook { lsystem, seed: species_look_seed(looks.scene_seed, name, seed), ..looks.tree.clone() };
             let species_sets_height = match t.get("tree") {
-                Some((_, v)) => matches!(v.get_ref(), DeValue::Table(table) if table.iter().any(|(k, _)| k.get_ref() == "height")),
+                Some((_, v)) => {
+                    matches!(v.get_ref(), DeValue::Table(table) if table.iter().any(|(k, _)| k.get_ref() == "height"))
+                }
                 None => false,
             };
             if let Some(species) = builtin {
@@ -1139,7 +1208,11 @@ fn parse_look(t: &Table<'_, '_>, name: &str, kind: SpeciesKind, looks: &Looks<'_
                 if let Err(e) = crate::lsystem::parse::read_file(&look.lsystem, look.dialect) {
                     let (k, v) = t.get("lsystem").expect("lsystem was read above");
                     let _ = k;
-                    return Err(t.ctx.at(&v.span(), format!("the L-system of {} does not parse:\n{e}", t.label), "fix the file at the position shown, or force its format with `tree = { dialect = \"v5\" }`"));
+                    return Err(t.ctx.at(
+                        &v.span(),
+                        format!("the L-system of {} does not parse:\n{e}", t.label),
+                        "fix the file at the position shown, or force its format with `tree = { dialect = \"v5\" }`",
+                    ));
                 }
             }
             PlantLook::Tree(look)
@@ -1181,8 +1254,9 @@ fn parse_species(
     check_inputs: bool,
 ) -> Result<(SpeciesSettings, Range<usize>), PresetError> {
     let (name, name_span) = t.string("name", "name = \"oak\"")?.ok_or_else(|| t.missing("name", "name = \"oak\""))?;
-    check_species_name(name)
-        .map_err(|why| t.ctx.at(&name_span, why, "use only letters, digits, `-` and `_`, e.g. `name = \"scots-pine\"`"))?;
+    check_species_name(name).map_err(|why| {
+        t.ctx.at(&name_span, why, "use only letters, digits, `-` and `_`, e.g. `name = \"scots-pine\"`")
+    })?;
     // from here on, messages name the species
     let t = &Table { ctx: t.ctx, label: format!("[[species]] `{name}`"), span: t.span.clone(), table: t.table };
     t.check_keys(
@@ -1207,14 +1281,20 @@ fn parse_species(
         Some(("flower", _)) => SpeciesKind::Flower,
         Some(("tree", _)) => SpeciesKind::Tree,
         Some(("mesh", _)) => SpeciesKind::Mesh,
-        Some((other, span)) => return Err(unknown_value(t, "kind", other, &["grass", "flower", "tree", "mesh"], &span)),
+        Some((other, span)) => {
+            return Err(unknown_value(t, "kind", other, &["grass", "flower", "tree", "mesh"], &span))
+        }
     };
     let density_map = input_path(t, "density_map", "density_map = \"maps/grass.png\"", check_inputs)?;
     let mask = input_path(t, "mask", "mask = \"maps/meadow-mask.png\"", check_inputs)?;
     let max_density = t
         .number("max_density", "max_density = 0.5", positive)?
         .ok_or_else(|| {
-            t.ctx.at(&t.span, format!("{} has no `max_density`", t.label), "add `max_density = 0.5` (instances per square metre)")
+            t.ctx.at(
+                &t.span,
+                format!("{} has no `max_density`", t.label),
+                "add `max_density = 0.5` (instances per square metre)",
+            )
         })?
         .0;
 
@@ -1246,7 +1326,10 @@ fn parse_species(
         (Placement::Poisson, None) => {
             return Err(t.ctx.at(
                 &t.span,
-                format!("{} has no `min_spacing`, which placement = \"poisson\" needs (only trees have a default)", t.label),
+                format!(
+                    "{} has no `min_spacing`, which placement = \"poisson\" needs (only trees have a default)",
+                    t.label
+                ),
                 "add `min_spacing = 1.0` (metres between two instances) or use `placement = \"jittered\"`",
             ));
         }
@@ -1261,7 +1344,8 @@ fn parse_species(
         }
     })?
     .unwrap_or([0.0, 90.0]);
-    let altitude_m = pair(t, "altitude", "altitude = [200.0, 1800.0]", "metres", any_finite)?.unwrap_or(UNBOUNDED_ALTITUDE_M);
+    let altitude_m =
+        pair(t, "altitude", "altitude = [200.0, 1800.0]", "metres", any_finite)?.unwrap_or(UNBOUNDED_ALTITUDE_M);
     let water_level_m = t.number("water_level", "water_level = 2.0", any_finite)?.map(|(x, _)| x);
     let scale = match t.get("scale") {
         // a single number: every instance the same size
@@ -1350,10 +1434,8 @@ fn parse_exclusions(
         e.check_keys(EXCLUSION_KEYS, &[("[[species]]", SPECIES_KEYS)])?;
         let (other, span) =
             e.string("species", "species = \"oak\"")?.ok_or_else(|| e.missing("species", "species = \"oak\""))?;
-        let radius_m = e
-            .number("radius", "radius = 1.5", positive)?
-            .ok_or_else(|| e.missing("radius", "radius = 1.5"))?
-            .0;
+        let radius_m =
+            e.number("radius", "radius = 1.5", positive)?.ok_or_else(|| e.missing("radius", "radius = 1.5"))?.0;
         if other != this && !earlier.iter().any(|s| s.name == other) {
             let names: Vec<&str> = earlier.iter().map(|s| s.name.as_str()).chain([this]).collect();
             let remedy = match did_you_mean(other, &names) {
@@ -1393,7 +1475,8 @@ fn pair(
     valid: impl Fn(f64) -> Result<(), String>,
 ) -> Result<Option<[f64; 2]>, PresetError> {
     let Some((_, v)) = t.get(key) else { return Ok(None) };
-    let expected = if unit.is_empty() { "an array [min, max]".to_string() } else { format!("an array [min, max] in {unit}") };
+    let expected =
+        if unit.is_empty() { "an array [min, max]".to_string() } else { format!("an array [min, max] in {unit}") };
     let DeValue::Array(items) = v.get_ref() else {
         return Err(t.wrong_type(key, v, &expected, example));
     };
@@ -1487,9 +1570,11 @@ fn parse_procedural(
         Some(("ridged", _)) => NoiseKind::Ridged,
         Some((other, span)) => return Err(unknown_value(&t, "kind", other, &["fbm", "ridged"], &span)),
     };
-    let size = t.integer("size", PROCEDURAL_SIZES, "size = 513")?.ok_or_else(|| t.missing("size", "size = 513"))?.0 as usize;
+    let size =
+        t.integer("size", PROCEDURAL_SIZES, "size = 513")?.ok_or_else(|| t.missing("size", "size = 513"))?.0 as usize;
     let seed = t.integer("seed", 0..=i64::MAX as u64, "seed = 7")?.map_or(scene_seed, |(s, _)| s);
-    let relief_m = t.number("relief", "relief = 200.0", positive)?.ok_or_else(|| t.missing("relief", "relief = 200.0"))?.0;
+    let relief_m =
+        t.number("relief", "relief = 200.0", positive)?.ok_or_else(|| t.missing("relief", "relief = 200.0"))?.0;
     Ok(TerrainSource::Fbm { size, seed, relief_m, cell_size_m, noise })
 }
 
@@ -1503,7 +1588,11 @@ fn parse_heightmap(
         return Err(t.wrong_type("heightmap", value, "a path (a string)", "heightmap = \"heights/valley.png\""));
     };
     if relative.is_empty() {
-        return Err(t.ctx.at(&value.span(), "`heightmap` is empty", "name the heightmap file, relative to this preset"));
+        return Err(t.ctx.at(
+            &value.span(),
+            "`heightmap` is empty",
+            "name the heightmap file, relative to this preset",
+        ));
     }
     let path = resolve(t.ctx.file, Path::new(relative.as_ref()));
     let mut decode = DecodeOptions { cell_size_m, ..DecodeOptions::default() };

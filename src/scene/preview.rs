@@ -264,7 +264,11 @@ const SNOW_MAX_OPACITY: f32 = 0.85;
 /// weight at its centre (× [`SNOW_MAX_OPACITY`]). Draw it before the placements, so they stay on top.
 pub fn draw_cover(canvas: &mut Canvas, view: &OrthoView, mask: &crate::snow::CoverMask) {
     let w = canvas.width as usize;
-    if w == 0 || canvas.color.len() != w * canvas.height as usize || view.pixels_per_metre.is_nan() || view.pixels_per_metre <= 0.0 {
+    if w == 0
+        || canvas.color.len() != w * canvas.height as usize
+        || view.pixels_per_metre.is_nan()
+        || view.pixels_per_metre <= 0.0
+    {
         return;
     }
     // pixel (i, j) of a top-down view has its centre at x = origin.x + (i + ½)/ppm, z = origin.z + (j + ½)/ppm
@@ -491,7 +495,9 @@ pub fn draw_placements(canvas: &mut Canvas, view: &OrthoView, layers: &[PreviewL
                 }
             }
             let mean = layer.positions.len() as f64 / (w * h) as f64;
-            let radius = (0..=MAX_SHADE_RADIUS).find(|r| mean * ((2 * r + 1) * (2 * r + 1)) as f64 >= SHADE_WINDOW_COUNT).unwrap_or(MAX_SHADE_RADIUS);
+            let radius = (0..=MAX_SHADE_RADIUS)
+                .find(|r| mean * ((2 * r + 1) * (2 * r + 1)) as f64 >= SHADE_WINDOW_COUNT)
+                .unwrap_or(MAX_SHADE_RADIUS);
             (layer, box_filter(&counts, w, h, radius))
         })
         .collect();
@@ -514,7 +520,8 @@ pub fn draw_placements(canvas: &mut Canvas, view: &OrthoView, layers: &[PreviewL
     for layer in layers.iter().filter(|l| draws_as_discs(l, ppm, w * h)) {
         let r = (layer.footprint_m * ppm).max(MIN_DISC_PX) / 2.0;
         let rim = if 2.0 * r >= RIM_FROM_PX { r - 1.0 } else { f64::INFINITY };
-        let dark = [layer.color[0] * RIM_FACTOR, layer.color[1] * RIM_FACTOR, layer.color[2] * RIM_FACTOR, layer.color[3]];
+        let dark =
+            [layer.color[0] * RIM_FACTOR, layer.color[1] * RIM_FACTOR, layer.color[2] * RIM_FACTOR, layer.color[3]];
         for &p in &layer.positions {
             let Some((cx, cy)) = pixel(p) else { continue };
             // pixels whose centre lies in the disc
@@ -586,7 +593,11 @@ mod placement_tests {
     fn trees_are_discs_of_their_footprint_and_at_least_three_pixels() {
         // a sub-pixel crown: a 3 px disc (the 3×3 pixels whose centres are within 1.5 px)
         let (mut c, view) = blank();
-        draw_placements(&mut c, &view, &[layer(SpeciesKind::Tree, TREE, 0.4, vec![[20.5, 0.0, 30.5], [70.5, 0.0, 60.5]])]);
+        draw_placements(
+            &mut c,
+            &view,
+            &[layer(SpeciesKind::Tree, TREE, 0.4, vec![[20.5, 0.0, 30.5], [70.5, 0.0, 60.5]])],
+        );
         assert_eq!(covered(&c), 2 * 9);
         assert!(c.color[30 * 100 + 20][3] > 0.9 && c.color[31 * 100 + 21][3] > 0.9 && c.color[32 * 100 + 20][3] == 0.0);
         // a 9 m crown: about π·4.5² pixels, its own colour inside and a darker rim
@@ -599,7 +610,11 @@ mod placement_tests {
         assert!(rim[3] > 0.9 && rim[1] < 0.7 * inside[1], "{rim:?}");
         // far outside the view: nothing drawn, no panic
         let (mut c, view) = blank();
-        draw_placements(&mut c, &view, &[layer(SpeciesKind::Tree, TREE, 9.0, vec![[-1e9, 0.0, 5.0], [f64::NAN, 0.0, 1.0]])]);
+        draw_placements(
+            &mut c,
+            &view,
+            &[layer(SpeciesKind::Tree, TREE, 9.0, vec![[-1e9, 0.0, 5.0], [f64::NAN, 0.0, 1.0]])],
+        );
         assert_eq!(covered(&c), 0);
     }
 
@@ -615,7 +630,10 @@ mod placement_tests {
         }
         let (mut c, view) = blank();
         // the tree comes first in the list but is drawn over the shading
-        let layers = [layer(SpeciesKind::Tree, TREE, 6.0, vec![[25.5, 0.0, 50.5]]), layer(SpeciesKind::Grass, GRASS, 0.24, grass)];
+        let layers = [
+            layer(SpeciesKind::Tree, TREE, 6.0, vec![[25.5, 0.0, 50.5]]),
+            layer(SpeciesKind::Grass, GRASS, 0.24, grass),
+        ];
         draw_placements(&mut c, &view, &layers);
         let mean_alpha = |x0: usize, x1: usize| {
             let (mut sum, mut n) = (0.0, 0);

@@ -11,9 +11,9 @@ use crate::export::{self, table};
 use crate::mesh::Scene;
 use crate::plants::marker;
 use crate::scatter::density::DensityMap;
+use crate::scatter::rules::SnowThinning;
 use crate::scatter::stats::{analyze, SpeciesStats};
 use crate::scatter::surface::SurfaceIndex;
-use crate::scatter::rules::SnowThinning;
 use crate::scatter::{scatter_species_snow, Instance, RuleCounts};
 use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::stages::StageError;
@@ -70,7 +70,8 @@ pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageEr
         k.add(serde_json::to_string(s).unwrap_or_default().as_bytes());
         crate::scene::plants_stage::add_look_inputs(&mut k, &s.name, &s.look)?;
         for map in [&s.density_map, &s.mask].into_iter().flatten() {
-            let bytes = crate::input::read_limited(map, crate::input::MAX_IMAGE_BYTES, "a density map or mask").map_err(|e| fail(e.to_string()))?;
+            let bytes = crate::input::read_limited(map, crate::input::MAX_IMAGE_BYTES, "a density map or mask")
+                .map_err(|e| fail(e.to_string()))?;
             k.add(sha256_hex(&bytes).as_bytes());
         }
     }
@@ -97,7 +98,11 @@ pub struct Placed {
 }
 
 /// Runs the scatter stage into `scene_dir`.
-pub fn run_scatter(preset: &Preset, terrain: &Scene, scene_dir: &Path) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
+pub fn run_scatter(
+    preset: &Preset,
+    terrain: &Scene,
+    scene_dir: &Path,
+) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
     run_scatter_with_snow(preset, terrain, scene_dir, None)
 }
 
@@ -118,9 +123,12 @@ pub fn run_scatter_with_snow(
         let t1 = Instant::now();
         let density = load_map(&species.density_map)?;
         let mask = load_map(&species.mask)?;
-        let earlier: Vec<(&str, &[Instance])> = placed.iter().map(|p| (p.species.name.as_str(), &p.instances[..])).collect();
+        let earlier: Vec<(&str, &[Instance])> =
+            placed.iter().map(|p| (p.species.name.as_str(), &p.instances[..])).collect();
         let thinning = match (snow_mask, &preset.snow, species.kind) {
-            (Some(mask), Some(snow), crate::scene::SpeciesKind::Grass | crate::scene::SpeciesKind::Flower) if snow.thin_plants > 0.0 => {
+            (Some(mask), Some(snow), crate::scene::SpeciesKind::Grass | crate::scene::SpeciesKind::Flower)
+                if snow.thin_plants > 0.0 =>
+            {
                 Some(SnowThinning { mask, strength: snow.thin_plants })
             }
             _ => None,
@@ -138,8 +146,18 @@ pub fn run_scatter_with_snow(
         )
         .map_err(|e| fail(e.to_string()))?;
         let generate_s = t1.elapsed().as_secs_f64();
-        let stats = analyze(&surface, extent, species, density.as_ref(), mask.as_ref(), thinning, &result.instances, preset.scatter.tile_m, generate_s)
-            .map_err(|e| fail(e.to_string()))?;
+        let stats = analyze(
+            &surface,
+            extent,
+            species,
+            density.as_ref(),
+            mask.as_ref(),
+            thinning,
+            &result.instances,
+            preset.scatter.tile_m,
+            generate_s,
+        )
+        .map_err(|e| fail(e.to_string()))?;
         let csv = PathBuf::from("placements").join(format!("{}.csv", species.name));
         table::write_placements_csv(&scene_dir.join(&csv), &result.instances).map_err(|e| fail(e.to_string()))?;
         let report = SpeciesReport {
@@ -159,11 +177,17 @@ pub fn run_scatter_with_snow(
         }
         let mut json = serde_json::to_string_pretty(&summary).map_err(|e| fail(e.to_string()))?;
         json.push('\n');
-        export::write_atomic(&scene_dir.join(csv.with_extension("json")), json.as_bytes()).map_err(|e| fail(e.to_string()))?;
+        export::write_atomic(&scene_dir.join(csv.with_extension("json")), json.as_bytes())
+            .map_err(|e| fail(e.to_string()))?;
         reports.push(report);
-        placed.push(Placed { species: species.clone(), color: marker::species_color(species.kind, index), instances: result.instances });
+        placed.push(Placed {
+            species: species.clone(),
+            color: marker::species_color(species.kind, index),
+            instances: result.instances,
+        });
     }
-    let report = ScatterStageReport { tile_m: preset.scatter.tile_m, species: reports, seconds: t0.elapsed().as_secs_f64() };
+    let report =
+        ScatterStageReport { tile_m: preset.scatter.tile_m, species: reports, seconds: t0.elapsed().as_secs_f64() };
     Ok((report, placed))
 }
 
@@ -181,6 +205,13 @@ struct SpeciesSummary<'a> {
 
 impl<'a> From<&'a SpeciesReport> for SpeciesSummary<'a> {
     fn from(r: &'a SpeciesReport) -> Self {
-        SpeciesSummary { species: &r.name, kind: r.kind, count: r.count, table: &r.csv, rules: &r.rules, stats: &r.stats }
+        SpeciesSummary {
+            species: &r.name,
+            kind: r.kind,
+            count: r.count,
+            table: &r.csv,
+            rules: &r.rules,
+            stats: &r.stats,
+        }
     }
 }

@@ -89,7 +89,12 @@ fn rel(scene_dir: &Path, files: Vec<PathBuf>) -> Vec<PathBuf> {
 }
 
 /// Runs the snow stage into `scene_dir/snow/` on `terrain` (the terrain stage's main scene).
-pub fn run_snow(_preset: &Preset, s: &SnowSettings, terrain: &Scene, scene_dir: &Path) -> Result<SnowStageReport, StageError> {
+pub fn run_snow(
+    _preset: &Preset,
+    s: &SnowSettings,
+    terrain: &Scene,
+    scene_dir: &Path,
+) -> Result<SnowStageReport, StageError> {
     let t0 = Instant::now();
     let dir = scene_dir.join(SNOW_DIR);
     let err = |e: snow::SnowError| fail(e.to_string());
@@ -111,7 +116,8 @@ pub fn run_snow(_preset: &Preset, s: &SnowSettings, terrain: &Scene, scene_dir: 
     let cover_s = t1.elapsed().as_secs_f64();
 
     let t1 = Instant::now();
-    let mut files = rel(scene_dir, snow::write_snowfall(&dir, &atlas, &s.emitter, &particles, s.flakes.alpha_cutoff).map_err(err)?);
+    let mut files =
+        rel(scene_dir, snow::write_snowfall(&dir, &atlas, &s.emitter, &particles, s.flakes.alpha_cutoff).map_err(err)?);
     files.extend(rel(scene_dir, snow::write_cover(&dir, &mask, layer.as_ref()).map_err(err)?));
     let terrain_file = PathBuf::from(SNOW_DIR).join(TERRAIN_FILE);
     let written = export::write_scene(&covered, &scene_dir.join(&terrain_file)).map_err(|e| fail(e.to_string()))?;
@@ -145,13 +151,22 @@ pub fn run_snow(_preset: &Preset, s: &SnowSettings, terrain: &Scene, scene_dir: 
         particles: particles.len(),
         layer_triangles,
         analysis,
-        seconds: SnowSeconds { atlas: atlas_s, particles: particles_s, cover: cover_s, write: write_s, analyze: analyze_s, total: t0.elapsed().as_secs_f64() },
+        seconds: SnowSeconds {
+            atlas: atlas_s,
+            particles: particles_s,
+            cover: cover_s,
+            write: write_s,
+            analyze: analyze_s,
+            total: t0.elapsed().as_secs_f64(),
+        },
     })
 }
 
 /// The cover mask as stored in `snow/cover_mask.png`, placed over the terrain as the report says.
 pub fn load_mask(scene_dir: &Path, info: &MaskInfo) -> Result<CoverMask, StageError> {
     let path = scene_dir.join(&info.file);
-    let bytes = std::fs::read(&path).map_err(|e| fail(format!("{}: cannot read the cover mask: {e}", path.display())))?;
-    CoverMask::from_png(&bytes, info.min_x, info.min_z, info.metres_per_pixel).map_err(|e| fail(format!("{}: {e}", path.display())))
+    let bytes =
+        std::fs::read(&path).map_err(|e| fail(format!("{}: cannot read the cover mask: {e}", path.display())))?;
+    CoverMask::from_png(&bytes, info.min_x, info.min_z, info.metres_per_pixel)
+        .map_err(|e| fail(format!("{}: {e}", path.display())))
 }

@@ -14,9 +14,9 @@ use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
-use crate::terrain::layers::{bake_layers, LayerReport};
 use crate::terrain::error::measure;
 use crate::terrain::job::{mesh_samples, MeshMode};
+use crate::terrain::layers::{bake_layers, LayerReport};
 use crate::terrain::SampleMesh;
 
 /// The stages in build order. Later issues add scatter, grass, trees and snow.
@@ -40,7 +40,8 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 6] = [Stage::Terrain, Stage::Snow, Stage::Plants, Stage::Scatter, Stage::View, Stage::Preview];
+    pub const ALL: [Stage; 6] =
+        [Stage::Terrain, Stage::Snow, Stage::Plants, Stage::Scatter, Stage::View, Stage::Preview];
     pub fn name(self) -> &'static str {
         match self {
             Stage::Terrain => "terrain",
@@ -128,12 +129,14 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
     let f = fail(Stage::Terrain);
     match &t.source {
         TerrainSource::Heightmap { path, decode } => {
-            let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap").map_err(|e| f(e.to_string()))?;
+            let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+                .map_err(|e| f(e.to_string()))?;
             let d = heightfield::decode(path, &bytes, decode).map_err(|e| f(e.to_string()))?;
             Ok((d.heightfield, d.voids_filled, Some(sha256_hex(&bytes))))
         }
         source => {
-            let hf = procedural_heightfield(source).ok_or_else(|| f("the procedural terrain could not be generated".into()))?;
+            let hf = procedural_heightfield(source)
+                .ok_or_else(|| f("the procedural terrain could not be generated".into()))?;
             Ok((hf, 0, None))
         }
     }
@@ -162,21 +165,24 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
         k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
     }
     if let TerrainSource::Heightmap { path, .. } = &t.source {
-        let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap").map_err(|e| fail(Stage::Terrain)(e.to_string()))?;
+        let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+            .map_err(|e| fail(Stage::Terrain)(e.to_string()))?;
         k.add(sha256_hex(&bytes).as_bytes());
     }
     Ok(k.finish())
 }
 
 fn mesh_at(t: &TerrainSettings, hf: &Heightfield, max_error_m: f64) -> Result<(SampleMesh, bool), StageError> {
-    mesh_samples(hf, t.mode, t.grid_step, max_error_m, t.max_triangles, &crate::terrain::stored::Storage::f32(hf)).map_err(|e| fail(Stage::Terrain)(e.to_string()))
+    mesh_samples(hf, t.mode, t.grid_step, max_error_m, t.max_triangles, &crate::terrain::stored::Storage::f32(hf))
+        .map_err(|e| fail(Stage::Terrain)(e.to_string()))
 }
 
 fn write_formats(preset: &Preset, scene: &Scene, scene_dir: &Path, stem: &str) -> Result<Vec<PathBuf>, StageError> {
     let mut files = Vec::new();
     for fmt in &preset.scene.formats {
         let rel = PathBuf::from("terrain").join(format!("{stem}.{}", fmt.extension()));
-        let written = export::write_scene(scene, &scene_dir.join(&rel)).map_err(|e| fail(Stage::Terrain)(e.to_string()))?;
+        let written =
+            export::write_scene(scene, &scene_dir.join(&rel)).map_err(|e| fail(Stage::Terrain)(e.to_string()))?;
         for w in written {
             let rel = w.strip_prefix(scene_dir).map(Path::to_path_buf).unwrap_or(w);
             files.push(rel);
@@ -186,7 +192,11 @@ fn write_formats(preset: &Preset, scene: &Scene, scene_dir: &Path, stem: &str) -
 }
 
 /// Runs the terrain stage into `scene_dir`; returns its report and the main scene (for the preview).
-pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Result<(TerrainStageReport, Scene), StageError> {
+pub fn run_terrain(
+    preset: &Preset,
+    t: &TerrainSettings,
+    scene_dir: &Path,
+) -> Result<(TerrainStageReport, Scene), StageError> {
     let f = fail(Stage::Terrain);
     let t0 = Instant::now();
     let (hf, voids_filled, input_sha256) = terrain_heights(t)?;
@@ -217,11 +227,14 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
         }
     };
 
-    let build_opts = |name: String| BuildOptions { chunk_samples: t.chunk, skirt_depth_m: t.skirt_m, base_depth_m: t.base_m, name };
+    let build_opts =
+        |name: String| BuildOptions { chunk_samples: t.chunk, skirt_depth_m: t.skirt_m, base_depth_m: t.base_m, name };
     let t1 = Instant::now();
     let layers = bake_layers(&hf);
     let textured = |mut scene: Scene| -> Result<Scene, StageError> {
-        layers.texture(&mut scene, "terrain").map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
+        layers
+            .texture(&mut scene, "terrain")
+            .map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
         Ok(scene)
     };
     let scene = textured(build_scene(&hf, &mesh, &build_opts("terrain".into())).map_err(|e| f(e.to_string()))?)?;
@@ -239,7 +252,8 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
     let mut lods = Vec::new();
     for level in chain {
         let stem = format!("terrain_LOD{}", level.level);
-        let lod_scene = textured(build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| f(e.to_string()))?)?;
+        let lod_scene =
+            textured(build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| f(e.to_string()))?)?;
         let files = write_formats(preset, &lod_scene, scene_dir, &stem)?;
         lods.push(LodInfo {
             level: level.level,
@@ -275,7 +289,12 @@ pub fn run_terrain(preset: &Preset, t: &TerrainSettings, scene_dir: &Path) -> Re
         mode: t.mode,
         max_error_requested_m: (t.mode == MeshMode::Tin).then_some(t.max_error_m),
         max_error_m: stats.max_error_m,
-        max_error_f64_m: crate::terrain::error::exact_max_error(&hf, &mesh, &stats, &crate::terrain::stored::Storage::f32(&hf)),
+        max_error_f64_m: crate::terrain::error::exact_max_error(
+            &hf,
+            &mesh,
+            &stats,
+            &crate::terrain::stored::Storage::f32(&hf),
+        ),
         rms_error_m: stats.rms_error_m,
         worst_sample: stats.worst_sample,
         hit_triangle_limit,
@@ -355,21 +374,36 @@ pub fn run_preview(
     let file = PathBuf::from("preview.png");
     let Some((scene, camera)) = view else {
         crate::scene::preview::write_png(&canvas, &scene_dir.join(&file)).map_err(|e| f(e.to_string()))?;
-        return Ok(PreviewStageReport { file, width_px: canvas.width, height_px: canvas.height, map: None, view: None, seconds: t0.elapsed().as_secs_f64() });
+        return Ok(PreviewStageReport {
+            file,
+            width_px: canvas.width,
+            height_px: canvas.height,
+            map: None,
+            view: None,
+            seconds: t0.elapsed().as_secs_f64(),
+        });
     };
     // the map keeps the top-down drawing; preview.png is the scene as the first view sees it
     let map = PathBuf::from("map.png");
     crate::scene::preview::write_png(&canvas, &scene_dir.join(&map)).map_err(|e| f(e.to_string()))?;
     let scale = (PREVIEW_VIEW_WIDTH_PX as f64 / camera.size_px[0] as f64).min(1.0);
-    let (w, h) = ((camera.size_px[0] as f64 * scale).round().max(16.0) as u32, (camera.size_px[1] as f64 * scale).round().max(16.0) as u32);
-    let (render, figures) = crate::scene::view_render::render_view(scene, camera, w, h).map_err(|e| f(format!("scene.glb: {e}")))?;
+    let (w, h) = (
+        (camera.size_px[0] as f64 * scale).round().max(16.0) as u32,
+        (camera.size_px[1] as f64 * scale).round().max(16.0) as u32,
+    );
+    let (render, figures) =
+        crate::scene::view_render::render_view(scene, camera, w, h).map_err(|e| f(format!("scene.glb: {e}")))?;
     crate::scene::preview::write_png(&render, &scene_dir.join(&file)).map_err(|e| f(e.to_string()))?;
     Ok(PreviewStageReport {
         file,
         width_px: w,
         height_px: h,
         map: Some(map),
-        view: Some(PreviewViewFigures { camera: camera.name.clone(), triangles: figures.triangles, instances: figures.instances }),
+        view: Some(PreviewViewFigures {
+            camera: camera.name.clone(),
+            triangles: figures.triangles,
+            instances: figures.instances,
+        }),
         seconds: t0.elapsed().as_secs_f64(),
     })
 }

@@ -191,7 +191,11 @@ mod tests {
         let yaw = ViewSettings { yaw_pitch_deg: Some([90.0, 0.0]), ..ViewSettings::default_view() };
         let c = yaw.resolve([0.0, 0.0, 10.0, 10.0], flat).unwrap();
         assert!((c.forward[0] - 1.0).abs() < 1e-12);
-        let same = ViewSettings { position: Some([1.0, 2.0, 3.0]), target: Some([1.0, 2.0, 3.0]), ..ViewSettings::default_view() };
+        let same = ViewSettings {
+            position: Some([1.0, 2.0, 3.0]),
+            target: Some([1.0, 2.0, 3.0]),
+            ..ViewSettings::default_view()
+        };
         assert!(same.resolve([0.0, 0.0, 10.0, 10.0], flat).unwrap_err().contains("target"));
     }
 
@@ -211,7 +215,13 @@ mod tests {
     #[test]
     fn the_reference_view_has_factor_one_and_sharper_views_more() {
         let policy = LodView::default();
-        let c = Camera { name: "v".into(), eye: [0.0; 3], forward: [0.0, 0.0, -1.0], fov_y_deg: policy.fov_y_deg, size_px: [1920, 1080] };
+        let c = Camera {
+            name: "v".into(),
+            eye: [0.0; 3],
+            forward: [0.0, 0.0, -1.0],
+            fov_y_deg: policy.fov_y_deg,
+            size_px: [1920, 1080],
+        };
         assert!((view_distance_factor(&c, &policy) - 1.0).abs() < 1e-12);
         let tall = Camera { size_px: [3840, 2160], ..c.clone() };
         assert!((view_distance_factor(&tall, &policy) - 2.0).abs() < 1e-12);

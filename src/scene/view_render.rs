@@ -72,12 +72,16 @@ pub struct RenderFigures {
 pub fn render_view(scene: &Scene, camera: &Camera, width: u32, height: u32) -> Result<(Canvas, RenderFigures), String> {
     let mut canvas = Canvas::new(width, height, SKY).map_err(|e| e.to_string())?;
     // normal maps hold data (glTF reads them as linear values), colour textures sRGB
-    let is_data: Vec<bool> = (0..scene.textures.len()).map(|t| scene.materials.iter().any(|m| m.normal_texture == Some(t))).collect();
+    let is_data: Vec<bool> =
+        (0..scene.textures.len()).map(|t| scene.materials.iter().any(|m| m.normal_texture == Some(t))).collect();
     let textures: Vec<Image> = scene
         .textures
         .iter()
         .zip(&is_data)
-        .map(|(t, &data)| if data { Image::from_png_data(&t.png) } else { Image::from_png(&t.png) }.map_err(|e| format!("texture `{}`: {e}", t.name)))
+        .map(|(t, &data)| {
+            if data { Image::from_png_data(&t.png) } else { Image::from_png(&t.png) }
+                .map_err(|e| format!("texture `{}`: {e}", t.name))
+        })
         .collect::<Result<_, _>>()?;
     let cam = raster_camera(camera, width, height);
     let mut figures = RenderFigures::default();
@@ -100,11 +104,17 @@ pub fn render_view(scene: &Scene, camera: &Camera, width: u32, height: u32) -> R
                 Some(inst) => {
                     for k in 0..inst.translations.len() {
                         let m = mul(&world, &trs_matrix(inst.translations[k], inst.rotations[k], inst.scales[k]));
-                        figures.triangles += render_mesh(&mut canvas, &cam, &m, mesh, &scene.materials, &textures, &opts).triangles as u64;
+                        figures.triangles +=
+                            render_mesh(&mut canvas, &cam, &m, mesh, &scene.materials, &textures, &opts).triangles
+                                as u64;
                         figures.instances += 1;
                     }
                 }
-                None => figures.triangles += render_mesh(&mut canvas, &cam, &world, mesh, &scene.materials, &textures, &opts).triangles as u64,
+                None => {
+                    figures.triangles +=
+                        render_mesh(&mut canvas, &cam, &world, mesh, &scene.materials, &textures, &opts).triangles
+                            as u64
+                }
             }
         }
         stack.extend(node.children.iter().rev().map(|&c| (c, world)));

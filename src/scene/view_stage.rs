@@ -282,7 +282,8 @@ pub fn run_view(
     compare_full_detail: bool,
 ) -> Result<ViewStageReport, StageError> {
     let t0 = Instant::now();
-    let mut asm = Assembler { dir: scene_dir, files: BTreeMap::new(), scene: Scene::default(), meshes: BTreeMap::new() };
+    let mut asm =
+        Assembler { dir: scene_dir, files: BTreeMap::new(), scene: Scene::default(), meshes: BTreeMap::new() };
     let main = asm.file(terrain.main)?.clone();
     let surface = {
         let parts: Vec<(&[[f32; 3]], &[u32])> =
@@ -305,20 +306,27 @@ pub fn run_view(
         }
     }
     let chunked = !levels.is_empty()
-        && levels.iter().try_fold(true, |ok, (f, _)| Ok::<bool, StageError>(ok && asm.file(f)?.meshes.len() == main.meshes.len()))?;
+        && levels.iter().try_fold(true, |ok, (f, _)| {
+            Ok::<bool, StageError>(ok && asm.file(f)?.meshes.len() == main.meshes.len())
+        })?;
 
     // placements and chains
     let chains: BTreeMap<&str, &SpeciesChain> =
         plants.map(|p| p.species.iter().map(|s| (s.name.as_str(), &s.chain)).collect()).unwrap_or_default();
     let mut rows_of: Vec<Vec<table::PlacementRow>> = Vec::with_capacity(preset.species.len());
     for s in &preset.species {
-        let rel = tables.iter().find(|(n, _)| *n == s.name).map(|(_, p)| p.clone()).unwrap_or_else(|| PathBuf::from("placements").join(format!("{}.csv", s.name)));
+        let rel = tables
+            .iter()
+            .find(|(n, _)| *n == s.name)
+            .map(|(_, p)| p.clone())
+            .unwrap_or_else(|| PathBuf::from("placements").join(format!("{}.csv", s.name)));
         let path = scene_dir.join(&rel);
         rows_of.push(table::read_placements_csv(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?);
     }
 
     // full detail (first view, when compared): the main terrain, every row at its variant's LoD0
-    let mut full = Assembler { dir: scene_dir, files: BTreeMap::new(), scene: Scene::default(), meshes: BTreeMap::new() };
+    let mut full =
+        Assembler { dir: scene_dir, files: BTreeMap::new(), scene: Scene::default(), meshes: BTreeMap::new() };
     if compare_full_detail {
         let mut children = Vec::new();
         for c in 0..main.meshes.len() {
@@ -369,7 +377,11 @@ pub fn run_view(
             t_calls += mesh.primitives.len();
             if write {
                 let mi = asm.mesh(&file, index)?;
-                asm.scene.nodes.push(Node { name: asm.scene.meshes[mi].name.clone(), mesh: Some(mi), ..Node::default() });
+                asm.scene.nodes.push(Node {
+                    name: asm.scene.meshes[mi].name.clone(),
+                    mesh: Some(mi),
+                    ..Node::default()
+                });
                 terrain_children.push(asm.scene.nodes.len() - 1);
             }
         }
@@ -378,16 +390,25 @@ pub fn run_view(
             asm.scene.roots.push(asm.scene.nodes.len() - 1);
         }
         let (mut triangles, mut draw_calls) = (t_tris, t_calls);
-        let (mut full_triangles, mut full_calls) = (t_full, main.meshes.iter().map(|m| m.primitives.len()).sum::<usize>());
+        let (mut full_triangles, mut full_calls) =
+            (t_full, main.meshes.iter().map(|m| m.primitives.len()).sum::<usize>());
 
         let mut species_reports = Vec::with_capacity(preset.species.len());
         for (s, rows) in preset.species.iter().zip(&rows_of) {
             let Some(chain) = chains.get(s.name.as_str()).filter(|c| !c.variants.is_empty()) else {
-                species_reports.push(SpeciesDraw { name: s.name.clone(), placed: rows.len(), drawn: 0, culled: 0, cull: None, levels: Vec::new() });
+                species_reports.push(SpeciesDraw {
+                    name: s.name.clone(),
+                    placed: rows.len(),
+                    drawn: 0,
+                    culled: 0,
+                    cull: None,
+                    levels: Vec::new(),
+                });
                 continue;
             };
             let nlevels = chain.variants.iter().map(Vec::len).max().unwrap_or(0);
-            let last_switch = chain.variants.iter().filter_map(|v| v.last()).map(|l| l.switch_distance_m).fold(0.0, f64::max);
+            let last_switch =
+                chain.variants.iter().filter_map(|v| v.last()).map(|l| l.switch_distance_m).fold(0.0, f64::max);
             let cull = cull_distance(s.cull_distance_m, chain.height_m, last_switch, &preset.lod);
             // (variant, level) → instances
             let mut groups: BTreeMap<(usize, usize), Instances> = BTreeMap::new();
@@ -411,7 +432,12 @@ pub fn run_view(
             let mut level_draws: Vec<LevelDraw> = (0..nlevels)
                 .map(|level| LevelDraw {
                     level,
-                    switch_distance_m: chain.variants.iter().filter_map(|v| v.get(level)).map(|l| l.switch_distance_m).collect(),
+                    switch_distance_m: chain
+                        .variants
+                        .iter()
+                        .filter_map(|v| v.get(level))
+                        .map(|l| l.switch_distance_m)
+                        .collect(),
                     instances: 0,
                     triangles: 0,
                 })
@@ -457,7 +483,14 @@ pub fn run_view(
                 asm.scene.roots.push(asm.scene.nodes.len() - 1);
             }
             let drawn = rows.len() - culled;
-            species_reports.push(SpeciesDraw { name: s.name.clone(), placed: rows.len(), drawn, culled, cull: Some(cull), levels: level_draws });
+            species_reports.push(SpeciesDraw {
+                name: s.name.clone(),
+                placed: rows.len(),
+                drawn,
+                culled,
+                cull: Some(cull),
+                levels: level_draws,
+            });
         }
         reports.push(ViewReport {
             camera: camera.clone(),
@@ -475,13 +508,28 @@ pub fn run_view(
         if let Some(first) = reports.first_mut() {
             let t = Instant::now();
             let [w, h] = COMPARE_SIZE_PX;
-            let mut c = ImageComparison { size_px: [w, h], differing: 0.0, threshold: COMPARE_THRESHOLD, color_rmse: 0.0, skipped: None, seconds: 0.0 };
+            let mut c = ImageComparison {
+                size_px: [w, h],
+                differing: 0.0,
+                threshold: COMPARE_THRESHOLD,
+                color_rmse: 0.0,
+                skipped: None,
+                seconds: 0.0,
+            };
             if first.full_detail_triangles > MAX_COMPARE_TRIANGLES {
-                c.skipped = Some(format!("{} full-detail triangles, over the {MAX_COMPARE_TRIANGLES} the comparison renders", first.full_detail_triangles));
+                c.skipped = Some(format!(
+                    "{} full-detail triangles, over the {MAX_COMPARE_TRIANGLES} the comparison renders",
+                    first.full_detail_triangles
+                ));
             } else {
-                let render = |s: &Scene| crate::scene::view_render::render_view(s, &first.camera, w, h).map(|(canvas, _)| canvas).map_err(fail);
+                let render = |s: &Scene| {
+                    crate::scene::view_render::render_view(s, &first.camera, w, h)
+                        .map(|(canvas, _)| canvas)
+                        .map_err(fail)
+                };
                 let (lod, detail) = (render(&asm.scene)?, render(&full.scene)?);
-                (c.differing, c.color_rmse) = crate::scene::view_render::image_difference(&lod, &detail, COMPARE_THRESHOLD);
+                (c.differing, c.color_rmse) =
+                    crate::scene::view_render::image_difference(&lod, &detail, COMPARE_THRESHOLD);
             }
             c.seconds = t.elapsed().as_secs_f64();
             first.image = Some(c);
@@ -547,7 +595,13 @@ mod tests {
 
     #[test]
     fn the_centre_follows_rotation_and_scale() {
-        let row = table::PlacementRow { position: [1.0, 2.0, 3.0], rotation: [0.0, 0.0, 0.0, 1.0], scale: [2.0; 3], yaw_deg: 0.0, tile: 0 };
+        let row = table::PlacementRow {
+            position: [1.0, 2.0, 3.0],
+            rotation: [0.0, 0.0, 0.0, 1.0],
+            scale: [2.0; 3],
+            yaw_deg: 0.0,
+            tile: 0,
+        };
         assert_eq!(instance_centre(&row, 5.0), [1.0, 12.0, 3.0]);
         // tipped 90° about +Z: up becomes −X
         let h = std::f32::consts::FRAC_1_SQRT_2;

@@ -59,7 +59,10 @@ impl Default for CoverSettings {
 
 impl CoverSettings {
     pub fn check(&self) -> Result<(), SnowError> {
-        if !within(self.full_slope_deg, 0.0, 90.0) || !within(self.max_slope_deg, 0.0, 90.0) || self.full_slope_deg >= self.max_slope_deg {
+        if !within(self.full_slope_deg, 0.0, 90.0)
+            || !within(self.max_slope_deg, 0.0, 90.0)
+            || self.full_slope_deg >= self.max_slope_deg
+        {
             return bad(
                 "full_slope_deg/max_slope_deg",
                 format!("are {}° and {}°", self.full_slope_deg, self.max_slope_deg),
@@ -155,7 +158,11 @@ fn vertex_normals(p: &Primitive) -> Vec<[f32; 3]> {
     n.iter()
         .map(|v| {
             let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            if l > 0.0 { [(v[0] / l) as f32, (v[1] / l) as f32, (v[2] / l) as f32] } else { [0.0, 1.0, 0.0] }
+            if l > 0.0 {
+                [(v[0] / l) as f32, (v[1] / l) as f32, (v[2] / l) as f32]
+            } else {
+                [0.0, 1.0, 0.0]
+            }
         })
         .collect()
 }
@@ -163,13 +170,20 @@ fn vertex_normals(p: &Primitive) -> Vec<[f32; 3]> {
 fn check_primitive(mesh: &str, k: usize, p: &Primitive) -> Result<(), SnowError> {
     let n = p.positions.len();
     if p.indices.iter().any(|&i| i as usize >= n) {
-        return Err(SnowError::Terrain(format!("mesh {mesh:?} primitive {k} has an index beyond its {n} vertices; re-export the terrain")));
+        return Err(SnowError::Terrain(format!(
+            "mesh {mesh:?} primitive {k} has an index beyond its {n} vertices; re-export the terrain"
+        )));
     }
     if !p.normals.is_empty() && p.normals.len() != n {
-        return Err(SnowError::Terrain(format!("mesh {mesh:?} primitive {k} has {} normals for {n} vertices; re-export the terrain", p.normals.len())));
+        return Err(SnowError::Terrain(format!(
+            "mesh {mesh:?} primitive {k} has {} normals for {n} vertices; re-export the terrain",
+            p.normals.len()
+        )));
     }
     if p.positions.iter().flatten().any(|c| !c.is_finite()) {
-        return Err(SnowError::Terrain(format!("mesh {mesh:?} primitive {k} has a non-finite position; fix the heightmap")));
+        return Err(SnowError::Terrain(format!(
+            "mesh {mesh:?} primitive {k} has a non-finite position; fix the heightmap"
+        )));
     }
     Ok(())
 }
@@ -263,7 +277,14 @@ impl CoverMask {
         Image {
             width: self.width,
             height: self.height,
-            pixels: self.weights.iter().map(|&w| { let l = srgb_to_linear(w.clamp(0.0, 1.0)); [l, l, l, 1.0] }).collect(),
+            pixels: self
+                .weights
+                .iter()
+                .map(|&w| {
+                    let l = srgb_to_linear(w.clamp(0.0, 1.0));
+                    [l, l, l, 1.0]
+                })
+                .collect(),
         }
     }
 }
@@ -273,7 +294,9 @@ impl CoverMask {
 fn snow_of<'a>(mesh: &str, k: usize, p: &'a Primitive) -> Result<&'a crate::mesh::CustomAttribute, SnowError> {
     check_primitive(mesh, k, p)?;
     let Some(snow) = p.custom.iter().find(|c| c.name == SNOW_ATTRIBUTE) else {
-        return Err(SnowError::Terrain(format!("mesh {mesh:?} primitive {k} has no {SNOW_ATTRIBUTE} attribute; call apply_cover first")));
+        return Err(SnowError::Terrain(format!(
+            "mesh {mesh:?} primitive {k} has no {SNOW_ATTRIBUTE} attribute; call apply_cover first"
+        )));
     };
     if snow.values.len() != p.positions.len() {
         return Err(SnowError::Terrain(format!(
@@ -308,7 +331,14 @@ pub fn cover_mask(terrain: &Scene, size_px: u32) -> Result<CoverMask, SnowError>
     let Some(b) = crate::mesh::Bounds::of(&points) else {
         return Err(SnowError::Terrain("the terrain scene has no vertices; build the terrain first".into()));
     };
-    let view = OrthoView::top_down(b.min[0] as f64, b.max[0] as f64, b.min[2] as f64, b.max[2] as f64, b.max[1] as f64 + 1.0, size_px);
+    let view = OrthoView::top_down(
+        b.min[0] as f64,
+        b.max[0] as f64,
+        b.min[2] as f64,
+        b.max[2] as f64,
+        b.max[1] as f64 + 1.0,
+        size_px,
+    );
     let cam = Camera::Ortho(view);
     let mut canvas = cam.canvas([0.0; 4]).map_err(|e| SnowError::Bake(e.to_string()))?;
     let materials = [Material { name: "snow_weight".into(), double_sided: true, ..Material::default() }];
@@ -334,7 +364,12 @@ pub fn snow_layer(terrain: &Scene, min_weight: f32) -> Result<Scene, SnowError> 
     }
     let mut out = Scene {
         name: format!("{}_snow", terrain.name),
-        materials: vec![Material { name: "snow".into(), base_color: [0.9, 0.92, 0.95, 1.0], roughness: 0.9, ..Material::default() }],
+        materials: vec![Material {
+            name: "snow".into(),
+            base_color: [0.9, 0.92, 0.95, 1.0],
+            roughness: 0.9,
+            ..Material::default()
+        }],
         ..Scene::default()
     };
     for mesh in &terrain.meshes {

@@ -100,7 +100,10 @@ impl Emitter {
             return bad("near_count", format!("is {}", self.near_count), "use at most 1000000 flakes");
         }
         if let Some(far) = &self.far {
-            if !(far.outer_radius_m.is_finite() && far.outer_radius_m > self.near_radius_m && far.outer_radius_m <= 100_000.0) {
+            if !(far.outer_radius_m.is_finite()
+                && far.outer_radius_m > self.near_radius_m
+                && far.outer_radius_m <= 100_000.0)
+            {
                 return bad(
                     "far.outer_radius_m",
                     format!("is {} m with near_radius_m {} m", far.outer_radius_m, self.near_radius_m),
@@ -125,10 +128,18 @@ impl Emitter {
             return bad("wind_speed_m_s", format!("is {} m/s", self.wind_speed_m_s), "use 0 to 100 m/s");
         }
         if !(self.flake_mass_kg.is_finite() && self.flake_mass_kg > 0.0 && self.flake_mass_kg <= 1e-3) {
-            return bad("flake_mass_kg", format!("is {} kg", self.flake_mass_kg), "use a positive mass up to 0.001 kg (flakes weigh ~1e-6 kg)");
+            return bad(
+                "flake_mass_kg",
+                format!("is {} kg", self.flake_mass_kg),
+                "use a positive mass up to 0.001 kg (flakes weigh ~1e-6 kg)",
+            );
         }
         if !(self.drag_kg_s.is_finite() && self.drag_kg_s > 0.0 && self.drag_kg_s <= 1.0) {
-            return bad("drag_kg_s", format!("is {} kg/s", self.drag_kg_s), "use a positive drag coefficient up to 1 kg/s");
+            return bad(
+                "drag_kg_s",
+                format!("is {} kg/s", self.drag_kg_s),
+                "use a positive drag coefficient up to 1 kg/s",
+            );
         }
         if !within(self.ground_slowdown_m, 0.0, self.fall_height_m) {
             return bad("ground_slowdown_m", format!("is {} m", self.ground_slowdown_m), "use 0 up to fall_height_m");
@@ -172,7 +183,11 @@ impl Emitter {
     pub fn wind_unit(&self) -> [f32; 2] {
         let [x, z] = self.wind_direction;
         let l = (x * x + z * z).sqrt();
-        if l > 0.0 { [x / l, z / l] } else { [1.0, 0.0] }
+        if l > 0.0 {
+            [x / l, z / l]
+        } else {
+            [1.0, 0.0]
+        }
     }
 }
 
@@ -206,7 +221,13 @@ pub fn emitter_json(emitter: &Emitter, atlas: &FlakeAtlas, atlas_file: &str) -> 
         terminal_velocity_m_s: emitter.terminal_velocity_m_s(),
         time_constant_s: emitter.time_constant_s(),
         wind_unit: emitter.wind_unit(),
-        atlas: AtlasInfo { image: atlas_file, columns: atlas.columns, rows: atlas.rows, cell_px: atlas.cell_px, cells: &atlas.cells },
+        atlas: AtlasInfo {
+            image: atlas_file,
+            columns: atlas.columns,
+            rows: atlas.rows,
+            cell_px: atlas.cell_px,
+            cells: &atlas.cells,
+        },
     };
     serde_json::to_string_pretty(&file).map_err(|e| SnowError::Bake(e.to_string()))
 }

@@ -89,7 +89,15 @@ pub struct FlakeSettings {
 
 impl Default for FlakeSettings {
     fn default() -> Self {
-        FlakeSettings { temperature_c: -15.0, humidity: 0.6, columns: 4, rows: 4, cell_px: 64, alpha_cutoff: 0.5, seed: 0 }
+        FlakeSettings {
+            temperature_c: -15.0,
+            humidity: 0.6,
+            columns: 4,
+            rows: 4,
+            cell_px: 64,
+            alpha_cutoff: 0.5,
+            seed: 0,
+        }
     }
 }
 
@@ -123,7 +131,13 @@ pub fn flake_kind(temperature_c: f32, humidity: f32, u: f32) -> FlakeKind {
         t if t > -8.0 => FlakeKind::Needle,
         t if t > -12.0 => FlakeKind::Plate,
         // dendrites need supersaturated air; in dry air the plate habit continues
-        t if t > -18.0 => if humidity < 0.25 { FlakeKind::Plate } else { FlakeKind::StellarDendrite },
+        t if t > -18.0 => {
+            if humidity < 0.25 {
+                FlakeKind::Plate
+            } else {
+                FlakeKind::StellarDendrite
+            }
+        }
         t if t > -25.0 => FlakeKind::SpatialDendrite,
         _ => FlakeKind::Column,
     }
@@ -325,7 +339,9 @@ pub fn flake_model(kind: FlakeKind, r: &mut Stream) -> Primitive {
                 let part = flake_model(kind, &mut child);
                 let scale = r.range([0.35, 0.55]);
                 let (s, c) = r.range([0.0, std::f32::consts::TAU]).sin_cos();
-                let at = if k == 0 { [0.0, 0.0] } else {
+                let at = if k == 0 {
+                    [0.0, 0.0]
+                } else {
                     let (sa, ca) = r.range([0.0, std::f32::consts::TAU]).sin_cos();
                     let d = r.range([0.3, 0.55]);
                     [d * ca, d * sa]
@@ -354,8 +370,20 @@ fn push_rect(p: &mut Primitive, min: [f32; 2], max: [f32; 2], z: f32, color: [f3
 fn push_needle(p: &mut Primitive, c: [f32; 2], len: f32, half_w: f32) {
     let body = len - 2.0 * half_w;
     push_rect(p, [c[0] - half_w, c[1] - body], [c[0] + half_w, c[1] + body], 0.0, ICE);
-    push_tri(p, [c[0] - half_w, c[1] + body, 0.0], [c[0] + half_w, c[1] + body, 0.0], [c[0], c[1] + len, 0.0], ICE_EDGE);
-    push_tri(p, [c[0] + half_w, c[1] - body, 0.0], [c[0] - half_w, c[1] - body, 0.0], [c[0], c[1] - len, 0.0], ICE_EDGE);
+    push_tri(
+        p,
+        [c[0] - half_w, c[1] + body, 0.0],
+        [c[0] + half_w, c[1] + body, 0.0],
+        [c[0], c[1] + len, 0.0],
+        ICE_EDGE,
+    );
+    push_tri(
+        p,
+        [c[0] + half_w, c[1] - body, 0.0],
+        [c[0] - half_w, c[1] - body, 0.0],
+        [c[0], c[1] - len, 0.0],
+        ICE_EDGE,
+    );
 }
 
 /// Centres nothing (every habit is built about the origin) but scales the x–y extent to MODEL_RADIUS.
@@ -405,7 +433,8 @@ pub fn build_atlas(s: &FlakeSettings) -> Result<FlakeAtlas, SnowError> {
             Ok((resolve_supersampled(&Image::from_canvas_owned(canvas), ss), FlakeCell { index: k, kind, size_mm }))
         })
         .collect();
-    let mut image = Image::new(n * s.columns, n * s.rows, [ICE[0], ICE[1], ICE[2], 0.0]).map_err(|e| SnowError::Bake(e.to_string()))?;
+    let mut image = Image::new(n * s.columns, n * s.rows, [ICE[0], ICE[1], ICE[2], 0.0])
+        .map_err(|e| SnowError::Bake(e.to_string()))?;
     let mut cells = Vec::with_capacity(count);
     for (k, cell) in rendered.into_iter().enumerate() {
         let (img, info) = cell?;

@@ -91,7 +91,11 @@ impl SnowSettings {
             return bad("layer_min_weight", format!("is {}", self.layer_min_weight), "use 0 to 1");
         }
         if !(self.thin_plants.is_finite() && (0.0..=1.0).contains(&self.thin_plants)) {
-            return bad("thin_plants", format!("is {}", self.thin_plants), "use 0 (no thinning) to 1 (no plant where the cover is full)");
+            return bad(
+                "thin_plants",
+                format!("is {}", self.thin_plants),
+                "use 0 (no thinning) to 1 (no plant where the cover is full)",
+            );
         }
         Ok(())
     }

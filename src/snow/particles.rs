@@ -110,7 +110,13 @@ pub fn snowfall_scene(name: &str, ps: &[Particle], atlas: &FlakeAtlas, alpha_cut
         scene.meshes.push(Mesh { name: format!("flake_cell{cell}"), primitives: vec![prim], extras: None });
         let instances = Instances {
             translations: mine.iter().map(|p| p.position).collect(),
-            rotations: mine.iter().map(|p| { let (s, c) = (p.angle_rad / 2.0).sin_cos(); [0.0, 0.0, s, c] }).collect(),
+            rotations: mine
+                .iter()
+                .map(|p| {
+                    let (s, c) = (p.angle_rad / 2.0).sin_cos();
+                    [0.0, 0.0, s, c]
+                })
+                .collect(),
             scales: mine.iter().map(|p| [p.size_m, p.size_m, p.size_m]).collect(),
         };
         scene.nodes.push(Node {

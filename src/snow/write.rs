@@ -22,7 +22,13 @@ fn write(path: PathBuf, bytes: &[u8], written: &mut Vec<PathBuf>) -> Result<(), 
 
 /// Writes `flakes.png`, `emitter.json`, `particles.csv` and `snowfall.glb` into `dir` (created if
 /// missing); returns the files written.
-pub fn write_snowfall(dir: &Path, atlas: &FlakeAtlas, emitter: &Emitter, particles: &[Particle], alpha_cutoff: f32) -> Result<Vec<PathBuf>, SnowError> {
+pub fn write_snowfall(
+    dir: &Path,
+    atlas: &FlakeAtlas,
+    emitter: &Emitter,
+    particles: &[Particle],
+    alpha_cutoff: f32,
+) -> Result<Vec<PathBuf>, SnowError> {
     let mut written = Vec::new();
     // build everything that can fail on the data before touching the disk
     let json = emitter_json(emitter, atlas, ATLAS_FILE)?;

@@ -49,7 +49,15 @@ pub enum TerrainError {
          row {j}), {height_m} m, {storage} are {step_m:e} m apart, so the written surface is {achieved_m:e} m \
          off there, at a vertex no further refinement moves; use a bound of at least {achieved_m:e} m"
     )]
-    BelowStoragePrecision { max_error_m: f64, achieved_m: f64, i: usize, j: usize, height_m: f64, step_m: f64, storage: &'static str },
+    BelowStoragePrecision {
+        max_error_m: f64,
+        achieved_m: f64,
+        i: usize,
+        j: usize,
+        height_m: f64,
+        step_m: f64,
+        storage: &'static str,
+    },
     #[error("internal error: the triangulation could not take sample (column {i}, row {j}); please report this with the heightmap")]
     Internal { i: usize, j: usize },
 }
@@ -270,10 +278,7 @@ mod tests {
         let mut heights = vec![0.0; 9];
         heights[4] = 2.0;
         let map = hf(3, 3, heights);
-        let mesh = SampleMesh {
-            vertices: vec![[0, 0], [2, 0], [0, 2], [2, 2]],
-            triangles: vec![[0, 2, 1], [1, 2, 3]],
-        };
+        let mesh = SampleMesh { vertices: vec![[0, 0], [2, 0], [0, 2], [2, 2]], triangles: vec![[0, 2, 1], [1, 2, 3]] };
         let s = measure(&map, &mesh);
         assert_eq!(s.samples_covered, 9);
         assert_eq!(s.max_error_m, 2.0);

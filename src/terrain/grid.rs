@@ -25,10 +25,8 @@ pub fn grid(hf: &Heightfield, step: usize) -> Result<SampleMesh, TerrainError> {
     let xs = axis(hf.width, step);
     let zs = axis(hf.height, step);
     let (nx, nz) = (xs.len(), zs.len());
-    let mut mesh = SampleMesh {
-        vertices: Vec::with_capacity(nx * nz),
-        triangles: Vec::with_capacity(2 * (nx - 1) * (nz - 1)),
-    };
+    let mut mesh =
+        SampleMesh { vertices: Vec::with_capacity(nx * nz), triangles: Vec::with_capacity(2 * (nx - 1) * (nz - 1)) };
     for &j in &zs {
         for &i in &xs {
             mesh.vertices.push([i, j]);

@@ -6,15 +6,15 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use crate::export::gltf::WriteOptions;
 use crate::export::{self, ExportError};
 use crate::heightfield::{self, DecodeOptions, Decoded, Encoding, Heightfield, HeightfieldError};
 use crate::mesh::{Bounds, Scene};
-use crate::terrain::layers::{bake_layers, LayerReport};
 use crate::terrain::build::{build_scene, BuildError, BuildOptions};
-use crate::export::gltf::WriteOptions;
 use crate::terrain::error::{exact_max_error, measure_stored, ErrorStats};
-use crate::terrain::stored::{PositionGrid, Storage};
 use crate::terrain::grid::grid;
+use crate::terrain::layers::{bake_layers, LayerReport};
+use crate::terrain::stored::{PositionGrid, Storage};
 use crate::terrain::tin::{tin_stored, TinOptions};
 use crate::terrain::{SampleMesh, TerrainError};
 
@@ -177,14 +177,22 @@ pub fn mesh_samples(
 }
 
 /// Meshes `hf` as the job asks, at `max_error_m`.
-pub fn mesh_heightfield(job: &TerrainJob, hf: &Heightfield, max_error_m: f64, storage: &Storage) -> Result<(SampleMesh, bool), JobError> {
+pub fn mesh_heightfield(
+    job: &TerrainJob,
+    hf: &Heightfield,
+    max_error_m: f64,
+    storage: &Storage,
+) -> Result<(SampleMesh, bool), JobError> {
     mesh_samples(hf, job.mode, job.grid_step, max_error_m, job.max_triangles, storage)
         .map_err(|error| JobError::Terrain { source_label: job.source.label(), error })
 }
 
 fn check_options(job: &TerrainJob) -> Result<(), JobError> {
     if job.mode == MeshMode::Tin && !(job.max_error_m.is_finite() && job.max_error_m >= 0.0) {
-        return Err(JobError::Options(format!("--max-error must be a finite number of metres ≥ 0, got {}", job.max_error_m)));
+        return Err(JobError::Options(format!(
+            "--max-error must be a finite number of metres ≥ 0, got {}",
+            job.max_error_m
+        )));
     }
     if job.mode == MeshMode::Grid && job.grid_step == 0 {
         return Err(JobError::Options("--grid-step must be at least 1 sample".into()));
@@ -239,7 +247,13 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
     // the analyzer has the last word: a TIN over its bound as written is never written
     if job.mode == MeshMode::Tin && !hit_limit && stats.max_error_m > job.max_error_m {
         let [i, j] = stats.worst_sample;
-        return Err(JobError::BoundBroken { source_label: job.source.label(), measured_m: stats.max_error_m, bound_m: job.max_error_m, i, j });
+        return Err(JobError::BoundBroken {
+            source_label: job.source.label(),
+            measured_m: stats.max_error_m,
+            bound_m: job.max_error_m,
+            i,
+            j,
+        });
     }
 
     let t = Instant::now();
@@ -251,7 +265,11 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
     let t = Instant::now();
     let output_summary = match output {
         Some(path) => {
-            let files = export::write_scene_with(&scene, path, &WriteOptions { position_grid: grid, meshopt: job.meshopt && grid.is_some() })?;
+            let files = export::write_scene_with(
+                &scene,
+                path,
+                &WriteOptions { position_grid: grid, meshopt: job.meshopt && grid.is_some() },
+            )?;
             Some(summarize(&scene, files.iter().map(|f| f.display().to_string()).collect()))
         }
         None => None,
@@ -308,13 +326,7 @@ pub fn summarize(scene: &Scene, files: Vec<String>) -> OutputSummary {
             }
         }
     }
-    OutputSummary {
-        files,
-        meshes: scene.meshes.len(),
-        vertices,
-        triangles,
-        bounds,
-    }
+    OutputSummary { files, meshes: scene.meshes.len(), vertices, triangles, bounds }
 }
 
 /// One row of the speed/error curve.

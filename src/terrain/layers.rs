@@ -20,7 +20,8 @@ use crate::mesh::{Scene, Texture};
 pub const LAYER_NAMES: [&str; 4] = ["grass", "scree", "rock", "snow"];
 
 /// Each layer's albedo, linear RGB (sRGB (84, 112, 46), (128, 112, 88), (112, 108, 102), (236, 240, 246)).
-pub const LAYER_ALBEDO: [[f32; 3]; 4] = [[0.0887, 0.162, 0.0273], [0.216, 0.162, 0.0976], [0.162, 0.150, 0.133], [0.838, 0.871, 0.922]];
+pub const LAYER_ALBEDO: [[f32; 3]; 4] =
+    [[0.0887, 0.162, 0.0273], [0.216, 0.162, 0.0976], [0.162, 0.150, 0.133], [0.838, 0.871, 0.922]];
 
 /// Slopes (degrees) where scree starts and is full, then rock starts and is full.
 pub const SCREE_SLOPE_DEG: [f64; 2] = [18.0, 30.0];
@@ -43,7 +44,8 @@ fn smoothstep(edge: [f64; 2], x: f64) -> f64 {
 pub fn layer_weights(slope_deg: f64, height_m: f64) -> [f64; 4] {
     let rock = smoothstep(ROCK_SLOPE_DEG, slope_deg);
     let scree = smoothstep(SCREE_SLOPE_DEG, slope_deg) * (1.0 - rock);
-    let snow_cover = smoothstep([SNOWLINE_M, SNOWLINE_M + SNOW_FADE_M], height_m) * (1.0 - smoothstep(SNOW_SLOPE_DEG, slope_deg));
+    let snow_cover =
+        smoothstep([SNOWLINE_M, SNOWLINE_M + SNOW_FADE_M], height_m) * (1.0 - smoothstep(SNOW_SLOPE_DEG, slope_deg));
     let rest = 1.0 - snow_cover;
     let (rock, scree) = (rock * rest, scree * rest);
     let grass = (1.0 - rock - scree - snow_cover).max(0.0);
@@ -129,7 +131,12 @@ pub fn bake_layers(hf: &Heightfield) -> TerrainLayers {
     TerrainLayers {
         weights,
         albedo: Image { width: w, height: h, pixels },
-        report: LayerReport { map_px: [w, h], layers: LAYER_NAMES.iter().map(|s| s.to_string()).collect(), coverage, snowline_m: SNOWLINE_M },
+        report: LayerReport {
+            map_px: [w, h],
+            layers: LAYER_NAMES.iter().map(|s| s.to_string()).collect(),
+            coverage,
+            snowline_m: SNOWLINE_M,
+        },
         albedo_png: std::sync::OnceLock::new(),
     }
 }
@@ -174,7 +181,10 @@ mod tests {
         for slope in (0..90).step_by(3) {
             for height in [0.0, 2400.0, 2600.0, 2700.0, 9000.0] {
                 let w = layer_weights(slope as f64, height);
-                assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12 && w.iter().all(|&v| v >= 0.0), "{slope} {height} {w:?}");
+                assert!(
+                    (w.iter().sum::<f64>() - 1.0).abs() < 1e-12 && w.iter().all(|&v| v >= 0.0),
+                    "{slope} {height} {w:?}"
+                );
             }
         }
     }
@@ -195,7 +205,16 @@ mod tests {
         // left half flat, right half a 60° ramp
         let (w, h) = (65, 33);
         let cell = 1.0;
-        let heights: Vec<f32> = (0..w * h).map(|k| { let i = k % w; if i < 32 { 0.0 } else { (i - 32) as f32 * 1.732 } }).collect();
+        let heights: Vec<f32> = (0..w * h)
+            .map(|k| {
+                let i = k % w;
+                if i < 32 {
+                    0.0
+                } else {
+                    (i - 32) as f32 * 1.732
+                }
+            })
+            .collect();
         let hf = Heightfield { width: w, height: h, cell_size_m: cell, heights, exact: None };
         let layers = bake_layers(&hf);
         assert_eq!(layers.report.map_px, [64, 32]);

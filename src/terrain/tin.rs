@@ -559,7 +559,13 @@ fn output(dt: &Dt) -> SampleMesh {
 ///
 /// With a `storage` that rounds, the faces' bounds cover the stored error (see [`recheck_stored`])
 /// and the exact figure is the stored one, corners included.
-fn achieved_error(hf: &Heightfield, faces: &[FaceSlot], first_face: usize, mesh: &SampleMesh, storage: Option<&Storage>) -> f64 {
+fn achieved_error(
+    hf: &Heightfield,
+    faces: &[FaceSlot],
+    first_face: usize,
+    mesh: &SampleMesh,
+    storage: Option<&Storage>,
+) -> f64 {
     // Face slot f holds output triangle f − first_face.
     let faces = &faces[..faces.len().min(mesh.triangles.len() + first_face)];
     let exact = |f: usize, floor: f64| {
@@ -573,13 +579,16 @@ fn achieved_error(hf: &Heightfield, faces: &[FaceSlot], first_face: usize, mesh:
         }
     };
     // The face with the largest bound first: its exact error rules out almost every other face.
-    let Some(first) = (first_face..faces.len()).max_by(|&a, &b| faces[a].upper.total_cmp(&faces[b].upper).then(b.cmp(&a)))
+    let Some(first) =
+        (first_face..faces.len()).max_by(|&a, &b| faces[a].upper.total_cmp(&faces[b].upper).then(b.cmp(&a)))
     else {
         return 0.0;
     };
     let mut best = exact(first, 0.0);
-    let mut rest: Vec<(f32, usize)> =
-        (first_face..faces.len()).filter(|&f| f != first && faces[f].upper as f64 > best).map(|f| (faces[f].upper, f)).collect();
+    let mut rest: Vec<(f32, usize)> = (first_face..faces.len())
+        .filter(|&f| f != first && faces[f].upper as f64 > best)
+        .map(|f| (faces[f].upper, f))
+        .collect();
     rest.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
     for (upper, f) in rest {
         if upper as f64 <= best {
@@ -660,14 +669,13 @@ pub fn tin_spade(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, Terra
         m.dt.insert(vertex(i, j)).map_err(|_| internal(i, j))?;
     }
     // The two corner triangles (the last corner is not necessarily in both).
-    m.star = m
-        .dt
-        .inner_faces()
-        .map(|f| {
-            let [a, b, c] = f.vertices();
-            (f.fix().index() as u32, [a.data().corner(), b.data().corner(), c.data().corner()], 0)
-        })
-        .collect();
+    m.star =
+        m.dt.inner_faces()
+            .map(|f| {
+                let [a, b, c] = f.vertices();
+                (f.fix().index() as u32, [a.data().corner(), b.data().corner(), c.data().corner()], 0)
+            })
+            .collect();
     m.rescan();
 
     let mut triangles = 2usize;
@@ -685,10 +693,9 @@ pub fn tin_spade(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, Terra
         }
         prefetch_around(hf, ci as usize, cj as usize);
         let before = m.dt.num_vertices();
-        let v = m
-            .dt
-            .insert_with_hint(vertex(ci, cj), FixedVertexHandle::from_index(m.hints[top.face as usize] as usize))
-            .map_err(|_| internal(ci, cj))?;
+        let v =
+            m.dt.insert_with_hint(vertex(ci, cj), FixedVertexHandle::from_index(m.hints[top.face as usize] as usize))
+                .map_err(|_| internal(ci, cj))?;
         if m.dt.num_vertices() != before + 1 {
             // The candidate was already a vertex: impossible for a valid triangulation (a closed face
             // holds no vertex but its corners); stop rather than loop forever.
@@ -805,9 +812,9 @@ impl GreedyDelaunay {
         let pp = [p[0] as i64, p[1] as i64];
         let e0 = 3 * t;
         // Which edge (if any) the point lies on.
-        let on_edge = (0..3).map(|k| e0 + k).find(|&e| {
-            orient(self.point(self.tri[e as usize]), self.point(self.tri[next_edge(e) as usize]), pp) == 0
-        });
+        let on_edge = (0..3)
+            .map(|k| e0 + k)
+            .find(|&e| orient(self.point(self.tri[e as usize]), self.point(self.tri[next_edge(e) as usize]), pp) == 0);
         // The new triangles form a fan around p: ring vertices counter-clockwise, the outer twin of
         // each ring edge, and the slots to reuse. Fan triangle k = (p, r[k], r[k + 1]), so its
         // half-edge 1 is the one opposite p.
@@ -826,7 +833,8 @@ impl GreedyDelaunay {
             }
             Some(e) => {
                 // Edge u → v of t = (u, v, w).
-                let (u, v, w) = (self.tri[e as usize], self.tri[next_edge(e) as usize], self.tri[prev_edge(e) as usize]);
+                let (u, v, w) =
+                    (self.tri[e as usize], self.tri[next_edge(e) as usize], self.tri[prev_edge(e) as usize]);
                 let f = self.twin[e as usize];
                 let n = self.triangle_count() as u32;
                 if f == NO_EDGE {
@@ -1282,8 +1290,8 @@ pub(crate) mod tests {
             let (a, b) = (ours.mesh.triangles.len() as f64, theirs.mesh.triangles.len() as f64);
             assert!((a - b).abs() <= 0.05 * b + 4.0, "{a} vs {b}");
         }
-        let limited = tin_spade(&noise(20, 20, 1, 100, 1.0), &TinOptions { max_error_m: 0.0, max_triangles: Some(50) })
-            .unwrap();
+        let limited =
+            tin_spade(&noise(20, 20, 1, 100, 1.0), &TinOptions { max_error_m: 0.0, max_triangles: Some(50) }).unwrap();
         assert!(limited.hit_triangle_limit && limited.mesh.triangles.len() <= 50);
     }
 

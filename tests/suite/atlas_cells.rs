@@ -21,7 +21,11 @@ const EPS: f32 = 1e-6;
 
 fn shipped_presets() -> Vec<(String, Preset)> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("presets");
-    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "toml")).collect();
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
     paths.sort();
     assert!(paths.len() >= 3, "shipped presets in {}", dir.display());
     let mut out = vec![("demo".to_string(), demo_preset())];
@@ -82,7 +86,9 @@ fn check_normal_maps(what: &str, scene: &Scene) -> usize {
         if !scene.textures[t].name.ends_with("_atlas") {
             continue;
         }
-        let n = m.normal_texture.unwrap_or_else(|| panic!("{what}: material {} draws an atlas without a normal map", m.name));
+        let n = m
+            .normal_texture
+            .unwrap_or_else(|| panic!("{what}: material {} draws an atlas without a normal map", m.name));
         assert!(scene.textures[n].name.ends_with("_atlas_normal"), "{what}: normal map {}", scene.textures[n].name);
         // glTF reads a normalTexture as linear data: the bytes as stored, not sRGB-decoded
         let img = verdant::bake::image::Image::from_png_data(&scene.textures[n].png).unwrap();
@@ -111,7 +117,11 @@ fn check_chain(what: &str, chain: &TreeLods, atlas_px: u32, sways: bool) {
         };
         check_plant_scene(&format!("{what} LOD{}", level.level), &level.scene, expect);
         if matches!(level.kind, "cards" | "billboards" | "impostor") {
-            assert!(check_normal_maps(&format!("{what} LOD{}", level.level), &level.scene) > 0, "{what} LOD{}: no lit card material", level.level);
+            assert!(
+                check_normal_maps(&format!("{what} LOD{}", level.level), &level.scene) > 0,
+                "{what} LOD{}: no lit card material",
+                level.level
+            );
         }
     }
     assert!(n > 0, "{what}: no atlas cards checked");
@@ -141,7 +151,10 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                     check_plant_scene(&format!("{what} chain"), &asset.chain, Expect::Sway);
                     check_plant_scene(&format!("{what} far field"), &asset.far, Expect::Sway);
                     // lit cards: LoD2, LoD3, the far field and the chain's atlas material
-                    let lit: usize = [&asset.lod_scenes[2], &asset.lod_scenes[3], &asset.far, &asset.chain].iter().map(|sc| check_normal_maps(&what, sc)).sum();
+                    let lit: usize = [&asset.lod_scenes[2], &asset.lod_scenes[3], &asset.far, &asset.chain]
+                        .iter()
+                        .map(|sc| check_normal_maps(&what, sc))
+                        .sum();
                     assert!(lit >= 4, "{what}: {lit} lit card materials");
                     kinds.insert("grass");
                 }
@@ -153,11 +166,20 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                     assert_eq!(check_normal_maps(&what, &asset.scene), 1, "{what}: the flower cards are lit");
                     for (v, c) in asset.cells.iter().enumerate() {
                         // the card's bottom (y = 0) samples the cell's bottom row: the stem meets the ground
-                        assert!((c.card_uv[3] - c.uv[3]).abs() < EPS, "{what} v{v}: card bottom {} vs cell bottom {}", c.card_uv[3], c.uv[3]);
+                        assert!(
+                            (c.card_uv[3] - c.uv[3]).abs() < EPS,
+                            "{what} v{v}: card bottom {} vs cell bottom {}",
+                            c.card_uv[3],
+                            c.uv[3]
+                        );
                         let prim = &asset.scene.meshes[v].primitives[0];
                         for (pos, uv) in prim.positions.iter().zip(&prim.uvs) {
                             if pos[1] == 0.0 {
-                                assert!((uv[1] - c.uv[3]).abs() < EPS, "{what} v{v}: a ground vertex samples v = {}", uv[1]);
+                                assert!(
+                                    (uv[1] - c.uv[3]).abs() < EPS,
+                                    "{what} v{v}: a ground vertex samples v = {}",
+                                    uv[1]
+                                );
                             }
                         }
                     }
@@ -187,7 +209,13 @@ fn a_tall_flower_card_fits_its_cell() {
     let asset = build_flower("tall", &s).unwrap();
     for c in &asset.cells {
         assert!(c.card_uv.iter().all(|v| (0.0..=1.0).contains(v)), "{c:?}");
-        assert!(c.card_uv[0] >= c.uv[0] - EPS && c.card_uv[2] <= c.uv[2] + EPS && c.card_uv[1] >= c.uv[1] - EPS && c.card_uv[3] <= c.uv[3] + EPS, "{c:?}");
+        assert!(
+            c.card_uv[0] >= c.uv[0] - EPS
+                && c.card_uv[2] <= c.uv[2] + EPS
+                && c.card_uv[1] >= c.uv[1] - EPS
+                && c.card_uv[3] <= c.uv[3] + EPS,
+            "{c:?}"
+        );
     }
     let cells: Vec<[f32; 4]> = asset.cells.iter().map(|c| c.uv).collect();
     assert!(check_cards("tall flower", &asset.scene, &cells) > 0);

@@ -32,7 +32,20 @@ fn help_explains_options_with_units_and_defaults() {
     let o = verdant(&["terrain", "--help"]);
     assert!(o.status.success());
     let t = text(&o);
-    for needle in ["--max-error", "METRES", "[default: 1]", "--cell-size", "--encoding", "terrain-rgb", "--chunk", "--skirt", "--base", "--report", "--sweep", "--max-samples"] {
+    for needle in [
+        "--max-error",
+        "METRES",
+        "[default: 1]",
+        "--cell-size",
+        "--encoding",
+        "terrain-rgb",
+        "--chunk",
+        "--skirt",
+        "--base",
+        "--report",
+        "--sweep",
+        "--max-samples",
+    ] {
         assert!(t.contains(needle), "{needle:?} missing from help:\n{t}");
     }
     let v = verdant(&["--version"]);
@@ -97,7 +110,18 @@ fn demo_terrain_report_and_reimport() {
     let o = verdant(&["terrain", "--demo", "--max-error", "2", "-o", p(&out), "--report", p(&report)]);
     assert!(o.status.success(), "{}", text(&o));
     let r = read_json(&report);
-    for key in ["input", "width", "height", "encoding", "mode", "max_error_requested", "max_error", "rms_error", "vertices", "triangles"] {
+    for key in [
+        "input",
+        "width",
+        "height",
+        "encoding",
+        "mode",
+        "max_error_requested",
+        "max_error",
+        "rms_error",
+        "vertices",
+        "triangles",
+    ] {
         assert!(!r[key].is_null(), "report lacks {key}: {r}");
     }
     for key in ["decode", "mesh", "export", "total"] {
@@ -116,7 +140,19 @@ fn same_output_bytes_for_any_thread_count() {
     let mut files = Vec::new();
     for threads in ["1", "2", "4"] {
         let out = dir.path().join(format!("t{threads}.glb"));
-        let o = verdant(&["--threads", threads, "--quiet", "terrain", "--demo", "--max-error", "1", "--chunk", "64", "-o", p(&out)]);
+        let o = verdant(&[
+            "--threads",
+            threads,
+            "--quiet",
+            "terrain",
+            "--demo",
+            "--max-error",
+            "1",
+            "--chunk",
+            "64",
+            "-o",
+            p(&out),
+        ]);
         assert!(o.status.success(), "{}", text(&o));
         assert!(o.stdout.is_empty(), "--quiet prints nothing");
         files.push(std::fs::read(out).unwrap());
@@ -151,7 +187,18 @@ fn grid_step_one_reproduces_the_heightmap() {
     write_gray16(&input, 31, 17, |i, j| ((i * 977 + j * 131) % 65536) as u16);
     let out = dir.path().join("h.obj");
     let report = dir.path().join("h.json");
-    let o = verdant(&["terrain", p(&input), "--mode", "grid", "--height-scale", "65535", "-o", p(&out), "--report", p(&report)]);
+    let o = verdant(&[
+        "terrain",
+        p(&input),
+        "--mode",
+        "grid",
+        "--height-scale",
+        "65535",
+        "-o",
+        p(&out),
+        "--report",
+        p(&report),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let r = read_json(&report);
     assert_eq!(r["max_error"].as_f64(), Some(0.0));

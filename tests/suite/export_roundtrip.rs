@@ -250,7 +250,10 @@ fn obj_round_trips_values() {
     }
     // the child is scaled by 2, turned 90° about Y and moved
     let child = &back.meshes[0].primitives[1];
-    assert!(child.positions.iter().any(|p| (p[0] - 1.5).abs() < 1e-5 && (p[1] - 2.85).abs() < 1e-5 && (p[2] + 3.0).abs() < 1e-5));
+    assert!(child
+        .positions
+        .iter()
+        .any(|p| (p[0] - 1.5).abs() < 1e-5 && (p[1] - 2.85).abs() < 1e-5 && (p[2] + 3.0).abs() < 1e-5));
 
     // materials
     assert_eq!(back.materials.len(), 2);
@@ -542,13 +545,24 @@ fn a_lod_chain_glb_streams_each_finer_level_from_its_own_buffer() {
     // level only when its data comes through a URI: so the coarsest level's data is in the GLB
     // chunk, each finer level's in a data: URI buffer of its own (the old single-chunk files made
     // 5 of 10 chains fail to load there)
-    let tri = |y: f32| Primitive { positions: vec![[0.0, y, 0.0], [1.0, y, 0.0], [0.0, y, 1.0]], indices: vec![0, 2, 1], material: Some(0), ..Primitive::default() };
+    let tri = |y: f32| Primitive {
+        positions: vec![[0.0, y, 0.0], [1.0, y, 0.0], [0.0, y, 1.0]],
+        indices: vec![0, 2, 1],
+        material: Some(0),
+        ..Primitive::default()
+    };
     let mesh = |name: &str, y: f32| Mesh { name: name.into(), primitives: vec![tri(y)], extras: None };
     let scene = Scene {
         meshes: vec![mesh("lod0", 0.0), mesh("lod1", 1.0), mesh("lod2", 2.0)],
         materials: vec![Material::default()],
         nodes: vec![
-            Node { name: "t_LOD0".into(), mesh: Some(0), lods: vec![1, 2], lod_screen_coverage: vec![0.5, 0.2, 0.05], ..Node::default() },
+            Node {
+                name: "t_LOD0".into(),
+                mesh: Some(0),
+                lods: vec![1, 2],
+                lod_screen_coverage: vec![0.5, 0.2, 0.05],
+                ..Node::default()
+            },
             Node { name: "t_LOD1".into(), mesh: Some(1), ..Node::default() },
             Node { name: "t_LOD2".into(), mesh: Some(2), ..Node::default() },
         ],
@@ -573,9 +587,15 @@ fn a_lod_chain_glb_streams_each_finer_level_from_its_own_buffer() {
         let v = doc["accessors"][a]["bufferView"].as_u64().unwrap() as usize;
         doc["bufferViews"][v]["buffer"].as_u64().unwrap()
     };
-    let by_name: Vec<(String, u64)> = (0..3).map(|m| (doc["meshes"][m]["name"].as_str().unwrap().to_string(), buffer_of_mesh(m))).collect();
+    let by_name: Vec<(String, u64)> =
+        (0..3).map(|m| (doc["meshes"][m]["name"].as_str().unwrap().to_string(), buffer_of_mesh(m))).collect();
     for (name, buffer) in by_name {
-        let want = match name.as_str() { "lod2" => 0, "lod1" => 1, "lod0" => 2, other => panic!("{other}") };
+        let want = match name.as_str() {
+            "lod2" => 0,
+            "lod1" => 1,
+            "lod0" => 2,
+            other => panic!("{other}"),
+        };
         assert_eq!(buffer, want, "{name}");
     }
     // every reader gets the same scene back, and the file is valid glTF

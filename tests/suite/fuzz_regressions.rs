@@ -41,7 +41,9 @@ fn gltf_reproducers() -> Vec<(&'static str, Vec<u8>, &'static str)> {
     let accessors: Vec<serde_json::Value> = (0..17)
         .map(|_| serde_json::json!({"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 0, 1]}))
         .collect();
-    let meshes: Vec<serde_json::Value> = (0..5).map(|m| serde_json::json!({"primitives": [{"attributes": {"POSITION": if m == 4 { 26 } else { m }}}]})).collect();
+    let meshes: Vec<serde_json::Value> = (0..5)
+        .map(|m| serde_json::json!({"primitives": [{"attributes": {"POSITION": if m == 4 { 26 } else { m }}}]}))
+        .collect();
     let json = serde_json::json!({
         "asset": {"version": "2.0"},
         "meshes": meshes,
@@ -51,7 +53,11 @@ fn gltf_reproducers() -> Vec<(&'static str, Vec<u8>, &'static str)> {
     });
     let bin: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 0., 1.].iter().flat_map(|f| f.to_le_bytes()).collect();
     vec![
-        ("mesh_panic.glb", glb(&json.to_string(), &bin), "meshes[4].primitives[0].attributes.POSITION: accessor 26 does not exist (17 accessors)"),
+        (
+            "mesh_panic.glb",
+            glb(&json.to_string(), &bin),
+            "meshes[4].primitives[0].attributes.POSITION: accessor 26 does not exist (17 accessors)",
+        ),
         (
             "position_oob.gltf",
             triangle_gltf(|v| {
@@ -59,8 +65,16 @@ fn gltf_reproducers() -> Vec<(&'static str, Vec<u8>, &'static str)> {
             }),
             "meshes[0].primitives[0].attributes.POSITION: accessor 0 does not exist (0 accessors)",
         ),
-        ("image_no_mime.gltf", image(serde_json::json!({"bufferView": 0})), "images[0]: an image in a bufferView needs a mimeType"),
-        ("image_no_source.gltf", image(serde_json::json!({"name": "nothing"})), "images[0]: neither a uri nor a bufferView"),
+        (
+            "image_no_mime.gltf",
+            image(serde_json::json!({"bufferView": 0})),
+            "images[0]: an image in a bufferView needs a mimeType",
+        ),
+        (
+            "image_no_source.gltf",
+            image(serde_json::json!({"name": "nothing"})),
+            "images[0]: neither a uri nor a bufferView",
+        ),
         (
             "morph_target_oob.gltf",
             triangle_gltf(|v| {
@@ -79,7 +93,9 @@ fn glb_files_that_made_the_gltf_crates_panic_are_positioned_parse_errors() {
         fs::write(&path, &bytes).unwrap();
         harness::gltf(&bytes);
         match validate_file(&path, &ValidateOptions::default()) {
-            Err(ValidateError::Parse { problem, .. }) => assert!(problem.contains(expected), "{name}: expected `{expected}` in `{problem}`"),
+            Err(ValidateError::Parse { problem, .. }) => {
+                assert!(problem.contains(expected), "{name}: expected `{expected}` in `{problem}`")
+            }
             other => panic!("{name}: expected a parse error, got {other:?}"),
         }
         // what a user sees: exit 2, the file and the JSON path named, no panic
@@ -109,7 +125,8 @@ const SLOW_V5: &str = "recursion 18\nangle 10\nthickness 15\naxiom [|FFFFFFAFFFF
 fn a_self_copying_rule_is_refused_before_expanding() {
     let parsed = verdant::lsystem::parse::parse_bytes(SLOW_V5.as_bytes(), Path::new("slow.ls"), None).unwrap();
     let options = verdant::plants::tree::TreeOptions::default();
-    let err = verdant::plants::tree::build_tree(&parsed.system, &options).expect_err("3^18 copies are over every default budget");
+    let err = verdant::plants::tree::build_tree(&parsed.system, &options)
+        .expect_err("3^18 copies are over every default budget");
     let message = err.to_string();
     assert!(message.contains("over the budget of 50000000 symbols") && message.contains("max_symbols"), "{message}");
     // refused from the counts alone: the lower bound is known before a symbol is expanded
@@ -165,8 +182,30 @@ impl Stream {
 
 /// Bytes that matter to parsers: digits, signs, brackets, separators, huge and tiny numbers.
 const INTERESTING: &[&[u8]] = &[
-    b"0", b"-1", b"9", b"1e39", b"-1e308", b"nan", b"inf", b"65535", b"4294967295", b"[", b"]", b"(", b")", b"{", b"}", b"=", b",", b"\n",
-    b"\0", b"\xff", b"\"", b".", b"-0.0", b"99999999999",
+    b"0",
+    b"-1",
+    b"9",
+    b"1e39",
+    b"-1e308",
+    b"nan",
+    b"inf",
+    b"65535",
+    b"4294967295",
+    b"[",
+    b"]",
+    b"(",
+    b")",
+    b"{",
+    b"}",
+    b"=",
+    b",",
+    b"\n",
+    b"\0",
+    b"\xff",
+    b"\"",
+    b".",
+    b"-0.0",
+    b"99999999999",
 ];
 
 fn mutate(seed: &[u8], s: &mut Stream) -> Vec<u8> {
@@ -225,7 +264,8 @@ fn run_mutations(name: &str, seeds: &[Vec<u8>], per_seed: usize, entry: fn(&[u8]
     count_panics();
     let mut s = Stream(0x5EED ^ name.len() as u64);
     for seed in seeds {
-        let inputs = std::iter::once(seed.clone()).chain((0..per_seed).map(|_| mutate(seed, &mut s)).collect::<Vec<_>>());
+        let inputs =
+            std::iter::once(seed.clone()).chain((0..per_seed).map(|_| mutate(seed, &mut s)).collect::<Vec<_>>());
         for input in inputs {
             let before = PANICS.with(|p| p.get());
             let outcome = std::panic::catch_unwind(|| entry(&input));
@@ -263,7 +303,10 @@ fn mutated_lsystems_never_panic() {
 fn mutated_heightmaps_never_panic() {
     let mut tiff = std::io::Cursor::new(Vec::new());
     let metres: Vec<f32> = (0..81).map(|k| 8800.0 + (k % 9 * (k / 9)) as f32 * 1e-3).collect();
-    tiff::encoder::TiffEncoder::new(&mut tiff).unwrap().write_image::<tiff::encoder::colortype::Gray32Float>(9, 9, &metres).unwrap();
+    tiff::encoder::TiffEncoder::new(&mut tiff)
+        .unwrap()
+        .write_image::<tiff::encoder::colortype::Gray32Float>(9, 9, &metres)
+        .unwrap();
     let seeds = vec![
         png16(17, 17, |i, j| ((i * 3000 + j * 700) % 65536) as u16),
         png16(4, 3, |i, _| if i < 2 { 0 } else { 65535 }),
@@ -276,7 +319,10 @@ fn mutated_heightmaps_never_panic() {
 #[test]
 fn mutated_presets_never_panic() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut seeds: Vec<Vec<u8>> = ["meadow", "winter_valley", "alpine"].iter().map(|n| fs::read(root.join(format!("presets/{n}.toml"))).unwrap()).collect();
+    let mut seeds: Vec<Vec<u8>> = ["meadow", "winter_valley", "alpine"]
+        .iter()
+        .map(|n| fs::read(root.join(format!("presets/{n}.toml"))).unwrap())
+        .collect();
     seeds.push(verdant::scene::preset::template("seed").into_bytes());
     run_mutations("preset", &seeds, 150, harness::preset);
 }
@@ -298,7 +344,13 @@ fn mutated_gltf_files_never_panic() {
     let mut seeds: Vec<Vec<u8>> = gltf_reproducers().into_iter().map(|(_, bytes, _)| bytes).collect();
     seeds.push(triangle_gltf(|_| {}));
     // a file verdant writes: a small terrain
-    let hf = verdant::heightfield::Heightfield { width: 9, height: 9, heights: (0..81).map(|k| (k % 7) as f32).collect(), cell_size_m: 1.0, exact: None };
+    let hf = verdant::heightfield::Heightfield {
+        width: 9,
+        height: 9,
+        heights: (0..81).map(|k| (k % 7) as f32).collect(),
+        cell_size_m: 1.0,
+        exact: None,
+    };
     let tin = verdant::terrain::tin::tin(&hf, &verdant::terrain::tin::TinOptions::default()).unwrap();
     let scene = verdant::terrain::build::build_scene(&hf, &tin.mesh, &Default::default()).unwrap();
     seeds.push(verdant::export::gltf::to_glb(&scene).unwrap());
@@ -333,7 +385,12 @@ fn a_colour_line_with_two_numbers_is_a_positioned_error_not_a_tobj_panic() {
     let o = verdant_in(dir.path(), &["mesh", "model.obj", "--lods", "1", "-o", "m.glb"]);
     let t = text(&o);
     assert_eq!(o.status.code(), Some(2), "{t}");
-    assert!(t.contains("model.mtl") && t.contains("line 3: `Kd` needs three numbers (r g b), found 2") && !t.contains("panicked"), "{t}");
+    assert!(
+        t.contains("model.mtl")
+            && t.contains("line 3: `Kd` needs three numbers (r g b), found 2")
+            && !t.contains("panicked"),
+        "{t}"
+    );
     let data = b"mtllib model.mtl\nv 0 0 0\nv 1 0 0\nv 0 0 1\nf 1 3 2\n\0newmtl m\nKa 1\n\0";
     harness::obj(data);
 }
@@ -345,7 +402,10 @@ fn heights_beyond_a_thousand_kilometres_are_refused_with_the_sample_named() {
     let mut metres = vec![100.0f32; 16];
     metres[6] = 1.0e30;
     let file = fs::File::create(dir.path().join("huge.tif")).unwrap();
-    tiff::encoder::TiffEncoder::new(file).unwrap().write_image::<tiff::encoder::colortype::Gray32Float>(4, 4, &metres).unwrap();
+    tiff::encoder::TiffEncoder::new(file)
+        .unwrap()
+        .write_image::<tiff::encoder::colortype::Gray32Float>(4, 4, &metres)
+        .unwrap();
     let o = verdant_in(dir.path(), &["terrain", "huge.tif", "-o", "t.glb"]);
     let t = text(&o);
     assert_eq!(o.status.code(), Some(2), "{t}");

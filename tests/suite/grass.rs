@@ -84,7 +84,12 @@ fn analyzer_orders_switch_distances_and_mips_keep_coverage() {
     let lods = &a.report.lods;
     assert_eq!(lods[0].switch_distance_m, 0.0);
     for w in lods.windows(2) {
-        assert!(w[1].switch_distance_m >= w[0].switch_distance_m, "{} then {}", w[0].switch_distance_m, w[1].switch_distance_m);
+        assert!(
+            w[1].switch_distance_m >= w[0].switch_distance_m,
+            "{} then {}",
+            w[0].switch_distance_m,
+            w[1].switch_distance_m
+        );
     }
     // the coarse levels do switch within the measured range, and not at the viewer's feet
     for l in &lods[1..] {
@@ -131,10 +136,16 @@ fn flowers_are_crossed_billboards_of_a_baked_flower() {
     let img = &a.atlas[0].image;
     let cell_w = img.width / s.variants as u32;
     for v in 0..s.variants as u32 {
-        let cell: Vec<[f32; 4]> = (0..img.height).flat_map(|y| (0..cell_w).map(move |x| (x, y))).map(|(x, y)| img.pixels[(y * img.width + v * cell_w + x) as usize]).collect();
+        let cell: Vec<[f32; 4]> = (0..img.height)
+            .flat_map(|y| (0..cell_w).map(move |x| (x, y)))
+            .map(|(x, y)| img.pixels[(y * img.width + v * cell_w + x) as usize])
+            .collect();
         let covered = cell.iter().filter(|p| p[3] >= s.alpha_cutoff).count();
         assert!(covered > 50 && covered < cell.len() / 2, "variant {v}: {covered} covered texels");
-        assert!(cell.iter().any(|p| p[3] >= s.alpha_cutoff && p[0] > 0.4 && p[1] < 0.3), "variant {v}: no petal colour");
+        assert!(
+            cell.iter().any(|p| p[3] >= s.alpha_cutoff && p[0] > 0.4 && p[1] < 0.3),
+            "variant {v}: no petal colour"
+        );
     }
     let again = build_flower("f", &s).unwrap();
     assert_eq!(to_glb(&a.scene).unwrap(), to_glb(&again.scene).unwrap());
@@ -173,7 +184,9 @@ fn grass_and_flower_tables_set_defaults_and_species_override_them() {
     let PlantLook::Flower(c) = look_of(&text, 2) else { panic!() };
     assert_eq!((c.petals, c.petal_color), (5, [1.0, 1.0, 1.0]));
     // a tree species without an L-system grows a built-in tree, not a marker
-    assert!(matches!(look_of(&text, 3), PlantLook::Tree(t) if t.lsystem.as_path() == std::path::Path::new("builtin:broadleaf")));
+    assert!(
+        matches!(look_of(&text, 3), PlantLook::Tree(t) if t.lsystem.as_path() == std::path::Path::new("builtin:broadleaf"))
+    );
     // no tables: the defaults
     let plain = format!("{BASE}[[species]]\nname = \"g\"\nkind = \"grass\"\nmax_density = 1.0\n");
     let PlantLook::Grass(g) = look_of(&plain, 0) else { panic!() };
@@ -191,7 +204,9 @@ fn grass_mistakes_are_positioned_errors() {
     assert!(e.starts_with("p.toml:6:") && e.contains("six hex digits"), "{e}");
     let e = error_of(&format!("{BASE}[grass]\nblades = 6\n"));
     assert!(e.contains("blades_per_clump") && e.contains("18"), "{e}");
-    let e = error_of(&format!("{BASE}[[species]]\nname = \"t\"\nkind = \"tree\"\nmax_density = 0.1\ngrass = {{ segments = 4 }}\n"));
+    let e = error_of(&format!(
+        "{BASE}[[species]]\nname = \"t\"\nkind = \"tree\"\nmax_density = 0.1\ngrass = {{ segments = 4 }}\n"
+    ));
     assert!(e.starts_with("p.toml:9:1") && e.contains("kind = \"grass\""), "{e}");
     // input files are checked when a preset is loaded from disk
     let dir = tempfile::tempdir().unwrap();

@@ -190,7 +190,9 @@ fn bad_files_name_the_file_and_the_problem() {
     let truncated = dir.path().join("cut.png");
     std::fs::write(&truncated, &full[..full.len() / 2]).unwrap();
     let missing = dir.path().join("missing.png");
-    for (path, word) in [(&empty, "empty"), (&text, "not a recognised image"), (&truncated, "decode"), (&missing, "cannot read")] {
+    for (path, word) in
+        [(&empty, "empty"), (&text, "not a recognised image"), (&truncated, "decode"), (&missing, "cannot read")]
+    {
         let e = err_text(load(path, &opts(Encoding::Auto)).unwrap_err());
         assert!(e.contains(path.file_name().unwrap().to_str().unwrap()), "file not named: {e}");
         assert!(e.contains(word), "{word:?} missing: {e}");

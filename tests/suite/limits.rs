@@ -21,7 +21,11 @@ fn devices_and_folders_are_refused_before_reading() {
     let d = dir.path();
     // an L-system, a heightmap, a preset, a glTF: /dev/zero would grow memory without bound
     refused(&verdant_in(d, &["tree", "/dev/zero"]), 2, "not a regular file");
-    refused(&verdant_in(d, &["terrain", "/dev/zero", "--encoding", "r16", "--size", "4x4", "-o", "t.glb"]), 2, "not a regular file");
+    refused(
+        &verdant_in(d, &["terrain", "/dev/zero", "--encoding", "r16", "--size", "4x4", "-o", "t.glb"]),
+        2,
+        "not a regular file",
+    );
     refused(&verdant_in(d, &["preset", "check", "/dev/zero"]), 2, "not a regular file");
     std::os::unix::fs::symlink("/dev/zero", d.join("zero.glb")).unwrap();
     refused(&verdant_in(d, &["validate", "zero.glb"]), 2, "not a regular file");
@@ -46,10 +50,16 @@ fn a_preset_that_is_not_utf8_is_refused_at_the_byte() {
 fn the_validator_reports_cycles_lengths_and_escaping_uris() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let cycle = glb(r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"children":[1]},{"children":[0]}]}"#, &[]);
+    let cycle = glb(
+        r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"children":[1]},{"children":[0]}]}"#,
+        &[],
+    );
     fs::write(d.join("cycle.glb"), &cycle).unwrap();
     refused(&verdant_in(d, &["validate", "cycle.glb"]), 1, "the node hierarchy has a cycle");
-    let two = glb(r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0,1]}],"nodes":[{"children":[2]},{"children":[2]},{}]}"#, &[]);
+    let two = glb(
+        r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0,1]}],"nodes":[{"children":[2]},{"children":[2]},{}]}"#,
+        &[],
+    );
     fs::write(d.join("two.glb"), &two).unwrap();
     refused(&verdant_in(d, &["validate", "two.glb"]), 1, "has two parents");
     let mut short = glb(r#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"scene":0}"#, &[]);
@@ -57,7 +67,11 @@ fn the_validator_reports_cycles_lengths_and_escaping_uris() {
     fs::write(d.join("short.glb"), &short).unwrap();
     refused(&verdant_in(d, &["validate", "short.glb"]), 2, "the GLB header says the file is 20 bytes");
     for uri in ["../outside.bin", "/etc/passwd"] {
-        write(d, "g/a.gltf", &format!(r#"{{"asset":{{"version":"2.0"}},"buffers":[{{"uri":"{uri}","byteLength":4}}]}}"#));
+        write(
+            d,
+            "g/a.gltf",
+            &format!(r#"{{"asset":{{"version":"2.0"}},"buffers":[{{"uri":"{uri}","byteLength":4}}]}}"#),
+        );
         refused(&verdant_in(d, &["validate", "g/a.gltf"]), 2, "buffer 0");
     }
     write(d, "g/b.gltf", r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"missing.bin","byteLength":4}]}"#);

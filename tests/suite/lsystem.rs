@@ -55,7 +55,12 @@ fn sys(text: &str) -> LSystem {
 
 fn all_finite(scene: &Scene) -> bool {
     scene.meshes.iter().flat_map(|m| &m.primitives).all(|p| {
-        p.positions.iter().flatten().chain(p.normals.iter().flatten()).chain(p.uvs.iter().flatten()).all(|x| x.is_finite())
+        p.positions
+            .iter()
+            .flatten()
+            .chain(p.normals.iter().flatten())
+            .chain(p.uvs.iter().flatten())
+            .all(|x| x.is_finite())
     })
 }
 
@@ -68,7 +73,13 @@ fn write_and_validate(scene: &Scene, path: &Path) {
 fn khronos(path: &Path) {
     if let Some(script) = std::env::var_os("VERDANT_GLTF_VALIDATOR") {
         let out = Command::new("node").arg(script).arg(path).output().expect("run node");
-        assert!(out.status.success(), "Khronos validator on {}:\n{}{}", path.display(), String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "Khronos validator on {}:\n{}{}",
+            path.display(),
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
     }
 }
 
@@ -81,7 +92,8 @@ fn every_real_file_builds_a_valid_glb() {
     let out = tempfile::tempdir().unwrap();
     for file in real_files(&dir) {
         let parsed = read_file(&file, None).unwrap_or_else(|e| panic!("{e}"));
-        let tree = build_tree(&parsed.system, &TreeOptions::default()).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        let tree =
+            build_tree(&parsed.system, &TreeOptions::default()).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
         assert!(tree.stats.triangles > 0, "{}", file.display());
         assert!(all_finite(&tree.scene), "{}: NaN or infinity in the mesh", file.display());
         let glb = out.path().join(file.file_name().unwrap()).with_extension("glb");
@@ -185,7 +197,13 @@ fn stochastic_frequencies_match_the_declared_distribution() {
             let n = 10_000.0f64;
             let hits = out.iter().filter(|&&b| b == symbol).count() as f64;
             let sigma = (n * p * (1.0 - p)).sqrt();
-            assert!((hits - n * p).abs() < 3.0 * sigma, "seed {seed}: {} {hits} times, expected {} ± {:.0}", symbol as char, n * p, 3.0 * sigma);
+            assert!(
+                (hits - n * p).abs() < 3.0 * sigma,
+                "seed {seed}: {} {hits} times, expected {} ± {:.0}",
+                symbol as char,
+                n * p,
+                3.0 * sigma
+            );
         }
     }
 }
@@ -298,15 +316,16 @@ fn per_level_recursion_grows_inner_branches() {
     let trunk = |levels: &str| {
         let s = expand::expand_to_bytes(&sys(&BUSH.replacen("3-2-2", levels, 1)), 5, u64::MAX).unwrap();
         let mut depth = 0;
-        s.iter().filter(|&&b| {
-            match b {
-                b'[' => depth += 1,
-                b']' => depth -= 1,
-                _ => {}
-            }
-            depth == 0 && b == b'F'
-        })
-        .count()
+        s.iter()
+            .filter(|&&b| {
+                match b {
+                    b'[' => depth += 1,
+                    b']' => depth -= 1,
+                    _ => {}
+                }
+                depth == 0 && b == b'F'
+            })
+            .count()
     };
     assert_eq!(trunk("3-0-0"), trunk("3-2-2"));
 }
@@ -333,7 +352,10 @@ fn expansion_of_1e8_symbols_in_bounded_memory() {
     assert!(counts.peak_frames <= 28, "{} frames", counts.peak_frames);
     // and a budget stops it with a clear error instead
     let e = expand::count(&system, 0, 10_000_000).unwrap_err();
-    assert!(e.to_string().contains("over the budget of 10000000 symbols") && e.to_string().contains("--max-symbols"), "{e}");
+    assert!(
+        e.to_string().contains("over the budget of 10000000 symbols") && e.to_string().contains("--max-symbols"),
+        "{e}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -353,9 +375,24 @@ fn bad_arguments_and_rules_give_positioned_errors() {
         (b"7\n22.5\n80\nA\nAF\n@\n", None, "bad.ls:5:1: expected a rule `X=…`", "  AF\n  ^"),
         (b"7\n22.5\n80\nA\nA=+(3x)F\n@\n", None, "bad.ls:5:4: `(3x)` is not a number", "  A=+(3x)F\n     ^"),
         (b"7\n22.5\n80\nA\n[=F\n@\n", None, "bad.ls:5:1: `[` cannot be a rule's predecessor", "  [=F\n  ^"),
-        (b"recursion 3\r\nangle 10\r\naxiom F\r\nrule FF = F\r\n", None, "bad.ls:4:6: expected `rule X = …`", "  rule FF = F\n       ^"),
-        (b"3-2-2\n28\n18\nX(100)=FFA\nA(40)=F\nA(90)=FF\n@\n", None, "bad.ls:6:3: the variants of `A` end at 90; the last must be 100", "  A(90)=FF\n    ^"),
-        (b"3-2-2\n28\n18\nX(100)=FFA\nA(40)=F\nA(140)=FF\n@\n", None, "bad.ls:6:3: distribution `140` is not a whole number", "  A(140)=FF\n    ^"),
+        (
+            b"recursion 3\r\nangle 10\r\naxiom F\r\nrule FF = F\r\n",
+            None,
+            "bad.ls:4:6: expected `rule X = …`",
+            "  rule FF = F\n       ^",
+        ),
+        (
+            b"3-2-2\n28\n18\nX(100)=FFA\nA(40)=F\nA(90)=FF\n@\n",
+            None,
+            "bad.ls:6:3: the variants of `A` end at 90; the last must be 100",
+            "  A(90)=FF\n    ^",
+        ),
+        (
+            b"3-2-2\n28\n18\nX(100)=FFA\nA(40)=F\nA(140)=FF\n@\n",
+            None,
+            "bad.ls:6:3: distribution `140` is not a whole number",
+            "  A(140)=FF\n    ^",
+        ),
     ];
     for (text, dialect, head, caret) in cases {
         let e = error_of(text, dialect);
@@ -501,12 +538,15 @@ fn thesis_dialect_uses_its_own_factors_and_leaves() {
     assert_eq!(r.leaves.len(), 1);
     assert_eq!(r.leaves[0].color, 8, "leaf green until a `c` sets a colour");
     // leaves take the turtle's colour index once a `c` set one, on that branch only
-    let c = interpret(&sys("1
+    let c = interpret(
+        &sys("1
 90
 10
 X(100)=F[c(5)FL]FL
 @
-"), 0);
+"),
+        0,
+    );
     assert_eq!(c.leaves.iter().map(|l| l.color).collect::<Vec<_>>(), vec![5, 8]);
     // `|` turns 180° about the heading in the thesis: the next F keeps going up
     assert!(r.segments[3].end.y > r.segments[3].start.y);
@@ -534,7 +574,13 @@ fn degenerate_commands_never_make_nan() {
         let system = sys(text);
         let r = interpret(&system, 3);
         for s in &r.segments {
-            assert!(s.start.is_finite() && s.end.is_finite() && s.diameter.is_finite() && s.frame.orthonormality_error() < 1e-9, "case {k}: {s:?}");
+            assert!(
+                s.start.is_finite()
+                    && s.end.is_finite()
+                    && s.diameter.is_finite()
+                    && s.frame.orthonormality_error() < 1e-9,
+                "case {k}: {s:?}"
+            );
         }
         match build_tree(&system, &TreeOptions::default()) {
             Ok(tree) => {
@@ -586,9 +632,14 @@ fn branch_levels_are_exposed_and_their_prefixes_are_valid_meshes() {
     let table = extras["branch_levels"].as_array().unwrap();
     assert_eq!(table.len(), back.meshes[0].primitives.len());
     for (p, ranges) in back.meshes[0].primitives.iter().zip(table) {
-        let starts = |k: &str| ranges[k].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect::<Vec<_>>();
+        let starts =
+            |k: &str| ranges[k].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect::<Vec<_>>();
         let (levels, vs, is) = (starts("levels"), starts("vertex_starts"), starts("index_starts"));
-        assert!(levels.windows(2).all(|w| w[0] < w[1]) && vs.windows(2).all(|w| w[0] < w[1]) && is.windows(2).all(|w| w[0] < w[1]));
+        assert!(
+            levels.windows(2).all(|w| w[0] < w[1])
+                && vs.windows(2).all(|w| w[0] < w[1])
+                && is.windows(2).all(|w| w[0] < w[1])
+        );
         assert_eq!((vs[0], is[0]), (0, 0));
         // the triangles of a level use only that level's vertices
         for (k, &start) in is.iter().enumerate() {
@@ -618,7 +669,10 @@ fn branch_levels_are_exposed_and_their_prefixes_are_valid_meshes() {
 fn consecutive_segments_share_rings() {
     // one run of five segments bent by 20° turns: 6 rings (base, 4 joints, tip), 2 caps
     let r = 10;
-    let tree = tree_of("recursion 0\nangle 20\nthickness 10\naxiom F+F+F-F&F\n", &TreeOptions { radial_segments: r, ..TreeOptions::default() });
+    let tree = tree_of(
+        "recursion 0\nangle 20\nthickness 10\naxiom F+F+F-F&F\n",
+        &TreeOptions { radial_segments: r, ..TreeOptions::default() },
+    );
     let p = &tree.mesh().primitives[0];
     let ring = r as usize + 1;
     assert_eq!(p.positions.len(), 6 * ring + 2 * (r as usize + 1));
@@ -629,7 +683,10 @@ fn consecutive_segments_share_rings() {
     assert!((0..5).all(|k| v_of_ring(k) < v_of_ring(k + 1)));
     assert_eq!((p.uvs[0][0], p.uvs[ring - 1][0]), (0.0, 1.0));
     // a branch `[ ]` starts its own run; the trunk continues after it through a shared ring
-    let tree = tree_of("recursion 0\nangle 30\nthickness 10\naxiom F[+F]F\n", &TreeOptions { radial_segments: r, ..TreeOptions::default() });
+    let tree = tree_of(
+        "recursion 0\nangle 30\nthickness 10\naxiom F[+F]F\n",
+        &TreeOptions { radial_segments: r, ..TreeOptions::default() },
+    );
     let p = &tree.mesh().primitives.iter().map(|p| p.positions.len()).sum::<usize>();
     assert_eq!(*p, (3 + 2) * ring + 4 * (r as usize + 1), "trunk: 3 rings, branch: 2 rings, 4 caps");
 }
@@ -639,7 +696,8 @@ fn leaves_and_polygons_are_grouped_by_material() {
     // thesis leaves (textured quads) and lparser polygons in two colours
     let tree = tree_of(BUSH, &TreeOptions::default());
     let mesh = tree.mesh();
-    let materials: Vec<&str> = mesh.primitives.iter().map(|p| tree.scene.materials[p.material.unwrap()].name.as_str()).collect();
+    let materials: Vec<&str> =
+        mesh.primitives.iter().map(|p| tree.scene.materials[p.material.unwrap()].name.as_str()).collect();
     assert_eq!(materials, vec!["bark_c12", "leaf_c8"]);
     let leaf = &tree.scene.materials[mesh.primitives[1].material.unwrap()];
     assert!(leaf.double_sided && leaf.base_color_texture.is_some());
@@ -650,8 +708,12 @@ fn leaves_and_polygons_are_grouped_by_material() {
         assert!(tree.scene.materials[p.material.unwrap()].base_color_texture.is_some());
     }
     assert_eq!(mesh.primitives[1].triangle_count() as u64, 2 * tree.stats.leaves);
-    let tree = tree_of("recursion 0\nangle 90\nthickness 10\naxiom F[c(8){f+f+f}]F[c(4){f+f+f+f}][c(8){f-f-f}]\n", &TreeOptions::default());
-    let names: Vec<String> = tree.mesh().primitives.iter().map(|p| tree.scene.materials[p.material.unwrap()].name.clone()).collect();
+    let tree = tree_of(
+        "recursion 0\nangle 90\nthickness 10\naxiom F[c(8){f+f+f}]F[c(4){f+f+f+f}][c(8){f-f-f}]\n",
+        &TreeOptions::default(),
+    );
+    let names: Vec<String> =
+        tree.mesh().primitives.iter().map(|p| tree.scene.materials[p.material.unwrap()].name.clone()).collect();
     assert_eq!(names, vec!["bark_c2", "leaf_polygon_c4", "leaf_polygon_c8"]);
     // both polygon colours share the one leaf-surface texture, tinted by their factors
     let textures: Vec<&str> = tree.scene.textures.iter().map(|t| t.name.as_str()).collect();
@@ -671,7 +733,11 @@ fn budgets_give_clear_errors() {
     assert!(e.to_string().contains("more than 5000 triangles (--max-triangles)"), "{e}");
     let e = build_tree(&system, &TreeOptions { max_symbols: 3000, ..TreeOptions::default() }).unwrap_err();
     // refused before expanding: the shortest derivation is already longer
-    assert!(e.to_string().contains("has at least 32761 symbols, over the budget of 3000 symbols") && e.to_string().contains("--max-symbols"), "{e}");
+    assert!(
+        e.to_string().contains("has at least 32761 symbols, over the budget of 3000 symbols")
+            && e.to_string().contains("--max-symbols"),
+        "{e}"
+    );
     assert_eq!(e.exit_code(), 2);
     let e = build_tree(&system, &TreeOptions { radial_segments: 2, ..TreeOptions::default() }).unwrap_err();
     assert!(e.to_string().contains("--radial-segments 2"), "{e}");
@@ -911,7 +977,11 @@ fn files_lparser_accepts_build_with_positioned_warnings() {
     for (name, text, warned) in [("cross_rule.ls", cross_rule, 2usize), ("stray.ls", stray, 1)] {
         let parsed = parse_bytes(&text, Path::new(name), None).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(parsed.warnings.len(), warned, "{name}: {:?}", parsed.warnings);
-        assert!(parsed.warnings.iter().all(|w| w.starts_with("line ") && w.contains(", column ")), "{:?}", parsed.warnings);
+        assert!(
+            parsed.warnings.iter().all(|w| w.starts_with("line ") && w.contains(", column ")),
+            "{:?}",
+            parsed.warnings
+        );
         let tree = build_tree(&parsed.system, &TreeOptions::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert!(tree.stats.segments > 10, "{name}: {:?}", tree.stats);
         // branch levels come from the turtle's stack depth: the branches are there
@@ -937,7 +1007,12 @@ fn a_doubling_rule_at_depth_60_is_refused_before_any_expansion() {
     let e = Expander::new(&system, 0, verdant::lsystem::expand::DEFAULT_MAX_SYMBOLS).err().expect("refused");
     assert!(started.elapsed().as_secs_f64() < 0.1);
     let msg = e.to_string();
-    assert!(msg.contains("at least 1152921504606846976 symbols") && msg.contains("--max-symbols") && msg.contains("max_symbols = N"), "{msg}");
+    assert!(
+        msg.contains("at least 1152921504606846976 symbols")
+            && msg.contains("--max-symbols")
+            && msg.contains("max_symbols = N"),
+        "{msg}"
+    );
     // a stochastic system: the shortest alternative bounds it from below
     let s = sys("3\n30\n20\nX(100)=A\nA(50)=AAA\nA(100)=A\n@\n");
     assert_eq!(verdant::lsystem::expand::fewest_symbols(&s), Some(1));

@@ -2,15 +2,15 @@
 //! of once per test file, which was most of the check's compile time (19 test binaries). Each
 //! module is one former `tests/<name>.rs`; run one with `cargo test --release --test suite <name>::`.
 
-mod common;
 mod atlas_cells;
 mod bake;
 mod cli;
+mod common;
 mod export_roundtrip;
 mod fuzz_regressions;
 mod grass;
-mod limits;
 mod heightfield_decode;
+mod limits;
 mod lsystem;
 mod mesh_lod;
 mod preset_parse;

@@ -20,13 +20,40 @@ use crate::common::lod::{bytes_of, in_pool, small_atlas};
 fn rock_vertices_and_faces() -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
     let t = (1.0 + 5f64.sqrt()) / 2.0;
     let mut v: Vec<[f64; 3]> = vec![
-        [-1.0, t, 0.0], [1.0, t, 0.0], [-1.0, -t, 0.0], [1.0, -t, 0.0],
-        [0.0, -1.0, t], [0.0, 1.0, t], [0.0, -1.0, -t], [0.0, 1.0, -t],
-        [t, 0.0, -1.0], [t, 0.0, 1.0], [-t, 0.0, -1.0], [-t, 0.0, 1.0],
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
     ];
     let mut f: Vec<[usize; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     let unit = |p: [f64; 3]| {
         let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
@@ -132,12 +159,15 @@ fn write_tree(dir: &Path) -> PathBuf {
         writeln!(obj, "f {}/{} {}/{} {}/{} {}/{}", v0, t0, v0 + 1, t0 + 1, v0 + 2, t0 + 2, v0 + 3, t0 + 3).unwrap();
     }
     std::fs::write(dir.join("tree.obj"), obj).unwrap();
-    std::fs::write(dir.join("tree.mtl"), "newmtl bark\nKd 0.35 0.22 0.12\n\nnewmtl leaf\nKd 1 1 1\nmap_Kd textures/leaf.png\n").unwrap();
+    std::fs::write(
+        dir.join("tree.mtl"),
+        "newmtl bark\nKd 0.35 0.22 0.12\n\nnewmtl leaf\nKd 1 1 1\nmap_Kd textures/leaf.png\n",
+    )
+    .unwrap();
     std::fs::create_dir_all(dir.join("textures")).unwrap();
     write_leaf_png(&dir.join("textures/leaf.png"));
     dir.join("tree.obj")
 }
-
 
 #[test]
 fn rock_stands_on_the_origin_and_z_up_equals_y_up() {
@@ -152,10 +182,17 @@ fn rock_stands_on_the_origin_and_z_up_equals_y_up() {
     // normals point away from the rock's middle
     let p = &y_up.mesh().primitives[0];
     let mid = [(b.min[0] + b.max[0]) / 2.0, (b.min[1] + b.max[1]) / 2.0, (b.min[2] + b.max[2]) / 2.0];
-    let outward = p.positions.iter().zip(&p.normals).filter(|(v, n)| (0..3).map(|k| (v[k] - mid[k]) * n[k]).sum::<f32>() > 0.0).count();
+    let outward = p
+        .positions
+        .iter()
+        .zip(&p.normals)
+        .filter(|(v, n)| (0..3).map(|k| (v[k] - mid[k]) * n[k]).sum::<f32>() > 0.0)
+        .count();
     assert!(outward as f64 > 0.95 * p.positions.len() as f64, "{outward} of {} normals point out", p.positions.len());
 
-    let z_up = load_obj(&write_rock(dir.path(), "rock_z", true), &ObjOptions { up_axis: UpAxis::Z, ..ObjOptions::default() }).unwrap();
+    let z_up =
+        load_obj(&write_rock(dir.path(), "rock_z", true), &ObjOptions { up_axis: UpAxis::Z, ..ObjOptions::default() })
+            .unwrap();
     assert_eq!(z_up.mesh().primitives, y_up.mesh().primitives, "the Z-up export turns back into the Y-up rock");
     // read as Y-up, the same file lies on its side
     let wrong = load_obj(&dir.path().join("rock_z.obj"), &ObjOptions::default()).unwrap();
@@ -190,10 +227,19 @@ fn rock_chain_is_valid_reimports_as_built_and_decreases() {
         assert!(tris < last, "LoD{}: {tris} triangles, not fewer than {last}", lod.level);
         last = tris;
     }
-    assert_eq!(bytes_of(&built)[..TREE_LODS], built.levels.iter().map(|l| std::fs::read(dir.path().join(format!("out/boulder_LOD{}.glb", l.level))).unwrap()).collect::<Vec<_>>()[..]);
+    assert_eq!(
+        bytes_of(&built)[..TREE_LODS],
+        built
+            .levels
+            .iter()
+            .map(|l| std::fs::read(dir.path().join(format!("out/boulder_LOD{}.glb", l.level))).unwrap())
+            .collect::<Vec<_>>()[..]
+    );
     let chain = read_scene(&out).unwrap();
     assert_eq!(chain.nodes[chain.roots[0]].lods.len(), TREE_LODS - 1, "MSFT_lod chain");
-    assert!(dir.path().join("out/boulder_atlas.png").is_file() && dir.path().join("out/boulder_atlas_mip1.png").is_file());
+    assert!(
+        dir.path().join("out/boulder_atlas.png").is_file() && dir.path().join("out/boulder_atlas_mip1.png").is_file()
+    );
     assert_eq!(built.levels[2].kind, "decimated");
     assert!(built.levels[2].triangles() <= built.levels[0].triangles() / 5, "LoD2 is a strong simplification");
 
@@ -201,7 +247,11 @@ fn rock_chain_is_valid_reimports_as_built_and_decreases() {
     let lods = &report.chain.lods;
     let radius = report.chain.bounding_radius_m;
     assert!(lods[1].geometric_error.samples > 0);
-    assert!(lods[1].geometric_error.max_m < 0.03 * radius, "LoD1 moved {} m (radius {radius})", lods[1].geometric_error.max_m);
+    assert!(
+        lods[1].geometric_error.max_m < 0.03 * radius,
+        "LoD1 moved {} m (radius {radius})",
+        lods[1].geometric_error.max_m
+    );
     assert!(lods[3].geometric_error.max_m > lods[1].geometric_error.max_m);
     for w in lods.windows(2) {
         assert!(w[1].switch_distance_m >= w[0].switch_distance_m);
@@ -240,7 +290,13 @@ fn tree_obj_with_alpha_leaf_cards_gets_a_masked_double_sided_material_and_a_vali
     assert_eq!(b.min[1], 0.0);
     assert!((b.max[1] - 314.0 * 0.01).abs() < 1e-5, "314 cm scaled to metres: {b:?}");
     let out = dir.path().join("tree.glb");
-    let report = run_mesh_lods(&MeshLodJob { input, output: out, obj: ObjOptions { scale: 0.01, ..ObjOptions::default() }, lod: TreeLodOptions { analyze: false, ..small_atlas() } }).unwrap();
+    let report = run_mesh_lods(&MeshLodJob {
+        input,
+        output: out,
+        obj: ObjOptions { scale: 0.01, ..ObjOptions::default() },
+        lod: TreeLodOptions { analyze: false, ..small_atlas() },
+    })
+    .unwrap();
     assert_eq!((report.validation_errors, report.validation_warnings), (0, 0));
     let tris: Vec<usize> = report.chain.lods.iter().map(|l| l.triangles).collect();
     assert!(tris.windows(2).all(|w| w[1] < w[0]), "{tris:?}");
@@ -299,7 +355,24 @@ fn cli_mesh_writes_the_chain_like_tree_and_reports() {
     let glb = dir.path().join("out/rock.glb");
     let report = dir.path().join("out/rock.json");
     let (i, g, r) = (input.to_str().unwrap(), glb.to_str().unwrap(), report.to_str().unwrap());
-    let o = verdant(&["--quiet", "mesh", i, "-o", g, "--up-axis", "z", "--scale", "0.5", "--lods", "4", "--atlas-size", "256", "--no-analysis", "--report", r]);
+    let o = verdant(&[
+        "--quiet",
+        "mesh",
+        i,
+        "-o",
+        g,
+        "--up-axis",
+        "z",
+        "--scale",
+        "0.5",
+        "--lods",
+        "4",
+        "--atlas-size",
+        "256",
+        "--no-analysis",
+        "--report",
+        r,
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     for name in ["rock.glb", "rock_LOD0.glb", "rock_LOD3.glb", "rock_atlas.png", "rock_atlas_mip1.png"] {
         assert!(dir.path().join("out").join(name).is_file(), "{name} missing");

@@ -221,7 +221,10 @@ fn unknown_key_has_position_and_did_you_mean() {
 
     // nothing close: the known keys are listed
     let e = error_of("[scene]\nname = \"x\"\nzzz = 1\n");
-    assert!(e.starts_with("p.toml:3:1: unknown key `zzz` in [scene]; the keys of [scene] are `name`, `seed`, `formats`"), "{e}");
+    assert!(
+        e.starts_with("p.toml:3:1: unknown key `zzz` in [scene]; the keys of [scene] are `name`, `seed`, `formats`"),
+        "{e}"
+    );
 
     // inside the procedural table
     let e = error_of(&with_terrain("procedural = { kind = \"fbm\", size = 65, releif = 10.0 }"));
@@ -311,7 +314,10 @@ fn invalid_values_are_refused_where_they_are() {
         ("size = 65, relief = 0.0", "`relief` must be greater than 0"),
         ("size = 65", "`procedural` has no `relief`"),
         ("relief = 10.0", "`procedural` has no `size`"),
-        ("kind = \"perlin\", size = 65, relief = 1.0", "unknown `kind` value \"perlin\"; allowed values are fbm, ridged"),
+        (
+            "kind = \"perlin\", size = 65, relief = 1.0",
+            "unknown `kind` value \"perlin\"; allowed values are fbm, ridged",
+        ),
         ("kind = \"ridge\", size = 65, relief = 1.0", "did you mean \"ridged\"?"),
         ("seed = -1, size = 65, relief = 1.0", "`seed` must be between 0 and"),
     ];
@@ -326,7 +332,10 @@ fn invalid_values_are_refused_where_they_are() {
         ("name = \"\"", "p.toml:2:8: the scene name is empty"),
         ("name = \"x\"\nformats = []", "p.toml:3:11: `formats` is empty"),
         ("name = \"x\"\nformats = [\"glb\", \"obj\", \"glb\"]", "p.toml:3:26: format \"glb\" is listed twice"),
-        ("name = \"x\"\nformats = [\"fbx\"]", "p.toml:3:12: unknown `formats` value \"fbx\"; allowed values are glb, gltf, obj"),
+        (
+            "name = \"x\"\nformats = [\"fbx\"]",
+            "p.toml:3:12: unknown `formats` value \"fbx\"; allowed values are glb, gltf, obj",
+        ),
         ("name = \"x\"\nformats = [\"gltff\"]", "did you mean \"gltf\"?"),
         ("name = \"x\"\nseed = -3", "p.toml:3:8: `seed` must be between 0 and"),
         ("seed = 3", "p.toml:1:2: [scene] has no `name`; add `name = \"my-scene\"`"),
@@ -339,7 +348,8 @@ fn invalid_values_are_refused_where_they_are() {
 
 #[test]
 fn all_formats_parse() {
-    let p = parse_preset("[scene]\nname = \"x\"\nformats = [\"obj\", \"gltf\", \"glb\"]\n", Path::new("p.toml")).unwrap();
+    let p =
+        parse_preset("[scene]\nname = \"x\"\nformats = [\"obj\", \"gltf\", \"glb\"]\n", Path::new("p.toml")).unwrap();
     assert_eq!(p.scene.formats, vec![Format::Obj, Format::Gltf, Format::Glb]);
 }
 
@@ -522,10 +532,22 @@ fn species_defaults_follow_the_kind() {
     let p = parse_preset(&text, Path::new("p.toml")).unwrap();
     assert_eq!(p.scatter.tile_m, 256.0);
     let [t, g, f, m] = &p.species[..] else { panic!("{:?}", p.species) };
-    assert_eq!((t.kind, t.placement, t.min_spacing_m, t.align_to_normal), (SpeciesKind::Tree, Placement::Poisson, 4.0, 0.0));
-    assert_eq!((g.kind, g.placement, g.min_spacing_m, g.align_to_normal), (SpeciesKind::Grass, Placement::Jittered, 0.0, 1.0));
-    assert_eq!((f.kind, f.placement, f.min_spacing_m, f.align_to_normal), (SpeciesKind::Flower, Placement::Jittered, 0.0, 1.0));
-    assert_eq!((m.kind, m.placement, m.min_spacing_m, m.align_to_normal), (SpeciesKind::Mesh, Placement::Jittered, 0.0, 0.0));
+    assert_eq!(
+        (t.kind, t.placement, t.min_spacing_m, t.align_to_normal),
+        (SpeciesKind::Tree, Placement::Poisson, 4.0, 0.0)
+    );
+    assert_eq!(
+        (g.kind, g.placement, g.min_spacing_m, g.align_to_normal),
+        (SpeciesKind::Grass, Placement::Jittered, 0.0, 1.0)
+    );
+    assert_eq!(
+        (f.kind, f.placement, f.min_spacing_m, f.align_to_normal),
+        (SpeciesKind::Flower, Placement::Jittered, 0.0, 1.0)
+    );
+    assert_eq!(
+        (m.kind, m.placement, m.min_spacing_m, m.align_to_normal),
+        (SpeciesKind::Mesh, Placement::Jittered, 0.0, 0.0)
+    );
     for s in &p.species {
         assert_eq!((s.density_map.as_ref(), s.mask.as_ref(), s.water_level_m), (None, None, None));
         assert_eq!((s.slope_deg, s.altitude_m, s.scale), ([0.0, 90.0], UNBOUNDED_ALTITUDE_M, [1.0, 1.0]));
@@ -562,8 +584,16 @@ fn species_invalid_values_are_refused_where_they_are() {
         ("max_density = -1", "p.toml:9:15:", "`max_density` must be greater than 0"),
         ("max_density = nan", "p.toml:9:15:", "`max_density` must be a finite number"),
         ("max_density = inf", "p.toml:9:15:", "`max_density` must be a finite number"),
-        ("kind = \"bush\"", "p.toml:9:8:", "unknown `kind` value \"bush\"; allowed values are grass, flower, tree, mesh"),
-        ("placement = \"random\"", "p.toml:9:13:", "unknown `placement` value \"random\"; allowed values are poisson, jittered"),
+        (
+            "kind = \"bush\"",
+            "p.toml:9:8:",
+            "unknown `kind` value \"bush\"; allowed values are grass, flower, tree, mesh",
+        ),
+        (
+            "placement = \"random\"",
+            "p.toml:9:13:",
+            "unknown `placement` value \"random\"; allowed values are poisson, jittered",
+        ),
         ("placement = \"poison\"", "p.toml:9:13:", "did you mean \"poisson\"?"),
         ("min_spacing = -1", "p.toml:9:15:", "`min_spacing` must be 0 or more"),
         ("min_spacing = 0", "p.toml:9:15:", "`min_spacing` must be greater than 0 for placement = \"poisson\""),
@@ -582,8 +612,16 @@ fn species_invalid_values_are_refused_where_they_are() {
         ("scale = [2, 1]", "p.toml:9:9:", "`scale` is [min, max], but 2 > 1"),
         ("scale = -1", "p.toml:9:9:", "`scale` must be greater than 0"),
         ("scale = \"big\"", "p.toml:9:9:", "`scale` must be an array [min, max], found a string"),
-        ("random_yaw = 1", "p.toml:9:14:", "`random_yaw` must be a boolean, found an integer; write it like `random_yaw = false`"),
-        ("align_to_normal = 1.5", "p.toml:9:19:", "`align_to_normal` must be between 0 (upright) and 1 (along the terrain normal), got 1.5"),
+        (
+            "random_yaw = 1",
+            "p.toml:9:14:",
+            "`random_yaw` must be a boolean, found an integer; write it like `random_yaw = false`",
+        ),
+        (
+            "align_to_normal = 1.5",
+            "p.toml:9:19:",
+            "`align_to_normal` must be between 0 (upright) and 1 (along the terrain normal), got 1.5",
+        ),
         ("align_to_normal = -0.1", "p.toml:9:19:", "`align_to_normal` must be between 0"),
         ("seed = -1", "p.toml:9:8:", "`seed` must be between 0 and"),
         ("seed = 1.5", "p.toml:9:8:", "`seed` must be an integer, found a float"),
@@ -597,8 +635,16 @@ fn species_invalid_values_are_refused_where_they_are() {
         ("exclusion = { radius = 1 }", "p.toml:9:13:", "`exclusion` has no `species`; add `species = \"oak\"`"),
         ("exclusion = \"oak\"", "p.toml:9:13:", "`exclusion` must be a table or an array of tables, found a string"),
         ("exclusion = [1]", "p.toml:9:14:", "`exclusion` must be a table, found an integer"),
-        ("exclusion = { species = \"oak\", radius = 1, radias = 2 }", "p.toml:9:44:", "unknown key `radias` in `exclusion`; did you mean `radius`?"),
-        ("exclusion = [{ species = \"oak\", radius = 1 }, { species = \"oak\", radius = 2 }]", "p.toml:9:59:", "species `oak` is excluded twice in `oak`"),
+        (
+            "exclusion = { species = \"oak\", radius = 1, radias = 2 }",
+            "p.toml:9:44:",
+            "unknown key `radias` in `exclusion`; did you mean `radius`?",
+        ),
+        (
+            "exclusion = [{ species = \"oak\", radius = 1 }, { species = \"oak\", radius = 2 }]",
+            "p.toml:9:59:",
+            "species `oak` is excluded twice in `oak`",
+        ),
     ];
     for (line, position, expected) in cases {
         // the line under test comes right after the name (line 7); `kind` and `max_density` follow unless tested
@@ -637,7 +683,11 @@ fn species_jittered_with_a_spacing_is_refused_at_the_value() {
     let e = species_error(&format!("{TREE}\nmin_spacing = 6\nplacement = \"jittered\""));
     assert!(e.starts_with("p.toml:9:15:") && e.contains("`oak` is placed \"jittered\""), "{e}");
     // 0 stays the jittered default
-    let p = parse_preset(&with_species(&format!("{grass}\nplacement = \"jittered\"\nmin_spacing = 0")), Path::new("p.toml")).unwrap();
+    let p = parse_preset(
+        &with_species(&format!("{grass}\nplacement = \"jittered\"\nmin_spacing = 0")),
+        Path::new("p.toml"),
+    )
+    .unwrap();
     assert_eq!((p.species[0].placement, p.species[0].min_spacing_m), (Placement::Jittered, 0.0));
 }
 
@@ -646,11 +696,20 @@ fn species_required_keys_and_names() {
     let e = species_error("[[species]]\nkind = \"tree\"\nmax_density = 1");
     assert_eq!(e, "p.toml:5:1: [[species]] has no `name`; add `name = \"oak\"`");
     let e = species_error("[[species]]\nname = \"oak\"\nmax_density = 1");
-    assert_eq!(e, "p.toml:5:1: [[species]] `oak` has no `kind`; add `kind = \"grass\"` (or \"flower\", \"tree\", \"mesh\")");
+    assert_eq!(
+        e,
+        "p.toml:5:1: [[species]] `oak` has no `kind`; add `kind = \"grass\"` (or \"flower\", \"tree\", \"mesh\")"
+    );
     let e = species_error("[[species]]\nname = \"oak\"\nkind = \"tree\"");
-    assert_eq!(e, "p.toml:5:1: [[species]] `oak` has no `max_density`; add `max_density = 0.5` (instances per square metre)");
+    assert_eq!(
+        e,
+        "p.toml:5:1: [[species]] `oak` has no `max_density`; add `max_density = 0.5` (instances per square metre)"
+    );
     let e = species_error("[[species]]\nname = \"rock\"\nkind = \"mesh\"\nmax_density = 1\nplacement = \"poisson\"");
-    assert!(e.starts_with("p.toml:5:1: [[species]] `rock` has no `min_spacing`, which placement = \"poisson\" needs"), "{e}");
+    assert!(
+        e.starts_with("p.toml:5:1: [[species]] `rock` has no `min_spacing`, which placement = \"poisson\" needs"),
+        "{e}"
+    );
     assert!(e.contains("add `min_spacing = 1.0`"), "{e}");
     for (name, expected) in [
         ("\"\"", "the species name is empty"),
@@ -671,7 +730,10 @@ fn species_required_keys_and_names() {
 #[test]
 fn duplicate_species_names_are_refused() {
     let e = species_error(&format!("{TREE}\n[[species]]\nname = \"oak\"\nkind = \"grass\"\nmax_density = 1"));
-    assert_eq!(e, "p.toml:10:8: species `oak` is declared twice; the first is at line 6; give each [[species]] its own name");
+    assert_eq!(
+        e,
+        "p.toml:10:8: species `oak` is declared twice; the first is at line 6; give each [[species]] its own name"
+    );
     // names differing only in case would be one file on case-insensitive file systems
     let e = species_error(&format!("{TREE}\n[[species]]\nname = \"Oak\"\nkind = \"grass\"\nmax_density = 1"));
     assert!(e.starts_with("p.toml:10:8: species `Oak` is declared twice; the first is at line 6 as `oak`"), "{e}");
@@ -679,7 +741,9 @@ fn duplicate_species_names_are_refused() {
 
 #[test]
 fn exclusions_name_earlier_species_or_themselves() {
-    let grass = |exclusion: &str| format!("[[species]]\nname = \"grass\"\nkind = \"grass\"\nmax_density = 1\nexclusion = {exclusion}");
+    let grass = |exclusion: &str| {
+        format!("[[species]]\nname = \"grass\"\nkind = \"grass\"\nmax_density = 1\nexclusion = {exclusion}")
+    };
     // declared later: the remedy says to move it up
     let e = species_error(&format!("{}\n{TREE}", grass("{ species = \"oak\", radius = 1 }")));
     assert_eq!(
@@ -689,14 +753,25 @@ fn exclusions_name_earlier_species_or_themselves() {
     );
     // not declared at all, with a near miss
     let e = species_error(&format!("{TREE}\n{}", grass("{ species = \"oaks\", radius = 1 }")));
-    assert!(e.starts_with("p.toml:13:25: exclusion names species `oaks`, which is not declared before `grass`; did you mean `oak`?"), "{e}");
+    assert!(
+        e.starts_with(
+            "p.toml:13:25: exclusion names species `oaks`, which is not declared before `grass`; did you mean `oak`?"
+        ),
+        "{e}"
+    );
     // not declared at all, nothing close: the declared ones are listed
-    let e = species_error(&format!("{TREE}\n{}", grass("[{ species = \"oak\", radius = 1 }, { species = \"birch\", radius = 1 }]")));
+    let e = species_error(&format!(
+        "{TREE}\n{}",
+        grass("[{ species = \"oak\", radius = 1 }, { species = \"birch\", radius = 1 }]")
+    ));
     assert!(e.starts_with("p.toml:13:59: exclusion names species `birch`"), "{e}");
     assert!(e.contains("species declared so far: `oak`, `grass`"), "{e}");
     // earlier and itself are fine
     let p = parse_preset(
-        &with_species(&format!("{TREE}\nexclusion = {{ species = \"oak\", radius = 8 }}\n{}", grass("[{ species = \"oak\", radius = 1 }, { species = \"grass\", radius = 0.2 }]"))),
+        &with_species(&format!(
+            "{TREE}\nexclusion = {{ species = \"oak\", radius = 8 }}\n{}",
+            grass("[{ species = \"oak\", radius = 1 }, { species = \"grass\", radius = 0.2 }]")
+        )),
         Path::new("p.toml"),
     )
     .unwrap();
@@ -711,16 +786,27 @@ fn species_unknown_keys_have_positions_and_did_you_mean() {
     let e = species_error(&format!("{TREE}\nmin-spacing = 3"));
     assert_eq!(e, "p.toml:9:1: unknown key `min-spacing` in [[species]] `oak`; did you mean `min_spacing`?");
     let e = species_error(&format!("{TREE}\nformats = [\"glb\"]"));
-    assert!(e.starts_with("p.toml:9:1: unknown key `formats` in [[species]] `oak`; `formats` belongs in [scene]"), "{e}");
+    assert!(
+        e.starts_with("p.toml:9:1: unknown key `formats` in [[species]] `oak`; `formats` belongs in [scene]"),
+        "{e}"
+    );
     let e = species_error(&format!("{TREE}\ntile = 64"));
     assert!(e.starts_with("p.toml:9:1: unknown key `tile` in [[species]] `oak`; `tile` belongs in [scatter]"), "{e}");
     let e = species_error(&format!("{TREE}\nzzz = 1"));
-    assert!(e.starts_with("p.toml:9:1: unknown key `zzz` in [[species]] `oak`; the keys of [[species]] `oak` are `name`, `kind`"), "{e}");
+    assert!(
+        e.starts_with(
+            "p.toml:9:1: unknown key `zzz` in [[species]] `oak`; the keys of [[species]] `oak` are `name`, `kind`"
+        ),
+        "{e}"
+    );
     // [scatter]
     let e = species_error("[scatter]\ntiles = 64");
     assert_eq!(e, "p.toml:6:1: unknown key `tiles` in [scatter]; did you mean `tile`?");
     let e = species_error("[scatter]\nmax_density = 1");
-    assert!(e.starts_with("p.toml:6:1: unknown key `max_density` in [scatter]; `max_density` belongs in [[species]]"), "{e}");
+    assert!(
+        e.starts_with("p.toml:6:1: unknown key `max_density` in [scatter]; `max_density` belongs in [[species]]"),
+        "{e}"
+    );
     for (line, expected) in [
         ("tile = 0", "p.toml:6:8: `tile` must be greater than 0, got 0"),
         ("tile = -5", "p.toml:6:8: `tile` must be greater than 0"),
@@ -749,7 +835,8 @@ fn species_section_shapes() {
     let e = error_of(&format!("scatter = 3\n{MINIMAL}"));
     assert!(e.starts_with("p.toml:1:1: `scatter` must be a section `[scatter]`, found an integer"), "{e}");
     // an inline array of tables at the top level is the same as [[species]] to TOML
-    let text = format!("species = [{{ name = \"a\", kind = \"grass\", max_density = 1 }}]\n{MINIMAL}[terrain]\n{PROC}\n");
+    let text =
+        format!("species = [{{ name = \"a\", kind = \"grass\", max_density = 1 }}]\n{MINIMAL}[terrain]\n{PROC}\n");
     let p = parse_preset(&text, Path::new("p.toml")).unwrap();
     assert_eq!(p.species[0].name, "a");
 }
@@ -779,14 +866,28 @@ fn missing_density_map_and_mask_are_named_with_their_lines() {
     assert!(matches!(&e, PresetError::MissingInput { input, what: "density_map", .. } if input == &resolved), "{e:?}");
     assert_eq!(e.position(), Some((9, 15)));
     let s = e.to_string();
-    assert!(s.starts_with(&format!("{}:9:15: density_map `{}` not found; paths are relative", file.display(), resolved.display())), "{s}");
+    assert!(
+        s.starts_with(&format!(
+            "{}:9:15: density_map `{}` not found; paths are relative",
+            file.display(),
+            resolved.display()
+        )),
+        "{s}"
+    );
     // parse_preset does not look at the disk, and resolves against the preset's folder
     let p = parse_preset(&std::fs::read_to_string(&file).unwrap(), &file).unwrap();
     assert_eq!(p.species[0].density_map.as_deref(), Some(resolved.as_path()));
 
     std::fs::write(&file, with_species(&format!("{TREE}\nmask = \"m.png\""))).unwrap();
     let e = load_preset(&file).unwrap_err();
-    assert!(e.to_string().starts_with(&format!("{}:9:8: mask `{}` not found", file.display(), dir.path().join("m.png").display())), "{e}");
+    assert!(
+        e.to_string().starts_with(&format!(
+            "{}:9:8: mask `{}` not found",
+            file.display(),
+            dir.path().join("m.png").display()
+        )),
+        "{e}"
+    );
     // a folder is not an image
     std::fs::create_dir_all(dir.path().join("m.png")).unwrap();
     let e = load_preset(&file).unwrap_err();
@@ -815,7 +916,9 @@ fn shipped_presets_have_the_species_they_promise() {
     assert_eq!((boulder.kind, boulder.placement), (SpeciesKind::Mesh, Placement::Poisson));
     let verdant::scene::PlantLook::Mesh(model) = &boulder.look else { panic!("boulder: {:?}", boulder.look) };
     assert!(model.obj.ends_with("models/boulder.obj") && model.obj.is_file(), "{}", model.obj.display());
-    let verdant::scene::PlantLook::Tree(oak_look) = &load_preset(&manifest_dir().join("presets/meadow.toml")).unwrap().species[0].look else {
+    let verdant::scene::PlantLook::Tree(oak_look) =
+        &load_preset(&manifest_dir().join("presets/meadow.toml")).unwrap().species[0].look
+    else {
         panic!("the meadow's oaks grow from an L-system")
     };
     assert!(oak_look.lsystem.ends_with("lsystems/broadleaf.ls") && oak_look.lsystem.is_file());
@@ -825,7 +928,9 @@ fn shipped_presets_have_the_species_they_promise() {
 fn demo_species_stay_small() {
     let d = demo_preset();
     assert!(d.species.len() >= 2);
-    assert!(d.species.iter().any(|s| s.kind == SpeciesKind::Tree) && d.species.iter().any(|s| s.kind == SpeciesKind::Grass));
+    assert!(
+        d.species.iter().any(|s| s.kind == SpeciesKind::Tree) && d.species.iter().any(|s| s.kind == SpeciesKind::Grass)
+    );
     // an upper bound of the instance count: max_density over the whole 2048 m × 2048 m map
     let area = 2048.0 * 2048.0;
     let bound: f64 = d.species.iter().map(|s| s.max_density * area).sum();
@@ -853,7 +958,11 @@ fn template_species_example_parses_when_uncommented() {
             Some(rest) if after_scatter => {
                 let rest = rest.strip_prefix("# ").unwrap_or(rest);
                 let is_toml = rest.starts_with('[') || rest.split_once(" = ").is_some_and(|(k, _)| !k.contains(' '));
-                if is_toml { rest } else { line }
+                if is_toml {
+                    rest
+                } else {
+                    line
+                }
             }
             _ => line,
         };

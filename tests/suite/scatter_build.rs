@@ -64,7 +64,13 @@ fn read_csv(path: &Path) -> Vec<Row> {
             assert_eq!(f.len(), 12, "{}: row {l}", path.display());
             let d = |k: usize| f[k].parse::<f64>().unwrap_or_else(|e| panic!("{l}: {e}"));
             let s = |k: usize| f[k].parse::<f32>().unwrap_or_else(|e| panic!("{l}: {e}"));
-            Row { pos: [d(0), d(1), d(2)], rot: [s(3), s(4), s(5), s(6)], scale: [s(7), s(8), s(9)], yaw: s(10), tile: f[11].parse().unwrap() }
+            Row {
+                pos: [d(0), d(1), d(2)],
+                rot: [s(3), s(4), s(5), s(6)],
+                scale: [s(7), s(8), s(9)],
+                yaw: s(10),
+                tile: f[11].parse().unwrap(),
+            }
         })
         .collect()
 }
@@ -122,7 +128,13 @@ fn placements_and_scene_glb_are_byte_identical_across_runs_threads_and_jobs() {
         let first = scatter_files(&d.join("o1").join(scene));
         assert_eq!(
             first.keys().collect::<Vec<_>>(),
-            ["placements/grass.csv", "placements/grass.json", "placements/tree.csv", "placements/tree.json", "scene.glb"],
+            [
+                "placements/grass.csv",
+                "placements/grass.json",
+                "placements/tree.csv",
+                "placements/tree.json",
+                "scene.glb"
+            ],
             "{scene}: scatter files"
         );
         for (out, ..) in &runs[1..] {
@@ -133,8 +145,14 @@ fn placements_and_scene_glb_are_byte_identical_across_runs_threads_and_jobs() {
         }
     }
     // a different scene seed gives different placements on the same terrain
-    assert_ne!(fs::read(d.join("o1/a/placements/tree.csv")).unwrap(), fs::read(d.join("o1/b/placements/tree.csv")).unwrap());
-    assert_eq!(fs::read(d.join("o1/a/terrain/terrain.glb")).unwrap(), fs::read(d.join("o1/b/terrain/terrain.glb")).unwrap());
+    assert_ne!(
+        fs::read(d.join("o1/a/placements/tree.csv")).unwrap(),
+        fs::read(d.join("o1/b/placements/tree.csv")).unwrap()
+    );
+    assert_eq!(
+        fs::read(d.join("o1/a/terrain/terrain.glb")).unwrap(),
+        fs::read(d.join("o1/b/terrain/terrain.glb")).unwrap()
+    );
 }
 
 // ---------------------------------------------------------------------- scene.glb = tables = report
@@ -159,7 +177,12 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
         // the first view, replayed here from the table and manifest.json's view section: each
         // row's variant (the documented hash), distance to its centre, cull and level; scene.glb's
         // node per (variant, level) holds exactly those rows, in CSV order
-        let root = scene.roots.iter().map(|&r| &scene.nodes[r]).find(|n| n.name == species).unwrap_or_else(|| panic!("no root node {species}"));
+        let root = scene
+            .roots
+            .iter()
+            .map(|&r| &scene.nodes[r])
+            .find(|n| n.name == species)
+            .unwrap_or_else(|| panic!("no root node {species}"));
         let view = &manifest["view"]["views"][0];
         let chain = &manifest["view"]["chains"][species];
         let cull = &view["species"][k]["cull"];
@@ -175,15 +198,32 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
             let s = r.scale[1] as f64;
             let [x, y, z, w] = r.rot.map(|c| c as f64);
             let up = centre_y * s;
-            let c = [r.pos[0] as f32 as f64 + 2.0 * (x * y - w * z) * up, r.pos[1] as f32 as f64 + (1.0 - 2.0 * (x * x + z * z)) * up, r.pos[2] as f32 as f64 + 2.0 * (y * z + w * x) * up];
+            let c = [
+                r.pos[0] as f32 as f64 + 2.0 * (x * y - w * z) * up,
+                r.pos[1] as f32 as f64 + (1.0 - 2.0 * (x * x + z * z)) * up,
+                r.pos[2] as f32 as f64 + 2.0 * (y * z + w * x) * up,
+            ];
             let d = ((c[0] - eye[0]).powi(2) + (c[1] - eye[1]).powi(2) + (c[2] - eye[2]).powi(2)).sqrt();
-            let limit = cull["distance_m"].as_f64().unwrap() * if cull["scales_with_view"].as_bool().unwrap() { factor * s } else { 1.0 };
+            let limit = cull["distance_m"].as_f64().unwrap()
+                * if cull["scales_with_view"].as_bool().unwrap() { factor * s } else { 1.0 };
             if d > limit {
                 culled += 1;
                 continue;
             }
-            let level = variants[v].as_array().unwrap().iter().enumerate().filter(|(_, l)| l["switch_distance_m"].as_f64().unwrap() * factor * s <= d).map(|(n, _)| n).max().unwrap();
-            want.entry((v as u64, level as u64)).or_default().push(key([r.pos[0] as f32, r.pos[1] as f32, r.pos[2] as f32], r.rot, r.scale));
+            let level = variants[v]
+                .as_array()
+                .unwrap()
+                .iter()
+                .enumerate()
+                .filter(|(_, l)| l["switch_distance_m"].as_f64().unwrap() * factor * s <= d)
+                .map(|(n, _)| n)
+                .max()
+                .unwrap();
+            want.entry((v as u64, level as u64)).or_default().push(key(
+                [r.pos[0] as f32, r.pos[1] as f32, r.pos[2] as f32],
+                r.rot,
+                r.scale,
+            ));
         }
         assert_eq!(view["species"][k]["culled"].as_u64(), Some(culled), "{species}: culled rows");
         let mut got: BTreeMap<(u64, u64), Vec<String>> = BTreeMap::new();
@@ -192,12 +232,19 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
             let e = node.extras.as_ref().unwrap_or_else(|| panic!("{}: no extras", node.name));
             let (v, level) = (e["variant"].as_u64().unwrap(), e["level"].as_u64().unwrap());
             let mesh = &scene.meshes[node.mesh.unwrap_or_else(|| panic!("{}: no mesh", node.name))];
-            assert_eq!(mesh.name, variants[v as usize][level as usize]["mesh"].as_str().unwrap(), "{}: the chain's mesh", node.name);
+            assert_eq!(
+                mesh.name,
+                variants[v as usize][level as usize]["mesh"].as_str().unwrap(),
+                "{}: the chain's mesh",
+                node.name
+            );
             assert_eq!(node.name, format!("{species}_{}", mesh.name));
             let inst = node.instances.as_ref().unwrap_or_else(|| panic!("{} is not instanced", node.name));
             assert_eq!(inst.translations.len(), inst.rotations.len());
             assert_eq!(inst.translations.len(), inst.scales.len());
-            let keys: Vec<String> = (0..inst.translations.len()).map(|i| key(inst.translations[i], inst.rotations[i], inst.scales[i])).collect();
+            let keys: Vec<String> = (0..inst.translations.len())
+                .map(|i| key(inst.translations[i], inst.rotations[i], inst.scales[i]))
+                .collect();
             assert!(got.insert((v, level), keys).is_none(), "{species}: two nodes for variant {v} LOD{level}");
         }
         assert_eq!(got, want, "{species}: scene.glb = the table replayed for the first view (CSV order within a node)");
@@ -233,18 +280,29 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
         let st = &rs["stats"];
         assert_eq!(st["count"].as_u64(), Some(rows.len() as u64));
         let expected = st["expected"].as_f64().unwrap_or_else(|| panic!("{species}: no expected count: {st}"));
-        assert!((rows.len() as f64 - expected).abs() < 0.1 * expected, "{species}: {} placed, {expected} expected", rows.len());
-        let max_err = st["max_height_error_m"].as_f64().unwrap_or_else(|| panic!("{species}: no max_height_error_m: {st}"));
+        assert!(
+            (rows.len() as f64 - expected).abs() < 0.1 * expected,
+            "{species}: {} placed, {expected} expected",
+            rows.len()
+        );
+        let max_err =
+            st["max_height_error_m"].as_f64().unwrap_or_else(|| panic!("{species}: no max_height_error_m: {st}"));
         assert!((0.0..=1e-4).contains(&max_err), "{species}: max height error {max_err}");
         // measured on every instance (below the sampling limit): the CSV's heights are the mesh's
         // on their 1 µm grid (half a step, 5e-7 m, at most)
         assert_eq!(st["height_checked"].as_u64(), Some(rows.len() as u64), "{species}: {st}");
-        let csv_err = st["max_height_error_csv_m"].as_f64().unwrap_or_else(|| panic!("{species}: no max_height_error_csv_m: {st}"));
+        let csv_err = st["max_height_error_csv_m"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{species}: no max_height_error_csv_m: {st}"));
         assert!((0.0..=5e-7 + 1e-12).contains(&csv_err), "{species}: CSV height error {csv_err}");
-        let min_pair = st["min_pair_distance_m"].as_f64().unwrap_or_else(|| panic!("{species}: no min_pair_distance_m: {st}"));
+        let min_pair =
+            st["min_pair_distance_m"].as_f64().unwrap_or_else(|| panic!("{species}: no min_pair_distance_m: {st}"));
         let ours = min_distance(&rows, &rows, true, 6.0);
         if ours.is_finite() {
-            assert!((ours - min_pair).abs() <= 1e-9 * ours.max(1.0), "{species}: report min pair {min_pair}, CSV {ours}");
+            assert!(
+                (ours - min_pair).abs() <= 1e-9 * ours.max(1.0),
+                "{species}: report min pair {min_pair}, CSV {ours}"
+            );
         }
         assert_eq!(manifest["scatter"]["species"][k]["count"].as_u64(), Some(rows.len() as u64));
     }
@@ -305,7 +363,8 @@ fn only_terrain_scatter_writes_placements_without_preview_and_scatter_alone_is_a
 fn scatter_cache_hits_on_rebuild_and_misses_on_species_or_density_map_changes() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let mapped = GRASS.replace("placement = \"jittered\"\n", "placement = \"jittered\"\ndensity_map = \"maps/grass.png\"\n");
+    let mapped =
+        GRASS.replace("placement = \"jittered\"\n", "placement = \"jittered\"\ndensity_map = \"maps/grass.png\"\n");
     write_density(&d.join("p/maps/grass.png"), 0.2, 0.8);
     write(d, "p/a.toml", &preset("a", 3, &format!("{TREE}\n{mapped}")));
     let build = || {
@@ -331,7 +390,11 @@ fn scatter_cache_hits_on_rebuild_and_misses_on_species_or_density_map_changes() 
     assert_eq!(scatter_files(&s), first, "a cached scatter stage restored different bytes");
 
     // a species setting changes: the scatter misses, the terrain hits
-    write(d, "p/a.toml", &preset("a", 3, &format!("{}\n{mapped}", TREE.replace("max_density = 0.01", "max_density = 0.005"))));
+    write(
+        d,
+        "p/a.toml",
+        &preset("a", 3, &format!("{}\n{mapped}", TREE.replace("max_density = 0.01", "max_density = 0.005"))),
+    );
     build();
     assert!(timing_cached(&s, "terrain"), "the terrain should come from the cache");
     assert!(!timing_cached(&s, "scatter"), "a changed max_density must recompute the scatter");
@@ -390,7 +453,12 @@ fn a_slope_range_that_excludes_everything_writes_empty_valid_files() {
     assert_eq!(json["count"].as_u64(), Some(0));
     assert!(json["rules"]["slope"].as_u64().unwrap() > 0, "{json}");
     let scene = verdant::validate::read_scene(&s.join("scene.glb")).unwrap();
-    let root = scene.roots.iter().map(|&r| &scene.nodes[r]).find(|n| n.name == "grass").expect("a grass node, even when empty");
+    let root = scene
+        .roots
+        .iter()
+        .map(|&r| &scene.nodes[r])
+        .find(|n| n.name == "grass")
+        .expect("a grass node, even when empty");
     assert!(root.children.is_empty());
     assert!(!read_csv(&s.join("placements/tree.csv")).is_empty());
     ok(&verdant_in(d, &["validate", "o/a/scene.glb"]));

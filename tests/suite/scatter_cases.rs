@@ -103,7 +103,8 @@ fn instances_sit_on_the_tin_surface() {
         let on = |v: f64, steps: f64| ((v * steps).round() / steps - v).abs() <= v.abs() * 1e-7;
         assert!(v.iter().all(|i| on(i.yaw_deg as f64, 100.0) && on(i.scale[0] as f64, 1e4)));
         if placement == Placement::Jittered {
-            assert!(v.iter().all(|i| (i.position[0] * 1e4).round() / 1e4 == i.position[0] && (i.position[2] * 1e4).round() / 1e4 == i.position[2]));
+            assert!(v.iter().all(|i| (i.position[0] * 1e4).round() / 1e4 == i.position[0]
+                && (i.position[2] * 1e4).round() / 1e4 == i.position[2]));
         }
         // heights on the 1 µm grid, quaternion components on the 10⁻⁷ grid (both placements)
         assert!(v.iter().all(|i| (i.position[1] * 1e6).round() / 1e6 == i.position[1]));
@@ -186,7 +187,10 @@ fn analyzer_height_error_catches_a_wrong_triangle() {
     assert!((check.max_error_f64_m - worst_d).abs() <= GRID_ERROR, "{check:?} vs {worst_d}");
     // and through analyze(), as the report gets it
     let stats = analyze(&t.surface, t.extent, &sp, None, None, None, &bad, 32.0, 0.0).unwrap();
-    assert!((stats.max_height_error_csv_m - worst_d).abs() <= GRID_ERROR && stats.max_height_error_m >= worst_d - 1e-4, "{stats:?}");
+    assert!(
+        (stats.max_height_error_csv_m - worst_d).abs() <= GRID_ERROR && stats.max_height_error_m >= worst_d - 1e-4,
+        "{stats:?}"
+    );
     // off the mesh: counted, not measured
     let mut off = placed[..10].to_vec();
     off[4].position[0] = t.extent[2] + 5.0;
@@ -247,7 +251,10 @@ fn density_fidelity_in_two_constant_regions() {
                 let measured = v.iter().filter(|i| i.position[0] >= half[0] && i.position[0] < half[2]).count() as f64;
                 let ratio = measured / expected;
                 eprintln!("{placement:?} seed {seed} half {k}: {measured} / {expected:.0} = {ratio:.4}");
-                assert!((ratio - 1.0).abs() < 0.05, "{placement:?} seed {seed} half {k}: {measured} / {expected:.0} = {ratio:.3}");
+                assert!(
+                    (ratio - 1.0).abs() < 0.05,
+                    "{placement:?} seed {seed} half {k}: {measured} / {expected:.0} = {ratio:.3}"
+                );
             }
             // the analyzer says the same
             let stats = analyze(&t.surface, t.extent, &sp, Some(&map), None, None, &v, 16.0, 0.0).unwrap();
@@ -295,11 +302,15 @@ fn density_all_zero_all_one_and_one_pixel() {
         let ones = DensityMap::from_fn(5, 3, |_, _| 1.0);
         let uniform = scatter_species(&t.surface, t.extent, &sp, None, None, &[], 16.0, 5).unwrap();
         assert_eq!(scatter_species(&t.surface, t.extent, &sp, Some(&ones), None, &[], 16.0, 5).unwrap(), uniform);
-        assert_eq!(scatter_species(&t.surface, t.extent, &sp, Some(&DensityMap::constant(1.0)), None, &[], 16.0, 5).unwrap(), uniform);
+        assert_eq!(
+            scatter_species(&t.surface, t.extent, &sp, Some(&DensityMap::constant(1.0)), None, &[], 16.0, 5).unwrap(),
+            uniform
+        );
         let expected = expected_count(&t.surface, t.extent, &sp, None, None, None, t.extent, 200).unwrap();
         assert!((uniform.len() as f64 / expected - 1.0).abs() < 0.03, "{} vs {expected}", uniform.len());
         // a 1×1 map of 0.5: half
-        let half = scatter_species(&t.surface, t.extent, &sp, Some(&DensityMap::constant(0.5)), None, &[], 16.0, 5).unwrap();
+        let half =
+            scatter_species(&t.surface, t.extent, &sp, Some(&DensityMap::constant(0.5)), None, &[], 16.0, 5).unwrap();
         assert!((half.len() as f64 / (0.5 * expected) - 1.0).abs() < 0.04, "{} vs {}", half.len(), 0.5 * expected);
     }
 }
@@ -404,7 +415,10 @@ fn max_instances_exceeded_is_a_clear_error() {
     let e = scatter_species(&t.surface, t.extent, &sp, None, None, &[], 16.0, 1).unwrap_err();
     assert!(matches!(e, ScatterError::TooManyEstimated { .. }), "{e:?}");
     let msg = e.to_string();
-    assert!(msg.contains("lawn") && msg.contains("max_instances = 1000") && msg.contains("raise max_instances"), "{msg}");
+    assert!(
+        msg.contains("lawn") && msg.contains("max_instances = 1000") && msg.contains("raise max_instances"),
+        "{msg}"
+    );
     // a huge request fails fast (estimated, not generated)
     sp.max_density = 1e7;
     let start = std::time::Instant::now();
@@ -467,15 +481,30 @@ fn poisson_max_density_below_packing_thins() {
 fn bad_settings_are_errors_not_panics() {
     let t = terrain(65, 20.0, 0.5);
     let sp = species("x", Placement::Poisson);
-    assert!(matches!(scatter_species(&t.surface, [0.0, 0.0, 0.0, 10.0], &sp, None, None, &[], 16.0, 1), Err(ScatterError::Extent { .. })));
-    assert!(matches!(scatter_species(&t.surface, t.extent, &sp, None, None, &[], 1e-6, 1), Err(ScatterError::Tiles { .. })));
-    assert!(matches!(scatter_species(&t.surface, t.extent, &sp, None, None, &[], f64::NAN, 1), Err(ScatterError::Tiles { .. })));
+    assert!(matches!(
+        scatter_species(&t.surface, [0.0, 0.0, 0.0, 10.0], &sp, None, None, &[], 16.0, 1),
+        Err(ScatterError::Extent { .. })
+    ));
+    assert!(matches!(
+        scatter_species(&t.surface, t.extent, &sp, None, None, &[], 1e-6, 1),
+        Err(ScatterError::Tiles { .. })
+    ));
+    assert!(matches!(
+        scatter_species(&t.surface, t.extent, &sp, None, None, &[], f64::NAN, 1),
+        Err(ScatterError::Tiles { .. })
+    ));
     let mut bad = sp.clone();
     bad.min_spacing_m = 0.0;
-    assert!(matches!(scatter_species(&t.surface, t.extent, &bad, None, None, &[], 16.0, 1), Err(ScatterError::Settings { .. })));
+    assert!(matches!(
+        scatter_species(&t.surface, t.extent, &bad, None, None, &[], 16.0, 1),
+        Err(ScatterError::Settings { .. })
+    ));
     bad.min_spacing_m = 1.0;
     bad.max_density = f64::NAN;
-    assert!(matches!(scatter_species(&t.surface, t.extent, &bad, None, None, &[], 16.0, 1), Err(ScatterError::Settings { .. })));
+    assert!(matches!(
+        scatter_species(&t.surface, t.extent, &bad, None, None, &[], 16.0, 1),
+        Err(ScatterError::Settings { .. })
+    ));
     // an empty surface: nothing is placed, no error
     let empty = SurfaceIndex::new(&[], &[]);
     assert!(scatter_species(&empty, t.extent, &sp, None, None, &[], 16.0, 1).unwrap().is_empty());

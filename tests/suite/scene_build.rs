@@ -67,7 +67,13 @@ fn without_timing(rel: &str, bytes: &[u8]) -> Vec<u8> {
 /// Asserts two scene trees are byte-identical, reports compared without their timing.
 fn assert_same_tree(a: &Path, b: &Path) {
     let (ta, tb) = (tree(a), tree(b));
-    assert_eq!(ta.keys().collect::<Vec<_>>(), tb.keys().collect::<Vec<_>>(), "{} and {} hold different files", a.display(), b.display());
+    assert_eq!(
+        ta.keys().collect::<Vec<_>>(),
+        tb.keys().collect::<Vec<_>>(),
+        "{} and {} hold different files",
+        a.display(),
+        b.display()
+    );
     for (rel, bytes) in &ta {
         assert!(
             without_timing(rel, bytes) == without_timing(rel, &tb[rel]),
@@ -121,11 +127,36 @@ fn preset_check_reports_errors_at_file_line_column() {
     let section = format!("{}\n[species]\nx = 1\n", small_preset("s", 1));
     let line_of = |text: &str, needle: &str| text.lines().position(|l| l.contains(needle)).unwrap() + 1;
     let cases: Vec<(&str, String, String, Vec<&str>)> = vec![
-        ("p/unknown.toml", unknown.clone(), format!("p/unknown.toml:{}:1:", line_of(&unknown, "max_eror")), vec!["max_eror", "did you mean", "max_error"]),
-        ("p/type.toml", wrong_type.clone(), format!("p/type.toml:{}:9:", line_of(&wrong_type, "chunk")), vec!["chunk", "integer", "string"]),
-        ("p/float.toml", float_for_int.clone(), format!("p/float.toml:{}:9:", line_of(&float_for_int, "chunk")), vec!["chunk", "integer"]),
-        ("p/missing.toml", missing.clone(), format!("p/missing.toml:{}:13:", line_of(&missing, "heightmap")), vec!["p/maps/none.png", "not found"]),
-        ("p/section.toml", section.clone(), format!("p/section.toml:{}:", line_of(&section, "[species]")), vec!["species", "[scene]", "[terrain]"]),
+        (
+            "p/unknown.toml",
+            unknown.clone(),
+            format!("p/unknown.toml:{}:1:", line_of(&unknown, "max_eror")),
+            vec!["max_eror", "did you mean", "max_error"],
+        ),
+        (
+            "p/type.toml",
+            wrong_type.clone(),
+            format!("p/type.toml:{}:9:", line_of(&wrong_type, "chunk")),
+            vec!["chunk", "integer", "string"],
+        ),
+        (
+            "p/float.toml",
+            float_for_int.clone(),
+            format!("p/float.toml:{}:9:", line_of(&float_for_int, "chunk")),
+            vec!["chunk", "integer"],
+        ),
+        (
+            "p/missing.toml",
+            missing.clone(),
+            format!("p/missing.toml:{}:13:", line_of(&missing, "heightmap")),
+            vec!["p/maps/none.png", "not found"],
+        ),
+        (
+            "p/section.toml",
+            section.clone(),
+            format!("p/section.toml:{}:", line_of(&section, "[species]")),
+            vec!["species", "[scene]", "[terrain]"],
+        ),
     ];
     for (file, body, position, words) in &cases {
         write(d, file, body);
@@ -166,7 +197,10 @@ fn preset_new_writes_a_template_that_checks_and_is_not_overwritten() {
     let path = d.join("presets/canyon.toml");
     let first = fs::read_to_string(&path).expect("presets/canyon.toml written");
     assert!(first.contains("name = \"canyon\""), "{first}");
-    assert!(first.lines().filter(|l| l.trim_start().starts_with('#')).count() >= 5, "the template is not commented:\n{first}");
+    assert!(
+        first.lines().filter(|l| l.trim_start().starts_with('#')).count() >= 5,
+        "the template is not commented:\n{first}"
+    );
     ok(&verdant_in(d, &["preset", "check", "presets/canyon.toml"]));
 
     // a second `new` refuses and leaves the (edited) file alone
@@ -211,7 +245,8 @@ fn a_broken_preset_fails_alone_and_leaves_its_previous_output_untouched() {
     // and the good scene changes, so it is really rebuilt
     write(d, "p/good.toml", &small_preset("good", 5));
     for jobs in ["1", "2"] {
-        let o = verdant_in(d, &["build", "p/victim.toml", "p/good.toml", "p/mapped.toml", "--jobs", jobs, "--out", "o"]);
+        let o =
+            verdant_in(d, &["build", "p/victim.toml", "p/good.toml", "p/mapped.toml", "--jobs", jobs, "--out", "o"]);
         let t = text(&o);
         assert_eq!(o.status.code(), Some(1), "--jobs {jobs}: {t}");
         assert!(summary_row(&o, "good")[1].starts_with("built"), "{t}");
@@ -267,7 +302,12 @@ fn outputs_are_identical_for_any_jobs_and_threads() {
     }
     // the cache entries are the same too (their stage.json carries the timing of the run that
     // computed them, so compare the files only)
-    let cache = |o: &str| tree(&d.join(o).join(".cache")).into_iter().filter(|(k, _)| !k.ends_with("stage.json")).collect::<BTreeMap<_, _>>();
+    let cache = |o: &str| {
+        tree(&d.join(o).join(".cache"))
+            .into_iter()
+            .filter(|(k, _)| !k.ends_with("stage.json"))
+            .collect::<BTreeMap<_, _>>()
+    };
     assert_eq!(cache("o1"), cache("o2"));
 }
 
@@ -356,7 +396,10 @@ fn cached_rebuild_manifest_is_byte_identical() {
     assert_eq!(summary_row(&o, "a")[1], "built*");
     let cached = tree(&d.join("o/a"));
     assert_eq!(String::from_utf8_lossy(&cached["manifest.json"]), String::from_utf8_lossy(&fresh["manifest.json"]));
-    assert_eq!(without_timing("report.json", &cached["report.json"]), without_timing("report.json", &fresh["report.json"]));
+    assert_eq!(
+        without_timing("report.json", &cached["report.json"]),
+        without_timing("report.json", &fresh["report.json"])
+    );
 }
 
 fn write_bytes(path: &Path, bytes: &[u8]) {
@@ -403,9 +446,10 @@ fn a_damaged_cache_entry_is_recomputed() {
     let d = dir.path();
     write(d, "p/a.toml", &small_preset("a", 3));
     ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
-    let entry = fs::read_dir(d.join("o/.cache")).unwrap().map(|e| e.unwrap().path()).find(|p| {
-        p.file_name().unwrap().to_string_lossy().starts_with("terrain-")
-    });
+    let entry = fs::read_dir(d.join("o/.cache"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.file_name().unwrap().to_string_lossy().starts_with("terrain-"));
     fs::remove_file(entry.unwrap().join("terrain/terrain_LOD1.glb")).unwrap();
     let o = verdant_in(d, &["build", "p/a.toml", "--out", "o"]);
     ok(&o);
@@ -430,9 +474,15 @@ fn manifest_lists_every_file_with_its_hash_and_lods_are_ordered() {
         .as_array()
         .unwrap()
         .iter()
-        .map(|f| (f["path"].as_str().unwrap().to_string(), (f["bytes"].as_u64().unwrap(), f["sha256"].as_str().unwrap().to_string())))
+        .map(|f| {
+            (
+                f["path"].as_str().unwrap().to_string(),
+                (f["bytes"].as_u64().unwrap(), f["sha256"].as_str().unwrap().to_string()),
+            )
+        })
         .collect();
-    let expected: Vec<&String> = on_disk.keys().filter(|k| !["manifest.json", "report.json", "report.md"].contains(&k.as_str())).collect();
+    let expected: Vec<&String> =
+        on_disk.keys().filter(|k| !["manifest.json", "report.json", "report.md"].contains(&k.as_str())).collect();
     assert_eq!(listed.keys().collect::<Vec<_>>(), expected, "the manifest does not list exactly the scene's files");
     for (path, (bytes, sha)) in &listed {
         assert_eq!(*bytes, on_disk[path].len() as u64, "{path}: size");
@@ -451,7 +501,10 @@ fn manifest_lists_every_file_with_its_hash_and_lods_are_ordered() {
     assert!(t["max_error_m"].as_f64().unwrap() <= 0.5);
     let chunks = t["chunks"].as_array().unwrap();
     assert_eq!(chunks.len(), 4, "129² samples in 64² chunks");
-    assert_eq!(chunks.iter().map(|c| c["triangles"].as_u64().unwrap()).sum::<u64>(), t["output_triangles"].as_u64().unwrap());
+    assert_eq!(
+        chunks.iter().map(|c| c["triangles"].as_u64().unwrap()).sum::<u64>(),
+        t["output_triangles"].as_u64().unwrap()
+    );
     let (lo, hi) = (&t["bounds"]["min"], &t["bounds"]["max"]);
     for c in chunks {
         for k in 0..3 {
@@ -508,7 +561,8 @@ fn preview_has_the_reported_size_and_shows_something() {
     ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
     let scene = d.join("o/a");
     let r = read_json(&scene.join("report.json"));
-    let (w, h) = (r["stages"]["preview"]["width_px"].as_u64().unwrap(), r["stages"]["preview"]["height_px"].as_u64().unwrap());
+    let (w, h) =
+        (r["stages"]["preview"]["width_px"].as_u64().unwrap(), r["stages"]["preview"]["height_px"].as_u64().unwrap());
     let img = image::open(scene.join("preview.png")).expect("preview.png decodes").to_rgba8();
     assert_eq!((img.width() as u64, img.height() as u64), (w, h));
     if scene.join("scene.glb").is_file() {
@@ -600,7 +654,16 @@ fn build_without_a_preset_builds_the_demo() {
     ok(&o);
     assert!(text(&o).contains("(embedded demo)"), "{}", text(&o));
     let s = d.join("o/demo");
-    for f in ["terrain/terrain.glb", "terrain/terrain_LOD0.glb", "terrain/terrain_LOD1.glb", "terrain/terrain_LOD2.glb", "preview.png", "manifest.json", "report.json", "report.md"] {
+    for f in [
+        "terrain/terrain.glb",
+        "terrain/terrain_LOD0.glb",
+        "terrain/terrain_LOD1.glb",
+        "terrain/terrain_LOD2.glb",
+        "preview.png",
+        "manifest.json",
+        "report.json",
+        "report.md",
+    ] {
         assert!(s.join(f).is_file(), "demo: {f} missing");
     }
     let m = read_json(&s.join("manifest.json"));
@@ -624,8 +687,13 @@ fn library_batch_keeps_order_and_reports_failures() {
         t.source = load_preset(&good).unwrap().terrain.unwrap().source;
         t.chunk = Some(64);
     }
-    let settings = BuildSettings { out_dir: d.join("out"), stages: Stage::ALL.to_vec(), force: false, compare_full_detail: false };
-    let sources = vec![PresetSource::File(bad.clone()), PresetSource::Resolved(Box::new(demo.clone())), PresetSource::File(good.clone())];
+    let settings =
+        BuildSettings { out_dir: d.join("out"), stages: Stage::ALL.to_vec(), force: false, compare_full_detail: false };
+    let sources = vec![
+        PresetSource::File(bad.clone()),
+        PresetSource::Resolved(Box::new(demo.clone())),
+        PresetSource::File(good.clone()),
+    ];
     let lines = std::sync::Mutex::new(Vec::<String>::new());
     let progress = |scene: &str, msg: &str| lines.lock().unwrap().push(format!("{scene}: {msg}"));
     let outcomes = build_batch(&sources, &settings, 3, &progress);
@@ -676,7 +744,8 @@ fn concurrent_stores_of_one_cache_entry_stay_complete() {
         });
         let (_, entry) = cache.lookup("terrain", "k").expect("an entry");
         let restored = dir.path().join(format!("restored{round}"));
-        Cache::restore(&entry, &restored, &files).unwrap_or_else(|e| panic!("round {round}: incomplete cache entry: {e}"));
+        Cache::restore(&entry, &restored, &files)
+            .unwrap_or_else(|e| panic!("round {round}: incomplete cache entry: {e}"));
     }
 }
 

@@ -45,7 +45,12 @@ fn a_tile_beyond_the_cull_distance_contributes_no_instance() {
         if let Some(inst) = &n.instances {
             for t in &inst.translations {
                 let d2 = (t[0] as f64 - e[0]).powi(2) + (t[1] as f64 - e[1]).powi(2) + (t[2] as f64 - e[2]).powi(2);
-                assert!(d2.sqrt() <= 60.0 + 1.2 * centre_y.abs() + 1e-3, "{}: an instance {} m from the eye", n.name, d2.sqrt());
+                assert!(
+                    d2.sqrt() <= 60.0 + 1.2 * centre_y.abs() + 1e-3,
+                    "{}: an instance {} m from the eye",
+                    n.name,
+                    d2.sqrt()
+                );
                 drawn.push(*t);
             }
         }
@@ -60,14 +65,24 @@ fn a_tile_beyond_the_cull_distance_contributes_no_instance() {
         let gap: f64 = (0..3)
             .map(|k| {
                 let (a, b) = (lo[k].as_f64().unwrap(), hi[k].as_f64().unwrap());
-                let g = if e[k] < a { a - e[k] } else if e[k] > b { e[k] - b } else { 0.0 };
+                let g = if e[k] < a {
+                    a - e[k]
+                } else if e[k] > b {
+                    e[k] - b
+                } else {
+                    0.0
+                };
                 g * g
             })
             .sum::<f64>()
             .sqrt();
         if gap > 60.0 + 2.0 {
             far_tiles += 1;
-            let inside = drawn.iter().any(|p| (0..3).all(|k| (p[k] as f64) >= lo[k].as_f64().unwrap() - 1e-3 && (p[k] as f64) <= hi[k].as_f64().unwrap() + 1e-3));
+            let inside = drawn.iter().any(|p| {
+                (0..3).all(|k| {
+                    (p[k] as f64) >= lo[k].as_f64().unwrap() - 1e-3 && (p[k] as f64) <= hi[k].as_f64().unwrap() + 1e-3
+                })
+            });
             assert!(!inside, "tile {} lies beyond the cull distance but has a drawn instance", t["tile"]);
         }
     }
@@ -87,10 +102,21 @@ fn a_larger_budget_switches_nearer_and_draws_fewer_triangles() {
     let mut runs = Vec::new();
     for (name, px) in [("fine", 1.0), ("coarse", 4.0)] {
         let m = build(d, name, &meadow(name, &format!("[lod]\nmax_pixel_error = {px}\n"), ""));
-        let switch: Vec<f64> = m["view"]["chains"]["grass"]["variants"][0].as_array().unwrap().iter().map(|l| l["switch_distance_m"].as_f64().unwrap()).collect();
-        let terrain: Vec<f64> = m["terrain"]["lods"].as_array().unwrap().iter().map(|l| l["switch_distance_m"].as_f64().unwrap()).collect();
+        let switch: Vec<f64> = m["view"]["chains"]["grass"]["variants"][0]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|l| l["switch_distance_m"].as_f64().unwrap())
+            .collect();
+        let terrain: Vec<f64> =
+            m["terrain"]["lods"].as_array().unwrap().iter().map(|l| l["switch_distance_m"].as_f64().unwrap()).collect();
         let view = &m["view"]["views"][0];
-        runs.push((switch, terrain, view["triangles"].as_u64().unwrap(), view["full_detail_triangles"].as_u64().unwrap()));
+        runs.push((
+            switch,
+            terrain,
+            view["triangles"].as_u64().unwrap(),
+            view["full_detail_triangles"].as_u64().unwrap(),
+        ));
     }
     let (fine, coarse) = (&runs[0], &runs[1]);
     for (s, t, _, _) in &runs {
@@ -131,7 +157,11 @@ fn the_default_view_and_bad_views() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("did you mean `max_pixel_error`"), "{}", text(&o));
     // the eye on the target: the build fails naming the view
-    write(d, "p/bad3.toml", &meadow("bad3", "[[view]]\nname = \"stuck\"\nposition = [5.0, 5.0, 5.0]\ntarget = [5.0, 5.0, 5.0]\n", ""));
+    write(
+        d,
+        "p/bad3.toml",
+        &meadow("bad3", "[[view]]\nname = \"stuck\"\nposition = [5.0, 5.0, 5.0]\ntarget = [5.0, 5.0, 5.0]\n", ""),
+    );
     let o = verdant_in(d, &["build", "p/bad3.toml", "--out", "o"]);
     assert_ne!(o.status.code(), Some(0));
     assert!(text(&o).contains("view `stuck`"), "{}", text(&o));
@@ -146,7 +176,12 @@ fn preset_check_warns_before_any_work_when_a_species_may_exceed_max_instances() 
     assert_eq!(o.status.code(), Some(0), "a warning, not an error: {}", text(&o));
     let t = text(&o);
     // 0.3 per m² over 256 m × 256 m ≈ 19 661
-    assert!(t.contains("warning:") && t.contains("species `grass` may place up to ~19661") && t.contains("max_instances 1000"), "{t}");
+    assert!(
+        t.contains("warning:")
+            && t.contains("species `grass` may place up to ~19661")
+            && t.contains("max_instances 1000"),
+        "{t}"
+    );
     write(d, "p/ok.toml", &meadow("fine", "", ""));
     assert!(!text(&verdant_in(d, &["preset", "check", "p/ok.toml"])).contains("warning"));
 }

@@ -39,7 +39,8 @@ fn rotation_mismatch(img: &Image, deg: f32) -> f64 {
 }
 
 fn atlas_px(temperature_c: f32, humidity: f32, cell_px: u32) -> FlakeAtlas {
-    build_atlas(&FlakeSettings { temperature_c, humidity, columns: 4, rows: 4, cell_px, ..FlakeSettings::default() }).unwrap()
+    build_atlas(&FlakeSettings { temperature_c, humidity, columns: 4, rows: 4, cell_px, ..FlakeSettings::default() })
+        .unwrap()
 }
 
 fn atlas_at(temperature_c: f32, humidity: f32) -> FlakeAtlas {
@@ -64,14 +65,25 @@ fn atlas_cells_are_filled_and_rotationally_symmetric() {
         for cell in &atlas.cells {
             let img = atlas.cell_image(cell.index);
             let covered = img.pixels.iter().filter(|p| p[3] >= 0.5).count();
-            assert!(covered as f64 > 0.02 * img.pixels.len() as f64, "cell {} ({:?}) at {t} °C covers {covered} px", cell.index, cell.kind);
+            assert!(
+                covered as f64 > 0.02 * img.pixels.len() as f64,
+                "cell {} ({:?}) at {t} °C covers {covered} px",
+                cell.index,
+                cell.kind
+            );
             outlines.insert((cell.kind, covered));
             let Some(angle) = cell.kind.symmetry_deg() else { continue };
             let e = rotation_mismatch(&img, angle);
             assert!(e < 0.15, "cell {} ({:?}) at {t} °C: {angle}° mismatch {e:.3}", cell.index, cell.kind);
             // the measure can tell: turning by half the symmetry angle does not match
             let off = rotation_mismatch(&img, angle / 2.0);
-            assert!(off > 2.0 * e + 0.05, "cell {} ({:?}): {angle}° {e:.3}, {}° {off:.3}", cell.index, cell.kind, angle / 2.0);
+            assert!(
+                off > 2.0 * e + 0.05,
+                "cell {} ({:?}): {angle}° {e:.3}, {}° {off:.3}",
+                cell.index,
+                cell.kind,
+                angle / 2.0
+            );
             checked[(angle > 90.0) as usize] += 1;
         }
     }
@@ -83,8 +95,14 @@ fn atlas_cells_are_filled_and_rotationally_symmetric() {
 #[test]
 fn habits_and_sizes_follow_temperature_and_humidity() {
     let count = |a: &FlakeAtlas, k: FlakeKind| a.cells.iter().filter(|c| c.kind == k).count();
-    for (t, kind) in [(-6.0, FlakeKind::Needle), (-10.0, FlakeKind::Plate), (-15.0, FlakeKind::StellarDendrite),
-                      (-21.5, FlakeKind::SpatialDendrite), (-33.0, FlakeKind::Column), (0.0, FlakeKind::Aggregate)] {
+    for (t, kind) in [
+        (-6.0, FlakeKind::Needle),
+        (-10.0, FlakeKind::Plate),
+        (-15.0, FlakeKind::StellarDendrite),
+        (-21.5, FlakeKind::SpatialDendrite),
+        (-33.0, FlakeKind::Column),
+        (0.0, FlakeKind::Aggregate),
+    ] {
         let a = atlas_at(t, 0.7);
         assert!(count(&a, kind) >= 12, "{t} °C: {:?}", a.cells.iter().map(|c| c.kind).collect::<Vec<_>>());
     }
@@ -179,7 +197,11 @@ fn snow_weight_never_increases_with_slope() {
                 let n = [slope.sin() * aspect.cos(), slope.cos(), slope.sin() * aspect.sin()];
                 let [w, _, _] = snow_weight(&s, [13.0, altitude, -7.0], n);
                 assert!((0.0..=1.0).contains(&w));
-                assert!(w <= last + 1e-6, "altitude {altitude}, aspect {aspect}: {w} after {last} at slope {}", step as f32 * 0.5);
+                assert!(
+                    w <= last + 1e-6,
+                    "altitude {altitude}, aspect {aspect}: {w} after {last} at slope {}",
+                    step as f32 * 0.5
+                );
                 last = w;
             }
         }
@@ -210,7 +232,8 @@ fn cover_on_a_terrain_attribute_mask_layer_and_report() {
     // the mask agrees with the vertex weights where it is read back
     let p = &scene.meshes[0].primitives[0];
     let w = &p.custom[0].values;
-    let err: f32 = p.positions.iter().zip(w).map(|(q, v)| (mask.weight_at(q[0], q[2]) - v[0]).abs()).sum::<f32>() / w.len() as f32;
+    let err: f32 =
+        p.positions.iter().zip(w).map(|(q, v)| (mask.weight_at(q[0], q[2]) - v[0]).abs()).sum::<f32>() / w.len() as f32;
     // the rest is the pixel-centre offset on a rough test terrain (0.11 at 128 px, 0.027 at 512)
     assert!(err < 0.05, "mean |mask − vertex weight| {err}");
     // the PNG stores the weight itself (weight·255)
@@ -257,11 +280,15 @@ fn all_outputs(dir: &std::path::Path) -> Vec<Vec<u8>> {
     let ps = particles(&e, &atlas).unwrap();
     let mut files = write_snowfall(dir, &atlas, &e, &ps, 0.5).unwrap();
     let mut terrain = terrain();
-    apply_cover(&mut terrain, &CoverSettings { snow_line_m: 30.0, snow_line_noise_m: 8.0, ..CoverSettings::default() }).unwrap();
+    apply_cover(&mut terrain, &CoverSettings { snow_line_m: 30.0, snow_line_noise_m: 8.0, ..CoverSettings::default() })
+        .unwrap();
     let mask = cover_mask(&terrain, 96).unwrap();
     files.extend(write_cover(dir, &mask, Some(&snow_layer(&terrain, 0.5).unwrap())).unwrap());
     let names: Vec<String> = files.iter().map(|f| f.file_name().unwrap().to_string_lossy().into_owned()).collect();
-    assert_eq!(names, ["flakes.png", "emitter.json", "particles.csv", "snowfall.glb", "cover_mask.png", "snow_layer.glb"]);
+    assert_eq!(
+        names,
+        ["flakes.png", "emitter.json", "particles.csv", "snowfall.glb", "cover_mask.png", "snow_layer.glb"]
+    );
     files.iter().map(|f| std::fs::read(f).unwrap()).collect()
 }
 
@@ -303,7 +330,10 @@ fn emitter_json_has_the_derived_figures_and_every_field_is_documented() {
     let docs = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/snow.md")).unwrap();
     fn keys(v: &serde_json::Value, out: &mut Vec<String>) {
         match v {
-            serde_json::Value::Object(m) => m.iter().for_each(|(k, x)| { out.push(k.clone()); keys(x, out) }),
+            serde_json::Value::Object(m) => m.iter().for_each(|(k, x)| {
+                out.push(k.clone());
+                keys(x, out)
+            }),
             serde_json::Value::Array(a) => a.iter().for_each(|x| keys(x, out)),
             _ => {}
         }
@@ -325,16 +355,23 @@ fn bad_settings_give_clear_errors() {
     let err = build_atlas(&f).unwrap_err();
     assert!(err.to_string().contains("−40 and +2 °C"), "{err}");
     assert_eq!(key(err), "temperature_c");
-    assert_eq!(key(build_atlas(&FlakeSettings { humidity: f32::NAN, ..FlakeSettings::default() }).unwrap_err()), "humidity");
+    assert_eq!(
+        key(build_atlas(&FlakeSettings { humidity: f32::NAN, ..FlakeSettings::default() }).unwrap_err()),
+        "humidity"
+    );
     assert_eq!(key(build_atlas(&FlakeSettings { cell_px: 4, ..FlakeSettings::default() }).unwrap_err()), "cell_px");
 
     let json = r#"{"near_radius_m": 20.0, "far": {"outer_radius_m": 10.0, "count": 5, "view_angle_deg": 90}}"#;
     assert_eq!(key(Emitter::from_json(json, "emitter.json").unwrap_err()), "far.outer_radius_m");
     assert_eq!(key(Emitter::from_json(r#"{"drag_kg_s": 0}"#, "e.json").unwrap_err()), "drag_kg_s");
-    let err = Emitter::from_json("{\n  \"near_count\": 10,\n  \"fall_heigth_m\": 3\n}", "snow/emitter.json").unwrap_err();
+    let err =
+        Emitter::from_json("{\n  \"near_count\": 10,\n  \"fall_heigth_m\": 3\n}", "snow/emitter.json").unwrap_err();
     let msg = err.to_string();
     assert!(matches!(err, SnowError::Json { line: 3, .. }), "{msg}");
-    assert!(msg.contains("snow/emitter.json") && msg.contains("fall_heigth_m") && msg.contains("fall_height_m"), "{msg}");
+    assert!(
+        msg.contains("snow/emitter.json") && msg.contains("fall_heigth_m") && msg.contains("fall_height_m"),
+        "{msg}"
+    );
 
     let c = CoverSettings { full_slope_deg: 50.0, max_slope_deg: 40.0, ..CoverSettings::default() };
     let mut scene = terrain();
@@ -343,7 +380,6 @@ fn bad_settings_give_clear_errors() {
     let err = cover_mask(&scene, 64).unwrap_err();
     assert!(err.to_string().contains("apply_cover"), "{err}");
 }
-
 
 #[test]
 fn the_stored_mask_reads_back_on_its_8_bit_steps_and_in_place() {
@@ -362,7 +398,8 @@ fn the_stored_mask_reads_back_on_its_8_bit_steps_and_in_place() {
     assert!(back.weights.iter().any(|&w| w > 0.9) && back.weights.iter().any(|&w| w < 0.1), "partly covered");
     // the same place: read at a pixel centre, both give that pixel's value
     let (i, j) = (back.width / 3, back.height / 2);
-    let (x, z) = (mask.min_x + (i as f32 + 0.5) * mask.metres_per_pixel, mask.min_z + (j as f32 + 0.5) * mask.metres_per_pixel);
+    let (x, z) =
+        (mask.min_x + (i as f32 + 0.5) * mask.metres_per_pixel, mask.min_z + (j as f32 + 0.5) * mask.metres_per_pixel);
     assert!((back.weight_at(x, z) - back.weights[(j * back.width + i) as usize]).abs() < 1e-5);
     assert!((back.weight_at(x, z) - mask.weight_at(x, z)).abs() <= 0.5 / 255.0 + 1e-5);
     // not a PNG: an error naming the remedy, no panic

@@ -14,7 +14,8 @@ use verdant::scene::preset::{parse_preset, template};
 
 use crate::common::*;
 
-const TREE: &str = "[[species]]\nname = \"tree\"\nkind = \"tree\"\nplacement = \"poisson\"\nmax_density = 0.01\nmin_spacing = 5.0\n";
+const TREE: &str =
+    "[[species]]\nname = \"tree\"\nkind = \"tree\"\nplacement = \"poisson\"\nmax_density = 0.01\nmin_spacing = 5.0\n";
 /// No exclusion, so every grass candidate the snow drops would otherwise have been placed.
 const GRASS: &str = "[[species]]\nname = \"grass\"\nkind = \"grass\"\nmax_density = 0.3\n";
 const FLOWER: &str = "[[species]]\nname = \"bloom\"\nkind = \"flower\"\nmax_density = 0.1\n";
@@ -61,7 +62,13 @@ fn outputs(scene_dir: &Path) -> BTreeMap<String, Vec<u8>> {
 
 fn species_stats(scene_dir: &Path, name: &str) -> serde_json::Value {
     let r = read_json(&scene_dir.join("report.json"));
-    r["stages"]["scatter"]["species"].as_array().unwrap().iter().find(|s| s["name"] == name).unwrap_or_else(|| panic!("no species {name} in the report"))["stats"].clone()
+    r["stages"]["scatter"]["species"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["name"] == name)
+        .unwrap_or_else(|| panic!("no species {name} in the report"))["stats"]
+        .clone()
 }
 
 fn species_rules(scene_dir: &Path, name: &str) -> serde_json::Value {
@@ -95,7 +102,10 @@ fn snow_section_errors_are_positioned_with_a_remedy() {
     // a misspelt key: at the key, with the right spelling
     let (line, column, msg) = error_at(&format!("{base}[snow]\nhumidity = 0.5\ntemprature_c = -10.0\n"));
     assert_eq!((line, column), (line_of_snow + 2, 1), "{msg}");
-    assert!(msg.contains("unknown key `temprature_c` in [snow]") && msg.contains("did you mean `temperature_c`?"), "{msg}");
+    assert!(
+        msg.contains("unknown key `temprature_c` in [snow]") && msg.contains("did you mean `temperature_c`?"),
+        "{msg}"
+    );
     // out of range: at the value, naming the range
     let (line, column, msg) = error_at(&format!("{base}[snow]\nhumidity = 1.5\n"));
     assert_eq!((line, column), (line_of_snow + 1, 12), "{msg}");
@@ -147,7 +157,8 @@ fn snow_section_errors_are_positioned_with_a_remedy() {
         .map(|l| format!("{l}\n"))
         .collect();
     assert!(uncommented.contains("temperature_c"), "{uncommented}");
-    let p = parse_preset(&format!("{base}{uncommented}"), Path::new("t.toml")).unwrap_or_else(|e| panic!("{e}\n{uncommented}"));
+    let p = parse_preset(&format!("{base}{uncommented}"), Path::new("t.toml"))
+        .unwrap_or_else(|e| panic!("{e}\n{uncommented}"));
     assert!(p.snow.is_some());
 }
 
@@ -162,7 +173,15 @@ fn build_writes_every_snow_file_reports_it_and_draws_the_cover() {
     build(d, "p/s.toml", "o", &[]);
     build(d, "p/n.toml", "o", &[]);
     let s = d.join("o/s");
-    for f in ["flakes.png", "emitter.json", "particles.csv", "snowfall.glb", "cover_mask.png", "snow_layer.glb", "terrain_snow.glb"] {
+    for f in [
+        "flakes.png",
+        "emitter.json",
+        "particles.csv",
+        "snowfall.glb",
+        "cover_mask.png",
+        "snow_layer.glb",
+        "terrain_snow.glb",
+    ] {
         assert!(s.join("snow").join(f).is_file(), "snow/{f} missing");
     }
     let m = read_json(&s.join("manifest.json"));
@@ -175,7 +194,11 @@ fn build_writes_every_snow_file_reports_it_and_draws_the_cover() {
     let e = read_json(&s.join("snow/emitter.json"));
     let particles = rows(&s.join("snow/particles.csv"));
     assert_eq!(particles.len(), 500);
-    let (r1, r2, h) = (e["near_radius_m"].as_f64().unwrap(), e["far"]["outer_radius_m"].as_f64().unwrap(), e["fall_height_m"].as_f64().unwrap());
+    let (r1, r2, h) = (
+        e["near_radius_m"].as_f64().unwrap(),
+        e["far"]["outer_radius_m"].as_f64().unwrap(),
+        e["fall_height_m"].as_f64().unwrap(),
+    );
     for row in &particles {
         let f: Vec<&str> = row.split(',').collect();
         let (x, y, z): (f64, f64, f64) = (f[1].parse().unwrap(), f[2].parse().unwrap(), f[3].parse().unwrap());
@@ -183,7 +206,10 @@ fn build_writes_every_snow_file_reports_it_and_draws_the_cover() {
         assert!((0.0..=h).contains(&y), "{row}");
         match f[0] {
             "near" => assert!(r <= r1 * (1.0 + 1e-6), "{row}"),
-            _ => assert!(r >= r1 * (1.0 - 1e-6) && r <= r2 * (1.0 + 1e-6) && x.atan2(-z).to_degrees().abs() <= 40.0 + 1e-3, "{row}"),
+            _ => assert!(
+                r >= r1 * (1.0 - 1e-6) && r <= r2 * (1.0 + 1e-6) && x.atan2(-z).to_degrees().abs() <= 40.0 + 1e-3,
+                "{row}"
+            ),
         }
     }
     let v = e["flake_mass_kg"].as_f64().unwrap() * 9.80665 / e["drag_kg_s"].as_f64().unwrap();
@@ -212,10 +238,19 @@ fn build_writes_every_snow_file_reports_it_and_draws_the_cover() {
     assert!((ma["terminal_velocity_m_s"].as_f64().unwrap() - v).abs() < 1e-4 * v);
     for key in ["cover_by_slope", "cover_by_altitude"] {
         let (x, y) = (ma[key].as_array().unwrap(), a[key].as_array().unwrap());
-        assert!(x.iter().zip(y).all(|(p, q)| p["vertices"] == q["vertices"] && p["mean_weight"] == q["mean_weight"]), "{key}");
+        assert!(
+            x.iter().zip(y).all(|(p, q)| p["vertices"] == q["vertices"] && p["mean_weight"] == q["mean_weight"]),
+            "{key}"
+        );
     }
     let md = fs::read_to_string(s.join("report.md")).unwrap();
-    assert!(md.contains("## Snow") && md.contains("Terminal velocity") && md.contains("| slope band |") && md.contains("| altitude band |"), "{md}");
+    assert!(
+        md.contains("## Snow")
+            && md.contains("Terminal velocity")
+            && md.contains("| slope band |")
+            && md.contains("| altitude band |"),
+        "{md}"
+    );
 
     // the preview shows the cover: brighter than the same scene without snow
     let brightness = |p: &Path| {
@@ -262,19 +297,37 @@ fn snow_thins_grass_and_flowers_by_the_reported_count_and_leaves_trees() {
     assert!(mask.pixels().all(|p| p.0[0] == 255), "full snow: every mask pixel at weight 1");
 
     // trees: untouched
-    assert_eq!(fs::read(bare.join("placements/tree.csv")).unwrap(), fs::read(snowy.join("placements/tree.csv")).unwrap());
+    assert_eq!(
+        fs::read(bare.join("placements/tree.csv")).unwrap(),
+        fs::read(snowy.join("placements/tree.csv")).unwrap()
+    );
     assert_eq!(species_rules(&snowy, "tree")["snow"], 0);
     for name in ["grass", "bloom"] {
-        let (before, after) = (rows(&bare.join(format!("placements/{name}.csv"))), rows(&snowy.join(format!("placements/{name}.csv"))));
+        let (before, after) =
+            (rows(&bare.join(format!("placements/{name}.csv"))), rows(&snowy.join(format!("placements/{name}.csv"))));
         let thinned = species_rules(&snowy, name)["snow"].as_u64().unwrap() as usize;
         assert_eq!(species_rules(&bare, name)["snow"], 0);
         // the same candidates, some dropped: what is left is a subset, and the count is the rule's
-        assert_eq!(after.len() + thinned, before.len(), "{name}: {} kept + {thinned} thinned != {} without snow", after.len(), before.len());
+        assert_eq!(
+            after.len() + thinned,
+            before.len(),
+            "{name}: {} kept + {thinned} thinned != {} without snow",
+            after.len(),
+            before.len()
+        );
         let kept: std::collections::BTreeSet<&String> = before.iter().collect();
-        assert!(after.iter().all(|r| kept.contains(r)), "{name}: an instance appears that the bare scene does not have");
+        assert!(
+            after.iter().all(|r| kept.contains(r)),
+            "{name}: an instance appears that the bare scene does not have"
+        );
         // thin_plants = 0.5 at weight 1: about half survive
         let share = after.len() as f64 / before.len() as f64;
-        assert!(before.len() > 1000 && (0.45..0.55).contains(&share), "{name}: {} of {} kept ({share:.3})", after.len(), before.len());
+        assert!(
+            before.len() > 1000 && (0.45..0.55).contains(&share),
+            "{name}: {} of {} kept ({share:.3})",
+            after.len(),
+            before.len()
+        );
         let summary = read_json(&snowy.join(format!("placements/{name}.json")));
         assert_eq!(summary["rules"]["snow"].as_u64().unwrap() as usize, thinned);
         // the analyzer expects what the snow leaves: count / expected near 1 with and without it
@@ -303,7 +356,11 @@ fn snow_cache_hits_on_rebuild_and_misses_when_a_snow_key_changes() {
     assert!(outputs(&s) == first, "a cached build restored different bytes");
 
     // a crystal setting: the snow recomputes (new atlas), the terrain does not
-    write(d, "p/c.toml", &preset("c", &format!("{GRASS}\n{}", SNOW.replace("temperature_c = -15.0", "temperature_c = -6.0"))));
+    write(
+        d,
+        "p/c.toml",
+        &preset("c", &format!("{GRASS}\n{}", SNOW.replace("temperature_c = -15.0", "temperature_c = -6.0"))),
+    );
     build(d, "p/c.toml", "o", &[]);
     assert!(timing_cached(&s, "terrain"));
     assert!(!timing_cached(&s, "snow"), "a changed temperature_c must recompute the snow");
@@ -314,7 +371,10 @@ fn snow_cache_hits_on_rebuild_and_misses_when_a_snow_key_changes() {
     build(d, "p/c.toml", "o", &[]);
     assert!(timing_cached(&s, "terrain"));
     assert!(!timing_cached(&s, "snow") && !timing_cached(&s, "scatter"));
-    assert!(rows(&s.join("placements/grass.csv")).len() > rows_of(&first["placements/grass.csv"]), "less thinning keeps more grass");
+    assert!(
+        rows(&s.join("placements/grass.csv")).len() > rows_of(&first["placements/grass.csv"]),
+        "less thinning keeps more grass"
+    );
 
     // back to the first settings: every stage from the cache, the first bytes again
     write(d, "p/c.toml", &preset("c", &format!("{GRASS}\n{SNOW}")));
@@ -345,5 +405,8 @@ fn a_preset_without_snow_writes_no_snow_folder() {
     write(d, "p/m.toml", &preset("m", &format!("{GRASS}\n{}", full_snow(1.0))));
     build(d, "p/m.toml", "o", &["--skip", "snow"]);
     assert!(!d.join("o/m/snow").exists());
-    assert_eq!(fs::read(d.join("o/m/placements/grass.csv")).unwrap(), fs::read(s.join("placements/grass.csv")).unwrap());
+    assert_eq!(
+        fs::read(d.join("o/m/placements/grass.csv")).unwrap(),
+        fs::read(s.join("placements/grass.csv")).unwrap()
+    );
 }

@@ -95,7 +95,8 @@ fn vertical_cliff() {
 #[test]
 fn white_noise_keeps_the_bound() {
     let dir = tempfile::tempdir().unwrap();
-    let path = write_png(dir.path(), "noise.png", 48, 48, |i, j| (verdant::synth::mix64((i * 48 + j) as u64) >> 48) as u16);
+    let path =
+        write_png(dir.path(), "noise.png", 48, 48, |i, j| (verdant::synth::mix64((i * 48 + j) as u64) >> 48) as u16);
     let (r, _) = run_checked(&job_for(&path, 100.0), dir.path(), "glb");
     assert!(r.triangles as f64 > 0.8 * r.full_grid_triangles as f64, "noise approaches the full grid: {}", r.triangles);
 }
@@ -139,7 +140,15 @@ fn two_by_two_and_zero_area_maps() {
 #[test]
 fn sixteen_bit_full_range() {
     let dir = tempfile::tempdir().unwrap();
-    let path = write_png(dir.path(), "full.png", 33, 33, |i, j| if (i, j) == (16, 16) { 65535 } else if i == 0 { 0 } else { ((i * 2000) % 65536) as u16 });
+    let path = write_png(dir.path(), "full.png", 33, 33, |i, j| {
+        if (i, j) == (16, 16) {
+            65535
+        } else if i == 0 {
+            0
+        } else {
+            ((i * 2000) % 65536) as u16
+        }
+    });
     let (r, scene) = run_checked(&job_for(&path, 0.5), dir.path(), "glb");
     let ys: Vec<f32> = scene.meshes[0].primitives[0].positions.iter().map(|p| p[1]).collect();
     assert!(ys.contains(&65535.0) && ys.contains(&0.0));
@@ -181,7 +190,9 @@ fn triangle_limit_reports_the_achieved_error() {
 #[test]
 fn chunks_skirts_and_base_round_trip() {
     let dir = tempfile::tempdir().unwrap();
-    let path = write_png(dir.path(), "hill.png", 70, 50, |i, j| (((i as f64 / 10.0).sin() * (j as f64 / 7.0).cos() + 1.0) * 2000.0) as u16);
+    let path = write_png(dir.path(), "hill.png", 70, 50, |i, j| {
+        (((i as f64 / 10.0).sin() * (j as f64 / 7.0).cos() + 1.0) * 2000.0) as u16
+    });
     let mut job = job_for(&path, 1.0);
     job.build.chunk_samples = Some(32);
     let (r, scene) = run_checked(&job, dir.path(), "glb");
@@ -283,7 +294,8 @@ fn error_in_file(path: &Path, cell: f64, truth: &dyn Fn(i64, i64) -> f64) -> (f6
         assert_eq!(node.rotation, [0.0, 0.0, 0.0, 1.0], "terrain nodes are not rotated");
         let (t, sc) = (node.translation.map(|c| c as f64), node.scale.map(|c| c as f64));
         for prim in &back.meshes[node.mesh.unwrap()].primitives {
-            let world: Vec<[f64; 3]> = prim.positions.iter().map(|p| [0, 1, 2].map(|a| t[a] + sc[a] * p[a] as f64)).collect();
+            let world: Vec<[f64; 3]> =
+                prim.positions.iter().map(|p| [0, 1, 2].map(|a| t[a] + sc[a] * p[a] as f64)).collect();
             for tri in prim.indices.chunks_exact(3) {
                 let p = [tri[0], tri[1], tri[2]].map(|k| world[k as usize]);
                 let d = (p[1][0] - p[0][0]) * (p[2][2] - p[0][2]) - (p[2][0] - p[0][0]) * (p[1][2] - p[0][2]);
@@ -332,11 +344,20 @@ fn quantized_and_compressed_terrains_keep_the_bound_as_stored() {
     let (scale, offset, cell) = (2345.6, 812.3, 7.5);
     let truth = |i: i64, j: i64| offset + v(i as u32, j as u32) as f64 / 65535.0 * scale;
     let mut job = job_for(&path, 0.25);
-    job.decode = DecodeOptions { encoding: Encoding::Gray, height_scale_m: scale, height_offset_m: offset, cell_size_m: cell, ..DecodeOptions::default() };
-    job.build = BuildOptions { chunk_samples: Some(32), skirt_depth_m: Some(4.0), base_depth_m: None, name: "q".into() };
+    job.decode = DecodeOptions {
+        encoding: Encoding::Gray,
+        height_scale_m: scale,
+        height_offset_m: offset,
+        cell_size_m: cell,
+        ..DecodeOptions::default()
+    };
+    job.build =
+        BuildOptions { chunk_samples: Some(32), skirt_depth_m: Some(4.0), base_depth_m: None, name: "q".into() };
     let mut sizes = Vec::new();
     let mut scenes = Vec::new();
-    for (name, quantize, meshopt) in [("f32.glb", false, false), ("quantized.glb", true, false), ("compressed.glb", true, true)] {
+    for (name, quantize, meshopt) in
+        [("f32.glb", false, false), ("quantized.glb", true, false), ("compressed.glb", true, true)]
+    {
         let (mut job, out) = (job.clone(), dir.path().join(name));
         (job.quantize, job.meshopt) = (quantize, meshopt);
         let (report, _) = job::run(&job, Some(&out)).unwrap();
@@ -344,7 +365,11 @@ fn quantized_and_compressed_terrains_keep_the_bound_as_stored() {
         let (worst, covered) = error_in_file(&out, cell, &truth);
         assert_eq!(covered, (w * h) as usize, "{name}");
         assert!(worst <= 0.25, "{name}: the file is {worst} m off the map");
-        assert!((worst - report.max_error).abs() < 1e-9, "{name}: independent {worst} vs reported {}", report.max_error);
+        assert!(
+            (worst - report.max_error).abs() < 1e-9,
+            "{name}: independent {worst} vs reported {}",
+            report.max_error
+        );
         let v = validate_file(&out, &ValidateOptions { up_facing: false }).unwrap();
         assert!(v.ok(), "{name}: {v}");
         sizes.push(std::fs::metadata(&out).unwrap().len());
@@ -360,7 +385,8 @@ fn quantized_and_compressed_terrains_keep_the_bound_as_stored() {
                 let k = (0..3).min_by_key(|&k| t[k]).unwrap();
                 [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
             };
-            let (ta, tb): (Vec<_>, Vec<_>) = (pa.indices.chunks(3).map(rotated).collect(), pb.indices.chunks(3).map(rotated).collect());
+            let (ta, tb): (Vec<_>, Vec<_>) =
+                (pa.indices.chunks(3).map(rotated).collect(), pb.indices.chunks(3).map(rotated).collect());
             assert_eq!(ta, tb, "{}: the same triangles in the same order and winding", a.name);
         }
     }
@@ -419,18 +445,44 @@ fn damaged_meshopt_views_are_refused_not_aborted() {
     let attr = views.iter().position(|v| ext(v)["mode"] == "ATTRIBUTES").unwrap();
     let fallback = good["buffers"].as_array().unwrap().iter().position(|b| b.get("extensions").is_some()).unwrap();
     let cases: Vec<(&str, Box<dyn Fn(&mut serde_json::Value)>)> = vec![
-        ("count not a multiple of 3", Box::new(move |j| { let c = j["bufferViews"][tri]["extensions"]["EXT_meshopt_compression"]["count"].as_u64().unwrap(); j["bufferViews"][tri]["extensions"]["EXT_meshopt_compression"]["count"] = (c + 1).into(); })),
-        ("a count of 2^40", Box::new(move |j| j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["count"] = (1u64 << 40).into())),
-        ("a count of 2^60", Box::new(move |j| j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["count"] = (1u64 << 60).into())),
-        ("a stride of 6", Box::new(move |j| j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["byteStride"] = 6.into())),
-        ("compressed bytes past the buffer", Box::new(move |j| j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["byteOffset"] = (1u64 << 40).into())),
+        (
+            "count not a multiple of 3",
+            Box::new(move |j| {
+                let c = j["bufferViews"][tri]["extensions"]["EXT_meshopt_compression"]["count"].as_u64().unwrap();
+                j["bufferViews"][tri]["extensions"]["EXT_meshopt_compression"]["count"] = (c + 1).into();
+            }),
+        ),
+        (
+            "a count of 2^40",
+            Box::new(move |j| {
+                j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["count"] = (1u64 << 40).into()
+            }),
+        ),
+        (
+            "a count of 2^60",
+            Box::new(move |j| {
+                j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["count"] = (1u64 << 60).into()
+            }),
+        ),
+        (
+            "a stride of 6",
+            Box::new(move |j| j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["byteStride"] = 6.into()),
+        ),
+        (
+            "compressed bytes past the buffer",
+            Box::new(move |j| {
+                j["bufferViews"][attr]["extensions"]["EXT_meshopt_compression"]["byteOffset"] = (1u64 << 40).into()
+            }),
+        ),
     ];
     for (what, damage) in cases {
         let mut j = good.clone();
         damage(&mut j);
         let bad = dir.path().join("bad.gltf");
         std::fs::write(&bad, serde_json::to_vec(&j).unwrap()).unwrap();
-        let err = validate_file(&bad, &ValidateOptions { up_facing: false }).err().unwrap_or_else(|| panic!("{what}: accepted"));
+        let err = validate_file(&bad, &ValidateOptions { up_facing: false })
+            .err()
+            .unwrap_or_else(|| panic!("{what}: accepted"));
         assert!(err.to_string().contains("EXT_meshopt_compression"), "{what}: {err}");
     }
     // a fallback buffer declaring 2^62 bytes is read only as far as its views reach

@@ -10,7 +10,9 @@ use verdant::bake::atlas::coverage;
 use verdant::lsystem::parse::parse_bytes;
 use verdant::mesh::PrimitiveMode;
 use verdant::plants::tree::{build_tree, TreeOptions, LEAF_SIZE_ATTRIBUTE};
-use verdant::plants::tree_lod::{build_tree_lods, run_lods, TreeLodJob, TreeLodOptions, TreeLods, ATLAS_ALPHA_CUTOFF, IMPOSTOR_EXTRAS_KEY, TREE_LODS};
+use verdant::plants::tree_lod::{
+    build_tree_lods, run_lods, TreeLodJob, TreeLodOptions, TreeLods, ATLAS_ALPHA_CUTOFF, IMPOSTOR_EXTRAS_KEY, TREE_LODS,
+};
 use verdant::validate::{read_scene, validate_file};
 
 use crate::common::lod::{bytes_of, in_pool, small_atlas};
@@ -30,7 +32,6 @@ fn bush(seed: u64, options: &TreeLodOptions) -> TreeLods {
     build_tree_lods(&system, &TreeOptions { seed, name: "bush".into(), ..TreeOptions::default() }, options).unwrap()
 }
 
-
 #[test]
 fn tree_lods_are_byte_identical_at_one_and_two_threads() {
     let opts = small_atlas();
@@ -48,7 +49,12 @@ fn switch_distances_never_decrease_and_errors_grow_with_the_level() {
     let lods = &t.report.lods;
     assert_eq!(lods.len(), TREE_LODS);
     for w in lods.windows(2) {
-        assert!(w[1].switch_distance_m >= w[0].switch_distance_m, "{} then {}", w[0].switch_distance_m, w[1].switch_distance_m);
+        assert!(
+            w[1].switch_distance_m >= w[0].switch_distance_m,
+            "{} then {}",
+            w[0].switch_distance_m,
+            w[1].switch_distance_m
+        );
         assert!(w[1].screen_coverage <= w[0].screen_coverage);
     }
     let radius = t.report.bounding_radius_m;
@@ -60,7 +66,11 @@ fn switch_distances_never_decrease_and_errors_grow_with_the_level() {
         assert!(l.near_iou < 1.0, "LoD{} draws exactly LoD0 at {} m", l.level, l.near_distance_m);
     }
     // the simplified mesh stays close to LoD0; the flat billboards do not
-    assert!(lods[1].geometric_error.max_m < 0.05 * radius, "LoD1 moved {} m (radius {radius})", lods[1].geometric_error.max_m);
+    assert!(
+        lods[1].geometric_error.max_m < 0.05 * radius,
+        "LoD1 moved {} m (radius {radius})",
+        lods[1].geometric_error.max_m
+    );
     assert!(lods[3].geometric_error.max_m > lods[1].geometric_error.max_m);
     assert_eq!(t.report.table.len(), TREE_LODS);
     // the chain carries the coverages: LoD0's node with MSFT_lod to the four others
@@ -101,7 +111,8 @@ fn real_files_give_valid_chains_with_strictly_fewer_triangles() {
     };
     let out = tempfile::tempdir().unwrap();
     // small and varied: thesis format, lparser 5, lparser 4 polygons only (Koch), a stochastic bush
-    for file in ["stochastic/design-example.ls", "stochastic/bush.ls", "lparser-v5/tree1.ls", "lparser-v4/cees-koch.ls"] {
+    for file in ["stochastic/design-example.ls", "stochastic/bush.ls", "lparser-v5/tree1.ls", "lparser-v4/cees-koch.ls"]
+    {
         let input = dir.join(file);
         let stem = input.file_stem().unwrap().to_str().unwrap().to_string();
         let job = TreeLodJob {
@@ -124,7 +135,13 @@ fn real_files_give_valid_chains_with_strictly_fewer_triangles() {
             assert!(tris < last, "{file} LoD{n}: {tris} triangles, not fewer than {last}");
             last = tris;
             for p in scene.meshes.iter().flat_map(|m| &m.primitives) {
-                let finite = p.positions.iter().flatten().chain(p.normals.iter().flatten()).chain(p.uvs.iter().flatten()).all(|x| x.is_finite());
+                let finite = p
+                    .positions
+                    .iter()
+                    .flatten()
+                    .chain(p.normals.iter().flatten())
+                    .chain(p.uvs.iter().flatten())
+                    .all(|x| x.is_finite());
                 assert!(finite, "{file} LoD{n}: NaN or infinity");
             }
         }
@@ -132,10 +149,17 @@ fn real_files_give_valid_chains_with_strictly_fewer_triangles() {
         assert_eq!(validate_file(&chain, &Default::default()).unwrap().errors(), 0);
         let scene = read_scene(&chain).unwrap();
         assert_eq!(scene.nodes[scene.roots[0]].lods.len(), TREE_LODS - 1, "{file}: MSFT_lod chain");
-        assert!(out.path().join(format!("{stem}_atlas.png")).is_file() && out.path().join(format!("{stem}_atlas_mip1.png")).is_file());
+        assert!(
+            out.path().join(format!("{stem}_atlas.png")).is_file()
+                && out.path().join(format!("{stem}_atlas_mip1.png")).is_file()
+        );
         // the impostor says how to pick its view
         let impostor = read_scene(&out.path().join(format!("{stem}_LOD4.glb"))).unwrap();
-        let extras = impostor.meshes[0].extras.as_ref().and_then(|e| e.get(IMPOSTOR_EXTRAS_KEY)).unwrap_or_else(|| panic!("{file}: no impostor extras"));
+        let extras = impostor.meshes[0]
+            .extras
+            .as_ref()
+            .and_then(|e| e.get(IMPOSTOR_EXTRAS_KEY))
+            .unwrap_or_else(|| panic!("{file}: no impostor extras"));
         assert_eq!(extras["cells_uv"].as_array().map(Vec::len), Some(8));
     }
 }
@@ -152,7 +176,22 @@ fn cli_tree_writes_variants_lod_files_atlases_and_a_speed_error_table() {
     let glb = dir.path().join("out/bush.glb");
     let report = dir.path().join("out/bush.json");
     let (i, g, r) = (input.to_str().unwrap(), glb.to_str().unwrap(), report.to_str().unwrap());
-    let o = verdant(&["--quiet", "tree", i, "-o", g, "--variants", "2", "--lods", "4", "--atlas-size", "256", "--no-analysis", "--report", r]);
+    let o = verdant(&[
+        "--quiet",
+        "tree",
+        i,
+        "-o",
+        g,
+        "--variants",
+        "2",
+        "--lods",
+        "4",
+        "--atlas-size",
+        "256",
+        "--no-analysis",
+        "--report",
+        r,
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     for k in 0..2 {
         for name in [format!("bush_v{k}.glb"), format!("bush_v{k}_LOD3.glb"), format!("bush_v{k}_atlas.png")] {
@@ -164,7 +203,9 @@ fn cli_tree_writes_variants_lod_files_atlases_and_a_speed_error_table() {
     assert_eq!(r["variants"].as_array().unwrap().len(), 2);
     let table = r["variants"][0]["table"].as_array().unwrap();
     assert_eq!(table.len(), 4);
-    assert!(table.iter().all(|row| row["triangles"].as_u64().is_some() && row["bytes"].as_u64().is_some_and(|b| b > 0)));
+    assert!(table
+        .iter()
+        .all(|row| row["triangles"].as_u64().is_some() && row["bytes"].as_u64().is_some_and(|b| b > 0)));
     assert_ne!(r["variants"][0]["lods"][0]["triangles"], serde_json::Value::Null);
     // bad options: exit 2, naming the option and the remedy, nothing written
     let bad = dir.path().join("bad.glb");
@@ -198,11 +239,19 @@ fn point_leaves_are_one_point_per_quad_leaf_with_normal_colour_and_size() {
     let quads = build_tree(&system, &TreeOptions { seed: 3, ..TreeOptions::default() }).unwrap();
     let points = build_tree(&system, &TreeOptions { seed: 3, leaf_points: true, ..TreeOptions::default() }).unwrap();
     // the quad leaves: two triangles each, in the textured leaf primitives
-    let leaf_texture = |m: Option<usize>| m.and_then(|m| quads.scene.materials[m].base_color_texture).is_some_and(|t| quads.scene.textures[t].name == "leaf");
-    let quad_leaves: usize = quads.mesh().primitives.iter().filter(|p| leaf_texture(p.material)).map(|p| p.triangle_count() / 2).sum();
+    let leaf_texture = |m: Option<usize>| {
+        m.and_then(|m| quads.scene.materials[m].base_color_texture)
+            .is_some_and(|t| quads.scene.textures[t].name == "leaf")
+    };
+    let quad_leaves: usize =
+        quads.mesh().primitives.iter().filter(|p| leaf_texture(p.material)).map(|p| p.triangle_count() / 2).sum();
     assert!(quad_leaves > 10, "the bush has leaves ({quad_leaves})");
     assert_eq!(points.mesh().point_count(), quad_leaves, "one point per quad leaf");
-    assert_eq!(points.mesh().triangle_count() + 2 * quad_leaves, quads.mesh().triangle_count(), "only the leaves changed");
+    assert_eq!(
+        points.mesh().triangle_count() + 2 * quad_leaves,
+        quads.mesh().triangle_count(),
+        "only the leaves changed"
+    );
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("points.glb");
     verdant::export::write_scene(&points.scene, &path).unwrap();
@@ -220,19 +269,29 @@ fn point_leaves_are_one_point_per_quad_leaf_with_normal_colour_and_size() {
         assert!(p.colors.iter().all(|c| c[1] > c[0] && c[3] == 1.0), "leaf green");
         let size = p.custom.iter().find(|c| c.name == LEAF_SIZE_ATTRIBUTE).expect("_LEAF_SIZE");
         assert_eq!(size.values.len(), p.positions.len());
-        assert!(size.values.iter().all(|s| s[0] > 0.0 && s[1] > 0.0 && (s[1] - s[0] / 2.0).abs() < 1e-6), "length, width = length / 2");
+        assert!(
+            size.values.iter().all(|s| s[0] > 0.0 && s[1] > 0.0 && (s[1] - s[0] / 2.0).abs() < 1e-6),
+            "length, width = length / 2"
+        );
         assert!(p.uvs.is_empty() && p.indices.is_empty());
         // no texture on points (they have no texture coordinates)
         assert_eq!(scene.materials[p.material.unwrap()].base_color_texture, None);
     }
     // each point sits at its quad leaf's centre: the quads' centres, in the same order
     let quad_prim = quads.mesh().primitives.iter().find(|p| leaf_texture(p.material)).unwrap();
-    let centres: Vec<[f32; 3]> = quad_prim.indices.chunks_exact(6).map(|q| {
-        let (a, c) = (quad_prim.positions[q[0] as usize], quad_prim.positions[q[2] as usize]);
-        [(a[0] + c[0]) / 2.0, (a[1] + c[1]) / 2.0, (a[2] + c[2]) / 2.0]
-    }).collect();
+    let centres: Vec<[f32; 3]> = quad_prim
+        .indices
+        .chunks_exact(6)
+        .map(|q| {
+            let (a, c) = (quad_prim.positions[q[0] as usize], quad_prim.positions[q[2] as usize]);
+            [(a[0] + c[0]) / 2.0, (a[1] + c[1]) / 2.0, (a[2] + c[2]) / 2.0]
+        })
+        .collect();
     let point_prim = points.mesh().primitives.iter().find(|p| p.mode == PrimitiveMode::Points).unwrap();
-    let close = centres.iter().filter(|c| point_prim.positions.iter().any(|p| (0..3).all(|k| (p[k] - c[k]).abs() < 1e-4))).count();
+    let close = centres
+        .iter()
+        .filter(|c| point_prim.positions.iter().any(|p| (0..3).all(|k| (p[k] - c[k]).abs() < 1e-4)))
+        .count();
     assert_eq!(close, centres.len(), "every quad's centre has its point");
 }
 
@@ -240,9 +299,19 @@ fn point_leaves_are_one_point_per_quad_leaf_with_normal_colour_and_size() {
 fn point_leaf_chains_keep_points_at_lod0_and_stay_valid() {
     let system = parse_bytes(BUSH.as_bytes(), Path::new("bush.ls"), None).unwrap().system;
     let options = TreeLodOptions { analyze: false, ..small_atlas() };
-    let t = build_tree_lods(&system, &TreeOptions { seed: 3, name: "bush".into(), leaf_points: true, ..TreeOptions::default() }, &options).unwrap();
-    let quads = build_tree_lods(&system, &TreeOptions { seed: 3, name: "bush".into(), ..TreeOptions::default() }, &options).unwrap();
-    assert!(t.levels[0].scene.meshes[0].point_count() > 0 && t.levels[1].scene.meshes[0].point_count() > 0, "LoD0 and LoD1 draw points");
+    let t = build_tree_lods(
+        &system,
+        &TreeOptions { seed: 3, name: "bush".into(), leaf_points: true, ..TreeOptions::default() },
+        &options,
+    )
+    .unwrap();
+    let quads =
+        build_tree_lods(&system, &TreeOptions { seed: 3, name: "bush".into(), ..TreeOptions::default() }, &options)
+            .unwrap();
+    assert!(
+        t.levels[0].scene.meshes[0].point_count() > 0 && t.levels[1].scene.meshes[0].point_count() > 0,
+        "LoD0 and LoD1 draw points"
+    );
     let tris: Vec<usize> = t.levels.iter().map(|l| l.triangles()).collect();
     assert!(tris.windows(2).all(|w| w[1] < w[0]), "{tris:?}");
     // the atlas is baked from the quad-leaf tree
@@ -252,10 +321,26 @@ fn point_leaf_chains_keep_points_at_lod0_and_stay_valid() {
     let input = dir.path().join("bush.ls");
     std::fs::write(&input, BUSH).unwrap();
     let glb = dir.path().join("bush.glb");
-    let o = verdant(&["--quiet", "tree", input.to_str().unwrap(), "-o", glb.to_str().unwrap(), "--point-leaves", "--atlas-size", "256", "--no-analysis"]);
+    let o = verdant(&[
+        "--quiet",
+        "tree",
+        input.to_str().unwrap(),
+        "-o",
+        glb.to_str().unwrap(),
+        "--point-leaves",
+        "--atlas-size",
+        "256",
+        "--no-analysis",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(primitive_modes(&std::fs::read(dir.path().join("bush_LOD0.glb")).unwrap()).iter().any(|m| m.0 == 0));
-    let o = verdant(&["tree", input.to_str().unwrap(), "-o", dir.path().join("bush.obj").to_str().unwrap(), "--point-leaves"]);
+    let o = verdant(&[
+        "tree",
+        input.to_str().unwrap(),
+        "-o",
+        dir.path().join("bush.obj").to_str().unwrap(),
+        "--point-leaves",
+    ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("point leaves"));
 }

@@ -51,10 +51,14 @@ fn variants_are_built_as_chains_and_instanced_by_position() {
         assert!(!chain.meshes.is_empty());
         let mut triangles = Vec::new();
         for level in 0..5 {
-            let lod = verdant::validate::read_scene(&s.join(format!("species/bush_v{k}_LOD{level}.glb"))).expect("level re-imports");
+            let lod = verdant::validate::read_scene(&s.join(format!("species/bush_v{k}_LOD{level}.glb")))
+                .expect("level re-imports");
             triangles.push(lod.meshes.iter().map(|m| m.triangle_count()).sum::<usize>());
         }
-        assert!(triangles.windows(2).all(|w| w[1] < w[0]), "variant {k}: triangles must strictly decrease: {triangles:?}");
+        assert!(
+            triangles.windows(2).all(|w| w[1] < w[0]),
+            "variant {k}: triangles must strictly decrease: {triangles:?}"
+        );
         assert!(s.join(format!("atlases/bush_v{k}.png")).is_file(), "variant {k}: atlas");
         assert!(s.join(format!("atlases/bush_v{k}_mip1.png")).is_file(), "variant {k}: atlas mips");
     }
@@ -62,15 +66,20 @@ fn variants_are_built_as_chains_and_instanced_by_position() {
 
     // scene.glb: the two variants' LoD0 meshes (no analysis: no coarser level may stand in), instanced; instances = CSV rows; both used
     let scene = verdant::validate::read_scene(&s.join("scene.glb")).expect("scene.glb re-imports");
-    let mesh_index = |name: &str| scene.meshes.iter().position(|m| m.name == name).unwrap_or_else(|| panic!("scene.glb has no mesh {name}"));
+    let mesh_index = |name: &str| {
+        scene.meshes.iter().position(|m| m.name == name).unwrap_or_else(|| panic!("scene.glb has no mesh {name}"))
+    };
     let variants = [mesh_index("bush_v0_LOD0"), mesh_index("bush_v1_LOD0")];
     assert_ne!(
-        scene.meshes[variants[0]].primitives[0].positions,
-        scene.meshes[variants[1]].primitives[0].positions,
+        scene.meshes[variants[0]].primitives[0].positions, scene.meshes[variants[1]].primitives[0].positions,
         "two seeds, two different trees"
     );
     let lod0 = verdant::validate::read_scene(&s.join("species/bush_v1_LOD0.glb")).unwrap();
-    assert_eq!(lod0.meshes[0].triangle_count(), scene.meshes[variants[1]].triangle_count(), "the instanced mesh is the chain's LoD0");
+    assert_eq!(
+        lod0.meshes[0].triangle_count(),
+        scene.meshes[variants[1]].triangle_count(),
+        "the instanced mesh is the chain's LoD0"
+    );
     let root = scene.roots.iter().map(|&r| &scene.nodes[r]).find(|n| n.name == "bush").expect("species root node");
     let mut per_variant = BTreeMap::new();
     for &c in &root.children {
@@ -97,7 +106,9 @@ fn variants_are_built_as_chains_and_instanced_by_position() {
         assert!(s.join(l["file"].as_str().unwrap()).is_file(), "{l}");
     }
     let report = read_json(&s.join("report.json"));
-    let tree = report["stages"]["plants"]["species"].as_array().unwrap().iter().find(|p| p["name"] == "bush").unwrap()["tree"].clone();
+    let tree = report["stages"]["plants"]["species"].as_array().unwrap().iter().find(|p| p["name"] == "bush").unwrap()
+        ["tree"]
+        .clone();
     assert_eq!(tree["variants_asked"], 2);
     assert_eq!(tree["variants"].as_array().unwrap().len(), 2);
     assert!(tree["variants"][0]["stats"]["segments"].as_u64().unwrap() > 20);
@@ -133,7 +144,10 @@ fn builds_are_byte_identical_and_the_lsystem_bytes_key_the_cache() {
     ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o1", "--threads", "1"]));
     ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o2", "--threads", "2"]));
     let outputs = |root: &str| -> BTreeMap<String, Vec<u8>> {
-        tree(&d.join(root).join("a")).into_iter().filter(|(k, _)| k.starts_with("species/") || k.starts_with("atlases/") || k == "scene.glb").collect()
+        tree(&d.join(root).join("a"))
+            .into_iter()
+            .filter(|(k, _)| k.starts_with("species/") || k.starts_with("atlases/") || k == "scene.glb")
+            .collect()
     };
     let (a, b) = (outputs("o1"), outputs("o2"));
     assert!(a.len() > 12, "{:?}", a.keys().collect::<Vec<_>>());
@@ -147,7 +161,11 @@ fn builds_are_byte_identical_and_the_lsystem_bytes_key_the_cache() {
     write(d, "p/bush.ls", &BUSH_LS.replace("angle 25", "angle 30"));
     ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o1"]));
     assert!(!timing_cached(&d.join("o1/a"), "plants") && !timing_cached(&d.join("o1/a"), "scatter"));
-    assert_ne!(fs::read(d.join("o1/a/species/bush_v0_LOD0.glb")).unwrap(), a["species/bush_v0_LOD0.glb"], "the new angle is built");
+    assert_ne!(
+        fs::read(d.join("o1/a/species/bush_v0_LOD0.glb")).unwrap(),
+        a["species/bush_v0_LOD0.glb"],
+        "the new angle is built"
+    );
 }
 
 // ----------------------------------------------------------------------------------- preset errors
@@ -209,14 +227,21 @@ fn a_tree_without_a_file_grows_from_the_built_in_library() {
     );
     // an unknown built-in name is a positioned error listing the library
     let e = error_of(&species("kind = \"tree\"\nlsystem = \"builtin:palm\""));
-    assert!(e.contains("p.toml:") && e.contains("builtin:palm") && e.contains("conifer, broadleaf, birch, bush"), "{e}");
+    assert!(
+        e.contains("p.toml:") && e.contains("builtin:palm") && e.contains("conifer, broadleaf, birch, bush"),
+        "{e}"
+    );
 }
 
 #[test]
 fn tree_preset_mistakes_are_positioned_errors_with_a_remedy() {
     let cases: &[(&str, &str, &str)] = &[
         ("kind = \"grass\"\nlsystem = \"a.ls\"", "p.toml:9:1", "set `kind = \"tree\"`"),
-        ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { atlas_size = 1000 }", "not a multiple of 16", "atlas_size = 1024"),
+        (
+            "kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { atlas_size = 1000 }",
+            "not a multiple of 16",
+            "atlas_size = 1024",
+        ),
         ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { dialect = \"v6\" }", "dialect", "allowed: auto, ls, v4, v5"),
         ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { varients = 2 }", "varients", "variants"),
         ("kind = \"tree\"\nlsystem = \"a.ls\"\ntree = { variants = 0 }", "variants", "1"),
@@ -256,7 +281,12 @@ fn rock_obj(rings: usize, sectors: usize) -> String {
         for k in 0..sectors {
             let phi = 2.0 * std::f64::consts::PI * k as f64 / sectors as f64;
             let bump = 1.0 + 0.15 * (3.0 * phi).sin() * (2.0 * theta).sin();
-            s += &format!("v {:.5} {:.5} {:.5}\n", bump * theta.sin() * phi.cos(), 0.7 * bump * theta.cos(), bump * theta.sin() * phi.sin());
+            s += &format!(
+                "v {:.5} {:.5} {:.5}\n",
+                bump * theta.sin() * phi.cos(),
+                0.7 * bump * theta.cos(),
+                bump * theta.sin() * phi.sin()
+            );
         }
     }
     s += "usemtl stone\n";
@@ -290,21 +320,31 @@ fn an_obj_model_gets_the_chain_and_is_instanced() {
     let s = d.join("o/a");
     let mut triangles = Vec::new();
     for level in 0..5 {
-        let lod = verdant::validate::read_scene(&s.join(format!("species/rock_LOD{level}.glb"))).expect("level re-imports");
+        let lod =
+            verdant::validate::read_scene(&s.join(format!("species/rock_LOD{level}.glb"))).expect("level re-imports");
         triangles.push(lod.meshes.iter().map(|m| m.triangle_count()).sum::<usize>());
     }
-    assert_eq!(triangles[0], 16 * 24 * 2 - 2 * 24, "LoD0 is the model (poles' degenerate halves dropped): {triangles:?}");
+    assert_eq!(
+        triangles[0],
+        16 * 24 * 2 - 2 * 24,
+        "LoD0 is the model (poles' degenerate halves dropped): {triangles:?}"
+    );
     assert!(triangles.windows(2).all(|w| w[1] < w[0]), "{triangles:?}");
     assert!(s.join("species/rock.glb").is_file() && s.join("atlases/rock.png").is_file());
 
     let scene = verdant::validate::read_scene(&s.join("scene.glb")).unwrap();
     let root = scene.roots.iter().map(|&r| &scene.nodes[r]).find(|n| n.name == "rock").expect("species root node");
-    let instanced: usize = root.children.iter().map(|&c| scene.nodes[c].instances.as_ref().unwrap().translations.len()).sum();
+    let instanced: usize =
+        root.children.iter().map(|&c| scene.nodes[c].instances.as_ref().unwrap().translations.len()).sum();
     assert_eq!(instanced, csv_rows(&s.join("placements/rock.csv")));
     let mesh = scene.nodes[root.children[0]].mesh.unwrap();
     assert_eq!(scene.meshes[mesh].triangle_count(), triangles[0], "scene.glb instances the model itself");
     // the model stands on y = 0 (recentred), so instances sit on the ground
-    let min_y = scene.meshes[mesh].primitives.iter().flat_map(|p| p.positions.iter().map(|v| v[1])).fold(f32::INFINITY, f32::min);
+    let min_y = scene.meshes[mesh]
+        .primitives
+        .iter()
+        .flat_map(|p| p.positions.iter().map(|v| v[1]))
+        .fold(f32::INFINITY, f32::min);
     assert!(min_y.abs() < 1e-5, "model base at y = {min_y}");
     let manifest = read_json(&s.join("manifest.json"));
     let rock = manifest["plants"].as_array().unwrap().iter().find(|p| p["name"] == "rock").unwrap().clone();

@@ -37,7 +37,10 @@ pub fn check_plant_scene(what: &str, scene: &Scene, expect: Expect) -> usize {
     for mesh in &scene.meshes {
         let what = format!("{what} mesh {}", mesh.name);
         for p in &mesh.primitives {
-            assert!(p.colors.iter().all(|c| c[3] == 1.0 && c.iter().all(|x| (0.0..=1.0).contains(x))), "{what}: COLOR_0 that is not an opaque colour");
+            assert!(
+                p.colors.iter().all(|c| c[3] == 1.0 && c.iter().all(|x| (0.0..=1.0).contains(x))),
+                "{what}: COLOR_0 that is not an opaque colour"
+            );
             if expect == Expect::Nothing {
                 assert!(find(&p.custom, WIND_ATTRIBUTE).is_none(), "{what}: wind data on a model that does not sway");
                 continue;
@@ -63,10 +66,21 @@ pub fn check_plant_scene(what: &str, scene: &Scene, expect: Expect) -> usize {
 /// Across a mesh the bend weight is one non-decreasing function of height: 0 at the ground and
 /// (for a mesh reaching its plant's top) 1 there.
 fn bend_grows_with_height(what: &str, mesh: &Mesh) {
-    let mut pairs: Vec<(f32, f32)> = mesh.primitives.iter().flat_map(|p| p.positions.iter().zip(wind_of(what, p, WIND_ATTRIBUTE)).map(|(q, w)| (q[1], w[0]))).collect();
+    let mut pairs: Vec<(f32, f32)> = mesh
+        .primitives
+        .iter()
+        .flat_map(|p| p.positions.iter().zip(wind_of(what, p, WIND_ATTRIBUTE)).map(|(q, w)| (q[1], w[0])))
+        .collect();
     pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
     for w in pairs.windows(2) {
-        assert!(w[1].1 >= w[0].1 - 1e-6, "{what}: bend weight {} at y = {} but {} at y = {}", w[0].1, w[0].0, w[1].1, w[1].0);
+        assert!(
+            w[1].1 >= w[0].1 - 1e-6,
+            "{what}: bend weight {} at y = {} but {} at y = {}",
+            w[0].1,
+            w[0].0,
+            w[1].1,
+            w[1].0
+        );
     }
     let lowest = pairs.first().expect("a mesh with vertices");
     if lowest.0 <= 1e-6 {
@@ -79,7 +93,12 @@ fn check_branch(what: &str, mesh: &Mesh) {
     let mut max_weight = 0.0f32;
     for p in &mesh.primitives {
         for v in wind_of(what, p, WIND_BRANCH_ATTRIBUTE) {
-            assert!((0.0..=1.0).contains(&v[0]) && (0.0..=1.0).contains(&v[2]), "{what}: branch weight {} flutter {}", v[0], v[2]);
+            assert!(
+                (0.0..=1.0).contains(&v[0]) && (0.0..=1.0).contains(&v[2]),
+                "{what}: branch weight {} flutter {}",
+                v[0],
+                v[2]
+            );
             assert!((0.0..TAU).contains(&v[1]) && (0.0..TAU).contains(&v[3]), "{what}: phases {} {}", v[1], v[3]);
             max_weight = max_weight.max(v[0]);
         }
@@ -94,7 +113,9 @@ fn system(text: &str) -> verdant::lsystem::LSystem {
 #[test]
 fn a_limb_bends_from_its_joint_and_its_twig_continues_it() {
     // trunk F, limb 1 = [+F [-F] F] with a twig, the trunk again and limb 2 = [&FF]
-    let tree = build_tree(&system("recursion 0\nangle 30\nthickness 10\naxiom F[+F[-F]F]F[&FF]\n"), &TreeOptions::default()).unwrap();
+    let tree =
+        build_tree(&system("recursion 0\nangle 30\nthickness 10\naxiom F[+F[-F]F]F[&FF]\n"), &TreeOptions::default())
+            .unwrap();
     let mesh = tree.mesh();
     check_plant_scene("tree", &tree.scene, Expect::SwayAndBranch);
     let p = &mesh.primitives[0];
@@ -118,7 +139,9 @@ fn a_limb_bends_from_its_joint_and_its_twig_continues_it() {
         assert!((w[0] - (q[1] / top).clamp(0.0, 1.0).powi(2)).abs() < 1e-5, "bend at y = {}: {}", q[1], w[0]);
     }
     // the same tree twice: the same wind data (seeded, order-independent)
-    let again = build_tree(&system("recursion 0\nangle 30\nthickness 10\naxiom F[+F[-F]F]F[&FF]\n"), &TreeOptions::default()).unwrap();
+    let again =
+        build_tree(&system("recursion 0\nangle 30\nthickness 10\naxiom F[+F[-F]F]F[&FF]\n"), &TreeOptions::default())
+            .unwrap();
     assert_eq!(again.mesh(), mesh);
 }
 
@@ -149,7 +172,9 @@ fn leaves_flutter_at_the_tip_and_hold_at_the_stalk() {
 #[test]
 fn polygon_leaves_flutter_away_from_their_stalk() {
     // lparser polygons: held at their first vertex (where `{` was), fluttering most at the far edge
-    let tree = build_tree(&system("recursion 0\nangle 30\nthickness 10\naxiom F[+F{.f.+f.+f.}]\n"), &TreeOptions::default()).unwrap();
+    let tree =
+        build_tree(&system("recursion 0\nangle 30\nthickness 10\naxiom F[+F{.f.+f.+f.}]\n"), &TreeOptions::default())
+            .unwrap();
     let mut polygon_vertices = 0;
     for p in &tree.mesh().primitives {
         let branch = wind_of("polygons", p, WIND_BRANCH_ATTRIBUTE);
@@ -164,7 +189,9 @@ fn polygon_leaves_flutter_away_from_their_stalk() {
 
 #[test]
 fn wind_survives_the_written_file() {
-    let tree = build_tree(&system("recursion 0\nangle 30\nthickness 10\naxiom F[+F[-F]F]F[&FF]\n"), &TreeOptions::default()).unwrap();
+    let tree =
+        build_tree(&system("recursion 0\nangle 30\nthickness 10\naxiom F[+F[-F]F]F[&FF]\n"), &TreeOptions::default())
+            .unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("t.glb");
     verdant::export::write_scene(&tree.scene, &path).unwrap();

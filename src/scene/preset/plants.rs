@@ -31,7 +31,17 @@ pub const GRASS_KEYS: &[&str] = &[
     "blade_texture",
 ];
 /// Keys of `[tree]` and `tree = { … }` (the L-system file itself is the species' `lsystem`).
-pub const TREE_KEYS: &[&str] = &["variants", "height", "radial_segments", "lods", "atlas_size", "max_segments", "max_symbols", "dialect", "analysis"];
+pub const TREE_KEYS: &[&str] = &[
+    "variants",
+    "height",
+    "radial_segments",
+    "lods",
+    "atlas_size",
+    "max_segments",
+    "max_symbols",
+    "dialect",
+    "analysis",
+];
 /// Keys of `[mesh]` and `mesh = { … }` (the model itself is the species' `obj`).
 pub const MESH_KEYS: &[&str] = &["scale", "up_axis", "lods", "atlas_size", "analysis"];
 /// Keys of `[flower]` and `flower = { … }`.
@@ -51,15 +61,23 @@ fn colour(t: &Table<'_, '_>, key: &str) -> Result<Option<[f32; 3]>, PresetError>
     match v.get_ref() {
         DeValue::String(s) => {
             let hex = s.strip_prefix('#').unwrap_or(s);
-            let parsed = (hex.len() == 6 && hex.bytes().all(|b| b.is_ascii_hexdigit()))
-                .then(|| std::array::from_fn(|k| u8::from_str_radix(&hex[2 * k..2 * k + 2], 16).map(|x| srgb_to_linear(x as f64 / 255.0))));
+            let parsed = (hex.len() == 6 && hex.bytes().all(|b| b.is_ascii_hexdigit())).then(|| {
+                std::array::from_fn(|k| {
+                    u8::from_str_radix(&hex[2 * k..2 * k + 2], 16).map(|x| srgb_to_linear(x as f64 / 255.0))
+                })
+            });
             match parsed {
                 Some([Ok(r), Ok(g), Ok(b)]) => Ok(Some([r, g, b])),
-                _ => Err(t.ctx.at(&v.span(), format!("`{key}` = {s:?} is not a colour"), format!("write it as six hex digits, like `{example}`, or as `[0.4, 0.6, 0.17]`"))),
+                _ => Err(t.ctx.at(
+                    &v.span(),
+                    format!("`{key}` = {s:?} is not a colour"),
+                    format!("write it as six hex digits, like `{example}`, or as `[0.4, 0.6, 0.17]`"),
+                )),
             }
         }
         DeValue::Array(items) if items.len() == 3 => {
-            let in01 = |x: f64| if (0.0..=1.0).contains(&x) { Ok(()) } else { Err("must be between 0 and 1".to_string()) };
+            let in01 =
+                |x: f64| if (0.0..=1.0).contains(&x) { Ok(()) } else { Err("must be between 0 and 1".to_string()) };
             let mut c = [0.0f32; 3];
             for (k, item) in items.iter().enumerate() {
                 c[k] = srgb_to_linear(number_value(t, key, item, &example, &in01)?);
@@ -70,7 +88,12 @@ fn colour(t: &Table<'_, '_>, key: &str) -> Result<Option<[f32; 3]>, PresetError>
     }
 }
 
-fn count(t: &Table<'_, '_>, key: &str, range: std::ops::RangeInclusive<u64>, example: &str) -> Result<Option<usize>, PresetError> {
+fn count(
+    t: &Table<'_, '_>,
+    key: &str,
+    range: std::ops::RangeInclusive<u64>,
+    example: &str,
+) -> Result<Option<usize>, PresetError> {
     Ok(t.integer(key, range, example)?.map(|(n, _)| n as usize))
 }
 
@@ -96,7 +119,11 @@ fn range_f32(r: [f64; 2]) -> [f32; 2] {
 
 /// Applies the keys of a grass table to `base`. Ranges are checked again as a whole by
 /// [`GrassSettings::check`], whose message is reported at the table.
-pub(super) fn apply_grass(t: &Table<'_, '_>, mut g: GrassSettings, check_inputs: bool) -> Result<GrassSettings, PresetError> {
+pub(super) fn apply_grass(
+    t: &Table<'_, '_>,
+    mut g: GrassSettings,
+    check_inputs: bool,
+) -> Result<GrassSettings, PresetError> {
     t.check_keys(GRASS_KEYS, &[("[flower]", FLOWER_KEYS), ("[tree]", TREE_KEYS)])?;
     if let Some(n) = count(t, "blades", 1..=crate::plants::grass::MAX_BLADES_PER_CLUMP as u64, "blades = 48")? {
         g.blades_per_clump = n;
@@ -113,11 +140,14 @@ pub(super) fn apply_grass(t: &Table<'_, '_>, mut g: GrassSettings, check_inputs:
     if let Some(r) = pair(t, "width", "width = [0.008, 0.016]", "metres", positive)? {
         g.width_m = range_f32(r);
     }
-    let degrees = |x: f64| if (0.0..=85.0).contains(&x) { Ok(()) } else { Err("must be between 0 and 85 degrees".to_string()) };
+    let degrees =
+        |x: f64| if (0.0..=85.0).contains(&x) { Ok(()) } else { Err("must be between 0 and 85 degrees".to_string()) };
     if let Some(r) = pair(t, "bend", "bend = [10.0, 50.0]", "degrees", degrees)? {
         g.bend_rad = [r[0].to_radians() as f32, r[1].to_radians() as f32];
     }
-    if let Some(n) = count(t, "density_levels", 1..=crate::plants::grass::MAX_DENSITY_LEVELS as u64, "density_levels = 3")? {
+    if let Some(n) =
+        count(t, "density_levels", 1..=crate::plants::grass::MAX_DENSITY_LEVELS as u64, "density_levels = 3")?
+    {
         g.density_levels = n;
     }
     if let Some(n) = count(t, "variants", 1..=crate::plants::grass::MAX_VARIANTS as u64, "variants = 2")? {
@@ -180,7 +210,9 @@ pub(super) fn apply_flower(t: &Table<'_, '_>, mut f: FlowerSettings) -> Result<F
     if let Some(n) = count(t, "petals", 3..=32, "petals = 7")? {
         f.petals = n;
     }
-    for (key, slot) in [("petal_color", &mut f.petal_color), ("center_color", &mut f.center_color), ("stem_color", &mut f.stem_color)] {
+    for (key, slot) in
+        [("petal_color", &mut f.petal_color), ("center_color", &mut f.center_color), ("stem_color", &mut f.stem_color)]
+    {
         if let Some(c) = colour(t, key)? {
             *slot = c;
         }
@@ -261,7 +293,11 @@ fn chain_keys(t: &Table<'_, '_>, lods: &mut usize, atlas_px: &mut u32, analyze: 
     }
     if let Some((n, span)) = t.integer("atlas_size", MIN_ATLAS_PX as u64..=MAX_ATLAS_PX as u64, "atlas_size = 1024")? {
         if n % 16 != 0 {
-            return Err(t.ctx.at(&span, format!("`atlas_size` = {n} is not a multiple of 16"), "use e.g. `atlas_size = 1024` or 2048"));
+            return Err(t.ctx.at(
+                &span,
+                format!("`atlas_size` = {n} is not a multiple of 16"),
+                "use e.g. `atlas_size = 1024` or 2048",
+            ));
         }
         *atlas_px = n as u32;
     }
@@ -299,9 +335,15 @@ pub(super) fn apply_mesh(t: &Table<'_, '_>, mut mesh: MeshLook) -> Result<MeshLo
 }
 
 /// A species' `grass = { … }` or `flower = { … }` value as a table to read.
-pub(super) fn sub_table<'a, 'i>(t: &Table<'a, 'i>, key: &str, v: &'a Spanned<DeValue<'i>>) -> Result<Table<'a, 'i>, PresetError> {
+pub(super) fn sub_table<'a, 'i>(
+    t: &Table<'a, 'i>,
+    key: &str,
+    v: &'a Spanned<DeValue<'i>>,
+) -> Result<Table<'a, 'i>, PresetError> {
     match v.get_ref() {
-        DeValue::Table(table) => Ok(Table { ctx: t.ctx, label: format!("`{key}` of {}", t.label), span: v.span(), table }),
+        DeValue::Table(table) => {
+            Ok(Table { ctx: t.ctx, label: format!("`{key}` of {}", t.label), span: v.span(), table })
+        }
         _ => Err(t.wrong_type(key, v, "a table", &format!("{key} = {{ height = [0.2, 0.4] }}"))),
     }
 }

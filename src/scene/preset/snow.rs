@@ -59,7 +59,13 @@ fn positive_up_to(hi: f64, unit: &'static str) -> impl Fn(f64) -> Result<(), Str
 }
 
 /// A float key in `valid`, stored with `set` when present.
-fn num(t: &Table<'_, '_>, key: &str, example: &str, valid: impl Fn(f64) -> Result<(), String>, set: impl FnOnce(f64)) -> Result<(), PresetError> {
+fn num(
+    t: &Table<'_, '_>,
+    key: &str,
+    example: &str,
+    valid: impl Fn(f64) -> Result<(), String>,
+    set: impl FnOnce(f64),
+) -> Result<(), PresetError> {
     if let Some((x, _)) = t.number(key, example, valid)? {
         set(x);
     }
@@ -67,13 +73,22 @@ fn num(t: &Table<'_, '_>, key: &str, example: &str, valid: impl Fn(f64) -> Resul
 }
 
 /// `key = [a, b]`: two numbers, each checked by `valid` (no order between them).
-fn two(t: &Table<'_, '_>, key: &str, example: &str, valid: impl Fn(f64) -> Result<(), String>) -> Result<Option<[f64; 2]>, PresetError> {
+fn two(
+    t: &Table<'_, '_>,
+    key: &str,
+    example: &str,
+    valid: impl Fn(f64) -> Result<(), String>,
+) -> Result<Option<[f64; 2]>, PresetError> {
     let Some((_, v)) = t.get(key) else { return Ok(None) };
     let DeValue::Array(items) = v.get_ref() else {
         return Err(t.wrong_type(key, v, "an array of two numbers", example));
     };
     if items.len() != 2 {
-        return Err(t.ctx.at(&v.span(), format!("`{key}` must have two numbers, found {}", items.len()), format!("write it like `{example}`")));
+        return Err(t.ctx.at(
+            &v.span(),
+            format!("`{key}` must have two numbers, found {}", items.len()),
+            format!("write it like `{example}`"),
+        ));
     }
     Ok(Some([number_value(t, key, &items[0], example, &valid)?, number_value(t, key, &items[1], example, &valid)?]))
 }
@@ -90,7 +105,10 @@ fn boolean(t: &Table<'_, '_>, key: &str, example: &str) -> Result<Option<bool>, 
 
 /// Reads `[snow]` over the defaults; `scene_seed` seeds it when it has no `seed`.
 pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSettings, PresetError> {
-    t.check_keys(SNOW_KEYS, &[("[scene]", super::SCENE_KEYS), ("[terrain]", super::TERRAIN_KEYS), ("[grass]", super::GRASS_KEYS)])?;
+    t.check_keys(
+        SNOW_KEYS,
+        &[("[scene]", super::SCENE_KEYS), ("[terrain]", super::TERRAIN_KEYS), ("[grass]", super::GRASS_KEYS)],
+    )?;
     let mut s = SnowSettings::default();
     let seed = t.integer("seed", 0..=i64::MAX as u64, "seed = 3")?.map_or(default_snow_seed(scene_seed), |(n, _)| n);
     s.flakes.seed = seed;
@@ -98,7 +116,13 @@ pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSetti
     s.cover.seed = seed;
 
     // crystals
-    num(t, "temperature_c", "temperature_c = -15.0", in_range(-40.0, 2.0, " °C (snow forms between −40 and +2 °C)"), |x| s.flakes.temperature_c = x as f32)?;
+    num(
+        t,
+        "temperature_c",
+        "temperature_c = -15.0",
+        in_range(-40.0, 2.0, " °C (snow forms between −40 and +2 °C)"),
+        |x| s.flakes.temperature_c = x as f32,
+    )?;
     num(t, "humidity", "humidity = 0.6", in_range(0.0, 1.0, ""), |x| s.flakes.humidity = x as f32)?;
     if let Some((_, v)) = t.get("atlas_cells") {
         let example = "atlas_cells = [4, 4]";
@@ -128,7 +152,11 @@ pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSetti
         // far_count = 0: no far field; its other keys would be silently unused
         Some((0, _)) => {
             if let Some((k, _)) = t.get("far_radius").or(t.get("view_angle")) {
-                return Err(t.ctx.at(&k.span(), format!("`{}` describes the far field, but far_count = 0 turns it off", k.get_ref()), "remove it, or give far_count > 0"));
+                return Err(t.ctx.at(
+                    &k.span(),
+                    format!("`{}` describes the far field, but far_count = 0 turns it off", k.get_ref()),
+                    "remove it, or give far_count > 0",
+                ));
             }
             e.far = None;
         }
@@ -154,7 +182,13 @@ pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSetti
         }
     }
     num(t, "fall_height", "fall_height = 20.0", in_range(0.1, 10_000.0, " m"), |x| e.fall_height_m = x as f32)?;
-    if let Some(d) = two(t, "wind_direction", "wind_direction = [1.0, 0.0]", |x| if x.abs() <= 1e6 { Ok(()) } else { Err("must be at most 1e6 in size".into()) })? {
+    if let Some(d) = two(t, "wind_direction", "wind_direction = [1.0, 0.0]", |x| {
+        if x.abs() <= 1e6 {
+            Ok(())
+        } else {
+            Err("must be at most 1e6 in size".into())
+        }
+    })? {
         if d[0] * d[0] + d[1] * d[1] <= 1e-12 {
             let span = t.get("wind_direction").map(|(_, v)| v.span()).unwrap_or(t.span.clone());
             return Err(t.ctx.at(&span, "`wind_direction` is [0, 0], which has no direction", "give the [x, z] the wind blows towards, e.g. `wind_direction = [1.0, 0.0]`; use wind_speed = 0 for calm air"));
@@ -163,10 +197,16 @@ pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSetti
         s.cover.wind_direction = e.wind_direction;
     }
     num(t, "wind_speed", "wind_speed = 1.5", in_range(0.0, 100.0, " m/s"), |x| e.wind_speed_m_s = x as f32)?;
-    num(t, "flake_mass", "flake_mass = 3e-6", positive_up_to(1e-3, " kg (flakes weigh about 1e-6 kg)"), |x| e.flake_mass_kg = x as f32)?;
+    num(t, "flake_mass", "flake_mass = 3e-6", positive_up_to(1e-3, " kg (flakes weigh about 1e-6 kg)"), |x| {
+        e.flake_mass_kg = x as f32
+    })?;
     num(t, "drag", "drag = 3e-5", positive_up_to(1.0, " kg/s"), |x| e.drag_kg_s = x as f32)?;
-    num(t, "ground_slowdown", "ground_slowdown = 0.5", in_range(0.0, 10_000.0, " m"), |x| e.ground_slowdown_m = x as f32)?;
-    num(t, "ground_speed_factor", "ground_speed_factor = 0.3", in_range(0.0, 1.0, ""), |x| e.ground_speed_factor = x as f32)?;
+    num(t, "ground_slowdown", "ground_slowdown = 0.5", in_range(0.0, 10_000.0, " m"), |x| {
+        e.ground_slowdown_m = x as f32
+    })?;
+    num(t, "ground_speed_factor", "ground_speed_factor = 0.3", in_range(0.0, 1.0, ""), |x| {
+        e.ground_speed_factor = x as f32
+    })?;
     match t.string("respawn", "respawn = \"top\"")? {
         None => {}
         Some(("top", _)) => e.respawn = Respawn::Top,
@@ -178,7 +218,9 @@ pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSetti
     // cover
     let c = &mut s.cover;
     num(t, "snow_line", "snow_line = 120.0", in_range(-20_000.0, 20_000.0, " m"), |x| c.snow_line_m = x as f32)?;
-    num(t, "snow_line_noise", "snow_line_noise = 15.0", in_range(0.0, 10_000.0, " m"), |x| c.snow_line_noise_m = x as f32)?;
+    num(t, "snow_line_noise", "snow_line_noise = 15.0", in_range(0.0, 10_000.0, " m"), |x| {
+        c.snow_line_noise_m = x as f32
+    })?;
     num(t, "noise_scale", "noise_scale = 200.0", in_range(0.01, 1e6, " m"), |x| c.noise_scale_m = x as f32)?;
     num(t, "transition", "transition = 10.0", in_range(0.0, 10_000.0, " m"), |x| c.transition_m = x as f32)?;
     num(t, "full_slope", "full_slope = 25.0", in_range(0.0, 90.0, " degrees"), |x| c.full_slope_deg = x as f32)?;

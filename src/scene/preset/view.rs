@@ -38,7 +38,11 @@ fn three(t: &Table<'_, '_>, key: &str, example: &str) -> Result<Option<[f64; 3]>
         return Err(t.wrong_type(key, v, "an array [x, y, z] in metres", example));
     };
     if items.len() != 3 {
-        return Err(t.ctx.at(&v.span(), format!("`{key}` must have three numbers [x, y, z], found {}", items.len()), format!("write it like `{example}`")));
+        return Err(t.ctx.at(
+            &v.span(),
+            format!("`{key}` must have three numbers [x, y, z], found {}", items.len()),
+            format!("write it like `{example}`"),
+        ));
     }
     let finite = |x: f64| if x.abs() <= 1e7 { Ok(()) } else { Err("must be within ±10 000 km".to_string()) };
     let mut out = [0.0; 3];
@@ -53,19 +57,34 @@ pub(super) fn parse_view(t: &Table<'_, '_>, index: usize) -> Result<ViewSettings
     t.check_keys(VIEW_KEYS, &[("[lod]", LOD_KEYS)])?;
     let name = match t.string("name", "name = \"overlook\"")? {
         Some((s, span)) => {
-            super::check_safe_name("view", "file", s).map_err(|e| t.ctx.at(&span, e, "use letters, digits, `-` and `_`"))?;
+            super::check_safe_name("view", "file", s)
+                .map_err(|e| t.ctx.at(&span, e, "use letters, digits, `-` and `_`"))?;
             s.to_string()
         }
         None => format!("view{index}"),
     };
     let position = three(t, "position", "position = [500.0, 120.0, 900.0]")?;
     let target = three(t, "target", "target = [500.0, 40.0, 500.0]")?;
-    let yaw = t.number("yaw", "yaw = 180.0", |x| if x.abs() <= 360.0 { Ok(()) } else { Err("must be within ±360 degrees".into()) })?;
-    let pitch = t.number("pitch", "pitch = -10.0", |x| if x.abs() < 90.0 { Ok(()) } else { Err("must be between −90 and 90 degrees (exclusive)".into()) })?;
+    let yaw = t.number("yaw", "yaw = 180.0", |x| {
+        if x.abs() <= 360.0 {
+            Ok(())
+        } else {
+            Err("must be within ±360 degrees".into())
+        }
+    })?;
+    let pitch = t.number("pitch", "pitch = -10.0", |x| {
+        if x.abs() < 90.0 {
+            Ok(())
+        } else {
+            Err("must be between −90 and 90 degrees (exclusive)".into())
+        }
+    })?;
     if let (Some(_), Some((_, span))) = (&target, yaw.as_ref().or(pitch.as_ref())) {
         return Err(t.ctx.at(span, "a view has either `target` or `yaw`/`pitch`, not both", "remove one of them"));
     }
-    let fov = t.number("fov", "fov = 60.0", in_range(0.0, 179.0, " degrees (vertical field of view)"))?.map_or(DEFAULT_VIEW_FOV_DEG, |(x, _)| x);
+    let fov = t
+        .number("fov", "fov = 60.0", in_range(0.0, 179.0, " degrees (vertical field of view)"))?
+        .map_or(DEFAULT_VIEW_FOV_DEG, |(x, _)| x);
     let size = match t.get("size") {
         None => DEFAULT_VIEW_SIZE_PX,
         Some((_, v)) => {
@@ -75,7 +94,9 @@ pub(super) fn parse_view(t: &Table<'_, '_>, index: usize) -> Result<ViewSettings
                     super::integer_value(t, "size", &items[0], 16..=MAX_VIEW_SIDE_PX as u64, example)? as u32,
                     super::integer_value(t, "size", &items[1], 16..=MAX_VIEW_SIDE_PX as u64, example)? as u32,
                 ],
-                _ => return Err(t.wrong_type("size", v, "an array of two integers [width, height] in pixels", example)),
+                _ => {
+                    return Err(t.wrong_type("size", v, "an array of two integers [width, height] in pixels", example))
+                }
             }
         }
     };
