@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use verdant::export::table::{placements_csv, write_placements_csv};
 use verdant::scatter::{analyze, scatter_species_detailed, DensityMap, Instance, SurfaceIndex, POISSON_PACKING};
-use verdant::scene::{Placement, SpeciesKind, SpeciesSettings};
+use verdant::scatter::{Placement, SpeciesRules};
 use verdant::terrain::tin::{tin, TinOptions};
 
 const SIZE: usize = 2049;
@@ -51,10 +51,9 @@ fn reset_peak() {
     let _ = std::fs::write("/proc/self/clear_refs", "5");
 }
 
-fn species(name: &str, placement: Placement, max_density: f64, min_spacing_m: f64) -> SpeciesSettings {
-    SpeciesSettings {
+fn species(name: &str, placement: Placement, max_density: f64, min_spacing_m: f64) -> SpeciesRules {
+    SpeciesRules {
         name: name.into(),
-        kind: SpeciesKind::Grass,
         density_map: None,
         mask: None,
         max_density,
@@ -69,8 +68,6 @@ fn species(name: &str, placement: Placement, max_density: f64, min_spacing_m: f6
         exclusions: vec![],
         seed: 0,
         max_instances: 100_000_000,
-        cull_distance_m: None,
-        look: verdant::scene::PlantLook::Marker,
     }
 }
 

@@ -3,7 +3,7 @@
 //! +Y up, so an instance's scale multiplies a plausible size.
 
 use crate::mesh::{Material, Mesh, Primitive};
-use crate::scene::SpeciesKind;
+use crate::plants::SpeciesKind;
 
 /// Nominal height in metres of a kind's marker.
 pub fn nominal_height_m(kind: SpeciesKind) -> f32 {

@@ -13,3 +13,15 @@ pub mod texture;
 pub mod tree;
 pub mod tree_lod;
 pub mod wind;
+
+use serde::{Deserialize, Serialize};
+
+/// What a species' instances are: the generator its meshes come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SpeciesKind {
+    Grass,
+    Flower,
+    Tree,
+    Mesh,
+}

@@ -8,13 +8,7 @@ use rayon::prelude::*;
 use crate::synth::mix64;
 
 use super::rules::Rules;
-use super::{Instance, RuleCounts, ScatterError, MAX_CANDIDATES};
-
-/// Points per r² of the unthinned set this sampler produces away from the extent's edges (measured:
-/// 0.616–0.617 on 300 r × 300 r with tiles of 10 r to 300 r, which includes ≈ +0.5 % from the
-/// extent's edges, where points pack tighter; see the `packing_constant` test). Random sequential
-/// adsorption saturates at ≈ 0.70/r² (jamming coverage 0.547); Bridson with k = 30 stops short of it.
-pub const POISSON_PACKING: f64 = 0.613;
+use super::{Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POISSON_PACKING};
 
 /// Candidates tried around an active point before it retires (Bridson's k).
 const K: usize = 30;
@@ -356,17 +350,16 @@ impl Blocks {
 mod tests {
     use super::*;
     use crate::scatter::{scatter_species_detailed, stats::min_pair_distance, SurfaceIndex};
-    use crate::scene::{Placement, SpeciesKind, SpeciesSettings};
+    use crate::scatter::{Placement, SpeciesRules};
 
     pub(crate) fn flat(w: f32, h: f32) -> SurfaceIndex {
         let p = [[0.0, 0.0, 0.0], [w, 0.0, 0.0], [w, 0.0, h], [0.0, 0.0, h]];
         SurfaceIndex::new(&p, &[0, 2, 1, 0, 3, 2])
     }
 
-    fn species(r: f64) -> SpeciesSettings {
-        SpeciesSettings {
+    fn species(r: f64) -> SpeciesRules {
+        SpeciesRules {
             name: "t".into(),
-            kind: SpeciesKind::Tree,
             density_map: None,
             mask: None,
             max_density: 1e9,
@@ -381,8 +374,6 @@ mod tests {
             exclusions: vec![],
             seed: 0,
             max_instances: 10_000_000,
-            cull_distance_m: None,
-            look: crate::scene::PlantLook::Marker,
         }
     }
 

@@ -2,19 +2,19 @@
 //! altitude and slope (degrees from the containing triangle's normal), and exclusion radii around
 //! the instances of earlier species (a uniform-grid spatial hash of those instances).
 
-use crate::scene::{Placement, SpeciesSettings};
+use crate::scatter::{Placement, SpeciesRules};
 use crate::synth::mix64;
 
 use super::{
-    on_grid, poisson::POISSON_PACKING, sin_cos_0_pi, species_key, unit, DensityMap, Instance, RuleCounts, ScatterError,
-    SurfaceIndex, Tiling, SCALE_STEPS, YAW_STEPS_PER_DEG,
+    on_grid, sin_cos_0_pi, species_key, unit, DensityMap, Instance, RuleCounts, ScatterError, SurfaceIndex, Tiling,
+    POISSON_PACKING, SCALE_STEPS, YAW_STEPS_PER_DEG,
 };
 
 /// Everything one species' candidates are judged by, resolved once.
 pub struct Rules<'a> {
     pub surface: &'a SurfaceIndex,
     pub tiling: Tiling,
-    pub species: &'a SpeciesSettings,
+    pub species: &'a SpeciesRules,
     pub density: Option<&'a DensityMap>,
     pub mask: Option<&'a DensityMap>,
     /// Root of every random number of this species.
@@ -59,7 +59,7 @@ impl<'a> Rules<'a> {
     pub fn new(
         surface: &'a SurfaceIndex,
         tiling: Tiling,
-        species: &'a SpeciesSettings,
+        species: &'a SpeciesRules,
         density: Option<&'a DensityMap>,
         mask: Option<&'a DensityMap>,
         earlier: &[(&str, &[Instance])],
@@ -87,7 +87,7 @@ impl<'a> Rules<'a> {
     pub fn without_exclusions(
         surface: &'a SurfaceIndex,
         tiling: Tiling,
-        species: &'a SpeciesSettings,
+        species: &'a SpeciesRules,
         density: Option<&'a DensityMap>,
         mask: Option<&'a DensityMap>,
         scene_seed: u64,

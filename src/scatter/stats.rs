@@ -14,7 +14,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::scene::SpeciesSettings;
+use crate::scatter::SpeciesRules;
 
 use super::{expected_count, DensityMap, Instance, ScatterError, SurfaceIndex, Tiling};
 
@@ -76,7 +76,7 @@ pub struct SpeciesStats {
 pub fn analyze(
     surface: &SurfaceIndex,
     extent: [f64; 4],
-    species: &SpeciesSettings,
+    species: &SpeciesRules,
     density: Option<&DensityMap>,
     mask: Option<&DensityMap>,
     snow: Option<super::rules::SnowThinning<'_>>,

@@ -303,7 +303,7 @@ fn placements_from_tables(
         .enumerate()
         .map(|(index, s)| {
             let mut points = Vec::new();
-            if let Some((_, rel)) = tables.iter().find(|(n, _)| *n == s.name) {
+            if let Some((_, rel)) = tables.iter().find(|(n, _)| *n == s.rules.name) {
                 let path = dir.join(rel);
                 let rows = crate::export::table::read_placements_csv(&path)
                     .map_err(|message| SceneBuildError::Io { path: path.clone(), message })?;

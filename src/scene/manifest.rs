@@ -448,7 +448,8 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
                 s += &format!("## Scatter\n\nPlacement tables (`placements/`), tiles of {} m; `scene.glb` (the view stage) draws them\n\n", sc.tile_m);
                 s += "| species | kind | instances | expected | ratio | min pair distance (m) | min_spacing (m) | max \\|y − terrain\\| scene.glb, f32 (m) | max \\|y − terrain\\| CSV (m) | snow-thinned | tiles |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
                 for sp in &sc.species {
-                    let spacing = preset.species.iter().find(|x| x.name == sp.name).map_or(0.0, |x| x.min_spacing_m);
+                    let spacing =
+                        preset.species.iter().find(|x| x.rules.name == sp.name).map_or(0.0, |x| x.rules.min_spacing_m);
                     s += &format!(
                         "| {} | {:?} | {} | {:.0} | {:.3} | {} | {} | {:.2e} | {:.2e} | {} | {} |\n",
                         sp.name,

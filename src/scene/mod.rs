@@ -20,6 +20,8 @@ use std::path::PathBuf;
 use serde::Serialize;
 
 use crate::heightfield::DecodeOptions;
+use crate::plants::SpeciesKind;
+use crate::scatter::SpeciesRules;
 use crate::synth::NoiseKind;
 use crate::terrain::job::MeshMode;
 
@@ -116,67 +118,13 @@ impl Default for ScatterSettings {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum SpeciesKind {
-    Grass,
-    Flower,
-    Tree,
-    Mesh,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Placement {
-    /// Poisson-disk sampling thinned by density: spacing ≥ `min_spacing` everywhere.
-    Poisson,
-    /// One jittered candidate per grid cell, thinned by density: fast, for dense ground cover.
-    Jittered,
-}
-
-/// `exclusion = { species = "...", radius = m }`: keep at least `radius_m` from every instance
-/// of `species` (which must be placed earlier; naming the species itself keeps its own instances
-/// apart).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Exclusion {
-    pub species: String,
-    pub radius_m: f64,
-}
-
-/// `[[species]]`, resolved.
+/// `[[species]]`, resolved: how its instances are placed (the scatter stage's half, flattened
+/// into the manifest as one object) and what they show (the plants stage's half).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SpeciesSettings {
-    pub name: String,
+    #[serde(flatten)]
+    pub rules: SpeciesRules,
     pub kind: SpeciesKind,
-    /// Grayscale image stretched over the terrain extent (bilinear); value 0..1 scales
-    /// `max_density`. `None`: uniform.
-    pub density_map: Option<PathBuf>,
-    /// Grayscale image over the extent; nothing is placed where it is below 0.5.
-    pub mask: Option<PathBuf>,
-    /// Instances per square metre where the density map is 1.
-    pub max_density: f64,
-    pub placement: Placement,
-    /// Poisson radius in metres (minimum distance between two instances of this species).
-    /// The parser guarantees > 0 for `Poisson`; 0 (no minimum) is the default for `Jittered`.
-    pub min_spacing_m: f64,
-    /// Allowed terrain slope in degrees, [min, max].
-    pub slope_deg: [f64; 2],
-    /// Allowed altitude in metres, [min, max]. Unbounded is ±1e9 m
-    /// ([`preset::UNBOUNDED_ALTITUDE_M`]), not ±∞: JSON has no infinity and this is written into
-    /// the manifest.
-    pub altitude_m: [f64; 2],
-    /// Nothing is placed below this height (metres).
-    pub water_level_m: Option<f64>,
-    /// Uniform scale range [min, max].
-    pub scale: [f64; 2],
-    pub random_yaw: bool,
-    /// 0: upright (+Y), 1: along the terrain normal; in between, a blend.
-    pub align_to_normal: f64,
-    pub exclusions: Vec<Exclusion>,
-    /// Offset added to the scene seed for this species.
-    pub seed: u64,
-    /// Explicit limit; exceeding it is an error naming the species and the remedy.
-    pub max_instances: usize,
     /// `cull_distance` (m): instances farther from the eye are not drawn; `None`: from the LoD
     /// budget (where the coarsest level spans the pixel budget, [`view::cull_distance`]).
     pub cull_distance_m: Option<f64>,

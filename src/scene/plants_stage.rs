@@ -163,9 +163,9 @@ pub fn plants_key(preset: &Preset) -> Result<String, StageError> {
     let mut k = KeyBuilder::new("plants", PLANTS_ALGORITHM_VERSION);
     k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
     for s in &preset.species {
-        k.add(s.name.as_bytes());
+        k.add(s.rules.name.as_bytes());
         k.add(serde_json::to_string(&s.look).unwrap_or_default().as_bytes());
-        add_look_inputs(&mut k, &s.name, &s.look)?;
+        add_look_inputs(&mut k, &s.rules.name, &s.look)?;
     }
     Ok(k.finish())
 }
@@ -385,7 +385,7 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
     for s in &preset.species {
         let t1 = Instant::now();
         let mut files = Vec::new();
-        let name = &s.name;
+        let name = &s.rules.name;
         let (mut tree_report, mut mesh_report) = (None, None);
         let draw;
         let (grass_report, flower_report) = match &s.look {

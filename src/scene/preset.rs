@@ -21,13 +21,15 @@ pub use snow::{default_snow_seed, SNOW_KEYS};
 pub use view::{LOD_KEYS, VIEW_KEYS};
 
 use super::{
-    Exclusion, Format, MeshLook, Placement, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesKind,
-    SpeciesSettings, TerrainSettings, TerrainSource, TreeLook,
+    Format, MeshLook, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesSettings, TerrainSettings,
+    TerrainSource, TreeLook,
 };
 use crate::heightfield::{DecodeOptions, Encoding, Heightfield, DEFAULT_MAX_SAMPLES};
 use crate::lsystem::library;
 use crate::plants::flower::FlowerSettings;
 use crate::plants::grass::GrassSettings;
+use crate::plants::SpeciesKind;
+use crate::scatter::{Exclusion, Placement, SpeciesRules, UNBOUNDED_ALTITUDE_M};
 use crate::synth::{self, NoiseKind};
 use crate::terrain::job::MeshMode;
 
@@ -92,10 +94,6 @@ pub const DEFAULT_MAX_INSTANCES: usize = 5_000_000;
 pub const MAX_MAX_INSTANCES: u64 = u32::MAX as u64;
 /// Default `min_spacing` (m) of a Poisson-placed tree: crowns of ordinary trees do not touch.
 pub const DEFAULT_TREE_SPACING_M: f64 = 4.0;
-/// `altitude` when absent: "unbounded", written as ±1e9 m rather than ±∞ because JSON has no
-/// infinity (serde_json writes `null`), and the manifest must reproduce the build. No terrain
-/// comes near 10⁶ km, so the band never excludes anything.
-pub const UNBOUNDED_ALTITUDE_M: [f64; 2] = [-1e9, 1e9];
 /// Default `[scatter] tile` (m).
 pub const DEFAULT_TILE_M: f64 = 256.0;
 /// Keys of `[terrain] procedural = { … }`.
@@ -196,22 +194,24 @@ pub fn demo_preset() -> Preset {
         species: vec![
             // 58 % of the map is below 240 m with slopes under 30°: ≈ 2.4 km² × 0.002 ≈ 4 800 trees
             SpeciesSettings {
-                name: "tree".into(),
+                rules: SpeciesRules {
+                    name: "tree".into(),
+                    density_map: None,
+                    mask: None,
+                    max_density: 0.002,
+                    placement: Placement::Poisson,
+                    min_spacing_m: 6.0,
+                    slope_deg: [0.0, 30.0],
+                    altitude_m: [0.0, 240.0],
+                    water_level_m: None,
+                    scale: [0.8, 1.25],
+                    random_yaw: true,
+                    align_to_normal: 0.0,
+                    exclusions: Vec::new(),
+                    seed: 0,
+                    max_instances: DEFAULT_MAX_INSTANCES,
+                },
                 kind: SpeciesKind::Tree,
-                density_map: None,
-                mask: None,
-                max_density: 0.002,
-                placement: Placement::Poisson,
-                min_spacing_m: 6.0,
-                slope_deg: [0.0, 30.0],
-                altitude_m: [0.0, 240.0],
-                water_level_m: None,
-                scale: [0.8, 1.25],
-                random_yaw: true,
-                align_to_normal: 0.0,
-                exclusions: Vec::new(),
-                seed: 0,
-                max_instances: DEFAULT_MAX_INSTANCES,
                 cull_distance_m: None,
                 // the built-in broadleaf (crate::lsystem::library), 12 m before the instance scale
                 look: PlantLook::Tree(TreeLook {
@@ -223,22 +223,24 @@ pub fn demo_preset() -> Preset {
             },
             // 75 % of the map has slopes under 35°: ≈ 3.1 km² × 0.04 ≈ 125 000 clumps
             SpeciesSettings {
-                name: "grass".into(),
+                rules: SpeciesRules {
+                    name: "grass".into(),
+                    density_map: None,
+                    mask: None,
+                    max_density: 0.04,
+                    placement: Placement::Jittered,
+                    min_spacing_m: 0.0,
+                    slope_deg: [0.0, 35.0],
+                    altitude_m: UNBOUNDED_ALTITUDE_M,
+                    water_level_m: None,
+                    scale: [0.7, 1.2],
+                    random_yaw: true,
+                    align_to_normal: 1.0,
+                    exclusions: vec![Exclusion { species: "tree".into(), radius_m: 1.5 }],
+                    seed: 0,
+                    max_instances: DEFAULT_MAX_INSTANCES,
+                },
                 kind: SpeciesKind::Grass,
-                density_map: None,
-                mask: None,
-                max_density: 0.04,
-                placement: Placement::Jittered,
-                min_spacing_m: 0.0,
-                slope_deg: [0.0, 35.0],
-                altitude_m: UNBOUNDED_ALTITUDE_M,
-                water_level_m: None,
-                scale: [0.7, 1.2],
-                random_yaw: true,
-                align_to_normal: 1.0,
-                exclusions: vec![Exclusion { species: "tree".into(), radius_m: 1.5 }],
-                seed: 0,
-                max_instances: DEFAULT_MAX_INSTANCES,
                 cull_distance_m: None,
                 look: PlantLook::Grass(GrassSettings {
                     seed: species_look_seed(0, "grass", 0),
@@ -281,14 +283,15 @@ pub fn instance_estimates_over_limit(p: &Preset) -> Vec<(String, f64, usize)> {
     p.species
         .iter()
         .filter_map(|s| {
-            let density = match s.placement {
-                Placement::Poisson if s.min_spacing_m > 0.0 => {
-                    s.max_density.min(crate::scatter::POISSON_PACKING / (s.min_spacing_m * s.min_spacing_m))
-                }
-                _ => s.max_density,
+            let density = match s.rules.placement {
+                Placement::Poisson if s.rules.min_spacing_m > 0.0 => s
+                    .rules
+                    .max_density
+                    .min(crate::scatter::POISSON_PACKING / (s.rules.min_spacing_m * s.rules.min_spacing_m)),
+                _ => s.rules.max_density,
             };
             let estimate = density * area;
-            (estimate > s.max_instances as f64).then(|| (s.name.clone(), estimate, s.max_instances))
+            (estimate > s.rules.max_instances as f64).then(|| (s.rules.name.clone(), estimate, s.rules.max_instances))
         })
         .collect()
 }
@@ -901,16 +904,16 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
             let t = Table { ctx: &ctx, label: "[[species]]".into(), span: item.span(), table };
             let (s, name_span) = parse_species(&t, &species, &looks, check_inputs)?;
             // compared ignoring case: `Oak` and `oak` would be one file on some file systems
-            if let Some(i) = species.iter().position(|e| e.name.eq_ignore_ascii_case(&s.name)) {
-                let first = &species[i].name;
-                let case = if *first == s.name {
+            if let Some(i) = species.iter().position(|e| e.rules.name.eq_ignore_ascii_case(&s.rules.name)) {
+                let first = &species[i].rules.name;
+                let case = if *first == s.rules.name {
                     String::new()
                 } else {
                     format!(" as `{first}` (names that differ only in case are one file name on some systems)")
                 };
                 return Err(ctx.at(
                     &name_span,
-                    format!("species `{}` is declared twice; the first is at line {}{case}", s.name, lines[i]),
+                    format!("species `{}` is declared twice; the first is at line {}{case}", s.rules.name, lines[i]),
                     "give each [[species]] its own name",
                 ));
             }
@@ -1389,22 +1392,24 @@ fn parse_species(
     let look = parse_look(t, name, kind, looks, seed, check_inputs)?;
 
     let species = SpeciesSettings {
-        name: name.to_string(),
+        rules: SpeciesRules {
+            name: name.to_string(),
+            density_map,
+            mask,
+            max_density,
+            placement,
+            min_spacing_m,
+            slope_deg,
+            altitude_m,
+            water_level_m,
+            scale,
+            random_yaw,
+            align_to_normal,
+            exclusions,
+            seed,
+            max_instances,
+        },
         kind,
-        density_map,
-        mask,
-        max_density,
-        placement,
-        min_spacing_m,
-        slope_deg,
-        altitude_m,
-        water_level_m,
-        scale,
-        random_yaw,
-        align_to_normal,
-        exclusions,
-        seed,
-        max_instances,
         cull_distance_m,
         look,
     };
@@ -1436,8 +1441,8 @@ fn parse_exclusions(
             e.string("species", "species = \"oak\"")?.ok_or_else(|| e.missing("species", "species = \"oak\""))?;
         let radius_m =
             e.number("radius", "radius = 1.5", positive)?.ok_or_else(|| e.missing("radius", "radius = 1.5"))?.0;
-        if other != this && !earlier.iter().any(|s| s.name == other) {
-            let names: Vec<&str> = earlier.iter().map(|s| s.name.as_str()).chain([this]).collect();
+        if other != this && !earlier.iter().any(|s| s.rules.name == other) {
+            let names: Vec<&str> = earlier.iter().map(|s| s.rules.name.as_str()).chain([this]).collect();
             let remedy = match did_you_mean(other, &names) {
                 Some(m) => format!("did you mean `{m}`?"),
                 None if earlier.is_empty() => format!(

@@ -412,7 +412,7 @@ pub struct PreviewLayer {
 /// [`TREE_CROWN_PER_HEIGHT`] of it (an estimate, so the preview needs no tree built).
 pub fn footprint_m(species: &crate::scene::SpeciesSettings) -> f64 {
     use crate::scene::{PlantLook, SpeciesKind};
-    let mid_scale = 0.5 * (species.scale[0] + species.scale[1]);
+    let mid_scale = 0.5 * (species.rules.scale[0] + species.rules.scale[1]);
     if let PlantLook::Tree(crate::scene::TreeLook { height_m: Some(h), .. }) = &species.look {
         return h * TREE_CROWN_PER_HEIGHT * mid_scale;
     }

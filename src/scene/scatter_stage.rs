@@ -68,8 +68,8 @@ pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageEr
     k.add(serde_json::to_string(&preset.scatter).unwrap_or_default().as_bytes());
     for s in &preset.species {
         k.add(serde_json::to_string(s).unwrap_or_default().as_bytes());
-        crate::scene::plants_stage::add_look_inputs(&mut k, &s.name, &s.look)?;
-        for map in [&s.density_map, &s.mask].into_iter().flatten() {
+        crate::scene::plants_stage::add_look_inputs(&mut k, &s.rules.name, &s.look)?;
+        for map in [&s.rules.density_map, &s.rules.mask].into_iter().flatten() {
             let bytes = crate::input::read_limited(map, crate::input::MAX_IMAGE_BYTES, "a density map or mask")
                 .map_err(|e| fail(e.to_string()))?;
             k.add(sha256_hex(&bytes).as_bytes());
@@ -121,10 +121,10 @@ pub fn run_scatter_with_snow(
     let mut reports = Vec::new();
     for (index, species) in preset.species.iter().enumerate() {
         let t1 = Instant::now();
-        let density = load_map(&species.density_map)?;
-        let mask = load_map(&species.mask)?;
+        let density = load_map(&species.rules.density_map)?;
+        let mask = load_map(&species.rules.mask)?;
         let earlier: Vec<(&str, &[Instance])> =
-            placed.iter().map(|p| (p.species.name.as_str(), &p.instances[..])).collect();
+            placed.iter().map(|p| (p.species.rules.name.as_str(), &p.instances[..])).collect();
         let thinning = match (snow_mask, &preset.snow, species.kind) {
             (Some(mask), Some(snow), crate::scene::SpeciesKind::Grass | crate::scene::SpeciesKind::Flower)
                 if snow.thin_plants > 0.0 =>
@@ -136,7 +136,7 @@ pub fn run_scatter_with_snow(
         let result = scatter_species_snow(
             &surface,
             extent,
-            species,
+            &species.rules,
             density.as_ref(),
             mask.as_ref(),
             &earlier,
@@ -149,7 +149,7 @@ pub fn run_scatter_with_snow(
         let stats = analyze(
             &surface,
             extent,
-            species,
+            &species.rules,
             density.as_ref(),
             mask.as_ref(),
             thinning,
@@ -158,10 +158,10 @@ pub fn run_scatter_with_snow(
             generate_s,
         )
         .map_err(|e| fail(e.to_string()))?;
-        let csv = PathBuf::from("placements").join(format!("{}.csv", species.name));
+        let csv = PathBuf::from("placements").join(format!("{}.csv", species.rules.name));
         table::write_placements_csv(&scene_dir.join(&csv), &result.instances).map_err(|e| fail(e.to_string()))?;
         let report = SpeciesReport {
-            name: species.name.clone(),
+            name: species.rules.name.clone(),
             kind: species.kind,
             count: result.instances.len(),
             csv: csv.clone(),

@@ -131,7 +131,7 @@ pub fn view_key(preset: &Preset, upstream: &[&str]) -> String {
     k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
     k.add(serde_json::to_string(&preset.views).unwrap_or_default().as_bytes());
     for s in &preset.species {
-        k.add(s.name.as_bytes()).add(serde_json::to_string(&s.cull_distance_m).unwrap_or_default().as_bytes());
+        k.add(s.rules.name.as_bytes()).add(serde_json::to_string(&s.cull_distance_m).unwrap_or_default().as_bytes());
     }
     k.finish()
 }
@@ -317,9 +317,9 @@ pub fn run_view(
     for s in &preset.species {
         let rel = tables
             .iter()
-            .find(|(n, _)| *n == s.name)
+            .find(|(n, _)| *n == s.rules.name)
             .map(|(_, p)| p.clone())
-            .unwrap_or_else(|| PathBuf::from("placements").join(format!("{}.csv", s.name)));
+            .unwrap_or_else(|| PathBuf::from("placements").join(format!("{}.csv", s.rules.name)));
         let path = scene_dir.join(&rel);
         rows_of.push(table::read_placements_csv(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?);
     }
@@ -335,7 +335,7 @@ pub fn run_view(
             children.push(full.scene.nodes.len() - 1);
         }
         for (s, rows) in preset.species.iter().zip(&rows_of) {
-            let Some(chain) = chains.get(s.name.as_str()).filter(|c| !c.variants.is_empty()) else { continue };
+            let Some(chain) = chains.get(s.rules.name.as_str()).filter(|c| !c.variants.is_empty()) else { continue };
             let mut groups: BTreeMap<usize, Instances> = BTreeMap::new();
             for row in rows {
                 let g = groups.entry(variant_of(row.position, chain.variants.len())).or_default();
@@ -395,9 +395,9 @@ pub fn run_view(
 
         let mut species_reports = Vec::with_capacity(preset.species.len());
         for (s, rows) in preset.species.iter().zip(&rows_of) {
-            let Some(chain) = chains.get(s.name.as_str()).filter(|c| !c.variants.is_empty()) else {
+            let Some(chain) = chains.get(s.rules.name.as_str()).filter(|c| !c.variants.is_empty()) else {
                 species_reports.push(SpeciesDraw {
-                    name: s.name.clone(),
+                    name: s.rules.name.clone(),
                     placed: rows.len(),
                     drawn: 0,
                     culled: 0,
@@ -453,11 +453,11 @@ pub fn run_view(
                 draw_calls += asm.scene.meshes[mi].primitives.len();
                 if write {
                     asm.scene.nodes.push(Node {
-                        name: format!("{}_{}", s.name, l.mesh),
+                        name: format!("{}_{}", s.rules.name, l.mesh),
                         mesh: Some(mi),
                         instances: Some(inst),
                         extras: Some(serde_json::json!({
-                            "species": s.name, "variant": variant, "level": level, "mesh": l.mesh, "file": l.file,
+                            "species": s.rules.name, "variant": variant, "level": level, "mesh": l.mesh, "file": l.file,
                         })),
                         ..Node::default()
                     });
@@ -479,12 +479,12 @@ pub fn run_view(
                 full_calls += asm.scene.meshes[mi].primitives.len();
             }
             if write {
-                asm.scene.nodes.push(Node { name: s.name.clone(), children, ..Node::default() });
+                asm.scene.nodes.push(Node { name: s.rules.name.clone(), children, ..Node::default() });
                 asm.scene.roots.push(asm.scene.nodes.len() - 1);
             }
             let drawn = rows.len() - culled;
             species_reports.push(SpeciesDraw {
-                name: s.name.clone(),
+                name: s.rules.name.clone(),
                 placed: rows.len(),
                 drawn,
                 culled,

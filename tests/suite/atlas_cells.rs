@@ -132,12 +132,12 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
     let mut kinds = std::collections::BTreeSet::new();
     for (preset_name, preset) in shipped_presets() {
         for s in &preset.species {
-            let what = format!("{preset_name}: species `{}`", s.name);
+            let what = format!("{preset_name}: species `{}`", s.rules.name);
             match &s.look {
                 PlantLook::Marker => continue,
                 PlantLook::Grass(g) => {
                     let blade = user_blade(g).unwrap();
-                    let asset = build_grass(&s.name, g, blade.as_ref()).unwrap();
+                    let asset = build_grass(&s.rules.name, g, blade.as_ref()).unwrap();
                     let cells: Vec<[f32; 4]> = asset.cells.iter().map(|c| c.uv).collect();
                     let mut n = check_cards(&format!("{what} chain"), &asset.chain, &cells);
                     for (k, scene) in asset.lod_scenes.iter().enumerate() {
@@ -159,7 +159,7 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                     kinds.insert("grass");
                 }
                 PlantLook::Flower(f) => {
-                    let asset = build_flower(&s.name, f).unwrap();
+                    let asset = build_flower(&s.rules.name, f).unwrap();
                     let cells: Vec<[f32; 4]> = asset.cells.iter().map(|c| c.uv).collect();
                     assert!(check_cards(&what, &asset.scene, &cells) > 0, "{what}: no atlas cards checked");
                     assert!(check_plant_scene(&what, &asset.scene, Expect::Sway) > 0);
@@ -186,12 +186,17 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                     kinds.insert("flower");
                 }
                 PlantLook::Tree(t) => {
-                    let system = read_lsystem(&s.name, t).unwrap();
-                    check_chain(&what, &tree_chain(&s.name, t, &system, 0, &preset.lod).unwrap(), t.atlas_px, true);
+                    let system = read_lsystem(&s.rules.name, t).unwrap();
+                    check_chain(
+                        &what,
+                        &tree_chain(&s.rules.name, t, &system, 0, &preset.lod).unwrap(),
+                        t.atlas_px,
+                        true,
+                    );
                     kinds.insert("tree");
                 }
                 PlantLook::Mesh(m) => {
-                    check_chain(&what, &mesh_chain(&s.name, m, &preset.lod).unwrap().1, m.atlas_px, false);
+                    check_chain(&what, &mesh_chain(&s.rules.name, m, &preset.lod).unwrap().1, m.atlas_px, false);
                     kinds.insert("mesh");
                 }
             }

@@ -5,11 +5,12 @@ use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
 use verdant::heightfield::{Encoding, DEFAULT_MAX_SAMPLES};
+use verdant::plants::SpeciesKind;
+use verdant::scatter::{Exclusion, Placement, UNBOUNDED_ALTITUDE_M};
 use verdant::scene::preset::{
     demo_preset, load_preset, parse_preset, procedural_heightfield, template, PresetError, DEFAULT_MAX_INSTANCES,
-    UNBOUNDED_ALTITUDE_M,
 };
-use verdant::scene::{Exclusion, Format, Placement, SpeciesKind, TerrainSource};
+use verdant::scene::{Format, TerrainSource};
 use verdant::synth::{self, NoiseKind};
 use verdant::terrain::job::MeshMode;
 
@@ -488,20 +489,23 @@ fn species_every_key_parses() {
     assert_eq!(p.scatter.tile_m, 64.0);
     assert_eq!(p.species.len(), 2);
     let g = &p.species[1];
-    assert_eq!((g.name.as_str(), g.kind), ("Grass_2", SpeciesKind::Grass));
-    assert_eq!(g.density_map.as_deref(), Some(dir.path().join("maps/d.png").as_path()));
-    assert_eq!(g.mask.as_deref(), Some(dir.path().join("maps/m.png").as_path()));
-    assert_eq!((g.max_density, g.placement, g.min_spacing_m), (2.0, Placement::Poisson, 0.25));
-    assert_eq!((g.slope_deg, g.altitude_m, g.water_level_m), ([5.0, 40.5], [-10.0, 300.0], Some(1.5)));
-    assert_eq!((g.scale, g.random_yaw, g.align_to_normal), ([0.5, 2.0], false, 0.25));
+    assert_eq!((g.rules.name.as_str(), g.kind), ("Grass_2", SpeciesKind::Grass));
+    assert_eq!(g.rules.density_map.as_deref(), Some(dir.path().join("maps/d.png").as_path()));
+    assert_eq!(g.rules.mask.as_deref(), Some(dir.path().join("maps/m.png").as_path()));
+    assert_eq!((g.rules.max_density, g.rules.placement, g.rules.min_spacing_m), (2.0, Placement::Poisson, 0.25));
     assert_eq!(
-        g.exclusions,
+        (g.rules.slope_deg, g.rules.altitude_m, g.rules.water_level_m),
+        ([5.0, 40.5], [-10.0, 300.0], Some(1.5))
+    );
+    assert_eq!((g.rules.scale, g.rules.random_yaw, g.rules.align_to_normal), ([0.5, 2.0], false, 0.25));
+    assert_eq!(
+        g.rules.exclusions,
         vec![
             Exclusion { species: "oak".into(), radius_m: 1.5 },
             Exclusion { species: "Grass_2".into(), radius_m: 0.1 }
         ]
     );
-    assert_eq!((g.seed, g.max_instances), (9, 1234));
+    assert_eq!((g.rules.seed, g.rules.max_instances), (9, 1234));
     // a single exclusion table; a single number for scale; an inline array of species tables
     let p = parse_preset(
         &with_species(&format!(
@@ -511,8 +515,8 @@ fn species_every_key_parses() {
         Path::new("p.toml"),
     )
     .unwrap();
-    assert_eq!(p.species[1].scale, [1.5, 1.5]);
-    assert_eq!(p.species[1].exclusions, vec![Exclusion { species: "oak".into(), radius_m: 2.0 }]);
+    assert_eq!(p.species[1].rules.scale, [1.5, 1.5]);
+    assert_eq!(p.species[1].rules.exclusions, vec![Exclusion { species: "oak".into(), radius_m: 2.0 }]);
     let p = parse_preset(
         &with_species("species = [{ name = \"a\", kind = \"mesh\", max_density = 0.1, min_spacing = 2.0, placement = \"poisson\" }]"),
         Path::new("p.toml"),
@@ -533,30 +537,33 @@ fn species_defaults_follow_the_kind() {
     assert_eq!(p.scatter.tile_m, 256.0);
     let [t, g, f, m] = &p.species[..] else { panic!("{:?}", p.species) };
     assert_eq!(
-        (t.kind, t.placement, t.min_spacing_m, t.align_to_normal),
+        (t.kind, t.rules.placement, t.rules.min_spacing_m, t.rules.align_to_normal),
         (SpeciesKind::Tree, Placement::Poisson, 4.0, 0.0)
     );
     assert_eq!(
-        (g.kind, g.placement, g.min_spacing_m, g.align_to_normal),
+        (g.kind, g.rules.placement, g.rules.min_spacing_m, g.rules.align_to_normal),
         (SpeciesKind::Grass, Placement::Jittered, 0.0, 1.0)
     );
     assert_eq!(
-        (f.kind, f.placement, f.min_spacing_m, f.align_to_normal),
+        (f.kind, f.rules.placement, f.rules.min_spacing_m, f.rules.align_to_normal),
         (SpeciesKind::Flower, Placement::Jittered, 0.0, 1.0)
     );
     assert_eq!(
-        (m.kind, m.placement, m.min_spacing_m, m.align_to_normal),
+        (m.kind, m.rules.placement, m.rules.min_spacing_m, m.rules.align_to_normal),
         (SpeciesKind::Mesh, Placement::Jittered, 0.0, 0.0)
     );
     for s in &p.species {
-        assert_eq!((s.density_map.as_ref(), s.mask.as_ref(), s.water_level_m), (None, None, None));
-        assert_eq!((s.slope_deg, s.altitude_m, s.scale), ([0.0, 90.0], UNBOUNDED_ALTITUDE_M, [1.0, 1.0]));
-        assert!(s.random_yaw && s.exclusions.is_empty());
-        assert_eq!((s.seed, s.max_instances), (0, DEFAULT_MAX_INSTANCES));
+        assert_eq!((s.rules.density_map.as_ref(), s.rules.mask.as_ref(), s.rules.water_level_m), (None, None, None));
+        assert_eq!(
+            (s.rules.slope_deg, s.rules.altitude_m, s.rules.scale),
+            ([0.0, 90.0], UNBOUNDED_ALTITUDE_M, [1.0, 1.0])
+        );
+        assert!(s.rules.random_yaw && s.rules.exclusions.is_empty());
+        assert_eq!((s.rules.seed, s.rules.max_instances), (0, DEFAULT_MAX_INSTANCES));
     }
     // trees may be jittered; then the spacing defaults to 0
     let p = parse_preset(&with_species(&format!("{TREE}\nplacement = \"jittered\"")), Path::new("p.toml")).unwrap();
-    assert_eq!((p.species[0].placement, p.species[0].min_spacing_m), (Placement::Jittered, 0.0));
+    assert_eq!((p.species[0].rules.placement, p.species[0].rules.min_spacing_m), (Placement::Jittered, 0.0));
     // no species: empty list, default tile
     let p = parse_preset(&with_terrain(PROC), Path::new("p.toml")).unwrap();
     assert!(p.species.is_empty());
@@ -688,7 +695,7 @@ fn species_jittered_with_a_spacing_is_refused_at_the_value() {
         Path::new("p.toml"),
     )
     .unwrap();
-    assert_eq!((p.species[0].placement, p.species[0].min_spacing_m), (Placement::Jittered, 0.0));
+    assert_eq!((p.species[0].rules.placement, p.species[0].rules.min_spacing_m), (Placement::Jittered, 0.0));
 }
 
 #[test]
@@ -775,8 +782,8 @@ fn exclusions_name_earlier_species_or_themselves() {
         Path::new("p.toml"),
     )
     .unwrap();
-    assert_eq!(p.species[0].exclusions, vec![Exclusion { species: "oak".into(), radius_m: 8.0 }]);
-    assert_eq!(p.species[1].exclusions.len(), 2);
+    assert_eq!(p.species[0].rules.exclusions, vec![Exclusion { species: "oak".into(), radius_m: 8.0 }]);
+    assert_eq!(p.species[1].rules.exclusions.len(), 2);
 }
 
 #[test]
@@ -838,7 +845,7 @@ fn species_section_shapes() {
     let text =
         format!("species = [{{ name = \"a\", kind = \"grass\", max_density = 1 }}]\n{MINIMAL}[terrain]\n{PROC}\n");
     let p = parse_preset(&text, Path::new("p.toml")).unwrap();
-    assert_eq!(p.species[0].name, "a");
+    assert_eq!(p.species[0].rules.name, "a");
 }
 
 #[test]
@@ -876,7 +883,7 @@ fn missing_density_map_and_mask_are_named_with_their_lines() {
     );
     // parse_preset does not look at the disk, and resolves against the preset's folder
     let p = parse_preset(&std::fs::read_to_string(&file).unwrap(), &file).unwrap();
-    assert_eq!(p.species[0].density_map.as_deref(), Some(resolved.as_path()));
+    assert_eq!(p.species[0].rules.density_map.as_deref(), Some(resolved.as_path()));
 
     std::fs::write(&file, with_species(&format!("{TREE}\nmask = \"m.png\""))).unwrap();
     let e = load_preset(&file).unwrap_err();
@@ -897,23 +904,31 @@ fn missing_density_map_and_mask_are_named_with_their_lines() {
 #[test]
 fn shipped_presets_have_the_species_they_promise() {
     let p = load_preset(&manifest_dir().join("presets/meadow.toml")).unwrap();
-    let names: Vec<&str> = p.species.iter().map(|s| s.name.as_str()).collect();
+    let names: Vec<&str> = p.species.iter().map(|s| s.rules.name.as_str()).collect();
     assert_eq!(names, ["oak", "grass", "flowers"]);
     let [oak, grass, flowers] = &p.species[..] else { panic!() };
-    assert_eq!((oak.kind, oak.placement), (SpeciesKind::Tree, Placement::Poisson));
-    assert!(oak.min_spacing_m > 0.0);
-    assert_eq!((grass.kind, grass.placement), (SpeciesKind::Grass, Placement::Jittered));
-    assert_eq!(grass.exclusions[0].species, "oak");
+    assert_eq!((oak.kind, oak.rules.placement), (SpeciesKind::Tree, Placement::Poisson));
+    assert!(oak.rules.min_spacing_m > 0.0);
+    assert_eq!((grass.kind, grass.rules.placement), (SpeciesKind::Grass, Placement::Jittered));
+    assert_eq!(grass.rules.exclusions[0].species, "oak");
     assert_eq!(flowers.kind, SpeciesKind::Flower);
-    assert!(p.species.iter().all(|s| s.density_map.is_none() && s.mask.is_none()), "no image files are shipped");
+    assert!(
+        p.species.iter().all(|s| s.rules.density_map.is_none() && s.rules.mask.is_none()),
+        "no image files are shipped"
+    );
 
     let p = load_preset(&manifest_dir().join("presets/alpine.toml")).unwrap();
     let [conifer, grass, boulder] = &p.species[..] else { panic!("{:?}", p.species) };
-    assert_eq!((conifer.kind, conifer.placement, conifer.min_spacing_m), (SpeciesKind::Tree, Placement::Poisson, 6.0));
-    assert!(conifer.slope_deg[1] <= 35.0 && conifer.altitude_m[1] < 1500.0 && conifer.altitude_m[0] > 0.0);
+    assert_eq!(
+        (conifer.kind, conifer.rules.placement, conifer.rules.min_spacing_m),
+        (SpeciesKind::Tree, Placement::Poisson, 6.0)
+    );
+    assert!(
+        conifer.rules.slope_deg[1] <= 35.0 && conifer.rules.altitude_m[1] < 1500.0 && conifer.rules.altitude_m[0] > 0.0
+    );
     assert_eq!(grass.kind, SpeciesKind::Grass);
-    assert_eq!(grass.exclusions[0].species, "conifer");
-    assert_eq!((boulder.kind, boulder.placement), (SpeciesKind::Mesh, Placement::Poisson));
+    assert_eq!(grass.rules.exclusions[0].species, "conifer");
+    assert_eq!((boulder.kind, boulder.rules.placement), (SpeciesKind::Mesh, Placement::Poisson));
     let verdant::scene::PlantLook::Mesh(model) = &boulder.look else { panic!("boulder: {:?}", boulder.look) };
     assert!(model.obj.ends_with("models/boulder.obj") && model.obj.is_file(), "{}", model.obj.display());
     let verdant::scene::PlantLook::Tree(oak_look) =
@@ -933,13 +948,13 @@ fn demo_species_stay_small() {
     );
     // an upper bound of the instance count: max_density over the whole 2048 m × 2048 m map
     let area = 2048.0 * 2048.0;
-    let bound: f64 = d.species.iter().map(|s| s.max_density * area).sum();
+    let bound: f64 = d.species.iter().map(|s| s.rules.max_density * area).sum();
     assert!(bound <= 200_000.0, "{bound}");
     // the same invariants the parser enforces
     for (i, s) in d.species.iter().enumerate() {
-        assert!(s.placement != Placement::Poisson || s.min_spacing_m > 0.0);
-        for e in &s.exclusions {
-            assert!(d.species[..=i].iter().any(|o| o.name == e.species));
+        assert!(s.rules.placement != Placement::Poisson || s.rules.min_spacing_m > 0.0);
+        for e in &s.rules.exclusions {
+            assert!(d.species[..=i].iter().any(|o| o.rules.name == e.species));
         }
     }
     // it serialises without nulls in the ranges
@@ -971,10 +986,10 @@ fn template_species_example_parses_when_uncommented() {
     }
     assert!(out.contains("\n[[species]]\n") && out.contains("\n[scatter]\n"), "{out}");
     let p = parse_preset(&out, Path::new("presets/t.toml")).unwrap_or_else(|e| panic!("{e}\n{out}"));
-    let names: Vec<&str> = p.species.iter().map(|s| s.name.as_str()).collect();
+    let names: Vec<&str> = p.species.iter().map(|s| s.rules.name.as_str()).collect();
     assert_eq!(names, ["pine", "grass"]);
-    assert_eq!(p.species[0].density_map.as_deref(), Some(Path::new("presets/maps/forest.png")));
-    assert_eq!(p.species[1].exclusions[0].species, "pine");
+    assert_eq!(p.species[0].rules.density_map.as_deref(), Some(Path::new("presets/maps/forest.png")));
+    assert_eq!(p.species[1].rules.exclusions[0].species, "pine");
     // and as shipped (all commented out) it has none
     assert!(parse_preset(&text, Path::new("t.toml")).unwrap().species.is_empty());
 }

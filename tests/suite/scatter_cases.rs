@@ -8,7 +8,7 @@ use verdant::scatter::{
     analyze, expected_count, scatter_species, scatter_species_detailed, stats::min_pair_distance, DensityMap, Instance,
     ScatterError, SurfaceIndex, POISSON_PACKING,
 };
-use verdant::scene::{Exclusion, Placement, SpeciesKind, SpeciesSettings};
+use verdant::scatter::{Exclusion, Placement, SpeciesRules};
 use verdant::terrain::tin::{tin, TinOptions};
 
 struct Terrain {
@@ -29,10 +29,9 @@ fn terrain(size: usize, relief_m: f64, max_error_m: f64) -> Terrain {
     Terrain { positions, indices, surface, extent: [0.0, 0.0, side, side] }
 }
 
-fn species(name: &str, placement: Placement) -> SpeciesSettings {
-    SpeciesSettings {
+fn species(name: &str, placement: Placement) -> SpeciesRules {
+    SpeciesRules {
         name: name.into(),
-        kind: SpeciesKind::Grass,
         density_map: None,
         mask: None,
         max_density: 1.0,
@@ -48,8 +47,6 @@ fn species(name: &str, placement: Placement) -> SpeciesSettings {
         exclusions: vec![],
         seed: 0,
         max_instances: 10_000_000,
-        cull_distance_m: None,
-        look: verdant::scene::PlantLook::Marker,
     }
 }
 

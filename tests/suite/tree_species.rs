@@ -214,7 +214,7 @@ fn a_tree_without_a_file_grows_from_the_built_in_library() {
         .iter()
         .map(|s| match &s.look {
             PlantLook::Tree(t) => (t.lsystem.clone(), t.height_m, t.variants),
-            other => panic!("{}: {other:?}", s.name),
+            other => panic!("{}: {other:?}", s.rules.name),
         })
         .collect();
     assert_eq!(
