@@ -10,6 +10,7 @@
 
 pub mod bake;
 pub mod export;
+pub mod failure;
 pub mod harness;
 pub mod heightfield;
 pub mod input;

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use verdant::failure::{Blame, Failure};
 use verdant::heightfield::{DecodeOptions, Encoding, DEFAULT_MAX_SAMPLES};
 use verdant::lsystem::expand::DEFAULT_MAX_SYMBOLS;
 use verdant::lsystem::Dialect;
@@ -364,17 +365,18 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Some(n) = cli.threads {
         if n == 0 {
-            eprintln!("error: --threads must be at least 1");
-            return ExitCode::from(2);
+            return exit(fail("--threads must be at least 1", Blame::Input));
         }
         let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
         if n > MAX_THREADS_PER_CORE * cores {
-            eprintln!("error: --threads {n} is more than {MAX_THREADS_PER_CORE} per core ({cores} cores here); use at most {}", MAX_THREADS_PER_CORE * cores);
-            return ExitCode::from(2);
+            let most = MAX_THREADS_PER_CORE * cores;
+            let message = format!(
+                "--threads {n} is more than {MAX_THREADS_PER_CORE} per core ({cores} cores here); use at most {most}"
+            );
+            return exit(fail(&message, Blame::Input));
         }
         if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n).build_global() {
-            eprintln!("error: cannot start {n} threads: {e}");
-            return ExitCode::from(1);
+            return exit(fail(&format!("cannot start {n} threads: {e}"), Blame::Build));
         }
     }
     let code = match cli.command {
@@ -386,6 +388,10 @@ fn main() -> ExitCode {
         Command::Tree(args) => tree(args, cli.quiet),
         Command::Mesh(args) => mesh(args, cli.quiet),
     };
+    exit(code)
+}
+
+fn exit(code: i32) -> ExitCode {
     ExitCode::from(code as u8)
 }
 
@@ -397,7 +403,7 @@ fn cache(cmd: CacheCommand, quiet: bool) -> i32 {
     if out.exists() && !out.is_dir() {
         return fail(
             &format!("{}: not a folder; pass the output folder of `verdant build` with --out", out.display()),
-            2,
+            Blame::Input,
         );
     }
     let cache = verdant::scene::cache::Cache::new(out);
@@ -415,7 +421,7 @@ fn cache(cmd: CacheCommand, quiet: bool) -> i32 {
             }
             0
         }
-        Err(e) => fail(&format!("{}: {e}; check the folder's permissions", cache.root.display()), 1),
+        Err(e) => fail(&format!("{}: {e}; check the folder's permissions", cache.root.display()), Blame::Build),
     }
 }
 
@@ -468,26 +474,29 @@ fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
                 match &a.report {
                     Some(path) => match job::write_json(path, &rows) {
                         Ok(()) => 0,
-                        Err(e) => fail(&e.to_string(), e.exit_code()),
+                        Err(e) => failed(&e),
                     },
                     None => 0,
                 }
             }
-            Err(e) => fail(&e.to_string(), e.exit_code()),
+            Err(e) => failed(&e),
         };
     }
     let output = a.output.clone().unwrap_or_else(|| PathBuf::from("out").join(format!("{name}.glb")));
+    if let Err(e) = verdant::export::check_output_path(&output) {
+        return failed(&e);
+    }
     if (a.quantize || a.compress) && output.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) {
         return fail(
             &format!("{}: --quantize and --compress store glTF integer positions (KHR_mesh_quantization), which an .obj cannot hold; write .glb or .gltf, or leave them out", output.display()),
-            2,
+            Blame::Input,
         );
     }
     match job::run(&job, Some(&output)) {
         Ok((report, _scene)) => {
             if let Some(path) = &a.report {
                 if let Err(e) = job::write_json(path, &report) {
-                    return fail(&e.to_string(), e.exit_code());
+                    return failed(&e);
                 }
             }
             if !quiet {
@@ -518,7 +527,7 @@ fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
             }
             0
         }
-        Err(e) => fail(&e.to_string(), e.exit_code()),
+        Err(e) => failed(&e),
     }
 }
 
@@ -529,35 +538,44 @@ fn validate(a: ValidateArgs, quiet: bool) -> i32 {
         match validate_file(file, &opts) {
             Ok(report) => {
                 if !report.ok() {
-                    worst = worst.max(1);
+                    // a file that does not validate: the build that wrote it failed
+                    worst = worst.max(Blame::Build.exit_code());
                     eprintln!("{report}");
                 } else if !quiet {
                     println!("{report}");
                 }
             }
-            Err(e) => {
-                eprintln!("error: {e}");
-                worst = 2;
-            }
+            // a file that cannot be read or parsed at all is bad input (and the worst outcome)
+            Err(e) => worst = worst.max(fail(&e.to_string(), Blame::Input)),
         }
     }
     worst
 }
 
-fn fail(message: &str, code: i32) -> i32 {
+/// The one exit mapping of every subcommand: prints the message, returns the exit code of whose
+/// fault it is (2 bad input or usage, 1 a failure of the build, its writing or validation).
+fn fail(message: &str, blame: Blame) -> i32 {
     eprintln!("error: {message}");
-    code
+    blame.exit_code()
+}
+
+/// [`fail`] with a typed error's own message and blame.
+fn failed(e: &dyn Failure) -> i32 {
+    fail(&e.to_string(), e.blame())
 }
 
 fn build(a: BuildArgs, quiet: bool) -> i32 {
     let mut stages: Vec<Stage> = if a.only.is_empty() { Stage::ALL.to_vec() } else { a.only.clone() };
     stages.retain(|s| !a.skip.contains(s));
     if stages.is_empty() {
-        return fail("--only/--skip leave no stage to build", 2);
+        return fail("--only/--skip leave no stage to build", Blame::Input);
     }
     for s in [Stage::Snow, Stage::Scatter, Stage::Preview] {
         if stages.contains(&s) && !stages.contains(&Stage::Terrain) {
-            return fail(&format!("the {0} stage needs the terrain stage: add it (--only terrain,{0})", s.name()), 2);
+            return fail(
+                &format!("the {0} stage needs the terrain stage: add it (--only terrain,{0})", s.name()),
+                Blame::Input,
+            );
         }
     }
     let sources: Vec<PresetSource> = if a.presets.is_empty() {
@@ -578,7 +596,7 @@ fn build(a: BuildArgs, quiet: bool) -> i32 {
     } else if !quiet {
         print!("{table}");
     }
-    scene_build::batch_exit_code(&outcomes)
+    scene_build::batch_blame(&outcomes).map_or(0, Blame::exit_code)
 }
 
 fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
@@ -586,7 +604,7 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
         PresetCommand::Check { files } => {
             let mut code = 0;
             for f in &files {
-                match preset::load_preset(f) {
+                match preset::check_preset(f) {
                     Ok(p) => {
                         for (name, estimate, limit) in preset::instance_estimates_over_limit(&p) {
                             eprintln!(
@@ -600,10 +618,7 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
                             println!("{}: ok (scene `{}`)", f.display(), p.scene.name);
                         }
                     }
-                    Err(e) => {
-                        eprintln!("error: {e}");
-                        code = e.exit_code();
-                    }
+                    Err(e) => code = failed(&e),
                 }
             }
             code
@@ -613,12 +628,12 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
             if path.exists() {
                 return fail(
                     &format!("{} exists; choose another name or --output, it is not overwritten", path.display()),
-                    2,
+                    Blame::Input,
                 );
             }
             let text = preset::template(&name);
             if let Err(e) = preset::parse_preset(&text, &path) {
-                return fail(&format!("cannot make a template named `{name}`: {e}"), 2);
+                return fail(&format!("cannot make a template named `{name}`: {e}"), Blame::Input);
             }
             match verdant::export::write_atomic(&path, text.as_bytes()) {
                 Ok(()) => {
@@ -627,7 +642,7 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
                     }
                     0
                 }
-                Err(e) => fail(&e.to_string(), 1),
+                Err(e) => fail(&e.to_string(), Blame::Build),
             }
         }
     }
@@ -643,7 +658,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
                     "{}: no built-in L-system of that name; built-in: {names} (e.g. builtin:conifer)",
                     a.input.display()
                 ),
-                2,
+                Blame::Input,
             )
         }
         None => None,
@@ -674,6 +689,9 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             ..TreeOptions::default()
         },
     };
+    if let Err(e) = verdant::export::check_output_path(&job.output) {
+        return failed(&e);
+    }
     let glb = job.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     let lods = a.lods.unwrap_or(if glb { tree_lod::TREE_LODS } else { 1 });
     // `--lods 1` on a .glb still writes the (one-level) chain and its report; on .gltf/.obj it is
@@ -691,7 +709,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             Ok(report) => {
                 if let Some(path) = &a.report {
                     if let Err(e) = tree_lod::write_lod_report(path, &report) {
-                        return fail(&e.to_string(), e.exit_code());
+                        return failed(&e);
                     }
                 }
                 if !quiet {
@@ -705,14 +723,14 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
                 }
                 0
             }
-            Err(e) => fail(&e.to_string(), e.exit_code()),
+            Err(e) => failed(&e),
         };
     }
     match tree_job::run(&job) {
         Ok(report) => {
             if let Some(path) = &a.report {
                 if let Err(e) = tree_job::write_report(path, &report) {
-                    return fail(&e.to_string(), e.exit_code());
+                    return failed(&e);
                 }
             }
             if !quiet {
@@ -723,7 +741,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             }
             0
         }
-        Err(e) => fail(&e.to_string(), e.exit_code()),
+        Err(e) => failed(&e),
     }
 }
 
@@ -774,11 +792,14 @@ fn mesh(a: MeshArgs, quiet: bool) -> i32 {
             ..TreeLodOptions::default()
         },
     };
+    if let Err(e) = verdant::export::check_output_path(&job.output) {
+        return failed(&e);
+    }
     match tree_lod::run_mesh_lods(&job) {
         Ok(report) => {
             if let Some(path) = &a.report {
                 if let Err(e) = tree_lod::write_json_report(path, &report) {
-                    return fail(&e.to_string(), e.exit_code());
+                    return failed(&e);
                 }
             }
             if !quiet {
@@ -801,7 +822,7 @@ fn mesh(a: MeshArgs, quiet: bool) -> i32 {
             }
             0
         }
-        Err(e) => fail(&e.to_string(), e.exit_code()),
+        Err(e) => failed(&e),
     }
 }
 

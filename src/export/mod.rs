@@ -39,8 +39,38 @@ pub enum ExportError {
     },
     #[error("cannot export {path}: unknown extension {ext:?}; use one of {SUPPORTED_EXTENSIONS}")]
     UnsupportedExtension { path: PathBuf, ext: String },
+    #[error(
+        "cannot export {path}: the path has no file name (or it is not UTF-8); name a file such as out/terrain.glb"
+    )]
+    NoFileName { path: PathBuf },
     #[error("cannot export {path}: {problem}; this is a bug in the stage that built the scene, please report it with the command line used")]
     InvalidScene { path: PathBuf, problem: String },
+}
+
+/// The input's for an output path that names no file this module writes; the build's for a
+/// failed write or a scene the writers refuse.
+impl crate::failure::Failure for ExportError {
+    fn blame(&self) -> crate::failure::Blame {
+        match self {
+            ExportError::UnsupportedExtension { .. } | ExportError::NoFileName { .. } => crate::failure::Blame::Input,
+            ExportError::Io { .. } | ExportError::InvalidScene { .. } => crate::failure::Blame::Build,
+        }
+    }
+}
+
+/// Whether `path` names a file [`write_scene`] can write: a UTF-8 file name with a known extension
+/// (`.glb`, `.gltf`, `.obj`, any case). Commands check it before any work, so a wrong `-o` fails at
+/// once as bad input rather than after meshing.
+pub fn check_output_path(path: &Path) -> Result<(), ExportError> {
+    match path.file_stem().and_then(OsStr::to_str) {
+        Some(s) if !s.is_empty() => {}
+        _ => return Err(ExportError::NoFileName { path: path.to_path_buf() }),
+    }
+    let ext = path.extension().and_then(OsStr::to_str).unwrap_or("").to_ascii_lowercase();
+    match ext.as_str() {
+        "glb" | "gltf" | "obj" => Ok(()),
+        _ => Err(ExportError::UnsupportedExtension { path: path.to_path_buf(), ext }),
+    }
 }
 
 /// Why a scene cannot be written (the writers know no file name; [`write_scene`] adds it).
@@ -78,12 +108,7 @@ pub fn write_scene_with(scene: &Scene, path: &Path, opts: &gltf::WriteOptions) -
     let ext = path.extension().and_then(OsStr::to_str).unwrap_or("").to_ascii_lowercase();
     let stem = match path.file_stem().and_then(OsStr::to_str) {
         Some(s) if !s.is_empty() => s.to_string(),
-        _ => {
-            return Err(ExportError::InvalidScene {
-                path: path.to_path_buf(),
-                problem: "the output path has no file name (or it is not UTF-8)".into(),
-            })
-        }
+        _ => return Err(ExportError::NoFileName { path: path.to_path_buf() }),
     };
     let sibling = |name: &str| path.with_file_name(name);
     // Build everything first, write afterwards: a scene error never touches the disk.

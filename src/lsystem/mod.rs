@@ -203,6 +203,13 @@ pub enum LsystemError {
     Settings(String),
 }
 
+/// Always the input's: a file that does not read or parse, settings or a budget it exceeds.
+impl crate::failure::Failure for LsystemError {
+    fn blame(&self) -> crate::failure::Blame {
+        crate::failure::Blame::Input
+    }
+}
+
 /// Where and what is wrong in an `.ls` file.
 #[derive(Debug, Error)]
 #[error("{}:{line}:{column}: {message}\n  {text}\n  {caret}\n{remedy}", path.display())]

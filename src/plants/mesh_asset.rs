@@ -56,10 +56,10 @@ pub enum MeshAssetError {
     Options(String),
 }
 
-impl MeshAssetError {
-    /// Every failure here is bad input or an exceeded limit: exit code 2.
-    pub fn exit_code(&self) -> i32 {
-        2
+/// Every failure here is bad input or an exceeded limit.
+impl crate::failure::Failure for MeshAssetError {
+    fn blame(&self) -> crate::failure::Blame {
+        crate::failure::Blame::Input
     }
 }
 

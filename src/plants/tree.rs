@@ -19,6 +19,7 @@ use serde_json::json;
 use thiserror::Error;
 
 use crate::export::{self, ExportError};
+use crate::failure::{Blame, Failure};
 use crate::lsystem::expand::{Expander, DEFAULT_MAX_SYMBOLS};
 use crate::lsystem::turtle::{Conventions, Frame, Leaf, Limb, Polygon, Segment, Sink, Turtle, TurtleCounts};
 use crate::lsystem::{parse, Dialect, LSystem, LsystemError};
@@ -114,16 +115,20 @@ pub enum TreeError {
     Invalid { path: PathBuf, report: String },
 }
 
-impl TreeError {
-    /// 1 for failures of the build itself, 2 for bad input, options or exceeded limits.
-    pub fn exit_code(&self) -> i32 {
+/// The build's for a failed write or an invalid output; the input's otherwise (bad input,
+/// options or exceeded limits).
+impl Failure for TreeError {
+    fn blame(&self) -> Blame {
         match self {
-            TreeError::Export(_) | TreeError::Invalid { .. } => 1,
-            TreeError::InFile { source, .. } => source.exit_code(),
-            _ => 2,
+            TreeError::Export(e) => e.blame(),
+            TreeError::Invalid { .. } => Blame::Build,
+            TreeError::InFile { source, .. } => source.blame(),
+            _ => Blame::Input,
         }
     }
+}
 
+impl TreeError {
     fn in_file(self, path: &Path) -> TreeError {
         match self {
             TreeError::Parse(_) | TreeError::InFile { .. } | TreeError::Export(_) | TreeError::Invalid { .. } => self,

@@ -32,6 +32,7 @@ use crate::bake::views::{
     lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, SwitchSearch,
 };
 use crate::export::{self, ExportError};
+use crate::failure::{Blame, Failure};
 use crate::lod::LodView;
 use crate::lsystem::{parse, Dialect, LSystem};
 use crate::mesh::{AlphaMode, Bounds, CustomAttribute, Material, Mesh, Node, Primitive, Scene, Texture};
@@ -91,14 +92,14 @@ pub enum TreeLodError {
     Invalid { path: PathBuf, report: String },
 }
 
-impl TreeLodError {
-    /// 1 for failures of the build itself, 2 for bad input, options or exceeded limits.
-    pub fn exit_code(&self) -> i32 {
+/// The input's for bad input, options or exceeded limits; the build's otherwise.
+impl Failure for TreeLodError {
+    fn blame(&self) -> Blame {
         match self {
-            TreeLodError::Tree(e) => e.exit_code(),
-            TreeLodError::Options(_) | TreeLodError::TooSmall { .. } => 2,
-            TreeLodError::MeshAsset(e) => e.exit_code(),
-            _ => 1,
+            TreeLodError::Tree(e) => e.blame(),
+            TreeLodError::Options(_) | TreeLodError::TooSmall { .. } => Blame::Input,
+            TreeLodError::MeshAsset(e) => e.blame(),
+            _ => Blame::Build,
         }
     }
 }

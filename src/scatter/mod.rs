@@ -132,6 +132,13 @@ pub enum ScatterError {
     Tiles { tile_m: f64, tiles: u64, limit: u64 },
 }
 
+/// Always the input's: a map that does not read, settings or limits the species exceeds.
+impl crate::failure::Failure for ScatterError {
+    fn blame(&self) -> crate::failure::Blame {
+        crate::failure::Blame::Input
+    }
+}
+
 /// Most tiles accepted over an extent.
 pub const MAX_TILES: u64 = 1 << 22;
 /// Most candidates a species may examine (jittered cells, Poisson points): bounds time and memory

@@ -11,12 +11,14 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::failure::{Blame, Failure};
 use crate::mesh::Scene;
 use crate::plants::marker;
 use crate::scene::cache::{process_alive, temp_owner, Cache, FileHashes, KeyBuilder};
+use crate::scene::error::SceneBuildError;
 use crate::scene::manifest::{write_manifest_and_report, StageRun};
 use crate::scene::plants_stage::{self, PlantsStageReport};
-use crate::scene::preset::{load_preset, PresetError};
+use crate::scene::preset::load_preset;
 use crate::scene::preview::{footprint_m, PreviewLayer};
 use crate::scene::scatter_stage::{self, ScatterStageReport};
 use crate::scene::snow_stage::{self, SnowStageReport};
@@ -47,37 +49,14 @@ impl Default for BuildSettings {
     }
 }
 
-#[derive(Debug, thiserror::Error)]
-pub enum SceneBuildError {
-    #[error(transparent)]
-    Preset(#[from] PresetError),
-    #[error(transparent)]
-    Stage(#[from] stages::StageError),
-    #[error("{path}: {message}")]
-    Io { path: PathBuf, message: String },
-    #[error("{0}")]
-    Usage(String),
-}
-
-impl SceneBuildError {
-    /// 2 for bad input or usage (a preset that does not parse or names what is not there, stages
-    /// that cannot run alone), 1 for a failure of the build itself.
-    pub fn exit_code(&self) -> i32 {
-        match self {
-            SceneBuildError::Preset(e) => e.exit_code(),
-            SceneBuildError::Usage(_) => 2,
-            SceneBuildError::Stage(_) | SceneBuildError::Io { .. } => 1,
-        }
-    }
-}
-
-/// The exit code of a batch: 1 when a build failed, else 2 when an input was bad, else 0.
-pub fn batch_exit_code(outcomes: &[SceneOutcome]) -> i32 {
-    let codes = || outcomes.iter().map(|o| o.exit_code);
-    if codes().any(|c| c == 1) {
-        1
+/// Whose fault a batch's failure is: the build's when one build failed, else the input's when an
+/// input was bad, else `None` (every scene built).
+pub fn batch_blame(outcomes: &[SceneOutcome]) -> Option<Blame> {
+    let blames = || outcomes.iter().filter_map(|o| o.blame);
+    if blames().any(|b| b == Blame::Build) {
+        Some(Blame::Build)
     } else {
-        codes().max().unwrap_or(0)
+        blames().next()
     }
 }
 
@@ -93,10 +72,9 @@ pub struct SceneOutcome {
     pub scene: String,
     /// `None` when the scene was built; the error message otherwise.
     pub error: Option<String>,
-    /// The process exit code this outcome asks for: 0 built, 2 bad input or usage, 1 a failure of
-    /// the build itself ([`SceneBuildError::exit_code`]).
+    /// `None` when built; else whose fault the failure is (bad input or usage, or the build itself).
     #[serde(skip)]
-    pub exit_code: i32,
+    pub blame: Option<Blame>,
     pub dir: Option<PathBuf>,
     pub files: usize,
     pub triangles: usize,
@@ -556,7 +534,7 @@ fn build_into(
         preset: preset_label(preset),
         scene: name.clone(),
         error: None,
-        exit_code: 0,
+        blame: None,
         dir: None,
         files,
         triangles,
@@ -614,7 +592,7 @@ pub fn build_batch(
             preset: label.clone(),
             scene,
             error: Some(e.to_string()),
-            exit_code: e.exit_code(),
+            blame: Some(e.blame()),
             dir: None,
             files: 0,
             triangles: 0,
@@ -736,6 +714,32 @@ impl ProgressView {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::error::StageError;
+
+    #[test]
+    fn a_batch_is_the_builds_fault_when_one_build_failed_else_the_inputs() {
+        let outcome = |blame: Option<Blame>| SceneOutcome {
+            preset: String::new(),
+            scene: String::new(),
+            error: blame.map(|_| "x".into()),
+            blame,
+            dir: None,
+            files: 0,
+            triangles: 0,
+            cached_stages: Vec::new(),
+            seconds: 0.0,
+        };
+        let (ok, input, build) = (outcome(None), outcome(Some(Blame::Input)), outcome(Some(Blame::Build)));
+        assert_eq!(batch_blame(&[ok.clone(), ok.clone()]), None);
+        assert_eq!(batch_blame(&[ok.clone(), input.clone()]), Some(Blame::Input));
+        assert_eq!(batch_blame(&[input.clone(), build.clone(), ok]), Some(Blame::Build));
+        assert_eq!(batch_blame(&[build, input]), Some(Blame::Build));
+        // a stage's error keeps the blame of what failed in it
+        let bad_map =
+            SceneBuildError::Stage(StageError::Input { stage: "terrain", message: "x.png: not a PNG".into() });
+        let write = SceneBuildError::Stage(StageError::Failed { stage: "terrain", message: "disk full".into() });
+        assert_eq!((bad_map.exit_code(), write.exit_code()), (2, 1));
+    }
 
     #[test]
     fn folders_of_killed_builds_are_cleaned_up() {

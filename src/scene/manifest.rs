@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use crate::export::write_atomic;
-use crate::scene::build::SceneBuildError;
 use crate::scene::cache::{sha256_hex, FileHashes};
+use crate::scene::error::SceneBuildError;
 use crate::scene::plants_stage::PlantsStageReport;
 use crate::scene::scatter_stage::ScatterStageReport;
 use crate::scene::snow_stage::SnowStageReport;

@@ -6,6 +6,7 @@
 
 pub mod build;
 pub mod cache;
+pub mod error;
 pub mod manifest;
 pub mod plants_stage;
 pub mod preview;

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use crate::bake::atlas::write_mip_pngs;
 use crate::bake::image::Image;
 use crate::export;
+use crate::failure::Failure;
 use crate::lod::LodView;
 use crate::lsystem::parse;
 use crate::lsystem::LSystem;
@@ -23,11 +24,21 @@ use crate::plants::tree_lod::{
     build_mesh_lods, build_tree_lods, variant_seed, TreeLodOptions, TreeLodReport, TreeLods,
 };
 use crate::scene::cache::{sha256_hex, KeyBuilder};
-use crate::scene::stages::StageError;
+use crate::scene::error::StageError;
 use crate::scene::{MeshLook, PlantLook, Preset, TreeLook};
 
 fn fail(message: String) -> StageError {
     StageError::Failed { stage: "plants", message }
+}
+
+/// A species' input at fault (exit code 2): a file that does not read, an image it cannot use.
+fn bad_input(message: String) -> StageError {
+    StageError::Input { stage: "plants", message }
+}
+
+/// `message` with the blame of `e` (an L-system, a model or a chain that could not be built).
+fn failure(e: &dyn Failure, message: String) -> StageError {
+    StageError::of("plants", e, message)
 }
 
 /// What the plants stage made for one species.
@@ -187,7 +198,7 @@ pub fn add_look_inputs(k: &mut KeyBuilder, name: &str, look: &PlantLook) -> Resu
     };
     // an L-system may be a built-in one (`builtin:<name>`): its source is in the crate
     let bytes = crate::lsystem::library::read_bytes(input)
-        .map_err(|e| fail(format!("{}: cannot read: {e}", input.display())))?;
+        .map_err(|e| bad_input(format!("{}: cannot read: {e}", input.display())))?;
     k.add(sha256_hex(&bytes).as_bytes());
     Ok(())
 }
@@ -203,7 +214,9 @@ fn distinct_variants(system: &LSystem, look: &TreeLook) -> usize {
 }
 
 pub fn read_lsystem(name: &str, look: &TreeLook) -> Result<LSystem, StageError> {
-    parse::read_file(&look.lsystem, look.dialect).map(|p| p.system).map_err(|e| fail(format!("species `{name}`: {e}")))
+    parse::read_file(&look.lsystem, look.dialect)
+        .map(|p| p.system)
+        .map_err(|e| failure(&e, format!("species `{name}`: {e}")))
 }
 
 /// How variant `k` of a tree species grows (the chain's LoD0 and the instanced mesh are the same).
@@ -261,7 +274,7 @@ pub struct MeshSpeciesReport {
 
 fn load_model(name: &str, look: &MeshLook) -> Result<SourceMesh, StageError> {
     let options = ObjOptions { scale: look.scale, up_axis: look.up_axis, ..ObjOptions::default() };
-    load_obj(&look.obj, &options).map_err(|e| fail(format!("species `{name}`: {e}")))
+    load_obj(&look.obj, &options).map_err(|e| failure(&e, format!("species `{name}`: {e}")))
 }
 
 /// Builds and writes a mesh species' chain: `species/<name>.glb`, `species/<name>_LOD<n>.glb`,
@@ -291,7 +304,7 @@ pub fn mesh_chain(name: &str, look: &MeshLook, policy: &LodView) -> Result<(Sour
         ..TreeLodOptions::default()
     };
     let chain = build_mesh_lods(&source, name, &lod)
-        .map_err(|e| fail(format!("species `{name}`: {}: {e}", look.obj.display())))?;
+        .map_err(|e| failure(&e, format!("species `{name}`: {}: {e}", look.obj.display())))?;
     Ok((source, chain))
 }
 
@@ -311,7 +324,7 @@ pub fn tree_chain(
         ..TreeLodOptions::default()
     };
     build_tree_lods(system, &tree_options(name, look, k), &lod)
-        .map_err(|e| fail(format!("species `{name}`: {}: {e}", look.lsystem.display())))
+        .map_err(|e| failure(&e, format!("species `{name}`: {}: {e}", look.lsystem.display())))
 }
 
 /// Builds and writes every variant's chain: `species/<name>_v<k>.glb` (MSFT_lod),
@@ -358,7 +371,7 @@ pub fn user_blade(settings: &GrassSettings) -> Result<Option<Image>, StageError>
         None => Ok(None),
         Some(p) => Image::read_png(p)
             .map(Some)
-            .map_err(|e| fail(format!("{}: {e}; give an RGBA PNG whose alpha is the blade's shape", p.display()))),
+            .map_err(|e| bad_input(format!("{}: {e}; give an RGBA PNG whose alpha is the blade's shape", p.display()))),
     }
 }
 

@@ -123,12 +123,14 @@ pub enum PresetError {
     MissingInput { file: PathBuf, line: usize, column: usize, what: &'static str, input: PathBuf },
 }
 
-impl PresetError {
-    /// Process exit code: 2, bad input.
-    pub fn exit_code(&self) -> i32 {
-        2
+/// Always the input's.
+impl crate::failure::Failure for PresetError {
+    fn blame(&self) -> crate::failure::Blame {
+        crate::failure::Blame::Input
     }
+}
 
+impl PresetError {
     /// Line and column (1-based, columns in characters) of the problem, where known.
     pub fn position(&self) -> Option<(usize, usize)> {
         match self {
@@ -140,8 +142,41 @@ impl PresetError {
     }
 }
 
+/// How far parsing checks the input files a preset names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub(crate) enum Inputs {
+    /// Not at all ([`parse_preset`]: no disk access).
+    Unchecked,
+    /// Each exists and is a file; `.ls` files parse ([`load_preset`], what a build needs first).
+    Exist,
+    /// Each also decodes as the preset reads it: the heightmap with its encoding, size and scale,
+    /// density maps, masks and blade textures as images, OBJ models with their MTL and textures
+    /// ([`check_preset`]: everything that does not need the build itself).
+    Decode,
+}
+
+impl Inputs {
+    pub(crate) fn exist(self) -> bool {
+        self >= Inputs::Exist
+    }
+    pub(crate) fn decode(self) -> bool {
+        self >= Inputs::Decode
+    }
+}
+
 /// Reads, parses and resolves the preset at `path`, and checks that the input files it names exist.
 pub fn load_preset(path: &Path) -> Result<Preset, PresetError> {
+    load(path, Inputs::Exist)
+}
+
+/// [`load_preset`], and every input decodes as the preset reads it (`verdant preset check`): a
+/// heightmap its `encoding` cannot read, an image that is no PNG, an OBJ that does not load are
+/// reported at the preset key that names them, before any build.
+pub fn check_preset(path: &Path) -> Result<Preset, PresetError> {
+    load(path, Inputs::Decode)
+}
+
+fn load(path: &Path, inputs: Inputs) -> Result<Preset, PresetError> {
     let bytes = crate::input::read_limited(path, crate::input::MAX_PRESET_BYTES, "a preset")
         .map_err(|e| PresetError::Read { file: path.to_path_buf(), source: e.into_io() })?;
     let text = String::from_utf8(bytes).map_err(|e| {
@@ -156,14 +191,14 @@ pub fn load_preset(path: &Path) -> Result<Preset, PresetError> {
             remedy: "save the preset as UTF-8 (TOML files are UTF-8)".into(),
         }
     })?;
-    parse(&text, path, true)
+    parse(&text, path, inputs)
 }
 
 /// Parses and resolves preset `text`. `path` is where it came from: it names the file in messages
 /// and relative input paths are resolved against its folder. Input files are not checked here
 /// ([`load_preset`] does).
 pub fn parse_preset(text: &str, path: &Path) -> Result<Preset, PresetError> {
-    parse(text, path, false)
+    parse(text, path, Inputs::Unchecked)
 }
 
 /// The embedded default of `verdant build` without a preset: a 513² fBm map generated in memory,
@@ -705,7 +740,7 @@ fn unknown_value(t: &Table<'_, '_>, key: &str, s: &str, allowed: &[&str], span: 
     t.ctx.at(span, format!("unknown `{key}` value \"{s}\""), remedy)
 }
 
-fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetError> {
+fn parse(text: &str, path: &Path, inputs: Inputs) -> Result<Preset, PresetError> {
     let ctx = Ctx { file: path, text };
     let root = DeTable::parse(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
@@ -831,7 +866,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         None => None,
         Some((span, table)) => {
             let t = Table { ctx: &ctx, label: "[terrain]".into(), span, table };
-            Some(parse_terrain(&t, scene.seed, check_inputs)?)
+            Some(parse_terrain(&t, scene.seed, inputs)?)
         }
     };
     let scatter = match scatter {
@@ -843,7 +878,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         Some((span, table)) => plants::apply_grass(
             &Table { ctx: &ctx, label: "[grass]".into(), span, table },
             GrassSettings::default(),
-            check_inputs,
+            inputs,
         )?,
     };
     let flower_defaults = match flower_section {
@@ -902,7 +937,7 @@ fn parse(text: &str, path: &Path, check_inputs: bool) -> Result<Preset, PresetEr
         for item in items.iter() {
             let DeValue::Table(table) = item.get_ref() else { continue };
             let t = Table { ctx: &ctx, label: "[[species]]".into(), span: item.span(), table };
-            let (s, name_span) = parse_species(&t, &species, &looks, check_inputs)?;
+            let (s, name_span) = parse_species(&t, &species, &looks, inputs)?;
             // compared ignoring case: `Oak` and `oak` would be one file on some file systems
             if let Some(i) = species.iter().position(|e| e.rules.name.eq_ignore_ascii_case(&s.rules.name)) {
                 let first = &species[i].rules.name;
@@ -1006,7 +1041,7 @@ fn parse_scene(t: &Table<'_, '_>) -> Result<SceneSettings, PresetError> {
     Ok(SceneSettings { name: name.to_string(), seed, formats })
 }
 
-fn parse_terrain(t: &Table<'_, '_>, scene_seed: u64, check_inputs: bool) -> Result<TerrainSettings, PresetError> {
+fn parse_terrain(t: &Table<'_, '_>, scene_seed: u64, inputs: Inputs) -> Result<TerrainSettings, PresetError> {
     t.check_keys(TERRAIN_KEYS, &[("[scene]", SCENE_KEYS), ("`procedural = { … }`", PROCEDURAL_KEYS)])?;
     let cell_size_m = t.number("cell_size", "cell_size = 10.0", positive)?.map_or(1.0, |(x, _)| x);
 
@@ -1039,7 +1074,7 @@ fn parse_terrain(t: &Table<'_, '_>, scene_seed: u64, check_inputs: bool) -> Resu
             }
             parse_procedural(t, v, cell_size_m, scene_seed)?
         }
-        (Some((_, v)), None) => parse_heightmap(t, v, cell_size_m, check_inputs)?,
+        (Some((_, v)), None) => parse_heightmap(t, v, cell_size_m, inputs)?,
     };
 
     let mode = match t.string("mode", "mode = \"tin\"")? {
@@ -1118,7 +1153,7 @@ fn parse_look(
     kind: SpeciesKind,
     looks: &Looks<'_>,
     seed: u64,
-    check_inputs: bool,
+    inputs: Inputs,
 ) -> Result<PlantLook, PresetError> {
     for (key, owner) in [
         ("grass", SpeciesKind::Grass),
@@ -1154,7 +1189,7 @@ fn parse_look(
             match t.get("grass") {
                 None => PlantLook::Grass(base),
                 Some((_, v)) => {
-                    PlantLook::Grass(plants::apply_grass(&plants::sub_table(t, "grass", v)?, base, check_inputs)?)
+                    PlantLook::Grass(plants::apply_grass(&plants::sub_table(t, "grass", v)?, base, inputs)?)
                 }
             }
         }
@@ -1186,7 +1221,7 @@ fn parse_look(
             };
             let lsystem = match builtin {
                 Some(species) => library::path_of(species),
-                None => input_path(t, "lsystem", "lsystem = \"trees/birch.ls\"", check_inputs)?
+                None => input_path(t, "lsystem", "lsystem = \"trees/birch.ls\"", inputs)?
                     .expect("`lsystem` was found above"),
             };
             let mut base =
@@ -1206,7 +1241,7 @@ fn parse_look(
                 None => base,
                 Some((_, v)) => plants::apply_tree(&plants::sub_table(t, "tree", v)?, base)?,
             };
-            if check_inputs {
+            if inputs.exist() {
                 // the .ls file is parsed now so a bad rule is reported before anything is built
                 if let Err(e) = crate::lsystem::parse::read_file(&look.lsystem, look.dialect) {
                     let (k, v) = t.get("lsystem").expect("lsystem was read above");
@@ -1221,7 +1256,7 @@ fn parse_look(
             PlantLook::Tree(look)
         }
         SpeciesKind::Mesh => {
-            let Some(obj) = input_path(t, "obj", "obj = \"rocks/boulder.obj\"", check_inputs)? else {
+            let Some(obj) = input_path(t, "obj", "obj = \"rocks/boulder.obj\"", inputs)? else {
                 if let Some((k, _)) = t.get("mesh") {
                     return Err(t.ctx.at(
                         &k.span(),
@@ -1233,10 +1268,27 @@ fn parse_look(
                 return Ok(PlantLook::Marker);
             };
             let base = MeshLook { obj, ..looks.mesh.clone() };
-            PlantLook::Mesh(match t.get("mesh") {
+            let look = match t.get("mesh") {
                 None => base,
                 Some((_, v)) => plants::apply_mesh(&plants::sub_table(t, "mesh", v)?, base)?,
-            })
+            };
+            if inputs.decode() {
+                // the model as the plants stage loads it (scale, up axis, MTL, textures, limits)
+                let options = crate::plants::mesh_asset::ObjOptions {
+                    scale: look.scale,
+                    up_axis: look.up_axis,
+                    ..Default::default()
+                };
+                if let Err(e) = crate::plants::mesh_asset::load_obj(&look.obj, &options) {
+                    let (_, v) = t.get("obj").expect("obj was read above");
+                    return Err(t.ctx.at(
+                        &v.span(),
+                        format!("the model of {} does not load:\n{e}", t.label),
+                        "fix the OBJ (or its MTL and textures), or `mesh = { scale, up_axis }`",
+                    ));
+                }
+            }
+            PlantLook::Mesh(look)
         }
     })
 }
@@ -1254,7 +1306,7 @@ fn parse_species(
     t: &Table<'_, '_>,
     earlier: &[SpeciesSettings],
     looks: &Looks<'_>,
-    check_inputs: bool,
+    inputs: Inputs,
 ) -> Result<(SpeciesSettings, Range<usize>), PresetError> {
     let (name, name_span) = t.string("name", "name = \"oak\"")?.ok_or_else(|| t.missing("name", "name = \"oak\""))?;
     check_species_name(name).map_err(|why| {
@@ -1288,8 +1340,8 @@ fn parse_species(
             return Err(unknown_value(t, "kind", other, &["grass", "flower", "tree", "mesh"], &span))
         }
     };
-    let density_map = input_path(t, "density_map", "density_map = \"maps/grass.png\"", check_inputs)?;
-    let mask = input_path(t, "mask", "mask = \"maps/meadow-mask.png\"", check_inputs)?;
+    let density_map = input_path(t, "density_map", "density_map = \"maps/grass.png\"", inputs)?;
+    let mask = input_path(t, "mask", "mask = \"maps/meadow-mask.png\"", inputs)?;
     let max_density = t
         .number("max_density", "max_density = 0.5", positive)?
         .ok_or_else(|| {
@@ -1389,7 +1441,7 @@ fn parse_species(
         .integer("max_instances", 1..=MAX_MAX_INSTANCES, "max_instances = 5000000")?
         .map_or(DEFAULT_MAX_INSTANCES, |(n, _)| n as usize);
     let cull_distance_m = t.number("cull_distance", "cull_distance = 80.0", positive)?.map(|(x, _)| x);
-    let look = parse_look(t, name, kind, looks, seed, check_inputs)?;
+    let look = parse_look(t, name, kind, looks, seed, inputs)?;
 
     let species = SpeciesSettings {
         rules: SpeciesRules {
@@ -1505,12 +1557,12 @@ fn pair(
 }
 
 /// An optional input file (`density_map`, `mask`): resolved against the preset's folder; when
-/// `check_inputs`, it must exist and be a file.
+/// `inputs` asks, it must exist and be a file, and decode.
 fn input_path(
     t: &Table<'_, '_>,
     key: &'static str,
     example: &str,
-    check_inputs: bool,
+    inputs: Inputs,
 ) -> Result<Option<PathBuf>, PresetError> {
     let Some((_, value)) = t.get(key) else { return Ok(None) };
     let DeValue::String(relative) = value.get_ref() else {
@@ -1524,8 +1576,22 @@ fn input_path(
         ));
     }
     let path = resolve(t.ctx.file, Path::new(relative.as_ref()));
-    if check_inputs {
+    if inputs.exist() {
         check_input_file(t, value, key, &path)?;
+    }
+    if inputs.decode() {
+        let problem = match key {
+            "density_map" | "mask" => crate::scatter::DensityMap::load(&path).err().map(|e| e.to_string()),
+            "blade_texture" => crate::bake::image::Image::read_png(&path).err().map(|e| e.to_string()),
+            _ => None,
+        };
+        if let Some(e) = problem {
+            return Err(t.ctx.at(
+                &value.span(),
+                format!("`{key}` does not decode: {e}"),
+                "give a PNG (8 or 16 bit; density maps and masks are read as grayscale)",
+            ));
+        }
     }
     Ok(Some(path))
 }
@@ -1587,7 +1653,7 @@ fn parse_heightmap(
     t: &Table<'_, '_>,
     value: &Spanned<DeValue<'_>>,
     cell_size_m: f64,
-    check_inputs: bool,
+    inputs: Inputs,
 ) -> Result<TerrainSource, PresetError> {
     let DeValue::String(relative) = value.get_ref() else {
         return Err(t.wrong_type("heightmap", value, "a path (a string)", "heightmap = \"heights/valley.png\""));
@@ -1625,8 +1691,20 @@ fn parse_heightmap(
         .integer("max_samples", 1..=i64::MAX as u64, "max_samples = 67125249")?
         .map_or(DEFAULT_MAX_SAMPLES, |(n, _)| n as usize);
 
-    if check_inputs {
+    if inputs.exist() {
         check_input_file(t, value, "heightmap", &path)?;
+    }
+    if inputs.decode() {
+        let decoded = crate::input::read_limited(&path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+            .map_err(|e| e.to_string())
+            .and_then(|bytes| crate::heightfield::decode(&path, &bytes, &decode).map_err(|e| e.to_string()));
+        if let Err(e) = decoded {
+            return Err(t.ctx.at(
+                &value.span(),
+                format!("the heightmap does not decode as this preset reads it: {e}"),
+                "fix `encoding` (and `size`, `height_scale` for raw maps) in [terrain], or the file",
+            ));
+        }
     }
     Ok(TerrainSource::Heightmap { path, decode })
 }

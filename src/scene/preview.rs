@@ -399,7 +399,7 @@ pub struct PreviewLayer {
     pub color: [f32; 4],
     /// Trees and meshes are objects, drawn as discs however small; grass and flowers are cover,
     /// drawn as discs only where each is at least [`MIN_DISC_PX`] wide, else as density shading.
-    pub kind: crate::scene::SpeciesKind,
+    pub kind: crate::plants::SpeciesKind,
     /// Width of one instance seen from above, in metres (see [`footprint_m`]).
     pub footprint_m: f64,
     /// Instance positions (x, y, z); the preview uses x and z.
@@ -411,7 +411,8 @@ pub struct PreviewLayer {
 /// flower cards 0.6 of it, a mesh box its height); an L-system tree scaled to a height as wide as
 /// [`TREE_CROWN_PER_HEIGHT`] of it (an estimate, so the preview needs no tree built).
 pub fn footprint_m(species: &crate::scene::SpeciesSettings) -> f64 {
-    use crate::scene::{PlantLook, SpeciesKind};
+    use crate::plants::SpeciesKind;
+    use crate::scene::PlantLook;
     let mid_scale = 0.5 * (species.rules.scale[0] + species.rules.scale[1]);
     if let PlantLook::Tree(crate::scene::TreeLook { height_m: Some(h), .. }) = &species.look {
         return h * TREE_CROWN_PER_HEIGHT * mid_scale;
@@ -447,7 +448,7 @@ const MAX_SHADE_RADIUS: usize = 6;
 
 /// True when `layer` is drawn as one disc per instance (see [`PreviewLayer::kind`]).
 fn draws_as_discs(layer: &PreviewLayer, pixels_per_metre: f64, pixels: usize) -> bool {
-    use crate::scene::SpeciesKind;
+    use crate::plants::SpeciesKind;
     let footprint_px = layer.footprint_m * pixels_per_metre;
     let d = footprint_px.max(MIN_DISC_PX);
     let cover = layer.positions.len() as f64 * std::f64::consts::FRAC_PI_4 * d * d / pixels as f64;
@@ -570,7 +571,7 @@ fn box_filter(values: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
 #[cfg(test)]
 mod placement_tests {
     use super::*;
-    use crate::scene::SpeciesKind;
+    use crate::plants::SpeciesKind;
 
     const TREE: [f32; 4] = [0.05, 0.25, 0.06, 1.0];
     const GRASS: [f32; 4] = [0.35, 0.60, 0.12, 1.0];

@@ -16,18 +16,23 @@ use crate::scatter::stats::{analyze, SpeciesStats};
 use crate::scatter::surface::SurfaceIndex;
 use crate::scatter::{scatter_species_snow, Instance, RuleCounts};
 use crate::scene::cache::{sha256_hex, KeyBuilder};
-use crate::scene::stages::StageError;
+use crate::scene::error::StageError;
 use crate::scene::{Preset, SpeciesSettings};
 
 fn fail(message: String) -> StageError {
     StageError::Failed { stage: "scatter", message }
 }
 
+/// A species' input at fault (exit code 2): a map that does not read, settings or limits it exceeds.
+fn bad_input(message: String) -> StageError {
+    StageError::Input { stage: "scatter", message }
+}
+
 /// What the scatter stage measured for one species (also written as placements/<species>.json).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct SpeciesReport {
     pub name: String,
-    pub kind: crate::scene::SpeciesKind,
+    pub kind: crate::plants::SpeciesKind,
     pub count: usize,
     pub csv: PathBuf,
     pub rules: RuleCounts,
@@ -71,7 +76,7 @@ pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageEr
         crate::scene::plants_stage::add_look_inputs(&mut k, &s.rules.name, &s.look)?;
         for map in [&s.rules.density_map, &s.rules.mask].into_iter().flatten() {
             let bytes = crate::input::read_limited(map, crate::input::MAX_IMAGE_BYTES, "a density map or mask")
-                .map_err(|e| fail(e.to_string()))?;
+                .map_err(|e| bad_input(e.to_string()))?;
             k.add(sha256_hex(&bytes).as_bytes());
         }
     }
@@ -87,7 +92,7 @@ pub fn surface_of(terrain: &Scene) -> SurfaceIndex {
 }
 
 fn load_map(path: &Option<PathBuf>) -> Result<Option<DensityMap>, StageError> {
-    path.as_ref().map(|p| DensityMap::load(p).map_err(|e| fail(e.to_string()))).transpose()
+    path.as_ref().map(|p| DensityMap::load(p).map_err(|e| bad_input(e.to_string()))).transpose()
 }
 
 /// The placed instances of one species, for the preview.
@@ -126,7 +131,7 @@ pub fn run_scatter_with_snow(
         let earlier: Vec<(&str, &[Instance])> =
             placed.iter().map(|p| (p.species.rules.name.as_str(), &p.instances[..])).collect();
         let thinning = match (snow_mask, &preset.snow, species.kind) {
-            (Some(mask), Some(snow), crate::scene::SpeciesKind::Grass | crate::scene::SpeciesKind::Flower)
+            (Some(mask), Some(snow), crate::plants::SpeciesKind::Grass | crate::plants::SpeciesKind::Flower)
                 if snow.thin_plants > 0.0 =>
             {
                 Some(SnowThinning { mask, strength: snow.thin_plants })
@@ -144,7 +149,7 @@ pub fn run_scatter_with_snow(
             preset.scene.seed,
             thinning,
         )
-        .map_err(|e| fail(e.to_string()))?;
+        .map_err(|e| bad_input(e.to_string()))?;
         let generate_s = t1.elapsed().as_secs_f64();
         let stats = analyze(
             &surface,
@@ -157,7 +162,7 @@ pub fn run_scatter_with_snow(
             preset.scatter.tile_m,
             generate_s,
         )
-        .map_err(|e| fail(e.to_string()))?;
+        .map_err(|e| bad_input(e.to_string()))?;
         let csv = PathBuf::from("placements").join(format!("{}.csv", species.rules.name));
         table::write_placements_csv(&scene_dir.join(&csv), &result.instances).map_err(|e| fail(e.to_string()))?;
         let report = SpeciesReport {
@@ -196,7 +201,7 @@ pub fn run_scatter_with_snow(
 #[derive(Serialize)]
 struct SpeciesSummary<'a> {
     species: &'a str,
-    kind: crate::scene::SpeciesKind,
+    kind: crate::plants::SpeciesKind,
     count: usize,
     table: &'a Path,
     rules: &'a RuleCounts,

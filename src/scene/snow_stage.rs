@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use crate::export;
 use crate::mesh::Scene;
 use crate::scene::cache::KeyBuilder;
-use crate::scene::stages::StageError;
+use crate::scene::error::StageError;
 use crate::scene::Preset;
 use crate::snow::{self, CoverMask, SnowReport, SnowSettings};
 
@@ -97,7 +97,7 @@ pub fn run_snow(
 ) -> Result<SnowStageReport, StageError> {
     let t0 = Instant::now();
     let dir = scene_dir.join(SNOW_DIR);
-    let err = |e: snow::SnowError| fail(e.to_string());
+    let err = |e: snow::SnowError| StageError::of("snow", &e, e.to_string());
 
     let t1 = Instant::now();
     let atlas = snow::build_atlas(&s.flakes).map_err(err)?;

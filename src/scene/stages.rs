@@ -11,6 +11,7 @@ use crate::heightfield::{self, Heightfield};
 use crate::lod::terrain_lod_chain;
 use crate::mesh::{Bounds, Scene};
 use crate::scene::cache::{sha256_hex, KeyBuilder};
+use crate::scene::error::StageError;
 use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
@@ -52,16 +53,6 @@ impl Stage {
             Stage::Preview => "preview",
         }
     }
-}
-
-#[derive(Debug, thiserror::Error)]
-pub enum StageError {
-    #[error("{stage} stage: {message}")]
-    Failed { stage: &'static str, message: String },
-}
-
-fn fail(stage: Stage) -> impl Fn(String) -> StageError {
-    move |message| StageError::Failed { stage: stage.name(), message }
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -124,9 +115,18 @@ pub struct StageSeconds {
     pub total: f64,
 }
 
+fn fail(stage: Stage) -> impl Fn(String) -> StageError {
+    move |message| StageError::Failed { stage: stage.name(), message }
+}
+
+/// A stage's input at fault (exit code 2).
+fn bad_input(stage: Stage) -> impl Fn(String) -> StageError {
+    move |message| StageError::Input { stage: stage.name(), message }
+}
+
 /// The terrain's heights, from a file or generated; with the file's hash when it came from one.
 pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Option<String>), StageError> {
-    let f = fail(Stage::Terrain);
+    let f = bad_input(Stage::Terrain);
     match &t.source {
         TerrainSource::Heightmap { path, decode } => {
             let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
@@ -166,7 +166,7 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
     }
     if let TerrainSource::Heightmap { path, .. } = &t.source {
         let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
-            .map_err(|e| fail(Stage::Terrain)(e.to_string()))?;
+            .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))?;
         k.add(sha256_hex(&bytes).as_bytes());
     }
     Ok(k.finish())
@@ -174,7 +174,7 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
 
 fn mesh_at(t: &TerrainSettings, hf: &Heightfield, max_error_m: f64) -> Result<(SampleMesh, bool), StageError> {
     mesh_samples(hf, t.mode, t.grid_step, max_error_m, t.max_triangles, &crate::terrain::stored::Storage::f32(hf))
-        .map_err(|e| fail(Stage::Terrain)(e.to_string()))
+        .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))
 }
 
 fn write_formats(preset: &Preset, scene: &Scene, scene_dir: &Path, stem: &str) -> Result<Vec<PathBuf>, StageError> {
@@ -198,6 +198,8 @@ pub fn run_terrain(
     scene_dir: &Path,
 ) -> Result<(TerrainStageReport, Scene), StageError> {
     let f = fail(Stage::Terrain);
+    // the settings or the map at fault: a chain the map cannot have, chunks or skirts it cannot take
+    let input = bad_input(Stage::Terrain);
     let t0 = Instant::now();
     let (hf, voids_filled, input_sha256) = terrain_heights(t)?;
     let decode_s = t0.elapsed().as_secs_f64();
@@ -208,7 +210,7 @@ pub fn run_terrain(
     let chain = if t.lods.is_empty() {
         Vec::new()
     } else {
-        terrain_lod_chain(&hf, &t.lods, t.max_triangles, &preset.lod).map_err(|e| f(e.to_string()))?
+        terrain_lod_chain(&hf, &t.lods, t.max_triangles, &preset.lod).map_err(|e| input(e.to_string()))?
     };
     let chain_s = t1.elapsed().as_secs_f64();
     let shared = chain.iter().find(|l| t.mode == MeshMode::Tin && l.max_error_requested_m == t.max_error_m);
@@ -237,7 +239,7 @@ pub fn run_terrain(
             .map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
         Ok(scene)
     };
-    let scene = textured(build_scene(&hf, &mesh, &build_opts("terrain".into())).map_err(|e| f(e.to_string()))?)?;
+    let scene = textured(build_scene(&hf, &mesh, &build_opts("terrain".into())).map_err(|e| input(e.to_string()))?)?;
     let build_s = t1.elapsed().as_secs_f64();
 
     let t1 = Instant::now();
@@ -253,7 +255,7 @@ pub fn run_terrain(
     for level in chain {
         let stem = format!("terrain_LOD{}", level.level);
         let lod_scene =
-            textured(build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| f(e.to_string()))?)?;
+            textured(build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| input(e.to_string()))?)?;
         let files = write_formats(preset, &lod_scene, scene_dir, &stem)?;
         lods.push(LodInfo {
             level: level.level,

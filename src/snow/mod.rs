@@ -38,6 +38,16 @@ pub enum SnowError {
     Write(String),
 }
 
+/// The input's for settings and JSON; the build's for a bake, the terrain it was given or a write.
+impl crate::failure::Failure for SnowError {
+    fn blame(&self) -> crate::failure::Blame {
+        match self {
+            SnowError::Setting { .. } | SnowError::Json { .. } => crate::failure::Blame::Input,
+            SnowError::Bake(_) | SnowError::Terrain(_) | SnowError::Write(_) => crate::failure::Blame::Build,
+        }
+    }
+}
+
 pub(crate) fn bad<T>(key: &'static str, problem: String, remedy: &str) -> Result<T, SnowError> {
     Err(SnowError::Setting { key, problem, remedy: remedy.into() })
 }

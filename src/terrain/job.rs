@@ -80,12 +80,13 @@ pub enum JobError {
     BoundBroken { source_label: String, measured_m: f64, bound_m: f64, i: u32, j: u32 },
 }
 
-impl JobError {
-    /// Process exit code: 2 for bad input or usage, 1 for a failure while building or writing.
-    pub fn exit_code(&self) -> i32 {
+/// The build's for a failure while building or writing; the input's otherwise (bad input or usage).
+impl crate::failure::Failure for JobError {
+    fn blame(&self) -> crate::failure::Blame {
         match self {
-            JobError::Export(_) | JobError::Texture(_) | JobError::BoundBroken { .. } => 1,
-            _ => 2,
+            JobError::Export(e) => crate::failure::Failure::blame(e),
+            JobError::Texture(_) | JobError::BoundBroken { .. } => crate::failure::Blame::Build,
+            _ => crate::failure::Blame::Input,
         }
     }
 }

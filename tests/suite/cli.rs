@@ -102,6 +102,32 @@ fn usage_errors_exit_2() {
     assert_eq!(verdant(&["terrain", "x.r16", "--size", "12"]).status.code(), Some(2));
 }
 
+/// An output the writers cannot make (`-o p.txt`, no file name) is refused before any work, as bad
+/// input: the message is about the output even when the input is missing too (it was checked
+/// first), and nothing is written.
+#[test]
+fn an_unwritable_output_name_is_refused_first_with_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let missing = d.join("missing.png");
+    let cases: [(&str, Vec<&str>); 3] = [
+        ("terrain", vec!["terrain", p(&missing)]),
+        ("tree", vec!["tree", "builtin:conifer"]),
+        ("mesh", vec!["mesh", "missing.obj"]),
+    ];
+    for (name, args) in cases {
+        let out = d.join(format!("{name}.txt"));
+        let mut args = args.clone();
+        args.extend(["-o", p(&out)]);
+        let o = verdant(&args);
+        let t = String::from_utf8_lossy(&o.stderr).to_string();
+        assert_eq!(o.status.code(), Some(2), "{name}: {t}");
+        assert!(t.contains("unknown extension \"txt\"") && t.contains(&format!("{name}.txt")), "{name}: {t}");
+        assert!(!t.contains("missing"), "{name}: the input was read before the output was checked: {t}");
+    }
+    assert_eq!(std::fs::read_dir(d).unwrap().count(), 0, "nothing is written");
+}
+
 #[test]
 fn demo_terrain_report_and_reimport() {
     let dir = tempfile::tempdir().unwrap();

@@ -14,6 +14,7 @@ use std::process::Command;
 use proptest::prelude::*;
 use serde_json::Value;
 use verdant::export::write_scene;
+use verdant::failure::Failure;
 use verdant::lsystem::expand::{self, axiom_id, child_id, choose_variant, Expander, Token};
 use verdant::lsystem::parse::{parse_bytes, read_file};
 use verdant::lsystem::turtle::{Frame, Leaf, Segment, Sink, Turtle};

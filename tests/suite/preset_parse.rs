@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
+use verdant::failure::Failure;
 use verdant::heightfield::{Encoding, DEFAULT_MAX_SAMPLES};
 use verdant::plants::SpeciesKind;
 use verdant::scatter::{Exclusion, Placement, UNBOUNDED_ALTITUDE_M};

@@ -427,7 +427,8 @@ fn max_instances_exceeded_fails_the_scene_naming_the_species_and_keeps_the_old_o
     write(d, "p/a.toml", &preset("a", 3, &format!("{TREE}\n{GRASS}max_instances = 1000\n")));
     let o = verdant_in(d, &["build", "p/a.toml", "--out", "o"]);
     let t = text(&o);
-    assert_eq!(o.status.code(), Some(1), "{t}");
+    // a limit the preset sets is the input's fault: exit 2
+    assert_eq!(o.status.code(), Some(2), "{t}");
     assert!(t.contains("grass") && t.contains("max_instances"), "the error does not name the species and limit: {t}");
     assert!(!t.contains("panicked"), "{t}");
     assert_eq!(tree(&d.join("o/a")), before, "the failed build changed the previous output");

@@ -187,6 +187,68 @@ fn preset_check_reports_errors_at_file_line_column() {
     assert!(!d.join("o/u").exists());
 }
 
+/// `preset check` runs what a build would find first without building: the heightmap decodes with
+/// the preset's encoding (an RGB map under `auto`, a text file named .png), density maps and masks
+/// are images, OBJ models load. Each failure names the preset key's line and column and exits 2;
+/// `build` (which only needs the files to exist before it starts) finds the same in its terrain
+/// stage and exits 2 as well.
+#[test]
+fn preset_check_decodes_every_input_as_the_build_would() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let line_of = |text: &str, needle: &str| text.lines().position(|l| l.contains(needle)).unwrap() + 1;
+    write(d, "p/ok.toml", &heightmap_preset("ok"));
+    write_heightmap(&d.join("p/maps/ok.png"), 0.0);
+    ok(&verdant_in(d, &["preset", "check", "p/ok.toml"]));
+
+    // an RGB picture whose channels differ, read with the automatic encoding (which refuses to guess)
+    let rgb = heightmap_preset("rgb").replace("encoding = \"gray\"", "encoding = \"auto\"");
+    write(d, "p/rgb.toml", &rgb);
+    ImageBuffer::from_fn(33, 33, |i, j| image::Rgb([i as u8 * 7, j as u8 * 7, 0]))
+        .save(d.join("p/maps/rgb.png"))
+        .unwrap();
+    // a text file with a .png name
+    let text_map = heightmap_preset("text");
+    write(d, "p/text.toml", &text_map);
+    fs::write(d.join("p/maps/text.png"), b"this is not a png").unwrap();
+    // a density map and an OBJ that do not decode
+    let species = |key: &str, value: &str, kind: &str| {
+        format!(
+            "{}\n[[species]]\nname = \"s\"\nkind = \"{kind}\"\nmax_density = 0.01\n{key} = \"{value}\"\n",
+            heightmap_preset("ok")
+        )
+    };
+    let density = species("density_map", "maps/density.png", "grass");
+    write(d, "p/density.toml", &density);
+    fs::write(d.join("p/maps/density.png"), b"GIF89a").unwrap();
+    let model = species("obj", "models/rock.obj", "mesh");
+    write(d, "p/model.toml", &model);
+    write(d, "p/models/rock.obj", "v 0 0 0\nv 1 0 0\nf 1 2 3\n");
+    let cases = [
+        ("p/rgb.toml", format!("p/rgb.toml:{}:13:", line_of(&rgb, "heightmap")), "does not decode"),
+        ("p/text.toml", format!("p/text.toml:{}:13:", line_of(&text_map, "heightmap")), "does not decode"),
+        ("p/density.toml", format!("p/density.toml:{}:15:", line_of(&density, "density_map")), "density_map"),
+        ("p/model.toml", format!("p/model.toml:{}:7:", line_of(&model, "obj =")), "does not load"),
+    ];
+    for (file, position, words) in &cases {
+        // the files exist: loading for a build passes, the check does not
+        if let Err(e) = load_preset(&d.join(file)) {
+            panic!("{file}: {e}");
+        }
+        let o = verdant_in(d, &["preset", "check", file]);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{file}: {t}");
+        assert!(t.contains(position.as_str()), "{file}: expected position {position:?} in {t}");
+        assert!(t.contains(words), "{file}: {words:?} missing from {t}");
+        assert!(!t.contains("panicked"), "{t}");
+    }
+    // the build finds the bad heightmap in its terrain stage: bad input, exit 2, nothing written
+    let o = verdant_in(d, &["build", "p/text.toml", "--out", "o"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("text.png"), "{}", text(&o));
+    assert!(!d.join("o/text").exists());
+}
+
 #[test]
 fn preset_new_writes_a_template_that_checks_and_is_not_overwritten() {
     let dir = tempfile::tempdir().unwrap();
@@ -248,7 +310,9 @@ fn a_broken_preset_fails_alone_and_leaves_its_previous_output_untouched() {
         let o =
             verdant_in(d, &["build", "p/victim.toml", "p/good.toml", "p/mapped.toml", "--jobs", jobs, "--out", "o"]);
         let t = text(&o);
-        assert_eq!(o.status.code(), Some(1), "--jobs {jobs}: {t}");
+        // both failures are the inputs' (a preset that does not parse, a heightmap that does not
+        // decode): exit 2, as for any bad input; a failure of the build itself would be 1
+        assert_eq!(o.status.code(), Some(2), "--jobs {jobs}: {t}");
         assert!(summary_row(&o, "good")[1].starts_with("built"), "{t}");
         assert_eq!(summary_row(&o, "mapped")[1], "FAILED", "{t}");
         assert!(t.contains("FAILED") && t.contains("p/victim.toml") && t.contains("max_eror"), "{t}");

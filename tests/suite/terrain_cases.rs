@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use image::{ImageBuffer, Luma};
+use verdant::failure::Failure;
 use verdant::heightfield::{DecodeOptions, Encoding};
 use verdant::mesh::Scene;
 use verdant::terrain::build::BuildOptions;

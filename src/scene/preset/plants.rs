@@ -122,7 +122,7 @@ fn range_f32(r: [f64; 2]) -> [f32; 2] {
 pub(super) fn apply_grass(
     t: &Table<'_, '_>,
     mut g: GrassSettings,
-    check_inputs: bool,
+    inputs: super::Inputs,
 ) -> Result<GrassSettings, PresetError> {
     t.check_keys(GRASS_KEYS, &[("[flower]", FLOWER_KEYS), ("[tree]", TREE_KEYS)])?;
     if let Some(n) = count(t, "blades", 1..=crate::plants::grass::MAX_BLADES_PER_CLUMP as u64, "blades = 48")? {
@@ -198,7 +198,7 @@ pub(super) fn apply_grass(
     if let Some(n) = count(t, "far_cells", 1..=8, "far_cells = 3")? {
         g.far_cells = n;
     }
-    if let Some(p) = input_path(t, "blade_texture", "blade_texture = \"textures/blade.png\"", check_inputs)? {
+    if let Some(p) = input_path(t, "blade_texture", "blade_texture = \"textures/blade.png\"", inputs)? {
         g.blade_texture = Some(p);
     }
     g.check().map_err(|e| t.ctx.at(&t.span, format!("{}: {e}", t.label), "see docs/presets.md, section [grass]"))?;
