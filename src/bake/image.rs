@@ -8,7 +8,8 @@ use std::path::Path;
 use image::ImageDecoder;
 
 use crate::bake::error::BakeError;
-use crate::bake::raster::{srgb_to_linear, Canvas, MAX_CANVAS_SIDE};
+use crate::bake::raster::{Canvas, MAX_CANVAS_SIDE};
+use crate::color::srgb_to_linear;
 use crate::export::write_atomic;
 
 /// Largest image side accepted (the rasteriser's canvas limit): 16384² RGBA f32 is 4 GB.
@@ -66,7 +67,7 @@ impl Image {
         let mut img = Image::decode_png(bytes, "the PNG data")?;
         for p in &mut img.pixels {
             for c in p.iter_mut().take(3) {
-                *c = crate::bake::raster::linear_to_srgb(*c);
+                *c = crate::color::linear_to_srgb(*c);
             }
         }
         // 8-bit values exactly: the sRGB round trip may be off by a rounding step
@@ -225,7 +226,7 @@ mod tests {
     }
 
     use super::*;
-    use crate::bake::raster::linear_to_srgb;
+    use crate::color::linear_to_srgb;
 
     fn checker() -> Image {
         // 2×2: red, green / blue, white at half alpha.

@@ -29,7 +29,9 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
+use crate::color::linear_to_srgb;
 use crate::export::{write_atomic, ExportError};
+use crate::math::{cross3, dot3, normalize3, sub3};
 use crate::mesh::Primitive;
 
 /// Largest canvas side in pixels: keeps canvases within a few GB and the fixed-point arithmetic far
@@ -194,15 +196,6 @@ const MAX_FOV_DEG: f64 = 179.0;
 /// eye's plane they come: 2^18 + [`MAX_CANVAS_SIDE`] < 2^20 pixels.
 const GUARD_BAND_PX: f64 = (1u32 << 18) as f64;
 
-fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn normalize3(a: [f64; 3]) -> Option<[f64; 3]> {
-    let len = dot3(a, a).sqrt();
-    (len > 0.0 && len.is_finite()).then(|| a.map(|v| v / len))
-}
-
 impl PerspectiveView {
     /// Focal length in pixels: (width/2) / tan(fov_x/2).
     pub fn focal_px(&self) -> f64 {
@@ -229,14 +222,14 @@ impl PerspectiveView {
         if !self.eye.iter().chain(&self.target).chain(&self.up).all(|v| v.is_finite()) {
             return bad("eye, target and up must be finite");
         }
-        let Some(forward) = normalize3(crate::mesh::sub3(self.target, self.eye)) else {
+        let Some(forward) = normalize3(sub3(self.target, self.eye)) else {
             return bad("eye and target coincide; move the target away from the eye");
         };
         // Right-handed: right = forward × up, up' = right × forward (see `OrthoView`).
-        let Some(right) = normalize3(crate::mesh::cross3(forward, self.up)) else {
+        let Some(right) = normalize3(cross3(forward, self.up)) else {
             return bad("up is parallel to the view direction; pick another up vector");
         };
-        let up = crate::mesh::cross3(right, forward);
+        let up = cross3(right, forward);
         let row = |a: [f64; 3]| [a[0], a[1], a[2], -dot3(a, self.eye)];
         let (w, h) = (self.width as f64, self.height as f64);
         Ok(PerspFrame {
@@ -574,31 +567,6 @@ pub fn encode_rgba8_png(rgba: &[u8], width: u32, height: u32) -> Result<Vec<u8>,
     Ok(bytes)
 }
 
-pub fn linear_to_srgb(v: f32) -> f32 {
-    if v.is_nan() || v <= 0.0 {
-        0.0
-    } else if v >= 1.0 {
-        1.0
-    } else if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
-}
-
-/// Inverse of [`linear_to_srgb`].
-pub fn srgb_to_linear(v: f32) -> f32 {
-    if v.is_nan() || v <= 0.0 {
-        0.0
-    } else if v >= 1.0 {
-        1.0
-    } else if v <= 0.040_45 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
-}
-
 #[inline]
 pub(crate) fn to_u8(v: f32) -> u8 {
     // NaN → 0; round half up.
@@ -852,7 +820,7 @@ impl PerspSetup {
             };
             // Facing from the eye (the origin of view space). View space (right, up, forward) is
             // left-handed, so counter-clockwise seen from the eye is a positive triple product.
-            let facing = dot3(crate::mesh::cross3(crate::mesh::sub3(b, a), crate::mesh::sub3(c, a)), a);
+            let facing = dot3(cross3(sub3(b, a), sub3(c, a)), a);
             let front = facing > 0.0;
             let culled = facing == 0.0
                 || !facing.is_finite()
@@ -1696,6 +1664,5 @@ mod tests {
         assert_eq!(img.dimensions(), (200, 100));
         assert_eq!(img.get_pixel(0, 0).0, [255, 188, 0, 255]);
         assert_eq!(img.get_pixel(1, 0).0, [0, 0, 0, 0]);
-        assert!((srgb_to_linear(linear_to_srgb(0.3)) - 0.3).abs() < 1e-6);
     }
 }

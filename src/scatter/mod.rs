@@ -15,7 +15,7 @@
 //!
 //! Then the rules (`rules.rs`) drop candidates outside the mask, the slope/altitude ranges, below
 //! water or within an exclusion radius of an earlier species. Every random number is a hash
-//! (`synth::mix64`) of the seed, species, tile/cell and a counter, so the output does not depend on
+//! (`random::mix64`) of the seed, species, tile/cell and a counter, so the output does not depend on
 //! thread count or tile order. `stats.rs` is the paired analyzer.
 
 pub mod density;
@@ -33,8 +33,8 @@ pub use poisson::POISSON_PACKING;
 pub use stats::{analyze, RegionStat, SpeciesStats, TileStat};
 pub use surface::SurfaceIndex;
 
+use crate::random::mix64;
 use crate::scene::{Placement, SpeciesSettings};
-use crate::synth::mix64;
 
 /// One placed instance. `rotation` is a unit quaternion (x, y, z, w): yaw about +Y, then a tilt
 /// toward the terrain normal by `align_to_normal` of the slope angle.

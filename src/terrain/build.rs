@@ -663,8 +663,8 @@ mod tests {
                     assert!(vertical.contains(&rot([key(b), key(al), key(bl)])), "skirt triangle 2 missing");
                     // the quad's front faces away from the triangle that owns the edge
                     let f = |q: [f32; 3]| q.map(|c| c as f64);
-                    let n = crate::mesh::cross3(crate::mesh::sub3(f(a), f(b)), crate::mesh::sub3(f(al), f(b)));
-                    let inward = crate::mesh::sub3(f(c), f(a));
+                    let n = crate::math::cross3(crate::math::sub3(f(a), f(b)), crate::math::sub3(f(al), f(b)));
+                    let inward = crate::math::sub3(f(c), f(a));
                     assert!(n[0] * inward[0] + n[2] * inward[2] < 0.0, "skirt faces inward");
                 }
             }
@@ -695,7 +695,7 @@ mod tests {
                     }
                     let f = |q: [f32; 3]| q.map(|c| c as f64);
                     let (a, b, c) = (f(pos[0]), f(pos[1]), f(pos[2]));
-                    volume += crate::mesh::cross3(b, c).iter().zip(a).map(|(x, y)| x * y).sum::<f64>() / 6.0;
+                    volume += crate::math::cross3(b, c).iter().zip(a).map(|(x, y)| x * y).sum::<f64>() / 6.0;
                     faces += 1;
                 }
             }

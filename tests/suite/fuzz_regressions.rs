@@ -173,7 +173,7 @@ struct Stream(u64);
 impl Stream {
     fn next(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(1);
-        verdant::synth::mix64(self.0)
+        verdant::random::mix64(self.0)
     }
     fn below(&mut self, n: usize) -> usize {
         (self.next() % n.max(1) as u64) as usize
