@@ -10,7 +10,7 @@
 //! ([`Storage::scan`]); the mesher refines until the stored measure is within the bound.
 
 use crate::heightfield::Heightfield;
-use crate::terrain::error::plane_height;
+use crate::terrain::plane::plane_height;
 
 /// A 16-bit position grid (KHR_mesh_quantization): a vertex is stored as integers q, and the file's
 /// node transform puts it at `origin + step·q` (per axis). For a terrain, x and z step by the cell

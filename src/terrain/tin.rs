@@ -19,7 +19,8 @@ use spade::handles::FixedVertexHandle;
 use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use crate::heightfield::Heightfield;
-use crate::terrain::error::{check_heightfield, measure_stored, plane_height, TerrainError};
+use crate::terrain::error::{check_heightfield, measure_stored, TerrainError};
+use crate::terrain::plane::plane_height;
 use crate::terrain::stored::Storage;
 use crate::terrain::SampleMesh;
 
