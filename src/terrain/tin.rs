@@ -1382,7 +1382,7 @@ pub(crate) mod tests {
                 .map(|k| (20_000 + crate::random::mix64(seed ^ k as u64) % relief_dm) as f64 * 0.1)
                 .collect();
             let hf = Heightfield::from_f64(w, h, &heights, cell);
-            let grid = crate::terrain::stored::PositionGrid::terrain(&hf, hf.height_range().unwrap().0).unwrap();
+            let grid = crate::export::grid::PositionGrid::terrain(&hf, hf.height_range().unwrap().0).unwrap();
             let storage = Storage::quantized(&hf, grid);
             let bound = steps * grid.step[1] as f64;
             match tin_stored(&hf, &TinOptions { max_error_m: bound, max_triangles: None }, &storage) {
