@@ -1,7 +1,7 @@
 //! sRGB transfer functions (IEC 61966-2-1): colours as authored (sRGB) to the linear values that
 //! materials and shading use, and back.
 
-/// Linear to sRGB-encoded, in f32; clamps to [0, 1], NaN → 0.
+/// The sRGB transfer function (IEC 61966-2-1) of a linear value in 0..1, in f32 (clamped; NaN → 0).
 pub fn linear_to_srgb(v: f32) -> f32 {
     if v.is_nan() || v <= 0.0 {
         0.0
