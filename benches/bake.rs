@@ -21,7 +21,7 @@ use verdant::bake::raster::{Camera, DrawOptions, Fragment, OrthoView, Perspectiv
 use verdant::bake::render::{render_mesh, RenderOptions};
 use verdant::bake::views::{lod_image_error, Renderable, ScreenView};
 use verdant::mesh::{AlphaMode, Material, Mesh, Primitive};
-use verdant::synth::mix64;
+use verdant::random::mix64;
 
 const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
 

@@ -1010,7 +1010,7 @@ def ray_heights(terrain: trimesh.Trimesh, xz: np.ndarray) -> np.ndarray:
 
 
 def mix64(z: np.ndarray) -> np.ndarray:
-    """verdant's synth::mix64 (splitmix64's finaliser) on uint64 arrays (numpy wraps like Rust)."""
+    """verdant's random::mix64 (splitmix64's finaliser) on uint64 arrays (numpy wraps like Rust)."""
     with np.errstate(over="ignore"):
         z = z + np.uint64(0x9E3779B97F4A7C15)
         z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)

@@ -64,6 +64,14 @@ impl Heightfield {
         [(i as f64 * self.cell_size_m) as f32, self.at(i, j), (j as f64 * self.cell_size_m) as f32]
     }
 
+    /// UV0 of sample (i, j): planar over the map, u = i/(w−1), v = j/(h−1). Row 0 is the heightmap
+    /// image's top row and glTF's v runs down from the image top, so a texture made from the heightmap's
+    /// pixels lands on its samples. Exactly 0 and 1 at the corners. Needs a map of at least 2×2.
+    #[inline]
+    pub fn planar_uv(&self, i: usize, j: usize) -> [f32; 2] {
+        [(i as f64 / (self.width - 1) as f64) as f32, (j as f64 / (self.height - 1) as f64) as f32]
+    }
+
     /// Lowest and highest height, or `None` when empty.
     pub fn height_range(&self) -> Option<(f32, f32)> {
         let first = *self.heights.first()?;

@@ -9,6 +9,7 @@
 //! terrain); writes are atomic; same inputs give byte-identical outputs at any thread count.
 
 pub mod bake;
+pub mod color;
 pub mod export;
 pub mod failure;
 pub mod harness;
@@ -16,8 +17,10 @@ pub mod heightfield;
 pub mod input;
 pub mod lod;
 pub mod lsystem;
+pub mod math;
 pub mod mesh;
 pub mod plants;
+pub mod random;
 pub mod scatter;
 pub mod scene;
 pub mod snow;

@@ -6,6 +6,8 @@
 
 use serde_json::Value;
 
+use crate::math::{cross3, sub3};
+
 /// One drawable piece with a single material: the unit of a glTF primitive or an OBJ group.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Primitive {
@@ -343,14 +345,6 @@ impl Scene {
         self.roots.push(n);
         n
     }
-}
-
-pub fn sub3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub fn cross3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 #[cfg(test)]

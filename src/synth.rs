@@ -10,15 +10,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::heightfield::Heightfield;
-
-/// SplitMix64 finaliser: a well-mixed 64-bit hash.
-#[inline]
-pub fn mix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
+use crate::random::mix64;
 
 /// Uniform value in [−1, 1) from a hash of `seed` and a lattice point.
 #[inline]

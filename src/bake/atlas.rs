@@ -286,7 +286,7 @@ pub fn mip_chain(level0: &Image, cutoff: f32) -> Vec<MipLevel> {
 /// min(1, alpha · scale) rounded to the nearest of the 256 values 8 bits store.
 #[inline]
 fn quantized_alpha(alpha: f32, scale: f32) -> f32 {
-    crate::bake::raster::to_u8(alpha * scale) as f32 / 255.0
+    crate::bake::raster::png::to_u8(alpha * scale) as f32 / 255.0
 }
 
 /// Plain box-filtered mips (no coverage preservation), for comparison: level 0 first.

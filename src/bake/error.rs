@@ -2,16 +2,16 @@
 
 use std::path::PathBuf;
 
-use crate::bake::raster::RasterError;
+use crate::bake::raster::{RasterError, MAX_CANVAS_SIDE};
 use crate::export::ExportError;
 
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
     #[error("could not read {source_name} as a PNG image: {reason} (save it as an 8- or 16-bit PNG)")]
     Png { source_name: String, reason: String },
+    // images share the rasteriser's canvas limit (`image::MAX_IMAGE_SIDE` is `MAX_CANVAS_SIDE`)
     #[error(
-        "{source_name} is {width}×{height} pixels; images must be 1 to {max} pixels a side (resize it)",
-        max = crate::bake::image::MAX_IMAGE_SIDE
+        "{source_name} is {width}×{height} pixels; images must be 1 to {MAX_CANVAS_SIDE} pixels a side (resize it)"
     )]
     ImageSize { source_name: String, width: u64, height: u64 },
     #[error("could not read {}: {source}", path.display())]

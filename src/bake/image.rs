@@ -8,7 +8,8 @@ use std::path::Path;
 use image::ImageDecoder;
 
 use crate::bake::error::BakeError;
-use crate::bake::raster::{srgb_to_linear, Canvas, MAX_CANVAS_SIDE};
+use crate::bake::raster::{Canvas, MAX_CANVAS_SIDE};
+use crate::color::srgb_to_linear;
 use crate::export::write_atomic;
 
 /// Largest image side accepted (the rasteriser's canvas limit): 16384² RGBA f32 is 4 GB.
@@ -66,7 +67,7 @@ impl Image {
         let mut img = Image::decode_png(bytes, "the PNG data")?;
         for p in &mut img.pixels {
             for c in p.iter_mut().take(3) {
-                *c = crate::bake::raster::linear_to_srgb(*c);
+                *c = crate::color::linear_to_srgb(*c);
             }
         }
         // 8-bit values exactly: the sRGB round trip may be off by a rounding step
@@ -87,7 +88,7 @@ impl Image {
         let to_u8 = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
         let raw: Vec<u8> =
             self.pixels.iter().flat_map(|c| [to_u8(c[0]), to_u8(c[1]), to_u8(c[2]), to_u8(c[3])]).collect();
-        crate::bake::raster::encode_rgba8_png(&raw, self.width, self.height).map_err(BakeError::Encode)
+        crate::bake::raster::png::encode_rgba8_png(&raw, self.width, self.height).map_err(BakeError::Encode)
     }
 
     fn decode_png(bytes: &[u8], source_name: &str) -> Result<Image, BakeError> {
@@ -121,7 +122,7 @@ impl Image {
 
     /// sRGB-encoded 8-bit RGBA, row-major from the top-left (alpha stays linear), rounded to nearest.
     pub fn to_rgba8(&self) -> Vec<u8> {
-        crate::bake::raster::rgba8(&self.pixels)
+        crate::bake::raster::png::rgba8(&self.pixels)
     }
 
     /// PNG bytes (RGBA8, sRGB colour). Deterministic: the same image gives the same bytes.
@@ -129,7 +130,7 @@ impl Image {
         if !self.is_well_formed() {
             return Err(self.malformed());
         }
-        crate::bake::raster::encode_rgba8_png(&self.to_rgba8(), self.width, self.height).map_err(BakeError::Encode)
+        crate::bake::raster::png::encode_rgba8_png(&self.to_rgba8(), self.width, self.height).map_err(BakeError::Encode)
     }
 
     /// Writes the image as a PNG, atomically (temporary file, then rename).
@@ -225,7 +226,7 @@ mod tests {
     }
 
     use super::*;
-    use crate::bake::raster::linear_to_srgb;
+    use crate::color::linear_to_srgb;
 
     fn checker() -> Image {
         // 2×2: red, green / blue, white at half alpha.

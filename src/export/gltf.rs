@@ -21,10 +21,10 @@ use json::Index;
 use serde_json::{Map, Value};
 
 use super::compact::compact;
+use super::grid::PositionGrid;
 use super::streaming::{base64, load_groups};
 use super::{check_scene, SceneProblem};
 use crate::mesh::{AlphaMode, PrimitiveMode, Scene};
-pub use crate::terrain::stored::PositionGrid;
 
 /// `asset.generator` of every file written.
 pub const GENERATOR: &str = concat!("verdant ", env!("CARGO_PKG_VERSION"));

@@ -7,6 +7,7 @@
 
 pub mod compact;
 pub mod gltf;
+pub mod grid;
 pub mod obj;
 pub mod streaming;
 pub mod table;

@@ -599,7 +599,7 @@ mod tests {
         let mut values: Vec<u64> = (0..20).flat_map(|e| [10u64.pow(e), 10u64.pow(e) - 1, 10u64.pow(e) + 1]).collect();
         values.extend([0, u32::MAX as u64, u64::MAX, 99_999_999, 100_000_000]);
         for _ in 0..100_000 {
-            h = crate::synth::mix64(h);
+            h = crate::random::mix64(h);
             values.push(h >> (h % 64));
         }
         for v in values {
@@ -626,7 +626,7 @@ mod tests {
             }
         }
         for _ in 0..200_000 {
-            h = crate::synth::mix64(h);
+            h = crate::random::mix64(h);
             let (d, s) = (f64::from_bits(h), f32::from_bits((h >> 32) as u32));
             for (a, b) in [(d, s as f64), (h as f64 * 1e-12, (h >> 40) as f64 / 16.0)] {
                 if a.is_finite() {
@@ -668,7 +668,7 @@ mod tests {
         let mut fmt = ryu::Buffer::new();
         let mut h: u64 = 7;
         for _ in 0..1_000_000 {
-            h = crate::synth::mix64(h);
+            h = crate::random::mix64(h);
             let m = (h >> 20) % 1_000_000_000_000_000; // below 10^15: values below 10^9 at 10⁻⁶
             let short = m % 1_000_000_000_000_000 / 1000; // below 10^12: values below 10^6 at 10⁻⁶
             if short >= 100 {

@@ -15,7 +15,7 @@
 //! bracket `b` more times, then those inside two `c` more times (see [`Expander`]).
 
 use super::{Item, LSystem, LsystemError, Recursion};
-use crate::synth::mix64;
+use crate::random::mix64;
 
 /// Default budget of expanded symbols: 5·10⁷, about 12 times what lparser itself can hold (it caps
 /// the string at 2–4 MiB), and about 3 s of expansion on this project's reference machine (10⁹

@@ -15,7 +15,7 @@ use glam::DVec3;
 
 use super::expand::Token;
 use super::{Dialect, LSystem};
-use crate::synth::mix64;
+use crate::random::mix64;
 
 /// The turtle's "up in the world": `$` levels the left vector against it, tropism pulls away from it.
 pub const SKY: DVec3 = DVec3::Y;

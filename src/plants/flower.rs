@@ -9,8 +9,8 @@ use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
 use crate::mesh::{AlphaMode, Material, Mesh, Primitive, Scene, Texture};
-use crate::plants::random::Stream;
 use crate::plants::wind;
+use crate::random::Stream;
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FlowerSettings {

@@ -19,8 +19,9 @@
 
 use serde::Serialize;
 
+use crate::math::{cross3_f32, normalize3_f32_or_up};
 use crate::mesh::{CustomAttribute, Primitive};
-use crate::plants::random::Stream;
+use crate::random::Stream;
 
 pub use crate::plants::wind::WIND_ATTRIBUTE;
 /// Largest blade sway frequency a preset may ask for (Hz).
@@ -379,19 +380,6 @@ fn wind_primitive(material: usize) -> Primitive {
     }
 }
 
-fn normalize(v: [f32; 3]) -> [f32; 3] {
-    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    if l > 0.0 && l.is_finite() {
-        [v[0] / l, v[1] / l, v[2] / l]
-    } else {
-        [0.0, 1.0, 0.0]
-    }
-}
-
-fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
 /// u range of a blade texture column (the column's full width), for a centre offset in −1..1.
 fn column_u(column: usize, across: f32) -> f32 {
     (column as f32 + 0.5 + 0.5 * across) / BLADE_TEXTURE_COLUMNS as f32
@@ -420,7 +408,7 @@ pub fn lod0_filtered(
             // tangent by central differences along the centreline
             let (a, b) = (pts[k.saturating_sub(1)], pts[(k + 1).min(n)]);
             let tangent = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let normal = normalize(cross(side, tangent));
+            let normal = normalize3_f32_or_up(cross3_f32(side, tangent));
             let hw = blade.half_width(t);
             let v = 1.0 - t; // glTF v runs down from the image top: tip at the top
             if k < n {
@@ -459,7 +447,7 @@ pub fn lod1(settings: &GrassSettings, clump: &Clump, material: usize) -> Primiti
         let (root, tip) = (pts[0], pts[settings.segments]);
         let side = [-blade.facing[1], 0.0, blade.facing[0]];
         let axis = [tip[0] - root[0], tip[1] - root[1], tip[2] - root[2]];
-        let normal = normalize(cross(side, axis));
+        let normal = normalize3_f32_or_up(cross3_f32(side, axis));
         let hw = blade.width_m / 2.0;
         let base = p.positions.len() as u32;
         for (c, v, s) in [(root, 1.0, -1.0f32), (root, 1.0, 1.0), (tip, 0.0, 1.0), (tip, 0.0, -1.0)] {

@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use crate::bake::image::Image;
 use crate::mesh::{AlphaMode, Material, Mesh};
-use crate::synth::mix64;
+use crate::random::mix64;
 
 /// Largest grid side in cells (the grid holds at most this cubed cell lists).
 const MAX_GRID_SIDE: usize = 96;

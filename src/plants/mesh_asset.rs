@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::bake::raster::encode_rgba8_png;
+use crate::bake::raster::png::encode_rgba8_png;
 use crate::mesh::{AlphaMode, Bounds, Material, Mesh, Primitive, Scene, Texture};
 use crate::plants::tree::is_flat;
 

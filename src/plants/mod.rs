@@ -8,7 +8,6 @@ pub mod grass_asset;
 pub mod hausdorff;
 pub mod marker;
 pub mod mesh_asset;
-pub mod random;
 pub mod texture;
 pub mod tree;
 pub mod tree_lod;

@@ -4,7 +4,7 @@
 
 use crate::bake::image::Image;
 use crate::plants::grass::{taper, GrassSettings, BLADE_TEXTURE_COLUMNS};
-use crate::plants::random::Stream;
+use crate::random::Stream;
 
 /// Pixels per blade column and texture height of the procedural blade texture.
 pub const COLUMN_PX: u32 = 16;

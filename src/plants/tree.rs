@@ -18,6 +18,7 @@ use serde::Serialize;
 use serde_json::json;
 use thiserror::Error;
 
+use crate::color::srgb_to_linear;
 use crate::export::{self, ExportError};
 use crate::failure::{Blame, Failure};
 use crate::lsystem::expand::{Expander, DEFAULT_MAX_SYMBOLS};
@@ -25,7 +26,7 @@ use crate::lsystem::turtle::{Conventions, Frame, Leaf, Limb, Polygon, Segment, S
 use crate::lsystem::{parse, Dialect, LSystem, LsystemError};
 use crate::mesh::{AlphaMode, Bounds, CustomAttribute, Material, Mesh, Primitive, PrimitiveMode, Scene, Texture};
 use crate::plants::wind::{self, WIND_ATTRIBUTE, WIND_BRANCH_ATTRIBUTE};
-use crate::synth::mix64;
+use crate::random::mix64;
 use crate::validate::{validate_file, ValidateOptions};
 
 pub const DEFAULT_RADIAL_SEGMENTS: u32 = 8;
@@ -252,14 +253,6 @@ pub fn lparser_color(index: u16) -> [f32; 3] {
         14 => [0.75, 0.75, 0.75],
         15 => [1.0, 1.0, 1.0],
         _ => [0.5, 0.5, 0.5],
-    }
-}
-
-fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
     }
 }
 

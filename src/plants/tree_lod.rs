@@ -40,7 +40,7 @@ use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleGrid};
 use crate::plants::mesh_asset::{load_obj, MeshAssetError, MeshAssetStats, ObjOptions, SourceMesh};
 use crate::plants::tree::{build_tree, is_flat, TreeError, TreeMesh, TreeOptions, TreeReport, TreeSeconds};
 use crate::plants::wind::{self, WIND_ATTRIBUTE, WIND_BRANCH_ATTRIBUTE};
-use crate::synth::mix64;
+use crate::random::mix64;
 use crate::validate::{validate_file, ValidateOptions};
 
 /// LoD0 full … LoD4 impostor.

@@ -24,7 +24,7 @@
 //! docs/wind.md has a GLSL vertex shader and notes for Godot, Unity and Unreal.
 
 use crate::mesh::CustomAttribute;
-use crate::synth::mix64;
+use crate::random::mix64;
 
 /// The sway attribute every plant mesh carries.
 pub const WIND_ATTRIBUTE: &str = "_WIND";

@@ -4,7 +4,7 @@
 //! Positions are rounded to a 0.1 mm grid (far below the jitter's scale), heights and rotations to
 //! theirs (see `on_table_grids`), which keeps the placement table's entries short.
 
-use crate::synth::mix64;
+use crate::random::mix64;
 
 use super::rules::Rules;
 use super::storage::gather_in_order;

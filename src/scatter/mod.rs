@@ -15,7 +15,7 @@
 //!
 //! Then the rules (`rules.rs`) drop candidates outside the mask, the slope/altitude ranges, below
 //! water or within an exclusion radius of an earlier species. Every random number is a hash
-//! (`synth::mix64`) of the seed, species, tile/cell and a counter, so the output does not depend on
+//! (`random::mix64`) of the seed, species, tile/cell and a counter, so the output does not depend on
 //! thread count or tile order. `stats.rs` is the paired analyzer.
 
 pub mod density;
@@ -34,7 +34,7 @@ pub use species::{Exclusion, Placement, SpeciesRules, UNBOUNDED_ALTITUDE_M};
 pub use stats::{analyze, RegionStat, SpeciesStats, TileStat};
 pub use surface::SurfaceIndex;
 
-use crate::synth::mix64;
+use crate::random::mix64;
 
 /// Points per r² of the unthinned set this sampler produces away from the extent's edges (measured:
 /// 0.616–0.617 on 300 r × 300 r with tiles of 10 r to 300 r, which includes ≈ +0.5 % from the

@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use crate::synth::mix64;
+use crate::random::mix64;
 
 use super::rules::Rules;
 use super::{Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POISSON_PACKING};

@@ -2,8 +2,8 @@
 //! altitude and slope (degrees from the containing triangle's normal), and exclusion radii around
 //! the instances of earlier species (a uniform-grid spatial hash of those instances).
 
+use crate::random::mix64;
 use crate::scatter::{Placement, SpeciesRules};
-use crate::synth::mix64;
 
 use super::{
     on_grid, sin_cos_0_pi, species_key, unit, DensityMap, Instance, RuleCounts, ScatterError, SurfaceIndex, Tiling,

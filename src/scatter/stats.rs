@@ -372,7 +372,7 @@ mod tests {
             let n = 2 + (seed as usize * 7) % 60;
             let pts: Vec<[f64; 2]> = (0..n as u64)
                 .map(|k| {
-                    let h = crate::synth::mix64(seed * 1000 + k);
+                    let h = crate::random::mix64(seed * 1000 + k);
                     [(h >> 40) as f64 / 1e3 * (1 + seed % 3) as f64, (h & 0xFF_FFFF) as f64 / 1e5]
                 })
                 .collect();

@@ -2,6 +2,8 @@
 //! bucket lists the triangles whose bounding box overlaps it), then exact barycentric interpolation
 //! in the containing triangle (the grass thesis, formula 3.2), all in f64.
 
+use crate::math::{cross3, sub3};
+
 /// One upward-facing triangle: corners as (x, y, z) in f64.
 #[derive(Debug, Clone, Copy)]
 struct Tri {
@@ -50,7 +52,7 @@ impl SurfaceIndex {
                 if !(a.iter().chain(&b).chain(&c)).all(|v| v.is_finite()) {
                     continue;
                 }
-                let n = cross(sub(b, a), sub(c, a));
+                let n = cross3(sub3(b, a), sub3(c, a));
                 let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
                 // upward-facing only: skirts are vertical (n.y = 0 exactly), the base faces down
                 if n[1] <= 1e-12 * len {
@@ -251,16 +253,6 @@ fn bary(t: &Tri, x: f64, z: f64) -> (f64, f64, f64, f64) {
     }
 }
 
-#[inline]
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-#[inline]
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -318,7 +310,7 @@ mod tests {
         let mut hint = u32::MAX;
         let mut h: u64 = 3;
         for k in 0..20_000 {
-            h = crate::synth::mix64(h);
+            h = crate::random::mix64(h);
             // a walk of small steps, every 7th query on the lattice (vertices and edges)
             let (x, z) = if k % 7 == 0 {
                 ((h % 25) as f64 * 1.5, ((h >> 8) % 25) as f64 * 0.75)

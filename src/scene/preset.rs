@@ -1142,8 +1142,8 @@ struct Looks<'a> {
 /// offset (two grass species of one scene differ; renaming or `seed` reshuffles one alone).
 pub fn species_look_seed(scene_seed: u64, name: &str, species_seed: u64) -> u64 {
     let name_hash = name.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3));
-    crate::synth::mix64(
-        scene_seed ^ crate::synth::mix64(name_hash ^ crate::synth::mix64(species_seed.wrapping_add(0x6c6f_6f6b))),
+    crate::random::mix64(
+        scene_seed ^ crate::random::mix64(name_hash ^ crate::random::mix64(species_seed.wrapping_add(0x6c6f_6f6b))),
     )
 }
 

@@ -11,7 +11,8 @@
 
 use std::path::Path;
 
-use crate::bake::raster::{srgb_to_linear, Canvas, Cull, DrawOptions, OrthoView, RasterError, MAX_CANVAS_SIDE};
+use crate::bake::raster::{Canvas, Cull, DrawOptions, OrthoView, RasterError, MAX_CANVAS_SIDE};
+use crate::color::srgb_to_linear;
 use crate::mesh::{Primitive, Scene};
 
 /// Uncovered pixels: transparent, so the picture composes onto any page background.
@@ -624,7 +625,7 @@ mod placement_tests {
         // grass four times as dense on the left half as on the right: 8 and 2 per m², hashed spots
         let mut grass = Vec::new();
         for k in 0..50_000u64 {
-            let h = crate::synth::mix64(k);
+            let h = crate::random::mix64(k);
             let (u, v) = ((h >> 40) as f64 / (1u64 << 24) as f64, (h & 0xFF_FFFF) as f64 / (1u64 << 24) as f64);
             let x = if k % 5 == 0 { 50.0 + 50.0 * u } else { 50.0 * u };
             grass.push([x, 0.0, 100.0 * v]);

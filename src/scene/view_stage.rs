@@ -140,7 +140,7 @@ pub fn view_key(preset: &Preset, upstream: &[&str]) -> String {
 /// Which variant an instance shows: a hash of its position (f64 bits), so neighbours differ and
 /// the choice is reproducible from the table alone.
 pub fn variant_of(position: [f64; 3], variants: usize) -> usize {
-    let h = crate::synth::mix64(position[0].to_bits() ^ crate::synth::mix64(position[2].to_bits()));
+    let h = crate::random::mix64(position[0].to_bits() ^ crate::random::mix64(position[2].to_bits()));
     (((h >> 32) * variants as u64) >> 32) as usize
 }
 

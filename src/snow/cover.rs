@@ -7,11 +7,12 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bake::image::Image;
-use crate::bake::raster::{srgb_to_linear, Camera, OrthoView};
+use crate::bake::raster::{Camera, OrthoView};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
+use crate::color::srgb_to_linear;
 use crate::mesh::{CustomAttribute, Material, Mesh, Primitive, Scene};
+use crate::random::mix64;
 use crate::snow::{bad, within, SnowError};
-use crate::synth::mix64;
 
 /// Name of the glTF custom attribute: x = weight 0..1, y = snow depth in metres (weight ·
 /// `max_depth_m`), z = slope factor, w = altitude factor (exposure = x / (z · w) where defined).

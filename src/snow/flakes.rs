@@ -11,7 +11,7 @@ use crate::bake::raster::{Camera, OrthoView};
 use crate::bake::render::{render_mesh, RenderOptions, Shading};
 use crate::mesh::{Material, Mesh, Primitive};
 use crate::plants::grass_asset::BAKE_SUPERSAMPLE;
-use crate::plants::random::Stream;
+use crate::random::Stream;
 use crate::snow::{bad, within, SnowError};
 
 /// Stream tag of flake generation ("flak").

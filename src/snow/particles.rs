@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::mesh::{AlphaMode, Instances, Material, Mesh, Node, Primitive, Scene, Texture};
-use crate::plants::random::Stream;
+use crate::random::Stream;
 use crate::snow::emitter::Emitter;
 use crate::snow::flakes::FlakeAtlas;
 use crate::snow::SnowError;

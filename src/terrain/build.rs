@@ -144,13 +144,6 @@ pub fn build_scene(hf: &Heightfield, mesh: &SampleMesh, opts: &BuildOptions) -> 
     Ok(scene)
 }
 
-/// UV0 of sample (i, j): planar over the map, u = i/(w−1), v = j/(h−1). Row 0 is the heightmap
-/// image's top row and glTF's v runs down from the image top, so a texture made from the heightmap's
-/// pixels lands on its samples. Exactly 0 and 1 at the corners. Needs a map of at least 2×2.
-pub fn planar_uv(hf: &Heightfield, i: usize, j: usize) -> [f32; 2] {
-    [(i as f64 / (hf.width - 1) as f64) as f32, (j as f64 / (hf.height - 1) as f64) as f32]
-}
-
 /// Vertex normal of sample (i, j): the heightfield's normal, unit length in f32 (renormalised
 /// after narrowing, which can leave it a few ulps off).
 pub fn vertex_normal(hf: &Heightfield, i: usize, j: usize) -> [f32; 3] {
@@ -342,7 +335,7 @@ fn surface(
                 let [i, j] = mesh.vertices[v as usize].map(|c| c as usize);
                 prim.positions.push(hf.position(i, j));
                 prim.normals.push(vertex_normal(hf, i, j));
-                prim.uvs.push(planar_uv(hf, i, j));
+                prim.uvs.push(hf.planar_uv(i, j));
             }
             prim.indices.push(*slot);
         }
@@ -663,8 +656,8 @@ mod tests {
                     assert!(vertical.contains(&rot([key(b), key(al), key(bl)])), "skirt triangle 2 missing");
                     // the quad's front faces away from the triangle that owns the edge
                     let f = |q: [f32; 3]| q.map(|c| c as f64);
-                    let n = crate::mesh::cross3(crate::mesh::sub3(f(a), f(b)), crate::mesh::sub3(f(al), f(b)));
-                    let inward = crate::mesh::sub3(f(c), f(a));
+                    let n = crate::math::cross3(crate::math::sub3(f(a), f(b)), crate::math::sub3(f(al), f(b)));
+                    let inward = crate::math::sub3(f(c), f(a));
                     assert!(n[0] * inward[0] + n[2] * inward[2] < 0.0, "skirt faces inward");
                 }
             }
@@ -695,7 +688,7 @@ mod tests {
                     }
                     let f = |q: [f32; 3]| q.map(|c| c as f64);
                     let (a, b, c) = (f(pos[0]), f(pos[1]), f(pos[2]));
-                    volume += crate::mesh::cross3(b, c).iter().zip(a).map(|(x, y)| x * y).sum::<f64>() / 6.0;
+                    volume += crate::math::cross3(b, c).iter().zip(a).map(|(x, y)| x * y).sum::<f64>() / 6.0;
                     faces += 1;
                 }
             }

@@ -11,7 +11,7 @@ use std::hash::{BuildHasherDefault, Hasher};
 /// depend on it.
 pub type IdMap<K, V> = HashMap<K, V, BuildHasherDefault<IdHasher>>;
 
-/// Hasher for [`IdMap`]: mixes each integer written into the state with `synth::mix64`.
+/// Hasher for [`IdMap`]: mixes each integer written into the state with `random::mix64`.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct IdHasher(u64);
 
@@ -28,7 +28,7 @@ impl Hasher for IdHasher {
         self.write_u64(n as u64);
     }
     fn write_u64(&mut self, n: u64) {
-        self.0 = crate::synth::mix64(self.0.rotate_left(32) ^ n);
+        self.0 = crate::random::mix64(self.0.rotate_left(32) ^ n);
     }
     fn write_usize(&mut self, n: usize) {
         self.write_u64(n as u64);

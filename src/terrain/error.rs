@@ -14,6 +14,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use rayon::prelude::*;
 
 use crate::heightfield::Heightfield;
+use crate::terrain::plane::plane_height;
 use crate::terrain::stored::Storage;
 use crate::terrain::SampleMesh;
 
@@ -80,17 +81,6 @@ pub(crate) fn check_heightfield(hf: &Heightfield) -> Result<(), TerrainError> {
         return Err(TerrainError::NonFiniteHeight { i: k % width, j: k / width });
     }
     Ok(())
-}
-
-/// The plane through three samples evaluated at a fourth, the one formula both the mesher and this
-/// analyzer use. `w` are the integer barycentric weights (twice the signed sub-triangle areas, all ≥ 0
-/// inside), `h` the corner heights and `area` = w[0] + w[1] + w[2] > 0. The corners must be given in
-/// ascending sample index order so that the floating-point sum is evaluated in one canonical order
-/// whichever way a triangle is stored; weights are exact integers, so the result is bit-identical
-/// between callers.
-#[inline(always)]
-pub(crate) fn plane_height(w: [i64; 3], h: [f64; 3], area: i64) -> f64 {
-    (w[0] as f64 * h[0] + w[1] as f64 * h[1] + w[2] as f64 * h[2]) / area as f64
 }
 
 /// What [`measure`] found.

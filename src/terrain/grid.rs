@@ -54,7 +54,7 @@ mod tests {
     use crate::terrain::tin::tests::check_mesh;
 
     fn noise(w: usize, h: usize) -> Heightfield {
-        let heights = (0..w * h).map(|k| (crate::synth::mix64(k as u64) % 1000) as f32 * 0.25).collect();
+        let heights = (0..w * h).map(|k| (crate::random::mix64(k as u64) % 1000) as f32 * 0.25).collect();
         Heightfield { width: w, height: h, heights, cell_size_m: 1.0, exact: None }
     }
 

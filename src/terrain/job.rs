@@ -7,6 +7,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::export::gltf::WriteOptions;
+use crate::export::grid::PositionGrid;
 use crate::export::{self, ExportError};
 use crate::heightfield::{self, DecodeOptions, Decoded, Encoding, Heightfield, HeightfieldError};
 use crate::mesh::{Bounds, Scene};
@@ -14,7 +15,7 @@ use crate::terrain::build::{build_scene, BuildError, BuildOptions};
 use crate::terrain::error::{exact_max_error, measure_stored, ErrorStats};
 use crate::terrain::grid::grid;
 use crate::terrain::layers::{bake_layers, LayerReport};
-use crate::terrain::stored::{PositionGrid, Storage};
+use crate::terrain::stored::Storage;
 use crate::terrain::tin::{tin_stored, TinOptions};
 use crate::terrain::{SampleMesh, TerrainError};
 

@@ -12,7 +12,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::bake::image::Image;
-use crate::bake::raster::encode_rgba8_png;
+use crate::bake::raster::png::encode_rgba8_png;
 use crate::heightfield::Heightfield;
 use crate::mesh::{Scene, Texture};
 

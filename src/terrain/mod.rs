@@ -7,6 +7,7 @@ pub mod error;
 pub mod grid;
 pub mod job;
 pub mod layers;
+pub mod plane;
 pub mod solid;
 pub mod stored;
 pub mod tin;

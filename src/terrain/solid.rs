@@ -6,7 +6,6 @@
 use crate::heightfield::Heightfield;
 use crate::mesh::Primitive;
 
-use super::build::planar_uv;
 use super::chunks::IdMap;
 
 /// `y` lowered by `depth_m`, or `None` when f32 cannot hold a finite value strictly below `y`
@@ -122,7 +121,7 @@ pub fn base_primitive(hf: &Heightfield, border: &[[[u32; 2]; 2]], base_y: f32) -
                 if low {
                     p[1] = base_y;
                 }
-                push(prim, p, SIDE_NORMALS[side], planar_uv(hf, s[0] as usize, s[1] as usize))
+                push(prim, p, SIDE_NORMALS[side], hf.planar_uv(s[0] as usize, s[1] as usize))
             })
         };
         let (ta, tb, la, lb) =
@@ -131,7 +130,7 @@ pub fn base_primitive(hf: &Heightfield, border: &[[[u32; 2]; 2]], base_y: f32) -
         let mut bottom = |prim: &mut Primitive, s: [u32; 2]| -> u32 {
             *floor.entry(sample_key(s)).or_insert_with(|| {
                 let p = hf.position(s[0] as usize, s[1] as usize);
-                push(prim, [p[0], base_y, p[2]], [0.0, -1.0, 0.0], planar_uv(hf, s[0] as usize, s[1] as usize))
+                push(prim, [p[0], base_y, p[2]], [0.0, -1.0, 0.0], hf.planar_uv(s[0] as usize, s[1] as usize))
             })
         };
         let (fa, fb) = (bottom(&mut prim, a), bottom(&mut prim, b));

@@ -9,18 +9,12 @@
 //! that difference per face, so only faces within it of the bound are measured again as stored
 //! ([`Storage::scan`]); the mesher refines until the stored measure is within the bound.
 
+use crate::export::grid::PositionGrid;
 use crate::heightfield::Heightfield;
-use crate::terrain::error::plane_height;
+use crate::terrain::plane::plane_height;
 
-/// A 16-bit position grid (KHR_mesh_quantization): a vertex is stored as integers q, and the file's
-/// node transform puts it at `origin + step·q` (per axis). For a terrain, x and z step by the cell
-/// (q = i, j: exact) and y by the height range over 65,535.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PositionGrid {
-    pub origin: [f32; 3],
-    pub step: [f32; 3],
-}
-
+/// The terrain's [`PositionGrid`]: built here, where the heightfield is known (the grid itself is the
+/// writer's, `export::grid`).
 impl PositionGrid {
     /// The grid of a terrain over `hf` whose lowest stored point is `lowest_m` (the lowest sample,
     /// or a skirt's or base's bottom below it); `None` when the map is too wide for 16 bits.
@@ -35,18 +29,6 @@ impl PositionGrid {
         // a flat map still needs a scale an engine can invert
         let step_y = if range > 0.0 { ((range / 65535.0) as f32).next_up() } else { 1.0 };
         Some(PositionGrid { origin: [0.0, lowest_m, 0.0], step: [cell, step_y, cell] })
-    }
-
-    /// The integer a coordinate is stored as on `axis`.
-    #[inline]
-    pub fn quantize(&self, axis: usize, v: f32) -> i64 {
-        ((v as f64 - self.origin[axis] as f64) / self.step[axis] as f64).round() as i64
-    }
-
-    /// What the file holds for integer `q` on `axis`: origin + step·q, exactly (f64).
-    #[inline]
-    pub fn dequantize(&self, axis: usize, q: i64) -> f64 {
-        self.origin[axis] as f64 + self.step[axis] as f64 * q as f64
     }
 }
 

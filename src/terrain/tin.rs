@@ -19,7 +19,8 @@ use spade::handles::FixedVertexHandle;
 use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use crate::heightfield::Heightfield;
-use crate::terrain::error::{check_heightfield, measure_stored, plane_height, TerrainError};
+use crate::terrain::error::{check_heightfield, measure_stored, TerrainError};
+use crate::terrain::plane::plane_height;
 use crate::terrain::stored::Storage;
 use crate::terrain::SampleMesh;
 
@@ -1087,7 +1088,7 @@ pub(crate) mod tests {
     }
 
     fn noise(w: usize, h: usize, seed: u64, range: u64, scale: f32) -> Heightfield {
-        map(w, h, |i, j| (crate::synth::mix64(seed ^ ((j * w + i) as u64)) % range) as f32 * scale)
+        map(w, h, |i, j| (crate::random::mix64(seed ^ ((j * w + i) as u64)) % range) as f32 * scale)
     }
 
     /// Builds a TIN and checks everything the contract promises.
@@ -1211,7 +1212,7 @@ pub(crate) mod tests {
             let v = match (i, j) {
                 (10, 10) => 65535,
                 (11, 10) => 0,
-                _ => crate::synth::mix64((j * 64 + i) as u64 / 7) % 65536,
+                _ => crate::random::mix64((j * 64 + i) as u64 / 7) % 65536,
             };
             v as f32 * 0.1
         });
@@ -1341,7 +1342,7 @@ pub(crate) mod tests {
             steps in prop_oneof![Just(1.5f64), Just(3.0), Just(10.0), Just(200.0), Just(2000.0)],
         ) {
             let heights: Vec<f64> = (0..w * h)
-                .map(|k| (base_dm + crate::synth::mix64(seed ^ k as u64) % relief_dm) as f64 * 0.1)
+                .map(|k| (base_dm + crate::random::mix64(seed ^ k as u64) % relief_dm) as f64 * 0.1)
                 .collect();
             let hf = Heightfield::from_f64(w, h, &heights, cell);
             // a bound of some f32 steps at these heights (~9.8e-4 m)
@@ -1378,10 +1379,10 @@ pub(crate) mod tests {
             steps in prop_oneof![Just(0.6f64), Just(1.5), Just(4.0), Just(40.0)],
         ) {
             let heights: Vec<f64> = (0..w * h)
-                .map(|k| (20_000 + crate::synth::mix64(seed ^ k as u64) % relief_dm) as f64 * 0.1)
+                .map(|k| (20_000 + crate::random::mix64(seed ^ k as u64) % relief_dm) as f64 * 0.1)
                 .collect();
             let hf = Heightfield::from_f64(w, h, &heights, cell);
-            let grid = crate::terrain::stored::PositionGrid::terrain(&hf, hf.height_range().unwrap().0).unwrap();
+            let grid = crate::export::grid::PositionGrid::terrain(&hf, hf.height_range().unwrap().0).unwrap();
             let storage = Storage::quantized(&hf, grid);
             let bound = steps * grid.step[1] as f64;
             match tin_stored(&hf, &TinOptions { max_error_m: bound, max_triangles: None }, &storage) {

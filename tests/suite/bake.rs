@@ -316,7 +316,7 @@ fn near_plane_clipping_draws_nothing_behind_the_eye() {
 fn sparse_image(width: u32, height: u32, every: u64) -> Image {
     let mut img = Image::new(width, height, [0.0; 4]).unwrap();
     for (k, p) in img.pixels.iter_mut().enumerate() {
-        let h = verdant::synth::mix64(k as u64 ^ 0x5eed);
+        let h = verdant::random::mix64(k as u64 ^ 0x5eed);
         if h.is_multiple_of(every) {
             *p = [(h >> 8 & 255) as f32 / 255.0, (h >> 16 & 255) as f32 / 255.0, (h >> 24 & 255) as f32 / 255.0, 1.0];
         } else {
@@ -376,7 +376,7 @@ fn grass_image(size: u32, blades: u64) -> Image {
     let mut img = Image::new(fine, fine, [0.0; 4]).unwrap();
     let s = size as f64;
     for b in 0..blades {
-        let h = verdant::synth::mix64(b ^ 0x67_7261_7373);
+        let h = verdant::random::mix64(b ^ 0x67_7261_7373);
         let u = |shift: u32| ((h >> shift) & 0xffff) as f64 / 65535.0;
         let root = u(0) * s;
         let height = (0.4 + 0.55 * u(16)) * s;

@@ -173,7 +173,7 @@ struct Stream(u64);
 impl Stream {
     fn next(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(1);
-        verdant::synth::mix64(self.0)
+        verdant::random::mix64(self.0)
     }
     fn below(&mut self, n: usize) -> usize {
         (self.next() % n.max(1) as u64) as usize
@@ -356,7 +356,7 @@ fn mutated_gltf_files_never_panic() {
     seeds.push(verdant::export::gltf::to_glb(&scene).unwrap());
     // the same quantized (KHR_mesh_quantization) and compressed (EXT_meshopt_compression): the
     // reader decodes meshoptimizer streams, whose C decoder must never see a shape it asserts on
-    let grid = verdant::terrain::stored::PositionGrid::terrain(&hf, 0.0).unwrap();
+    let grid = verdant::export::grid::PositionGrid::terrain(&hf, 0.0).unwrap();
     for meshopt in [false, true] {
         let opts = verdant::export::gltf::WriteOptions { position_grid: Some(grid), meshopt };
         seeds.push(verdant::export::gltf::to_glb_with(&scene, &opts).unwrap());

@@ -545,7 +545,7 @@ proptest! {
     /// Bilinear samples stay within the map's value range, for any resolution.
     #[test]
     fn density_samples_stay_in_range(w in 1usize..9, h in 1usize..9, seed in 0u64..1000, u in -0.5f64..1.5, v in -0.5f64..1.5) {
-        let m = DensityMap::from_fn(w, h, |i, j| (verdant::synth::mix64(seed ^ (i * 31 + j) as u64) % 1000) as f32 / 999.0);
+        let m = DensityMap::from_fn(w, h, |i, j| (verdant::random::mix64(seed ^ (i * 31 + j) as u64) % 1000) as f32 / 999.0);
         let lo = m.values.iter().cloned().fold(1.0f32, f32::min);
         let hi = m.values.iter().cloned().fold(0.0f32, f32::max);
         let s = m.sample(u, v);

@@ -239,7 +239,7 @@ fn cover_on_a_terrain_attribute_mask_layer_and_report() {
     // the PNG stores the weight itself (weight·255)
     let png = Image::from_png(&mask.to_image().encode_png().unwrap()).unwrap();
     let i = (mask.height / 2 * mask.width + mask.width / 2) as usize;
-    let stored = verdant::bake::raster::linear_to_srgb(png.pixels[i][0]);
+    let stored = verdant::color::linear_to_srgb(png.pixels[i][0]);
     assert!((stored - mask.weights[i]).abs() < 1.5 / 255.0, "{stored} vs {}", mask.weights[i]);
 
     let atlas = atlas_at(-15.0, 0.6);

@@ -97,7 +97,7 @@ fn vertical_cliff() {
 fn white_noise_keeps_the_bound() {
     let dir = tempfile::tempdir().unwrap();
     let path =
-        write_png(dir.path(), "noise.png", 48, 48, |i, j| (verdant::synth::mix64((i * 48 + j) as u64) >> 48) as u16);
+        write_png(dir.path(), "noise.png", 48, 48, |i, j| (verdant::random::mix64((i * 48 + j) as u64) >> 48) as u16);
     let (r, _) = run_checked(&job_for(&path, 100.0), dir.path(), "glb");
     assert!(r.triangles as f64 > 0.8 * r.full_grid_triangles as f64, "noise approaches the full grid: {}", r.triangles);
 }
@@ -179,7 +179,8 @@ fn hgt_with_voids() {
 #[test]
 fn triangle_limit_reports_the_achieved_error() {
     let dir = tempfile::tempdir().unwrap();
-    let path = write_png(dir.path(), "f.png", 65, 65, |i, j| (verdant::synth::mix64((i * 65 + j) as u64) >> 52) as u16);
+    let path =
+        write_png(dir.path(), "f.png", 65, 65, |i, j| (verdant::random::mix64((i * 65 + j) as u64) >> 52) as u16);
     let mut job = job_for(&path, 0.0);
     job.max_triangles = Some(200);
     let (r, _) = run_checked(&job, dir.path(), "glb");

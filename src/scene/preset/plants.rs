@@ -5,6 +5,7 @@ use toml::de::DeValue;
 use toml::Spanned;
 
 use super::{input_path, number_value, pair, PresetError, Table};
+use crate::color::srgb_to_linear_f64;
 use crate::plants::flower::FlowerSettings;
 use crate::plants::grass::GrassSettings;
 use crate::scene::{MeshLook, TreeLook};
@@ -48,11 +49,6 @@ pub const MESH_KEYS: &[&str] = &["scale", "up_axis", "lods", "atlas_size", "anal
 pub const FLOWER_KEYS: &[&str] =
     &["petals", "petal_color", "center_color", "stem_color", "height", "head", "variants", "alpha_cutoff", "atlas_px"];
 
-fn srgb_to_linear(c: f64) -> f32 {
-    let c = c.clamp(0.0, 1.0);
-    (if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }) as f32
-}
-
 /// A colour as `"#rrggbb"` or `[r, g, b]` in 0..1, both sRGB (as colour pickers show them);
 /// returned linear.
 fn colour(t: &Table<'_, '_>, key: &str) -> Result<Option<[f32; 3]>, PresetError> {
@@ -63,7 +59,7 @@ fn colour(t: &Table<'_, '_>, key: &str) -> Result<Option<[f32; 3]>, PresetError>
             let hex = s.strip_prefix('#').unwrap_or(s);
             let parsed = (hex.len() == 6 && hex.bytes().all(|b| b.is_ascii_hexdigit())).then(|| {
                 std::array::from_fn(|k| {
-                    u8::from_str_radix(&hex[2 * k..2 * k + 2], 16).map(|x| srgb_to_linear(x as f64 / 255.0))
+                    u8::from_str_radix(&hex[2 * k..2 * k + 2], 16).map(|x| srgb_to_linear_f64(x as f64 / 255.0))
                 })
             });
             match parsed {
@@ -80,7 +76,7 @@ fn colour(t: &Table<'_, '_>, key: &str) -> Result<Option<[f32; 3]>, PresetError>
                 |x: f64| if (0.0..=1.0).contains(&x) { Ok(()) } else { Err("must be between 0 and 1".to_string()) };
             let mut c = [0.0f32; 3];
             for (k, item) in items.iter().enumerate() {
-                c[k] = srgb_to_linear(number_value(t, key, item, &example, &in01)?);
+                c[k] = srgb_to_linear_f64(number_value(t, key, item, &example, &in01)?);
             }
             Ok(Some(c))
         }

@@ -47,7 +47,7 @@ pub const SNOW_KEYS: &[&str] = &[
 /// Seed of the snow when `[snow] seed` is absent: the scene seed mixed with a tag, so the snow
 /// changes with the scene seed but not with anything else.
 pub fn default_snow_seed(scene_seed: u64) -> u64 {
-    crate::synth::mix64(scene_seed ^ 0x0073_6e6f_7773_6565) // "snowsee"
+    crate::random::mix64(scene_seed ^ 0x0073_6e6f_7773_6565) // "snowsee"
 }
 
 fn in_range(lo: f64, hi: f64, unit: &'static str) -> impl Fn(f64) -> Result<(), String> {

@@ -1,7 +1,14 @@
-//! Counter-based random streams for plant generation: value k of a stream is a SplitMix64 hash of
-//! (stream key, k), so a plant depends only on its seed and ids, never on evaluation order.
+//! Seeded randomness: the SplitMix64 hash and counter-based random streams. Value k of a stream is a
+//! hash of (stream key, k), so an output depends only on its seed and ids, never on evaluation order.
 
-use crate::synth::mix64;
+/// SplitMix64 finaliser: a well-mixed 64-bit hash.
+#[inline]
+pub fn mix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
 
 /// A reproducible stream of random numbers keyed by a list of ids (seed, species, level, …).
 #[derive(Debug, Clone)]

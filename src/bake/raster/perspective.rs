@@ -1,0 +1,275 @@
+//! Perspective triangles: clipped in view space against the near plane and the guard band
+//! (Sutherland & Hodgman 1974), projected and snapped, then scanned with perspective-correct
+//! attributes (Heckbert & Moreton 1991).
+
+use rayon::prelude::*;
+
+use super::camera::PerspectiveView;
+use super::canvas::{Cull, DrawOptions, DrawStats, Fragment};
+use super::scan::{orient, pixel_columns, pixel_rows, scan_triangle, weigh, Attributes};
+use super::{MAX_VERTEX_SUBPIXELS, SUBPIXEL};
+use crate::math::{cross3, dot3, sub3};
+use crate::mesh::Primitive;
+
+/// A vertex of a triangle being clipped: its view-space position and its weights of the source
+/// triangle's three vertices (index order). Both are linear along an edge in view space.
+#[derive(Debug, Clone, Copy, Default)]
+struct ClipVertex {
+    view: [f64; 3],
+    bary: [f64; 3],
+}
+
+/// Most vertices a triangle can have after clipping by the five planes (one more per plane).
+const MAX_CLIP_VERTICES: usize = 3 + 5;
+
+/// A convex polygon in a fixed buffer (clipping allocates nothing).
+#[derive(Clone, Copy)]
+struct ClipPolygon {
+    v: [ClipVertex; MAX_CLIP_VERTICES],
+    len: usize,
+}
+
+impl ClipPolygon {
+    /// Sutherland–Hodgman against one plane. A crossing edge's new vertex is computed from its
+    /// inside end, so the two triangles sharing that edge get the same point (no crack).
+    fn clip(&self, plane: [f64; 4]) -> ClipPolygon {
+        let dist = |c: &ClipVertex| plane[0] * c.view[0] + plane[1] * c.view[1] + plane[2] * c.view[2] + plane[3];
+        let mut out = ClipPolygon { v: [ClipVertex::default(); MAX_CLIP_VERTICES], len: 0 };
+        let mut push = |c: ClipVertex| {
+            if out.len < MAX_CLIP_VERTICES {
+                out.v[out.len] = c;
+                out.len += 1;
+            }
+        };
+        for k in 0..self.len {
+            let (a, b) = (self.v[k], self.v[(k + 1) % self.len]);
+            let (da, db) = (dist(&a), dist(&b));
+            if da >= 0.0 {
+                push(a);
+            }
+            if (da >= 0.0) != (db >= 0.0) {
+                let (inside, outside, di, doo) = if da >= 0.0 { (a, b, da, db) } else { (b, a, db, da) };
+                let t = di / (di - doo);
+                let lerp = |p: [f64; 3], q: [f64; 3]| [0, 1, 2].map(|d| p[d] + t * (q[d] - p[d]));
+                push(ClipVertex { view: lerp(inside.view, outside.view), bary: lerp(inside.bary, outside.bary) });
+            }
+        }
+        out
+    }
+}
+
+/// A perspective triangle (a source triangle or a piece of its clipped polygon) ready to scan.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct PerspTri {
+    /// Index of the source triangle in the primitive.
+    index: u32,
+    /// The source triangle's vertex indices, in index order.
+    source: [u32; 3],
+    /// Snapped positions, ordered so the edge functions are ≥ 0 inside.
+    pts: [[i64; 2]; 3],
+    /// 1 / depth at each of `pts`.
+    inv_depth: [f64; 3],
+    /// Weights of the source vertices at each of `pts`.
+    bary: [[f64; 3]; 3],
+    pub(super) min: [i64; 2],
+    pub(super) max: [i64; 2],
+    /// The source triangle is counter-clockwise seen from the eye.
+    front: bool,
+}
+
+pub(super) struct PerspSetup {
+    pub(super) tris: Vec<PerspTri>,
+    pub(super) stats: DrawStats,
+}
+
+impl PerspSetup {
+    pub(super) fn new(
+        view: &PerspectiveView,
+        object_to_world: &[[f64; 4]; 3],
+        prim: &Primitive,
+        cull: Cull,
+    ) -> PerspSetup {
+        let mut stats = DrawStats::default();
+        let Ok(frame) = view.frame() else {
+            stats.skipped = prim.indices.len() / 3;
+            return PerspSetup { tris: Vec::new(), stats };
+        };
+        let to_view = frame.view.then_from(object_to_world);
+        let verts: Vec<Option<[f64; 3]>> = prim
+            .positions
+            .par_iter()
+            .map(|p| {
+                let v = to_view.apply([p[0] as f64, p[1] as f64, p[2] as f64]);
+                v.iter().all(|c| c.is_finite()).then_some(v)
+            })
+            .collect();
+        let planes = frame.clip_planes();
+        let mut tris = Vec::with_capacity(prim.indices.len() / 3);
+        for (t, idx) in prim.indices.chunks_exact(3).enumerate() {
+            let get = |k: usize| verts.get(idx[k] as usize).copied().flatten();
+            let (Some(a), Some(b), Some(c)) = (get(0), get(1), get(2)) else {
+                stats.skipped += 1;
+                continue;
+            };
+            // Facing from the eye (the origin of view space). View space (right, up, forward) is
+            // left-handed, so counter-clockwise seen from the eye is a positive triple product.
+            let facing = dot3(cross3(sub3(b, a), sub3(c, a)), a);
+            let front = facing > 0.0;
+            let culled = facing == 0.0
+                || !facing.is_finite()
+                || match cull {
+                    Cull::None => false,
+                    Cull::Back => !front,
+                    Cull::Front => front,
+                };
+            if culled {
+                stats.culled += 1;
+                continue;
+            }
+            let mut poly = ClipPolygon { v: [ClipVertex::default(); MAX_CLIP_VERTICES], len: 3 };
+            poly.v[..3].copy_from_slice(&[
+                ClipVertex { view: a, bary: [1.0, 0.0, 0.0] },
+                ClipVertex { view: b, bary: [0.0, 1.0, 0.0] },
+                ClipVertex { view: c, bary: [0.0, 0.0, 1.0] },
+            ]);
+            let inside = |v: &[f64; 3], p: &[f64; 4]| p[0] * v[0] + p[1] * v[1] + p[2] * v[2] + p[3] >= 0.0;
+            for plane in &planes {
+                if [a, b, c].iter().all(|v| inside(v, plane)) {
+                    continue;
+                }
+                poly = poly.clip(*plane);
+                if poly.len < 3 {
+                    break;
+                }
+            }
+            if poly.len < 3 {
+                stats.clipped += 1;
+                continue;
+            }
+            // Project and snap the polygon; then a fan of triangles around its first vertex.
+            let mut screen = [([0i64; 2], 0.0f64); MAX_CLIP_VERTICES];
+            let mut usable = true;
+            for (k, cv) in poly.v[..poly.len].iter().enumerate() {
+                let s = frame.project(cv.view);
+                let snap = |v: f64| (v * SUBPIXEL as f64).round();
+                let (x, y) = (snap(s[0]), snap(s[1]));
+                let lim = MAX_VERTEX_SUBPIXELS as f64;
+                if !(x.abs() <= lim && y.abs() <= lim && s[2] > 0.0) {
+                    usable = false;
+                    break;
+                }
+                screen[k] = ([x as i64, y as i64], 1.0 / s[2]);
+            }
+            if !usable {
+                stats.skipped += 1;
+                continue;
+            }
+            let before = tris.len();
+            for k in 1..poly.len - 1 {
+                let fan = [0, k, k + 1];
+                let area = orient(screen[0].0, screen[k].0, screen[k + 1].0);
+                if area == 0 {
+                    continue;
+                }
+                let order = if area < 0 { [fan[0], fan[2], fan[1]] } else { fan };
+                let pts = order.map(|i| screen[i].0);
+                tris.push(PerspTri {
+                    index: t as u32,
+                    source: [idx[0], idx[1], idx[2]],
+                    pts,
+                    inv_depth: order.map(|i| screen[i].1),
+                    bary: order.map(|i| poly.v[i].bary),
+                    min: [pts.iter().map(|p| p[0]).min().unwrap_or(0), pts.iter().map(|p| p[1]).min().unwrap_or(0)],
+                    max: [pts.iter().map(|p| p[0]).max().unwrap_or(0), pts.iter().map(|p| p[1]).max().unwrap_or(0)],
+                    front,
+                });
+            }
+            if tris.len() == before {
+                // Zero area on the image once snapped, as in the orthographic path.
+                stats.culled += 1;
+            } else {
+                stats.triangles += 1;
+            }
+        }
+        PerspSetup { tris, stats }
+    }
+}
+
+/// [`raster_rows`](super::scan::raster_rows) for perspective triangles: per pixel, the screen-linear weights l give
+/// 1/z = Σ lᵢ/zᵢ and the perspective-correct weights (lᵢ/zᵢ)·z of the (clipped) vertices, whose
+/// own weights of the source triangle then give the attributes.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn raster_rows_persp<F>(
+    color: &mut [[f32; 4]],
+    depth: &mut [f32],
+    width: u32,
+    y0: u32,
+    y1: u32,
+    setup: &PerspSetup,
+    prim: &Primitive,
+    tris: &[u32],
+    opts: &DrawOptions,
+    shader: &mut F,
+) -> u64
+where
+    F: FnMut(&Fragment) -> Option<[f32; 4]>,
+{
+    let Attributes { normals, uvs, colors } = Attributes::of(prim);
+    let n = prim.positions.len();
+    let mut written = 0u64;
+    for &t in tris {
+        let Some(tri) = setup.tris.get(t as usize) else {
+            continue;
+        };
+        let Some((ry0, ry1)) = pixel_rows(tri.min[1], tri.max[1], y1) else {
+            continue;
+        };
+        let ry0 = ry0.max(y0);
+        if ry0 >= ry1 {
+            continue;
+        }
+        let Some((x0, x1)) = pixel_columns(tri.min[0], tri.max[0], width) else {
+            continue;
+        };
+        let vi = tri.source.map(|i| i as usize);
+        if vi.iter().any(|&i| i >= n) {
+            continue;
+        }
+        let inv_area = 1.0 / orient(tri.pts[0], tri.pts[1], tri.pts[2]) as f64;
+        let [w0, w1, w2] = tri.inv_depth;
+        let [b0, b1, b2] = tri.bary;
+        scan_triangle(tri.pts, x0, x1, ry0, ry1, |x, y, e| {
+            let q = [e[0] as f64 * inv_area * w0, e[1] as f64 * inv_area * w1, e[2] as f64 * inv_area * w2];
+            let inv_z = q[0] + q[1] + q[2];
+            let z_view = 1.0 / inv_z;
+            let z = z_view as f32;
+            let k = (y - y0) as usize * width as usize + x as usize;
+            if !opts.depth_test || z < depth[k] {
+                let lam = [q[0] * z_view, q[1] * z_view, q[2] * z_view];
+                let bary = weigh(lam, &b0, &b1, &b2);
+                let bf = [bary[0] as f32, bary[1] as f32, bary[2] as f32];
+                let p = &prim.positions;
+                let frag = Fragment {
+                    x,
+                    y,
+                    depth: z,
+                    position: weigh(bf, &p[vi[0]], &p[vi[1]], &p[vi[2]]),
+                    normal: normals.map_or([0.0; 3], |nm| weigh(bf, &nm[vi[0]], &nm[vi[1]], &nm[vi[2]])),
+                    uv: uvs.map_or([0.0; 2], |u| weigh(bf, &u[vi[0]], &u[vi[1]], &u[vi[2]])),
+                    color: colors.map_or([1.0; 4], |cl| weigh(bf, &cl[vi[0]], &cl[vi[1]], &cl[vi[2]])),
+                    bary: bf,
+                    triangle: tri.index,
+                    front_facing: tri.front,
+                };
+                if let Some(rgba) = shader(&frag) {
+                    color[k] = rgba;
+                    if opts.depth_write {
+                        depth[k] = z;
+                    }
+                    written += 1;
+                }
+            }
+        });
+    }
+    written
+}

@@ -1,0 +1,502 @@
+//! Reading a glTF 2.0 file (`.glb` or `.gltf` + buffers) back into a [`Scene`] exactly, with the
+//! structural problems the glTF crates would trip on checked first.
+
+use std::fs;
+use std::path::Path;
+
+use serde_json::Value;
+
+use super::accessor::{read_floats, read_indices, view_bytes};
+use super::meshopt::meshopt_buffers;
+use super::report::{issue, Issue, Severity};
+use super::{Loaded, ValidateError};
+use crate::export::gltf::{EXT_INSTANCING, EXT_LOD, EXT_MESHOPT, KHR_QUANTIZATION, LOD_COVERAGE_KEY};
+use crate::mesh::{AlphaMode, Bounds, Instances, Material, Mesh, Node, Primitive, PrimitiveMode, Scene, Texture};
+
+/// References gltf-json's validation or the gltf crate follow without a bounds check: every
+/// primitive's attribute and morph-target accessors (gltf-json 1.4.1 mesh.rs:151 indexes the
+/// POSITION accessor before validating it) and each image's source (gltf 1.4.1 image.rs:125–128
+/// unwraps `mimeType` for a bufferView image and `uri` when there is no bufferView). Checked on
+/// the JSON before either crate looks at them; each problem is "json path: what is wrong".
+fn gltf_json_problems(root: &gltf::json::Root) -> Vec<String> {
+    let mut problems = Vec::new();
+    let accessors = root.accessors.len();
+    for (mi, mesh) in root.meshes.iter().enumerate() {
+        for (pi, prim) in mesh.primitives.iter().enumerate() {
+            let at = format!("meshes[{mi}].primitives[{pi}]");
+            for (semantic, index) in &prim.attributes {
+                if index.value() >= accessors {
+                    let name = match semantic {
+                        gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                        gltf::json::validation::Checked::Invalid => "?".into(),
+                    };
+                    problems.push(format!(
+                        "{at}.attributes.{name}: accessor {} does not exist ({accessors} accessors)",
+                        index.value()
+                    ));
+                }
+            }
+            for (ti, target) in prim.targets.iter().flatten().enumerate() {
+                for (name, index) in
+                    [("POSITION", &target.positions), ("NORMAL", &target.normals), ("TANGENT", &target.tangents)]
+                {
+                    if let Some(index) = (*index).filter(|i| i.value() >= accessors) {
+                        problems.push(format!(
+                            "{at}.targets[{ti}].{name}: accessor {} does not exist ({accessors} accessors)",
+                            index.value()
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    for (ii, image) in root.images.iter().enumerate() {
+        match (&image.buffer_view, &image.uri) {
+            (Some(_), Some(_)) => {
+                problems.push(format!("images[{ii}]: both a uri and a bufferView; an image has exactly one"))
+            }
+            (Some(_), None) if image.mime_type.is_none() => problems
+                .push(format!("images[{ii}]: an image in a bufferView needs a mimeType (image/png or image/jpeg)")),
+            (None, None) => problems.push(format!("images[{ii}]: neither a uri nor a bufferView")),
+            _ => {}
+        }
+    }
+    problems
+}
+
+pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
+    let parse = |problem: String| ValidateError::Parse { path: path.to_path_buf(), problem };
+    let bytes = crate::input::read_limited(path, crate::input::MAX_GLTF_BYTES, "a glTF file")
+        .map_err(|e| ValidateError::Read { path: path.to_path_buf(), source: e.into_io() })?;
+    // a GLB's header states the file's length (the Khronos validator's GLB_LENGTH_MISMATCH)
+    if bytes.starts_with(b"glTF") && bytes.len() >= 12 {
+        let declared = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
+        if declared != bytes.len() {
+            return Err(parse(format!(
+                "the GLB header says the file is {declared} bytes, it is {} (truncated or padded?)",
+                bytes.len()
+            )));
+        }
+    }
+    // the gltf crate refuses required extensions it does not implement; the ones verdant writes
+    // (EXT_mesh_gpu_instancing) are checked here instead, so validate with that one exception
+    let gltf = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| parse(format!("not valid glTF: {e}")))?;
+    {
+        use gltf::json::validation::{Error as JsonError, Validate};
+        let root = gltf.document.as_json();
+        let problems = gltf_json_problems(root);
+        if !problems.is_empty() {
+            return Err(parse(format!("not valid glTF: {}", problems.join("; "))));
+        }
+        let mut problems = Vec::new();
+        root.validate(root, gltf::json::Path::new, &mut |path, error| {
+            let at = path().to_string();
+            let ours = matches!(error, JsonError::Unsupported)
+                && at.starts_with("extensionsRequired")
+                && [EXT_INSTANCING, KHR_QUANTIZATION, EXT_MESHOPT]
+                    .iter()
+                    .any(|ext| root.extensions_required.iter().any(|e| e == ext) && at.contains(ext));
+            if !ours {
+                problems.push(format!("{at}: {error}"));
+            }
+        });
+        if !problems.is_empty() {
+            return Err(parse(format!("not valid glTF: {}", problems.join("; "))));
+        }
+    }
+    let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let doc = gltf.document;
+    // buffer files: inside the file's folder, regular files within the size limit, named when
+    // missing (checked before the gltf crate reads them)
+    for buffer in doc.buffers() {
+        if let gltf::buffer::Source::Uri(uri) = buffer.source() {
+            if uri.starts_with("data:") {
+                continue;
+            }
+            let checked = crate::input::resolve_inside(base, uri).and_then(|file| {
+                let meta = fs::metadata(&file).map_err(|e| format!("{}: {e}", file.display()))?;
+                if !meta.is_file() {
+                    return Err(format!("{} is not a regular file", file.display()));
+                }
+                if meta.len() > crate::input::MAX_GLTF_BYTES {
+                    return Err(format!(
+                        "{}: {} bytes, more than the {}-byte limit for a glTF buffer",
+                        file.display(),
+                        meta.len(),
+                        crate::input::MAX_GLTF_BYTES
+                    ));
+                }
+                if (meta.len() as usize) < buffer.length() {
+                    return Err(format!(
+                        "{}: {} bytes, the buffer declares byteLength {}",
+                        file.display(),
+                        meta.len(),
+                        buffer.length()
+                    ));
+                }
+                Ok(())
+            });
+            if let Err(e) = checked {
+                return Err(parse(format!("buffer {} (uri `{}`): {e}", buffer.index(), crate::input::escape(uri))));
+            }
+        }
+    }
+    let buffers: Vec<Vec<u8>> = if doc.extensions_used().any(|e| e == EXT_MESHOPT) {
+        meshopt_buffers(&doc, base, gltf.blob).map_err(parse)?
+    } else {
+        gltf::import_buffers(&doc, Some(base), gltf.blob)
+            .map_err(|e| parse(format!("cannot load its buffers: {e}")))?
+            .into_iter()
+            .map(|b| b.0)
+            .collect()
+    };
+    let buffers: Vec<&[u8]> = buffers.iter().map(|b| &b[..]).collect();
+    let mut issues = node_graph_issues(&doc);
+    let mut scene = Scene::default();
+    let mut declared_bounds = Vec::new();
+
+    // KHR_mesh_quantization must be required where positions are not float (a reader without it
+    // would misread them)
+    let quantization_used = doc.extensions_required().any(|e| e == KHR_QUANTIZATION);
+    for mesh in doc.meshes() {
+        let mesh_name = mesh.name().unwrap_or("").to_string();
+        let mut out = Mesh { name: mesh_name.clone(), primitives: Vec::new(), extras: parse_extras(mesh.extras()) };
+        let mut declared = Vec::new();
+        for (pi, prim) in mesh.primitives().enumerate() {
+            let loc = format!("mesh {} {:?} primitive {pi}", mesh.index(), mesh_name);
+            let (p, bounds) = read_primitive(&prim, &buffers, &loc, quantization_used, &mut issues);
+            out.primitives.push(p);
+            declared.push(bounds);
+        }
+        scene.meshes.push(out);
+        declared_bounds.push(declared);
+    }
+
+    for m in doc.materials() {
+        let pbr = m.pbr_metallic_roughness();
+        let alpha_mode = match m.alpha_mode() {
+            gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+            gltf::material::AlphaMode::Mask => AlphaMode::Mask { cutoff: m.alpha_cutoff().unwrap_or(0.5) },
+            gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+        };
+        scene.materials.push(Material {
+            name: m.name().unwrap_or("").to_string(),
+            base_color: pbr.base_color_factor(),
+            base_color_texture: pbr.base_color_texture().map(|i| i.texture().index()),
+            normal_texture: m.normal_texture().map(|n| n.texture().index()),
+            metallic: pbr.metallic_factor(),
+            roughness: pbr.roughness_factor(),
+            alpha_mode,
+            double_sided: m.double_sided(),
+        });
+    }
+
+    for t in doc.textures() {
+        let image = t.source();
+        let loc = format!("texture {} image {}", t.index(), image.index());
+        let png = match image.source() {
+            gltf::image::Source::View { view, .. } => match view_bytes(&view, &buffers) {
+                Ok(b) => b.to_vec(),
+                Err(e) => {
+                    issues.push(issue(Severity::Error, &loc, e));
+                    Vec::new()
+                }
+            },
+            gltf::image::Source::Uri { uri, .. } => {
+                if uri.starts_with("data:") {
+                    issues.push(issue(Severity::Warning, &loc, "data: URI images are not checked"));
+                    Vec::new()
+                } else {
+                    match crate::input::resolve_inside(base, uri).and_then(|file| {
+                        crate::input::read_limited(&file, crate::input::MAX_TEXTURE_BYTES, "an image")
+                            .map_err(|e| e.to_string())
+                    }) {
+                        Ok(bytes) => bytes,
+                        Err(e) => {
+                            issues.push(issue(Severity::Error, &loc, format!("image URI: {e}")));
+                            Vec::new()
+                        }
+                    }
+                }
+            }
+        };
+        if !png.is_empty() && !png.starts_with(b"\x89PNG\r\n\x1a\n") && !png.starts_with(&[0xff, 0xd8, 0xff]) {
+            issues.push(issue(Severity::Error, &loc, "image data is neither PNG nor JPEG"));
+        }
+        let name = t.name().or(image.name()).unwrap_or("").to_string();
+        scene.textures.push(Texture { name, png });
+    }
+
+    for node in doc.nodes() {
+        let loc = format!("node {} {:?}", node.index(), node.name().unwrap_or(""));
+        let (translation, rotation, scale) = node.transform().decomposed();
+        let mut out = Node {
+            name: node.name().unwrap_or("").to_string(),
+            mesh: node.mesh().map(|m| m.index()),
+            translation,
+            rotation,
+            scale,
+            children: node.children().map(|c| c.index()).collect(),
+            extras: parse_extras(node.extras()),
+            ..Node::default()
+        };
+        if let Some(ext) = node.extension_value(EXT_INSTANCING) {
+            out.instances = Some(read_instances(ext, &doc, &buffers, &loc, &mut issues));
+            if node.mesh().is_none() {
+                issues.push(issue(Severity::Error, &loc, format!("{EXT_INSTANCING} on a node without a mesh")));
+            }
+        }
+        if let Some(ext) = node.extension_value(EXT_LOD) {
+            match ext.get("ids").and_then(Value::as_array) {
+                Some(ids) => {
+                    for id in ids {
+                        match id.as_u64().map(|i| i as usize).filter(|&i| i < doc.nodes().len() && i != node.index()) {
+                            Some(i) => out.lods.push(i),
+                            None => issues.push(issue(
+                                Severity::Error,
+                                &loc,
+                                format!("{EXT_LOD} id {id} is not another node"),
+                            )),
+                        }
+                    }
+                }
+                None => issues.push(issue(Severity::Error, &loc, format!("{EXT_LOD} without an \"ids\" array"))),
+            }
+            // the coverage lives in extras; take it out so extras round-trip as written
+            if let Some(Value::Object(map)) = &mut out.extras {
+                if let Some(cov) = map.remove(LOD_COVERAGE_KEY) {
+                    match cov
+                        .as_array()
+                        .map(|a| a.iter().map(|c| c.as_f64().map(|c| c as f32)).collect::<Option<Vec<_>>>())
+                    {
+                        Some(Some(c)) => out.lod_screen_coverage = c,
+                        _ => issues.push(issue(
+                            Severity::Error,
+                            &loc,
+                            format!("{LOD_COVERAGE_KEY} is not an array of numbers"),
+                        )),
+                    }
+                    if map.is_empty() {
+                        out.extras = None;
+                    }
+                }
+            }
+        }
+        scene.nodes.push(out);
+    }
+
+    if let Some(s) = doc.default_scene().or_else(|| doc.scenes().next()) {
+        scene.name = s.name().unwrap_or("").to_string();
+        scene.roots = s.nodes().map(|n| n.index()).collect();
+        scene.extras = parse_extras(s.extras());
+    }
+    Ok(Loaded { scene, issues, declared_bounds })
+}
+
+fn parse_extras(raw: &gltf::json::Extras) -> Option<Value> {
+    raw.as_ref().and_then(|r| serde_json::from_str(r.get()).ok())
+}
+
+/// Reads one triangle primitive; problems that stop an attribute from being read become issues.
+fn read_primitive(
+    prim: &gltf::Primitive,
+    buffers: &[&[u8]],
+    loc: &str,
+    quantization_used: bool,
+    issues: &mut Vec<Issue>,
+) -> (Primitive, Option<Bounds>) {
+    use gltf::Semantic;
+    let mut p = Primitive { material: prim.material().index(), ..Primitive::default() };
+    match prim.mode() {
+        gltf::mesh::Mode::Triangles => {}
+        gltf::mesh::Mode::Points => p.mode = PrimitiveMode::Points,
+        mode => {
+            issues.push(issue(
+                Severity::Warning,
+                loc,
+                format!("mode {mode:?} is not checked (only triangle lists and points are)"),
+            ));
+            return (p, None);
+        }
+    }
+    let mut declared = None;
+    let read = |issues: &mut Vec<Issue>,
+                sem: &str,
+                acc: Option<gltf::Accessor>,
+                dims: &[usize]|
+     -> Option<(usize, Vec<f32>)> {
+        let acc = acc?;
+        match read_floats(&acc, buffers) {
+            Ok((d, v)) if dims.contains(&d) => Some((d, v)),
+            Ok((d, _)) => {
+                issues.push(issue(Severity::Error, loc, format!("{sem} has {d} components per element")));
+                None
+            }
+            Err(e) => {
+                issues.push(issue(Severity::Error, loc, format!("{sem}: {e}")));
+                None
+            }
+        }
+    };
+    match prim.get(&Semantic::Positions) {
+        None => issues.push(issue(Severity::Error, loc, "no POSITION attribute")),
+        Some(acc) => {
+            // KHR_mesh_quantization allows (normalized) byte and short positions too
+            use gltf::accessor::DataType;
+            let quantized = matches!(acc.data_type(), DataType::U8 | DataType::I8 | DataType::U16 | DataType::I16);
+            if acc.data_type() != DataType::F32 && !(quantized && quantization_used) {
+                issues.push(issue(
+                    Severity::Error,
+                    loc,
+                    if quantized {
+                        "POSITION is not FLOAT and the file does not use KHR_mesh_quantization"
+                    } else {
+                        "POSITION is not FLOAT"
+                    },
+                ));
+            }
+            let bound = |v: Option<Value>| -> Option<[f32; 3]> {
+                let a = v?.as_array()?.iter().map(|x| x.as_f64().map(|x| x as f32)).collect::<Option<Vec<f32>>>()?;
+                a.try_into().ok()
+            };
+            match (bound(acc.min()), bound(acc.max())) {
+                (Some(min), Some(max)) => declared = Some(Bounds { min, max }),
+                _ => issues.push(issue(
+                    Severity::Error,
+                    loc,
+                    "POSITION accessor lacks a 3-number min/max (glTF requires it)",
+                )),
+            }
+            if let Some((_, v)) = read(issues, "POSITION", Some(acc), &[3]) {
+                p.positions = v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+            }
+        }
+    }
+    if let Some((_, v)) = read(issues, "NORMAL", prim.get(&Semantic::Normals), &[3]) {
+        p.normals = v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    }
+    if let Some((_, v)) = read(issues, "TEXCOORD_0", prim.get(&Semantic::TexCoords(0)), &[2]) {
+        p.uvs = v.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
+    }
+    if let Some((_, v)) = read(issues, "TANGENT", prim.get(&Semantic::Tangents), &[4]) {
+        p.tangents = v.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+    }
+    if let Some((d, v)) = read(issues, "COLOR_0", prim.get(&Semantic::Colors(0)), &[3, 4]) {
+        p.colors = v.chunks_exact(d).map(|c| [c[0], c[1], c[2], if d == 4 { c[3] } else { 1.0 }]).collect();
+    }
+    for (sem, acc) in prim.attributes() {
+        if let Semantic::Extras(name) = sem {
+            let name = format!("_{name}");
+            if let Some((_, v)) = read(issues, &name, Some(acc), &[4]) {
+                let values = v.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+                p.custom.push(crate::mesh::CustomAttribute { name, values });
+            }
+        }
+    }
+    match prim.indices() {
+        Some(acc) => match read_indices(&acc, buffers) {
+            Ok(i) => p.indices = i,
+            Err(e) => issues.push(issue(Severity::Error, loc, format!("indices: {e}"))),
+        },
+        // non-indexed points: every vertex is one (kept without indices, as written)
+        None if p.mode == PrimitiveMode::Points => {}
+        // non-indexed triangles: every three vertices are a triangle
+        None => p.indices = (0..p.positions.len() as u32).collect(),
+    }
+    let custom = p.custom.iter().map(|c| (c.name.as_str(), c.values.len()));
+    for (name, len) in [
+        ("NORMAL", p.normals.len()),
+        ("TEXCOORD_0", p.uvs.len()),
+        ("TANGENT", p.tangents.len()),
+        ("COLOR_0", p.colors.len()),
+    ]
+    .into_iter()
+    .chain(custom)
+    {
+        if len != 0 && len != p.positions.len() {
+            issues.push(issue(
+                Severity::Error,
+                loc,
+                format!("{name} has {len} elements for {} positions", p.positions.len()),
+            ));
+        }
+    }
+    (p, declared)
+}
+
+fn read_instances(
+    ext: &Value,
+    doc: &gltf::Document,
+    buffers: &[&[u8]],
+    loc: &str,
+    issues: &mut Vec<Issue>,
+) -> Instances {
+    let mut inst = Instances::default();
+    let attrs = ext.get("attributes").and_then(Value::as_object);
+    let mut get = |name: &str, dims: usize| -> Vec<f32> {
+        let Some(index) = attrs.and_then(|a| a.get(name)) else { return Vec::new() };
+        let acc = index.as_u64().and_then(|i| doc.accessors().nth(i as usize));
+        match acc.map(|a| read_floats(&a, buffers)) {
+            Some(Ok((d, v))) if d == dims => v,
+            Some(Ok((d, _))) => {
+                issues.push(issue(
+                    Severity::Error,
+                    loc,
+                    format!("instance {name} has {d} components, expected {dims}"),
+                ));
+                Vec::new()
+            }
+            Some(Err(e)) => {
+                issues.push(issue(Severity::Error, loc, format!("instance {name}: {e}")));
+                Vec::new()
+            }
+            None => {
+                issues.push(issue(Severity::Error, loc, format!("instance {name} accessor {index} does not exist")));
+                Vec::new()
+            }
+        }
+    };
+    inst.translations = get("TRANSLATION", 3).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    inst.rotations = get("ROTATION", 4).chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+    inst.scales = get("SCALE", 3).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    inst
+}
+
+/// The node hierarchy must be a forest (glTF 2.0 §3.5.3): no node is its own ancestor and no
+/// node has two parents; otherwise a viewer walking it loops or draws a node twice.
+fn node_graph_issues(doc: &gltf::Document) -> Vec<Issue> {
+    let n = doc.nodes().len();
+    let mut parent: Vec<Option<usize>> = vec![None; n];
+    let mut issues = Vec::new();
+    for node in doc.nodes() {
+        for child in node.children() {
+            let c = child.index();
+            if let Some(p) = parent[c] {
+                issues.push(issue(
+                    Severity::Error,
+                    format!("node {c}"),
+                    format!("has two parents, nodes {p} and {}", node.index()),
+                ));
+            } else {
+                parent[c] = Some(node.index());
+            }
+        }
+    }
+    for start in 0..n {
+        // walk up from every node: more than n steps means a cycle
+        let (mut at, mut steps) = (start, 0);
+        while let Some(p) = parent[at] {
+            at = p;
+            steps += 1;
+            if steps > n {
+                issues.push(issue(
+                    Severity::Error,
+                    format!("node {start}"),
+                    "is its own ancestor: the node hierarchy has a cycle",
+                ));
+                return issues;
+            }
+        }
+    }
+    issues
+}
