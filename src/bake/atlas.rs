@@ -229,7 +229,7 @@ fn box_weights(n_in: usize, n_out: usize) -> Vec<Vec<(usize, f32)>> {
 }
 
 /// A mip level's size, alpha scale and coverage, as reports list them.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MipFigures {
     pub width: u32,
     pub height: u32,

@@ -128,7 +128,7 @@ impl Default for LodImageOptions {
 }
 
 /// The errors over all views at one distance.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DistanceError {
     /// From the eye to the reference's bounding-sphere centre.
     pub distance_m: f64,

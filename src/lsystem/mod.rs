@@ -23,7 +23,7 @@ use thiserror::Error;
 pub const MAX_RECURSION: u32 = 4096;
 
 /// The three file formats.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum Dialect {
     /// The point-sprite thesis' stochastic format: `a-b-c` recursion levels, `X(100)=axiom`,
     /// `C(P)=R` rules with cumulative probabilities, `@`. Named `ls` on the command line.

@@ -2,7 +2,7 @@
 //! a flower the baker renders from a small procedural 3-D model (a curved stem with two leaves, a
 //! head of N elliptical petals around a disc, tilted towards the viewer).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::bake::atlas::{dilate, finish_normal_atlas, mip_chain, resolve_supersampled, MipLevel, FLAT_NORMAL};
 use crate::bake::image::Image;
@@ -196,7 +196,7 @@ pub struct FlowerAsset {
     pub report: FlowerReport,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FlowerReport {
     pub name: String,
     pub variants: usize,

@@ -6,7 +6,7 @@
 use std::time::Instant;
 
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::bake::atlas::{
     dilate, finish_normal_atlas, mip_chain, mip_figures, resolve_supersampled, MipFigures, MipLevel, FLAT_NORMAL,
@@ -22,6 +22,8 @@ use crate::plants::texture;
 
 /// Levels of detail of a clump (LoD0 blades … LoD3 top card).
 pub const GRASS_LODS: usize = 4;
+/// What each level draws, as manifest.json names it (see [`crate::plants::grass`]).
+pub const GRASS_LOD_KINDS: [&str; GRASS_LODS] = ["blades", "blade quads", "slices", "top card"];
 /// The rings the real-time grass thesis used (near blades up to 32 m, billboards to 80 m).
 pub const THESIS_RINGS_M: [f64; 2] = [32.0, 80.0];
 /// The grass switch search's range: farthest and nearest distance (eye to the clump's
@@ -65,7 +67,7 @@ pub struct AtlasCell {
 }
 
 /// Figures of one level of detail (all clumps together, and the densest clump alone).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LodFigures {
     pub level: usize,
     pub triangles: usize,
@@ -92,7 +94,7 @@ pub struct LodFigures {
     pub screen_coverage: f64,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct GrassReport {
     pub name: String,
     pub clumps: usize,

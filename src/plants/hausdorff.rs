@@ -5,7 +5,7 @@
 //! "Real-Time Collision Detection" §5.1.5.
 
 use glam::DVec3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::bake::image::Image;
 use crate::mesh::{AlphaMode, Material, Mesh};
@@ -15,7 +15,7 @@ use crate::random::mix64;
 const MAX_GRID_SIDE: usize = 96;
 
 /// What [`hausdorff`] measured, in metres.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct HausdorffError {
     /// Largest distance of a sample to the reference surface.
     pub max_m: f64,

@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::bake::raster::png::encode_rgba8_png;
 use crate::mesh::{AlphaMode, Bounds, Material, Mesh, Primitive, Scene, Texture};
@@ -98,7 +98,7 @@ impl Default for ObjOptions {
 }
 
 /// What the loader found and did.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct MeshAssetStats {
     pub vertices: usize,
     pub triangles: usize,

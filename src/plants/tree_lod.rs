@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::bake::atlas::{
@@ -86,8 +86,6 @@ pub enum TreeLodError {
     Export(#[from] ExportError),
     #[error(transparent)]
     MeshAsset(#[from] MeshAssetError),
-    #[error("{name}: LoD{level} would be empty: the model has too few triangles to simplify; pass --lods {level}")]
-    TooSmall { name: String, level: usize },
     #[error("{path} does not pass validation (this is a bug, please report it with the input file):\n{report}")]
     Invalid { path: PathBuf, report: String },
 }
@@ -97,7 +95,7 @@ impl Failure for TreeLodError {
     fn blame(&self) -> Blame {
         match self {
             TreeLodError::Tree(e) => e.blame(),
-            TreeLodError::Options(_) | TreeLodError::TooSmall { .. } => Blame::Input,
+            TreeLodError::Options(_) => Blame::Input,
             TreeLodError::MeshAsset(e) => e.blame(),
             _ => Blame::Build,
         }
@@ -555,10 +553,11 @@ impl TreeLod {
 }
 
 /// Figures of one level.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TreeLodFigures {
     pub level: usize,
-    pub kind: &'static str,
+    /// The level's [`TreeLod::kind`].
+    pub kind: String,
     pub triangles: usize,
     pub vertices: usize,
     /// Size of `<name>_LOD<n>.glb`.
@@ -581,7 +580,7 @@ pub struct TreeLodFigures {
 }
 
 /// One row of the speed/error table.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SpeedErrorRow {
     pub level: usize,
     pub triangles: usize,
@@ -593,7 +592,7 @@ pub struct SpeedErrorRow {
     pub triangle_ratio: f64,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TreeLodReport {
     pub name: String,
     pub seed: u64,
@@ -857,14 +856,19 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
     }];
     let lod1_source = lod1.as_ref().map(|l| (l.materials.clone(), l.textures.clone()));
     if let Some(lod1) = lod1 {
-        if lod1.mesh.primitives.is_empty() {
-            return Err(TreeLodError::TooSmall { name, level: 1 });
-        }
-        let images = decode(&lod1.textures)?;
+        // a model too small to simplify (a 12-triangle box) keeps LoD0's mesh here: the level then
+        // saves nothing and is left out of the written chain, which goes on to the card levels
+        let (mesh, materials, textures) = if lod1.mesh.primitives.is_empty() {
+            let lod0 = &levels[0].scene;
+            (lod0.meshes[0].clone(), lod0.materials.clone(), lod0.textures.clone())
+        } else {
+            (lod1.mesh, lod1.materials, lod1.textures)
+        };
+        let images = decode(&textures)?;
         levels.push(TreeLod {
             level: 1,
             kind: "simplified",
-            scene: single_mesh_scene(&format!("{name}_LOD1"), lod1.mesh, lod1.materials, lod1.textures),
+            scene: single_mesh_scene(&format!("{name}_LOD1"), mesh, materials, textures),
             images,
         });
     }
@@ -1005,9 +1009,12 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
                     mesh = simplify_sloppy(lod0_mesh, ratio);
                 }
                 if mesh.primitives.is_empty() {
-                    return Err(TreeLodError::TooSmall { name, level: 2 });
+                    // nothing left to decimate: LoD1's mesh, left out below as saving nothing
+                    let lod1 = &levels[1].scene;
+                    (lod1.meshes[0].clone(), lod1.materials.clone(), lod1.textures.clone(), levels[1].images.clone())
+                } else {
+                    (mesh, lod1_materials.clone(), lod1_textures.clone(), levels[1].images.clone())
                 }
-                (mesh, lod1_materials.clone(), lod1_textures.clone(), levels[1].images.clone())
             }
         };
         levels.push(TreeLod {
@@ -1086,7 +1093,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
         };
         let mut f = TreeLodFigures {
             level: lod.level,
-            kind: lod.kind,
+            kind: lod.kind.to_string(),
             triangles: lod.triangles(),
             vertices: mesh.vertex_count(),
             bytes,
@@ -1192,10 +1199,10 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<Chain, Tre
 
 /// A level built but not written: it would have drawn no fewer triangles than the level before it
 /// (a small tree's cards can outnumber its simplified branches), so an engine would gain nothing.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LeftOutLevel {
     /// What it would have been ("cards", "billboards", …) and its number in the full chain.
-    pub kind: &'static str,
+    pub kind: String,
     pub planned_level: usize,
     pub triangles: usize,
     /// The triangles of the level before it in the written chain.
@@ -1212,7 +1219,7 @@ fn without_levels_that_save_nothing(name: &str, levels: Vec<TreeLod>) -> (Vec<Tr
         match kept.last().map(TreeLod::triangles) {
             Some(previous) if empty || lod.triangles() >= previous => {
                 left_out.push(LeftOutLevel {
-                    kind: lod.kind,
+                    kind: lod.kind.to_string(),
                     planned_level: lod.level,
                     triangles: lod.triangles(),
                     previous_triangles: previous,

@@ -8,9 +8,11 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use crate::export::write_atomic;
+use crate::plants::grass_asset::GRASS_LOD_KINDS;
+use crate::plants::tree_lod::TreeLodReport;
 use crate::scene::cache::{sha256_hex, FileHashes};
 use crate::scene::error::SceneBuildError;
-use crate::scene::plants_stage::PlantsStageReport;
+use crate::scene::plants_stage::{PlantReport, PlantsStageReport};
 use crate::scene::scatter_stage::ScatterStageReport;
 use crate::scene::snow_stage::SnowStageReport;
 use crate::scene::stages::{PreviewStageReport, Stage, TerrainStageReport};
@@ -134,7 +136,22 @@ struct PlantManifest {
     /// "grass", "flower", "tree" or "mesh": what made the files.
     look: &'static str,
     files: Vec<String>,
-    lods: Vec<serde_json::Value>,
+    lods: Vec<PlantLodManifest>,
+}
+
+/// One level of a species' chain (of one variant, for trees).
+#[derive(Serialize)]
+struct PlantLodManifest {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    variant: Option<usize>,
+    level: usize,
+    /// What the level draws: "blades", "blade quads", "slices", "top card" (grass); "full",
+    /// "simplified", "decimated", "cards", "billboards", "impostor" (trees and models).
+    kind: String,
+    file: String,
+    triangles: usize,
+    switch_distance_m: f64,
+    screen_coverage: f64,
 }
 
 #[derive(Serialize)]
@@ -498,42 +515,47 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
 
 /// Per level of a species' chain (per variant for trees): its file, triangles, switch distance
 /// and MSFT_lod screen coverage.
-fn plant_lods(sp: &crate::scene::plants_stage::PlantReport) -> Vec<serde_json::Value> {
-    use serde_json::{json, Value};
-    let rows = |stem: &str, lods: &Value, variant: Option<usize>| -> Vec<Value> {
-        lods.as_array()
-            .into_iter()
-            .flatten()
-            .map(|l| {
-                let mut row = json!({
-                    "level": l["level"],
-                    "kind": l["kind"],
-                    "file": format!("species/{stem}_LOD{}.glb", l["level"]),
-                    "triangles": l["triangles"],
-                    "switch_distance_m": l["switch_distance_m"],
-                    "screen_coverage": l["screen_coverage"],
-                });
-                if let Some(k) = variant {
-                    row["variant"] = json!(k);
-                }
-                row
+fn plant_lods(sp: &PlantReport) -> Vec<PlantLodManifest> {
+    if let Some(g) = &sp.grass {
+        return g
+            .lods
+            .iter()
+            .map(|l| PlantLodManifest {
+                variant: None,
+                level: l.level,
+                kind: GRASS_LOD_KINDS.get(l.level).copied().unwrap_or("").to_string(),
+                file: format!("species/{}_LOD{}.glb", sp.name, l.level),
+                triangles: l.triangles,
+                switch_distance_m: l.switch_distance_m,
+                screen_coverage: l.screen_coverage,
+            })
+            .collect();
+    }
+    let chain_rows = |stem: &str, chain: &TreeLodReport, variant: Option<usize>| -> Vec<PlantLodManifest> {
+        chain
+            .lods
+            .iter()
+            .map(|l| PlantLodManifest {
+                variant,
+                level: l.level,
+                kind: l.kind.clone(),
+                file: format!("species/{stem}_LOD{}.glb", l.level),
+                triangles: l.triangles,
+                switch_distance_m: l.switch_distance_m,
+                screen_coverage: l.screen_coverage,
             })
             .collect()
     };
-    if let Some(g) = &sp.grass {
-        return rows(&sp.name, &g["lods"], None);
-    }
     if let Some(t) = &sp.tree {
-        return t["variants"]
-            .as_array()
-            .into_iter()
-            .flatten()
+        return t
+            .variants
+            .iter()
             .enumerate()
-            .flat_map(|(k, v)| rows(&format!("{}_v{k}", sp.name), &v["chain"]["lods"], Some(k)))
+            .flat_map(|(k, v)| chain_rows(&format!("{}_v{k}", sp.name), &v.chain, Some(k)))
             .collect();
     }
     if let Some(m) = &sp.mesh {
-        return rows(&sp.name, &m["chain"]["lods"], None);
+        return chain_rows(&sp.name, &m.chain, None);
     }
     Vec::new()
 }
@@ -543,37 +565,31 @@ const CHAIN_NOTE: &str = "The chain's speed/error table: geometric error = one-s
 const CHAIN_HEADER: &str = "| model | level | kind | triangles | bytes | Hausdorff max (m) | IoU at switch | switch distance (m) | screen coverage |\n\
                             |---|---|---|---|---|---|---|---|---|\n";
 
-fn file_name(path: &serde_json::Value) -> String {
-    path.as_str()
-        .and_then(|p| std::path::Path::new(p).file_name())
-        .map(|f| f.to_string_lossy().into_owned())
-        .unwrap_or_default()
+fn file_name(path: &Path) -> String {
+    path.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()
 }
 
-/// The rows of one chain's table (a TreeLodReport as JSON), the first cell naming the model.
-fn chain_rows(model: &str, chain: &serde_json::Value) -> String {
-    let num = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+/// The rows of one chain's table, the first cell naming the model.
+fn chain_rows(model: &str, chain: &TreeLodReport) -> String {
     let mut s = String::new();
-    for l in chain["lods"].as_array().into_iter().flatten() {
-        let never = if l["never_passes"].as_bool() == Some(true) { " (never ≤ 1 px in range)" } else { "" };
+    for l in &chain.lods {
+        let never = if l.never_passes { " (never ≤ 1 px in range)" } else { "" };
         s += &format!(
             "| {model} | LOD{} | {} | {} | {} | {:.3} | {:.3} | {:.1}{never} | {:.2e} |\n",
-            l["level"],
-            l["kind"].as_str().unwrap_or(""),
-            l["triangles"],
-            l["bytes"],
-            num(&l["geometric_error"]["max_m"]),
-            num(&l["switch_iou"]),
-            num(&l["switch_distance_m"]),
-            num(&l["screen_coverage"])
+            l.level,
+            l.kind,
+            l.triangles,
+            l.bytes,
+            l.geometric_error.max_m,
+            l.switch_iou,
+            l.switch_distance_m,
+            l.screen_coverage
         );
     }
-    for o in chain["left_out"].as_array().into_iter().flatten() {
+    for o in &chain.left_out {
         s += &format!(
             "| {model} | — | {} (left out) | {} | — | — | — | not fewer triangles than the {} before it | — |\n",
-            o["kind"].as_str().unwrap_or(""),
-            o["triangles"],
-            o["previous_triangles"]
+            o.kind, o.triangles, o.previous_triangles
         );
     }
     s
@@ -637,49 +653,40 @@ fn snow_md(r: &SnowStageReport) -> String {
 /// The plants section of report.md: per grass species a LoD table (with the thesis' rings for
 /// comparison) and the atlas coverage per mip level; per flower species its counts.
 fn plants_md(report: &PlantsStageReport) -> String {
-    use serde_json::Value;
-    let num = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
     let mut s = String::from("## Plants\n\n");
     for sp in &report.species {
         if let Some(g) = &sp.grass {
             s += &format!(
                 "### {} (grass: {} clumps, {} blades)\n\nImage error of the densest clump against its LoD0, rendered by the baker from 8 azimuths × 3 elevations; \
                  switch distance = where the silhouette error stays within the `[lod]` pixel budget.\n\n",
-                sp.name, g["clumps"], g["blades_total"]
+                sp.name, g.clumps, g.blades_total
             );
             s += "| level | triangles | vertices | bytes | IoU near | RMSE near | IoU at switch | edge error at switch (px) | switch distance (m) | screen coverage |\n|---|---|---|---|---|---|---|---|---|---|\n";
-            for l in g["lods"].as_array().into_iter().flatten() {
-                let never = if l["never_passes"].as_bool() == Some(true) { " (never ≤ 1 px in range)" } else { "" };
+            for l in &g.lods {
+                let never = if l.never_passes { " (never ≤ 1 px in range)" } else { "" };
                 s += &format!(
                     "| LOD{} | {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.2} | {:.1}{never} | {:.2e} |\n",
-                    l["level"],
-                    l["triangles"],
-                    l["vertices"],
-                    l["bytes"],
-                    num(&l["near_iou"]),
-                    num(&l["near_color_rmse"]),
-                    num(&l["switch_iou"]),
-                    num(&l["switch_edge_error_px"]),
-                    num(&l["switch_distance_m"]),
-                    num(&l["screen_coverage"])
+                    l.level,
+                    l.triangles,
+                    l.vertices,
+                    l.bytes,
+                    l.near_iou,
+                    l.near_color_rmse,
+                    l.switch_iou,
+                    l.switch_edge_error_px,
+                    l.switch_distance_m,
+                    l.screen_coverage
                 );
             }
-            let rings = &g["thesis_rings_m"];
+            let switch = |k: usize| g.lods.get(k).map_or(f64::NAN, |l| l.switch_distance_m);
             s += &format!(
                 "\nThe real-time grass thesis switched blades → billboards at {} m and billboards → nothing at {} m; measured here: \
                  LoD1 from {:.1} m, LoD2 from {:.1} m, LoD3 from {:.1} m.\n\n",
-                rings[0], rings[1],
-                num(&g["lods"][1]["switch_distance_m"]), num(&g["lods"][2]["switch_distance_m"]), num(&g["lods"][3]["switch_distance_m"])
+                g.thesis_rings_m[0], g.thesis_rings_m[1], switch(1), switch(2), switch(3)
             );
             s += "| atlas mip | size | alpha scale | coverage |\n|---|---|---|---|\n";
-            for (k, m) in g["atlas_mips"].as_array().into_iter().flatten().enumerate() {
-                s += &format!(
-                    "| {k} | {}×{} | {:.3} | {:.4} |\n",
-                    m["width"],
-                    m["height"],
-                    num(&m["alpha_scale"]),
-                    num(&m["coverage"])
-                );
+            for (k, m) in g.atlas_mips.iter().enumerate() {
+                s += &format!("| {k} | {}×{} | {:.3} | {:.4} |\n", m.width, m.height, m.alpha_scale, m.coverage);
             }
             s += "\n";
         }
@@ -687,32 +694,26 @@ fn plants_md(report: &PlantsStageReport) -> String {
             s += &format!(
                 "### {} (L-system tree: {}, dialect {})\n\n{CHAIN_NOTE}\n\n",
                 sp.name,
-                file_name(&t["lsystem"]),
-                t["dialect"].as_str().unwrap_or("?")
+                file_name(&t.lsystem),
+                t.dialect.name()
             );
             s += CHAIN_HEADER;
-            for (k, v) in t["variants"].as_array().into_iter().flatten().enumerate() {
-                let parts = v["stats"]["leaves"].as_u64().unwrap_or(0) + v["stats"]["polygons"].as_u64().unwrap_or(0);
-                s += &chain_rows(
-                    &format!("{k} ({} segments, {parts} leaves + polygons)", v["stats"]["segments"]),
-                    &v["chain"],
-                );
+            for (k, v) in t.variants.iter().enumerate() {
+                let parts = v.stats.leaves + v.stats.polygons;
+                s += &chain_rows(&format!("{k} ({} segments, {parts} leaves + polygons)", v.stats.segments), &v.chain);
             }
             s += "\n";
         }
         if let Some(m) = &sp.mesh {
-            s += &format!("### {} (mesh: {})\n\n{CHAIN_NOTE}\n\n", sp.name, file_name(&m["obj"]));
+            s += &format!("### {} (mesh: {})\n\n{CHAIN_NOTE}\n\n", sp.name, file_name(&m.obj));
             s += CHAIN_HEADER;
-            s += &chain_rows(
-                &format!("{} vertices, {} triangles", m["stats"]["vertices"], m["stats"]["triangles"]),
-                &m["chain"],
-            );
+            s += &chain_rows(&format!("{} vertices, {} triangles", m.stats.vertices, m.stats.triangles), &m.chain);
             s += "\n";
         }
         if let Some(f) = &sp.flower {
             s += &format!(
                 "### {} (flower)\n\n{} variants, {} triangles per flower (crossed billboards) baked from models of {} triangles in all\n\n",
-                sp.name, f["variants"], f["triangles_per_flower"], f["model_triangles"]
+                sp.name, f.variants, f.triangles_per_flower, f.model_triangles
             );
         }
     }

@@ -46,15 +46,16 @@ fn failure(e: &dyn Failure, message: String) -> StageError {
 pub struct PlantReport {
     pub name: String,
     pub files: Vec<PathBuf>,
-    /// The figures of a grass species (serialised as JSON values so the report stays one type).
-    pub grass: Option<serde_json::Value>,
-    pub flower: Option<serde_json::Value>,
-    /// A tree species: [`TreeSpeciesReport`].
+    /// What made the files: exactly one of these is set for a species with a model (none for a
+    /// marker-drawn mesh species).
     #[serde(default)]
-    pub tree: Option<serde_json::Value>,
-    /// A mesh species: [`MeshSpeciesReport`].
+    pub grass: Option<GrassReport>,
     #[serde(default)]
-    pub mesh: Option<serde_json::Value>,
+    pub flower: Option<FlowerReport>,
+    #[serde(default)]
+    pub tree: Option<TreeSpeciesReport>,
+    #[serde(default)]
+    pub mesh: Option<MeshSpeciesReport>,
     /// What the view stage draws the species' instances with (typed: the view stage reads it).
     pub chain: SpeciesChain,
     pub seconds: f64,
@@ -121,7 +122,7 @@ fn tree_levels(chain: &TreeLods, stem: &str, analyzed: bool) -> Vec<ChainLevel> 
 }
 
 /// One variant of a tree species: its seed, what the L-system grew and its chain's figures.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct TreeVariantReport {
     pub file: PathBuf,
     pub seed: u64,
@@ -129,7 +130,7 @@ pub struct TreeVariantReport {
     pub chain: TreeLodReport,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct TreeSpeciesReport {
     pub lsystem: PathBuf,
     pub dialect: crate::lsystem::Dialect,
@@ -264,7 +265,7 @@ fn write_normal_atlas(
 }
 
 /// What the plants stage made of a mesh species: the model as loaded and its chain's figures.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct MeshSpeciesReport {
     pub obj: PathBuf,
     pub file: PathBuf,
@@ -458,10 +459,10 @@ pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport
         species.push(PlantReport {
             name: name.clone(),
             files,
-            grass: grass_report.map(|r: GrassReport| serde_json::to_value(r).unwrap_or_default()),
-            flower: flower_report.map(|r: FlowerReport| serde_json::to_value(r).unwrap_or_default()),
-            tree: tree_report.map(|r| serde_json::to_value(r).unwrap_or_default()),
-            mesh: mesh_report.map(|r| serde_json::to_value(r).unwrap_or_default()),
+            grass: grass_report,
+            flower: flower_report,
+            tree: tree_report,
+            mesh: mesh_report,
             chain: draw,
             seconds: t1.elapsed().as_secs_f64(),
         });

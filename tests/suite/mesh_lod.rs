@@ -10,7 +10,7 @@ use std::process::Command;
 
 use verdant::mesh::AlphaMode;
 use verdant::plants::mesh_asset::{load_obj, MeshAssetError, ObjOptions, UpAxis};
-use verdant::plants::tree_lod::{build_mesh_lods, run_mesh_lods, MeshLodJob, TreeLodError, TreeLodOptions, TREE_LODS};
+use verdant::plants::tree_lod::{build_mesh_lods, run_mesh_lods, MeshLodJob, TreeLodOptions, TREE_LODS};
 use verdant::validate::{read_scene, validate_file};
 
 use crate::common::lod::{bytes_of, in_pool, small_atlas};
@@ -339,9 +339,13 @@ fn bad_models_give_errors_naming_the_file() {
     std::fs::write(dir.path().join("plain.obj"), "v 0 0 0\nv 1 0 0\nv 0 0 -1\nf 1 2 3\n").unwrap();
     let plain = load_obj(&dir.path().join("plain.obj"), &opts).unwrap();
     assert_eq!(plain.scene.materials[0].base_color, verdant::plants::mesh_asset::FALLBACK_GREY);
-    // too small for five levels: a clear error, not a broken chain
-    let e = build_mesh_lods(&plain, "plain", &small_atlas()).unwrap_err();
-    assert!(matches!(e, TreeLodError::TooSmall { level: 1, .. }) && e.to_string().contains("--lods 1"), "{e}");
+    // too small to simplify (one triangle): not an error; every level that would draw as many
+    // triangles or more is left out and said so, the chain is LoD0 alone
+    let built = build_mesh_lods(&plain, "plain", &small_atlas()).unwrap();
+    assert_eq!(built.levels.len(), 1, "{:?}", built.report.left_out);
+    assert_eq!(built.report.lods.len(), 1);
+    assert_eq!(built.report.left_out.len(), 4, "{:?}", built.report.left_out);
+    assert!(built.report.left_out.iter().all(|l| l.triangles >= l.previous_triangles && l.previous_triangles == 1));
 }
 
 fn verdant(args: &[&str]) -> std::process::Output {

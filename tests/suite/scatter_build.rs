@@ -28,6 +28,11 @@ const TREE: &str = "[[species]]\nname = \"tree\"\nkind = \"tree\"\nplacement = \
 const GRASS: &str = "[[species]]\nname = \"grass\"\nkind = \"grass\"\nplacement = \"jittered\"\nmax_density = 0.5\n\
                      scale = [0.7, 1.1]\nexclusion = { species = \"tree\", radius = 1.5 }\n";
 
+/// A unit cube resting on the ground (a rock for a mesh species).
+const ROCK_OBJ: &str = "v -0.5 0 -0.5\nv 0.5 0 -0.5\nv 0.5 0 0.5\nv -0.5 0 0.5\n\
+                        v -0.5 1 -0.5\nv 0.5 1 -0.5\nv 0.5 1 0.5\nv -0.5 1 0.5\n\
+                        f 1 2 3 4\nf 8 7 6 5\nf 1 5 6 2\nf 2 6 7 3\nf 3 7 8 4\nf 4 8 5 1\n";
+
 /// fbm 129² with 2 m cells, 64² chunks with skirts, 64 m scatter tiles, and the given species tables.
 fn preset(name: &str, seed: u64, species: &str) -> String {
     format!(
@@ -366,7 +371,11 @@ fn scatter_cache_hits_on_rebuild_and_misses_on_species_or_density_map_changes() 
     let mapped =
         GRASS.replace("placement = \"jittered\"\n", "placement = \"jittered\"\ndensity_map = \"maps/grass.png\"\n");
     write_density(&d.join("p/maps/grass.png"), 0.2, 0.8);
-    write(d, "p/a.toml", &preset("a", 3, &format!("{TREE}\n{mapped}")));
+    // every look the plants stage makes, so each of its typed reports goes through the cache
+    let others = "[[species]]\nname = \"flower\"\nkind = \"flower\"\nmax_density = 0.01\n\n\
+                  [[species]]\nname = \"rock\"\nkind = \"mesh\"\nmax_density = 0.002\nobj = \"models/rock.obj\"\n";
+    write(d, "p/models/rock.obj", ROCK_OBJ);
+    write(d, "p/a.toml", &preset("a", 3, &format!("{TREE}\n{mapped}\n{others}")));
     let build = || {
         let o = verdant_in(d, &["build", "p/a.toml", "--out", "o"]);
         ok(&o);
@@ -383,11 +392,30 @@ fn scatter_cache_hits_on_rebuild_and_misses_on_species_or_density_map_changes() 
     let left = grass.len() as f64 - right;
     assert!(right > 2.5 * left && right < 6.0 * left, "left {left}, right {right}");
 
-    // unchanged: built*, every stage cached, identical bytes
+    // every chain level in the manifest is named and written
+    let manifest = fs::read(s.join("manifest.json")).unwrap();
+    let m: serde_json::Value = serde_json::from_slice(&manifest).unwrap();
+    let plants = m["plants"].as_array().expect("manifest.json lists the plants");
+    assert_eq!(plants.len(), 4, "{plants:?}");
+    for p in plants {
+        let lods = p["lods"].as_array().unwrap();
+        // flowers are one level (crossed billboards); grass, trees and models are chains
+        let levels = if p["look"] == "flower" { 0..=0 } else { 2..=usize::MAX };
+        assert!(levels.contains(&lods.len()), "{} ({}): {lods:?}", p["name"], p["look"]);
+        for l in lods {
+            assert!(l["kind"].as_str().is_some_and(|k| !k.is_empty()), "{}: a level without a kind: {l}", p["name"]);
+            assert!(s.join(l["file"].as_str().unwrap()).is_file(), "{}: {l}", p["name"]);
+            assert!(l["triangles"].as_u64().is_some_and(|t| t > 0), "{l}");
+        }
+    }
+
+    // unchanged: built*, every stage cached (the plants' reports read back), identical bytes
     let o = build();
     assert_eq!(summary_row(&o, "a")[1], "built*", "{}", text(&o));
     assert!(timing_cached(&s, "terrain") && timing_cached(&s, "scatter") && timing_cached(&s, "preview"));
+    assert!(timing_cached(&s, "plants"), "the plants stage's report did not read back from the cache");
     assert_eq!(scatter_files(&s), first, "a cached scatter stage restored different bytes");
+    assert_eq!(fs::read(s.join("manifest.json")).unwrap(), manifest, "a cached build wrote another manifest");
 
     // a species setting changes: the scatter misses, the terrain hits
     write(
