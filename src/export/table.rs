@@ -73,7 +73,7 @@ impl Line<'_> {
 
     #[inline]
     fn push(&mut self, b: u8) {
-        debug_assert!(self.len < self.buf.len());
+        fast_path_check!(self.len < self.buf.len(), "placement row store at {} of {}", self.len, self.buf.len());
         // SAFETY: within a row (see `has_room_for_a_row`), len < buf.len()
         unsafe { *self.buf.get_unchecked_mut(self.len) = b };
         self.len += 1;
@@ -82,7 +82,12 @@ impl Line<'_> {
     /// Stores the 8 bytes of `word` (little-endian) and keeps the first `n` (≤ 8).
     #[inline]
     fn put8(&mut self, word: u64, n: usize) {
-        debug_assert!(self.len + 8 <= self.buf.len() && n <= 8);
+        fast_path_check!(
+            self.len + 8 <= self.buf.len() && n <= 8,
+            "8-byte store at {} of {}",
+            self.len,
+            self.buf.len()
+        );
         // SAFETY: within a row (see `has_room_for_a_row`), len + 8 ≤ buf.len(); the store is
         // unaligned-safe
         unsafe { self.buf.as_mut_ptr().add(self.len).cast::<[u8; 8]>().write_unaligned(word.to_le_bytes()) };
@@ -734,6 +739,32 @@ mod tests {
             })
             .collect();
         assert_eq!(parse(&placements_csv(&rows).unwrap()), rows);
+    }
+
+    /// The unchecked stores with their checks on (`fast_path_check!` asserts in unit tests): rows of
+    /// the longest fields, one buffer sized for exactly one row, so a store past the row's budget
+    /// (ROW_MAX + SLACK) fails here instead of writing past the buffer in release.
+    #[test]
+    fn the_longest_rows_stay_within_their_budget() {
+        let longest_f64 = [-1.234_567_890_123_456_7e-300, -2.225_073_858_507_201_4e-308, -f64::MAX, -5e-324];
+        let longest_f32 = [-1.175_494_4e-38f32, -3.402_823_5e38, -1.401_298_5e-45, -1.234_567_9e-37];
+        for (k, (&d, &f)) in longest_f64.iter().zip(&longest_f32).enumerate() {
+            let row = PlacementRow {
+                position: [d, d, d],
+                rotation: [f; 4],
+                scale: [f, -f, f],
+                yaw_deg: -f,
+                tile: u32::MAX - k as u32,
+            };
+            let mut buf = vec![0u8; ROW_MAX + SLACK];
+            let mut line = Line { buf: &mut buf, len: 0 };
+            assert!(push_row(&mut line, &row));
+            let len = line.len;
+            assert!(len <= ROW_MAX, "a row of {len} bytes is longer than ROW_MAX = {ROW_MAX}");
+            assert_eq!(buf[len - 1], b'\n');
+            let header = format!("{}\n", PLACEMENT_COLUMNS.join(","));
+            assert_eq!(parse(&[header.as_bytes(), &buf[..len]].concat()), vec![row]);
+        }
     }
 
     #[test]

@@ -382,7 +382,8 @@ const KEPT_ROWS: usize = 8;
 fn row_fast_max(heights: &[f32], start: usize, n: usize, z0: f64, gx: f64) -> f64 {
     use std::arch::x86_64::*;
     let row = &heights[start..start + n];
-    let p = row.as_ptr();
+    // from `heights`, not `row`: the last group may read (and mask out) samples past the row
+    let p = heights[start..].as_ptr();
     // SAFETY: SSE2 is part of x86_64; every load reads heights[start + k..start + k + 4], checked to
     // be in bounds (k + 4 ≤ n, or start + k + 4 ≤ heights.len() for the last group).
     unsafe {
@@ -393,6 +394,7 @@ fn row_fast_max(heights: &[f32], start: usize, n: usize, z0: f64, gx: f64) -> f6
         let (mut ma, mut mb) = (_mm_setzero_pd(), _mm_setzero_pd());
         let mut k = 0;
         while k + 4 <= n {
+            fast_path_check!(start + k + 4 <= heights.len());
             let h = _mm_loadu_ps(p.add(k));
             ma = _mm_max_pd(ma, _mm_and_pd(_mm_sub_pd(za, _mm_cvtps_pd(h)), abs));
             mb = _mm_max_pd(mb, _mm_and_pd(_mm_sub_pd(zb, _mm_cvtps_pd(_mm_movehl_ps(h, h))), abs));
@@ -1034,6 +1036,25 @@ pub(crate) mod tests {
     use crate::terrain::error::measure;
     use proptest::prelude::*;
     use std::collections::{HashMap, HashSet};
+
+    /// The SSE2 row scan (its loads checked by `fast_path_check!` here) against the plain one, at
+    /// every row length and position: rows ending inside the heights (the masked last group reads
+    /// past the row) and at their very end (the scalar tail).
+    #[test]
+    fn the_fast_row_scan_equals_the_plain_one_at_every_length_and_end() {
+        let heights: Vec<f32> = (0..37).map(|k| ((k * 7919) % 113) as f32 * 0.37 - 20.0).collect();
+        let (z0, gx) = (-3.25, 0.618);
+        for start in 0..heights.len() {
+            for n in 1..=heights.len() - start {
+                let plain = heights[start..start + n]
+                    .iter()
+                    .enumerate()
+                    .fold(0.0f64, |m, (k, &h)| m.max((z0 + gx * k as f64 - h as f64).abs()));
+                let fast = row_fast_max(&heights, start, n, z0, gx);
+                assert!((fast - plain).abs() <= 1e-12 * plain.max(1.0), "start {start}, n {n}: {fast} vs {plain}");
+            }
+        }
+    }
 
     /// Asserts that `mesh` is a valid triangulation of the whole sample rectangle of `hf`: vertices
     /// in range and distinct, corners present, every triangle non-degenerate and counter-clockwise
