@@ -1,0 +1,239 @@
+//! The `verdant tree --lods N` and `verdant mesh` jobs: read the input, build each chain in memory,
+//! write and validate every file, report.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::{build_mesh_lods, build_tree_lods, TreeLodError, TreeLodOptions, TreeLodReport, TreeLods};
+use crate::bake::atlas::write_mip_pngs;
+use crate::export;
+use crate::lsystem::{parse, Dialect};
+use crate::mesh::Scene;
+use crate::plants::mesh_asset::{load_obj, MeshAssetStats, ObjOptions};
+use crate::plants::tree::{TreeError, TreeOptions, TreeReport, TreeSeconds};
+use crate::random::mix64;
+use crate::validate::{validate_file, ValidateOptions};
+
+/// One `verdant tree` run with a LoD chain: read, build each variant's chain, write, validate.
+#[derive(Debug, Clone)]
+pub struct TreeLodJob {
+    pub input: PathBuf,
+    /// `<dir>/<stem>.glb`: the chain; `<stem>_LOD<n>.glb` and `<stem>_atlas*.png` beside it
+    /// (`<stem>_v<k>…` for variant k when there are several).
+    pub output: PathBuf,
+    pub dialect: Option<Dialect>,
+    pub options: TreeOptions,
+    pub lod: TreeLodOptions,
+    /// Trees from seeds derived from `options.seed` (variant 0 uses the seed itself).
+    pub variants: usize,
+}
+
+/// What `verdant tree --report` writes with a LoD chain: the LoD0 figures of variant 0 as
+/// without one, then every variant's chain.
+#[derive(Debug, Clone, Serialize)]
+pub struct TreeLodRunReport {
+    #[serde(flatten)]
+    pub tree: TreeReport,
+    pub variants: Vec<TreeLodReport>,
+}
+
+/// The seed of variant `k` (0: the seed itself).
+pub fn variant_seed(seed: u64, k: usize) -> u64 {
+    if k == 0 {
+        seed
+    } else {
+        mix64(seed ^ mix64(k as u64))
+    }
+}
+
+fn write_glb(scene: &Scene, path: &Path, files: &mut Vec<PathBuf>) -> Result<(usize, usize), TreeLodError> {
+    export::write_scene(scene, path)?;
+    let v = validate_file(path, &ValidateOptions::default())
+        .map_err(|e| TreeLodError::Invalid { path: path.to_path_buf(), report: e.to_string() })?;
+    if !v.ok() {
+        return Err(TreeLodError::Invalid { path: path.to_path_buf(), report: v.to_string() });
+    }
+    files.push(path.to_path_buf());
+    Ok((v.errors(), v.warnings()))
+}
+
+/// The files one run wrote and what validating them found.
+#[derive(Debug, Default)]
+struct Written {
+    files: Vec<PathBuf>,
+    errors: usize,
+    warnings: usize,
+}
+
+/// Writes `chain` as `<dir>/<file_stem>_LOD<n>.glb`, `<file_stem>_atlas*.png` and the MSFT_lod
+/// `<file_stem>.glb`, validating every glb.
+fn write_chain(chain: &TreeLods, dir: &Path, file_stem: &str, written: &mut Written) -> Result<(), TreeLodError> {
+    for lod in &chain.levels {
+        let (e, w) = write_glb(&lod.scene, &dir.join(format!("{file_stem}_LOD{}.glb", lod.level)), &mut written.files)?;
+        written.errors += e;
+        written.warnings += w;
+    }
+    if !chain.atlas.is_empty() {
+        let pngs = write_mip_pngs(dir, &format!("{file_stem}_atlas"), &chain.atlas)
+            .map_err(|e| TreeLodError::Texture(e.to_string()))?;
+        written.files.extend(pngs);
+    }
+    if let Some(normals) = &chain.normal_atlas {
+        let path = dir.join(format!("{file_stem}_atlas_normal.png"));
+        let png = normals.encode_png_data().map_err(|e| TreeLodError::Texture(e.to_string()))?;
+        export::write_atomic(&path, &png).map_err(|e| TreeLodError::Texture(e.to_string()))?;
+        written.files.push(path);
+    }
+    let (e, w) = write_glb(&chain.chain, &dir.join(format!("{file_stem}.glb")), &mut written.files)?;
+    written.errors += e;
+    written.warnings += w;
+    Ok(())
+}
+
+/// A chain's output must be a .glb (it holds MSFT_lod).
+fn check_glb_output(output: &Path) -> Result<(), TreeLodError> {
+    let ext = output.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if ext != "glb" {
+        return Err(TreeLodError::Options(format!(
+            "{}: a LoD chain is written as .glb (MSFT_lod); use a .glb output or --lods 1",
+            output.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Runs `job`: every file is built in memory before the first is written.
+pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
+    let t0 = Instant::now();
+    check_glb_output(&job.output)?;
+    if !(1..=64).contains(&job.variants) {
+        return Err(TreeLodError::Options(format!("--variants {} is out of range; use 1 to 64", job.variants)));
+    }
+    job.lod.check()?;
+    let parsed = parse::read_file(&job.input, job.dialect).map_err(|e| TreeLodError::Tree(TreeError::Parse(e)))?;
+    let t_parse = t0.elapsed().as_secs_f64();
+    let stem = job.output.file_stem().and_then(|s| s.to_str()).unwrap_or("tree").to_string();
+    let dir = job.output.parent().map(Path::to_path_buf).unwrap_or_default();
+    // names inside the files come from the tree's name, file names from the output's stem, so the
+    // same tree written under two names has the same bytes
+    let suffix = |k: usize| if job.variants == 1 { String::new() } else { format!("_v{k}") };
+    let mut chains = Vec::with_capacity(job.variants);
+    for k in 0..job.variants {
+        let options = TreeOptions {
+            seed: variant_seed(job.options.seed, k),
+            name: format!("{}{}", job.options.name, suffix(k)),
+            ..job.options.clone()
+        };
+        let chain = build_tree_lods(&parsed.system, &options, &job.lod).map_err(|e| match e {
+            TreeLodError::Tree(t) => {
+                TreeLodError::Tree(TreeError::InFile { path: job.input.clone(), source: Box::new(t) })
+            }
+            e => e,
+        })?;
+        chains.push(chain);
+    }
+    let t_build = t0.elapsed().as_secs_f64();
+    let mut written = Written::default();
+    for (k, c) in chains.iter().enumerate() {
+        write_chain(c, &dir, &format!("{stem}{}", suffix(k)), &mut written)?;
+    }
+    let Written { files, errors, warnings } = written;
+    let t_total = t0.elapsed().as_secs_f64();
+    let first = &chains[0];
+    let tree = TreeReport {
+        input: job.input.display().to_string(),
+        output: job.output.display().to_string(),
+        files: files.iter().map(|f| f.display().to_string()).collect(),
+        dialect: parsed.system.dialect,
+        dialect_detected: parsed.detected,
+        seed: job.options.seed,
+        radial_segments: job.options.radial_segments,
+        stats: first.lod0.as_ref().map(|t| t.stats.clone()).unwrap_or_default(),
+        warnings: parsed
+            .warnings
+            .into_iter()
+            .chain(first.lod0.as_ref().and_then(|t| crate::plants::tree::size_warning(&t.stats, &job.options)))
+            .collect(),
+        validation_errors: errors,
+        validation_warnings: warnings,
+        seconds: TreeSeconds {
+            parse: t_parse,
+            build: first.report.seconds_meshes,
+            export: t_total - t_build,
+            to_lod0: t_parse + first.report.seconds_meshes,
+            validate: 0.0,
+            total: t_total,
+        },
+    };
+    Ok(TreeLodRunReport { tree, variants: chains.into_iter().map(|c| c.report).collect() })
+}
+
+// ---------------------------------------------------------------------------------------------
+// the `verdant mesh` job
+
+/// One `verdant mesh` run: load an OBJ, build its chain, write and validate as `verdant tree` does.
+#[derive(Debug, Clone)]
+pub struct MeshLodJob {
+    pub input: PathBuf,
+    /// `<dir>/<stem>.glb`: the chain; `<stem>_LOD<n>.glb` and `<stem>_atlas*.png` beside it.
+    pub output: PathBuf,
+    pub obj: ObjOptions,
+    pub lod: TreeLodOptions,
+}
+
+/// What `verdant mesh --report` writes.
+#[derive(Debug, Clone, Serialize)]
+pub struct MeshLodRunReport {
+    pub input: String,
+    pub output: String,
+    pub files: Vec<String>,
+    pub source: MeshAssetStats,
+    pub validation_errors: usize,
+    pub validation_warnings: usize,
+    pub seconds_load: f64,
+    pub seconds_total: f64,
+    pub chain: TreeLodReport,
+}
+
+/// Runs `job`: every file is built in memory before the first is written. The names inside the
+/// files come from the input's stem, the file names from the output's.
+pub fn run_mesh_lods(job: &MeshLodJob) -> Result<MeshLodRunReport, TreeLodError> {
+    let t0 = Instant::now();
+    check_glb_output(&job.output)?;
+    job.lod.check()?;
+    let source = load_obj(&job.input, &job.obj)?;
+    let seconds_load = t0.elapsed().as_secs_f64();
+    let name = job.input.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
+    let chain = build_mesh_lods(&source, &name, &job.lod)?;
+    let stem = job.output.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
+    let dir = job.output.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mut written = Written::default();
+    write_chain(&chain, &dir, &stem, &mut written)?;
+    Ok(MeshLodRunReport {
+        input: job.input.display().to_string(),
+        output: job.output.display().to_string(),
+        files: written.files.iter().map(|f| f.display().to_string()).collect(),
+        source: source.stats,
+        validation_errors: written.errors,
+        validation_warnings: written.warnings,
+        seconds_load,
+        seconds_total: t0.elapsed().as_secs_f64(),
+        chain: chain.report,
+    })
+}
+
+/// Writes any serialisable report as pretty JSON (atomically).
+pub fn write_json_report<T: Serialize>(path: &Path, report: &T) -> Result<(), TreeLodError> {
+    let mut text = serde_json::to_string_pretty(report)
+        .map_err(|e| TreeLodError::Options(format!("cannot serialise the report: {e}")))?;
+    text.push('\n');
+    export::write_atomic(path, text.as_bytes())?;
+    Ok(())
+}
+
+/// Writes a report as pretty JSON (atomically).
+pub fn write_lod_report(path: &Path, report: &TreeLodRunReport) -> Result<(), TreeLodError> {
+    write_json_report(path, report)
+}
