@@ -6,12 +6,12 @@
 //! value out of range, a missing input file — is reported as `file:line:column: problem; remedy`.
 
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use clap::ValueEnum;
 use toml::de::{DeTable, DeValue};
-use toml::Spanned;
 
+mod error;
+mod keys;
 mod plants;
 mod reader;
 mod snow;
@@ -20,6 +20,13 @@ mod template;
 mod terrain;
 mod view;
 
+pub(crate) use error::Inputs;
+pub use error::PresetError;
+pub use keys::{
+    check_scene_name, check_species_name, DEFAULT_MAX_INSTANCES, DEFAULT_TILE_M, DEFAULT_TREE_SPACING_M,
+    EXCLUSION_KEYS, MAX_MAX_INSTANCES, MAX_NAME_CHARS, PROCEDURAL_KEYS, PROCEDURAL_SIZES, SCATTER_KEYS, SCENE_KEYS,
+    SECTIONS, SPECIES_KEYS, TERRAIN_KEYS,
+};
 pub use plants::{FLOWER_KEYS, GRASS_KEYS, MESH_KEYS, TREE_KEYS};
 pub use snow::{default_snow_seed, SNOW_KEYS};
 pub use view::{LOD_KEYS, VIEW_KEYS};
@@ -35,7 +42,7 @@ use super::{
     Format, MeshLook, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesSettings, TerrainSettings,
     TerrainSource, TreeLook,
 };
-use crate::heightfield::{DecodeOptions, Encoding, Heightfield, DEFAULT_MAX_SAMPLES};
+use crate::heightfield::Heightfield;
 use crate::lsystem::library;
 use crate::plants::flower::FlowerSettings;
 use crate::plants::grass::GrassSettings;
@@ -43,137 +50,6 @@ use crate::plants::SpeciesKind;
 use crate::scatter::{Exclusion, Placement, SpeciesRules, UNBOUNDED_ALTITUDE_M};
 use crate::synth::{self, NoiseKind};
 use crate::terrain::job::MeshMode;
-
-/// The sections a preset may have, in the order the docs list them (`species` is an array of
-/// tables, `[[species]]`).
-pub const SECTIONS: &[&str] =
-    &["scene", "terrain", "species", "scatter", "grass", "flower", "tree", "mesh", "snow", "lod", "view"];
-/// Keys of `[scene]`.
-pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats"];
-/// Keys of `[terrain]`.
-pub const TERRAIN_KEYS: &[&str] = &[
-    "heightmap",
-    "encoding",
-    "size",
-    "cell_size",
-    "height_scale",
-    "height_offset",
-    "max_samples",
-    "procedural",
-    "mode",
-    "max_error",
-    "max_triangles",
-    "grid_step",
-    "chunk",
-    "skirt",
-    "base",
-    "lods",
-];
-/// Keys of `[[species]]`.
-pub const SPECIES_KEYS: &[&str] = &[
-    "name",
-    "kind",
-    "density_map",
-    "mask",
-    "max_density",
-    "placement",
-    "min_spacing",
-    "slope",
-    "altitude",
-    "water_level",
-    "scale",
-    "random_yaw",
-    "align_to_normal",
-    "exclusion",
-    "seed",
-    "max_instances",
-    "cull_distance",
-    "grass",
-    "flower",
-    "lsystem",
-    "tree",
-    "obj",
-    "mesh",
-];
-/// Keys of `[[species]] exclusion = { … }`.
-pub const EXCLUSION_KEYS: &[&str] = &["species", "radius"];
-/// Keys of `[scatter]`.
-pub const SCATTER_KEYS: &[&str] = &["tile"];
-/// Default `max_instances` of a species.
-pub const DEFAULT_MAX_INSTANCES: usize = 5_000_000;
-/// Largest `max_instances` a preset may ask for (a glTF accessor count is a u32).
-pub const MAX_MAX_INSTANCES: u64 = u32::MAX as u64;
-/// Default `min_spacing` (m) of a Poisson-placed tree: crowns of ordinary trees do not touch.
-pub const DEFAULT_TREE_SPACING_M: f64 = 4.0;
-/// Default `[scatter] tile` (m).
-pub const DEFAULT_TILE_M: f64 = 256.0;
-/// Keys of `[terrain] procedural = { … }`.
-pub const PROCEDURAL_KEYS: &[&str] = &["kind", "size", "seed", "relief"];
-/// `[terrain]` keys that only mean something for a heightmap file.
-const HEIGHTMAP_ONLY_KEYS: &[&str] = &["encoding", "size", "height_scale", "height_offset", "max_samples"];
-/// Sizes a procedural map may have (samples per side).
-pub const PROCEDURAL_SIZES: std::ops::RangeInclusive<u64> = 2..=8193;
-/// Longest scene name (it becomes a folder name).
-pub const MAX_NAME_CHARS: usize = 64;
-
-/// Everything that can be wrong with a preset. Exit code 2 (bad input) for all of them.
-#[derive(Debug, thiserror::Error)]
-pub enum PresetError {
-    /// The preset file itself could not be read.
-    #[error("{}: cannot read the preset: {source}; check the path", file.display())]
-    Read { file: PathBuf, source: std::io::Error },
-    /// A problem at a place in the preset (syntax, unknown key, wrong type or value).
-    #[error("{}:{line}:{column}: {problem}; {remedy}", file.display())]
-    At { file: PathBuf, line: usize, column: usize, problem: String, remedy: String },
-    /// An input file the preset names does not exist (`input` is the resolved path).
-    #[error(
-        "{}:{line}:{column}: {what} `{}` not found; paths are relative to the preset's folder — fix the path or create the file",
-        file.display(),
-        input.display()
-    )]
-    MissingInput { file: PathBuf, line: usize, column: usize, what: &'static str, input: PathBuf },
-}
-
-/// Always the input's.
-impl crate::failure::Failure for PresetError {
-    fn blame(&self) -> crate::failure::Blame {
-        crate::failure::Blame::Input
-    }
-}
-
-impl PresetError {
-    /// Line and column (1-based, columns in characters) of the problem, where known.
-    pub fn position(&self) -> Option<(usize, usize)> {
-        match self {
-            PresetError::Read { .. } => None,
-            PresetError::At { line, column, .. } | PresetError::MissingInput { line, column, .. } => {
-                Some((*line, *column))
-            }
-        }
-    }
-}
-
-/// How far parsing checks the input files a preset names.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub(crate) enum Inputs {
-    /// Not at all ([`parse_preset`]: no disk access).
-    Unchecked,
-    /// Each exists and is a file; `.ls` files parse ([`load_preset`], what a build needs first).
-    Exist,
-    /// Each also decodes as the preset reads it: the heightmap with its encoding, size and scale,
-    /// density maps, masks and blade textures as images, OBJ models with their MTL and textures
-    /// ([`check_preset`]: everything that does not need the build itself).
-    Decode,
-}
-
-impl Inputs {
-    pub(crate) fn exist(self) -> bool {
-        self >= Inputs::Exist
-    }
-    pub(crate) fn decode(self) -> bool {
-        self >= Inputs::Decode
-    }
-}
 
 /// Reads, parses and resolves the preset at `path`, and checks that the input files it names exist.
 pub fn load_preset(path: &Path) -> Result<Preset, PresetError> {
@@ -350,31 +226,6 @@ pub fn procedural_heightfield(source: &TerrainSource) -> Option<Heightfield> {
             Some(synth::noise_map(noise, size, cell_size_m, relief_m, seed))
         }
     }
-}
-
-/// Whether `name` may be a scene name: 1 to 64 ASCII letters, digits, `-` and `_` (a folder name
-/// on every platform). The error says what is wrong.
-pub fn check_scene_name(name: &str) -> Result<(), String> {
-    check_safe_name("scene", "folder", name)
-}
-
-/// Whether `name` may be a species name: the same rule as a scene name, since it names files
-/// (`placements/<name>.csv`, `species/<name>_LOD0.glb`).
-pub fn check_species_name(name: &str) -> Result<(), String> {
-    check_safe_name("species", "file", name)
-}
-
-pub(super) fn check_safe_name(what: &str, used_as: &str, name: &str) -> Result<(), String> {
-    if name.is_empty() {
-        return Err(format!("the {what} name is empty"));
-    }
-    if name.chars().count() > MAX_NAME_CHARS {
-        return Err(format!("the {what} name is longer than {MAX_NAME_CHARS} characters"));
-    }
-    if let Some(c) = name.chars().find(|c| !(c.is_ascii_alphanumeric() || *c == '-' || *c == '_')) {
-        return Err(format!("{what} name `{name}` contains {c:?}, which is not safe in a {used_as} name"));
-    }
-    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -689,6 +540,8 @@ fn parse_scatter(t: &Table<'_, '_>) -> Result<ScatterSettings, PresetError> {
 
 #[cfg(test)]
 mod tests {
+    use std::path::PathBuf;
+
     use super::*;
 
     #[test]

@@ -6,7 +6,7 @@ use std::time::Instant;
 use glam::DVec3;
 
 use super::cards::ModelFrame;
-use super::{AtlasCell, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions, IMPOSTOR_VIEWS};
+use super::types::{AtlasCell, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions, IMPOSTOR_VIEWS};
 use crate::bake::views::{
     lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, SwitchSearch,
 };

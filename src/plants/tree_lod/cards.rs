@@ -4,10 +4,11 @@
 
 use glam::DVec3;
 use rayon::prelude::*;
-use serde::Serialize;
 
 use super::simplify::subset;
-use super::{TreeLodError, TreeLodOptions, ATLAS_ALPHA_CUTOFF, ATLAS_GUTTER_PX, BAKE_SUPERSAMPLE, IMPOSTOR_VIEWS};
+use super::types::{
+    AtlasCell, TreeLodError, TreeLodOptions, ATLAS_ALPHA_CUTOFF, ATLAS_GUTTER_PX, BAKE_SUPERSAMPLE, IMPOSTOR_VIEWS,
+};
 use crate::bake::atlas::{dilate, finish_normal_atlas, mip_chain, resolve_supersampled, MipLevel, FLAT_NORMAL};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
@@ -18,53 +19,6 @@ use crate::plants::tree::TreeError;
 use crate::plants::wind::{self, WIND_ATTRIBUTE, WIND_BRANCH_ATTRIBUTE};
 
 const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
-
-/// Every cell of an `atlas_px` tree atlas as its inside's (u0, v0, u1, v1): the impostor views
-/// (large cells 0..8), then the small cells cards and billboards use.
-pub fn atlas_cell_rects(atlas_px: u32) -> Vec<[f32; 4]> {
-    let large = (0..IMPOSTOR_VIEWS).map(|k| AtlasCell::large(atlas_px, k).uv);
-    large.chain((0..128).map(|j| AtlasCell::small(atlas_px, j).uv)).collect()
-}
-
-/// A square atlas cell; `uv` is its inside (within the gutter) as (u0, v0, u1, v1).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct AtlasCell {
-    pub x: u32,
-    pub y: u32,
-    pub size: u32,
-    pub uv: [f32; 4],
-}
-
-impl AtlasCell {
-    fn new(atlas_px: u32, x: u32, y: u32, size: u32) -> AtlasCell {
-        let (a, g) = (atlas_px as f32, ATLAS_GUTTER_PX);
-        AtlasCell {
-            x,
-            y,
-            size,
-            uv: [(x + g) as f32 / a, (y + g) as f32 / a, (x + size - g) as f32 / a, (y + size - g) as f32 / a],
-        }
-    }
-
-    /// Pixels inside the gutter.
-    pub(super) fn inner_px(&self) -> u32 {
-        self.size - 2 * ATLAS_GUTTER_PX
-    }
-
-    /// Large cell `i` of the 4 × 4 grid: 0..8 are the impostor views, 8..16 hold the small cells.
-    pub(super) fn large(atlas_px: u32, i: usize) -> AtlasCell {
-        let s = atlas_px / 4;
-        AtlasCell::new(atlas_px, (i as u32 % 4) * s, (i as u32 / 4) * s, s)
-    }
-
-    /// Small cell `j` (0..128): large cells 8..16, each split 4 × 4; a card uses two.
-    pub(super) fn small(atlas_px: u32, j: usize) -> AtlasCell {
-        let big = AtlasCell::large(atlas_px, 8 + j / 16);
-        let s = atlas_px / 16;
-        let k = j as u32 % 16;
-        AtlasCell::new(atlas_px, big.x + (k % 4) * s, big.y + (k / 4) * s, s)
-    }
-}
 
 /// A square picture plane: vertical, facing azimuth `azimuth_deg` (0° = +Z, 90° = +X), `side_m`
 /// wide and tall around `centre`.
@@ -395,8 +349,8 @@ pub(super) fn bake_atlas(
 mod tests {
     use glam::DVec3;
 
-    use super::{AtlasCell, CardFrame};
-    use crate::plants::tree_lod::MAX_CLUSTERS;
+    use super::CardFrame;
+    use crate::plants::tree_lod::types::{AtlasCell, MAX_CLUSTERS};
 
     #[test]
     fn atlas_cells_do_not_overlap_and_stay_inside() {

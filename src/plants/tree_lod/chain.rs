@@ -11,7 +11,7 @@ use super::cards::{
     appended, atlas_material, bake_atlas, branch_of, clusters, BakedAtlas, CardFrame, CardWind, Cluster, ModelFrame,
 };
 use super::simplify::{finer_than, simplify_below, simplify_sloppy, SIMPLIFY_RATIO, SLOPPY_RATIO};
-use super::{
+use super::types::{
     AtlasCell, LeftOutLevel, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions, TreeLodReport, TreeLods,
     BILLBOARD_PLANES, IMPOSTOR_EXTRAS_KEY, IMPOSTOR_VIEWS, MAX_CLUSTERS,
 };

@@ -6,7 +6,8 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::{build_mesh_lods, build_tree_lods, TreeLodError, TreeLodOptions, TreeLodReport, TreeLods};
+use super::chain::{build_mesh_lods, build_tree_lods};
+use super::types::{TreeLodError, TreeLodOptions, TreeLodReport, TreeLods};
 use crate::bake::atlas::write_mip_pngs;
 use crate::export;
 use crate::lsystem::{parse, Dialect};

@@ -4,7 +4,8 @@
 use toml::de::DeValue;
 use toml::Spanned;
 
-use super::{input_path, number_value, pair, PresetError, Table};
+use super::error::PresetError;
+use super::reader::{input_path, number_value, pair, Table};
 use crate::color::srgb_to_linear_f64;
 use crate::plants::flower::FlowerSettings;
 use crate::plants::grass::GrassSettings;
@@ -118,7 +119,7 @@ fn range_f32(r: [f64; 2]) -> [f32; 2] {
 pub(super) fn apply_grass(
     t: &Table<'_, '_>,
     mut g: GrassSettings,
-    inputs: super::Inputs,
+    inputs: super::error::Inputs,
 ) -> Result<GrassSettings, PresetError> {
     t.check_keys(GRASS_KEYS, &[("[flower]", FLOWER_KEYS), ("[tree]", TREE_KEYS)])?;
     if let Some(n) = count(t, "blades", 1..=crate::plants::grass::MAX_BLADES_PER_CLUMP as u64, "blades = 48")? {
@@ -275,7 +276,7 @@ pub(super) fn apply_tree(t: &Table<'_, '_>, mut tree: TreeLook) -> Result<TreeLo
             "ls" => Some(crate::lsystem::Dialect::Stochastic),
             "v4" => Some(crate::lsystem::Dialect::LparserV4),
             "v5" => Some(crate::lsystem::Dialect::LparserV5),
-            other => return Err(super::unknown_value(t, "dialect", other, &["auto", "ls", "v4", "v5"], &span)),
+            other => return Err(super::reader::unknown_value(t, "dialect", other, &["auto", "ls", "v4", "v5"], &span)),
         };
     }
     Ok(tree)
@@ -323,7 +324,7 @@ pub(super) fn apply_mesh(t: &Table<'_, '_>, mut mesh: MeshLook) -> Result<MeshLo
         mesh.up_axis = match axis {
             "y" | "Y" => UpAxis::Y,
             "z" | "Z" => UpAxis::Z,
-            other => return Err(super::unknown_value(t, "up_axis", other, &["y", "z"], &span)),
+            other => return Err(super::reader::unknown_value(t, "up_axis", other, &["y", "z"], &span)),
         };
     }
     chain_keys(t, &mut mesh.lods, &mut mesh.atlas_px, &mut mesh.analyze)?;

@@ -1,7 +1,14 @@
 //! Reading the TOML document: positions, the typed getters of a table, checked numbers and
 //! choices, and the messages they give (`file:line:column: problem; remedy`).
 
-use super::*;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use clap::ValueEnum;
+use toml::de::{DeTable, DeValue};
+use toml::Spanned;
+
+use super::error::{Inputs, PresetError};
 
 /// Type of a value as a message says it ("a string", "an integer", …).
 pub(super) fn type_name(value: &DeValue<'_>) -> &'static str {
@@ -327,4 +334,44 @@ pub fn resolve(preset: &Path, relative: &Path) -> PathBuf {
         Some(dir) if relative.is_relative() && !dir.as_os_str().is_empty() => dir.join(relative),
         _ => relative.to_path_buf(),
     }
+}
+
+/// An optional input file (`density_map`, `mask`): resolved against the preset's folder; when
+/// `inputs` asks, it must exist and be a file, and decode.
+pub(super) fn input_path(
+    t: &Table<'_, '_>,
+    key: &'static str,
+    example: &str,
+    inputs: Inputs,
+) -> Result<Option<PathBuf>, PresetError> {
+    let Some((_, value)) = t.get(key) else { return Ok(None) };
+    let DeValue::String(relative) = value.get_ref() else {
+        return Err(t.wrong_type(key, value, "a path (a string)", example));
+    };
+    if relative.is_empty() {
+        return Err(t.ctx.at(
+            &value.span(),
+            format!("`{key}` is empty"),
+            format!("name a grayscale image, relative to this preset, or remove `{key}`"),
+        ));
+    }
+    let path = resolve(t.ctx.file, Path::new(relative.as_ref()));
+    if inputs.exist() {
+        check_input_file(t, value, key, &path)?;
+    }
+    if inputs.decode() {
+        let problem = match key {
+            "density_map" | "mask" => crate::scatter::DensityMap::load(&path).err().map(|e| e.to_string()),
+            "blade_texture" => crate::bake::image::Image::read_png(&path).err().map(|e| e.to_string()),
+            _ => None,
+        };
+        if let Some(e) = problem {
+            return Err(t.ctx.at(
+                &value.span(),
+                format!("`{key}` does not decode: {e}"),
+                "give a PNG (8 or 16 bit; density maps and masks are read as grayscale)",
+            ));
+        }
+    }
+    Ok(Some(path))
 }

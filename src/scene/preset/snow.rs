@@ -4,7 +4,8 @@
 
 use toml::de::DeValue;
 
-use super::{number_value, PresetError, Table};
+use super::error::PresetError;
+use super::reader::{number_value, Table};
 use crate::snow::emitter::Respawn;
 use crate::snow::{FarField, SnowSettings};
 
@@ -107,7 +108,11 @@ fn boolean(t: &Table<'_, '_>, key: &str, example: &str) -> Result<Option<bool>, 
 pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSettings, PresetError> {
     t.check_keys(
         SNOW_KEYS,
-        &[("[scene]", super::SCENE_KEYS), ("[terrain]", super::TERRAIN_KEYS), ("[grass]", super::GRASS_KEYS)],
+        &[
+            ("[scene]", super::keys::SCENE_KEYS),
+            ("[terrain]", super::keys::TERRAIN_KEYS),
+            ("[grass]", super::plants::GRASS_KEYS),
+        ],
     )?;
     let mut s = SnowSettings::default();
     let seed = t.integer("seed", 0..=i64::MAX as u64, "seed = 3")?.map_or(default_snow_seed(scene_seed), |(n, _)| n);
@@ -128,8 +133,8 @@ pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSetti
         let example = "atlas_cells = [4, 4]";
         match v.get_ref() {
             DeValue::Array(items) if items.len() == 2 => {
-                s.flakes.columns = super::integer_value(t, "atlas_cells", &items[0], 1..=32, example)? as u32;
-                s.flakes.rows = super::integer_value(t, "atlas_cells", &items[1], 1..=32, example)? as u32;
+                s.flakes.columns = super::reader::integer_value(t, "atlas_cells", &items[0], 1..=32, example)? as u32;
+                s.flakes.rows = super::reader::integer_value(t, "atlas_cells", &items[1], 1..=32, example)? as u32;
             }
             _ => return Err(t.wrong_type("atlas_cells", v, "an array of two integers [columns, rows]", example)),
         }
@@ -211,7 +216,9 @@ pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSetti
         None => {}
         Some(("top", _)) => e.respawn = Respawn::Top,
         Some(("wrap_vertical", _)) => e.respawn = Respawn::WrapVertical,
-        Some((other, span)) => return Err(super::unknown_value(t, "respawn", other, &["top", "wrap_vertical"], &span)),
+        Some((other, span)) => {
+            return Err(super::reader::unknown_value(t, "respawn", other, &["top", "wrap_vertical"], &span))
+        }
     }
     num(t, "max_spin", "max_spin = 1.0", in_range(0.0, 100.0, " rad/s"), |x| e.max_spin_rad_s = x as f32)?;
 

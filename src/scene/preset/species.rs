@@ -1,6 +1,26 @@
 //! `[[species]]`: placement rules, the plant look and its inputs, exclusions.
 
-use super::*;
+use std::ops::Range;
+use std::path::Path;
+
+use toml::de::DeValue;
+use toml::Spanned;
+
+use super::error::{Inputs, PresetError};
+use super::keys::{
+    check_species_name, DEFAULT_MAX_INSTANCES, DEFAULT_TREE_SPACING_M, EXCLUSION_KEYS, MAX_MAX_INSTANCES, SCATTER_KEYS,
+    SCENE_KEYS, SPECIES_KEYS, TERRAIN_KEYS,
+};
+use super::plants;
+use super::reader::{
+    any_finite, backticked, did_you_mean, input_path, non_negative, number_value, pair, positive, unknown_value, Table,
+};
+use crate::lsystem::library;
+use crate::plants::flower::FlowerSettings;
+use crate::plants::grass::GrassSettings;
+use crate::plants::SpeciesKind;
+use crate::scatter::{Exclusion, Placement, SpeciesRules, UNBOUNDED_ALTITUDE_M};
+use crate::scene::{MeshLook, PlantLook, SpeciesSettings, TreeLook};
 
 /// Defaults of the plant looks (`[grass]`, `[flower]`) and the scene seed they are keyed by.
 pub(super) struct Looks<'a> {
@@ -398,44 +418,4 @@ pub(super) fn parse_exclusions(
         exclusions.push(Exclusion { species: other.to_string(), radius_m });
     }
     Ok(exclusions)
-}
-
-/// An optional input file (`density_map`, `mask`): resolved against the preset's folder; when
-/// `inputs` asks, it must exist and be a file, and decode.
-pub(super) fn input_path(
-    t: &Table<'_, '_>,
-    key: &'static str,
-    example: &str,
-    inputs: Inputs,
-) -> Result<Option<PathBuf>, PresetError> {
-    let Some((_, value)) = t.get(key) else { return Ok(None) };
-    let DeValue::String(relative) = value.get_ref() else {
-        return Err(t.wrong_type(key, value, "a path (a string)", example));
-    };
-    if relative.is_empty() {
-        return Err(t.ctx.at(
-            &value.span(),
-            format!("`{key}` is empty"),
-            format!("name a grayscale image, relative to this preset, or remove `{key}`"),
-        ));
-    }
-    let path = resolve(t.ctx.file, Path::new(relative.as_ref()));
-    if inputs.exist() {
-        check_input_file(t, value, key, &path)?;
-    }
-    if inputs.decode() {
-        let problem = match key {
-            "density_map" | "mask" => crate::scatter::DensityMap::load(&path).err().map(|e| e.to_string()),
-            "blade_texture" => crate::bake::image::Image::read_png(&path).err().map(|e| e.to_string()),
-            _ => None,
-        };
-        if let Some(e) = problem {
-            return Err(t.ctx.at(
-                &value.span(),
-                format!("`{key}` does not decode: {e}"),
-                "give a PNG (8 or 16 bit; density maps and masks are read as grayscale)",
-            ));
-        }
-    }
-    Ok(Some(path))
 }

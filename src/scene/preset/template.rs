@@ -1,7 +1,7 @@
 //! The commented preset `verdant preset new` writes.
 
 /// `verdant preset new NAME`: a fully commented preset that parses as it is (a procedural
-/// terrain, so it builds without any input file). `name` should pass [`super::check_scene_name`].
+/// terrain, so it builds without any input file). `name` should pass [`super::keys::check_scene_name`].
 pub fn template(name: &str) -> String {
     let escaped: String = name
         .chars()

@@ -1,6 +1,20 @@
 //! `[terrain]`: a heightmap file (decoded as the build will, when asked) or a procedural map.
 
-use super::*;
+use std::path::Path;
+
+use toml::de::DeValue;
+use toml::Spanned;
+
+use super::error::{Inputs, PresetError};
+use super::keys::{HEIGHTMAP_ONLY_KEYS, PROCEDURAL_KEYS, PROCEDURAL_SIZES, SCENE_KEYS, TERRAIN_KEYS};
+use super::reader::{
+    any_finite, check_input_file, choice, integer_value, non_negative, number_value, positive, resolve, unknown_value,
+    Table,
+};
+use crate::heightfield::{DecodeOptions, Encoding, DEFAULT_MAX_SAMPLES};
+use crate::scene::{TerrainSettings, TerrainSource};
+use crate::synth::NoiseKind;
+use crate::terrain::job::MeshMode;
 
 pub(super) fn parse_terrain(
     t: &Table<'_, '_>,

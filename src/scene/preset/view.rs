@@ -3,7 +3,8 @@
 
 use toml::de::DeValue;
 
-use super::{number_value, PresetError, Table};
+use super::error::PresetError;
+use super::reader::{number_value, Table};
 use crate::lod::LodView;
 use crate::scene::view::{ViewSettings, DEFAULT_VIEW_FOV_DEG, DEFAULT_VIEW_SIZE_PX, MAX_VIEW_SIDE_PX};
 
@@ -57,7 +58,7 @@ pub(super) fn parse_view(t: &Table<'_, '_>, index: usize) -> Result<ViewSettings
     t.check_keys(VIEW_KEYS, &[("[lod]", LOD_KEYS)])?;
     let name = match t.string("name", "name = \"overlook\"")? {
         Some((s, span)) => {
-            super::check_safe_name("view", "file", s)
+            super::keys::check_safe_name("view", "file", s)
                 .map_err(|e| t.ctx.at(&span, e, "use letters, digits, `-` and `_`"))?;
             s.to_string()
         }
@@ -91,8 +92,8 @@ pub(super) fn parse_view(t: &Table<'_, '_>, index: usize) -> Result<ViewSettings
             let example = "size = [1920, 1080]";
             match v.get_ref() {
                 DeValue::Array(items) if items.len() == 2 => [
-                    super::integer_value(t, "size", &items[0], 16..=MAX_VIEW_SIDE_PX as u64, example)? as u32,
-                    super::integer_value(t, "size", &items[1], 16..=MAX_VIEW_SIDE_PX as u64, example)? as u32,
+                    super::reader::integer_value(t, "size", &items[0], 16..=MAX_VIEW_SIDE_PX as u64, example)? as u32,
+                    super::reader::integer_value(t, "size", &items[1], 16..=MAX_VIEW_SIDE_PX as u64, example)? as u32,
                 ],
                 _ => {
                     return Err(t.wrong_type("size", v, "an array of two integers [width, height] in pixels", example))

@@ -1,0 +1,268 @@
+//! The chain's vocabulary: limits and defaults, options, errors, the atlas' cell layout, the levels
+//! and the figures the analyzer reports.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use crate::bake::atlas::{MipFigures, MipLevel};
+use crate::bake::image::Image;
+use crate::bake::raster::RasterError;
+use crate::bake::views::{DistanceError, LodImageOptions};
+use crate::export::ExportError;
+use crate::failure::{Blame, Failure};
+use crate::lod::LodView;
+use crate::mesh::{Mesh, Scene};
+use crate::plants::hausdorff::HausdorffError;
+use crate::plants::mesh_asset::MeshAssetError;
+use crate::plants::tree::{TreeError, TreeMesh};
+
+/// LoD0 full … LoD4 impostor.
+pub const TREE_LODS: usize = 5;
+pub const IMPOSTOR_VIEWS: usize = 8;
+/// LoD3's vertical planes (azimuths 0°, 45°, 90°, 135°: the first four impostor views).
+pub const BILLBOARD_PLANES: usize = 4;
+/// LoD2's leaf-cluster cards at most (two crossed quads each).
+pub const MAX_CLUSTERS: usize = 64;
+pub const DEFAULT_ATLAS_PX: u32 = 1024;
+pub const MIN_ATLAS_PX: u32 = 256;
+/// A 4096² atlas is 256 MiB as floats while baking.
+pub const MAX_ATLAS_PX: u32 = 4096;
+pub const ATLAS_ALPHA_CUTOFF: f32 = 0.5;
+/// Transparent (then dilated) texels around every atlas cell, so filtering and mips do not bleed.
+pub const ATLAS_GUTTER_PX: u32 = 4;
+/// Samples per texel along each axis when baking (the resolved alpha is fractional at edges, which
+/// lets the coverage-preserving mips keep level 0's coverage).
+pub const BAKE_SUPERSAMPLE: u32 = 2;
+pub const DEFAULT_HAUSDORFF_SAMPLES: usize = 20_000;
+
+/// Extras key of the impostor's mesh.
+pub const IMPOSTOR_EXTRAS_KEY: &str = "verdant_impostor";
+
+#[derive(Debug, thiserror::Error)]
+pub enum TreeLodError {
+    #[error(transparent)]
+    Tree(#[from] TreeError),
+    #[error("invalid LoD options: {0}")]
+    Options(String),
+    #[error("baking the tree atlas: {0}")]
+    Raster(#[from] RasterError),
+    #[error("tree texture: {0}")]
+    Texture(String),
+    #[error(transparent)]
+    Export(#[from] ExportError),
+    #[error(transparent)]
+    MeshAsset(#[from] MeshAssetError),
+    #[error("{path} does not pass validation (this is a bug, please report it with the input file):\n{report}")]
+    Invalid { path: PathBuf, report: String },
+}
+
+/// The input's for bad input, options or exceeded limits; the build's otherwise.
+impl Failure for TreeLodError {
+    fn blame(&self) -> Blame {
+        match self {
+            TreeLodError::Tree(e) => e.blame(),
+            TreeLodError::Options(_) => Blame::Input,
+            TreeLodError::MeshAsset(e) => e.blame(),
+            _ => Blame::Build,
+        }
+    }
+}
+
+/// How the chain is built and measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TreeLodOptions {
+    /// Levels written (1..=5, finest first).
+    pub lods: usize,
+    /// Side of the square atlas (a multiple of 16 in MIN_ATLAS_PX..=MAX_ATLAS_PX).
+    pub atlas_px: u32,
+    /// Measure image errors and switch distances (off: coverages are 0, for timing the build).
+    pub analyze: bool,
+    pub hausdorff_samples: usize,
+    /// How the image analyzer renders (8 azimuths × 3 elevations).
+    pub image: LodImageOptions,
+    /// The LoD policy switch distances are found for (`[lod]`: pixel budget and screen).
+    pub policy: LodView,
+}
+
+impl Default for TreeLodOptions {
+    fn default() -> Self {
+        TreeLodOptions {
+            lods: TREE_LODS,
+            atlas_px: DEFAULT_ATLAS_PX,
+            analyze: true,
+            hausdorff_samples: DEFAULT_HAUSDORFF_SAMPLES,
+            image: LodImageOptions { max_side_px: 96, supersample: 2, ..LodImageOptions::default() },
+            policy: LodView::default(),
+        }
+    }
+}
+
+impl TreeLodOptions {
+    pub fn check(&self) -> Result<(), TreeLodError> {
+        if !(1..=TREE_LODS).contains(&self.lods) {
+            return Err(TreeLodError::Options(format!("--lods {} is out of range; use 1 to {TREE_LODS}", self.lods)));
+        }
+        if !(MIN_ATLAS_PX..=MAX_ATLAS_PX).contains(&self.atlas_px) || !self.atlas_px.is_multiple_of(16) {
+            return Err(TreeLodError::Options(format!(
+                "--atlas-size {} must be a multiple of 16 from {MIN_ATLAS_PX} to {MAX_ATLAS_PX} (e.g. 1024 or 2048)",
+                self.atlas_px
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Every cell of an `atlas_px` tree atlas as its inside's (u0, v0, u1, v1): the impostor views
+/// (large cells 0..8), then the small cells cards and billboards use.
+pub fn atlas_cell_rects(atlas_px: u32) -> Vec<[f32; 4]> {
+    let large = (0..IMPOSTOR_VIEWS).map(|k| AtlasCell::large(atlas_px, k).uv);
+    large.chain((0..128).map(|j| AtlasCell::small(atlas_px, j).uv)).collect()
+}
+
+/// A square atlas cell; `uv` is its inside (within the gutter) as (u0, v0, u1, v1).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AtlasCell {
+    pub x: u32,
+    pub y: u32,
+    pub size: u32,
+    pub uv: [f32; 4],
+}
+
+impl AtlasCell {
+    fn new(atlas_px: u32, x: u32, y: u32, size: u32) -> AtlasCell {
+        let (a, g) = (atlas_px as f32, ATLAS_GUTTER_PX);
+        AtlasCell {
+            x,
+            y,
+            size,
+            uv: [(x + g) as f32 / a, (y + g) as f32 / a, (x + size - g) as f32 / a, (y + size - g) as f32 / a],
+        }
+    }
+
+    /// Pixels inside the gutter.
+    pub(super) fn inner_px(&self) -> u32 {
+        self.size - 2 * ATLAS_GUTTER_PX
+    }
+
+    /// Large cell `i` of the 4 × 4 grid: 0..8 are the impostor views, 8..16 hold the small cells.
+    pub(super) fn large(atlas_px: u32, i: usize) -> AtlasCell {
+        let s = atlas_px / 4;
+        AtlasCell::new(atlas_px, (i as u32 % 4) * s, (i as u32 / 4) * s, s)
+    }
+
+    /// Small cell `j` (0..128): large cells 8..16, each split 4 × 4; a card uses two.
+    pub(super) fn small(atlas_px: u32, j: usize) -> AtlasCell {
+        let big = AtlasCell::large(atlas_px, 8 + j / 16);
+        let s = atlas_px / 16;
+        let k = j as u32 % 16;
+        AtlasCell::new(atlas_px, big.x + (k % 4) * s, big.y + (k / 4) * s, s)
+    }
+}
+
+/// One level of the chain as its own file holds it.
+#[derive(Debug, Clone)]
+pub struct TreeLod {
+    pub level: usize,
+    /// What it is: "full", "simplified", "cards", "billboards", "impostor".
+    pub kind: &'static str,
+    pub scene: Scene,
+    /// `scene.textures` decoded, same order (what the analyzer draws with).
+    pub images: Vec<Image>,
+}
+
+impl TreeLod {
+    pub fn triangles(&self) -> usize {
+        self.scene.meshes.iter().map(Mesh::triangle_count).sum()
+    }
+}
+
+/// Figures of one level.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TreeLodFigures {
+    pub level: usize,
+    /// The level's [`TreeLod::kind`].
+    pub kind: String,
+    pub triangles: usize,
+    pub vertices: usize,
+    /// Size of `<name>_LOD<n>.glb`.
+    pub bytes: usize,
+    /// One-sided Hausdorff distance LoD_k → LoD0 (sampled; masked texels excluded).
+    pub geometric_error: HausdorffError,
+    /// Worst over 8 azimuths × 3 elevations at the nearest measured distance and at the switch.
+    pub near_distance_m: f64,
+    pub near_iou: f64,
+    pub near_color_rmse: f64,
+    pub switch_iou: f64,
+    pub switch_color_rmse: f64,
+    /// Distance (eye to the bounding-sphere centre) from which the silhouette error stays ≤ 1 px
+    /// (1920 px wide, 60°); raised to the previous level's where it was nearer.
+    pub switch_distance_m: f64,
+    pub never_passes: bool,
+    /// MSFT_lod screen coverage at the switch distance.
+    pub screen_coverage: f64,
+    pub measured: Vec<DistanceError>,
+}
+
+/// One row of the speed/error table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SpeedErrorRow {
+    pub level: usize,
+    pub triangles: usize,
+    pub bytes: usize,
+    pub hausdorff_max_m: f64,
+    pub worst_iou_at_switch: f64,
+    pub switch_distance_m: f64,
+    /// Triangles relative to LoD0 (what the level saves the GPU).
+    pub triangle_ratio: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TreeLodReport {
+    pub name: String,
+    pub seed: u64,
+    pub atlas_px: u32,
+    pub bounding_radius_m: f64,
+    pub clusters: usize,
+    /// Branch levels LoD2 drops (finest first); empty when the tree has one level.
+    pub dropped_levels: Vec<u32>,
+    /// Levels built but left out because they saved nothing over the level before (the written
+    /// chain is renumbered, so `lods` and the files stay contiguous).
+    pub left_out: Vec<LeftOutLevel>,
+    pub lods: Vec<TreeLodFigures>,
+    pub table: Vec<SpeedErrorRow>,
+    pub atlas_mips: Vec<MipFigures>,
+    pub seconds_meshes: f64,
+    pub seconds_bake: f64,
+    pub seconds_analyze: f64,
+    pub raster_fragments: u64,
+}
+
+/// Everything one tree's chain writes.
+#[derive(Debug, Clone)]
+pub struct TreeLods {
+    pub name: String,
+    pub levels: Vec<TreeLod>,
+    /// `<name>.glb`: LoD0 with MSFT_lod to the coarser levels.
+    pub chain: Scene,
+    pub atlas: Vec<MipLevel>,
+    /// The atlas' normals (glTF tangent-space normal map, level 0: engines make its mips), which
+    /// the card levels' material samples as normalTexture.
+    pub normal_atlas: Option<Image>,
+    pub impostor_cells: Vec<AtlasCell>,
+    pub report: TreeLodReport,
+    /// The L-system tree LoD0 shows (None for a mesh asset).
+    pub lod0: Option<TreeMesh>,
+}
+
+/// A level built but not written: it would have drawn no fewer triangles than the level before it
+/// (a small tree's cards can outnumber its simplified branches), so an engine would gain nothing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LeftOutLevel {
+    /// What it would have been ("cards", "billboards", …) and its number in the full chain.
+    pub kind: String,
+    pub planned_level: usize,
+    pub triangles: usize,
+    /// The triangles of the level before it in the written chain.
+    pub previous_triangles: usize,
+}
