@@ -56,7 +56,8 @@ section() {
 elapsed() { echo "$(( SECONDS - $1 ))s"; }
 
 # ---------------------------------------------------------------------------------------------------------
-section "1. Set-up (apt libs, Python venv, npm gltf-validator)"
+section "1. Set-up (apt libs, Python venv, npm, bpy)"
+setup_tools() {
 setup_start=$SECONDS
 
 # apt: only when something is missing (a fresh CI machine may lack the EGL/Mesa libraries).
@@ -150,11 +151,20 @@ node -e 'const v=require(process.argv[1]); console.log("node tools: gltf-validat
   "$ROOT/scripts/node_modules/gltf-validator"
 "$BPY" -c 'import bpy; print("blender tools: bpy " + bpy.app.version_string)' 2>/dev/null
 echo "set-up took $(elapsed "$setup_start")"
+}
 
-section "1b. Self-test of check_outputs.py (good samples pass, broken ones fail)"
-"$PY" scripts/check_outputs.py --self-test
-
-if ((SETUP_ONLY)); then exit 0; fi
+# With the tests, the set-up (downloads, unpacking, mostly waiting on the network and the disk) runs
+# in the background while cargo compiles; its output is shown when both are done.
+SETUP_PID=""
+SETUP_LOG="$ROOT/target/check-setup.log"
+if ((RUN_TESTS)) && ! ((SETUP_ONLY)); then
+  mkdir -p "$ROOT/target"
+  echo "set-up runs in the background while cargo compiles the tests (output: $SETUP_LOG, shown after the compile)"
+  setup_tools > "$SETUP_LOG" 2>&1 &
+  SETUP_PID=$!
+else
+  setup_tools
+fi
 
 section "1c. cargo fmt --check (rustfmt.toml)"
 if ! cargo fmt --version >/dev/null 2>&1; then rustup component add rustfmt; fi
@@ -163,11 +173,36 @@ if ! cargo fmt --check; then echo "!! code is not rustfmt-formatted: run \`cargo
 # ---------------------------------------------------------------------------------------------------------
 # Release for both: the tests then share compiled dependencies with the release build (one compile of
 # the dependency tree instead of two on 2 cores), and property tests and big maps run fast.
+# The tests are compiled first, then run in the background while the output checks below use the
+# binary they built: on 2 cores the two overlap where either waits (processes, files, the browser).
+TEST_PID=""
+TEST_LOG="$ROOT/target/check-cargo-test.log"
 if ((RUN_TESTS)); then
-  section "2. cargo test --release"
+  section "2a. cargo test --release --no-run (compile the tests and the binary)"
   t=$SECONDS
-  cargo test --release
-  echo "cargo test took $(elapsed "$t")"
+  cargo test --release --no-run
+  echo "compiling took $(elapsed "$t")"
+fi
+
+if [ -n "$SETUP_PID" ]; then
+  section "1. Set-up (apt libs, Python venv, npm, bpy), what of it the compile did not hide"
+  setup_rc=0
+  wait "$SETUP_PID" || setup_rc=$?
+  cat "$SETUP_LOG"
+  if ((setup_rc)); then echo "check.sh: the set-up failed (exit $setup_rc; see above)" >&2; exit 1; fi
+fi
+
+section "1b. Self-test of check_outputs.py (good samples pass, broken ones fail)"
+"$PY" scripts/check_outputs.py --self-test
+
+if ((SETUP_ONLY)); then exit 0; fi
+
+if ((RUN_TESTS)); then
+  section "2b. cargo test --release: the tests start in the background (their log follows the output checks)"
+  TEST_START=$SECONDS
+  cargo test --release > "$TEST_LOG" 2>&1 &
+  TEST_PID=$!
+  echo "cargo test is running (pid $TEST_PID, log $TEST_LOG)"
 else
   section "2. cargo test (skipped: --no-tests)"
 fi
@@ -554,6 +589,15 @@ for scene in "${SCENES[@]}"; do
 done
 
 # ---------------------------------------------------------------------------------------------------------
+TEST_RC=0
+if [ -n "$TEST_PID" ]; then
+  section "2c. cargo test --release: the tests' log (they ran alongside the output checks)"
+  wait "$TEST_PID" || TEST_RC=$?
+  cat "$TEST_LOG"
+  echo "cargo test ran for $(elapsed "$TEST_START") (exit $TEST_RC)"
+fi
+
+# ---------------------------------------------------------------------------------------------------------
 section "Summary"
 printf '%-38s | %-10s | %-16s | %-40s | %s\n' file export "verdant validate" "check_outputs" "gltf-validator"
 printf '%s\n' "---------------------------------------+------------+------------------+------------------------------------------+---------------------"
@@ -572,8 +616,13 @@ section "Time per section"
 printf '%s\n' "${SECTION_TIMES[@]}"
 echo "thumbnails: out/check/thumbs/   total time: $(elapsed "$SCRIPT_START")"
 echo "outputs: $PASSED passed, $FAILED failed"
-if ((FAILED)); then
-  echo "check.sh: FAILED ($FAILED output checks failed; see the '!!' lines above)" >&2
+if ((TEST_RC)); then
+  echo "cargo test: FAILED (exit $TEST_RC; its log is in section 2c above and in $TEST_LOG)" >&2
+else
+  echo "cargo test: passed"
+fi
+if ((FAILED)) || ((TEST_RC)); then
+  echo "check.sh: FAILED ($FAILED output checks failed; see the '!!' lines above$( ((TEST_RC)) && echo '; cargo test failed'))" >&2
   exit 1
 fi
 echo "check.sh: all checks passed"

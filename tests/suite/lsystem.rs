@@ -1004,9 +1004,9 @@ fn a_doubling_rule_at_depth_60_is_refused_before_any_expansion() {
     // to raise the budget
     let system = sys("recursion 60\naxiom A\nrule A = AA\n");
     assert_eq!(verdant::lsystem::expand::fewest_symbols(&system), Some(1u128 << 60));
-    let started = std::time::Instant::now();
+    // refused by the count alone (no wall-clock bound here: CI machines are shared; the count is
+    // what proves nothing was expanded)
     let e = Expander::new(&system, 0, verdant::lsystem::expand::DEFAULT_MAX_SYMBOLS).err().expect("refused");
-    assert!(started.elapsed().as_secs_f64() < 0.1);
     let msg = e.to_string();
     assert!(
         msg.contains("at least 1152921504606846976 symbols")

@@ -124,8 +124,23 @@ fn placements_and_scene_glb_are_byte_identical_across_runs_threads_and_jobs() {
     write(d, "p/a.toml", &forest("a", 3));
     write(d, "p/b.toml", &forest("b", 4));
     let runs: [(&str, &str, &str); 4] = [("o1", "1", "1"), ("o2", "2", "2"), ("o3", "2", "1"), ("o4", "1", "2")];
-    for (out, jobs, threads) in runs {
+    for (k, (out, jobs, threads)) in runs.into_iter().enumerate() {
+        if k >= 2 {
+            // o1 (1 job, 1 thread) and o2 (2 jobs, 2 threads) build every stage; o3 and o4 reuse
+            // o2's plants (the slow stage, whose thread independence the tree and grass tests check)
+            // and build terrain, scatter and view at their own job and thread counts
+            share_plants_cache(&d.join("o2"), &d.join(out));
+        }
         ok(&verdant_in(d, &["--threads", threads, "build", "p/a.toml", "p/b.toml", "--jobs", jobs, "--out", out]));
+    }
+    for out in ["o3", "o4"] {
+        let timing = |scene: &str| read_json(&d.join(out).join(scene).join("report.json"))["timing"].clone();
+        let (a, b) = (timing("a"), timing("b"));
+        for (stage, cached) in [("plants", true), ("scatter", false), ("view", false), ("preview", false)] {
+            assert_eq!((&a[stage]["cached"], &b[stage]["cached"]), (&cached.into(), &cached.into()), "{out}: {stage}");
+        }
+        // the two scenes share their terrain: one builds it, the other may find it cached
+        assert!(a["terrain"]["cached"] == false || b["terrain"]["cached"] == false, "{out}: terrain built");
     }
     // and once more like the first, with every stage recomputed
     ok(&verdant_in(d, &["--threads", "1", "build", "p/a.toml", "p/b.toml", "--jobs", "1", "--out", "o1", "--force"]));

@@ -418,9 +418,9 @@ fn max_instances_exceeded_is_a_clear_error() {
     );
     // a huge request fails fast (estimated, not generated)
     sp.max_density = 1e7;
-    let start = std::time::Instant::now();
     let e = scatter_species(&t.surface, t.extent, &sp, None, None, &[], 16.0, 1).unwrap_err();
-    assert!(matches!(e, ScatterError::TooManyEstimated { .. }) && start.elapsed().as_secs_f64() < 1.0, "{e:?}");
+    // TooManyEstimated is raised before any point is generated (no wall-clock bound: shared machines)
+    assert!(matches!(e, ScatterError::TooManyEstimated { .. }), "{e:?}");
     // huge work with little output (density ~0 almost everywhere) is refused too
     sp.max_instances = usize::MAX;
     sp.max_density = 1e9;

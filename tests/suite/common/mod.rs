@@ -95,3 +95,27 @@ pub fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
     }
     out
 }
+
+/// Copies the plants entries of `from`'s stage cache into `to`'s (the other stages stay to be built).
+pub fn share_plants_cache(from: &Path, to: &Path) {
+    let target = to.join(".cache");
+    fs::create_dir_all(&target).unwrap();
+    for entry in fs::read_dir(from.join(".cache")).unwrap() {
+        let entry = entry.unwrap();
+        if entry.file_name().to_string_lossy().starts_with("plants-") {
+            copy_dir(&entry.path(), &target.join(entry.file_name()));
+        }
+    }
+}
+
+pub fn copy_dir(from: &Path, to: &Path) {
+    fs::create_dir_all(to).unwrap();
+    for entry in fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &to.join(entry.file_name()));
+        } else {
+            fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
+        }
+    }
+}
