@@ -57,6 +57,11 @@ elapsed() { echo "$(( SECONDS - $1 ))s"; }
 
 # ---------------------------------------------------------------------------------------------------------
 section "1. Set-up (apt libs, Python venv, npm, bpy)"
+# Blender as a Python module (PyPI bpy): its venv, used by steps 5d and 5d2 (set here, outside
+# setup_tools, which may run in a background subshell whose variables do not come back)
+BPY_PKG="bpy==4.5.15"
+BVENV="$ROOT/.venv-blender"
+BPY="$BVENV/bin/python"
 setup_tools() {
 setup_start=$SECONDS
 
@@ -89,9 +94,9 @@ else
     python3 -m venv "$VENV"
   fi
   echo "pip: installing ${PY_PKGS[*]}"
-  "$PY" -m pip install -q --disable-pip-version-check "${PY_PKGS[@]}"
+  "$PY" -m pip install -q --no-compile --disable-pip-version-check "${PY_PKGS[@]}"
   echo "pip: installing ${PY_PKGS_AFTER[*]} (after pyrender, which pins an older PyOpenGL)"
-  "$PY" -m pip install -q --disable-pip-version-check "${PY_PKGS_AFTER[@]}"
+  "$PY" -m pip install -q --no-compile --disable-pip-version-check "${PY_PKGS_AFTER[@]}"
   echo "(pip's note that pyrender requires PyOpenGL==3.1.0 is expected: 3.1.10 is the one that works with EGL)"
   echo "$py_want" > "$py_stamp"
   echo "venv: ready in $(elapsed "$t")"
@@ -118,9 +123,6 @@ npm_ci scripts/engines babylonjs Babylon.js
 
 # Blender as a Python module (PyPI bpy) for the import checks; its wheel needs CPython 3.11, so it gets
 # a venv of its own (.venv-blender), made with a python3.11 from PATH or pyenv.
-BPY_PKG="bpy==4.5.15"
-BVENV="$ROOT/.venv-blender"
-BPY="$BVENV/bin/python"
 bpy_stamp="$BVENV/.verdant-check-deps"
 if [ -x "$BPY" ] && [ -f "$bpy_stamp" ] && [ "$(cat "$bpy_stamp")" = "$BPY_PKG" ]; then
   echo "blender venv: up to date ($BVENV)"
@@ -138,7 +140,7 @@ else
   fi
   echo "blender venv: creating $BVENV with $py311, pip: installing $BPY_PKG"
   "$py311" -m venv "$BVENV"
-  "$BPY" -m pip install -q --disable-pip-version-check "$BPY_PKG"
+  "$BPY" -m pip install -q --no-compile --disable-pip-version-check "$BPY_PKG"
   echo "$BPY_PKG" > "$bpy_stamp"
   echo "blender venv: ready in $(elapsed "$t")"
 fi
@@ -482,6 +484,7 @@ for f in "${FILES[@]}"; do
 done
 if ((${#green_files[@]})) && ((${#other_files[@]})); then
   # the two engines load in parallel (each browser mostly waits on one core), then the logs are read in order
+  engine_pids=()
   for engine in babylon three; do
     (
       for group in green other; do
@@ -491,8 +494,10 @@ if ((${#green_files[@]})) && ((${#other_files[@]})); then
           > "$OUT/check_${engine}_$group.log" 2>&1 || true
       done
     ) &
+    engine_pids+=($!)
   done
-  wait
+  # these two only: a bare `wait` would also wait for the tests running in the background
+  wait "${engine_pids[@]}"
   for engine in babylon three; do
     for group in green other; do
       if [ "$group" = green ]; then n=${#green_files[@]}; else n=${#other_files[@]}; fi

@@ -14,8 +14,8 @@ use verdant::plants::tree::{
 };
 use verdant::plants::tree_lod::{self, MeshLodJob, TreeLodJob, TreeLodOptions};
 use verdant::scene::build::{self as scene_build, BuildSettings, PresetSource};
+use verdant::scene::pipeline::Stage;
 use verdant::scene::preset;
-use verdant::scene::stages::Stage;
 use verdant::terrain::build::BuildOptions;
 use verdant::terrain::job::{self, MeshMode, Source, TerrainJob};
 use verdant::validate::{validate_file, ValidateOptions};

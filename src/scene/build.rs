@@ -12,20 +12,20 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::failure::{Blame, Failure};
-use crate::mesh::Scene;
-use crate::plants::marker;
-use crate::scene::cache::{process_alive, temp_owner, Cache, FileHashes, KeyBuilder};
+use crate::scene::cache::{process_alive, temp_owner, Cache};
 use crate::scene::error::SceneBuildError;
 use crate::scene::manifest::{write_manifest_and_report, StageRun};
-use crate::scene::plants_stage::{self, PlantsStageReport};
+use crate::scene::pipeline::{CacheUse, Stage, StageRunner, TerrainHandoff};
+use crate::scene::plants_stage::{self, PlantsJob, PlantsStageReport};
 use crate::scene::preset::load_preset;
 use crate::scene::preview::{footprint_m, PreviewLayer};
-use crate::scene::scatter_stage::{self, ScatterStageReport};
-use crate::scene::snow_stage::{self, SnowStageReport};
-use crate::scene::stages::{self, PreviewStageReport, Stage};
-use crate::scene::view_stage::{self, ViewStageReport};
+use crate::scene::preview_stage::{PreviewJob, PreviewPlacements};
+use crate::scene::scatter_stage::{Placed, ScatterJob};
+use crate::scene::snow_stage::{self, SnowJob};
+use crate::scene::terrain_stage::{LodInfo, TerrainJob};
+use crate::scene::view_stage::{TerrainInput, ViewJob, ViewStageReport};
 use crate::scene::Preset;
-use crate::validate::read_scene;
+use crate::snow::CoverMask;
 
 /// How to build: where, which stages, whether to ignore the cache.
 #[derive(Debug, Clone)]
@@ -193,110 +193,8 @@ fn swap_into_place(tmp_dir: &Path, final_dir: &Path) -> Result<(), SceneBuildErr
     Ok(())
 }
 
-/// The cache as one build used it.
-#[derive(Default)]
-struct CacheUse {
-    /// Sizes and hashes of the files restored or stored.
-    hashes: FileHashes,
-    /// Entry folder names looked up (served or stored).
-    entries: Vec<String>,
-}
-
-/// Runs one cached stage: restores its files and report from the cache when `key` is there and
-/// the entry is whole, otherwise computes them (`compute` also returns in-memory results for later
-/// stages) and stores them. Returns the report, the in-memory results when computed, and whether
-/// the cache served it.
-#[allow(clippy::too_many_arguments)]
-fn cached_stage<R, X>(
-    cache: &Cache,
-    force: bool,
-    stage: &str,
-    key: &str,
-    dir: &Path,
-    used: &mut CacheUse,
-    files_of: impl Fn(&R) -> Vec<PathBuf>,
-    compute: impl FnOnce() -> Result<(R, X), SceneBuildError>,
-    progress: &dyn Fn(&str),
-) -> Result<(R, Option<X>, bool), SceneBuildError>
-where
-    R: Serialize + serde::de::DeserializeOwned,
-{
-    let cached = if force { None } else { cache.lookup(stage, key) };
-    // an entry that cannot be read or restored completely is recomputed (and replaced)
-    let restored = cached.and_then(|(json, entry)| {
-        let report: R = serde_json::from_str(&json).ok()?;
-        used.hashes.extend(Cache::restore(&entry, dir, &files_of(&report)).ok()?);
-        Some(report)
-    });
-    used.entries.push(Cache::entry_name(stage, key));
-    if let Some(report) = restored {
-        progress(&format!("{stage}: cached"));
-        return Ok((report, None, true));
-    }
-    progress(&format!("{stage}: running"));
-    let (report, extra) = compute()?;
-    let json = serde_json::to_string_pretty(&report).unwrap_or_default();
-    match cache.store(stage, key, dir, &files_of(&report), &json) {
-        Ok(hashes) => used.hashes.extend(hashes),
-        Err(e) => progress(&format!("{stage}: could not store the cache entry ({e}); continuing")),
-    }
-    Ok((report, Some(extra), false))
-}
-
-/// The terrain scene for later stages: in memory when the terrain stage ran, else re-imported
-/// from the cached files on first use (also a check that what was cached reads back).
-struct LazyScene {
-    cell: std::cell::OnceCell<Scene>,
-    dir: PathBuf,
-    main: PathBuf,
-}
-
-impl LazyScene {
-    fn get(&self) -> Result<&Scene, SceneBuildError> {
-        if let Some(scene) = self.cell.get() {
-            return Ok(scene);
-        }
-        if self.main.as_os_str().is_empty() {
-            return Err(SceneBuildError::Usage("the terrain stage wrote no mesh".into()));
-        }
-        let scene = reimport(&self.dir, &self.main)?;
-        Ok(self.cell.get_or_init(|| scene))
-    }
-}
-
-fn reimport(dir: &Path, rel: &Path) -> Result<Scene, SceneBuildError> {
-    let path = dir.join(rel);
-    read_scene(&path).map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })
-}
-
-/// Positions of every species' placements as scene.glb stores them (f32), read from the tables.
-fn placements_from_tables(
-    dir: &Path,
-    tables: &[(String, PathBuf)],
-    preset: &Preset,
-) -> Result<Vec<PreviewLayer>, SceneBuildError> {
-    preset
-        .species
-        .iter()
-        .enumerate()
-        .map(|(index, s)| {
-            let mut points = Vec::new();
-            if let Some((_, rel)) = tables.iter().find(|(n, _)| *n == s.rules.name) {
-                let path = dir.join(rel);
-                let rows = crate::export::table::read_placements_csv(&path)
-                    .map_err(|message| SceneBuildError::Io { path: path.clone(), message })?;
-                points.extend(rows.iter().map(|r| r.position.map(|v| v as f32 as f64)));
-            }
-            Ok(PreviewLayer {
-                color: marker::species_color(s.kind, index),
-                kind: s.kind,
-                footprint_m: footprint_m(s),
-                positions: points,
-            })
-        })
-        .collect()
-}
-
+/// Runs the selected stages in order into `dir`, each through the cache; later stages take what
+/// earlier ones made (the terrain scene, the snow cover, the plants' chains, the placements).
 fn build_into(
     preset: &Preset,
     settings: &BuildSettings,
@@ -306,216 +204,84 @@ fn build_into(
     let name = &preset.scene.name;
     let say = |m: &str| progress(name, m);
     let cache = Cache::new(&settings.out_dir);
-    let force = settings.force;
     let wants = |s: Stage| settings.stages.contains(&s);
+    let mut runner =
+        StageRunner { cache: &cache, force: settings.force, dir, used: CacheUse::default(), progress: &say };
     let mut runs: Vec<StageRun> = Vec::new();
-    // sizes and hashes of stage files already known from the cache, so the manifest need not
-    // re-read them, and the entries this build used (what `verdant cache prune` keeps)
-    let mut known = CacheUse::default();
-    // what later stages need: the terrain scene and the placements (as stored: f32 positions)
-    let mut terrain: Option<(LazyScene, String)> = None;
-    let mut placements: Option<(Option<Vec<PreviewLayer>>, Vec<(String, PathBuf)>, String)> = None;
-    // what the view stage reads: the terrain's LoD levels, the plants stage's chains
-    let mut terrain_lods: Vec<crate::scene::stages::LodInfo> = Vec::new();
-    let mut plants: Option<(PlantsStageReport, String)> = None;
-    // the view stage's report and key, for the perspective preview
-    let mut drawn: Option<(ViewStageReport, String)> = None;
 
+    // the terrain scene for later stages (in memory when built, else read back on first use)
+    let mut terrain: Option<TerrainHandoff> = None;
+    let mut terrain_lods: Vec<LodInfo> = Vec::new();
     if let (true, Some(t)) = (wants(Stage::Terrain), &preset.terrain) {
-        let t0 = Instant::now();
-        let key = stages::terrain_key(preset, t)?;
-        let (report, scene, hit) = cached_stage(
-            &cache,
-            force,
-            "terrain",
-            &key,
-            dir,
-            &mut known,
-            stages::terrain_files,
-            || stages::run_terrain(preset, t, dir).map_err(SceneBuildError::from),
-            &say,
-        )?;
-        if wants(Stage::Scatter) || wants(Stage::Preview) || (wants(Stage::Snow) && preset.snow.is_some()) {
-            // a cached terrain is re-imported from its first mesh file only if a later stage runs
-            let is_mesh = |p: &&PathBuf| matches!(p.extension().and_then(|e| e.to_str()), Some("glb" | "gltf" | "obj"));
-            let main = report.files.iter().find(is_mesh).cloned().unwrap_or_default();
-            let lazy = LazyScene { cell: std::cell::OnceCell::new(), dir: dir.to_path_buf(), main };
-            if let Some(scene) = scene {
-                let _ = lazy.cell.set(scene);
-            }
-            terrain = Some((lazy, key));
-        }
-        terrain_lods = report.lods.clone();
-        runs.push(StageRun::Terrain { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+        let ran = runner.run(&TerrainJob { preset, terrain: t })?;
+        terrain = Some(TerrainHandoff::new(dir, &ran.report.files, ran.key, ran.artifact));
+        terrain_lods = ran.report.lods.clone();
+        runs.push(StageRun::Terrain { report: ran.report, cached: ran.cached, seconds: ran.seconds });
     }
 
-    // the snow cover as stored in snow/cover_mask.png (cached or not, the same values) and the
-    // stage's key, for the scatter's thinning and the preview
-    let mut cover: Option<(crate::snow::CoverMask, String)> = None;
-    if let (true, Some(snow), Some((scene, tkey))) = (wants(Stage::Snow), &preset.snow, &terrain) {
-        let t0 = Instant::now();
-        let key = snow_stage::snow_key(snow, tkey);
-        let (report, _, hit) = cached_stage(
-            &cache,
-            force,
-            "snow",
-            &key,
-            dir,
-            &mut known,
-            SnowStageReport::files,
-            || {
-                // always from the terrain as written (not the in-memory scene), so a snow stage
-                // run after a cached terrain gives the same bytes as one after a fresh terrain
-                let written = reimport(dir, &scene.main)?;
-                Ok((snow_stage::run_snow(preset, snow, &written, dir)?, ()))
-            },
-            &say,
-        )?;
-        cover = Some((snow_stage::load_mask(dir, &report.mask)?, key));
-        runs.push(StageRun::Snow { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+    // the snow cover as stored in snow/cover_mask.png (cached or not, the same values), and its key
+    let mut cover: Option<(CoverMask, String)> = None;
+    if let (true, Some(snow), Some(terrain)) = (wants(Stage::Snow), &preset.snow, &terrain) {
+        let ran = runner.run(&SnowJob { preset, snow, terrain })?;
+        cover = Some((snow_stage::load_mask(dir, &ran.report.mask)?, ran.key));
+        runs.push(StageRun::Snow { report: ran.report, cached: ran.cached, seconds: ran.seconds });
     }
+    let cover_ref = cover.as_ref().map(|(m, k)| (m, k.as_str()));
 
+    let mut plants: Option<(PlantsStageReport, String)> = None;
     if wants(Stage::Plants) && plants_stage::has_plants(preset) {
-        let t0 = Instant::now();
-        let key = plants_stage::plants_key(preset)?;
-        let (report, _, hit) = cached_stage(
-            &cache,
-            force,
-            "plants",
-            &key,
-            dir,
-            &mut known,
-            PlantsStageReport::files,
-            || Ok((plants_stage::run_plants(preset, dir)?, ())),
-            &say,
-        )?;
-        plants = Some((report.clone(), key));
-        runs.push(StageRun::Plants { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+        let ran = runner.run(&PlantsJob { preset })?;
+        plants = Some((ran.report.clone(), ran.key));
+        runs.push(StageRun::Plants { report: ran.report, cached: ran.cached, seconds: ran.seconds });
     }
 
-    if let (true, Some((scene, tkey)), false) = (wants(Stage::Scatter), &terrain, preset.species.is_empty()) {
-        let t0 = Instant::now();
-        // thinning by the snow cover makes the placements depend on the snow stage too
-        let upstream = match &cover {
-            Some((_, skey)) => format!("{tkey}+snow:{skey}"),
-            None => tkey.clone(),
-        };
-        let key = scatter_stage::scatter_key(preset, &upstream)?;
-        let (report, placed, hit) = cached_stage(
-            &cache,
-            force,
-            "scatter",
-            &key,
-            dir,
-            &mut known,
-            ScatterStageReport::files,
-            || {
-                scatter_stage::run_scatter_with_snow(preset, scene.get()?, dir, cover.as_ref().map(|(m, _)| m))
-                    .map_err(SceneBuildError::from)
-            },
-            &say,
-        )?;
-        let tables: Vec<(String, PathBuf)> = report.species.iter().map(|s| (s.name.clone(), s.csv.clone())).collect();
+    // what the preview draws of the placements, and the scatter stage's key; the view stage's
+    // report and key (the preview renders scene.glb from the first view)
+    let mut placed: (Option<Vec<PreviewLayer>>, Vec<(String, PathBuf)>, Option<String>) = (None, Vec::new(), None);
+    let mut drawn: Option<(ViewStageReport, String)> = None;
+    if let (true, Some(terrain), false) = (wants(Stage::Scatter), &terrain, preset.species.is_empty()) {
+        let ran = runner.run(&ScatterJob { preset, terrain, cover: cover_ref })?;
+        let tables: Vec<(String, PathBuf)> =
+            ran.report.species.iter().map(|s| (s.name.clone(), s.csv.clone())).collect();
+        runs.push(StageRun::Scatter { report: ran.report, cached: ran.cached, seconds: ran.seconds });
         if wants(Stage::View) {
-            let t0 = Instant::now();
             let plants_key = plants.as_ref().map_or("", |(_, k)| k.as_str());
-            let compare = if settings.compare_full_detail { "compare" } else { "" };
-            let vkey = view_stage::view_key(preset, &[tkey, plants_key, &key, compare]);
-            let main = scene.main.clone();
-            let (vreport, _, vhit) = cached_stage(
-                &cache,
-                force,
-                "view",
-                &vkey,
-                dir,
-                &mut known,
-                ViewStageReport::files,
-                || {
-                    let input = view_stage::TerrainInput { main: &main, lods: &terrain_lods };
-                    Ok((
-                        view_stage::run_view(
-                            preset,
-                            &input,
-                            plants.as_ref().map(|(r, _)| r),
-                            &tables,
-                            dir,
-                            settings.compare_full_detail,
-                        )?,
-                        (),
-                    ))
-                },
-                &say,
-            )?;
-            drawn = Some((vreport.clone(), vkey));
-            runs.push(StageRun::View { report: vreport, cached: vhit, seconds: t0.elapsed().as_secs_f64() });
+            let job = ViewJob {
+                preset,
+                terrain: TerrainInput { main: &terrain.main, lods: &terrain_lods },
+                plants: plants.as_ref().map(|(r, _)| r),
+                tables: &tables,
+                compare_full_detail: settings.compare_full_detail,
+                upstream: [&terrain.key, plants_key, &ran.key],
+            };
+            let view = runner.run(&job)?;
+            drawn = Some((view.report.clone(), view.key));
+            runs.push(StageRun::View { report: view.report, cached: view.cached, seconds: view.seconds });
         }
-        if wants(Stage::Preview) {
-            // positions as stored (f32), so a preview drawn after a cached scatter is the same
-            // (None when cached: read back from scene.glb only if the preview runs)
-            let layers = placed.map(|placed| {
-                placed
-                    .iter()
-                    .map(|p| {
-                        let pts = p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect();
-                        PreviewLayer {
-                            color: p.color,
-                            kind: p.species.kind,
-                            footprint_m: footprint_m(&p.species),
-                            positions: pts,
-                        }
-                    })
-                    .collect::<Vec<_>>()
-            });
-            placements = Some((layers, tables, key));
-        }
-        runs.push(StageRun::Scatter { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+        // positions as stored (f32), so a preview drawn after a cached scatter is the same
+        let layers = ran.artifact.map(|placed| placed.iter().map(preview_layer).collect());
+        placed = (layers, tables, Some(ran.key));
     }
 
-    if let (true, Some((scene, tkey))) = (wants(Stage::Preview), &terrain) {
-        let t0 = Instant::now();
-        let mut k = KeyBuilder::new("preview", stages::PREVIEW_ALGORITHM_VERSION);
-        k.add(tkey.as_bytes()).add(&stages::PREVIEW_SIZE_PX.to_le_bytes());
-        if let Some((_, _, skey)) = &placements {
-            k.add(skey.as_bytes());
-        }
-        if let Some((_, snow_key)) = &cover {
-            k.add(b"snow").add(snow_key.as_bytes());
-        }
-        if let Some((_, vkey)) = &drawn {
-            k.add(b"view").add(vkey.as_bytes());
-        }
-        let key = k.finish();
-        let (report, _, hit) = cached_stage(
-            &cache,
-            force,
-            "preview",
-            &key,
-            dir,
-            &mut known,
-            |r: &PreviewStageReport| std::iter::once(r.file.clone()).chain(r.map.clone()).collect(),
-            || {
-                let layers = match &placements {
-                    Some((Some(layers), _, _)) => layers.clone(),
-                    Some((None, tables, _)) => placements_from_tables(dir, tables, preset)?,
-                    None => Vec::new(),
-                };
-                // the perspective preview draws scene.glb as written (cached or not, the same bytes)
-                let view = match &drawn {
-                    Some((report, _)) => match report.views.first() {
-                        Some(v) => Some((reimport(dir, &report.scene_file)?, v.camera.clone())),
-                        None => None,
-                    },
-                    None => None,
-                };
-                let view = view.as_ref().map(|(s, c)| (s, c));
-                Ok((stages::run_preview(scene.get()?, &layers, cover.as_ref().map(|(m, _)| m), view, dir)?, ()))
-            },
-            &say,
-        )?;
-        runs.push(StageRun::Preview { report, cached: hit, seconds: t0.elapsed().as_secs_f64() });
+    if let (true, Some(terrain)) = (wants(Stage::Preview), &terrain) {
+        let placements = match &placed {
+            (Some(layers), _, _) => PreviewPlacements::Fresh(layers.clone()),
+            (None, tables, Some(_)) => PreviewPlacements::Tables(tables),
+            (None, _, None) => PreviewPlacements::None,
+        };
+        let job = PreviewJob {
+            preset,
+            terrain,
+            placements: (placements, placed.2.as_deref()),
+            cover: cover_ref,
+            view: drawn.as_ref().map(|(r, k)| (r, k.as_str())),
+        };
+        let ran = runner.run(&job)?;
+        runs.push(StageRun::Preview { report: ran.report, cached: ran.cached, seconds: ran.seconds });
     }
 
     progress(name, "manifest and report");
+    let known = runner.used;
     let files = write_manifest_and_report(preset, dir, &runs, &known.hashes)?;
     if let Err(e) = cache.record_scene(name, &known.entries) {
         progress(
@@ -541,6 +307,16 @@ fn build_into(
         cached_stages: runs.iter().filter(|r| r.cached()).map(StageRun::stage).collect(),
         seconds: 0.0,
     })
+}
+
+/// One species' fresh placements as the preview draws them: positions as stored (f32).
+fn preview_layer(p: &Placed) -> PreviewLayer {
+    PreviewLayer {
+        color: p.color,
+        kind: p.species.kind,
+        footprint_m: footprint_m(&p.species),
+        positions: p.instances.iter().map(|i| i.position.map(|v| v as f32 as f64)).collect(),
+    }
 }
 
 pub fn preset_label(preset: &Preset) -> String {

@@ -12,10 +12,12 @@ use crate::plants::grass_asset::GRASS_LOD_KINDS;
 use crate::plants::tree_lod::TreeLodReport;
 use crate::scene::cache::{sha256_hex, FileHashes};
 use crate::scene::error::SceneBuildError;
+use crate::scene::pipeline::Stage;
 use crate::scene::plants_stage::{PlantReport, PlantsStageReport};
+use crate::scene::preview_stage::PreviewStageReport;
 use crate::scene::scatter_stage::ScatterStageReport;
 use crate::scene::snow_stage::SnowStageReport;
-use crate::scene::stages::{PreviewStageReport, Stage, TerrainStageReport};
+use crate::scene::terrain_stage::TerrainStageReport;
 use crate::scene::Preset;
 
 /// One stage's result in this build.
@@ -124,8 +126,8 @@ struct TerrainManifest<'a> {
     output_triangles: usize,
     max_error_m: f64,
     bounds: &'a Option<crate::mesh::Bounds>,
-    chunks: &'a [crate::scene::stages::ChunkInfo],
-    lods: &'a [crate::scene::stages::LodInfo],
+    chunks: &'a [crate::scene::terrain_stage::ChunkInfo],
+    lods: &'a [crate::scene::terrain_stage::LodInfo],
 }
 
 /// A generated species: its files, and per level of detail the measured switch distance and the

@@ -8,11 +8,13 @@ pub mod build;
 pub mod cache;
 pub mod error;
 pub mod manifest;
+pub mod pipeline;
 pub mod plants_stage;
 pub mod preview;
+pub mod preview_stage;
 pub mod scatter_stage;
 pub mod snow_stage;
-pub mod stages;
+pub mod terrain_stage;
 pub mod view_render;
 pub mod view_stage;
 

@@ -24,7 +24,8 @@ use crate::plants::tree_lod::{
     build_mesh_lods, build_tree_lods, variant_seed, TreeLodOptions, TreeLodReport, TreeLods,
 };
 use crate::scene::cache::{sha256_hex, KeyBuilder};
-use crate::scene::error::StageError;
+use crate::scene::error::{SceneBuildError, StageError};
+use crate::scene::pipeline::{Stage, StageJob};
 use crate::scene::{MeshLook, PlantLook, Preset, TreeLook};
 
 fn fail(message: String) -> StageError {
@@ -157,7 +158,7 @@ pub fn has_plants(preset: &Preset) -> bool {
 }
 
 /// Version of what the plants stage writes for given inputs: part of its cache key (see
-/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: chain files keep their coarser levels
+/// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: chain files keep their coarser levels
 /// in a second glTF scene with shared materials; flower cards inside their atlas cells. 3: bark
 /// and polygon leaves textured (procedural, tinted by their colour). 4: wind data in `_WIND` /
 /// `_WIND_BRANCH` on every plant, none in COLOR_0. 5: a tree species without an L-system grows a
@@ -498,4 +499,27 @@ fn grass_chain(name: &str, g: &GrassSettings, asset: &GrassAsset) -> SpeciesChai
         .collect();
     let lod0: Vec<&Mesh> = clumps.iter().filter_map(|&c| asset.lod_scenes.first()?.meshes.get(c)).collect();
     SpeciesChain::with_bounds(variants, &lod0)
+}
+
+/// The stage in a scene build.
+pub struct PlantsJob<'a> {
+    pub preset: &'a Preset,
+}
+
+impl StageJob for PlantsJob<'_> {
+    type Report = PlantsStageReport;
+    type Artifact = ();
+    const STAGE: Stage = Stage::Plants;
+
+    fn key(&self) -> Result<String, SceneBuildError> {
+        Ok(plants_key(self.preset)?)
+    }
+
+    fn files(report: &PlantsStageReport) -> Vec<PathBuf> {
+        report.files()
+    }
+
+    fn run(&self, dir: &Path) -> Result<(PlantsStageReport, ()), SceneBuildError> {
+        Ok((run_plants(self.preset, dir)?, ()))
+    }
 }

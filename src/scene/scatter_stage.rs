@@ -16,7 +16,8 @@ use crate::scatter::stats::{analyze, SpeciesStats};
 use crate::scatter::surface::SurfaceIndex;
 use crate::scatter::{scatter_species_snow, Instance, RuleCounts};
 use crate::scene::cache::{sha256_hex, KeyBuilder};
-use crate::scene::error::StageError;
+use crate::scene::error::{SceneBuildError, StageError};
+use crate::scene::pipeline::{Stage, StageJob, TerrainHandoff};
 use crate::scene::{Preset, SpeciesSettings};
 
 fn fail(message: String) -> StageError {
@@ -59,7 +60,7 @@ impl ScatterStageReport {
 }
 
 /// Version of what the scatter stage writes for given inputs: part of its cache key (see
-/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: scene.glb holds no unused mesh; 3: its terrain is textured; 4:
+/// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: scene.glb holds no unused mesh; 3: its terrain is textured; 4:
 /// its plants carry wind in `_WIND`, not COLOR_0; 5: a tree without an L-system instances a
 /// built-in tree; 6: flower cards lit by a normal atlas (with TANGENT); 7: scene.glb moved to the
 /// view stage (tables only).
@@ -218,5 +219,38 @@ impl<'a> From<&'a SpeciesReport> for SpeciesSummary<'a> {
             rules: &r.rules,
             stats: &r.stats,
         }
+    }
+}
+
+/// The stage in a scene build.
+pub struct ScatterJob<'a> {
+    pub preset: &'a Preset,
+    pub terrain: &'a TerrainHandoff,
+    /// The snow cover that thins the placements, and the snow stage's key.
+    pub cover: Option<(&'a crate::snow::CoverMask, &'a str)>,
+}
+
+impl StageJob for ScatterJob<'_> {
+    type Report = ScatterStageReport;
+    /// Every species' placements (what the preview draws after a fresh run).
+    type Artifact = Vec<Placed>;
+    const STAGE: Stage = Stage::Scatter;
+
+    fn key(&self) -> Result<String, SceneBuildError> {
+        // thinning by the snow cover makes the placements depend on the snow stage too
+        let upstream = match self.cover {
+            Some((_, snow_key)) => format!("{}+snow:{snow_key}", self.terrain.key),
+            None => self.terrain.key.clone(),
+        };
+        Ok(scatter_key(self.preset, &upstream)?)
+    }
+
+    fn files(report: &ScatterStageReport) -> Vec<PathBuf> {
+        report.files()
+    }
+
+    fn run(&self, dir: &Path) -> Result<(ScatterStageReport, Vec<Placed>), SceneBuildError> {
+        let cover = self.cover.map(|(m, _)| m);
+        Ok(run_scatter_with_snow(self.preset, self.terrain.scene()?, dir, cover)?)
     }
 }

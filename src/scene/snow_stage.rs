@@ -16,7 +16,8 @@ use serde::{Deserialize, Serialize};
 use crate::export;
 use crate::mesh::Scene;
 use crate::scene::cache::KeyBuilder;
-use crate::scene::error::StageError;
+use crate::scene::error::{SceneBuildError, StageError};
+use crate::scene::pipeline::{read_back, Stage, StageJob, TerrainHandoff};
 use crate::scene::Preset;
 use crate::snow::{self, CoverMask, SnowReport, SnowSettings};
 
@@ -73,7 +74,7 @@ impl SnowStageReport {
 }
 
 /// Version of what the snow stage writes for given inputs: part of its cache key (see
-/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]). 2: terrain_snow.glb carries the textured terrain.
+/// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: terrain_snow.glb carries the textured terrain.
 pub const SNOW_ALGORITHM_VERSION: u32 = 2;
 
 /// Cache key: the terrain's key and the snow settings.
@@ -169,4 +170,32 @@ pub fn load_mask(scene_dir: &Path, info: &MaskInfo) -> Result<CoverMask, StageEr
         std::fs::read(&path).map_err(|e| fail(format!("{}: cannot read the cover mask: {e}", path.display())))?;
     CoverMask::from_png(&bytes, info.min_x, info.min_z, info.metres_per_pixel)
         .map_err(|e| fail(format!("{}: {e}", path.display())))
+}
+
+/// The stage in a scene build.
+pub struct SnowJob<'a> {
+    pub preset: &'a Preset,
+    pub snow: &'a SnowSettings,
+    pub terrain: &'a TerrainHandoff,
+}
+
+impl StageJob for SnowJob<'_> {
+    type Report = SnowStageReport;
+    type Artifact = ();
+    const STAGE: Stage = Stage::Snow;
+
+    fn key(&self) -> Result<String, SceneBuildError> {
+        Ok(snow_key(self.snow, &self.terrain.key))
+    }
+
+    fn files(report: &SnowStageReport) -> Vec<PathBuf> {
+        report.files()
+    }
+
+    fn run(&self, dir: &Path) -> Result<(SnowStageReport, ()), SceneBuildError> {
+        // always from the terrain as written (not the in-memory scene), so a snow stage run after
+        // a cached terrain gives the same bytes as one after a fresh terrain
+        let written = read_back(dir, &self.terrain.main)?;
+        Ok((run_snow(self.preset, self.snow, &written, dir)?, ()))
+    }
 }

@@ -19,9 +19,10 @@ use crate::export::{self, table};
 use crate::mesh::{Instances, Material, Mesh, Node, Scene, Texture};
 use crate::scatter::surface::SurfaceIndex;
 use crate::scene::cache::KeyBuilder;
-use crate::scene::error::StageError;
+use crate::scene::error::{SceneBuildError, StageError};
+use crate::scene::pipeline::{Stage, StageJob};
 use crate::scene::plants_stage::{PlantsStageReport, SpeciesChain};
-use crate::scene::stages::LodInfo;
+use crate::scene::terrain_stage::LodInfo;
 use crate::scene::view::{cull_distance, level_at, view_distance_factor, Camera, CullDistance};
 use crate::scene::Preset;
 use crate::validate::read_scene;
@@ -31,7 +32,7 @@ fn fail(message: String) -> StageError {
 }
 
 /// Version of what the view stage writes for given inputs (part of its cache key, see
-/// [`crate::scene::stages::TERRAIN_ALGORITHM_VERSION`]).
+/// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]).
 /// 2: the species' normal atlases are linear data.
 pub const VIEW_ALGORITHM_VERSION: u32 = 2;
 
@@ -588,6 +589,40 @@ fn prune_unused_meshes(scene: &mut Scene) {
     let (textures, remap) = keep_used(std::mem::take(&mut scene.textures), &used);
     scene.materials = materials.into_iter().map(|m| m.with_textures(|i| remap[i])).collect();
     scene.textures = textures;
+}
+
+/// The stage in a scene build.
+pub struct ViewJob<'a> {
+    pub preset: &'a Preset,
+    pub terrain: TerrainInput<'a>,
+    /// The plants stage's report (the species' chains), if it ran.
+    pub plants: Option<&'a PlantsStageReport>,
+    /// Each species' placement table (name, CSV).
+    pub tables: &'a [(String, PathBuf)],
+    pub compare_full_detail: bool,
+    /// The keys of the terrain, plants and scatter stages (what scene.glb is drawn from).
+    pub upstream: [&'a str; 3],
+}
+
+impl StageJob for ViewJob<'_> {
+    type Report = ViewStageReport;
+    type Artifact = ();
+    const STAGE: Stage = Stage::View;
+
+    fn key(&self) -> Result<String, SceneBuildError> {
+        let compare = if self.compare_full_detail { "compare" } else { "" };
+        let [terrain, plants, scatter] = self.upstream;
+        Ok(view_key(self.preset, &[terrain, plants, scatter, compare]))
+    }
+
+    fn files(report: &ViewStageReport) -> Vec<PathBuf> {
+        report.files()
+    }
+
+    fn run(&self, dir: &Path) -> Result<(ViewStageReport, ()), SceneBuildError> {
+        let report = run_view(self.preset, &self.terrain, self.plants, self.tables, dir, self.compare_full_detail)?;
+        Ok((report, ()))
+    }
 }
 
 #[cfg(test)]

@@ -13,8 +13,8 @@ use image::{ImageBuffer, Luma};
 use serde_json::Value;
 use verdant::scene::build::{build_batch, build_preset, BuildSettings, PresetSource};
 use verdant::scene::cache::sha256_hex;
+use verdant::scene::pipeline::Stage;
 use verdant::scene::preset::{demo_preset, load_preset};
-use verdant::scene::stages::Stage;
 
 use crate::common::*;
 
@@ -844,14 +844,14 @@ fn stage_of(rel: &str) -> Option<&'static str> {
 
 #[test]
 fn stage_outputs_match_their_pinned_algorithm_versions() {
-    use verdant::scene::{plants_stage, scatter_stage, snow_stage, stages, view_stage};
+    use verdant::scene::{plants_stage, preview_stage, scatter_stage, snow_stage, terrain_stage, view_stage};
     let versions = [
-        ("terrain", stages::TERRAIN_ALGORITHM_VERSION),
+        ("terrain", terrain_stage::TERRAIN_ALGORITHM_VERSION),
         ("plants", plants_stage::PLANTS_ALGORITHM_VERSION),
         ("snow", snow_stage::SNOW_ALGORITHM_VERSION),
         ("scatter", scatter_stage::SCATTER_ALGORITHM_VERSION),
         ("view", view_stage::VIEW_ALGORITHM_VERSION),
-        ("preview", stages::PREVIEW_ALGORITHM_VERSION),
+        ("preview", preview_stage::PREVIEW_ALGORITHM_VERSION),
     ];
     let dir = tempfile::tempdir().unwrap();
     let mut files: BTreeMap<&str, Vec<(String, String)>> = BTreeMap::new();

@@ -1,5 +1,5 @@
-//! The stages of a scene build. Each takes the resolved preset, writes its files into the scene's
-//! (temporary) folder and returns what it measured; the build caches both by a content key.
+//! The terrain stage: the heightmap (a file or procedural) meshed to its error bound, chunked,
+//! textured with its material layers, with its LoD chain, written in the preset's formats.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -11,7 +11,8 @@ use crate::heightfield::{self, Heightfield};
 use crate::lod::terrain_lod_chain;
 use crate::mesh::{Bounds, Scene};
 use crate::scene::cache::{sha256_hex, KeyBuilder};
-use crate::scene::error::StageError;
+use crate::scene::error::{SceneBuildError, StageError};
+use crate::scene::pipeline::{Stage, StageJob};
 use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
@@ -19,41 +20,6 @@ use crate::terrain::error::measure;
 use crate::terrain::job::{mesh_samples, MeshMode};
 use crate::terrain::layers::{bake_layers, LayerReport};
 use crate::terrain::SampleMesh;
-
-/// The stages in build order. Later issues add scatter, grass, trees and snow.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Stage {
-    /// Heightmap → terrain meshes (+ LoD chain).
-    Terrain,
-    /// `[snow]` → snow/: flake atlas, emitter.json, particle frame, cover mask, snow layer, and the
-    /// terrain with the `_SNOW` weight (skipped without `[snow]`).
-    Snow,
-    /// Grass, flower, tree and mesh species → their meshes with LoDs (species/) and baked atlases (atlases/).
-    Plants,
-    /// [[species]] → placements on the terrain: tables (placements/).
-    Scatter,
-    /// The first `[[view]]` → scene.glb: terrain chunks and instances at the levels their
-    /// distances select, culled beyond each species' cull distance; per view, what is drawn.
-    View,
-    /// preview.png: a shaded relief drawn from the terrain mesh.
-    Preview,
-}
-
-impl Stage {
-    pub const ALL: [Stage; 6] =
-        [Stage::Terrain, Stage::Snow, Stage::Plants, Stage::Scatter, Stage::View, Stage::Preview];
-    pub fn name(self) -> &'static str {
-        match self {
-            Stage::Terrain => "terrain",
-            Stage::Snow => "snow",
-            Stage::Plants => "plants",
-            Stage::Scatter => "scatter",
-            Stage::View => "view",
-            Stage::Preview => "preview",
-        }
-    }
-}
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct ChunkInfo {
@@ -150,11 +116,30 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// exact heights, and the TIN refines until that is within the bound; `max_error_f64_m` beside it.
 pub const TERRAIN_ALGORITHM_VERSION: u32 = 4;
 
-/// Version of the preview stage's output for given inputs (see [`TERRAIN_ALGORITHM_VERSION`]).
-/// 2: a tree species without an L-system is drawn at its built-in tree's height. 3: preview.png is
-/// the first view's perspective render of scene.glb, the top-down drawing moved to map.png. 4: lit
-/// through the materials' normal maps.
-pub const PREVIEW_ALGORITHM_VERSION: u32 = 4;
+/// The stage in a scene build.
+pub struct TerrainJob<'a> {
+    pub preset: &'a Preset,
+    pub terrain: &'a TerrainSettings,
+}
+
+impl StageJob for TerrainJob<'_> {
+    type Report = TerrainStageReport;
+    /// The main scene (what the snow, scatter and preview stages read).
+    type Artifact = Scene;
+    const STAGE: Stage = Stage::Terrain;
+
+    fn key(&self) -> Result<String, SceneBuildError> {
+        Ok(terrain_key(self.preset, self.terrain)?)
+    }
+
+    fn files(report: &TerrainStageReport) -> Vec<PathBuf> {
+        terrain_files(report)
+    }
+
+    fn run(&self, dir: &Path) -> Result<(TerrainStageReport, Scene), SceneBuildError> {
+        Ok(run_terrain(self.preset, self.terrain, dir)?)
+    }
+}
 
 /// Cache key of the terrain stage: its settings, the formats, the input's content.
 pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageError> {
@@ -329,86 +314,3 @@ pub fn terrain_files(r: &TerrainStageReport) -> Vec<PathBuf> {
     }
     files
 }
-
-/// What the preview stage produced.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct PreviewStageReport {
-    pub file: PathBuf,
-    pub width_px: u32,
-    pub height_px: u32,
-    /// The top-down map (`map.png`) when `preview.png` is the first view's perspective render.
-    #[serde(default)]
-    pub map: Option<PathBuf>,
-    /// What the perspective render drew (scene.glb from the first view), when it is one.
-    #[serde(default)]
-    pub view: Option<PreviewViewFigures>,
-    pub seconds: f64,
-}
-
-/// The perspective preview's figures.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct PreviewViewFigures {
-    pub camera: String,
-    pub triangles: u64,
-    pub instances: u64,
-}
-
-pub const PREVIEW_SIZE_PX: u32 = 1024;
-
-/// Draws preview.png: the terrain's shaded relief, the snow cover (when given) blended in white by
-/// its weight, then the placements (colour, positions) over it.
-pub fn run_preview(
-    terrain: &Scene,
-    placements: &[crate::scene::preview::PreviewLayer],
-    cover: Option<&crate::snow::CoverMask>,
-    view: Option<(&Scene, &crate::scene::view::Camera)>,
-    scene_dir: &Path,
-) -> Result<PreviewStageReport, StageError> {
-    let t0 = Instant::now();
-    let f = fail(Stage::Preview);
-    let mut canvas = crate::scene::preview::terrain_preview(terrain, PREVIEW_SIZE_PX);
-    if let Some(v) = crate::scene::preview::preview_view(terrain, PREVIEW_SIZE_PX) {
-        if let Some(mask) = cover {
-            crate::scene::preview::draw_cover(&mut canvas, &v, mask);
-        }
-        crate::scene::preview::draw_placements(&mut canvas, &v, placements);
-    }
-    let file = PathBuf::from("preview.png");
-    let Some((scene, camera)) = view else {
-        crate::scene::preview::write_png(&canvas, &scene_dir.join(&file)).map_err(|e| f(e.to_string()))?;
-        return Ok(PreviewStageReport {
-            file,
-            width_px: canvas.width,
-            height_px: canvas.height,
-            map: None,
-            view: None,
-            seconds: t0.elapsed().as_secs_f64(),
-        });
-    };
-    // the map keeps the top-down drawing; preview.png is the scene as the first view sees it
-    let map = PathBuf::from("map.png");
-    crate::scene::preview::write_png(&canvas, &scene_dir.join(&map)).map_err(|e| f(e.to_string()))?;
-    let scale = (PREVIEW_VIEW_WIDTH_PX as f64 / camera.size_px[0] as f64).min(1.0);
-    let (w, h) = (
-        (camera.size_px[0] as f64 * scale).round().max(16.0) as u32,
-        (camera.size_px[1] as f64 * scale).round().max(16.0) as u32,
-    );
-    let (render, figures) =
-        crate::scene::view_render::render_view(scene, camera, w, h).map_err(|e| f(format!("scene.glb: {e}")))?;
-    crate::scene::preview::write_png(&render, &scene_dir.join(&file)).map_err(|e| f(e.to_string()))?;
-    Ok(PreviewStageReport {
-        file,
-        width_px: w,
-        height_px: h,
-        map: Some(map),
-        view: Some(PreviewViewFigures {
-            camera: camera.name.clone(),
-            triangles: figures.triangles,
-            instances: figures.instances,
-        }),
-        seconds: t0.elapsed().as_secs_f64(),
-    })
-}
-
-/// Width of the perspective preview (the view's aspect kept; smaller views at their own size).
-pub const PREVIEW_VIEW_WIDTH_PX: u32 = 1280;
