@@ -606,12 +606,18 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
             for f in &files {
                 match preset::check_preset(f) {
                     Ok(p) => {
+                        let text = std::fs::read_to_string(f).unwrap_or_default();
                         for (name, estimate, limit) in preset::instance_estimates_over_limit(&p) {
+                            // at the species' max_density (the figure the estimate comes from)
+                            let index = p.species.iter().position(|s| s.rules.name == name).unwrap_or(0);
+                            let at = match preset::species_key_position(&text, index, "max_density") {
+                                Some((line, column)) => format!("{}:{line}:{column}", f.display()),
+                                None => f.display().to_string(),
+                            };
                             eprintln!(
-                                "warning: {}: species `{name}` may place up to ~{estimate:.0} instances (max_density over the whole terrain), \
+                                "warning: {at}: species `{name}` may place up to ~{estimate:.0} instances (max_density over the whole terrain), \
                                  above its max_instances {limit}: the build fails if its rules allow more than {limit}; \
-                                 lower max_density, narrow the rules or raise max_instances",
-                                f.display()
+                                 lower max_density, narrow the rules or raise max_instances"
                             );
                         }
                         if !quiet {

@@ -200,6 +200,21 @@ pub fn terrain_extent_m(t: &TerrainSettings) -> Option<[f64; 2]> {
 /// Upper estimates of each species' count before any work: `max_density` (capped by the Poisson
 /// packing for `poisson`) over the whole terrain; (name, estimate, max_instances) for the species
 /// whose estimate is above its `max_instances` (the build fails if the rules allow that many).
+/// Where in `text` the `index`-th `[[species]]` sets `key` (line and column, 1-based), or where
+/// that species' table starts when it does not set it; `None` when `text` has no such species.
+pub fn species_key_position(text: &str, index: usize, key: &str) -> Option<(usize, usize)> {
+    let root = DeTable::parse(text).ok()?;
+    let (_, species) = root.get_ref().get_key_value("species")?;
+    let DeValue::Array(items) = species.get_ref() else { return None };
+    let item = items.get(index)?;
+    let DeValue::Table(table) = item.get_ref() else { return None };
+    let span = match table.get_key_value(key) {
+        Some((k, _)) => k.span(),
+        None => item.span(),
+    };
+    Some(line_column(text, span.start))
+}
+
 pub fn instance_estimates_over_limit(p: &Preset) -> Vec<(String, f64, usize)> {
     let Some(area) = p.terrain.as_ref().and_then(terrain_extent_m).map(|[w, h]| w * h) else { return Vec::new() };
     p.species

@@ -182,6 +182,10 @@ fn preset_check_warns_before_any_work_when_a_species_may_exceed_max_instances() 
             && t.contains("max_instances 1000"),
         "{t}"
     );
+    // positioned at the species' max_density, the figure the estimate comes from
+    let preset = std::fs::read_to_string(d.join("p/dense.toml")).unwrap();
+    let line = 1 + preset.lines().position(|l| l.starts_with("max_density")).unwrap();
+    assert!(t.contains(&format!("p/dense.toml:{line}:1: species `grass`")), "{t}");
     write(d, "p/ok.toml", &meadow("fine", "", ""));
     assert!(!text(&verdant_in(d, &["preset", "check", "p/ok.toml"])).contains("warning"));
 }
