@@ -16,10 +16,9 @@ use crate::scene::pipeline::{Stage, StageJob};
 use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
-use crate::terrain::error::measure;
-use crate::terrain::job::{mesh_samples, MeshMode};
-use crate::terrain::layers::{bake_layers, LayerReport};
-use crate::terrain::SampleMesh;
+use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed};
+use crate::terrain::layers::LayerReport;
+use crate::terrain::stored::Storage;
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct ChunkInfo {
@@ -157,9 +156,12 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
     Ok(k.finish())
 }
 
-fn mesh_at(t: &TerrainSettings, hf: &Heightfield, max_error_m: f64) -> Result<(SampleMesh, bool), StageError> {
-    mesh_samples(hf, t.mode, t.grid_step, max_error_m, t.max_triangles, &crate::terrain::stored::Storage::f32(hf))
-        .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))
+/// How errors name the terrain's heights: the heightmap's path, or the procedural kind.
+fn source_label(t: &TerrainSettings) -> String {
+    match &t.source {
+        TerrainSource::Heightmap { path, .. } => path.display().to_string(),
+        _ => "the procedural terrain".into(),
+    }
 }
 
 fn write_formats(preset: &Preset, scene: &Scene, scene_dir: &Path, stem: &str) -> Result<Vec<PathBuf>, StageError> {
@@ -198,34 +200,30 @@ pub fn run_terrain(
         terrain_lod_chain(&hf, &t.lods, t.max_triangles, &preset.lod).map_err(|e| input(e.to_string()))?
     };
     let chain_s = t1.elapsed().as_secs_f64();
-    let shared = chain.iter().find(|l| t.mode == MeshMode::Tin && l.max_error_requested_m == t.max_error_m);
-    // (a shared level's meshing and measuring time is counted under `lods`)
-    let (mut mesh_s, mut analyze_s) = (0.0, 0.0);
-    let (mesh, hit_triangle_limit, stats) = match shared {
-        Some(l) => (l.mesh.clone(), l.hit_triangle_limit, l.stats),
-        None => {
-            let t1 = Instant::now();
-            let (mesh, hit) = mesh_at(t, &hf, t.max_error_m)?;
-            mesh_s = t1.elapsed().as_secs_f64();
-            let t1 = Instant::now();
-            let stats = measure(&hf, &mesh);
-            analyze_s = t1.elapsed().as_secs_f64();
-            (mesh, hit, stats)
-        }
-    };
-
+    let ready = chain
+        .iter()
+        .find(|l| t.mode == MeshMode::Tin && l.max_error_requested_m == t.max_error_m)
+        .map(|l| (l.mesh.clone(), l.hit_triangle_limit, l.stats));
     let build_opts =
         |name: String| BuildOptions { chunk_samples: t.chunk, skirt_depth_m: t.skirt_m, base_depth_m: t.base_m, name };
-    let t1 = Instant::now();
-    let layers = bake_layers(&hf);
+    let settings = MeshSettings {
+        mode: t.mode,
+        grid_step: t.grid_step,
+        max_error_m: t.max_error_m,
+        max_triangles: t.max_triangles,
+    };
+    // the same path as `verdant terrain`: mesh (or the shared level), measure as stored, build
+    let Meshed { mesh, hit_triangle_limit, stats, max_error_f64_m, scene, layers, seconds } =
+        mesh_and_build(&hf, &settings, &Storage::f32(&hf), &build_opts("terrain".into()), &source_label(t), ready)
+            .map_err(|e| StageError::of(Stage::Terrain.name(), &e, e.to_string()))?;
+    // (a shared level's meshing and measuring time is counted under `lods`)
+    let [mesh_s, analyze_s, build_s] = seconds;
     let textured = |mut scene: Scene| -> Result<Scene, StageError> {
         layers
             .texture(&mut scene, "terrain")
             .map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
         Ok(scene)
     };
-    let scene = textured(build_scene(&hf, &mesh, &build_opts("terrain".into())).map_err(|e| input(e.to_string()))?)?;
-    let build_s = t1.elapsed().as_secs_f64();
 
     let t1 = Instant::now();
     let mut files = write_formats(preset, &scene, scene_dir, "terrain")?;
@@ -276,12 +274,7 @@ pub fn run_terrain(
         mode: t.mode,
         max_error_requested_m: (t.mode == MeshMode::Tin).then_some(t.max_error_m),
         max_error_m: stats.max_error_m,
-        max_error_f64_m: crate::terrain::error::exact_max_error(
-            &hf,
-            &mesh,
-            &stats,
-            &crate::terrain::stored::Storage::f32(&hf),
-        ),
+        max_error_f64_m,
         rms_error_m: stats.rms_error_m,
         worst_sample: stats.worst_sample,
         hit_triangle_limit,

@@ -14,7 +14,7 @@ use crate::mesh::{Bounds, Scene};
 use crate::terrain::build::{build_scene, BuildError, BuildOptions};
 use crate::terrain::error::{exact_max_error, measure_stored, ErrorStats};
 use crate::terrain::grid::grid;
-use crate::terrain::layers::{bake_layers, LayerReport};
+use crate::terrain::layers::{bake_layers, LayerReport, TerrainLayers};
 use crate::terrain::stored::Storage;
 use crate::terrain::tin::{tin_stored, TinOptions};
 use crate::terrain::{SampleMesh, TerrainError};
@@ -229,6 +229,101 @@ fn storage_for(job: &TerrainJob, hf: &Heightfield) -> Result<(Option<PositionGri
     Ok((grid, grid.map_or_else(|| Storage::f32(hf), |g| Storage::quantized(hf, g))))
 }
 
+/// How a heightfield is meshed: what the CLI job and the scene's terrain stage both ask for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeshSettings {
+    pub mode: MeshMode,
+    pub grid_step: usize,
+    pub max_error_m: f64,
+    pub max_triangles: Option<usize>,
+}
+
+/// A terrain meshed, measured as stored and built into its textured scene.
+pub struct Meshed {
+    pub mesh: SampleMesh,
+    pub hit_triangle_limit: bool,
+    /// Measured on the vertices as stored against the map's heights (what the bound applies to).
+    pub stats: ErrorStats,
+    /// The same with the vertices exactly at their samples (f64).
+    pub max_error_f64_m: f64,
+    pub scene: Scene,
+    /// The material layers (the scene's base colour; LoD levels are textured with the same).
+    pub layers: TerrainLayers,
+    /// Seconds meshing, measuring, building (0 for a mesh given ready).
+    pub seconds: [f64; 3],
+}
+
+/// The one path from samples to a textured terrain scene: meshes `hf` as `settings` ask (or takes
+/// `ready`, a mesh already made at the same settings with its stats, e.g. a LoD level), measures it
+/// as `storage` stores it, refuses a TIN over its bound as written (the analyzer has the last
+/// word), builds the scene (`build`: chunks, skirts, base, name) and textures it with the layers.
+pub fn mesh_and_build(
+    hf: &Heightfield,
+    settings: &MeshSettings,
+    storage: &Storage,
+    build: &BuildOptions,
+    label: &str,
+    ready: Option<(SampleMesh, bool, ErrorStats)>,
+) -> Result<Meshed, JobError> {
+    let (mut t_mesh, mut t_analyze) = (0.0, 0.0);
+    let (mesh, hit_limit, stats) = match ready {
+        Some(ready) => ready,
+        None => {
+            let t = Instant::now();
+            let (mesh, hit) = mesh_samples(
+                hf,
+                settings.mode,
+                settings.grid_step,
+                settings.max_error_m,
+                settings.max_triangles,
+                storage,
+            )
+            .map_err(|error| JobError::Terrain { source_label: label.to_string(), error })?;
+            t_mesh = t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            let stats = measure_stored(hf, &mesh, storage);
+            t_analyze = t.elapsed().as_secs_f64();
+            (mesh, hit, stats)
+        }
+    };
+    if settings.mode == MeshMode::Tin && !hit_limit && stats.max_error_m > settings.max_error_m {
+        let [i, j] = stats.worst_sample;
+        return Err(JobError::BoundBroken {
+            source_label: label.to_string(),
+            measured_m: stats.max_error_m,
+            bound_m: settings.max_error_m,
+            i,
+            j,
+        });
+    }
+    let t = Instant::now();
+    let mut scene = build_scene(hf, &mesh, build)?;
+    let layers = bake_layers(hf);
+    layers.texture(&mut scene, &build.name).map_err(JobError::Texture)?;
+    let t_build = t.elapsed().as_secs_f64();
+    let max_error_f64_m = exact_max_error(hf, &mesh, &stats, storage);
+    Ok(Meshed {
+        mesh,
+        hit_triangle_limit: hit_limit,
+        stats,
+        max_error_f64_m,
+        scene,
+        layers,
+        seconds: [t_mesh, t_analyze, t_build],
+    })
+}
+
+impl TerrainJob {
+    pub fn mesh_settings(&self) -> MeshSettings {
+        MeshSettings {
+            mode: self.mode,
+            grid_step: self.grid_step,
+            max_error_m: self.max_error_m,
+            max_triangles: self.max_triangles,
+        }
+    }
+}
+
 /// Runs the job; writes the scene to `output` when given.
 pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Scene), JobError> {
     check_options(job)?;
@@ -238,31 +333,9 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
     let t_decode = t0.elapsed().as_secs_f64();
 
     let (grid, storage) = storage_for(job, hf)?;
-
-    let t = Instant::now();
-    let (mesh, hit_limit) = mesh_heightfield(job, hf, job.max_error_m, &storage)?;
-    let t_mesh = t.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    let stats: ErrorStats = measure_stored(hf, &mesh, &storage);
-    let t_analyze = t.elapsed().as_secs_f64();
-    // the analyzer has the last word: a TIN over its bound as written is never written
-    if job.mode == MeshMode::Tin && !hit_limit && stats.max_error_m > job.max_error_m {
-        let [i, j] = stats.worst_sample;
-        return Err(JobError::BoundBroken {
-            source_label: job.source.label(),
-            measured_m: stats.max_error_m,
-            bound_m: job.max_error_m,
-            i,
-            j,
-        });
-    }
-
-    let t = Instant::now();
-    let mut scene = build_scene(hf, &mesh, &job.build)?;
-    let layers = bake_layers(hf);
-    layers.texture(&mut scene, &job.build.name).map_err(JobError::Texture)?;
-    let t_build = t.elapsed().as_secs_f64();
+    let Meshed { mesh, hit_triangle_limit: hit_limit, stats, max_error_f64_m, scene, layers, seconds } =
+        mesh_and_build(hf, &job.mesh_settings(), &storage, &job.build, &job.source.label(), None)?;
+    let [t_mesh, t_analyze, t_build] = seconds;
 
     let t = Instant::now();
     let output_summary = match output {
@@ -291,7 +364,7 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
         max_triangles: job.max_triangles,
         hit_triangle_limit: hit_limit,
         max_error: stats.max_error_m,
-        max_error_f64: exact_max_error(hf, &mesh, &stats, &storage),
+        max_error_f64: max_error_f64_m,
         worst_sample: stats.worst_sample,
         rms_error: stats.rms_error_m,
         vertices: mesh.vertices.len(),
