@@ -504,22 +504,25 @@ fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
                 println!(
                     "{}: {}×{} samples ({}) → {} triangles ({:.2}% of the full grid), max error {} m as written (requested {}; {} m in f64), rms {:.3} m, {:.2} s",
                     report.input,
-                    report.width,
-                    report.height,
+                    report.figures.width,
+                    report.figures.height,
                     report.encoding,
-                    report.triangles,
-                    100.0 * report.triangles as f64 / report.full_grid_triangles.max(1) as f64,
-                    metres(report.max_error),
-                    report.max_error_requested.map_or("—".to_string(), |e| format!("{e} m")),
-                    metres(report.max_error_f64),
-                    report.rms_error,
+                    report.figures.triangles,
+                    100.0 * report.figures.triangles as f64 / report.figures.full_grid_triangles.max(1) as f64,
+                    metres(report.figures.max_error),
+                    report.figures.max_error_requested.map_or("—".to_string(), |e| format!("{e} m")),
+                    metres(report.figures.max_error_f64),
+                    report.figures.rms_error,
                     report.seconds.total
                 );
-                if report.hit_triangle_limit {
-                    println!("  stopped at --max-triangles; the achieved max error is {:.3} m", report.max_error);
+                if report.figures.hit_triangle_limit {
+                    println!(
+                        "  stopped at --max-triangles; the achieved max error is {:.3} m",
+                        report.figures.max_error
+                    );
                 }
-                if report.voids_filled > 0 {
-                    println!("  filled {} void samples from their neighbours", report.voids_filled);
+                if report.figures.voids_filled > 0 {
+                    println!("  filled {} void samples from their neighbours", report.figures.voids_filled);
                 }
                 for f in out.map(|o| o.files.as_slice()).unwrap_or(&[]) {
                     println!("  wrote {f}");

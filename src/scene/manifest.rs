@@ -259,13 +259,13 @@ pub fn write_manifest_and_report(
         files,
         terrain: terrain.map(|t| TerrainManifest {
             files: rel_strings(&t.files),
-            width: t.width,
-            height: t.height,
-            cell_size_m: t.cell_size_m,
-            vertices: t.vertices,
-            triangles: t.triangles,
+            width: t.figures.width,
+            height: t.figures.height,
+            cell_size_m: t.figures.cell_size_m,
+            vertices: t.figures.vertices,
+            triangles: t.figures.triangles,
             output_triangles: t.output_triangles,
-            max_error_m: t.max_error_m,
+            max_error_m: t.figures.max_error,
             bounds: &t.bounds,
             chunks: &t.chunks,
             lods: &t.lods,
@@ -431,17 +431,17 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
         match r {
             StageRun::Terrain { report: t, .. } => {
                 s += "## Terrain\n\n";
-                s += &format!("{}×{} samples, {} m apart", t.width, t.height, t.cell_size_m);
-                if t.voids_filled > 0 {
-                    s += &format!(", {} voids filled", t.voids_filled);
+                s += &format!("{}×{} samples, {} m apart", t.figures.width, t.figures.height, t.figures.cell_size_m);
+                if t.figures.voids_filled > 0 {
+                    s += &format!(", {} voids filled", t.figures.voids_filled);
                 }
                 s += "\n\n| level | max error requested (m) | measured max (m) | RMS (m) | triangles | switch distance (m) |\n|---|---|---|---|---|---|\n";
                 s += &format!(
                     "| main | {} | {:.4} | {:.4} | {} | — |\n",
-                    t.max_error_requested_m.map_or("grid".into(), |e| e.to_string()),
-                    t.max_error_m,
-                    t.rms_error_m,
-                    t.triangles
+                    t.figures.max_error_requested.map_or("grid".into(), |e| e.to_string()),
+                    t.figures.max_error,
+                    t.figures.rms_error,
+                    t.figures.triangles
                 );
                 for l in &t.lods {
                     s += &format!(

@@ -16,8 +16,7 @@ use crate::scene::pipeline::{Stage, StageJob};
 use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
-use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed};
-use crate::terrain::layers::LayerReport;
+use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed, TerrainFigures};
 use crate::terrain::stored::Storage;
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -42,29 +41,17 @@ pub struct LodInfo {
 /// What the terrain stage measured. Deterministic fields only; timings live in `seconds`.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct TerrainStageReport {
-    pub width: usize,
-    pub height: usize,
-    pub cell_size_m: f64,
-    pub voids_filled: usize,
+    /// What the analyzer measured of the main mesh: the schema `verdant terrain --report` writes
+    /// (`max_error` on the vertices as written, the figure the bound applies to; `max_error_f64`).
+    #[serde(flatten)]
+    pub figures: TerrainFigures,
     pub input_sha256: Option<String>,
-    pub mode: MeshMode,
-    pub max_error_requested_m: Option<f64>,
-    /// Measured on the vertices as written (f32) against the map's heights; the bound applies to it.
-    pub max_error_m: f64,
-    /// The same with the vertices exactly at their samples (f64).
-    pub max_error_f64_m: f64,
-    pub rms_error_m: f64,
-    pub worst_sample: [u32; 2],
-    pub hit_triangle_limit: bool,
-    pub vertices: usize,
-    pub triangles: usize,
+    /// Triangles written, skirts and base included.
     pub output_triangles: usize,
     pub bounds: Option<Bounds>,
     pub files: Vec<PathBuf>,
     pub chunks: Vec<ChunkInfo>,
     pub lods: Vec<LodInfo>,
-    /// The material layers baked into the base-colour texture and `terrain/terrain_layers.png`.
-    pub layers: LayerReport,
     /// Seconds of the run that computed these results (a cached build reports the original run).
     pub seconds: StageSeconds,
 }
@@ -213,11 +200,13 @@ pub fn run_terrain(
         max_triangles: t.max_triangles,
     };
     // the same path as `verdant terrain`: mesh (or the shared level), measure as stored, build
-    let Meshed { mesh, hit_triangle_limit, stats, max_error_f64_m, scene, layers, seconds } =
+    let meshed =
         mesh_and_build(&hf, &settings, &Storage::f32(&hf), &build_opts("terrain".into()), &source_label(t), ready)
             .map_err(|e| StageError::of(Stage::Terrain.name(), &e, e.to_string()))?;
+    let figures = meshed.figures(&hf, &settings, voids_filled);
     // (a shared level's meshing and measuring time is counted under `lods`)
-    let [mesh_s, analyze_s, build_s] = seconds;
+    let [mesh_s, analyze_s, build_s] = meshed.seconds;
+    let Meshed { scene, layers, .. } = meshed;
     let textured = |mut scene: Scene| -> Result<Scene, StageError> {
         layers
             .texture(&mut scene, "terrain")
@@ -266,26 +255,13 @@ pub fn run_terrain(
         Vec::new()
     };
     let report = TerrainStageReport {
-        width: hf.width,
-        height: hf.height,
-        cell_size_m: hf.cell_size_m,
-        voids_filled,
+        figures,
         input_sha256,
-        mode: t.mode,
-        max_error_requested_m: (t.mode == MeshMode::Tin).then_some(t.max_error_m),
-        max_error_m: stats.max_error_m,
-        max_error_f64_m,
-        rms_error_m: stats.rms_error_m,
-        worst_sample: stats.worst_sample,
-        hit_triangle_limit,
-        vertices: mesh.vertices.len(),
-        triangles: mesh.triangles.len(),
         output_triangles: summary.triangles,
         bounds: summary.bounds,
         files,
         chunks,
         lods,
-        layers: layers.report.clone(),
         seconds: StageSeconds {
             decode: decode_s,
             mesh: mesh_s,

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::export::gltf::WriteOptions;
 use crate::export::grid::PositionGrid;
@@ -111,24 +111,23 @@ pub struct OutputSummary {
     pub bounds: Option<Bounds>,
 }
 
-/// What `--report` writes: the analyzer's measurements and the time each step took.
-#[derive(Debug, Clone, Serialize)]
-pub struct TerrainReport {
-    pub input: String,
+/// What the terrain stage measured of its main mesh: one schema, flattened into both
+/// `verdant terrain --report` and the scene's `stages.terrain` (report.json, the cache).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct TerrainFigures {
     pub width: usize,
     pub height: usize,
-    pub encoding: Encoding,
+    /// Metres between samples.
     pub cell_size_m: f64,
     pub voids_filled: usize,
     pub mode: MeshMode,
-    pub grid_step: Option<usize>,
     /// Requested bound in metres (TIN mode).
     pub max_error_requested: Option<f64>,
     pub max_triangles: Option<usize>,
     pub hit_triangle_limit: bool,
     /// Largest vertical error over every sample, measured by the analyzer on the vertices as the
-    /// file stores them (f32) against the map's heights as its encoding defines them (metres): the
-    /// figure `--max-error` bounds.
+    /// file stores them (f32, or the 16-bit grid) against the map's heights as its encoding
+    /// defines them (metres): the figure the bound applies to.
     pub max_error: f64,
     /// The same with the vertices exactly at their samples (f64), before the file's rounding.
     pub max_error_f64: f64,
@@ -139,9 +138,20 @@ pub struct TerrainReport {
     pub triangles: usize,
     /// Triangles of the full grid (2·(w−1)·(h−1)), for the reduction ratio.
     pub full_grid_triangles: usize,
-    pub output: Option<OutputSummary>,
     /// The material layers baked into the terrain's base-colour texture (terrain/layers.rs).
     pub layers: LayerReport,
+}
+
+/// What `--report` writes: the analyzer's figures, the input and the files, and the time each
+/// step took.
+#[derive(Debug, Clone, Serialize)]
+pub struct TerrainReport {
+    pub input: String,
+    pub encoding: Encoding,
+    pub grid_step: Option<usize>,
+    #[serde(flatten)]
+    pub figures: TerrainFigures,
+    pub output: Option<OutputSummary>,
     pub seconds: Seconds,
 }
 
@@ -313,6 +323,30 @@ pub fn mesh_and_build(
     })
 }
 
+impl Meshed {
+    /// The figures of this mesh of `hf` (`voids_filled` from the decoding).
+    pub fn figures(&self, hf: &Heightfield, settings: &MeshSettings, voids_filled: usize) -> TerrainFigures {
+        TerrainFigures {
+            width: hf.width,
+            height: hf.height,
+            cell_size_m: hf.cell_size_m,
+            voids_filled,
+            mode: settings.mode,
+            max_error_requested: (settings.mode == MeshMode::Tin).then_some(settings.max_error_m),
+            max_triangles: settings.max_triangles,
+            hit_triangle_limit: self.hit_triangle_limit,
+            max_error: self.stats.max_error_m,
+            max_error_f64: self.max_error_f64_m,
+            worst_sample: self.stats.worst_sample,
+            rms_error: self.stats.rms_error_m,
+            vertices: self.mesh.vertices.len(),
+            triangles: self.mesh.triangles.len(),
+            full_grid_triangles: 2 * hf.width.saturating_sub(1) * hf.height.saturating_sub(1),
+            layers: self.layers.report.clone(),
+        }
+    }
+}
+
 impl TerrainJob {
     pub fn mesh_settings(&self) -> MeshSettings {
         MeshSettings {
@@ -333,9 +367,10 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
     let t_decode = t0.elapsed().as_secs_f64();
 
     let (grid, storage) = storage_for(job, hf)?;
-    let Meshed { mesh, hit_triangle_limit: hit_limit, stats, max_error_f64_m, scene, layers, seconds } =
-        mesh_and_build(hf, &job.mesh_settings(), &storage, &job.build, &job.source.label(), None)?;
-    let [t_mesh, t_analyze, t_build] = seconds;
+    let settings = job.mesh_settings();
+    let meshed = mesh_and_build(hf, &settings, &storage, &job.build, &job.source.label(), None)?;
+    let figures = meshed.figures(hf, &settings, decoded.voids_filled);
+    let ([t_mesh, t_analyze, t_build], scene) = (meshed.seconds, meshed.scene);
 
     let t = Instant::now();
     let output_summary = match output {
@@ -353,25 +388,10 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
 
     let report = TerrainReport {
         input: job.source.label(),
-        width: hf.width,
-        height: hf.height,
         encoding: decoded.encoding,
-        cell_size_m: hf.cell_size_m,
-        voids_filled: decoded.voids_filled,
-        mode: job.mode,
         grid_step: (job.mode == MeshMode::Grid).then_some(job.grid_step),
-        max_error_requested: (job.mode == MeshMode::Tin).then_some(job.max_error_m),
-        max_triangles: job.max_triangles,
-        hit_triangle_limit: hit_limit,
-        max_error: stats.max_error_m,
-        max_error_f64: max_error_f64_m,
-        worst_sample: stats.worst_sample,
-        rms_error: stats.rms_error_m,
-        vertices: mesh.vertices.len(),
-        triangles: mesh.triangles.len(),
-        full_grid_triangles: 2 * (hf.width - 1) * (hf.height - 1),
+        figures,
         output: output_summary,
-        layers: layers.report,
         seconds: Seconds {
             decode: t_decode,
             mesh: t_mesh,

@@ -35,8 +35,13 @@ fn job_for(path: &Path, max_error_m: f64) -> TerrainJob {
 fn run_checked(job: &TerrainJob, dir: &Path, ext: &str) -> (TerrainReport, Scene) {
     let out = dir.join(format!("out.{ext}"));
     let (report, scene) = job::run(job, Some(&out)).unwrap();
-    if !report.hit_triangle_limit {
-        assert!(report.max_error <= job.max_error_m, "bound broken: {} > {}", report.max_error, job.max_error_m);
+    if !report.figures.hit_triangle_limit {
+        assert!(
+            report.figures.max_error <= job.max_error_m,
+            "bound broken: {} > {}",
+            report.figures.max_error,
+            job.max_error_m
+        );
     }
     let up = job.build.base_depth_m.is_none() && job.build.skirt_depth_m.is_none();
     let v = validate_file(&out, &ValidateOptions { up_facing: up }).unwrap();
@@ -61,7 +66,7 @@ fn constant_map_gives_two_triangles() {
     let dir = tempfile::tempdir().unwrap();
     let path = write_png(dir.path(), "c.png", 65, 40, |_, _| 1234);
     let (r, _) = run_checked(&job_for(&path, 0.0), dir.path(), "glb");
-    assert_eq!((r.triangles, r.max_error), (2, 0.0));
+    assert_eq!((r.figures.triangles, r.figures.max_error), (2, 0.0));
 }
 
 #[test]
@@ -69,8 +74,8 @@ fn planar_map_gives_two_triangles() {
     let dir = tempfile::tempdir().unwrap();
     let path = write_png(dir.path(), "p.png", 50, 33, |i, j| (100 + 7 * i + 3 * j) as u16);
     let (r, _) = run_checked(&job_for(&path, 0.0), dir.path(), "glb");
-    assert_eq!(r.triangles, 2);
-    assert!(r.max_error < 1e-3, "{}", r.max_error);
+    assert_eq!(r.figures.triangles, 2);
+    assert!(r.figures.max_error < 1e-3, "{}", r.figures.max_error);
 }
 
 #[test]
@@ -79,7 +84,7 @@ fn single_spikes_in_the_middle_and_on_the_border() {
     for (name, si, sj) in [("mid.png", 20, 15), ("border.png", 0, 9), ("edge.png", 17, 29)] {
         let path = write_png(dir.path(), name, 41, 30, |i, j| if (i, j) == (si, sj) { 5000 } else { 10 });
         let (r, scene) = run_checked(&job_for(&path, 0.5), dir.path(), "glb");
-        assert_eq!(r.max_error, 0.0, "{name}: a spike is met exactly");
+        assert_eq!(r.figures.max_error, 0.0, "{name}: a spike is met exactly");
         let spike = [si as f32, 5000.0, sj as f32];
         assert!(scene.meshes[0].primitives[0].positions.contains(&spike), "{name}: spike vertex present");
     }
@@ -90,7 +95,7 @@ fn vertical_cliff() {
     let dir = tempfile::tempdir().unwrap();
     let path = write_png(dir.path(), "cliff.png", 64, 64, |i, _| if i < 31 { 0 } else { 60000 });
     let (r, _) = run_checked(&job_for(&path, 1.0), dir.path(), "glb");
-    assert!(r.triangles < 2 * 63 * 63 / 10, "a straight cliff needs few triangles: {}", r.triangles);
+    assert!(r.figures.triangles < 2 * 63 * 63 / 10, "a straight cliff needs few triangles: {}", r.figures.triangles);
 }
 
 #[test]
@@ -99,7 +104,11 @@ fn white_noise_keeps_the_bound() {
     let path =
         write_png(dir.path(), "noise.png", 48, 48, |i, j| (verdant::random::mix64((i * 48 + j) as u64) >> 48) as u16);
     let (r, _) = run_checked(&job_for(&path, 100.0), dir.path(), "glb");
-    assert!(r.triangles as f64 > 0.8 * r.full_grid_triangles as f64, "noise approaches the full grid: {}", r.triangles);
+    assert!(
+        r.figures.triangles as f64 > 0.8 * r.figures.full_grid_triangles as f64,
+        "noise approaches the full grid: {}",
+        r.figures.triangles
+    );
 }
 
 #[test]
@@ -107,7 +116,7 @@ fn checkerboard() {
     let dir = tempfile::tempdir().unwrap();
     let path = write_png(dir.path(), "check.png", 24, 24, |i, j| if (i + j) % 2 == 0 { 0 } else { 1000 });
     let (r, _) = run_checked(&job_for(&path, 0.1), dir.path(), "glb");
-    assert!(r.max_error <= 0.1);
+    assert!(r.figures.max_error <= 0.1);
 }
 
 #[test]
@@ -115,7 +124,7 @@ fn non_square_301_by_17_as_gltf_and_obj() {
     let dir = tempfile::tempdir().unwrap();
     let path = write_png(dir.path(), "wide.png", 301, 17, |i, j| ((i * 37 + j * 1009) % 4000) as u16);
     let (r, _) = run_checked(&job_for(&path, 2.0), dir.path(), "gltf");
-    assert_eq!((r.width, r.height), (301, 17));
+    assert_eq!((r.figures.width, r.figures.height), (301, 17));
     let out = dir.path().join("wide.obj");
     job::run(&job_for(&path, 2.0), Some(&out)).unwrap();
     assert!(validate_file(&out, &ValidateOptions { up_facing: true }).unwrap().ok());
@@ -126,7 +135,7 @@ fn two_by_two_and_zero_area_maps() {
     let dir = tempfile::tempdir().unwrap();
     let path = write_png(dir.path(), "tiny.png", 2, 2, |i, j| (i * 10 + j * 20) as u16);
     let (r, _) = run_checked(&job_for(&path, 0.0), dir.path(), "glb");
-    assert_eq!(r.triangles, 2);
+    assert_eq!(r.figures.triangles, 2);
     for (w, h) in [(1, 9), (9, 1), (1, 1)] {
         let path = write_png(dir.path(), &format!("z{w}x{h}.png"), w, h, |_, _| 5);
         let out = dir.path().join(format!("z{w}x{h}.glb"));
@@ -153,7 +162,7 @@ fn sixteen_bit_full_range() {
     let (r, scene) = run_checked(&job_for(&path, 0.5), dir.path(), "glb");
     let ys: Vec<f32> = scene.meshes[0].primitives[0].positions.iter().map(|p| p[1]).collect();
     assert!(ys.contains(&65535.0) && ys.contains(&0.0));
-    assert!(r.max_error <= 0.5);
+    assert!(r.figures.max_error <= 0.5);
 }
 
 #[test]
@@ -172,7 +181,7 @@ fn hgt_with_voids() {
     let mut job = job_for(&path, 0.5);
     job.decode.cell_size_m = 90.0;
     let (r, _) = run_checked(&job, dir.path(), "glb");
-    assert_eq!(r.voids_filled, 10);
+    assert_eq!(r.figures.voids_filled, 10);
     assert_eq!(r.encoding, Encoding::Hgt);
 }
 
@@ -184,9 +193,9 @@ fn triangle_limit_reports_the_achieved_error() {
     let mut job = job_for(&path, 0.0);
     job.max_triangles = Some(200);
     let (r, _) = run_checked(&job, dir.path(), "glb");
-    assert!(r.hit_triangle_limit);
-    assert!(r.triangles <= 200, "{}", r.triangles);
-    assert!(r.max_error > 0.0);
+    assert!(r.figures.hit_triangle_limit);
+    assert!(r.figures.triangles <= 200, "{}", r.figures.triangles);
+    assert!(r.figures.max_error > 0.0);
 }
 
 #[test]
@@ -199,10 +208,10 @@ fn chunks_skirts_and_base_round_trip() {
     job.build.chunk_samples = Some(32);
     let (r, scene) = run_checked(&job, dir.path(), "glb");
     assert_eq!(scene.meshes.len(), 3 * 2, "70×50 samples in 32-sample chunks");
-    assert_eq!(r.output.as_ref().unwrap().triangles, r.triangles, "chunking keeps every triangle");
+    assert_eq!(r.output.as_ref().unwrap().triangles, r.figures.triangles, "chunking keeps every triangle");
     job.build.skirt_depth_m = Some(5.0);
     let (r, _) = run_checked(&job, dir.path(), "gltf");
-    assert!(r.output.as_ref().unwrap().triangles > r.triangles);
+    assert!(r.output.as_ref().unwrap().triangles > r.figures.triangles);
     job.build.skirt_depth_m = None;
     job.build.chunk_samples = None;
     job.build.base_depth_m = Some(10.0);
@@ -232,8 +241,8 @@ fn the_terrain_is_textured_from_its_layers() {
     let rock = img.get_pixel(60, 8).0;
     assert!(grass[1] > grass[0] && grass[1] > grass[2], "gentle ground is green: {grass:?}");
     assert!(rock[0].abs_diff(rock[1]) < 12 && rock[1].abs_diff(rock[2]) < 12, "a cliff is grey rock: {rock:?}");
-    let c = &report.layers.coverage;
-    assert_eq!(report.layers.layers, ["grass", "scree", "rock", "snow"]);
+    let c = &report.figures.layers.coverage;
+    assert_eq!(report.figures.layers.layers, ["grass", "scree", "rock", "snow"]);
     assert!((c.iter().sum::<f64>() - 1.0).abs() < 1e-9 && c[0] > 0.3 && c[2] > 0.3, "{c:?}");
 }
 
@@ -262,7 +271,7 @@ fn the_bound_holds_in_the_bytes_written_at_high_altitude() {
     let mut job = job_for(&path, 0.1);
     job.decode = DecodeOptions { encoding: Encoding::TerrainRgb, cell_size_m: cell, ..DecodeOptions::default() };
     let (report, _) = run_checked(&job, dir.path(), "glb");
-    assert!(report.max_error <= 0.1, "{} over the bound as written", report.max_error);
+    assert!(report.figures.max_error <= 0.1, "{} over the bound as written", report.figures.max_error);
 
     // Independently: the file's triangles, located by their vertices' samples, evaluated through
     // the stored f32 vertices at each sample's place.
@@ -270,9 +279,18 @@ fn the_bound_holds_in_the_bytes_written_at_high_altitude() {
     let (worst, covered) = error_in_file(&dir.path().join("out.glb"), cell, &truth);
     assert_eq!(covered, (w * h) as usize, "every sample under a triangle of the file");
     assert!(worst <= 0.1, "the written surface is {worst} m off the map");
-    assert!((worst - report.max_error).abs() < 1e-9, "independent {worst} vs reported {}", report.max_error);
+    assert!(
+        (worst - report.figures.max_error).abs() < 1e-9,
+        "independent {worst} vs reported {}",
+        report.figures.max_error
+    );
     // the f32 rounding is really at play here: the exact triangulation alone is not the figure
-    assert!(report.max_error_f64 != report.max_error, "{} {}", report.max_error_f64, report.max_error);
+    assert!(
+        report.figures.max_error_f64 != report.figures.max_error,
+        "{} {}",
+        report.figures.max_error_f64,
+        report.figures.max_error
+    );
 
     // 0.0002 m is below half the f32 step at 8 900 m (4.9e-4 m): no triangulation can meet it.
     job.max_error_m = 0.0002;
@@ -363,14 +381,14 @@ fn quantized_and_compressed_terrains_keep_the_bound_as_stored() {
         let (mut job, out) = (job.clone(), dir.path().join(name));
         (job.quantize, job.meshopt) = (quantize, meshopt);
         let (report, _) = job::run(&job, Some(&out)).unwrap();
-        assert!(report.max_error <= 0.25, "{name}: {} as written", report.max_error);
+        assert!(report.figures.max_error <= 0.25, "{name}: {} as written", report.figures.max_error);
         let (worst, covered) = error_in_file(&out, cell, &truth);
         assert_eq!(covered, (w * h) as usize, "{name}");
         assert!(worst <= 0.25, "{name}: the file is {worst} m off the map");
         assert!(
-            (worst - report.max_error).abs() < 1e-9,
+            (worst - report.figures.max_error).abs() < 1e-9,
             "{name}: independent {worst} vs reported {}",
-            report.max_error
+            report.figures.max_error
         );
         let v = validate_file(&out, &ValidateOptions { up_facing: false }).unwrap();
         assert!(v.ok(), "{name}: {v}");
