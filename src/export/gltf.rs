@@ -20,10 +20,11 @@ use json::validation::USize64;
 use json::Index;
 use serde_json::{Map, Value};
 
+use super::check::check_scene;
 use super::compact::compact;
+use super::error::SceneProblem;
 use super::grid::PositionGrid;
 use super::streaming::{base64, load_groups};
-use super::{check_scene, SceneProblem};
 use crate::mesh::{AlphaMode, PrimitiveMode, Scene};
 
 /// `asset.generator` of every file written.

@@ -19,7 +19,8 @@ use std::fmt::Write;
 
 use glam::{DMat3, DMat4, DQuat, DVec3};
 
-use super::{check_scene, sanitize_name, SceneProblem};
+use super::check::{check_scene, sanitize_name};
+use super::error::SceneProblem;
 use crate::mesh::{Node, PrimitiveMode, Scene};
 
 /// The files of one OBJ export: `<stem>.obj`, `<stem>.mtl` (None without materials) and the

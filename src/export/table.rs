@@ -8,7 +8,8 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde_json::ser::{CompactFormatter, Formatter};
 
-use crate::export::{write_atomic_with, ExportError};
+use crate::export::atomic::write_atomic_with;
+use crate::export::error::ExportError;
 
 /// The columns of a placement table, in order.
 pub const PLACEMENT_COLUMNS: [&str; 12] = ["x", "y", "z", "qx", "qy", "qz", "qw", "sx", "sy", "sz", "yaw_deg", "tile"];

@@ -14,7 +14,7 @@
 //! thesis' per-level `a-b-c` rewrites everything `a` times, then the symbols inside at least one
 //! bracket `b` more times, then those inside two `c` more times (see [`Expander`]).
 
-use super::{Item, LSystem, LsystemError, Recursion};
+use super::system::{Item, LSystem, LsystemError, Recursion};
 use crate::random::mix64;
 
 /// Default budget of expanded symbols: 5·10⁷, about 12 times what lparser itself can hold (it caps

@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use super::{
+use super::system::{
     ArgText, ColorLine, Dialect, Item, LSystem, LsystemError, Recursion, Rule, SyntaxError, Variant, MAX_RECURSION,
 };
 
@@ -971,6 +971,21 @@ pub(crate) fn print(system: &LSystem) -> Vec<u8> {
         }
     }
     out
+}
+
+/// Printing, beside the parser it mirrors.
+impl LSystem {
+    /// The file text of this system in its own dialect (bytes: symbols may be any byte).
+    pub fn print(&self) -> Vec<u8> {
+        print(self)
+    }
+
+    /// `items` as the text they were written as (`F[&B]>(137)A`).
+    pub fn items_text(&self, items: &[Item]) -> Vec<u8> {
+        let mut out = Vec::with_capacity(items.len());
+        write_items(self, items, &mut out);
+        out
+    }
 }
 
 #[cfg(test)]

@@ -14,7 +14,7 @@
 use glam::DVec3;
 
 use super::expand::Token;
-use super::{Dialect, LSystem};
+use super::system::{Dialect, LSystem};
 use crate::random::mix64;
 
 /// The turtle's "up in the world": `$` levels the left vector against it, tropism pulls away from it.

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use super::ScatterError;
+use super::common::ScatterError;
 
 /// A grayscale map in 0..1, row-major, row 0 at the extent's minimum z (like heightmap rows).
 #[derive(Debug, Clone, PartialEq)]

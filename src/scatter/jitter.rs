@@ -6,11 +6,11 @@
 
 use crate::random::mix64;
 
-use super::rules::Rules;
-use super::storage::gather_in_order;
-use super::{
+use super::common::{
     height_bounds, on_grid, on_table_grids, Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POSITION_STEPS_PER_M,
 };
+use super::rules::Rules;
+use super::storage::gather_in_order;
 
 /// All instances of a jittered species, sorted by tile and then by cell (row-major).
 pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterError> {
@@ -135,7 +135,7 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
                             continue;
                         }
                         let h2 = mix64(h1);
-                        let keep_u = super::unit(h2);
+                        let keep_u = super::common::unit(h2);
                         if keep_u >= keep_bound {
                             counts.candidates += 1;
                             counts.density += 1;

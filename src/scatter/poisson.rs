@@ -7,8 +7,8 @@ use rayon::prelude::*;
 
 use crate::random::mix64;
 
+use super::common::{Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POISSON_PACKING};
 use super::rules::Rules;
-use super::{Instance, RuleCounts, ScatterError, MAX_CANDIDATES, POISSON_PACKING};
 
 /// Candidates tried around an active point before it retires (Bridson's k).
 const K: usize = 30;
@@ -51,7 +51,7 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     }
     let blocks = Blocks { extent: tiling.extent, block_m, nbx, nbz, r };
     let key = mix64(rules.key ^ 0x0070_6f69_7373_6f6e); // "poisson"
-    let bounds = super::height_bounds(s);
+    let bounds = super::common::height_bounds(s);
     let mut finished: Vec<Vec<[f64; 2]>> = vec![Vec::new(); nbx * nbz];
     for phase in 0..4 {
         let ids: Vec<usize> = (0..nbx * nbz).filter(|&b| (b % nbx) % 2 + 2 * ((b / nbx) % 2) == phase).collect();
@@ -82,9 +82,11 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
             for (k, p) in pts.iter().enumerate() {
                 let h = mix64(bkey.wrapping_add(k as u64));
                 let tile = tiling.tile_of(p[0], p[1]);
-                if let Some(inst) = rules.place(p[0], p[1], super::unit(h), mix64(h), tile, &mut counts, &mut hint) {
+                if let Some(inst) =
+                    rules.place(p[0], p[1], super::common::unit(h), mix64(h), tile, &mut counts, &mut hint)
+                {
                     // x and z keep every bit (rounding could bring two closer than the spacing)
-                    out.push(super::on_table_grids(inst, bounds));
+                    out.push(super::common::on_table_grids(inst, bounds));
                 }
             }
             (out, counts)
@@ -163,7 +165,7 @@ struct Stream {
 impl Stream {
     #[inline]
     fn next(&mut self) -> f64 {
-        super::unit(self.next_bits())
+        super::common::unit(self.next_bits())
     }
 
     #[inline]
@@ -314,7 +316,7 @@ impl Blocks {
             }
             // one hash picks the active point (top 53 bits) and the visit's turn (low 8 bits)
             let pick = rng.next_bits();
-            let a = ((super::unit(pick) * active.len() as f64) as usize).min(active.len() - 1);
+            let a = ((super::common::unit(pick) * active.len() as f64) as usize).min(active.len() - 1);
             let centre = active[a];
             let mut found = false;
             // candidates uniform by area in the annulus [r, 2r): offsets from a fixed table, five

@@ -3,12 +3,14 @@
 //! the instances of earlier species (a uniform-grid spatial hash of those instances).
 
 use crate::random::mix64;
-use crate::scatter::{Placement, SpeciesRules};
+use crate::scatter::species::{Placement, SpeciesRules};
 
-use super::{
-    on_grid, sin_cos_0_pi, species_key, unit, DensityMap, Instance, RuleCounts, ScatterError, SurfaceIndex, Tiling,
-    POISSON_PACKING, SCALE_STEPS, YAW_STEPS_PER_DEG,
+use super::common::{
+    on_grid, sin_cos_0_pi, species_key, unit, Instance, RuleCounts, ScatterError, Tiling, POISSON_PACKING, SCALE_STEPS,
+    YAW_STEPS_PER_DEG,
 };
+use super::density::DensityMap;
+use super::surface::SurfaceIndex;
 
 /// Everything one species' candidates are judged by, resolved once.
 pub struct Rules<'a> {
@@ -295,7 +297,7 @@ impl<'a> Rules<'a> {
         let h1 = mix64(attr);
         // yaw in whole 0.01° in [0, 360), scale in whole 10⁻⁴ within its range (short table entries)
         let yaw_deg = if s.random_yaw {
-            super::floor_i64(unit(h1) * 360.0 * YAW_STEPS_PER_DEG) as f64 / YAW_STEPS_PER_DEG
+            super::common::floor_i64(unit(h1) * 360.0 * YAW_STEPS_PER_DEG) as f64 / YAW_STEPS_PER_DEG
         } else {
             0.0
         };
@@ -430,8 +432,8 @@ impl ExclusionGrid {
     /// True if an instance lies closer than the radius to (x, z).
     #[inline]
     fn excludes(&self, x: f64, z: f64) -> bool {
-        let fi = super::floor_i64((x - self.origin[0]) * self.inv_cell);
-        let fj = super::floor_i64((z - self.origin[1]) * self.inv_cell);
+        let fi = super::common::floor_i64((x - self.origin[0]) * self.inv_cell);
+        let fj = super::common::floor_i64((z - self.origin[1]) * self.inv_cell);
         for j in (fj - 1).max(0)..=(fj + 1).min(self.dims[1] as i64 - 1) {
             let row = j as usize * self.dims[0];
             let (i0, i1) = ((fi - 1).max(0), (fi + 1).min(self.dims[0] as i64 - 1));
@@ -448,6 +450,32 @@ impl ExclusionGrid {
         }
         false
     }
+}
+
+/// Expected count of a species over `[x0, z0, x1, z1]` (a region of the extent): the integral of
+/// density · mask · terrain rules (slope, altitude, water) · the share snow thinning leaves, times
+/// the effective max density, by the midpoint rule on `samples`² points. Exclusions are not
+/// counted. Used by the analyzer.
+#[allow(clippy::too_many_arguments)]
+pub fn expected_count(
+    surface: &SurfaceIndex,
+    extent: [f64; 4],
+    species: &SpeciesRules,
+    density: Option<&DensityMap>,
+    mask: Option<&DensityMap>,
+    snow: Option<SnowThinning<'_>>,
+    region: [f64; 4],
+    samples: usize,
+) -> Result<f64, ScatterError> {
+    let tiling = Tiling::new(extent, (extent[2] - extent[0]).max(extent[3] - extent[1]))?;
+    let mut ctx = Rules::new(surface, tiling, species, density, mask, &[], 0).or_else(|e| match e {
+        // exclusions are ignored here, so unknown names do not matter
+        ScatterError::UnknownExclusion { .. } => Rules::without_exclusions(surface, tiling, species, density, mask, 0),
+        e => Err(e),
+    })?;
+    ctx.snow = snow;
+    let area = (region[2] - region[0]).max(0.0) * (region[3] - region[1]).max(0.0);
+    Ok(estimate_region(&ctx, region, samples) * ctx.effective_max_density * area)
 }
 
 #[cfg(test)]

@@ -14,9 +14,12 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::scatter::SpeciesRules;
+use crate::scatter::species::SpeciesRules;
 
-use super::{expected_count, DensityMap, Instance, ScatterError, SurfaceIndex, Tiling};
+use super::common::{Instance, ScatterError, Tiling};
+use super::density::DensityMap;
+use super::rules::expected_count;
+use super::surface::SurfaceIndex;
 
 /// Regions per side of the fidelity grid.
 pub const REGIONS: usize = 8;

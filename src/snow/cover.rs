@@ -12,7 +12,7 @@ use crate::bake::render::{render_mesh, RenderOptions, Shading};
 use crate::color::srgb_to_linear;
 use crate::mesh::{CustomAttribute, Material, Mesh, Primitive, Scene};
 use crate::random::mix64;
-use crate::snow::{bad, within, SnowError};
+use crate::snow::error::{bad, within, SnowError};
 
 /// Name of the glTF custom attribute: x = weight 0..1, y = snow depth in metres (weight ·
 /// `max_depth_m`), z = slope factor, w = altitude factor (exposure = x / (z · w) where defined).

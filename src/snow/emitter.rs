@@ -4,8 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::snow::error::{bad, within, SnowError};
 use crate::snow::flakes::FlakeAtlas;
-use crate::snow::{bad, within, SnowError};
 
 /// Standard gravity, m/s².
 pub const GRAVITY_M_S2: f32 = 9.806_65;

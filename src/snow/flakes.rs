@@ -12,7 +12,7 @@ use crate::bake::render::{render_mesh, RenderOptions, Shading};
 use crate::mesh::{Material, Mesh, Primitive};
 use crate::plants::grass_asset::BAKE_SUPERSAMPLE;
 use crate::random::Stream;
-use crate::snow::{bad, within, SnowError};
+use crate::snow::error::{bad, within, SnowError};
 
 /// Stream tag of flake generation ("flak").
 const FLAKE_TAG: u64 = 0x666c_616b;

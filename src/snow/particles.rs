@@ -10,8 +10,8 @@ use serde::Serialize;
 use crate::mesh::{AlphaMode, Instances, Material, Mesh, Node, Primitive, Scene, Texture};
 use crate::random::Stream;
 use crate::snow::emitter::Emitter;
+use crate::snow::error::SnowError;
 use crate::snow::flakes::FlakeAtlas;
-use crate::snow::SnowError;
 
 /// Stream tag of particle placement ("part").
 const PARTICLE_TAG: u64 = 0x7061_7274;
@@ -40,7 +40,7 @@ pub struct Particle {
 pub fn particles(e: &Emitter, atlas: &FlakeAtlas) -> Result<Vec<Particle>, SnowError> {
     e.check()?;
     if atlas.cells.is_empty() {
-        return crate::snow::bad("atlas", "has no cells".into(), "bake an atlas with at least one cell");
+        return crate::snow::error::bad("atlas", "has no cells".into(), "bake an atlas with at least one cell");
     }
     let make = |field: Field, i: u32| {
         let mut r = Stream::new(&[e.seed, PARTICLE_TAG, field as u64, i as u64]);

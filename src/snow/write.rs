@@ -7,9 +7,9 @@ use crate::export::{write_atomic, write_scene};
 use crate::mesh::Scene;
 use crate::snow::cover::CoverMask;
 use crate::snow::emitter::{emitter_json, Emitter};
+use crate::snow::error::SnowError;
 use crate::snow::flakes::FlakeAtlas;
 use crate::snow::particles::{particles_csv, snowfall_scene, Particle};
-use crate::snow::SnowError;
 
 /// File name of the flake atlas, which `emitter.json` refers to.
 pub const ATLAS_FILE: &str = "flakes.png";

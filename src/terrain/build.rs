@@ -22,8 +22,8 @@ use crate::heightfield::Heightfield;
 use crate::mesh::{AlphaMode, Material, Mesh, Node, Primitive, Scene};
 
 use super::chunks::{boundary_edges, ChunkGrid};
+use super::sample_mesh::SampleMesh;
 use super::solid::{add_skirt, base_primitive, lowered};
-use super::SampleMesh;
 
 /// How to turn a triangulation into meshes.
 #[derive(Debug, Clone, PartialEq)]

@@ -15,8 +15,8 @@ use rayon::prelude::*;
 
 use crate::heightfield::Heightfield;
 use crate::terrain::plane::plane_height;
+use crate::terrain::sample_mesh::SampleMesh;
 use crate::terrain::stored::Storage;
-use crate::terrain::SampleMesh;
 
 /// Largest width or height the meshers accept: keeps every edge function (products of two sample
 /// coordinates) exact in `i64` and every coordinate exact in `f64`.

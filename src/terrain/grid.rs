@@ -4,7 +4,7 @@
 
 use crate::heightfield::Heightfield;
 use crate::terrain::error::{check_heightfield, TerrainError};
-use crate::terrain::SampleMesh;
+use crate::terrain::sample_mesh::SampleMesh;
 
 /// Sample positions along one axis of `n` samples: 0, step, 2·step, … and always n − 1.
 fn axis(n: usize, step: usize) -> Vec<u32> {

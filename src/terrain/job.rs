@@ -12,12 +12,12 @@ use crate::export::{self, ExportError};
 use crate::heightfield::{self, DecodeOptions, Decoded, Encoding, Heightfield, HeightfieldError};
 use crate::mesh::{Bounds, Scene};
 use crate::terrain::build::{build_scene, BuildError, BuildOptions};
-use crate::terrain::error::{exact_max_error, measure_stored, ErrorStats};
+use crate::terrain::error::{exact_max_error, measure_stored, ErrorStats, TerrainError};
 use crate::terrain::grid::grid;
 use crate::terrain::layers::{bake_layers, LayerReport, TerrainLayers};
+use crate::terrain::sample_mesh::SampleMesh;
 use crate::terrain::stored::Storage;
 use crate::terrain::tin::{tin_stored, TinOptions};
-use crate::terrain::{SampleMesh, TerrainError};
 
 /// Where the heights come from.
 #[derive(Debug, Clone, PartialEq)]

@@ -21,8 +21,8 @@ use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 use crate::heightfield::Heightfield;
 use crate::terrain::error::{check_heightfield, measure_stored, TerrainError};
 use crate::terrain::plane::plane_height;
+use crate::terrain::sample_mesh::SampleMesh;
 use crate::terrain::stored::Storage;
-use crate::terrain::SampleMesh;
 
 /// What to build.
 #[derive(Debug, Clone, Copy, PartialEq)]

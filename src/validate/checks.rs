@@ -4,8 +4,8 @@
 
 use glam::{DMat4, DQuat, DVec3};
 
+use super::options::{ValidateOptions, MAX_LISTED, NORMAL_TOLERANCE};
 use super::report::{issue, Issue, Severity};
-use super::{ValidateOptions, MAX_LISTED, NORMAL_TOLERANCE};
 use crate::mesh::{Bounds, Primitive, PrimitiveMode, Scene};
 
 /// Collects one kind of problem for one primitive, listing the first few.

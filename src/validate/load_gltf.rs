@@ -8,8 +8,8 @@ use serde_json::Value;
 
 use super::accessor::{read_floats, read_indices, view_bytes};
 use super::meshopt::meshopt_buffers;
+use super::options::{Loaded, ValidateError};
 use super::report::{issue, Issue, Severity};
-use super::{Loaded, ValidateError};
 use crate::export::gltf::{EXT_INSTANCING, EXT_LOD, EXT_MESHOPT, KHR_QUANTIZATION, LOD_COVERAGE_KEY};
 use crate::mesh::{AlphaMode, Bounds, Instances, Material, Mesh, Node, Primitive, PrimitiveMode, Scene, Texture};
 

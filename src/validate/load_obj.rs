@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
+use super::options::{Loaded, ValidateError, MAX_LISTED};
 use super::report::{issue, Issue, Severity};
-use super::{Loaded, ValidateError, MAX_LISTED};
 use crate::mesh::{Material, Mesh, Primitive, Scene, Texture};
 
 pub(super) fn load_obj(path: &Path) -> Result<Loaded, ValidateError> {

@@ -15,45 +15,19 @@ mod checks;
 mod load_gltf;
 mod load_obj;
 mod meshopt;
+mod options;
 mod report;
 
+use options::Loaded;
+pub use options::{ValidateError, ValidateOptions, NORMAL_TOLERANCE};
 pub use report::{Issue, MeshReport, PrimitiveReport, Severity, ValidationReport};
 
-use std::io;
-use std::path::{Path, PathBuf};
-
-use thiserror::Error;
+use std::path::Path;
 
 use crate::mesh::{Bounds, Mesh, Scene};
 use checks::check_scene_data;
 use load_gltf::load_gltf;
 use load_obj::load_obj;
-
-/// |length − 1| above which a normal is reported.
-pub const NORMAL_TOLERANCE: f64 = 1e-3;
-/// How many occurrences of one problem in one primitive are listed before a summary line.
-const MAX_LISTED: usize = 5;
-
-#[derive(Debug, Clone, Default)]
-pub struct ValidateOptions {
-    /// Terrain: every triangle must face up (+Y) after its node's world transform.
-    pub up_facing: bool,
-}
-
-/// The file could not be read or parsed at all (its content problems go in the report instead).
-#[derive(Debug, Error)]
-pub enum ValidateError {
-    #[error("cannot read {path}: {source}; check that the file exists and is readable")]
-    Read {
-        path: PathBuf,
-        #[source]
-        source: io::Error,
-    },
-    #[error("cannot parse {path}: {problem}; the file is damaged or truncated, export it again")]
-    Parse { path: PathBuf, problem: String },
-    #[error("cannot validate {path}: unknown extension {ext:?}; verdant reads .glb, .gltf and .obj")]
-    Unsupported { path: PathBuf, ext: String },
-}
 
 /// The mesh's bounds as the first node holding it places them, when that node scales or moves it
 /// without rotating.
@@ -109,14 +83,6 @@ pub fn read_scene(path: &Path) -> Result<Scene, ValidateError> {
         });
     }
     Ok(loaded.scene)
-}
-
-/// A file turned into a [`Scene`], with the problems met on the way and, for glTF, the declared
-/// POSITION min/max of every primitive (`declared_bounds[mesh][primitive]`).
-struct Loaded {
-    scene: Scene,
-    issues: Vec<Issue>,
-    declared_bounds: Vec<Vec<Option<Bounds>>>,
 }
 
 fn load(path: &Path) -> Result<Loaded, ValidateError> {

@@ -2,7 +2,7 @@
 //! view with its checked frame and clip planes (near plane and guard band).
 
 use super::canvas::Canvas;
-use super::{RasterError, MAX_CANVAS_SIDE};
+use super::limits::{RasterError, MAX_CANVAS_SIDE};
 use crate::math::{cross3, dot3, normalize3, sub3};
 
 /// An orthographic camera: world point `p` lands at pixel coordinates

@@ -1,7 +1,7 @@
 //! The canvas a rasteriser draws into (linear RGBA colour and depth per pixel) and the vocabulary of
 //! a draw call: culling, options, statistics and the fragment a shader is given.
 
-use super::{RasterError, MAX_CANVAS_SIDE};
+use super::limits::{RasterError, MAX_CANVAS_SIDE};
 
 /// An image being drawn: linear RGBA colour and depth per pixel, row-major from the top-left.
 #[derive(Debug, Clone, PartialEq)]

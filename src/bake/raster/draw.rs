@@ -5,9 +5,9 @@ use rayon::prelude::*;
 
 use super::camera::{Camera, Projection};
 use super::canvas::{Canvas, DrawOptions, DrawStats, Fragment};
+use super::limits::BAND_ROWS;
 use super::perspective::{raster_rows_persp, PerspSetup};
 use super::scan::{pixel_rows, raster_rows, Setup};
-use super::BAND_ROWS;
 use crate::mesh::Primitive;
 
 impl Canvas {

@@ -6,8 +6,8 @@ use rayon::prelude::*;
 
 use super::camera::PerspectiveView;
 use super::canvas::{Cull, DrawOptions, DrawStats, Fragment};
+use super::limits::{MAX_VERTEX_SUBPIXELS, SUBPIXEL};
 use super::scan::{orient, pixel_columns, pixel_rows, scan_triangle, weigh, Attributes};
-use super::{MAX_VERTEX_SUBPIXELS, SUBPIXEL};
 use crate::math::{cross3, dot3, sub3};
 use crate::mesh::Primitive;
 

@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use super::canvas::Canvas;
-use super::RasterError;
+use super::limits::RasterError;
 use crate::color::linear_to_srgb;
 use crate::export::write_atomic;
 

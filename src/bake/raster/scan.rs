@@ -5,7 +5,7 @@ use rayon::prelude::*;
 
 use super::camera::Projection;
 use super::canvas::{Cull, DrawOptions, DrawStats, Fragment};
-use super::{MAX_VERTEX_SUBPIXELS, SUBPIXEL};
+use super::limits::{MAX_VERTEX_SUBPIXELS, SUBPIXEL};
 use crate::mesh::Primitive;
 
 /// A vertex on the image: snapped position in sub-pixels and depth; `None` if unusable.
