@@ -31,6 +31,7 @@ pub mod lsystem;
 pub mod math;
 pub mod mesh;
 pub mod plants;
+pub mod progress;
 pub mod random;
 pub mod scatter;
 pub mod scene;

@@ -714,7 +714,12 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             lod: TreeLodOptions { lods, atlas_px: a.atlas_size, analyze: !a.no_analysis, ..TreeLodOptions::default() },
             variants: a.variants,
         };
-        return match tree_lod::run_lods(&lod_job) {
+        // each step of the chain as it starts: a spinner on a terminal, plain lines otherwise
+        let view = verdant::progress::ProgressView::new(quiet);
+        let task = lod_job.options.name.clone();
+        let result = tree_lod::run_lods_with(&lod_job, &|step| view.update(&task, step));
+        view.finish();
+        return match result {
             Ok(report) => {
                 if let Some(path) = &a.report {
                     if let Err(e) = tree_lod::write_lod_report(path, &report) {
@@ -804,7 +809,11 @@ fn mesh(a: MeshArgs, quiet: bool) -> i32 {
     if let Err(e) = verdant::export::check_output_path(&job.output) {
         return failed(&e);
     }
-    match tree_lod::run_mesh_lods(&job) {
+    let view = verdant::progress::ProgressView::new(quiet);
+    let task = job.input.file_stem().map_or_else(|| "mesh".into(), |s| s.to_string_lossy().into_owned());
+    let result = tree_lod::run_mesh_lods_with(&job, &|step| view.update(&task, step));
+    view.finish();
+    match result {
         Ok(report) => {
             if let Some(path) = &a.report {
                 if let Err(e) = tree_lod::write_json_report(path, &report) {

@@ -5,13 +5,13 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::time::Instant;
 
 use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::failure::{Blame, Failure};
+pub use crate::progress::ProgressView;
 use crate::scene::cache::{process_alive, temp_owner, Cache};
 use crate::scene::error::SceneBuildError;
 use crate::scene::manifest::{write_manifest_and_report, StageRun};
@@ -425,66 +425,6 @@ pub fn summary_table(outcomes: &[SceneOutcome]) -> String {
         }
     }
     s
-}
-
-/// The spinner of each scene, by scene name.
-type SceneBars = Vec<(String, indicatif::ProgressBar)>;
-
-/// Progress display: a spinner line per scene (indicatif) on a terminal, plain lines on stderr
-/// otherwise, nothing with `--quiet`.
-pub struct ProgressView {
-    quiet: bool,
-    bars: Option<(indicatif::MultiProgress, Mutex<SceneBars>)>,
-    lines: Mutex<()>,
-}
-
-impl ProgressView {
-    pub fn new(quiet: bool) -> Self {
-        use std::io::IsTerminal;
-        let bars = (!quiet && std::io::stderr().is_terminal())
-            .then(|| (indicatif::MultiProgress::new(), Mutex::new(Vec::new())));
-        ProgressView { quiet, bars, lines: Mutex::new(()) }
-    }
-
-    pub fn update(&self, scene: &str, message: &str) {
-        if self.quiet {
-            return;
-        }
-        match &self.bars {
-            Some((multi, bars)) => {
-                let Ok(mut bars) = bars.lock() else { return };
-                let bar = match bars.iter().find(|(n, _)| n == scene) {
-                    Some((_, b)) => b.clone(),
-                    None => {
-                        let b = multi.add(indicatif::ProgressBar::new_spinner());
-                        b.set_style(
-                            indicatif::ProgressStyle::with_template("{spinner} {prefix:<16} {wide_msg} {elapsed}")
-                                .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
-                        );
-                        b.set_prefix(scene.to_string());
-                        b.enable_steady_tick(std::time::Duration::from_millis(120));
-                        bars.push((scene.to_string(), b.clone()));
-                        b
-                    }
-                };
-                bar.set_message(message.to_string());
-            }
-            None => {
-                let _guard = self.lines.lock();
-                eprintln!("[{scene}] {message}");
-            }
-        }
-    }
-
-    pub fn finish(&self) {
-        if let Some((_, bars)) = &self.bars {
-            if let Ok(bars) = bars.lock() {
-                for (_, b) in bars.iter() {
-                    b.finish_and_clear();
-                }
-            }
-        }
-    }
 }
 
 #[cfg(test)]

@@ -169,6 +169,51 @@ fn verdant(args: &[&str]) -> std::process::Output {
 }
 
 #[test]
+fn cli_tree_and_mesh_say_each_chain_step_as_it_starts_and_quiet_silences_them() {
+    // not a terminal here: plain `[name] step` lines on stderr (a spinner on a terminal)
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bush.ls");
+    std::fs::write(&input, BUSH).unwrap();
+    let glb = dir.path().join("out/bush.glb");
+    let (i, g) = (input.to_str().unwrap(), glb.to_str().unwrap());
+    let args = ["tree", i, "-o", g, "--atlas-size", "256"];
+    let o = verdant(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    let steps: Vec<&str> = err.lines().filter(|l| l.starts_with("[bush] ")).collect();
+    let want = [
+        "[bush] LoD0: growing the tree",
+        "[bush] LoD1: half the radial segments, simplified",
+        "[bush] cards, billboards and the impostor",
+        "[bush] measuring LoD1 (simplified) against LoD0",
+    ];
+    for w in want {
+        assert!(steps.contains(&w), "missing `{w}` in:\n{err}");
+    }
+    assert!(steps.iter().any(|l| l.starts_with("[bush] baking the atlas: ")), "{err}");
+    // in the order they run: LoD0 first, the measurements last
+    assert_eq!(steps.first(), Some(&"[bush] LoD0: growing the tree"), "{err}");
+    assert!(steps.last().is_some_and(|l| l.starts_with("[bush] measuring LoD")), "{err}");
+    let quiet = verdant(&[&["--quiet"], &args[..]].concat());
+    assert!(quiet.status.success() && quiet.stderr.is_empty(), "{}", String::from_utf8_lossy(&quiet.stderr));
+
+    // a model's chain the same way
+    let obj = dir.path().join("box.obj");
+    std::fs::write(
+        &obj,
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n\
+                          f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out/box.glb");
+    let o = verdant(&["mesh", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--atlas-size", "256"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.lines().any(|l| l == "[box] LoD1: simplified"), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("[box] measuring LoD")), "{err}");
+}
+
+#[test]
 fn cli_tree_writes_variants_lod_files_atlases_and_a_speed_error_table() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("bush.ls");

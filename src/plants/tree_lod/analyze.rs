@@ -6,7 +6,9 @@ use std::time::Instant;
 use glam::DVec3;
 
 use super::cards::ModelFrame;
-use super::types::{AtlasCell, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions, IMPOSTOR_VIEWS};
+use super::types::{
+    AtlasCell, Progress, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions, IMPOSTOR_VIEWS,
+};
 use crate::bake::views::{
     lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, SwitchSearch,
 };
@@ -30,6 +32,7 @@ pub(super) fn measure_levels(
     impostor_cells: &[AtlasCell],
     seed: u64,
     options: &TreeLodOptions,
+    progress: Progress,
 ) -> Result<Measured, TreeLodError> {
     let started = Instant::now();
     let grid = TriangleGrid::new(reference.mesh);
@@ -66,6 +69,7 @@ pub(super) fn measure_levels(
             measured: Vec::new(),
         };
         if lod.level > 0 && options.analyze {
+            progress(&format!("measuring LoD{} ({}) against LoD0", lod.level, lod.kind));
             image_error(&mut f, lod, reference, frame, impostor_cells, options);
         }
         lods.push(f);

@@ -12,7 +12,7 @@ use super::cards::{
 };
 use super::simplify::{finer_than, simplify_below, simplify_sloppy, SIMPLIFY_RATIO, SLOPPY_RATIO};
 use super::types::{
-    AtlasCell, LeftOutLevel, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions, TreeLodReport, TreeLods,
+    AtlasCell, LeftOutLevel, Progress, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions, TreeLodReport, TreeLods,
     BILLBOARD_PLANES, IMPOSTOR_EXTRAS_KEY, IMPOSTOR_VIEWS, MAX_CLUSTERS,
 };
 use crate::bake::atlas::mip_figures;
@@ -70,6 +70,8 @@ struct ChainInput<'a> {
     lod1: Option<LevelParts>,
     coarse: CoarseLevel,
     started: Instant,
+    /// Told each step as it starts.
+    progress: Progress<'a>,
 }
 
 /// Builds the LoD chain of `system`'s tree, bakes its atlas and measures every level.
@@ -82,8 +84,20 @@ pub fn build_tree_lods(
     tree_options: &TreeOptions,
     options: &TreeLodOptions,
 ) -> Result<TreeLods, TreeLodError> {
+    build_tree_lods_with(system, tree_options, options, &|_| {})
+}
+
+/// [`build_tree_lods`], saying each step to `progress` as it starts (LoD0, LoD1, the bake, the
+/// textured levels, each level's measurement).
+pub fn build_tree_lods_with(
+    system: &LSystem,
+    tree_options: &TreeOptions,
+    options: &TreeLodOptions,
+    progress: Progress,
+) -> Result<TreeLods, TreeLodError> {
     options.check()?;
     let started = Instant::now();
+    progress("LoD0: growing the tree");
     let lod0 = build_tree(system, tree_options)?;
     let quads = if tree_options.leaf_points {
         Some(build_tree(system, &TreeOptions { leaf_points: false, ..tree_options.clone() })?)
@@ -93,6 +107,9 @@ pub fn build_tree_lods(
     let reference = quads.as_ref().unwrap_or(&lod0);
     let wanted = options.lods;
     let lod0_triangles = lod0.mesh().triangle_count();
+    if wanted > 1 {
+        progress("LoD1: half the radial segments, simplified");
+    }
     let half = if wanted > 1 {
         Some(build_tree(
             system,
@@ -142,6 +159,7 @@ pub fn build_tree_lods(
         lod1,
         coarse,
         started,
+        progress,
     };
     let chain = build_chain(input, options)?;
     Ok(TreeLods { lod0: Some(lod0), ..chain })
@@ -152,7 +170,20 @@ pub fn build_tree_lods(
 /// than LoD1), LoD3 crossed billboards and LoD4 the impostor from the atlas baked from LoD0; every
 /// level measured as a tree's. `name` names the meshes, nodes and atlas inside the files.
 pub fn build_mesh_lods(source: &SourceMesh, name: &str, options: &TreeLodOptions) -> Result<TreeLods, TreeLodError> {
+    build_mesh_lods_with(source, name, options, &|_| {})
+}
+
+/// [`build_mesh_lods`], saying each step to `progress` as it starts.
+pub fn build_mesh_lods_with(
+    source: &SourceMesh,
+    name: &str,
+    options: &TreeLodOptions,
+    progress: Progress,
+) -> Result<TreeLods, TreeLodError> {
     options.check()?;
+    if options.lods > 1 {
+        progress("LoD1: simplified");
+    }
     let started = Instant::now();
     let mesh = source.mesh();
     if mesh.triangle_count() == 0 {
@@ -177,14 +208,25 @@ pub fn build_mesh_lods(source: &SourceMesh, name: &str, options: &TreeLodOptions
         lod1,
         coarse: CoarseLevel::Sloppy,
         started,
+        progress,
     };
     build_chain(input, options)
 }
 
 /// The levels after LoD1, the atlas, the analyzer and the MSFT_lod scene, for any source.
 fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<TreeLods, TreeLodError> {
-    let ChainInput { name, seed, lod0, reference, reference_materials, reference_textures, lod1, coarse, started } =
-        input;
+    let ChainInput {
+        name,
+        seed,
+        lod0,
+        reference,
+        reference_materials,
+        reference_textures,
+        lod1,
+        coarse,
+        started,
+        progress,
+    } = input;
     let reference_images = decode(reference_textures)?;
     let reference = Renderable { mesh: reference, materials: reference_materials, textures: &reference_images };
     let card_wind = CardWind::of(&lod0.mesh);
@@ -201,16 +243,22 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<TreeLods, 
         }
         _ => (Vec::new(), Vec::new()),
     };
+    if options.lods > 2 {
+        progress(&format!("baking the atlas: {} views", 2 * (IMPOSTOR_VIEWS + 2 * groups.len())));
+    }
     let atlas = bake_atlas(&reference, &frame, &groups, options)?;
     let seconds_bake = bake_started.elapsed().as_secs_f64();
     if let Some(lod1_source) = &lod1_source {
         let sources = CoarseSources { name: &name, lod1: lod1_source, coarse: &coarse, groups: &groups, card_wind };
+        if options.lods > 2 {
+            progress("cards, billboards and the impostor");
+        }
         textured_levels(&sources, &mut levels, &atlas, &frame, options.atlas_px)?;
     }
     levels.truncate(options.lods);
     let (levels, left_out) = without_levels_that_save_nothing(&name, levels);
 
-    let measured = measure_levels(&levels, &reference, &frame, &atlas.impostor_cells, seed, options)?;
+    let measured = measure_levels(&levels, &reference, &frame, &atlas.impostor_cells, seed, options, progress)?;
     let chain = chain_scene(&name, &levels, &measured.lods);
     let report = TreeLodReport {
         name: name.clone(),

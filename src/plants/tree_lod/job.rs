@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::chain::{build_mesh_lods, build_tree_lods};
-use super::types::{TreeLodError, TreeLodOptions, TreeLodReport, TreeLods};
+use super::chain::{build_mesh_lods_with, build_tree_lods_with};
+use super::types::{Progress, TreeLodError, TreeLodOptions, TreeLodReport, TreeLods};
 use crate::bake::atlas::write_mip_pngs;
 use crate::export;
 use crate::lsystem::{parse, Dialect};
@@ -107,6 +107,11 @@ fn check_glb_output(output: &Path) -> Result<(), TreeLodError> {
 
 /// Runs `job`: every file is built in memory before the first is written.
 pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
+    run_lods_with(job, &|_| {})
+}
+
+/// [`run_lods`], saying each step to `progress` as it starts (with the variant when several).
+pub fn run_lods_with(job: &TreeLodJob, progress: Progress) -> Result<TreeLodRunReport, TreeLodError> {
     let t0 = Instant::now();
     check_glb_output(&job.output)?;
     if !(1..=64).contains(&job.variants) {
@@ -127,7 +132,11 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
             name: format!("{}{}", job.options.name, suffix(k)),
             ..job.options.clone()
         };
-        let chain = build_tree_lods(&parsed.system, &options, &job.lod).map_err(|e| match e {
+        let say = |step: &str| match job.variants {
+            1 => progress(step),
+            n => progress(&format!("variant {}/{n}: {step}", k + 1)),
+        };
+        let chain = build_tree_lods_with(&parsed.system, &options, &job.lod, &say).map_err(|e| match e {
             TreeLodError::Tree(t) => {
                 TreeLodError::Tree(TreeError::InFile { path: job.input.clone(), source: Box::new(t) })
             }
@@ -201,13 +210,18 @@ pub struct MeshLodRunReport {
 /// Runs `job`: every file is built in memory before the first is written. The names inside the
 /// files come from the input's stem, the file names from the output's.
 pub fn run_mesh_lods(job: &MeshLodJob) -> Result<MeshLodRunReport, TreeLodError> {
+    run_mesh_lods_with(job, &|_| {})
+}
+
+/// [`run_mesh_lods`], saying each step to `progress` as it starts.
+pub fn run_mesh_lods_with(job: &MeshLodJob, progress: Progress) -> Result<MeshLodRunReport, TreeLodError> {
     let t0 = Instant::now();
     check_glb_output(&job.output)?;
     job.lod.check()?;
     let source = load_obj(&job.input, &job.obj)?;
     let seconds_load = t0.elapsed().as_secs_f64();
     let name = job.input.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
-    let chain = build_mesh_lods(&source, &name, &job.lod)?;
+    let chain = build_mesh_lods_with(&source, &name, &job.lod, progress)?;
     let stem = job.output.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
     let dir = job.output.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut written = Written::default();

@@ -20,15 +20,15 @@ mod job;
 mod simplify;
 mod types;
 
-pub use self::chain::{build_mesh_lods, build_tree_lods};
+pub use self::chain::{build_mesh_lods, build_mesh_lods_with, build_tree_lods, build_tree_lods_with};
 pub use self::job::{
-    run_lods, run_mesh_lods, variant_seed, write_json_report, write_lod_report, MeshLodJob, MeshLodRunReport,
-    TreeLodJob, TreeLodRunReport,
+    run_lods, run_lods_with, run_mesh_lods, run_mesh_lods_with, variant_seed, write_json_report, write_lod_report,
+    MeshLodJob, MeshLodRunReport, TreeLodJob, TreeLodRunReport,
 };
 pub use self::simplify::SLOPPY_RATIO;
 pub use self::types::{
-    atlas_cell_rects, AtlasCell, LeftOutLevel, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions,
-    TreeLodReport, TreeLods, ATLAS_ALPHA_CUTOFF, ATLAS_GUTTER_PX, BAKE_SUPERSAMPLE, BILLBOARD_PLANES, DEFAULT_ATLAS_PX,
-    DEFAULT_HAUSDORFF_SAMPLES, IMPOSTOR_EXTRAS_KEY, IMPOSTOR_VIEWS, MAX_ATLAS_PX, MAX_CLUSTERS, MIN_ATLAS_PX,
-    TREE_LODS,
+    atlas_cell_rects, AtlasCell, LeftOutLevel, Progress, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures,
+    TreeLodOptions, TreeLodReport, TreeLods, ATLAS_ALPHA_CUTOFF, ATLAS_GUTTER_PX, BAKE_SUPERSAMPLE, BILLBOARD_PLANES,
+    DEFAULT_ATLAS_PX, DEFAULT_HAUSDORFF_SAMPLES, IMPOSTOR_EXTRAS_KEY, IMPOSTOR_VIEWS, MAX_ATLAS_PX, MAX_CLUSTERS,
+    MIN_ATLAS_PX, TREE_LODS,
 };

@@ -39,6 +39,9 @@ pub const DEFAULT_HAUSDORFF_SAMPLES: usize = 20_000;
 /// Extras key of the impostor's mesh.
 pub const IMPOSTOR_EXTRAS_KEY: &str = "verdant_impostor";
 
+/// Told each step of a chain as it starts (a progress display; `&|_| {}` for none).
+pub type Progress<'a> = &'a dyn Fn(&str);
+
 #[derive(Debug, thiserror::Error)]
 pub enum TreeLodError {
     #[error(transparent)]
