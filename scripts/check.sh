@@ -94,9 +94,11 @@ else
     python3 -m venv "$VENV"
   fi
   echo "pip: installing ${PY_PKGS[*]}"
-  "$PY" -m pip install -q --no-compile --disable-pip-version-check "${PY_PKGS[@]}"
+  # pip byte-compiles what it installs: keep it (machines that set PYTHONDONTWRITEBYTECODE would
+  # otherwise recompile trimesh/scipy/numpy from source in every one of the many Python runs below)
+  "$PY" -m pip install -q --disable-pip-version-check "${PY_PKGS[@]}"
   echo "pip: installing ${PY_PKGS_AFTER[*]} (after pyrender, which pins an older PyOpenGL)"
-  "$PY" -m pip install -q --no-compile --disable-pip-version-check "${PY_PKGS_AFTER[@]}"
+  "$PY" -m pip install -q --disable-pip-version-check "${PY_PKGS_AFTER[@]}"
   echo "(pip's note that pyrender requires PyOpenGL==3.1.0 is expected: 3.1.10 is the one that works with EGL)"
   echo "$py_want" > "$py_stamp"
   echo "venv: ready in $(elapsed "$t")"
@@ -140,7 +142,7 @@ else
   fi
   echo "blender venv: creating $BVENV with $py311, pip: installing $BPY_PKG"
   "$py311" -m venv "$BVENV"
-  "$BPY" -m pip install -q --no-compile --disable-pip-version-check "$BPY_PKG"
+  "$BPY" -m pip install -q --disable-pip-version-check "$BPY_PKG"
   echo "$BPY_PKG" > "$bpy_stamp"
   echo "blender venv: ready in $(elapsed "$t")"
 fi
