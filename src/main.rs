@@ -609,8 +609,14 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
             for f in &files {
                 match preset::check_preset(f) {
                     Ok(p) => {
-                        let text = std::fs::read_to_string(f).unwrap_or_default();
-                        for (name, estimate, limit) in preset::instance_estimates_over_limit(&p) {
+                        let over = preset::instance_estimates_over_limit(&p);
+                        // the preset's text again only to place a warning
+                        let text = if over.is_empty() {
+                            String::new()
+                        } else {
+                            std::fs::read_to_string(f).unwrap_or_default()
+                        };
+                        for (name, estimate, limit) in over {
                             // at the species' max_density (the figure the estimate comes from)
                             let index = p.species.iter().position(|s| s.rules.name == name).unwrap_or(0);
                             let at = match preset::species_key_position(&text, index, "max_density") {

@@ -265,7 +265,7 @@ fn build_into(
 
     if let (true, Some(terrain)) = (wants(Stage::Preview), &terrain) {
         let placements = match &placed {
-            (Some(layers), _, _) => PreviewPlacements::Fresh(layers.clone()),
+            (Some(layers), _, _) => PreviewPlacements::Fresh(layers),
             (None, tables, Some(_)) => PreviewPlacements::Tables(tables),
             (None, _, None) => PreviewPlacements::None,
         };

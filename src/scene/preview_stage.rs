@@ -1,6 +1,7 @@
 //! The preview stage: `map.png`, the terrain's shaded relief from above with the snow cover and
 //! the placements drawn over it, and `preview.png`, scene.glb rendered from the first view.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -114,7 +115,7 @@ pub enum PreviewPlacements<'a> {
     /// No scatter stage ran.
     None,
     /// The scatter stage's fresh output (positions as stored: f32).
-    Fresh(Vec<PreviewLayer>),
+    Fresh(&'a [PreviewLayer]),
     /// A cached scatter stage's tables (species name, CSV), read only if the preview runs.
     Tables(&'a [(String, PathBuf)]),
 }
@@ -156,10 +157,11 @@ impl StageJob for PreviewJob<'_> {
     }
 
     fn run(&self, dir: &Path) -> Result<(PreviewStageReport, ()), SceneBuildError> {
-        let layers = match &self.placements.0 {
-            PreviewPlacements::None => Vec::new(),
-            PreviewPlacements::Fresh(layers) => layers.clone(),
-            PreviewPlacements::Tables(tables) => placements_from_tables(dir, tables, self.preset)?,
+        // fresh placements are drawn where they are (they can be millions of points)
+        let layers: Cow<[PreviewLayer]> = match &self.placements.0 {
+            PreviewPlacements::None => Cow::Owned(Vec::new()),
+            PreviewPlacements::Fresh(layers) => Cow::Borrowed(layers),
+            PreviewPlacements::Tables(tables) => Cow::Owned(placements_from_tables(dir, tables, self.preset)?),
         };
         // the perspective preview draws scene.glb as written (cached or not, the same bytes)
         let view = match self.view.and_then(|(report, _)| report.views.first().map(|v| (report, v))) {
