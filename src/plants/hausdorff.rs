@@ -1,18 +1,22 @@
 //! One-sided sampled Hausdorff distance between two meshes, as Metro measures it (Cignoni, Rocchini
 //! & Scopigno, "Metro: measuring error on simplified surfaces", CGF 1998): points sampled on the
 //! candidate's triangles (area-weighted, seeded), each one's distance to the reference surface found
-//! through a uniform grid of the reference's triangles; closest point on a triangle after Ericson,
+//! through a bounding-volume hierarchy of the reference's triangles (Rubin & Whitted 1980); closest point on a triangle after Ericson,
 //! "Real-Time Collision Detection" §5.1.5.
 
 use glam::DVec3;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::bake::image::Image;
 use crate::mesh::{AlphaMode, Material, Mesh};
 use crate::random::mix64;
 
-/// Largest grid side in cells (the grid holds at most this cubed cell lists).
-const MAX_GRID_SIDE: usize = 96;
+/// Most triangles in a leaf of the [`TriangleBvh`].
+const LEAF_TRIANGLES: usize = 4;
+
+/// Points measured per parallel batch (bounds the memory of a huge candidate's sample list).
+const BATCH_POINTS: usize = 1 << 16;
 
 /// What [`hausdorff`] measured, in metres.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
@@ -24,20 +28,30 @@ pub struct HausdorffError {
     pub samples: usize,
 }
 
-/// The reference surface, triangles filed in a uniform grid by their bounding boxes.
-pub struct TriangleGrid {
+/// The reference surface as a bounding-volume hierarchy of its triangles (median split on the
+/// longest axis of the triangles' centroids, boxes around each node's triangles): a nearest-surface
+/// query visits the nearer child first and skips every box farther than the best distance found,
+/// so it costs about log n box tests and a few triangle tests wherever the point is (a uniform grid
+/// fails on a tree: most of its box is empty air, its few filled cells hold hundreds of triangles).
+pub struct TriangleBvh {
+    /// In leaf order: leaf k's triangles are `triangles[start..start + count]`.
     triangles: Vec<[DVec3; 3]>,
-    origin: DVec3,
-    cell_m: f64,
-    dims: [usize; 3],
-    /// Cell k's triangles are `items[starts[k]..starts[k + 1]]`.
-    starts: Vec<u32>,
-    items: Vec<u32>,
+    nodes: Vec<BvhNode>,
 }
 
-impl TriangleGrid {
+#[derive(Clone, Copy)]
+struct BvhNode {
+    lo: DVec3,
+    hi: DVec3,
+    /// Leaf: first triangle. Interior: index of the second child (the first is the next node).
+    start: u32,
+    /// Triangles in a leaf; 0 for an interior node.
+    count: u32,
+}
+
+impl TriangleBvh {
     /// Files every finite triangle of `mesh`; None when it has none.
-    pub fn new(mesh: &Mesh) -> Option<TriangleGrid> {
+    pub fn new(mesh: &Mesh) -> Option<TriangleBvh> {
         let triangles: Vec<[DVec3; 3]> = mesh
             .primitives
             .iter()
@@ -54,92 +68,97 @@ impl TriangleGrid {
         if triangles.is_empty() {
             return None;
         }
-        let (lo, hi) = triangles
-            .iter()
-            .flatten()
-            .fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(lo, hi), &p| (lo.min(p), hi.max(p)));
-        let extent = (hi - lo).max(DVec3::splat(1e-6));
-        // about two triangles per cell, no side over MAX_GRID_SIDE
-        let cell_for_count = (extent.x * extent.y * extent.z / (triangles.len() as f64 / 2.0)).cbrt();
-        let cell_m = cell_for_count.max(extent.max_element() / MAX_GRID_SIDE as f64).max(1e-6);
-        let dims = [extent.x, extent.y, extent.z].map(|e| ((e / cell_m).ceil() as usize).clamp(1, MAX_GRID_SIDE));
-        let mut grid = TriangleGrid { triangles, origin: lo, cell_m, dims, starts: Vec::new(), items: Vec::new() };
-        // count per cell, prefix sums, then fill
-        let n_cells = dims[0] * dims[1] * dims[2];
-        let mut counts = vec![0u32; n_cells + 1];
-        for t in &grid.triangles {
-            grid.for_cells(t, |k| counts[k] += 1);
-        }
-        let mut starts = vec![0u32; n_cells + 1];
-        for k in 0..n_cells {
-            starts[k + 1] = starts[k] + counts[k];
-        }
-        let mut fill = starts.clone();
-        let mut items = vec![0u32; starts[n_cells] as usize];
-        for (i, t) in grid.triangles.iter().enumerate() {
-            grid.for_cells(t, |k| {
-                items[fill[k] as usize] = i as u32;
-                fill[k] += 1;
-            });
-        }
-        grid.starts = starts;
-        grid.items = items;
-        Some(grid)
+        let centroids: Vec<DVec3> = triangles.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
+        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
+        let mut nodes = Vec::with_capacity(2 * triangles.len() / LEAF_TRIANGLES + 1);
+        build(&triangles, &centroids, &mut order, 0, &mut nodes);
+        let triangles = order.iter().map(|&i| triangles[i as usize]).collect();
+        Some(TriangleBvh { triangles, nodes })
     }
 
-    fn cell_of(&self, p: DVec3) -> [usize; 3] {
-        let c = (p - self.origin) / self.cell_m;
-        let clamp = |v: f64, d: usize| (v.floor().max(0.0) as usize).min(d - 1);
-        [clamp(c.x, self.dims[0]), clamp(c.y, self.dims[1]), clamp(c.z, self.dims[2])]
-    }
-
-    fn index(&self, c: [usize; 3]) -> usize {
-        (c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]
-    }
-
-    fn for_cells(&self, t: &[DVec3; 3], mut f: impl FnMut(usize)) {
-        let lo = self.cell_of(t[0].min(t[1]).min(t[2]));
-        let hi = self.cell_of(t[0].max(t[1]).max(t[2]));
-        for z in lo[2]..=hi[2] {
-            for y in lo[1]..=hi[1] {
-                for x in lo[0]..=hi[0] {
-                    f(self.index([x, y, z]));
-                }
-            }
-        }
-    }
-
-    /// Distance from `p` to the nearest filed triangle. Rings of cells around p's (clamped) cell are
-    /// searched until the ring is farther than the best distance found: projection onto the grid's
-    /// box shortens no distance to a point inside it, so the bound holds for points outside too.
+    /// Distance from `p` to the nearest filed triangle: the smallest distance to any of them.
     pub fn distance(&self, p: DVec3) -> f64 {
-        let c = self.cell_of(p);
+        // squared distances decide (sqrt is monotone, so the minimum is the same triangle's)
         let mut best = f64::INFINITY;
-        let max_ring = self.dims.iter().copied().max().unwrap_or(1);
-        for ring in 0..=max_ring {
-            let lo = c.map(|v| v.saturating_sub(ring));
-            let hi = [0, 1, 2].map(|k| (c[k] + ring).min(self.dims[k] - 1));
-            for z in lo[2]..=hi[2] {
-                for y in lo[1]..=hi[1] {
-                    for x in lo[0]..=hi[0] {
-                        let on_ring = [x, y, z].iter().zip(c).any(|(&v, cv)| v.abs_diff(cv) == ring);
-                        if !on_ring {
-                            continue;
-                        }
-                        let k = self.index([x, y, z]);
-                        for &i in &self.items[self.starts[k] as usize..self.starts[k + 1] as usize] {
-                            let t = &self.triangles[i as usize];
-                            best = best.min((closest_on_triangle(p, t[0], t[1], t[2]) - p).length());
-                        }
-                    }
+        // depth ≤ log2(triangles) + 1 with median splits, and each step pushes at most one more
+        let mut stack = [0u32; 72];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let node = self.nodes[stack[top] as usize];
+            if box_distance2(&node, p) > best {
+                continue;
+            }
+            if node.count > 0 {
+                let (s, n) = (node.start as usize, node.count as usize);
+                for t in &self.triangles[s..s + n] {
+                    best = best.min((closest_on_triangle(p, t[0], t[1], t[2]) - p).length_squared());
                 }
+                continue;
             }
-            if best <= ring as f64 * self.cell_m {
-                break;
+            let (near, far) = (stack[top] + 1, node.start);
+            let (dn, df) = (box_distance2(&self.nodes[near as usize], p), box_distance2(&self.nodes[far as usize], p));
+            let (first, second) = if dn <= df { (near, far) } else { (far, near) };
+            if top + 2 > stack.len() {
+                // cannot happen for the depths above; stay exact rather than overflow
+                return self
+                    .triangles
+                    .iter()
+                    .map(|t| (closest_on_triangle(p, t[0], t[1], t[2]) - p).length())
+                    .fold(f64::INFINITY, f64::min);
             }
+            stack[top] = second;
+            stack[top + 1] = first;
+            top += 2;
         }
-        best
+        best.sqrt()
     }
+}
+
+/// Appends the subtree over `order`'s triangles (indices into `triangles`, `offset` their place in
+/// the final leaf order) to `nodes`; reorders `order` into leaf order.
+fn build(triangles: &[[DVec3; 3]], centroids: &[DVec3], order: &mut [u32], offset: usize, nodes: &mut Vec<BvhNode>) {
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    let (mut clo, mut chi) = (lo, hi);
+    for &i in order.iter() {
+        for v in &triangles[i as usize] {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
+        }
+        clo = clo.min(centroids[i as usize]);
+        chi = chi.max(centroids[i as usize]);
+    }
+    let here = nodes.len();
+    nodes.push(BvhNode { lo, hi, start: offset as u32, count: order.len() as u32 });
+    if order.len() <= LEAF_TRIANGLES {
+        return;
+    }
+    let extent = chi - clo;
+    let axis = if extent.x >= extent.y && extent.x >= extent.z {
+        0
+    } else if extent.y >= extent.z {
+        1
+    } else {
+        2
+    };
+    let mid = order.len() / 2;
+    // ties broken by triangle number: the tree does not depend on the sort's internals
+    order.select_nth_unstable_by(mid, |&a, &b| {
+        centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis]).then(a.cmp(&b))
+    });
+    let (left, right) = order.split_at_mut(mid);
+    build(triangles, centroids, left, offset, nodes);
+    let second = nodes.len() as u32;
+    build(triangles, centroids, right, offset + mid, nodes);
+    nodes[here].start = second;
+    nodes[here].count = 0;
+}
+
+/// Squared distance from `p` to the node's box (0 inside).
+#[inline]
+fn box_distance2(node: &BvhNode, p: DVec3) -> f64 {
+    let d = (node.lo - p).max(p - node.hi).max(DVec3::ZERO);
+    d.length_squared()
 }
 
 /// The point of triangle abc nearest to p (Ericson's Voronoi-region walk).
@@ -191,7 +210,7 @@ pub fn hausdorff(
     candidate: &Mesh,
     materials: &[Material],
     textures: &[Image],
-    reference: &TriangleGrid,
+    reference: &TriangleBvh,
     samples: usize,
     seed: u64,
 ) -> HausdorffError {
@@ -207,6 +226,20 @@ pub fn hausdorff(
     let mut out = HausdorffError::default();
     let mut sum = 0.0;
     let mut serial = 0u64;
+    // points are gathered in order, measured in parallel batches and summed in that order: the
+    // figures do not depend on the thread count
+    let mut batch: Vec<DVec3> = Vec::with_capacity(BATCH_POINTS.min(samples + 64));
+    let mut measure = |batch: &mut Vec<DVec3>| {
+        let distances: Vec<f64> = batch.par_iter().map(|q| reference.distance(*q)).collect();
+        for d in distances {
+            if d.is_finite() {
+                out.max_m = out.max_m.max(d);
+                sum += d;
+                out.samples += 1;
+            }
+        }
+        batch.clear();
+    };
     for p in &candidate.primitives {
         let mask = p.material.and_then(|m| materials.get(m)).and_then(|m| match (m.alpha_mode, m.base_color_texture) {
             (AlphaMode::Mask { cutoff }, Some(t)) => textures.get(t).map(|img| (img, cutoff, m.base_color[3])),
@@ -237,16 +270,14 @@ pub fn hausdorff(
                         continue;
                     }
                 }
-                let q = corner[0] + (corner[1] - corner[0]) * u + (corner[2] - corner[0]) * v;
-                let d = reference.distance(q);
-                if d.is_finite() {
-                    out.max_m = out.max_m.max(d);
-                    sum += d;
-                    out.samples += 1;
+                batch.push(corner[0] + (corner[1] - corner[0]) * u + (corner[2] - corner[0]) * v);
+                if batch.len() == BATCH_POINTS {
+                    measure(&mut batch);
                 }
             }
         }
     }
+    measure(&mut batch);
     out.mean_m = if out.samples > 0 { sum / out.samples as f64 } else { 0.0 };
     out
 }
@@ -275,7 +306,7 @@ mod tests {
 
     #[test]
     fn parallel_planes_are_their_distance_apart() {
-        let grid = TriangleGrid::new(&quad(0.0)).unwrap();
+        let grid = TriangleBvh::new(&quad(0.0)).unwrap();
         let e = hausdorff(&quad(0.25), &[], &[], &grid, 500, 1);
         assert!((e.max_m - 0.25).abs() < 1e-6 && (e.mean_m - 0.25).abs() < 1e-6, "{e:?}");
         assert!(e.samples >= 500);
@@ -283,5 +314,40 @@ mod tests {
         assert!(same.max_m < 1e-6);
         // a point far outside the grid still finds the surface
         assert!((grid.distance(DVec3::new(5.0, 0.0, 0.5)) - 4.0).abs() < 1e-9);
+    }
+
+    fn soup(coords: &[f32]) -> Mesh {
+        let positions: Vec<[f32; 3]> = coords.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let indices = (0..(positions.len() / 3 * 3) as u32).collect();
+        Mesh {
+            name: "soup".into(),
+            primitives: vec![Primitive { positions, indices, ..Primitive::default() }],
+            extras: None,
+        }
+    }
+
+    proptest::proptest! {
+        /// The hierarchy's nearest distance is exactly the smallest distance to any triangle, for
+        /// points inside and far outside the soup (clustered, overlapping and degenerate triangles).
+        #[test]
+        fn nearest_distance_equals_the_brute_force_minimum(
+            coords in proptest::collection::vec(-4.0f32..4.0, 9..600),
+            points in proptest::collection::vec((-40.0f64..40.0, -40.0f64..40.0, -40.0f64..40.0), 1..40),
+        ) {
+            let mesh = soup(&coords);
+            let bvh = TriangleBvh::new(&mesh).unwrap();
+            let tris: Vec<[DVec3; 3]> = coords
+                .chunks_exact(9)
+                .map(|c| [0, 1, 2].map(|k| DVec3::new(c[3 * k] as f64, c[3 * k + 1] as f64, c[3 * k + 2] as f64)))
+                .collect();
+            for (x, y, z) in points {
+                let p = DVec3::new(x, y, z);
+                let brute = tris
+                    .iter()
+                    .map(|t| (closest_on_triangle(p, t[0], t[1], t[2]) - p).length())
+                    .fold(f64::INFINITY, f64::min);
+                proptest::prop_assert_eq!(bvh.distance(p).to_bits(), brute.to_bits());
+            }
+        }
     }
 }

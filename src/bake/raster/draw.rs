@@ -6,7 +6,7 @@ use rayon::prelude::*;
 use super::camera::{Camera, Projection};
 use super::canvas::{Canvas, DrawOptions, DrawStats, Fragment};
 use super::limits::BAND_ROWS;
-use super::perspective::{raster_rows_persp, PerspSetup};
+use super::perspective::{draw_persp, raster_rows_persp, PerspSetup};
 use super::scan::{pixel_rows, raster_rows, Setup};
 use crate::mesh::Primitive;
 
@@ -63,23 +63,8 @@ impl Canvas {
         match cam {
             Camera::Ortho(v) => self.draw(&v.projection().then_from(object_to_world), prim, opts, shader),
             Camera::Perspective(v) => {
-                let setup = PerspSetup::new(v, object_to_world, prim, opts.cull);
-                let mut stats = setup.stats;
-                let tris: Vec<u32> = (0..setup.tris.len() as u32).collect();
                 let (w, h) = (self.width, self.height);
-                stats.fragments = raster_rows_persp(
-                    &mut self.color,
-                    &mut self.depth,
-                    w,
-                    0,
-                    h,
-                    &setup,
-                    prim,
-                    &tris,
-                    opts,
-                    &mut shader,
-                );
-                stats
+                draw_persp(&mut self.color, &mut self.depth, w, h, v, object_to_world, prim, opts, &mut shader)
             }
         }
     }

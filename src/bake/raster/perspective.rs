@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::camera::PerspectiveView;
+use super::camera::{PerspFrame, PerspectiveView};
 use super::canvas::{Cull, DrawOptions, DrawStats, Fragment};
 use super::limits::{MAX_VERTEX_SUBPIXELS, SUBPIXEL};
 use super::scan::{orient, pixel_columns, pixel_rows, scan_triangle, weigh, Attributes};
@@ -82,7 +82,126 @@ pub(super) struct PerspSetup {
     pub(super) stats: DrawStats,
 }
 
+/// What every triangle of one primitive's perspective draw shares: the camera frame, its clip
+/// planes and the vertices in view space (None where not finite).
+struct PerspContext {
+    frame: PerspFrame,
+    planes: [[f64; 4]; 5],
+    verts: Vec<Option<[f64; 3]>>,
+}
+
+impl PerspContext {
+    /// None when the view is invalid. `parallel`: move the vertices to view space in parallel.
+    fn new(
+        view: &PerspectiveView,
+        object_to_world: &[[f64; 4]; 3],
+        prim: &Primitive,
+        parallel: bool,
+    ) -> Option<PerspContext> {
+        let frame = view.frame().ok()?;
+        let to_view = frame.view.then_from(object_to_world);
+        let one = |p: &[f32; 3]| {
+            let v = to_view.apply([p[0] as f64, p[1] as f64, p[2] as f64]);
+            v.iter().all(|c| c.is_finite()).then_some(v)
+        };
+        let verts = if parallel {
+            prim.positions.par_iter().map(one).collect()
+        } else {
+            prim.positions.iter().map(one).collect()
+        };
+        let planes = frame.clip_planes();
+        Some(PerspContext { frame, planes, verts })
+    }
+
+    /// Sets up source triangle `t` (vertex indices `idx`): culled, clipped, projected and snapped
+    /// into up to six screen triangles handed to `emit` in fan order; counted in `stats`.
+    #[inline]
+    fn triangle(&self, t: usize, idx: &[u32], cull: Cull, stats: &mut DrawStats, mut emit: impl FnMut(PerspTri)) {
+        let get = |k: usize| self.verts.get(idx[k] as usize).copied().flatten();
+        let (Some(a), Some(b), Some(c)) = (get(0), get(1), get(2)) else {
+            stats.skipped += 1;
+            return;
+        };
+        // Facing from the eye (the origin of view space). View space (right, up, forward) is
+        // left-handed, so counter-clockwise seen from the eye is a positive triple product.
+        let facing = dot3(cross3(sub3(b, a), sub3(c, a)), a);
+        let front = facing > 0.0;
+        let culled = facing == 0.0
+            || !facing.is_finite()
+            || match cull {
+                Cull::None => false,
+                Cull::Back => !front,
+                Cull::Front => front,
+            };
+        if culled {
+            stats.culled += 1;
+            return;
+        }
+        let mut poly = ClipPolygon { v: [ClipVertex::default(); MAX_CLIP_VERTICES], len: 3 };
+        poly.v[..3].copy_from_slice(&[
+            ClipVertex { view: a, bary: [1.0, 0.0, 0.0] },
+            ClipVertex { view: b, bary: [0.0, 1.0, 0.0] },
+            ClipVertex { view: c, bary: [0.0, 0.0, 1.0] },
+        ]);
+        let inside = |v: &[f64; 3], p: &[f64; 4]| p[0] * v[0] + p[1] * v[1] + p[2] * v[2] + p[3] >= 0.0;
+        for plane in &self.planes {
+            if [a, b, c].iter().all(|v| inside(v, plane)) {
+                continue;
+            }
+            poly = poly.clip(*plane);
+            if poly.len < 3 {
+                break;
+            }
+        }
+        if poly.len < 3 {
+            stats.clipped += 1;
+            return;
+        }
+        // Project and snap the polygon; then a fan of triangles around its first vertex.
+        let mut screen = [([0i64; 2], 0.0f64); MAX_CLIP_VERTICES];
+        for (k, cv) in poly.v[..poly.len].iter().enumerate() {
+            let s = self.frame.project(cv.view);
+            let snap = |v: f64| (v * SUBPIXEL as f64).round();
+            let (x, y) = (snap(s[0]), snap(s[1]));
+            let lim = MAX_VERTEX_SUBPIXELS as f64;
+            if !(x.abs() <= lim && y.abs() <= lim && s[2] > 0.0) {
+                stats.skipped += 1;
+                return;
+            }
+            screen[k] = ([x as i64, y as i64], 1.0 / s[2]);
+        }
+        let mut any = false;
+        for k in 1..poly.len - 1 {
+            let fan = [0, k, k + 1];
+            let area = orient(screen[0].0, screen[k].0, screen[k + 1].0);
+            if area == 0 {
+                continue;
+            }
+            let order = if area < 0 { [fan[0], fan[2], fan[1]] } else { fan };
+            let pts = order.map(|i| screen[i].0);
+            any = true;
+            emit(PerspTri {
+                index: t as u32,
+                source: [idx[0], idx[1], idx[2]],
+                pts,
+                inv_depth: order.map(|i| screen[i].1),
+                bary: order.map(|i| poly.v[i].bary),
+                min: [pts.iter().map(|p| p[0]).min().unwrap_or(0), pts.iter().map(|p| p[1]).min().unwrap_or(0)],
+                max: [pts.iter().map(|p| p[0]).max().unwrap_or(0), pts.iter().map(|p| p[1]).max().unwrap_or(0)],
+                front,
+            });
+        }
+        if any {
+            stats.triangles += 1;
+        } else {
+            // Zero area on the image once snapped, as in the orthographic path.
+            stats.culled += 1;
+        }
+    }
+}
+
 impl PerspSetup {
+    /// Every triangle of `prim` set up for scanning (what a draw in parallel bands bins).
     pub(super) fn new(
         view: &PerspectiveView,
         object_to_world: &[[f64; 4]; 3],
@@ -90,109 +209,50 @@ impl PerspSetup {
         cull: Cull,
     ) -> PerspSetup {
         let mut stats = DrawStats::default();
-        let Ok(frame) = view.frame() else {
+        let Some(ctx) = PerspContext::new(view, object_to_world, prim, true) else {
             stats.skipped = prim.indices.len() / 3;
             return PerspSetup { tris: Vec::new(), stats };
         };
-        let to_view = frame.view.then_from(object_to_world);
-        let verts: Vec<Option<[f64; 3]>> = prim
-            .positions
-            .par_iter()
-            .map(|p| {
-                let v = to_view.apply([p[0] as f64, p[1] as f64, p[2] as f64]);
-                v.iter().all(|c| c.is_finite()).then_some(v)
-            })
-            .collect();
-        let planes = frame.clip_planes();
         let mut tris = Vec::with_capacity(prim.indices.len() / 3);
         for (t, idx) in prim.indices.chunks_exact(3).enumerate() {
-            let get = |k: usize| verts.get(idx[k] as usize).copied().flatten();
-            let (Some(a), Some(b), Some(c)) = (get(0), get(1), get(2)) else {
-                stats.skipped += 1;
-                continue;
-            };
-            // Facing from the eye (the origin of view space). View space (right, up, forward) is
-            // left-handed, so counter-clockwise seen from the eye is a positive triple product.
-            let facing = dot3(cross3(sub3(b, a), sub3(c, a)), a);
-            let front = facing > 0.0;
-            let culled = facing == 0.0
-                || !facing.is_finite()
-                || match cull {
-                    Cull::None => false,
-                    Cull::Back => !front,
-                    Cull::Front => front,
-                };
-            if culled {
-                stats.culled += 1;
-                continue;
-            }
-            let mut poly = ClipPolygon { v: [ClipVertex::default(); MAX_CLIP_VERTICES], len: 3 };
-            poly.v[..3].copy_from_slice(&[
-                ClipVertex { view: a, bary: [1.0, 0.0, 0.0] },
-                ClipVertex { view: b, bary: [0.0, 1.0, 0.0] },
-                ClipVertex { view: c, bary: [0.0, 0.0, 1.0] },
-            ]);
-            let inside = |v: &[f64; 3], p: &[f64; 4]| p[0] * v[0] + p[1] * v[1] + p[2] * v[2] + p[3] >= 0.0;
-            for plane in &planes {
-                if [a, b, c].iter().all(|v| inside(v, plane)) {
-                    continue;
-                }
-                poly = poly.clip(*plane);
-                if poly.len < 3 {
-                    break;
-                }
-            }
-            if poly.len < 3 {
-                stats.clipped += 1;
-                continue;
-            }
-            // Project and snap the polygon; then a fan of triangles around its first vertex.
-            let mut screen = [([0i64; 2], 0.0f64); MAX_CLIP_VERTICES];
-            let mut usable = true;
-            for (k, cv) in poly.v[..poly.len].iter().enumerate() {
-                let s = frame.project(cv.view);
-                let snap = |v: f64| (v * SUBPIXEL as f64).round();
-                let (x, y) = (snap(s[0]), snap(s[1]));
-                let lim = MAX_VERTEX_SUBPIXELS as f64;
-                if !(x.abs() <= lim && y.abs() <= lim && s[2] > 0.0) {
-                    usable = false;
-                    break;
-                }
-                screen[k] = ([x as i64, y as i64], 1.0 / s[2]);
-            }
-            if !usable {
-                stats.skipped += 1;
-                continue;
-            }
-            let before = tris.len();
-            for k in 1..poly.len - 1 {
-                let fan = [0, k, k + 1];
-                let area = orient(screen[0].0, screen[k].0, screen[k + 1].0);
-                if area == 0 {
-                    continue;
-                }
-                let order = if area < 0 { [fan[0], fan[2], fan[1]] } else { fan };
-                let pts = order.map(|i| screen[i].0);
-                tris.push(PerspTri {
-                    index: t as u32,
-                    source: [idx[0], idx[1], idx[2]],
-                    pts,
-                    inv_depth: order.map(|i| screen[i].1),
-                    bary: order.map(|i| poly.v[i].bary),
-                    min: [pts.iter().map(|p| p[0]).min().unwrap_or(0), pts.iter().map(|p| p[1]).min().unwrap_or(0)],
-                    max: [pts.iter().map(|p| p[0]).max().unwrap_or(0), pts.iter().map(|p| p[1]).max().unwrap_or(0)],
-                    front,
-                });
-            }
-            if tris.len() == before {
-                // Zero area on the image once snapped, as in the orthographic path.
-                stats.culled += 1;
-            } else {
-                stats.triangles += 1;
-            }
+            ctx.triangle(t, idx, cull, &mut stats, |tri| tris.push(tri));
         }
         PerspSetup { tris, stats }
     }
+}
+
+/// A serial perspective draw of `prim` into a whole canvas (`color`/`depth`, `width` × `height`):
+/// each triangle is set up and scanned at once, in index order, so nothing is stored per triangle.
+/// The same pixels and stats as [`PerspSetup::new`] followed by [`raster_rows_persp`] over all rows.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn draw_persp<F>(
+    color: &mut [[f32; 4]],
+    depth: &mut [f32],
+    width: u32,
+    height: u32,
+    view: &PerspectiveView,
+    object_to_world: &[[f64; 4]; 3],
+    prim: &Primitive,
+    opts: &DrawOptions,
+    shader: &mut F,
+) -> DrawStats
+where
+    F: FnMut(&Fragment) -> Option<[f32; 4]>,
+{
+    let mut stats = DrawStats::default();
+    let Some(ctx) = PerspContext::new(view, object_to_world, prim, false) else {
+        stats.skipped = prim.indices.len() / 3;
+        return stats;
+    };
+    let attributes = Attributes::of(prim);
+    let mut fragments = 0u64;
+    for (t, idx) in prim.indices.chunks_exact(3).enumerate() {
+        ctx.triangle(t, idx, opts.cull, &mut stats, |tri| {
+            fragments += raster_persp_triangle(color, depth, width, 0, height, &tri, prim, &attributes, opts, shader);
+        });
+    }
+    stats.fragments = fragments;
+    stats
 }
 
 /// [`raster_rows`](super::scan::raster_rows) for perspective triangles: per pixel, the screen-linear weights l give
@@ -214,62 +274,86 @@ pub(super) fn raster_rows_persp<F>(
 where
     F: FnMut(&Fragment) -> Option<[f32; 4]>,
 {
-    let Attributes { normals, uvs, colors } = Attributes::of(prim);
-    let n = prim.positions.len();
+    let attributes = Attributes::of(prim);
     let mut written = 0u64;
     for &t in tris {
-        let Some(tri) = setup.tris.get(t as usize) else {
-            continue;
-        };
-        let Some((ry0, ry1)) = pixel_rows(tri.min[1], tri.max[1], y1) else {
-            continue;
-        };
-        let ry0 = ry0.max(y0);
-        if ry0 >= ry1 {
-            continue;
+        if let Some(tri) = setup.tris.get(t as usize) {
+            written += raster_persp_triangle(color, depth, width, y0, y1, tri, prim, &attributes, opts, shader);
         }
-        let Some((x0, x1)) = pixel_columns(tri.min[0], tri.max[0], width) else {
-            continue;
-        };
-        let vi = tri.source.map(|i| i as usize);
-        if vi.iter().any(|&i| i >= n) {
-            continue;
-        }
-        let inv_area = 1.0 / orient(tri.pts[0], tri.pts[1], tri.pts[2]) as f64;
-        let [w0, w1, w2] = tri.inv_depth;
-        let [b0, b1, b2] = tri.bary;
-        scan_triangle(tri.pts, x0, x1, ry0, ry1, |x, y, e| {
-            let q = [e[0] as f64 * inv_area * w0, e[1] as f64 * inv_area * w1, e[2] as f64 * inv_area * w2];
-            let inv_z = q[0] + q[1] + q[2];
-            let z_view = 1.0 / inv_z;
-            let z = z_view as f32;
-            let k = (y - y0) as usize * width as usize + x as usize;
-            if !opts.depth_test || z < depth[k] {
-                let lam = [q[0] * z_view, q[1] * z_view, q[2] * z_view];
-                let bary = weigh(lam, &b0, &b1, &b2);
-                let bf = [bary[0] as f32, bary[1] as f32, bary[2] as f32];
-                let p = &prim.positions;
-                let frag = Fragment {
-                    x,
-                    y,
-                    depth: z,
-                    position: weigh(bf, &p[vi[0]], &p[vi[1]], &p[vi[2]]),
-                    normal: normals.map_or([0.0; 3], |nm| weigh(bf, &nm[vi[0]], &nm[vi[1]], &nm[vi[2]])),
-                    uv: uvs.map_or([0.0; 2], |u| weigh(bf, &u[vi[0]], &u[vi[1]], &u[vi[2]])),
-                    color: colors.map_or([1.0; 4], |cl| weigh(bf, &cl[vi[0]], &cl[vi[1]], &cl[vi[2]])),
-                    bary: bf,
-                    triangle: tri.index,
-                    front_facing: tri.front,
-                };
-                if let Some(rgba) = shader(&frag) {
-                    color[k] = rgba;
-                    if opts.depth_write {
-                        depth[k] = z;
-                    }
-                    written += 1;
-                }
-            }
-        });
     }
+    written
+}
+
+/// Scans one set-up triangle into the rows [y0, y1) held by `color`/`depth`; returns the fragments
+/// written.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn raster_persp_triangle<F>(
+    color: &mut [[f32; 4]],
+    depth: &mut [f32],
+    width: u32,
+    y0: u32,
+    y1: u32,
+    tri: &PerspTri,
+    prim: &Primitive,
+    attributes: &Attributes,
+    opts: &DrawOptions,
+    shader: &mut F,
+) -> u64
+where
+    F: FnMut(&Fragment) -> Option<[f32; 4]>,
+{
+    let Attributes { normals, uvs, colors } = *attributes;
+    let n = prim.positions.len();
+    let mut written = 0u64;
+    let Some((ry0, ry1)) = pixel_rows(tri.min[1], tri.max[1], y1) else {
+        return 0;
+    };
+    let ry0 = ry0.max(y0);
+    if ry0 >= ry1 {
+        return 0;
+    }
+    let Some((x0, x1)) = pixel_columns(tri.min[0], tri.max[0], width) else {
+        return 0;
+    };
+    let vi = tri.source.map(|i| i as usize);
+    if vi.iter().any(|&i| i >= n) {
+        return 0;
+    }
+    let inv_area = 1.0 / orient(tri.pts[0], tri.pts[1], tri.pts[2]) as f64;
+    let [w0, w1, w2] = tri.inv_depth;
+    let [b0, b1, b2] = tri.bary;
+    scan_triangle(tri.pts, x0, x1, ry0, ry1, |x, y, e| {
+        let q = [e[0] as f64 * inv_area * w0, e[1] as f64 * inv_area * w1, e[2] as f64 * inv_area * w2];
+        let inv_z = q[0] + q[1] + q[2];
+        let z_view = 1.0 / inv_z;
+        let z = z_view as f32;
+        let k = (y - y0) as usize * width as usize + x as usize;
+        if !opts.depth_test || z < depth[k] {
+            let lam = [q[0] * z_view, q[1] * z_view, q[2] * z_view];
+            let bary = weigh(lam, &b0, &b1, &b2);
+            let bf = [bary[0] as f32, bary[1] as f32, bary[2] as f32];
+            let p = &prim.positions;
+            let frag = Fragment {
+                x,
+                y,
+                depth: z,
+                position: weigh(bf, &p[vi[0]], &p[vi[1]], &p[vi[2]]),
+                normal: normals.map_or([0.0; 3], |nm| weigh(bf, &nm[vi[0]], &nm[vi[1]], &nm[vi[2]])),
+                uv: uvs.map_or([0.0; 2], |u| weigh(bf, &u[vi[0]], &u[vi[1]], &u[vi[2]])),
+                color: colors.map_or([1.0; 4], |cl| weigh(bf, &cl[vi[0]], &cl[vi[1]], &cl[vi[2]])),
+                bary: bf,
+                triangle: tri.index,
+                front_facing: tri.front,
+            };
+            if let Some(rgba) = shader(&frag) {
+                color[k] = rgba;
+                if opts.depth_write {
+                    depth[k] = z;
+                }
+                written += 1;
+            }
+        }
+    });
     written
 }

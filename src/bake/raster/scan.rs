@@ -183,6 +183,7 @@ where
 
 /// The optional per-vertex attributes of a primitive: each counts only when there is one per
 /// position (else it reads as its default).
+#[derive(Clone, Copy)]
 pub(super) struct Attributes<'a> {
     pub(super) normals: Option<&'a [[f32; 3]]>,
     pub(super) uvs: Option<&'a [[f32; 2]]>,

@@ -13,7 +13,7 @@ use crate::bake::views::{
     lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, SwitchSearch,
 };
 use crate::mesh::{Mesh, Primitive};
-use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleGrid};
+use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleBvh};
 use crate::random::mix64;
 
 /// What the analyzer found.
@@ -35,7 +35,7 @@ pub(super) fn measure_levels(
     progress: Progress,
 ) -> Result<Measured, TreeLodError> {
     let started = Instant::now();
-    let grid = TriangleGrid::new(reference.mesh);
+    let grid = TriangleBvh::new(reference.mesh);
     let mut lods = Vec::with_capacity(levels.len());
     for lod in levels {
         let mesh = &lod.scene.meshes[0];
