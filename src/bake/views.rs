@@ -191,7 +191,7 @@ pub fn lod_image_error_with(
     distances_m: &[f64],
     opts: &LodImageOptions,
 ) -> LodImageReport {
-    let (centre, radius_m) = bounding_sphere(reference.mesh, candidate.mesh);
+    let Sphere { centre, radius_m } = bounding_sphere(reference.mesh, &[candidate.mesh]);
     if let Err(problem) = view.check() {
         return LodImageReport {
             view: *view,
@@ -206,41 +206,11 @@ pub fn lod_image_error_with(
     }
     let mut distances: Vec<f64> = distances_m.iter().copied().filter(|d| d.is_finite() && *d > 0.0).collect();
     distances.sort_by(f64::total_cmp);
-    let azimuths = opts.azimuths.max(1) as usize;
-    let elevations = if opts.elevations_deg.is_empty() { vec![0.0] } else { opts.elevations_deg.clone() };
-    let views = azimuths * elevations.len();
-    let jobs: Vec<(usize, usize)> = (0..distances.len()).flat_map(|d| (0..views).map(move |v| (d, v))).collect();
-    let results: Vec<(ImageError, [u32; 2], f64)> = jobs
-        .par_iter()
-        .map(|&(d, v)| {
-            let azimuth = (v % azimuths) as f64 * 360.0 / azimuths as f64;
-            let elevation = elevations[v / azimuths];
-            measure_view(reference, candidate, view, opts, centre, radius_m, distances[d], azimuth, elevation)
-        })
-        .collect();
-    let rows: Vec<DistanceError> = distances
-        .iter()
-        .enumerate()
-        .map(|(d, &distance_m)| {
-            let per = &results[d * views..(d + 1) * views];
-            let n = per.len() as f64;
-            let worst = |f: fn(&ImageError) -> f64| per.iter().map(|r| f(&r.0)).fold(f64::NEG_INFINITY, f64::max);
-            let mean = |f: fn(&ImageError) -> f64| per.iter().map(|r| f(&r.0)).sum::<f64>() / n;
-            let worst_edge = worst(|e| e.edge_error_px);
-            DistanceError {
-                distance_m,
-                worst_iou: per.iter().map(|r| r.0.iou).fold(f64::INFINITY, f64::min),
-                mean_iou: mean(|e| e.iou),
-                worst_color_rmse: worst(|e| e.color_rmse),
-                mean_color_rmse: mean(|e| e.color_rmse),
-                worst_edge_error_px: worst_edge,
-                mean_edge_error_px: mean(|e| e.edge_error_px),
-                passes: worst_edge <= view.max_error_px,
-                canvas_px: per.iter().map(|r| r.1).max().unwrap_or([0, 0]),
-                screen_px_per_rendered_px: per.iter().map(|r| r.2).fold(1.0, f64::max),
-            }
-        })
-        .collect();
+    let views = view_count(opts);
+    let sphere = Sphere { centre, radius_m };
+    let only = [Candidate::Mesh(*candidate)];
+    let rows: Vec<DistanceError> =
+        distances.iter().flat_map(|&d| measure_distance(reference, &[&only[0]], view, opts, sphere, d)).collect();
     let (switch_distance_m, never_passes) = switch_distance(&rows, view.max_error_px);
     LodImageReport {
         view: *view,
@@ -321,9 +291,143 @@ pub fn switch_search_by(
     (rows, result.0, result.1)
 }
 
-/// Centre of the reference's bounding box and the radius around it that encloses both meshes
-/// (the candidate may be wider, e.g. billboards); at least 1 mm.
-fn bounding_sphere(reference: &Mesh, candidate: &Mesh) -> ([f64; 3], f64) {
+/// A level measured against the reference: geometry seen from every view; a textured card showing
+/// a projection of the reference (a billboard); or a view-dependent impostor whose cards are evenly
+/// spaced in azimuth from 0° (card k faces azimuth k · 360°/n; a view at azimuth α sees the card
+/// nearest to it, as an impostor shader picks it). Cards are framed by the reference's sphere: what
+/// they show is the reference projected onto a plane through its centre, which stays inside it,
+/// and only their cut-away corners reach past it.
+#[derive(Debug, Clone)]
+pub enum Candidate<'a> {
+    Mesh(Renderable<'a>),
+    Card(Renderable<'a>),
+    PerAzimuth(Vec<Renderable<'a>>),
+}
+
+impl<'a> Candidate<'a> {
+    /// What a view from `azimuth_deg` draws (None for an impostor without cards).
+    fn seen_from(&self, azimuth_deg: f64) -> Option<&Renderable<'a>> {
+        match self {
+            Candidate::Mesh(r) | Candidate::Card(r) => Some(r),
+            Candidate::PerAzimuth(cards) if cards.is_empty() => None,
+            Candidate::PerAzimuth(cards) => {
+                let n = cards.len();
+                let k = (azimuth_deg.rem_euclid(360.0) * n as f64 / 360.0).round() as usize % n;
+                cards.get(k)
+            }
+        }
+    }
+
+    /// The geometry the framing sphere must enclose (cards: none, see above).
+    fn framed(&self) -> Option<&'a Mesh> {
+        match self {
+            Candidate::Mesh(r) => Some(r.mesh),
+            Candidate::Card(_) | Candidate::PerAzimuth(_) => None,
+        }
+    }
+}
+
+/// [`switch_search`] for every level of a chain at once, each against the same reference and in
+/// the same framing: the sphere encloses the reference and every geometric candidate (not the cards,
+/// see [`Candidate`]), and a distance two
+/// levels both test renders the reference once for both. Every distance the search visits lies
+/// on the lattice `far_m` · 2^(−j / 2^bisections), so levels whose switches are near one another
+/// share most of them. Per level: its rows (sorted by distance), switch distance and whether even
+/// the farthest failed, exactly as [`switch_search_by`] decides them.
+pub fn switch_search_chain(
+    reference: &Renderable,
+    candidates: &[Candidate],
+    view: &ScreenView,
+    opts: &LodImageOptions,
+    range: &SwitchSearch,
+) -> Vec<(Vec<DistanceError>, f64, bool)> {
+    let meshes: Vec<&Mesh> = candidates.iter().filter_map(Candidate::framed).collect();
+    let sphere = bounding_sphere(reference.mesh, &meshes);
+    struct Search {
+        rows: Vec<DistanceError>,
+        pass: Option<f64>,
+        fail: Option<f64>,
+    }
+    let mut searches: Vec<Search> =
+        candidates.iter().map(|_| Search { rows: Vec::new(), pass: None, fail: None }).collect();
+    let measure = |levels: &[usize], d: f64| -> Vec<DistanceError> {
+        if view.check().is_err() {
+            return Vec::new();
+        }
+        let picked: Vec<&Candidate> = levels.iter().map(|&i| &candidates[i]).collect();
+        measure_distance(reference, &picked, view, opts, sphere, d)
+    };
+    // halving from the far end: a level leaves at its first failure
+    let mut d = range.far_m;
+    while d >= range.near_m {
+        let active: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].fail.is_none()).collect();
+        if active.is_empty() {
+            break;
+        }
+        let rows = measure(&active, d);
+        if rows.len() != active.len() {
+            break;
+        }
+        for (&i, r) in active.iter().zip(rows) {
+            let s = &mut searches[i];
+            if r.passes {
+                s.pass = Some(d);
+            } else {
+                s.fail = Some(d);
+            }
+            s.rows.push(r);
+        }
+        d /= 2.0;
+    }
+    // log-space bisections between each level's failing and passing distance, one round at a time;
+    // levels asking for the same distance share its renders
+    for _ in 0..range.bisections {
+        let mut wanted: std::collections::BTreeMap<u64, Vec<usize>> = std::collections::BTreeMap::new();
+        for (i, s) in searches.iter().enumerate() {
+            if let (Some(f), Some(p)) = (s.fail, s.pass) {
+                wanted.entry((f * p).sqrt().to_bits()).or_default().push(i);
+            }
+        }
+        for (m, levels) in wanted {
+            let m = f64::from_bits(m);
+            let rows = measure(&levels, m);
+            if rows.len() != levels.len() {
+                continue;
+            }
+            for (&i, r) in levels.iter().zip(rows) {
+                let s = &mut searches[i];
+                if r.passes {
+                    s.pass = Some(m);
+                } else {
+                    s.fail = Some(m);
+                }
+                s.rows.push(r);
+            }
+        }
+    }
+    searches
+        .into_iter()
+        .map(|mut s| {
+            s.rows.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
+            match (s.fail, s.pass) {
+                (None, _) => (s.rows, 0.0, false),
+                (Some(f), None) => (s.rows, f, true),
+                (Some(_), Some(p)) => (s.rows, p, false),
+            }
+        })
+        .collect()
+}
+
+/// The sphere every view of one measurement is framed by.
+#[derive(Debug, Clone, Copy)]
+struct Sphere {
+    centre: [f64; 3],
+    radius_m: f64,
+}
+
+/// Centre of the reference's bounding box and the radius around it that encloses the reference
+/// and every candidate (a candidate may be wider, e.g. billboards); at least 1 mm.
+fn bounding_sphere(reference: &Mesh, candidates: &[&Mesh]) -> Sphere {
     let points = |m: &Mesh| {
         m.primitives
             .iter()
@@ -332,8 +436,9 @@ fn bounding_sphere(reference: &Mesh, candidate: &Mesh) -> ([f64; 3], f64) {
             .map(|q| q.map(|v| v as f64))
             .collect::<Vec<_>>()
     };
-    let (r, c) = (points(reference), points(candidate));
-    // An empty reference (nothing to see) still gets a view of the candidate.
+    let r = points(reference);
+    let c: Vec<[f64; 3]> = candidates.iter().flat_map(|m| points(m)).collect();
+    // An empty reference (nothing to see) still gets a view of the candidates.
     let framed = if r.is_empty() { &c } else { &r };
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
@@ -344,67 +449,138 @@ fn bounding_sphere(reference: &Mesh, candidate: &Mesh) -> ([f64; 3], f64) {
         }
     }
     let centre = if lo[0].is_finite() { [0, 1, 2].map(|k| 0.5 * (lo[k] + hi[k])) } else { [0.0; 3] };
-    let radius = r
+    let radius_m = r
         .iter()
         .chain(&c)
         .map(|q| ((q[0] - centre[0]).powi(2) + (q[1] - centre[1]).powi(2) + (q[2] - centre[2]).powi(2)).sqrt())
         .fold(1e-3, f64::max);
-    (centre, radius)
+    Sphere { centre, radius_m }
 }
 
-/// Renders both meshes for one view and compares them: (error in screen pixels, canvas size in
-/// output pixels, screen pixels per rendered pixel).
-#[allow(clippy::too_many_arguments)]
-fn measure_view(
+/// Views per distance: azimuths × elevations.
+fn view_count(opts: &LodImageOptions) -> usize {
+    opts.azimuths.max(1) as usize * opts.elevations_deg.len().max(1)
+}
+
+/// The errors of each of `candidates` at one distance over every view (in parallel over views;
+/// the reference is rendered once per view for all of them). One row per candidate, in order.
+fn measure_distance(
     reference: &Renderable,
-    candidate: &Renderable,
+    candidates: &[&Candidate],
     view: &ScreenView,
     opts: &LodImageOptions,
-    centre: [f64; 3],
-    radius_m: f64,
+    sphere: Sphere,
     distance_m: f64,
-    azimuth_deg: f64,
-    elevation_deg: f64,
-) -> (ImageError, [u32; 2], f64) {
-    let ss = opts.supersample.clamp(1, MAX_RENDER_SIDE_PX);
-    let margin_px = 2.0;
-    let diameter = view.projected_diameter_px(radius_m, distance_m) + 2.0 * margin_px;
-    // The object's extent, but never more than the screen shows.
-    let want = [diameter.min(view.width_px), diameter.min(view.height_px())];
-    let max_side = opts.max_side_px.clamp(1, MAX_RENDER_SIDE_PX / ss);
-    let min_side = opts.min_side_px.clamp(1, max_side);
-    let shrink = (max_side as f64 / want[0].max(want[1])).min(1.0);
-    let side = |px: f64| ((px * shrink).ceil() as u32).clamp(min_side, max_side);
-    let canvas_px = [side(want[0]), side(want[1])];
-    let focal_rendered = view.focal_px() * shrink * ss as f64;
-    let width = (canvas_px[0] * ss).min(crate::bake::raster::MAX_CANVAS_SIDE);
-    let height = (canvas_px[1] * ss).min(crate::bake::raster::MAX_CANVAS_SIDE);
-    let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
-    let dir = [el.cos() * az.sin(), el.sin(), el.cos() * az.cos()];
-    let cam = Camera::Perspective(PerspectiveView {
-        eye: [0, 1, 2].map(|k| centre[k] + distance_m * dir[k]),
-        target: centre,
-        up: [0.0, 1.0, 0.0],
-        fov_x_deg: (2.0 * (width as f64 * 0.5 / focal_rendered).atan()).to_degrees(),
-        width,
-        height,
-        // Close enough to keep what is in front of the eye, far enough for depth precision.
-        near: (distance_m * 1e-3).max(1e-4),
-    });
-    let render = |r: &Renderable| -> Image {
-        match cam.canvas([0.0; 4]) {
+) -> Vec<DistanceError> {
+    let azimuths = opts.azimuths.max(1) as usize;
+    let elevations = if opts.elevations_deg.is_empty() { vec![0.0] } else { opts.elevations_deg.clone() };
+    let views = view_count(opts);
+    let per_view: Vec<Vec<(ImageError, [u32; 2], f64)>> = (0..views)
+        .into_par_iter()
+        .map(|v| {
+            let azimuth = (v % azimuths) as f64 * 360.0 / azimuths as f64;
+            let elevation = elevations[v / azimuths];
+            let shot = ViewShot::new(view, opts, sphere, distance_m, azimuth, elevation);
+            let reference_image = shot.render(reference);
+            candidates
+                .iter()
+                .map(|c| {
+                    let empty = Mesh::default();
+                    let nothing = Renderable { mesh: &empty, materials: &[], textures: &[] };
+                    let seen = c.seen_from(azimuth).unwrap_or(&nothing);
+                    shot.compare(&reference_image, &shot.render(seen), opts.cutoff)
+                })
+                .collect()
+        })
+        .collect();
+    (0..candidates.len())
+        .map(|c| {
+            let per: Vec<&(ImageError, [u32; 2], f64)> = per_view.iter().map(|v| &v[c]).collect();
+            let n = per.len() as f64;
+            let worst = |f: fn(&ImageError) -> f64| per.iter().map(|r| f(&r.0)).fold(f64::NEG_INFINITY, f64::max);
+            let mean = |f: fn(&ImageError) -> f64| per.iter().map(|r| f(&r.0)).sum::<f64>() / n;
+            let worst_edge = worst(|e| e.edge_error_px);
+            DistanceError {
+                distance_m,
+                worst_iou: per.iter().map(|r| r.0.iou).fold(f64::INFINITY, f64::min),
+                mean_iou: mean(|e| e.iou),
+                worst_color_rmse: worst(|e| e.color_rmse),
+                mean_color_rmse: mean(|e| e.color_rmse),
+                worst_edge_error_px: worst_edge,
+                mean_edge_error_px: mean(|e| e.edge_error_px),
+                passes: worst_edge <= view.max_error_px,
+                canvas_px: per.iter().map(|r| r.1).max().unwrap_or([0, 0]),
+                screen_px_per_rendered_px: per.iter().map(|r| r.2).fold(1.0, f64::max),
+            }
+        })
+        .collect()
+}
+
+/// One view of a measurement: the camera at `distance_m` from the sphere's centre looking at it
+/// from `azimuth_deg`, `elevation_deg`, its canvas the object's on-screen extent.
+struct ViewShot {
+    cam: Camera,
+    canvas_px: [u32; 2],
+    /// Rendered pixels per screen pixel (≤ 1 when capped by `max_side_px`).
+    shrink: f64,
+    supersample: u32,
+}
+
+impl ViewShot {
+    fn new(
+        view: &ScreenView,
+        opts: &LodImageOptions,
+        sphere: Sphere,
+        distance_m: f64,
+        azimuth_deg: f64,
+        elevation_deg: f64,
+    ) -> ViewShot {
+        let Sphere { centre, radius_m } = sphere;
+        let ss = opts.supersample.clamp(1, MAX_RENDER_SIDE_PX);
+        let margin_px = 2.0;
+        let diameter = view.projected_diameter_px(radius_m, distance_m) + 2.0 * margin_px;
+        // The object's extent, but never more than the screen shows.
+        let want = [diameter.min(view.width_px), diameter.min(view.height_px())];
+        let max_side = opts.max_side_px.clamp(1, MAX_RENDER_SIDE_PX / ss);
+        let min_side = opts.min_side_px.clamp(1, max_side);
+        let shrink = (max_side as f64 / want[0].max(want[1])).min(1.0);
+        let side = |px: f64| ((px * shrink).ceil() as u32).clamp(min_side, max_side);
+        let canvas_px = [side(want[0]), side(want[1])];
+        let focal_rendered = view.focal_px() * shrink * ss as f64;
+        let width = (canvas_px[0] * ss).min(crate::bake::raster::MAX_CANVAS_SIDE);
+        let height = (canvas_px[1] * ss).min(crate::bake::raster::MAX_CANVAS_SIDE);
+        let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
+        let dir = [el.cos() * az.sin(), el.sin(), el.cos() * az.cos()];
+        let cam = Camera::Perspective(PerspectiveView {
+            eye: [0, 1, 2].map(|k| centre[k] + distance_m * dir[k]),
+            target: centre,
+            up: [0.0, 1.0, 0.0],
+            fov_x_deg: (2.0 * (width as f64 * 0.5 / focal_rendered).atan()).to_degrees(),
+            width,
+            height,
+            // Close enough to keep what is in front of the eye, far enough for depth precision.
+            near: (distance_m * 1e-3).max(1e-4),
+        });
+        ViewShot { cam, canvas_px, shrink, supersample: ss }
+    }
+
+    fn render(&self, r: &Renderable) -> Image {
+        match self.cam.canvas([0.0; 4]) {
             Ok(mut canvas) => {
-                draw(&mut canvas, &cam, r);
+                draw(&mut canvas, &self.cam, r);
                 Image::from_canvas_owned(canvas)
             }
             // Cannot happen for the sizes above; an empty image keeps the analyzer total.
             Err(_) => Image { width: 0, height: 0, pixels: Vec::new() },
         }
-    };
-    let (a, b) = (render(reference), render(candidate));
-    let mut error = compare(&a, &b, opts.cutoff, ss);
-    error.edge_error_px /= shrink;
-    (error, canvas_px, 1.0 / shrink)
+    }
+
+    /// (error in screen pixels, canvas size in output pixels, screen pixels per rendered pixel).
+    fn compare(&self, reference: &Image, candidate: &Image, cutoff: f32) -> (ImageError, [u32; 2], f64) {
+        let mut error = compare(reference, candidate, cutoff, self.supersample);
+        error.edge_error_px /= self.shrink;
+        (error, self.canvas_px, 1.0 / self.shrink)
+    }
 }
 
 fn draw(canvas: &mut Canvas, cam: &Camera, r: &Renderable) {

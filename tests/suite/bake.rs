@@ -7,7 +7,10 @@ use verdant::bake::compare::compare;
 use verdant::bake::image::Image;
 use verdant::bake::raster::{Camera, DrawOptions, OrthoView, PerspectiveView};
 use verdant::bake::render::{render_mesh, RenderOptions};
-use verdant::bake::views::{lod_image_error, Renderable, ScreenView};
+use verdant::bake::views::{
+    lod_image_error, switch_search, switch_search_chain, Candidate, LodImageOptions, Renderable, ScreenView,
+    SwitchSearch,
+};
 use verdant::mesh::{AlphaMode, Material, Mesh, Primitive};
 
 const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
@@ -595,6 +598,46 @@ fn lod_image_error_switches_a_larger_sphere_where_its_outline_moves_one_pixel() 
         &[10.0, 20.0],
     );
     assert!(near_only.never_passes && near_only.switch_distance_m == 20.0);
+}
+
+#[test]
+fn the_chain_search_finds_for_each_level_what_a_search_of_it_alone_finds() {
+    // both candidates lie inside the reference, so one framing serves all three: the rows, the
+    // switch and the flag must be those of each level's own search, bit for bit
+    let mats = [Material::default()];
+    let reference = mesh(vec![sphere(0.55, [0.0, 0.5, 0.0], 24, 48)]);
+    let fine = mesh(vec![sphere(0.54, [0.0, 0.5, 0.0], 24, 48)]);
+    let coarse = mesh(vec![sphere(0.5, [0.0, 0.5, 0.0], 12, 24)]);
+    let r = Renderable { mesh: &reference, materials: &mats, textures: &[] };
+    let levels = [&fine, &coarse].map(|m| Renderable { mesh: m, materials: &mats, textures: &[] });
+    let view = ScreenView::default();
+    let opts = LodImageOptions { azimuths: 4, elevations_deg: vec![10.0, 60.0], ..LodImageOptions::default() };
+    let range = SwitchSearch { far_m: 640.0, near_m: 5.0, bisections: 3 };
+    let chain = switch_search_chain(&r, &levels.map(Candidate::Mesh), &view, &opts, &range);
+    assert_eq!(chain.len(), 2);
+    for (level, got) in levels.iter().zip(&chain) {
+        assert_eq!(&switch_search(&r, level, &view, &opts, &range), got);
+    }
+    // the finer level switches in nearer; both pass far away and fail close up
+    let ((_, fine_m, fine_never), (_, coarse_m, coarse_never)) = (&chain[0], &chain[1]);
+    assert!(!fine_never && !coarse_never && *fine_m > 5.0 && fine_m < coarse_m, "{fine_m} {coarse_m}");
+}
+
+#[test]
+fn an_impostor_is_seen_by_each_view_through_the_card_nearest_its_azimuth() {
+    // eight cards, only the first shows the reference: the three views from azimuth 0 (one per
+    // elevation) match it, the other 21 see nothing
+    let (m, mats, tex) = billboard_clump();
+    let r = Renderable { mesh: &m, materials: &mats, textures: &tex };
+    let empty = Mesh::default();
+    let nothing = Renderable { mesh: &empty, materials: &[], textures: &[] };
+    let cards: Vec<Renderable> = (0..8).map(|k| if k == 0 { r } else { nothing }).collect();
+    let range = SwitchSearch { far_m: 20.0, near_m: 20.0, bisections: 0 };
+    let opts = LodImageOptions::default();
+    let found = switch_search_chain(&r, &[Candidate::PerAzimuth(cards)], &ScreenView::default(), &opts, &range);
+    let row = &found[0].0[0];
+    assert_eq!((row.worst_iou, row.mean_iou), (0.0, 3.0 / 24.0), "{row:?}");
+    assert!(!row.passes && found[0].2);
 }
 
 /// A bake-like workload: four orthographic side slices and a top view of the clump, atlas,

@@ -82,12 +82,23 @@ pub(super) struct PerspSetup {
     pub(super) stats: DrawStats,
 }
 
+/// A vertex in view space, with its screen position when it needs no clipping.
+#[derive(Clone, Copy)]
+struct ViewVertex {
+    view: [f64; 3],
+    finite: bool,
+    /// Inside every clip plane (then a triangle of three such vertices is not clipped).
+    inside: bool,
+    /// When `inside`: snapped position and 1/depth, None where off the subpixel grid's range.
+    screen: Option<([i64; 2], f64)>,
+}
+
 /// What every triangle of one primitive's perspective draw shares: the camera frame, its clip
-/// planes and the vertices in view space (None where not finite).
+/// planes and the vertices in view space.
 struct PerspContext {
     frame: PerspFrame,
     planes: [[f64; 4]; 5],
-    verts: Vec<Option<[f64; 3]>>,
+    verts: Vec<ViewVertex>,
 }
 
 impl PerspContext {
@@ -100,16 +111,19 @@ impl PerspContext {
     ) -> Option<PerspContext> {
         let frame = view.frame().ok()?;
         let to_view = frame.view.then_from(object_to_world);
+        let planes = frame.clip_planes();
         let one = |p: &[f32; 3]| {
             let v = to_view.apply([p[0] as f64, p[1] as f64, p[2] as f64]);
-            v.iter().all(|c| c.is_finite()).then_some(v)
+            let finite = v.iter().all(|c| c.is_finite());
+            let inside = finite && planes.iter().all(|plane| inside(&v, plane));
+            let screen = inside.then(|| frame.snapped(v)).flatten();
+            ViewVertex { view: v, finite, inside, screen }
         };
         let verts = if parallel {
             prim.positions.par_iter().map(one).collect()
         } else {
             prim.positions.iter().map(one).collect()
         };
-        let planes = frame.clip_planes();
         Some(PerspContext { frame, planes, verts })
     }
 
@@ -117,11 +131,12 @@ impl PerspContext {
     /// into up to six screen triangles handed to `emit` in fan order; counted in `stats`.
     #[inline]
     fn triangle(&self, t: usize, idx: &[u32], cull: Cull, stats: &mut DrawStats, mut emit: impl FnMut(PerspTri)) {
-        let get = |k: usize| self.verts.get(idx[k] as usize).copied().flatten();
-        let (Some(a), Some(b), Some(c)) = (get(0), get(1), get(2)) else {
+        let get = |k: usize| self.verts.get(idx[k] as usize).filter(|v| v.finite);
+        let (Some(va), Some(vb), Some(vc)) = (get(0), get(1), get(2)) else {
             stats.skipped += 1;
             return;
         };
+        let (a, b, c) = (va.view, vb.view, vc.view);
         // Facing from the eye (the origin of view space). View space (right, up, forward) is
         // left-handed, so counter-clockwise seen from the eye is a positive triple product.
         let facing = dot3(cross3(sub3(b, a), sub3(c, a)), a);
@@ -137,13 +152,41 @@ impl PerspContext {
             stats.culled += 1;
             return;
         }
+        if va.inside && vb.inside && vc.inside {
+            // Nothing to clip (most triangles): the polygon path below with its three vertices,
+            // projected once per vertex.
+            let (Some(sa), Some(sb), Some(sc)) = (va.screen, vb.screen, vc.screen) else {
+                stats.skipped += 1;
+                return;
+            };
+            let screen = [sa, sb, sc];
+            let area = orient(screen[0].0, screen[1].0, screen[2].0);
+            if area == 0 {
+                stats.culled += 1;
+                return;
+            }
+            const UNIT: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+            let order = if area < 0 { [0, 2, 1] } else { [0, 1, 2] };
+            let pts = order.map(|i| screen[i].0);
+            emit(PerspTri {
+                index: t as u32,
+                source: [idx[0], idx[1], idx[2]],
+                pts,
+                inv_depth: order.map(|i| screen[i].1),
+                bary: order.map(|i| UNIT[i]),
+                min: [pts[0][0].min(pts[1][0]).min(pts[2][0]), pts[0][1].min(pts[1][1]).min(pts[2][1])],
+                max: [pts[0][0].max(pts[1][0]).max(pts[2][0]), pts[0][1].max(pts[1][1]).max(pts[2][1])],
+                front,
+            });
+            stats.triangles += 1;
+            return;
+        }
         let mut poly = ClipPolygon { v: [ClipVertex::default(); MAX_CLIP_VERTICES], len: 3 };
         poly.v[..3].copy_from_slice(&[
             ClipVertex { view: a, bary: [1.0, 0.0, 0.0] },
             ClipVertex { view: b, bary: [0.0, 1.0, 0.0] },
             ClipVertex { view: c, bary: [0.0, 0.0, 1.0] },
         ]);
-        let inside = |v: &[f64; 3], p: &[f64; 4]| p[0] * v[0] + p[1] * v[1] + p[2] * v[2] + p[3] >= 0.0;
         for plane in &self.planes {
             if [a, b, c].iter().all(|v| inside(v, plane)) {
                 continue;
@@ -160,15 +203,13 @@ impl PerspContext {
         // Project and snap the polygon; then a fan of triangles around its first vertex.
         let mut screen = [([0i64; 2], 0.0f64); MAX_CLIP_VERTICES];
         for (k, cv) in poly.v[..poly.len].iter().enumerate() {
-            let s = self.frame.project(cv.view);
-            let snap = |v: f64| (v * SUBPIXEL as f64).round();
-            let (x, y) = (snap(s[0]), snap(s[1]));
-            let lim = MAX_VERTEX_SUBPIXELS as f64;
-            if !(x.abs() <= lim && y.abs() <= lim && s[2] > 0.0) {
-                stats.skipped += 1;
-                return;
+            match self.frame.snapped(cv.view) {
+                Some(p) => screen[k] = p,
+                None => {
+                    stats.skipped += 1;
+                    return;
+                }
             }
-            screen[k] = ([x as i64, y as i64], 1.0 / s[2]);
         }
         let mut any = false;
         for k in 1..poly.len - 1 {
@@ -198,6 +239,41 @@ impl PerspContext {
             stats.culled += 1;
         }
     }
+}
+
+/// Whether view-space `v` is on the kept side of `plane`.
+#[inline]
+fn inside(v: &[f64; 3], plane: &[f64; 4]) -> bool {
+    plane[0] * v[0] + plane[1] * v[1] + plane[2] * v[2] + plane[3] >= 0.0
+}
+
+impl PerspFrame {
+    /// View-space `v` projected and snapped to the subpixel grid, with 1/depth; None off the
+    /// grid's range or not in front of the eye.
+    #[inline]
+    fn snapped(&self, v: [f64; 3]) -> Option<([i64; 2], f64)> {
+        let s = self.project(v);
+        match (snap(s[0]), snap(s[1])) {
+            (Some(x), Some(y)) if s[2] > 0.0 => Some(([x, y], 1.0 / s[2])),
+            _ => None,
+        }
+    }
+}
+
+/// A pixel coordinate on the subpixel grid, rounded half away from zero (as `f64::round`); None
+/// beyond [`MAX_VERTEX_SUBPIXELS`] or NaN. Without a rounding instruction in the baseline target,
+/// `f64::round` is a library call; this is the same number from a truncation.
+#[inline]
+fn snap(pixel: f64) -> Option<i64> {
+    let v = pixel * SUBPIXEL as f64;
+    // |round(v)| ≤ lim  ⇔  |v| < lim + ½ (exact: lim is a small power of two)
+    if !(v.abs() < MAX_VERTEX_SUBPIXELS as f64 + 0.5) {
+        return None;
+    }
+    let t = v as i64;
+    // exact for |v| < 2^52
+    let f = v - t as f64;
+    Some(t + (f >= 0.5) as i64 - (f <= -0.5) as i64)
 }
 
 impl PerspSetup {
@@ -356,4 +432,42 @@ where
         }
     });
     written
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::strategy::Strategy;
+
+    proptest::proptest! {
+        /// `snap` is `f64::round` of the subpixel coordinate, and refuses what `round` puts out of range.
+        #[test]
+        fn snap_rounds_as_the_library_does(
+            pixel in proptest::prop_oneof![
+                -1.1e6f64..1.1e6,
+                (-4096i64..4096).prop_map(|k| k as f64 / SUBPIXEL as f64 + 0.5 / SUBPIXEL as f64),
+                proptest::num::f64::ANY,
+            ],
+        ) {
+            let v = pixel * SUBPIXEL as f64;
+            let r = v.round();
+            let want = (r.abs() <= MAX_VERTEX_SUBPIXELS as f64).then_some(r as i64);
+            proptest::prop_assert_eq!(snap(pixel), want);
+        }
+    }
+
+    #[test]
+    fn snap_at_the_edges_of_its_range() {
+        let lim = MAX_VERTEX_SUBPIXELS as f64 / SUBPIXEL as f64;
+        let sub = 1.0 / SUBPIXEL as f64;
+        assert_eq!(snap(lim), Some(MAX_VERTEX_SUBPIXELS));
+        assert_eq!(snap(lim + 0.49 * sub), Some(MAX_VERTEX_SUBPIXELS));
+        assert_eq!(snap(lim + 0.5 * sub), None);
+        assert_eq!(snap(-lim - 0.5 * sub), None);
+        assert_eq!(snap(2.5 * sub), Some(3));
+        assert_eq!(snap(-2.5 * sub), Some(-3));
+        assert_eq!(snap(-0.4 * sub), Some(0));
+        assert_eq!(snap(f64::NAN), None);
+        assert_eq!(snap(f64::INFINITY), None);
+    }
 }

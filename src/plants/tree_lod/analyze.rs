@@ -3,15 +3,9 @@
 
 use std::time::Instant;
 
-use glam::DVec3;
-
 use super::cards::ModelFrame;
-use super::types::{
-    AtlasCell, Progress, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions, IMPOSTOR_VIEWS,
-};
-use crate::bake::views::{
-    lod_image_error_with, switch_search, switch_search_by, DistanceError, LodImageOptions, Renderable, SwitchSearch,
-};
+use super::types::{AtlasCell, Progress, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions};
+use crate::bake::views::{switch_search_chain, Candidate, Renderable, SwitchSearch};
 use crate::mesh::{Mesh, Primitive};
 use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleBvh};
 use crate::random::mix64;
@@ -51,7 +45,7 @@ pub(super) fn measure_levels(
             ),
             _ => HausdorffError::default(),
         };
-        let mut f = TreeLodFigures {
+        let f = TreeLodFigures {
             level: lod.level,
             kind: lod.kind.to_string(),
             triangles: lod.triangles(),
@@ -68,11 +62,10 @@ pub(super) fn measure_levels(
             screen_coverage: 1.0,
             measured: Vec::new(),
         };
-        if lod.level > 0 && options.analyze {
-            progress(&format!("measuring LoD{} ({}) against LoD0", lod.level, lod.kind));
-            image_error(&mut f, lod, reference, frame, impostor_cells, options);
-        }
         lods.push(f);
+    }
+    if options.analyze {
+        image_errors(&mut lods, levels, reference, frame, impostor_cells, options, progress);
     }
     for n in 1..lods.len() {
         if lods[n].switch_distance_m < lods[n - 1].switch_distance_m {
@@ -98,94 +91,65 @@ pub(super) fn measure_levels(
     Ok(Measured { lods, table, seconds })
 }
 
-/// `f`'s image figures: the error at each measured distance and the switch distance from which
-/// it stays within the policy's pixel budget.
-fn image_error(
-    f: &mut TreeLodFigures,
-    lod: &TreeLod,
+/// The image figures of every level after LoD0: the error at each measured distance and the
+/// switch distance from which it stays within the policy's pixel budget. All levels are searched
+/// together ([`switch_search_chain`]): a distance several levels test renders LoD0 once.
+fn image_errors(
+    figures: &mut [TreeLodFigures],
+    levels: &[TreeLod],
     reference: &Renderable,
     frame: &ModelFrame,
     impostor_cells: &[AtlasCell],
     options: &TreeLodOptions,
+    progress: Progress,
 ) {
+    let measured: Vec<usize> = (0..levels.len()).filter(|&n| levels[n].level > 0).collect();
+    if measured.is_empty() {
+        return;
+    }
+    let names: Vec<String> = measured.iter().map(|&n| format!("LoD{} ({})", levels[n].level, levels[n].kind)).collect();
+    progress(&format!("measuring {} against LoD0", names.join(", ")));
+    // the impostor's cards, each facing the azimuth it is baked from (engines show view k around
+    // azimuth k · 360°/views)
+    let cards: Vec<Mesh> = impostor_cells
+        .iter()
+        .enumerate()
+        .map(|(k, cell)| {
+            let quad = Primitive { material: Some(0), ..frame.view(k).quad(cell.uv) };
+            Mesh { name: String::new(), primitives: vec![quad], extras: None }
+        })
+        .collect();
+    let candidates: Vec<Candidate> = measured
+        .iter()
+        .map(|&n| {
+            let lod = &levels[n];
+            let r = |mesh| Renderable { mesh, materials: &lod.scene.materials, textures: &lod.images };
+            if lod.kind == "impostor" {
+                Candidate::PerAzimuth(cards.iter().map(r).collect())
+            } else if lod.kind == "billboards" {
+                Candidate::Card(r(&lod.scene.meshes[0]))
+            } else {
+                Candidate::Mesh(r(&lod.scene.meshes[0]))
+            }
+        })
+        .collect();
     let view = options.policy.screen_view();
     let range = SwitchSearch { far_m: frame.radius * 1024.0, near_m: frame.radius * 2.0, bisections: 3 };
-    let mesh = &lod.scene.meshes[0];
-    let candidate = Renderable { mesh, materials: &lod.scene.materials, textures: &lod.images };
-    let (rows, switch_m, never) = if lod.kind == "impostor" {
-        // the engine shows view k from azimuth k·45°: turn the reference instead, and look from
-        // azimuth 0 at each view's quad
-        let turned: Vec<(Mesh, Mesh)> = impostor_cells
-            .iter()
-            .enumerate()
-            .map(|(k, cell)| {
-                let azimuth = k as f64 * 360.0 / IMPOSTOR_VIEWS as f64;
-                let quad = Primitive { material: Some(0), ..frame.view(0).quad(cell.uv) };
-                (
-                    rotated(reference.mesh, frame.centre, -azimuth),
-                    Mesh { name: String::new(), primitives: vec![quad], extras: None },
-                )
-            })
-            .collect();
-        let one_azimuth = LodImageOptions { azimuths: 1, ..options.image.clone() };
-        switch_search_by(&range, |d| {
-            let rows = turned
-                .iter()
-                .filter_map(|(r, c)| {
-                    let r = Renderable { mesh: r, ..*reference };
-                    let c = Renderable { mesh: c, ..candidate };
-                    lod_image_error_with(&r, &c, &view, &[d], &one_azimuth).distances.into_iter().next()
-                })
-                .collect();
-            merged(rows)
-        })
-    } else {
-        switch_search(reference, &candidate, &view, &options.image, &range)
-    };
-    if let Some(near) = rows.first() {
-        f.near_distance_m = near.distance_m;
-        f.near_iou = near.worst_iou;
-        f.near_color_rmse = near.worst_color_rmse;
-    }
-    if let Some(at) = rows.iter().find(|d| d.distance_m >= switch_m) {
-        f.switch_iou = at.worst_iou;
-        f.switch_color_rmse = at.worst_color_rmse;
-    }
-    f.measured = rows;
-    f.switch_distance_m = switch_m;
-    f.never_passes = never;
-    f.screen_coverage = options.policy.coverage_at_centre_distance(frame.radius, switch_m);
-}
-
-/// `mesh` turned by `angle_deg` about the vertical axis through `axis` (positions and normals).
-fn rotated(mesh: &Mesh, axis: DVec3, angle_deg: f64) -> Mesh {
-    let q = glam::DQuat::from_rotation_y(angle_deg.to_radians());
-    let mut out = mesh.clone();
-    for p in &mut out.primitives {
-        for v in &mut p.positions {
-            *v = (axis + q * (DVec3::from(v.map(f64::from)) - axis)).as_vec3().to_array();
+    let results = switch_search_chain(reference, &candidates, &view, &options.image, &range);
+    for (&n, (rows, switch_m, never)) in measured.iter().zip(results) {
+        let f = &mut figures[n];
+        if let Some(near) = rows.first() {
+            f.near_distance_m = near.distance_m;
+            f.near_iou = near.worst_iou;
+            f.near_color_rmse = near.worst_color_rmse;
         }
-        for n in &mut p.normals {
-            *n = (q * DVec3::from(n.map(f64::from))).as_vec3().to_array();
+        if let Some(at) = rows.iter().find(|d| d.distance_m >= switch_m) {
+            f.switch_iou = at.worst_iou;
+            f.switch_color_rmse = at.worst_color_rmse;
         }
+        f.measured = rows;
+        f.switch_distance_m = switch_m;
+        f.never_passes = never;
+        f.screen_coverage = options.policy.coverage_at_centre_distance(frame.radius, switch_m);
     }
-    out
-}
-
-/// Worst (and mean) over several measurements at one distance.
-fn merged(rows: Vec<DistanceError>) -> Option<DistanceError> {
-    let n = rows.len() as f64;
-    let first = rows.first()?.clone();
-    Some(DistanceError {
-        distance_m: first.distance_m,
-        worst_iou: rows.iter().map(|r| r.worst_iou).fold(f64::INFINITY, f64::min),
-        mean_iou: rows.iter().map(|r| r.mean_iou).sum::<f64>() / n,
-        worst_color_rmse: rows.iter().map(|r| r.worst_color_rmse).fold(0.0, f64::max),
-        mean_color_rmse: rows.iter().map(|r| r.mean_color_rmse).sum::<f64>() / n,
-        worst_edge_error_px: rows.iter().map(|r| r.worst_edge_error_px).fold(0.0, f64::max),
-        mean_edge_error_px: rows.iter().map(|r| r.mean_edge_error_px).sum::<f64>() / n,
-        passes: rows.iter().all(|r| r.passes),
-        canvas_px: rows.iter().map(|r| r.canvas_px).max().unwrap_or([0, 0]),
-        screen_px_per_rendered_px: rows.iter().map(|r| r.screen_px_per_rendered_px).fold(1.0, f64::max),
-    })
 }
