@@ -7,7 +7,16 @@
 # Then the full LoD chain (5 levels, 2048-px atlas, every glb and mip written and re-validated):
 # best of VERDANT_BENCH_RUNS runs without the image analyzer, the analyzer's own seconds from one
 # run, and peak memory. Target: trees3.ls full chain under 5 s.
-# Last, `verdant mesh` on a generated OBJ rock (noisy icosphere, 20 480 triangles): the same chain.
+# Then `verdant mesh` on a generated OBJ rock (noisy icosphere, 20 480 triangles): the same chain.
+# Then issue 16's table: the default command (`verdant tree FILE -o x.glb`: 5 levels, 1024-px
+# atlas, the fast analyzer) on every file of ../shared/data/lsystems, best of VERDANT_BENCH_RUNS
+# wall times: triangles per level, seconds per step from the report (LoD0, LoD1, bake, card
+# levels, Hausdorff, image analysis), total wall seconds and peak memory. Target: under 2 s.
+# Last, the fast analyzer against the exhaustive one (`--analysis exhaustive`: 80 views up to
+# 256 px at 4x4 samples, 5 bisections) on four small files (VERDANT_BENCH_EXHAUSTIVE overrides the
+# list): per level the two switch distances and their ratio, and the worst IoU at each switch.
+# Stated tolerance: fast/exhaustive switch distance within 0.8..1.25 (the fast search's own step
+# is 2^(1/8) = 1.09).
 #
 # Uses ../shared/data/lsystems relative to the repo root (override with VERDANT_LSYSTEMS_DIR).
 # Arguments go to every `verdant tree` run, e.g. `--radial-segments 12`.
@@ -110,4 +119,46 @@ peak_kib=$( { /usr/bin/time -f '%M' "$BIN" --quiet mesh "$OUT/rock.obj" -o "$OUT
 analyze=$(jq '.chain.seconds_analyze' "$OUT/rock.analyzed.json")
 tris=$(jq -r '[.chain.lods[].triangles] | map(tostring) | join("/")' "$OUT/rock.chain.json")
 printf '%-16s %-34s %9.3f %9.3f %10.2f %9.1f\n' rock.obj "$tris" "$best" "$median" "$analyze" "$(awk -v k="$peak_kib" 'BEGIN { print k / 1024 }')"
+
+echo
+echo "default chain (verdant tree FILE -o x.glb), every file of $DATA: best of $RUNS wall times; steps from that run's report"
+printf '%-22s %-30s %7s %7s %7s %7s %7s %7s %8s %8s  %s\n' file triangles_LoD0..4 lod0_s lod1_s bake_s cards_s haus_s image_s total_s peak_MiB "target < 2 s"
+worst=0
+for file in "$DATA"/*/*.ls; do
+    name=$(basename "$file" .ls)
+    best=""
+    for ((run = 0; run < RUNS; run++)); do
+        start=$(date +%s.%N)
+        "$BIN" --quiet tree "$file" -o "$OUT/default/$name.glb" --report "$OUT/$name.run.json"
+        wall=$(awk -v a="$start" -v b="$(date +%s.%N)" 'BEGIN { print b - a }')
+        if [ -z "$best" ] || awk -v w="$wall" -v b="$best" 'BEGIN { exit !(w < b) }'; then
+            best=$wall
+            cp "$OUT/$name.run.json" "$OUT/$name.default.json"
+        fi
+    done
+    peak_kib=$( { /usr/bin/time -f '%M' "$BIN" --quiet tree "$file" -o "$OUT/default/$name.glb" ; } 2>&1 | tail -n 1)
+    read -r tris lod0 lod1 bake cards haus image < <(jq -r '.variants[0] | "\([.lods[].triangles] | map(tostring) | join("/")) \(.seconds_lod0) \(.seconds_lod1) \(.seconds_bake) \(.seconds_cards) \(.seconds_hausdorff) \(.seconds_image)"' "$OUT/$name.default.json")
+    if awk -v t="$best" 'BEGIN { exit !(t < 2.0) }'; then target=ok; else target=MISSED; status=1; fi
+    worst=$(awk -v t="$best" -v w="$worst" 'BEGIN { print (t > w) ? t : w }')
+    printf '%-22s %-30s %7.3f %7.3f %7.3f %7.3f %7.3f %7.3f %8.3f %8.1f  %s\n' "$(basename "$(dirname "$file")")/$name" "$tris" "$lod0" "$lod1" "$bake" "$cards" "$haus" "$image" "$best" "$(awk -v k="$peak_kib" 'BEGIN { print k / 1024 }')" "$target"
+done
+echo "slowest file: $worst s (target: every file under 2 s)"
+
+echo
+echo "fast analyzer (default) against --analysis exhaustive: switch distance per level (m), ratio, worst IoU at the switch"
+printf '%-22s %5s %-11s %11s %11s %7s %9s %9s  %s\n' file level kind fast_m exh_m ratio fast_iou exh_iou "tolerance 0.8..1.25"
+for rel in ${VERDANT_BENCH_EXHAUSTIVE:-lparser-v5/tree1 lparser-v5/horn stochastic/bush stochastic/design-example}; do
+    file="$DATA/$rel.ls"
+    name=$(basename "$rel")
+    "$BIN" --quiet tree "$file" -o "$OUT/fast/$name.glb" --report "$OUT/$name.fast.json"
+    "$BIN" --quiet tree "$file" -o "$OUT/exhaustive/$name.glb" --analysis exhaustive --report "$OUT/$name.exhaustive.json"
+    jq -r --slurpfile x "$OUT/$name.exhaustive.json" '.variants[0].lods as $f | $x[0].variants[0].lods as $e
+        | range(1; $f | length) as $i | "\($f[$i].level) \($f[$i].kind | gsub(" "; "_")) \($f[$i].switch_distance_m) \($e[$i].switch_distance_m) \($f[$i].switch_iou) \($e[$i].switch_iou)"' "$OUT/$name.fast.json" |
+    while read -r level kind fast exh fiou eiou; do
+        read -r ratio verdict < <(awk -v f="$fast" -v e="$exh" 'BEGIN {
+            if (e == 0 && f == 0) { print 1, "ok" } else if (e == 0 || f == 0) { print "-", "OUT" }
+            else { r = f / e; print r, (r >= 0.8 && r <= 1.25) ? "ok" : "OUT" } }')
+        printf '%-22s %5s %-11s %11.1f %11.1f %7s %9.3f %9.3f  %s\n' "$rel" "$level" "$kind" "$fast" "$exh" "$ratio" "$fiou" "$eiou" "$verdict"
+    done
+done
 exit $status

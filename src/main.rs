@@ -129,6 +129,26 @@ struct MeshArgs {
     /// Skip the image analyzer (no switch distances: MSFT_lod coverages are 0); for timing.
     #[arg(long)]
     no_analysis: bool,
+    /// How thoroughly the analyzer measures: `fast` (24 views up to 96 px, switches within 9 %)
+    /// or `exhaustive` (80 views up to 256 px at 4×4 samples, within 2 %; tens of times the work),
+    /// what the fast figures are checked against in scripts/bench_trees.sh.
+    #[arg(long, value_enum, value_name = "DETAIL", default_value_t = AnalysisArg::Fast)]
+    analysis: AnalysisArg,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum AnalysisArg {
+    Fast,
+    Exhaustive,
+}
+
+impl AnalysisArg {
+    fn detail(self) -> tree_lod::AnalysisDetail {
+        match self {
+            AnalysisArg::Fast => tree_lod::AnalysisDetail::Fast,
+            AnalysisArg::Exhaustive => tree_lod::AnalysisDetail::Exhaustive,
+        }
+    }
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -195,6 +215,11 @@ struct TreeArgs {
     /// Skip the image analyzer (no switch distances: MSFT_lod coverages are 0); for timing.
     #[arg(long)]
     no_analysis: bool,
+    /// How thoroughly the analyzer measures: `fast` (24 views up to 96 px, switches within 9 %)
+    /// or `exhaustive` (80 views up to 256 px at 4×4 samples, within 2 %; tens of times the work),
+    /// what the fast figures are checked against in scripts/bench_trees.sh.
+    #[arg(long, value_enum, value_name = "DETAIL", default_value_t = AnalysisArg::Fast)]
+    analysis: AnalysisArg,
     /// Leaves as glTF POINTS (one per leaf at its centre, NORMAL, COLOR_0 and _LEAF_SIZE =
     /// length, width in metres) for engines that draw leaf sprites; .glb/.gltf only.
     #[arg(long)]
@@ -717,7 +742,14 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             output: job.output.clone(),
             dialect: job.dialect,
             options: job.options.clone(),
-            lod: TreeLodOptions { lods, atlas_px: a.atlas_size, analyze: !a.no_analysis, ..TreeLodOptions::default() },
+            lod: TreeLodOptions {
+                lods,
+                atlas_px: a.atlas_size,
+                analyze: !a.no_analysis,
+                image: a.analysis.detail().image(),
+                bisections: a.analysis.detail().bisections(),
+                ..TreeLodOptions::default()
+            },
             variants: a.variants,
         };
         // each step of the chain as it starts: a spinner on a terminal, plain lines otherwise
@@ -809,6 +841,8 @@ fn mesh(a: MeshArgs, quiet: bool) -> i32 {
             lods: a.lods,
             atlas_px: a.atlas_size,
             analyze: !a.no_analysis,
+            image: a.analysis.detail().image(),
+            bisections: a.analysis.detail().bisections(),
             ..TreeLodOptions::default()
         },
     };

@@ -87,6 +87,11 @@ impl ScreenView {
     }
 }
 
+/// Samples across a view's canvas at least (see [`SMALL_VIEW_MAX_SUPERSAMPLE`]).
+const MIN_SAMPLES_ACROSS: u32 = 64;
+/// Samples per pixel along each axis a small view is raised to at most.
+const SMALL_VIEW_MAX_SUPERSAMPLE: u32 = 4;
+
 /// A mesh with what it needs to be drawn.
 #[derive(Debug, Clone, Copy)]
 pub struct Renderable<'a> {
@@ -98,7 +103,8 @@ pub struct Renderable<'a> {
 /// How [`lod_image_error_with`] renders.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct LodImageOptions {
-    /// Samples per output pixel along each axis.
+    /// Samples per output pixel along each axis (a view under 64 samples across gets more, up to
+    /// 4×4, so far-away silhouettes are not measured at the noise of the sample grid).
     pub supersample: u32,
     /// Smallest canvas side in output pixels (the object centred, at its on-screen size).
     pub min_side_px: u32,
@@ -546,6 +552,10 @@ impl ViewShot {
         let shrink = (max_side as f64 / want[0].max(want[1])).min(1.0);
         let side = |px: f64| ((px * shrink).ceil() as u32).clamp(min_side, max_side);
         let canvas_px = [side(want[0]), side(want[1])];
+        // a small view gets more samples per pixel (up to 4×4): its silhouette error is then not
+        // at the mercy of the sample grid, and its cost is the triangles, not the samples
+        let across = canvas_px[0].max(canvas_px[1]);
+        let ss = ss.max(MIN_SAMPLES_ACROSS.div_ceil(across).min(SMALL_VIEW_MAX_SUPERSAMPLE));
         let focal_rendered = view.focal_px() * shrink * ss as f64;
         let width = (canvas_px[0] * ss).min(crate::bake::raster::MAX_CANVAS_SIDE);
         let height = (canvas_px[1] * ss).min(crate::bake::raster::MAX_CANVAS_SIDE);

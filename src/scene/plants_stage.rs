@@ -169,8 +169,9 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// `[lod]` policy (2 px on 1080 px, 60° vertical by default); the report carries the typed chain.
 /// 10: normal atlases written as linear data (glTF normalTexture), not sRGB-encoded.
 /// 11: the tree analyzer searches all levels at once (the framing sphere encloses LoD0 and the
-/// geometric levels, not the cards; the impostor seen through the card facing each azimuth).
-pub const PLANTS_ALGORITHM_VERSION: u32 = 11;
+/// geometric levels, not the cards; the impostor seen through the card facing each azimuth). 12:
+/// small analyzer views get up to 4×4 samples per pixel (64 across at least).
+pub const PLANTS_ALGORITHM_VERSION: u32 = 12;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).

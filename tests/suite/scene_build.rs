@@ -822,11 +822,11 @@ fn concurrent_stores_of_one_cache_entry_stay_complete() {
 /// the new binary) and put the new digest here; the test prints the whole table to copy.
 const PINNED: &[(&str, u32, &str)] = &[
     ("terrain", 4, "8ede27b74341dd54"),
-    ("plants", 11, "e3ccf0f5422154b3"),
+    ("plants", 12, "d9950f96df5103ad"),
     ("snow", 2, "afe32471f9508a26"),
     ("scatter", 7, "adc595be82dcf951"),
-    ("view", 3, "76fbe1ff80466657"),
-    ("preview", 5, "b4fd3ca25d96d497"),
+    ("view", 4, "24533a2ecdb000cd"),
+    ("preview", 6, "4e286b58f20f3d60"),
 ];
 
 /// The stage a scene file belongs to (manifest and reports carry timings: not digested).

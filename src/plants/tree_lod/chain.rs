@@ -70,6 +70,8 @@ struct ChainInput<'a> {
     lod1: Option<LevelParts>,
     coarse: CoarseLevel,
     started: Instant,
+    /// Seconds growing LoD0 (0 for a loaded model).
+    seconds_lod0: f64,
     /// Told each step as it starts.
     progress: Progress<'a>,
 }
@@ -104,6 +106,7 @@ pub fn build_tree_lods_with(
     } else {
         None
     };
+    let seconds_lod0 = started.elapsed().as_secs_f64();
     let reference = quads.as_ref().unwrap_or(&lod0);
     let wanted = options.lods;
     let lod0_triangles = lod0.mesh().triangle_count();
@@ -159,6 +162,7 @@ pub fn build_tree_lods_with(
         lod1,
         coarse,
         started,
+        seconds_lod0,
         progress,
     };
     let chain = build_chain(input, options)?;
@@ -208,6 +212,7 @@ pub fn build_mesh_lods_with(
         lod1,
         coarse: CoarseLevel::Sloppy,
         started,
+        seconds_lod0: 0.0,
         progress,
     };
     build_chain(input, options)
@@ -225,6 +230,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<TreeLods, 
         lod1,
         coarse,
         started,
+        seconds_lod0,
         progress,
     } = input;
     let reference_images = decode(reference_textures)?;
@@ -248,6 +254,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<TreeLods, 
     }
     let atlas = bake_atlas(&reference, &frame, &groups, options)?;
     let seconds_bake = bake_started.elapsed().as_secs_f64();
+    let cards_started = Instant::now();
     if let Some(lod1_source) = &lod1_source {
         let sources = CoarseSources { name: &name, lod1: lod1_source, coarse: &coarse, groups: &groups, card_wind };
         if options.lods > 2 {
@@ -257,6 +264,7 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<TreeLods, 
     }
     levels.truncate(options.lods);
     let (levels, left_out) = without_levels_that_save_nothing(&name, levels);
+    let seconds_cards = cards_started.elapsed().as_secs_f64();
 
     let measured = measure_levels(&levels, &reference, &frame, &atlas.impostor_cells, seed, options, progress)?;
     let chain = chain_scene(&name, &levels, &measured.lods);
@@ -272,8 +280,13 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<TreeLods, 
         table: measured.table,
         atlas_mips: mip_figures(&atlas.mips),
         seconds_meshes,
+        seconds_lod0,
+        seconds_lod1: seconds_meshes - seconds_lod0,
         seconds_bake,
+        seconds_cards,
         seconds_analyze: measured.seconds,
+        seconds_hausdorff: measured.seconds_hausdorff,
+        seconds_image: measured.seconds_image,
         raster_fragments: atlas.fragments,
     };
     Ok(TreeLods {

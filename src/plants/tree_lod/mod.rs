@@ -27,8 +27,8 @@ pub use self::job::{
 };
 pub use self::simplify::SLOPPY_RATIO;
 pub use self::types::{
-    atlas_cell_rects, AtlasCell, LeftOutLevel, Progress, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures,
-    TreeLodOptions, TreeLodReport, TreeLods, ATLAS_ALPHA_CUTOFF, ATLAS_GUTTER_PX, BAKE_SUPERSAMPLE, BILLBOARD_PLANES,
-    DEFAULT_ATLAS_PX, DEFAULT_HAUSDORFF_SAMPLES, IMPOSTOR_EXTRAS_KEY, IMPOSTOR_VIEWS, MAX_ATLAS_PX, MAX_CLUSTERS,
-    MIN_ATLAS_PX, TREE_LODS,
+    atlas_cell_rects, AnalysisDetail, AtlasCell, LeftOutLevel, Progress, SpeedErrorRow, TreeLod, TreeLodError,
+    TreeLodFigures, TreeLodOptions, TreeLodReport, TreeLods, ATLAS_ALPHA_CUTOFF, ATLAS_GUTTER_PX, BAKE_SUPERSAMPLE,
+    BILLBOARD_PLANES, DEFAULT_ATLAS_PX, DEFAULT_HAUSDORFF_SAMPLES, IMPOSTOR_EXTRAS_KEY, IMPOSTOR_VIEWS, MAX_ATLAS_PX,
+    MAX_CLUSTERS, MIN_ATLAS_PX, TREE_LODS,
 };

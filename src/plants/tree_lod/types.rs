@@ -82,10 +82,55 @@ pub struct TreeLodOptions {
     /// Measure image errors and switch distances (off: coverages are 0, for timing the build).
     pub analyze: bool,
     pub hausdorff_samples: usize,
-    /// How the image analyzer renders (8 azimuths × 3 elevations).
+    /// How the image analyzer renders and how finely it searches ([`AnalysisDetail`]).
     pub image: LodImageOptions,
+    /// Log-space bisections of each switch search (each halves the factor the switch is known
+    /// within: 3 → 2^(1/8), 9 %).
+    pub bisections: usize,
     /// The LoD policy switch distances are found for (`[lod]`: pixel budget and screen).
     pub policy: LodView,
+}
+
+/// How thoroughly the chain's image analyzer measures (`verdant tree|mesh --analysis`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AnalysisDetail {
+    /// The default: 8 azimuths (every 45°, the impostor's views) × 3 elevations (10°, 40°, 75°),
+    /// views at most 96 px across with 2×2 samples per pixel (small views up to 4×4), 3 bisections
+    /// (switches within 9 %).
+    #[default]
+    Fast,
+    /// What the fast measure is checked against (`scripts/bench_trees.sh`): 16 azimuths × 5
+    /// elevations (10° to 80°), views up to 256 px with 4×4 samples, 5 bisections (2 %). Tens of
+    /// times the work.
+    Exhaustive,
+}
+
+impl AnalysisDetail {
+    pub fn image(self) -> LodImageOptions {
+        match self {
+            AnalysisDetail::Fast => LodImageOptions {
+                max_side_px: 96,
+                supersample: 2,
+                azimuths: 8,
+                elevations_deg: vec![10.0, 40.0, 75.0],
+                ..LodImageOptions::default()
+            },
+            AnalysisDetail::Exhaustive => LodImageOptions {
+                max_side_px: 256,
+                supersample: 4,
+                azimuths: 16,
+                elevations_deg: vec![10.0, 27.5, 45.0, 62.5, 80.0],
+                ..LodImageOptions::default()
+            },
+        }
+    }
+
+    pub fn bisections(self) -> usize {
+        match self {
+            AnalysisDetail::Fast => 3,
+            AnalysisDetail::Exhaustive => 5,
+        }
+    }
 }
 
 impl Default for TreeLodOptions {
@@ -95,7 +140,8 @@ impl Default for TreeLodOptions {
             atlas_px: DEFAULT_ATLAS_PX,
             analyze: true,
             hausdorff_samples: DEFAULT_HAUSDORFF_SAMPLES,
-            image: LodImageOptions { max_side_px: 96, supersample: 2, ..LodImageOptions::default() },
+            image: AnalysisDetail::Fast.image(),
+            bisections: AnalysisDetail::Fast.bisections(),
             policy: LodView::default(),
         }
     }
@@ -235,9 +281,27 @@ pub struct TreeLodReport {
     pub lods: Vec<TreeLodFigures>,
     pub table: Vec<SpeedErrorRow>,
     pub atlas_mips: Vec<MipFigures>,
+    /// LoD0 and LoD1 (`seconds_lod0` + `seconds_lod1`).
     pub seconds_meshes: f64,
+    /// Growing the tree (0 for a loaded model).
+    #[serde(default)]
+    pub seconds_lod0: f64,
+    /// LoD1: the thinner tree simplified, or the model simplified.
+    #[serde(default)]
+    pub seconds_lod1: f64,
+    /// The atlas (impostor views, leaf-cluster cards, normals).
     pub seconds_bake: f64,
+    /// The cards, billboard and impostor levels from the atlas.
+    #[serde(default)]
+    pub seconds_cards: f64,
+    /// The analyzer (`seconds_hausdorff` + `seconds_image`).
     pub seconds_analyze: f64,
+    /// Sizes and sampled Hausdorff distances of every level.
+    #[serde(default)]
+    pub seconds_hausdorff: f64,
+    /// The image errors and switch distances of every level.
+    #[serde(default)]
+    pub seconds_image: f64,
     pub raster_fragments: u64,
 }
 
