@@ -124,19 +124,22 @@ echo
 echo "default chain (verdant tree FILE -o x.glb), every file of $DATA: best of $RUNS wall times; steps from that run's report"
 printf '%-22s %-30s %7s %7s %7s %7s %7s %7s %8s %8s  %s\n' file triangles_LoD0..4 lod0_s lod1_s bake_s cards_s haus_s image_s total_s peak_MiB "target < 2 s"
 worst=0
-for file in "$DATA"/*/*.ls; do
+shopt -s nullglob
+files=("$DATA"/*/*.ls)
+[ ${#files[@]} -gt 0 ] || { echo "bench_trees: no .ls files under $DATA" >&2; exit 2; }
+for file in "${files[@]}"; do
     name=$(basename "$file" .ls)
     best=""
     for ((run = 0; run < RUNS; run++)); do
         start=$(date +%s.%N)
-        "$BIN" --quiet tree "$file" -o "$OUT/default/$name.glb" --report "$OUT/$name.run.json"
+        "$BIN" --quiet tree "$file" -o "$OUT/default/$name.glb" --report "$OUT/$name.run.json" "$@"
         wall=$(awk -v a="$start" -v b="$(date +%s.%N)" 'BEGIN { print b - a }')
         if [ -z "$best" ] || awk -v w="$wall" -v b="$best" 'BEGIN { exit !(w < b) }'; then
             best=$wall
             cp "$OUT/$name.run.json" "$OUT/$name.default.json"
         fi
     done
-    peak_kib=$( { /usr/bin/time -f '%M' "$BIN" --quiet tree "$file" -o "$OUT/default/$name.glb" ; } 2>&1 | tail -n 1)
+    peak_kib=$( { /usr/bin/time -f '%M' "$BIN" --quiet tree "$file" -o "$OUT/default/$name.glb" "$@" ; } 2>&1 | tail -n 1)
     read -r tris lod0 lod1 bake cards haus image < <(jq -r '.variants[0] | "\([.lods[].triangles] | map(tostring) | join("/")) \(.seconds_lod0) \(.seconds_lod1) \(.seconds_bake) \(.seconds_cards) \(.seconds_hausdorff) \(.seconds_image)"' "$OUT/$name.default.json")
     if awk -v t="$best" 'BEGIN { exit !(t < 2.0) }'; then target=ok; else target=MISSED; status=1; fi
     worst=$(awk -v t="$best" -v w="$worst" 'BEGIN { print (t > w) ? t : w }')
@@ -150,15 +153,18 @@ printf '%-22s %5s %-11s %11s %11s %7s %9s %9s  %s\n' file level kind fast_m exh_
 for rel in ${VERDANT_BENCH_EXHAUSTIVE:-lparser-v5/tree1 lparser-v5/horn stochastic/bush stochastic/design-example}; do
     file="$DATA/$rel.ls"
     name=$(basename "$rel")
-    "$BIN" --quiet tree "$file" -o "$OUT/fast/$name.glb" --report "$OUT/$name.fast.json"
-    "$BIN" --quiet tree "$file" -o "$OUT/exhaustive/$name.glb" --analysis exhaustive --report "$OUT/$name.exhaustive.json"
-    jq -r --slurpfile x "$OUT/$name.exhaustive.json" '.variants[0].lods as $f | $x[0].variants[0].lods as $e
-        | range(1; $f | length) as $i | "\($f[$i].level) \($f[$i].kind | gsub(" "; "_")) \($f[$i].switch_distance_m) \($e[$i].switch_distance_m) \($f[$i].switch_iou) \($e[$i].switch_iou)"' "$OUT/$name.fast.json" |
+    "$BIN" --quiet tree "$file" -o "$OUT/fast/$name.glb" --report "$OUT/$name.fast.json" "$@"
+    "$BIN" --quiet tree "$file" -o "$OUT/exhaustive/$name.glb" --analysis exhaustive --report "$OUT/$name.exhaustive.json" "$@"
+    # one line per level after LoD0; both runs build the same chain, so levels pair up by index
     while read -r level kind fast exh fiou eiou; do
         read -r ratio verdict < <(awk -v f="$fast" -v e="$exh" 'BEGIN {
-            if (e == 0 && f == 0) { print 1, "ok" } else if (e == 0 || f == 0) { print "-", "OUT" }
+            if (f !~ /^[0-9.eE+-]+$/ || e !~ /^[0-9.eE+-]+$/) { print "-", "MISMATCH" }
+            else if (e + 0 == 0 && f + 0 == 0) { print 1, "ok" } else if (e + 0 == 0 || f + 0 == 0) { print "-", "OUT" }
             else { r = f / e; print r, (r >= 0.8 && r <= 1.25) ? "ok" : "OUT" } }')
-        printf '%-22s %5s %-11s %11.1f %11.1f %7s %9.3f %9.3f  %s\n' "$rel" "$level" "$kind" "$fast" "$exh" "$ratio" "$fiou" "$eiou" "$verdict"
-    done
+        [ "$verdict" = ok ] || status=1
+        printf '%-22s %5s %-11s %11s %11s %7s %9s %9s  %s\n' "$rel" "$level" "$kind" "$fast" "$exh" "$ratio" "$fiou" "$eiou" "$verdict"
+    done < <(jq -r --slurpfile x "$OUT/$name.exhaustive.json" '.variants[0].lods as $f | $x[0].variants[0].lods as $e
+        | range(1; $f | length) as $i
+        | "\($f[$i].level) \($f[$i].kind | gsub(" "; "_")) \($f[$i].switch_distance_m * 10 | round / 10) \(($e[$i].switch_distance_m // "none") | if type == "number" then (. * 10 | round / 10) else . end) \($f[$i].switch_iou * 1000 | round / 1000) \(($e[$i].switch_iou // 0) * 1000 | round / 1000)"' "$OUT/$name.fast.json")
 done
 exit $status

@@ -215,8 +215,10 @@ pub fn lod_image_error_with(
     let views = view_count(opts);
     let sphere = Sphere { centre, radius_m };
     let only = [Candidate::Mesh(*candidate)];
-    let rows: Vec<DistanceError> =
-        distances.iter().flat_map(|&d| measure_distance(reference, &[&only[0]], view, opts, sphere, d)).collect();
+    // distances in parallel too (each measures its views in parallel), rows kept in order
+    let per_distance: Vec<Vec<DistanceError>> =
+        distances.par_iter().map(|&d| measure_distance(reference, &[&only[0]], view, opts, sphere, d)).collect();
+    let rows: Vec<DistanceError> = per_distance.into_iter().flatten().collect();
     let (switch_distance_m, never_passes) = switch_distance(&rows, view.max_error_px);
     LodImageReport {
         view: *view,
@@ -243,7 +245,8 @@ pub struct SwitchSearch {
 /// until a distance fails (error ≤ 1 px is monotone in distance but for noise: every halving on
 /// the far side is checked), then bisected in log space between the failing and the passing
 /// distance. Returns the measured rows (sorted by distance), the switch distance (the nearest
-/// distance known to pass: conservative) and whether even the farthest failed.
+/// distance known to pass: conservative) and whether even the farthest failed. A chain of one
+/// level ([`switch_search_chain`]).
 pub fn switch_search(
     reference: &Renderable,
     candidate: &Renderable,
@@ -251,58 +254,18 @@ pub fn switch_search(
     opts: &LodImageOptions,
     range: &SwitchSearch,
 ) -> (Vec<DistanceError>, f64, bool) {
-    switch_search_by(range, |d| {
-        lod_image_error_with(reference, candidate, view, &[d], opts).distances.into_iter().next()
-    })
+    let mut found = switch_search_chain(reference, &[Candidate::Mesh(*candidate)], view, opts, range);
+    found.pop().unwrap_or((Vec::new(), 0.0, false))
 }
 
-/// [`switch_search`] with the measurement at one distance given by `eval` (for candidates that
-/// are not one static mesh, e.g. a view-dependent impostor measured per view).
-pub fn switch_search_by(
-    range: &SwitchSearch,
-    eval: impl Fn(f64) -> Option<DistanceError>,
-) -> (Vec<DistanceError>, f64, bool) {
-    let mut rows = Vec::new();
-    let (mut pass, mut fail) = (None, None);
-    let mut d = range.far_m;
-    while d >= range.near_m {
-        let Some(r) = eval(d) else { break };
-        let passes = r.passes;
-        rows.push(r);
-        if !passes {
-            fail = Some(d);
-            break;
-        }
-        pass = Some(d);
-        d /= 2.0;
-    }
-    let result = match (fail, pass) {
-        (None, _) => (0.0, false),
-        (Some(f), None) => (f, true),
-        (Some(mut f), Some(mut p)) => {
-            for _ in 0..range.bisections {
-                let m = (f * p).sqrt();
-                let Some(r) = eval(m) else { break };
-                if r.passes {
-                    p = m;
-                } else {
-                    f = m;
-                }
-                rows.push(r);
-            }
-            (p, false)
-        }
-    };
-    rows.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
-    (rows, result.0, result.1)
-}
-
-/// A level measured against the reference: geometry seen from every view; a textured card showing
-/// a projection of the reference (a billboard); or a view-dependent impostor whose cards are evenly
-/// spaced in azimuth from 0° (card k faces azimuth k · 360°/n; a view at azimuth α sees the card
-/// nearest to it, as an impostor shader picks it). Cards are framed by the reference's sphere: what
-/// they show is the reference projected onto a plane through its centre, which stays inside it,
-/// and only their cut-away corners reach past it.
+/// A level measured against the reference: geometry seen from every view; textured cards showing
+/// parts of the reference projected onto them (leaf-cluster cards, billboards); or a
+/// view-dependent impostor whose cards are evenly spaced in azimuth from 0° (card k faces azimuth
+/// k · 360°/n): a view at azimuth α sees the card nearest to it turned about the vertical axis
+/// through the framing sphere's centre to face α, as an impostor shader shows it. Cards do not
+/// widen the framing sphere: what they show is the reference projected onto them, and only their
+/// cut-away corners reach past it (a 2-px margin takes what little a projection onto an off-centre
+/// plane may add). Geometry does: the sphere encloses it, so nothing of it is cropped.
 #[derive(Debug, Clone)]
 pub enum Candidate<'a> {
     Mesh(Renderable<'a>),
@@ -311,15 +274,21 @@ pub enum Candidate<'a> {
 }
 
 impl<'a> Candidate<'a> {
-    /// What a view from `azimuth_deg` draws (None for an impostor without cards).
-    fn seen_from(&self, azimuth_deg: f64) -> Option<&Renderable<'a>> {
+    /// What a view from `azimuth_deg` draws and the angle (degrees) to turn it by about the vertical
+    /// axis first (None for an impostor without cards).
+    fn seen_from(&self, azimuth_deg: f64) -> Option<(&Renderable<'a>, f64)> {
         match self {
-            Candidate::Mesh(r) | Candidate::Card(r) => Some(r),
+            Candidate::Mesh(r) | Candidate::Card(r) => Some((r, 0.0)),
             Candidate::PerAzimuth(cards) if cards.is_empty() => None,
             Candidate::PerAzimuth(cards) => {
                 let n = cards.len();
-                let k = (azimuth_deg.rem_euclid(360.0) * n as f64 / 360.0).round() as usize % n;
-                cards.get(k)
+                let step = 360.0 / n as f64;
+                let k = (azimuth_deg.rem_euclid(360.0) / step).round() as usize % n;
+                // within (−180°, 180°]; views at the cards' own azimuths (the default 8) see them
+                // untouched
+                let turn = (azimuth_deg - k as f64 * step).rem_euclid(360.0);
+                let turn = if turn > 180.0 { turn - 360.0 } else { turn };
+                cards.get(k).map(|c| (c, if turn.abs() < 1e-9 { 0.0 } else { turn }))
             }
         }
     }
@@ -333,13 +302,33 @@ impl<'a> Candidate<'a> {
     }
 }
 
+/// `mesh` turned by `angle_deg` about the vertical axis through `centre` (positions and normals):
+/// a turn by +angle moves what faces azimuth θ to face θ + angle (0° = +Z, 90° = +X).
+fn turned(mesh: &Mesh, centre: [f64; 3], angle_deg: f64) -> Mesh {
+    let (s, c) = angle_deg.to_radians().sin_cos();
+    let turn = |x: f64, z: f64| (c * x + s * z, -s * x + c * z);
+    let mut out = mesh.clone();
+    for p in &mut out.primitives {
+        for v in &mut p.positions {
+            let (x, z) = turn(v[0] as f64 - centre[0], v[2] as f64 - centre[2]);
+            *v = [(x + centre[0]) as f32, v[1], (z + centre[2]) as f32];
+        }
+        for n in &mut p.normals {
+            let (x, z) = turn(n[0] as f64, n[2] as f64);
+            *n = [x as f32, n[1], z as f32];
+        }
+    }
+    out
+}
+
 /// [`switch_search`] for every level of a chain at once, each against the same reference and in
 /// the same framing: the sphere encloses the reference and every geometric candidate (not the cards,
 /// see [`Candidate`]), and a distance two
 /// levels both test renders the reference once for both. Every distance the search visits lies
 /// on the lattice `far_m` · 2^(−j / 2^bisections), so levels whose switches are near one another
 /// share most of them. Per level: its rows (sorted by distance), switch distance and whether even
-/// the farthest failed, exactly as [`switch_search_by`] decides them.
+/// the farthest failed, exactly as [`switch_search`] of that level alone decides them when the
+/// framing is the same.
 pub fn switch_search_chain(
     reference: &Renderable,
     candidates: &[Candidate],
@@ -349,15 +338,14 @@ pub fn switch_search_chain(
 ) -> Vec<(Vec<DistanceError>, f64, bool)> {
     let meshes: Vec<&Mesh> = candidates.iter().filter_map(Candidate::framed).collect();
     let sphere = bounding_sphere(reference.mesh, &meshes);
-    struct Search {
-        rows: Vec<DistanceError>,
-        pass: Option<f64>,
-        fail: Option<f64>,
+    let mut searches: Vec<LevelSearch> = candidates.iter().map(|_| LevelSearch::default()).collect();
+    if !(range.near_m > 0.0 && range.far_m.is_finite()) {
+        // nothing to walk: halving would never reach a positive nearest distance
+        return searches.into_iter().map(|_| (Vec::new(), 0.0, false)).collect();
     }
-    let mut searches: Vec<Search> =
-        candidates.iter().map(|_| Search { rows: Vec::new(), pass: None, fail: None }).collect();
     let measure = |levels: &[usize], d: f64| -> Vec<DistanceError> {
-        if view.check().is_err() {
+        // a distance of 0 (or not finite) puts the eye on the target: nothing to measure
+        if view.check().is_err() || !(d.is_finite() && d > 0.0) {
             return Vec::new();
         }
         let picked: Vec<&Candidate> = levels.iter().map(|&i| &candidates[i]).collect();
@@ -375,13 +363,7 @@ pub fn switch_search_chain(
             break;
         }
         for (&i, r) in active.iter().zip(rows) {
-            let s = &mut searches[i];
-            if r.passes {
-                s.pass = Some(d);
-            } else {
-                s.fail = Some(d);
-            }
-            s.rows.push(r);
+            searches[i].record(d, r);
         }
         d /= 2.0;
     }
@@ -401,13 +383,7 @@ pub fn switch_search_chain(
                 continue;
             }
             for (&i, r) in levels.iter().zip(rows) {
-                let s = &mut searches[i];
-                if r.passes {
-                    s.pass = Some(m);
-                } else {
-                    s.fail = Some(m);
-                }
-                s.rows.push(r);
+                searches[i].record(m, r);
             }
         }
     }
@@ -422,6 +398,25 @@ pub fn switch_search_chain(
             }
         })
         .collect()
+}
+
+/// One level's switch search: what it measured, its nearest passing and failing distance.
+#[derive(Default)]
+struct LevelSearch {
+    rows: Vec<DistanceError>,
+    pass: Option<f64>,
+    fail: Option<f64>,
+}
+
+impl LevelSearch {
+    fn record(&mut self, d: f64, row: DistanceError) {
+        if row.passes {
+            self.pass = Some(d);
+        } else {
+            self.fail = Some(d);
+        }
+        self.rows.push(row);
+    }
 }
 
 /// The sphere every view of one measurement is framed by.
@@ -493,8 +488,15 @@ fn measure_distance(
                 .map(|c| {
                     let empty = Mesh::default();
                     let nothing = Renderable { mesh: &empty, materials: &[], textures: &[] };
-                    let seen = c.seen_from(azimuth).unwrap_or(&nothing);
-                    shot.compare(&reference_image, &shot.render(seen), opts.cutoff)
+                    let image = match c.seen_from(azimuth) {
+                        Some((seen, turn)) if turn != 0.0 => {
+                            let mesh = turned(seen.mesh, sphere.centre, turn);
+                            shot.render(&Renderable { mesh: &mesh, ..*seen })
+                        }
+                        Some((seen, _)) => shot.render(seen),
+                        None => shot.render(&nothing),
+                    };
+                    shot.compare(&reference_image, &image, opts.cutoff)
                 })
                 .collect()
         })
@@ -627,6 +629,7 @@ fn switch_distance(rows: &[DistanceError], max_error_px: f64) -> (f64, bool) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::Primitive;
 
     fn row(distance_m: f64, worst: f64) -> DistanceError {
         DistanceError {
@@ -660,6 +663,34 @@ mod tests {
         let (d, _) = switch_distance(&[row(10.0, 3.0), row(20.0, 0.0)], 1.0);
         assert!(d > 10.0 && d < 20.0);
         assert_eq!(switch_distance(&[], 1.0), (0.0, false));
+    }
+
+    #[test]
+    fn an_impostor_view_sees_the_nearest_card_turned_to_face_it() {
+        let empty = Mesh::default();
+        let r = Renderable { mesh: &empty, materials: &[], textures: &[] };
+        let cards = Candidate::PerAzimuth(vec![r; 8]);
+        let pick = |az: f64| cards.seen_from(az).map(|(c, turn)| (c.mesh as *const Mesh, turn));
+        assert_eq!(pick(45.0).map(|p| p.1), Some(0.0));
+        let (_, t) = pick(30.0).unwrap();
+        assert!((t + 15.0).abs() < 1e-12, "{t}");
+        let (_, t) = pick(350.0).unwrap();
+        assert!((t + 10.0).abs() < 1e-12, "{t}");
+        assert!(Candidate::PerAzimuth(Vec::new()).seen_from(0.0).is_none());
+        // a card facing +Z (azimuth 0°) turned by 90° faces +X (azimuth 90°), about the centre
+        let quad = Primitive {
+            positions: vec![[1.0, 0.0, 2.0], [3.0, 0.0, 2.0], [3.0, 1.0, 2.0]],
+            normals: vec![[0.0, 0.0, 1.0]; 3],
+            indices: vec![0, 1, 2],
+            ..Primitive::default()
+        };
+        let m = Mesh { name: String::new(), primitives: vec![quad], extras: None };
+        let t = turned(&m, [2.0, 0.0, 2.0], 90.0);
+        let p = &t.primitives[0];
+        for (got, want) in p.positions.iter().zip([[2.0, 0.0, 3.0], [2.0, 0.0, 1.0], [2.0, 1.0, 1.0]]) {
+            assert!(got.iter().zip(want).all(|(g, w)| (g - w).abs() < 1e-6), "{got:?} {want:?}");
+        }
+        assert!((p.normals[0][0] - 1.0).abs() < 1e-6 && p.normals[0][2].abs() < 1e-6);
     }
 
     #[test]

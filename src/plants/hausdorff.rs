@@ -15,6 +15,9 @@ use crate::random::mix64;
 /// Most triangles in a leaf of the [`TriangleBvh`].
 const LEAF_TRIANGLES: usize = 4;
 
+/// A box is skipped when its squared distance exceeds the best one by more than this factor.
+const PRUNE_SLACK: f64 = 1.0 + 1e-9;
+
 /// Points measured per parallel batch (bounds the memory of a huge candidate's sample list).
 const BATCH_POINTS: usize = 1 << 16;
 
@@ -86,7 +89,9 @@ impl TriangleBvh {
         while top > 0 {
             top -= 1;
             let node = self.nodes[stack[top] as usize];
-            if box_distance2(&node, p) > best {
+            // skipped only when clearly farther: a triangle's computed distance may round a few
+            // ulps below its box's, and a near-tie must still be measured for the exact minimum
+            if box_distance2(&node, p) > best * PRUNE_SLACK {
                 continue;
             }
             if node.count > 0 {

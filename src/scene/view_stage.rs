@@ -34,8 +34,9 @@ fn fail(message: String) -> StageError {
 /// Version of what the view stage writes for given inputs (part of its cache key, see
 /// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]).
 /// 2: the species' normal atlases are linear data. 3: the trees' switch distances from the joint
-/// chain search (plants 11). 4: and from small views sampled more finely (plants 12).
-pub const VIEW_ALGORITHM_VERSION: u32 = 4;
+/// chain search (plants 11). 4: and from small views sampled more finely (plants 12). 5: cards
+/// framed as billboards (plants 13).
+pub const VIEW_ALGORITHM_VERSION: u32 = 5;
 
 /// What one view draws.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

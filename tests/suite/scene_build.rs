@@ -822,10 +822,10 @@ fn concurrent_stores_of_one_cache_entry_stay_complete() {
 /// the new binary) and put the new digest here; the test prints the whole table to copy.
 const PINNED: &[(&str, u32, &str)] = &[
     ("terrain", 4, "8ede27b74341dd54"),
-    ("plants", 12, "d9950f96df5103ad"),
+    ("plants", 13, "bd7dbfd8b599519f"),
     ("snow", 2, "afe32471f9508a26"),
     ("scatter", 7, "adc595be82dcf951"),
-    ("view", 4, "24533a2ecdb000cd"),
+    ("view", 5, "52caea548a2094cf"),
     ("preview", 6, "4e286b58f20f3d60"),
 ];
 

@@ -77,6 +77,24 @@ pub(super) struct PerspTri {
     front: bool,
 }
 
+impl PerspTri {
+    /// Screen triangle `pts` (edge functions ≥ 0 inside) of source triangle `t` (`idx` its vertex
+    /// indices), with its bounding box.
+    #[inline]
+    fn new(t: usize, idx: &[u32], pts: [[i64; 2]; 3], inv_depth: [f64; 3], bary: [[f64; 3]; 3], front: bool) -> Self {
+        PerspTri {
+            index: t as u32,
+            source: [idx[0], idx[1], idx[2]],
+            pts,
+            inv_depth,
+            bary,
+            min: [pts[0][0].min(pts[1][0]).min(pts[2][0]), pts[0][1].min(pts[1][1]).min(pts[2][1])],
+            max: [pts[0][0].max(pts[1][0]).max(pts[2][0]), pts[0][1].max(pts[1][1]).max(pts[2][1])],
+            front,
+        }
+    }
+}
+
 pub(super) struct PerspSetup {
     pub(super) tris: Vec<PerspTri>,
     pub(super) stats: DrawStats,
@@ -168,16 +186,7 @@ impl PerspContext {
             const UNIT: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
             let order = if area < 0 { [0, 2, 1] } else { [0, 1, 2] };
             let pts = order.map(|i| screen[i].0);
-            emit(PerspTri {
-                index: t as u32,
-                source: [idx[0], idx[1], idx[2]],
-                pts,
-                inv_depth: order.map(|i| screen[i].1),
-                bary: order.map(|i| UNIT[i]),
-                min: [pts[0][0].min(pts[1][0]).min(pts[2][0]), pts[0][1].min(pts[1][1]).min(pts[2][1])],
-                max: [pts[0][0].max(pts[1][0]).max(pts[2][0]), pts[0][1].max(pts[1][1]).max(pts[2][1])],
-                front,
-            });
+            emit(PerspTri::new(t, idx, pts, order.map(|i| screen[i].1), order.map(|i| UNIT[i]), front));
             stats.triangles += 1;
             return;
         }
@@ -221,16 +230,7 @@ impl PerspContext {
             let order = if area < 0 { [fan[0], fan[2], fan[1]] } else { fan };
             let pts = order.map(|i| screen[i].0);
             any = true;
-            emit(PerspTri {
-                index: t as u32,
-                source: [idx[0], idx[1], idx[2]],
-                pts,
-                inv_depth: order.map(|i| screen[i].1),
-                bary: order.map(|i| poly.v[i].bary),
-                min: [pts.iter().map(|p| p[0]).min().unwrap_or(0), pts.iter().map(|p| p[1]).min().unwrap_or(0)],
-                max: [pts.iter().map(|p| p[0]).max().unwrap_or(0), pts.iter().map(|p| p[1]).max().unwrap_or(0)],
-                front,
-            });
+            emit(PerspTri::new(t, idx, pts, order.map(|i| screen[i].1), order.map(|i| poly.v[i].bary), front));
         }
         if any {
             stats.triangles += 1;

@@ -129,7 +129,7 @@ fn image_errors(
             let r = |mesh| Renderable { mesh, materials: &lod.scene.materials, textures: &lod.images };
             if lod.kind == "impostor" {
                 Candidate::PerAzimuth(cards.iter().map(r).collect())
-            } else if lod.kind == "billboards" {
+            } else if lod.kind == "billboards" || lod.kind == "cards" {
                 Candidate::Card(r(&lod.scene.meshes[0]))
             } else {
                 Candidate::Mesh(r(&lod.scene.meshes[0]))

@@ -5,7 +5,7 @@
 //! quadrics); LoD2 the finest branch level replaced by leaf-cluster cards baked from it; LoD3 four
 //! crossed billboards; LoD4 one impostor quad with 8 baked views. Each level is measured: triangles,
 //! bytes, sampled one-sided Hausdorff distance to LoD0 ([`crate::plants::hausdorff`]) and image error
-//! with the 1-px switch distance ([`crate::bake::views::switch_search`]).
+//! with the switch distance under the pixel budget ([`crate::bake::views::switch_search_chain`]).
 //!
 //! Impostor view selection (LoD4): the quad in the file faces +Z; an engine turns it to face the
 //! camera about the vertical axis through `centre` and picks the atlas cell from the direction
