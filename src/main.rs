@@ -746,9 +746,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
                 lods,
                 atlas_px: a.atlas_size,
                 analyze: !a.no_analysis,
-                image: a.analysis.detail().image(),
-                bisections: a.analysis.detail().bisections(),
-                ..TreeLodOptions::default()
+                ..TreeLodOptions::default().with_analysis(a.analysis.detail())
             },
             variants: a.variants,
         };
@@ -841,9 +839,7 @@ fn mesh(a: MeshArgs, quiet: bool) -> i32 {
             lods: a.lods,
             atlas_px: a.atlas_size,
             analyze: !a.no_analysis,
-            image: a.analysis.detail().image(),
-            bisections: a.analysis.detail().bisections(),
-            ..TreeLodOptions::default()
+            ..TreeLodOptions::default().with_analysis(a.analysis.detail())
         },
     };
     if let Err(e) = verdant::export::check_output_path(&job.output) {

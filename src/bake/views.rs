@@ -232,21 +232,40 @@ pub fn lod_image_error_with(
     }
 }
 
-/// The distances the 1-px switch search walks: from `far_m` halving down to `near_m`, then
-/// `bisections` log-space bisections (each narrows the switch to within a factor 2^(1/2^k)).
+/// The distances the 1-px switch search walks: from `start_m` halving down to `near_m` while a
+/// level passes, doubling up to `far_m` while it fails, then narrowing each level's bracket (its
+/// failing and passing distance) down to one step of the lattice `start_m` · 2^(j / 2^bisections):
+/// switches are found within a factor 2^(1/2^bisections). `start_m` = `far_m` checks every halving
+/// from the far end ([`SwitchSearch::from_far`]).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct SwitchSearch {
+    pub start_m: f64,
     pub far_m: f64,
     pub near_m: f64,
     pub bisections: usize,
+    /// How a bracket is narrowed: false, bisected in log space (`bisections` rounds); true, probed
+    /// where the error, linear in log-log between the bracket's ends, meets the bound, then at that
+    /// probe's neighbour across it (error against distance is close to 1/d near a switch: two
+    /// probes usually close a bracket that bisection needs three for), bisecting when a pair of
+    /// probes did not halve the bracket.
+    pub guided: bool,
 }
 
-/// Where a level's image error stays within the view's bound: measured at `far_m`, `far_m`/2, …
-/// until a distance fails (error ≤ 1 px is monotone in distance but for noise: every halving on
-/// the far side is checked), then bisected in log space between the failing and the passing
-/// distance. Returns the measured rows (sorted by distance), the switch distance (the nearest
-/// distance known to pass: conservative) and whether even the farthest failed. A chain of one
-/// level ([`switch_search_chain`]).
+impl SwitchSearch {
+    /// Halving from the far end, bracket bisected: every distance on the far side of a switch is
+    /// measured.
+    pub fn from_far(far_m: f64, near_m: f64, bisections: usize) -> SwitchSearch {
+        SwitchSearch { start_m: far_m, far_m, near_m, bisections, guided: false }
+    }
+}
+
+/// Where a level's image error stays within the view's bound: measured at `start_m`, then
+/// `start_m`/2, … until a distance fails, or (when `start_m` fails) `start_m`·2, … until one passes
+/// or `far_m` is passed (error ≤ 1 px is monotone in distance but for noise: from `far_m` every
+/// halving on the far side is checked), then bisected in log space between the failing and the
+/// passing distance. Returns the measured rows (sorted by distance), the switch distance (the
+/// nearest distance known to pass: conservative) and whether even the farthest failed. A chain of
+/// one level ([`switch_search_chain`]).
 pub fn switch_search(
     reference: &Renderable,
     candidate: &Renderable,
@@ -325,7 +344,7 @@ fn turned(mesh: &Mesh, centre: [f64; 3], angle_deg: f64) -> Mesh {
 /// the same framing: the sphere encloses the reference and every geometric candidate (not the cards,
 /// see [`Candidate`]), and a distance two
 /// levels both test renders the reference once for both. Every distance the search visits lies
-/// on the lattice `far_m` · 2^(−j / 2^bisections), so levels whose switches are near one another
+/// on the lattice `start_m` · 2^(j / 2^bisections) (j any integer), so levels whose switches are near one another
 /// share most of them. Per level: its rows (sorted by distance), switch distance and whether even
 /// the farthest failed, exactly as [`switch_search`] of that level alone decides them when the
 /// framing is the same.
@@ -339,8 +358,8 @@ pub fn switch_search_chain(
     let meshes: Vec<&Mesh> = candidates.iter().filter_map(Candidate::framed).collect();
     let sphere = bounding_sphere(reference.mesh, &meshes);
     let mut searches: Vec<LevelSearch> = candidates.iter().map(|_| LevelSearch::default()).collect();
-    if !(range.near_m > 0.0 && range.far_m.is_finite()) {
-        // nothing to walk: halving would never reach a positive nearest distance
+    if !(range.near_m > 0.0 && range.far_m.is_finite() && range.far_m >= range.near_m) {
+        // nothing to walk: an empty range, or halving would never reach a positive nearest distance
         return searches.into_iter().map(|_| (Vec::new(), 0.0, false)).collect();
     }
     let measure = |levels: &[usize], d: f64| -> Vec<DistanceError> {
@@ -351,40 +370,62 @@ pub fn switch_search_chain(
         let picked: Vec<&Candidate> = levels.iter().map(|&i| &candidates[i]).collect();
         measure_distance(reference, &picked, view, opts, sphere, d)
     };
-    // halving from the far end: a level leaves at its first failure
-    let mut d = range.far_m;
-    while d >= range.near_m {
-        let active: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].fail.is_none()).collect();
-        if active.is_empty() {
-            break;
+    // distances as lattice points: d(j) = start · 2^(j / steps), so two levels asking for the same
+    // point ask for the same bits and share its renders
+    let steps = 1i64 << range.bisections.min(20);
+    let start = if range.start_m.is_finite() { range.start_m.clamp(range.near_m, range.far_m) } else { range.far_m };
+    let at =
+        |j: i64| start * 2f64.powi(j.div_euclid(steps) as i32) * 2f64.powf(j.rem_euclid(steps) as f64 / steps as f64);
+    let measure_at = |searches: &mut [LevelSearch], levels: &[usize], j: i64| -> bool {
+        let rows = measure(levels, at(j));
+        if rows.len() != levels.len() {
+            return false;
         }
-        let rows = measure(&active, d);
-        if rows.len() != active.len() {
-            break;
+        for (&i, r) in levels.iter().zip(rows) {
+            searches[i].record(j, r);
         }
-        for (&i, r) in active.iter().zip(rows) {
-            searches[i].record(d, r);
+        true
+    };
+    // every level at the start; then halving towards `near_m` while a level passes (it leaves at
+    // its first failure) and doubling towards `far_m` while one fails (it leaves at its first pass)
+    let all: Vec<usize> = (0..searches.len()).collect();
+    if measure_at(&mut searches, &all, 0) {
+        let (mut inward, mut outward) = (-steps, steps);
+        loop {
+            let passing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].fail.is_none()).collect();
+            let failing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].pass.is_none()).collect();
+            let mut walked = false;
+            for (levels, j, ok) in
+                [(passing, inward, at(inward) >= range.near_m), (failing, outward, at(outward) <= range.far_m)]
+            {
+                if ok && !levels.is_empty() {
+                    walked |= measure_at(&mut searches, &levels, j);
+                }
+            }
+            if !walked {
+                break;
+            }
+            inward -= steps;
+            outward += steps;
         }
-        d /= 2.0;
     }
-    // log-space bisections between each level's failing and passing distance, one round at a time;
-    // levels asking for the same distance share its renders
-    for _ in 0..range.bisections {
-        let mut wanted: std::collections::BTreeMap<u64, Vec<usize>> = std::collections::BTreeMap::new();
-        for (i, s) in searches.iter().enumerate() {
-            if let (Some(f), Some(p)) = (s.fail, s.pass) {
-                wanted.entry((f * p).sqrt().to_bits()).or_default().push(i);
+    // each level's bracket narrowed to one lattice step, one round at a time; levels asking for
+    // the same point share its renders
+    let bound = view.max_error_px;
+    // guided: a pair of probes, then a bisection when the pair did not halve the bracket
+    let rounds = if range.guided { 3 * range.bisections + 2 } else { range.bisections };
+    for _ in 0..rounds {
+        let mut wanted: std::collections::BTreeMap<i64, Vec<usize>> = std::collections::BTreeMap::new();
+        for (i, s) in searches.iter_mut().enumerate() {
+            if let Some(j) = s.next_probe(range.guided, bound) {
+                wanted.entry(j).or_default().push(i);
             }
         }
-        for (m, levels) in wanted {
-            let m = f64::from_bits(m);
-            let rows = measure(&levels, m);
-            if rows.len() != levels.len() {
-                continue;
-            }
-            for (&i, r) in levels.iter().zip(rows) {
-                searches[i].record(m, r);
-            }
+        if wanted.is_empty() {
+            break;
+        }
+        for (j, levels) in wanted {
+            measure_at(&mut searches, &levels, j);
         }
     }
     searches
@@ -393,29 +434,71 @@ pub fn switch_search_chain(
             s.rows.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
             match (s.fail, s.pass) {
                 (None, _) => (s.rows, 0.0, false),
-                (Some(f), None) => (s.rows, f, true),
-                (Some(_), Some(p)) => (s.rows, p, false),
+                (Some((f, _)), None) => (s.rows, at(f), true),
+                (Some(_), Some((p, _))) => (s.rows, at(p), false),
             }
         })
         .collect()
 }
 
-/// One level's switch search: what it measured, its nearest passing and failing distance.
+/// One level's switch search: what it measured, its nearest passing and failing lattice point
+/// (with the worst edge error there), and where a guided narrowing stands.
 #[derive(Default)]
 struct LevelSearch {
     rows: Vec<DistanceError>,
-    pass: Option<f64>,
-    fail: Option<f64>,
+    pass: Option<(i64, f64)>,
+    fail: Option<(i64, f64)>,
+    /// A guided pair of probes under way: the bracket's width before it and whether the second
+    /// probe (the neighbour) was made.
+    pair: Option<(i64, bool)>,
 }
 
 impl LevelSearch {
-    fn record(&mut self, d: f64, row: DistanceError) {
+    fn record(&mut self, j: i64, row: DistanceError) {
+        let e = row.worst_edge_error_px;
         if row.passes {
-            self.pass = Some(d);
+            self.pass = Some((j, e));
         } else {
-            self.fail = Some(d);
+            self.fail = Some((j, e));
         }
         self.rows.push(row);
+    }
+
+    /// The lattice point to measure next inside the bracket; None once it is one step wide (or
+    /// there is no bracket). See [`SwitchSearch::guided`].
+    fn next_probe(&mut self, guided: bool, bound: f64) -> Option<i64> {
+        let ((lo, e_lo), (hi, e_hi)) = (self.fail?, self.pass?);
+        let width = hi - lo;
+        if width <= 1 {
+            return None;
+        }
+        let middle = lo + width / 2;
+        if !guided {
+            return Some(middle);
+        }
+        match self.pair {
+            Some((before, false)) => {
+                // the interpolated probe is now an end: its neighbour across the switch (strictly
+                // inside, as the bracket is wider than one step)
+                self.pair = Some((before, true));
+                let passed = self.rows.last().is_some_and(|r| r.passes);
+                return Some(if passed { hi - 1 } else { lo + 1 });
+            }
+            Some((before, true)) => {
+                self.pair = None;
+                if 2 * width > before {
+                    return Some(middle);
+                }
+            }
+            None => {}
+        }
+        // where log(error) meets log(bound), linear in log(distance) between the ends
+        let t = (e_lo / bound).ln() / (e_lo / e_hi).ln();
+        if !(t.is_finite() && t > 0.0 && t < 1.0) {
+            return Some(middle);
+        }
+        self.pair = Some((width, false));
+        Some((lo + (t * width as f64).ceil() as i64).clamp(lo + 1, hi - 1))
     }
 }
 
@@ -644,6 +727,54 @@ mod tests {
             canvas_px: [16, 16],
             screen_px_per_rendered_px: 1.0,
         }
+    }
+
+    /// Narrows the bracket (fail at lattice point 0, pass at `steps`) of an error curve `e(j)` as
+    /// the chain search does: the final bracket and the probes made.
+    fn narrow(guided: bool, bisections: usize, e: &dyn Fn(i64) -> f64) -> ((i64, i64), usize) {
+        let steps = 1i64 << bisections;
+        let mut s = LevelSearch::default();
+        s.record(0, row(0.0, e(0)));
+        s.record(steps, row(0.0, e(steps)));
+        let rounds = if guided { 3 * bisections + 2 } else { bisections };
+        let mut probes = 0;
+        for _ in 0..rounds {
+            let Some(j) = s.next_probe(guided, 1.0) else { break };
+            assert!(j > s.fail.unwrap().0 && j < s.pass.unwrap().0, "probe {j} outside the bracket");
+            s.record(j, row(0.0, e(j)));
+            probes += 1;
+        }
+        ((s.fail.unwrap().0, s.pass.unwrap().0), probes)
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn a_guided_narrowing_ends_where_bisection_does_on_a_monotone_error(
+            crossing in 0.01f64..0.99,
+            slope in 0.3f64..3.0,
+            bisections in 1usize..6,
+        ) {
+            // error = (distance / crossing distance)^(-slope): 1 px at `crossing` of the octave
+            let steps = (1i64 << bisections) as f64;
+            let e = |j: i64| 2f64.powf(-slope * (j as f64 / steps - crossing));
+            let (guided, probes) = narrow(true, bisections, &e);
+            let (bisected, _) = narrow(false, bisections, &e);
+            proptest::prop_assert_eq!(guided, bisected);
+            proptest::prop_assert_eq!(guided.1 - guided.0, 1);
+            proptest::prop_assert!(probes <= 3 * bisections + 2);
+        }
+    }
+
+    #[test]
+    fn a_guided_narrowing_closes_a_1_over_d_bracket_in_two_probes() {
+        // error ∝ 1/d crossing 1 px at 2^(2.6/8) of the octave: probe 3 passes, 2 fails
+        let e = |j: i64| 2f64.powf(-(j as f64 - 2.6) / 8.0);
+        assert_eq!(narrow(true, 3, &e), ((2, 3), 2));
+        assert_eq!(narrow(false, 3, &e), ((2, 3), 3));
+        // a curve that is not a power law still ends at the crossing, bisecting when a pair of
+        // probes does not halve the bracket: flat until 6.5, then a cliff
+        let cliff = |j: i64| if (j as f64) < 6.5 { 1.5 } else { 0.2 };
+        assert_eq!(narrow(true, 3, &cliff).0, (6, 7));
     }
 
     #[test]

@@ -40,7 +40,7 @@ pub fn switch_search(
     view: &ScreenView,
 ) -> (Vec<DistanceError>, f64, bool) {
     let opts = LodImageOptions { max_side_px: 128, supersample: 4, ..LodImageOptions::default() };
-    let range = SwitchSearch { far_m: SEARCH_FAR_M, near_m: SEARCH_NEAR_M, bisections: SEARCH_BISECTIONS };
+    let range = SwitchSearch::from_far(SEARCH_FAR_M, SEARCH_NEAR_M, SEARCH_BISECTIONS);
     views::switch_search(reference, candidate, view, &opts, &range)
 }
 

@@ -171,8 +171,10 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// 11: the tree analyzer searches all levels at once (the framing sphere encloses LoD0 and the
 /// geometric levels, not the cards; the impostor seen through the card facing each azimuth). 12:
 /// small analyzer views get up to 4×4 samples per pixel (64 across at least). 13: leaf-cluster
-/// cards frame like billboards (they no longer widen every level's views).
-pub const PLANTS_ALGORITHM_VERSION: u32 = 13;
+/// cards frame like billboards (they no longer widen every level's views). 14: the switch search
+/// starts at 128 radii and narrows brackets by interpolation (same switches on ../shared/data,
+/// fewer distances measured in the report).
+pub const PLANTS_ALGORITHM_VERSION: u32 = 14;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).

@@ -612,7 +612,7 @@ fn the_chain_search_finds_for_each_level_what_a_search_of_it_alone_finds() {
     let levels = [&fine, &coarse].map(|m| Renderable { mesh: m, materials: &mats, textures: &[] });
     let view = ScreenView::default();
     let opts = LodImageOptions { azimuths: 4, elevations_deg: vec![10.0, 60.0], ..LodImageOptions::default() };
-    let range = SwitchSearch { far_m: 640.0, near_m: 5.0, bisections: 3 };
+    let range = SwitchSearch::from_far(640.0, 5.0, 3);
     let chain = switch_search_chain(&r, &levels.map(Candidate::Mesh), &view, &opts, &range);
     assert_eq!(chain.len(), 2);
     for (level, got) in levels.iter().zip(&chain) {
@@ -624,6 +624,44 @@ fn the_chain_search_finds_for_each_level_what_a_search_of_it_alone_finds() {
 }
 
 #[test]
+fn a_search_started_midway_and_guided_finds_the_switches_the_full_search_finds() {
+    // the default tree search (start at 1/8 of the far end, brackets narrowed by interpolation)
+    // against halving from the far end and bisecting: the same lattice, the same switches, fewer
+    // distances measured
+    let mats = [Material::default()];
+    let reference = mesh(vec![sphere(0.55, [0.0, 0.5, 0.0], 24, 48)]);
+    let fine = mesh(vec![sphere(0.54, [0.0, 0.5, 0.0], 24, 48)]);
+    let coarse = mesh(vec![sphere(0.5, [0.0, 0.5, 0.0], 12, 24)]);
+    let r = Renderable { mesh: &reference, materials: &mats, textures: &[] };
+    let levels = [&fine, &coarse].map(|m| Candidate::Mesh(Renderable { mesh: m, materials: &mats, textures: &[] }));
+    let view = ScreenView::default();
+    let opts = LodImageOptions { azimuths: 4, elevations_deg: vec![10.0, 60.0], ..LodImageOptions::default() };
+    let full = switch_search_chain(&r, &levels, &view, &opts, &SwitchSearch::from_far(640.0, 5.0, 3));
+    let quick = SwitchSearch { start_m: 80.0, far_m: 640.0, near_m: 5.0, bisections: 3, guided: true };
+    let found = switch_search_chain(&r, &levels, &view, &opts, &quick);
+    let distinct = |found: &[(Vec<verdant::bake::views::DistanceError>, f64, bool)]| {
+        let mut d: Vec<u64> = found.iter().flat_map(|l| l.0.iter().map(|row| row.distance_m.to_bits())).collect();
+        d.sort_unstable();
+        d.dedup();
+        d.len()
+    };
+    for (a, b) in full.iter().zip(&found) {
+        assert_eq!((a.1.to_bits(), a.2), (b.1.to_bits(), b.2), "switch (m, never passes)");
+    }
+    assert!(
+        distinct(&found) < distinct(&full),
+        "{} distances, halving from the far end {}",
+        distinct(&found),
+        distinct(&full)
+    );
+    // a level failing at the start is followed outwards: started at 10 m, the coarse level's
+    // switch is still found (the far end bounds it)
+    let outward = SwitchSearch { start_m: 10.0, ..quick };
+    let found = switch_search_chain(&r, &levels, &view, &opts, &outward);
+    assert_eq!((found[1].1.to_bits(), found[1].2), (full[1].1.to_bits(), full[1].2));
+}
+
+#[test]
 fn an_impostor_is_seen_by_each_view_through_the_card_nearest_its_azimuth() {
     // eight cards, only the first shows the reference: the three views from azimuth 0 (one per
     // elevation) match it, the other 21 see nothing
@@ -632,7 +670,7 @@ fn an_impostor_is_seen_by_each_view_through_the_card_nearest_its_azimuth() {
     let empty = Mesh::default();
     let nothing = Renderable { mesh: &empty, materials: &[], textures: &[] };
     let cards: Vec<Renderable> = (0..8).map(|k| if k == 0 { r } else { nothing }).collect();
-    let range = SwitchSearch { far_m: 20.0, near_m: 20.0, bisections: 0 };
+    let range = SwitchSearch::from_far(20.0, 20.0, 0);
     let opts = LodImageOptions::default();
     let found = switch_search_chain(&r, &[Candidate::PerAzimuth(cards)], &ScreenView::default(), &opts, &range);
     let row = &found[0].0[0];

@@ -4,7 +4,10 @@
 use std::time::Instant;
 
 use super::cards::ModelFrame;
-use super::types::{AtlasCell, Progress, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions};
+use super::types::{
+    AtlasCell, Progress, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions, SEARCH_FAR_RADII,
+    SEARCH_NEAR_RADII,
+};
 use crate::bake::views::{switch_search_chain, Candidate, Renderable, SwitchSearch};
 use crate::mesh::{Mesh, Primitive};
 use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleBvh};
@@ -137,8 +140,13 @@ fn image_errors(
         })
         .collect();
     let view = options.policy.screen_view();
-    let range =
-        SwitchSearch { far_m: frame.radius * 1024.0, near_m: frame.radius * 2.0, bisections: options.bisections };
+    let range = SwitchSearch {
+        start_m: frame.radius * options.search_start_radii,
+        far_m: frame.radius * SEARCH_FAR_RADII,
+        near_m: frame.radius * SEARCH_NEAR_RADII,
+        bisections: options.bisections,
+        guided: options.guided_search,
+    };
     let results = switch_search_chain(reference, &candidates, &view, &options.image, &range);
     for (&n, (rows, switch_m, never)) in measured.iter().zip(results) {
         let f = &mut figures[n];

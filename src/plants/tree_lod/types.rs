@@ -84,9 +84,16 @@ pub struct TreeLodOptions {
     pub hausdorff_samples: usize,
     /// How the image analyzer renders and how finely it searches ([`AnalysisDetail`]).
     pub image: LodImageOptions,
-    /// Log-space bisections of each switch search (each halves the factor the switch is known
-    /// within: 3 → 2^(1/8), 9 %).
+    /// How finely each switch is found: within one step of a lattice with 2^bisections points per
+    /// octave (3 → 2^(1/8), 9 %); when not guided, by that many log-space bisections.
     pub bisections: usize,
+    /// Where each switch search starts, in bounding radii (it halves from there to 2 radii while
+    /// a level passes and doubles up to 1024 radii while one fails; 1024: every halving from the
+    /// far end is measured).
+    pub search_start_radii: f64,
+    /// Narrow each switch's bracket by interpolation rather than bisection
+    /// ([`crate::bake::views::SwitchSearch::guided`]).
+    pub guided_search: bool,
     /// The LoD policy switch distances are found for (`[lod]`: pixel budget and screen).
     pub policy: LodView,
 }
@@ -95,13 +102,15 @@ pub struct TreeLodOptions {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum AnalysisDetail {
     /// The default: 8 azimuths (every 45°, the impostor's views) × 3 elevations (10°, 40°, 75°),
-    /// views at most 96 px across with 2×2 samples per pixel (small views up to 4×4), 3 bisections
-    /// (switches within 9 %).
+    /// views at most 96 px across with 2×2 samples per pixel (small views up to 4×4); the search
+    /// starts at 128 radii and narrows each bracket by interpolation to 2^(1/8) (switches within
+    /// 9 %).
     #[default]
     Fast,
     /// What the fast measure is checked against (`scripts/bench_trees.sh`): 16 azimuths × 5
-    /// elevations (10° to 80°), views up to 256 px with 4×4 samples, 5 bisections (2 %). Tens of
-    /// times the work.
+    /// elevations (10° to 80°), views up to 256 px with 4×4 samples; the search halves from 1024
+    /// radii (every halving measured) and bisects each bracket 5 times (2 %). Tens of times the
+    /// work.
     Exhaustive,
 }
 
@@ -131,7 +140,27 @@ impl AnalysisDetail {
             AnalysisDetail::Exhaustive => 5,
         }
     }
+
+    /// Fast: 128 radii, where a tree is 26 px tall on the default screen (every level of the
+    /// files in ../shared/data switches nearer, at 2-76 radii; one that fails there is followed
+    /// outwards). Exhaustive: from the far end, every halving measured.
+    pub fn search_start_radii(self) -> f64 {
+        match self {
+            AnalysisDetail::Fast => 128.0,
+            AnalysisDetail::Exhaustive => SEARCH_FAR_RADII,
+        }
+    }
+
+    /// Fast: brackets narrowed by interpolation; exhaustive: bisected.
+    pub fn guided_search(self) -> bool {
+        self == AnalysisDetail::Fast
+    }
 }
+
+/// The farthest distance a switch search measures, in bounding radii (a tree ~3 px tall).
+pub const SEARCH_FAR_RADII: f64 = 1024.0;
+/// The nearest distance a switch search measures, in bounding radii.
+pub const SEARCH_NEAR_RADII: f64 = 2.0;
 
 impl Default for TreeLodOptions {
     fn default() -> Self {
@@ -142,12 +171,25 @@ impl Default for TreeLodOptions {
             hausdorff_samples: DEFAULT_HAUSDORFF_SAMPLES,
             image: AnalysisDetail::Fast.image(),
             bisections: AnalysisDetail::Fast.bisections(),
+            search_start_radii: AnalysisDetail::Fast.search_start_radii(),
+            guided_search: AnalysisDetail::Fast.guided_search(),
             policy: LodView::default(),
         }
     }
 }
 
 impl TreeLodOptions {
+    /// These options measured as `detail` says (views, samples and the switch search).
+    pub fn with_analysis(self, detail: AnalysisDetail) -> TreeLodOptions {
+        TreeLodOptions {
+            image: detail.image(),
+            bisections: detail.bisections(),
+            search_start_radii: detail.search_start_radii(),
+            guided_search: detail.guided_search(),
+            ..self
+        }
+    }
+
     pub fn check(&self) -> Result<(), TreeLodError> {
         if !(1..=TREE_LODS).contains(&self.lods) {
             return Err(TreeLodError::Options(format!("--lods {} is out of range; use 1 to {TREE_LODS}", self.lods)));
