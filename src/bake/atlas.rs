@@ -410,14 +410,17 @@ pub fn write_mip_pngs(dir: &Path, stem: &str, levels: &[MipLevel]) -> Result<Vec
     if !plain {
         return Err(BakeError::BadStem { stem: stem.to_string() });
     }
-    let mut paths = Vec::with_capacity(levels.len());
-    for (k, level) in levels.iter().enumerate() {
-        let name = if k == 0 { format!("{stem}.png") } else { format!("{stem}_mip{k}.png") };
-        let path = dir.join(name);
-        level.image.write_png(&path)?;
-        paths.push(path);
-    }
-    Ok(paths)
+    // encoded and written in parallel (the first level is most of the work)
+    levels
+        .par_iter()
+        .enumerate()
+        .map(|(k, level)| {
+            let name = if k == 0 { format!("{stem}.png") } else { format!("{stem}_mip{k}.png") };
+            let path = dir.join(name);
+            level.image.write_png(&path)?;
+            Ok(path)
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -173,7 +173,12 @@ impl Image {
             let x = t * n as f64 - 0.5;
             let x0 = x.floor();
             let frac = (x - x0) as f32;
-            let i0 = (x0 as i64).rem_euclid(n);
+            let i = x0 as i64;
+            if i >= 0 && i + 1 < n {
+                // inside: no wrapping (the common case; spares two integer divisions)
+                return (i as usize, i as usize + 1, frac);
+            }
+            let i0 = i.rem_euclid(n);
             (i0 as usize, ((i0 + 1) % n) as usize, frac)
         };
         let (x0, x1, fx) = axis(uv[0], w);

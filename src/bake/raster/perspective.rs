@@ -120,12 +120,14 @@ struct PerspContext {
 }
 
 impl PerspContext {
-    /// None when the view is invalid. `parallel`: move the vertices to view space in parallel.
+    /// None when the view is invalid. `parallel`: move the vertices to view space in parallel;
+    /// otherwise into `verts` (cleared first: a buffer kept from an earlier draw).
     fn new(
         view: &PerspectiveView,
         object_to_world: &[[f64; 4]; 3],
         prim: &Primitive,
         parallel: bool,
+        mut verts: Vec<ViewVertex>,
     ) -> Option<PerspContext> {
         let frame = view.frame().ok()?;
         let to_view = frame.view.then_from(object_to_world);
@@ -137,11 +139,12 @@ impl PerspContext {
             let screen = inside.then(|| frame.snapped(v)).flatten();
             ViewVertex { view: v, finite, inside, screen }
         };
-        let verts = if parallel {
-            prim.positions.par_iter().map(one).collect()
+        if parallel {
+            verts = prim.positions.par_iter().map(one).collect();
         } else {
-            prim.positions.iter().map(one).collect()
-        };
+            verts.clear();
+            verts.extend(prim.positions.iter().map(one));
+        }
         Some(PerspContext { frame, planes, verts })
     }
 
@@ -285,7 +288,7 @@ impl PerspSetup {
         cull: Cull,
     ) -> PerspSetup {
         let mut stats = DrawStats::default();
-        let Some(ctx) = PerspContext::new(view, object_to_world, prim, true) else {
+        let Some(ctx) = PerspContext::new(view, object_to_world, prim, true, Vec::new()) else {
             stats.skipped = prim.indices.len() / 3;
             return PerspSetup { tris: Vec::new(), stats };
         };
@@ -316,7 +319,7 @@ where
     F: FnMut(&Fragment) -> Option<[f32; 4]>,
 {
     let mut stats = DrawStats::default();
-    let Some(ctx) = PerspContext::new(view, object_to_world, prim, false) else {
+    let Some(ctx) = PerspContext::new(view, object_to_world, prim, false, VERTEX_CACHE.take()) else {
         stats.skipped = prim.indices.len() / 3;
         return stats;
     };
@@ -327,9 +330,22 @@ where
             fragments += raster_persp_triangle(color, depth, width, 0, height, &tri, prim, &attributes, opts, shader);
         });
     }
+    if ctx.verts.capacity() <= MAX_KEPT_VERTICES {
+        VERTEX_CACHE.set(ctx.verts);
+    }
     stats.fragments = fragments;
     stats
 }
+
+thread_local! {
+    /// Each thread's vertex cache, kept from one serial draw to the next: the LoD analyzer draws
+    /// the same 100k-vertex tree hundreds of times, and a fresh 6 MB buffer each time cost its
+    /// allocation and page faults.
+    static VERTEX_CACHE: std::cell::Cell<Vec<ViewVertex>> = const { std::cell::Cell::new(Vec::new()) };
+}
+
+/// The largest vertex cache a thread keeps between draws (64 MB).
+const MAX_KEPT_VERTICES: usize = 1 << 20;
 
 /// [`raster_rows`](super::scan::raster_rows) for perspective triangles: per pixel, the screen-linear weights l give
 /// 1/z = Σ lᵢ/zᵢ and the perspective-correct weights (lᵢ/zᵢ)·z of the (clipped) vertices, whose

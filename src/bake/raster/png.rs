@@ -28,17 +28,13 @@ impl Canvas {
 
 /// Linear straight-alpha RGBA → sRGB-encoded 8-bit RGBA (alpha stays linear), rounded to nearest:
 /// what every PNG the baker writes holds.
+/// In parallel over pixels (an atlas has a million).
 pub fn rgba8(pixels: &[[f32; 4]]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(pixels.len() * 4);
-    for c in pixels {
-        out.extend_from_slice(&[
-            to_u8(linear_to_srgb(c[0])),
-            to_u8(linear_to_srgb(c[1])),
-            to_u8(linear_to_srgb(c[2])),
-            to_u8(c[3]),
-        ]);
-    }
-    out
+    use rayon::prelude::*;
+    let one = |c: &[f32; 4]| {
+        [to_u8(linear_to_srgb(c[0])), to_u8(linear_to_srgb(c[1])), to_u8(linear_to_srgb(c[2])), to_u8(c[3])]
+    };
+    pixels.par_iter().with_min_len(1 << 14).map(one).collect::<Vec<[u8; 4]>>().into_flattened()
 }
 
 /// PNG bytes of `width` × `height` RGBA8 pixels (deterministic: same pixels, same bytes).

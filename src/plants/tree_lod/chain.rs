@@ -358,13 +358,12 @@ fn textured_levels(
 ) -> Result<(), TreeLodError> {
     let (Some(atlas0), Some(normal_img)) = (atlas.mips.first(), &atlas.normal) else { return Ok(()) };
     let CoarseSources { name, lod1: (lod1_materials, lod1_textures), coarse, groups, card_wind } = *sources;
-    let atlas_tex = Texture {
-        name: format!("{name}_atlas"),
-        png: atlas0.image.encode_png().map_err(|e| TreeLodError::Texture(e.to_string()))?,
-    };
+    let (atlas_png, normal_png) = rayon::join(|| atlas0.image.encode_png(), || normal_img.encode_png_data());
+    let atlas_tex =
+        Texture { name: format!("{name}_atlas"), png: atlas_png.map_err(|e| TreeLodError::Texture(e.to_string()))? };
     let normal_tex = Texture {
         name: format!("{name}_atlas_normal"),
-        png: normal_img.encode_png_data().map_err(|e| TreeLodError::Texture(e.to_string()))?,
+        png: normal_png.map_err(|e| TreeLodError::Texture(e.to_string()))?,
     };
     let impostor_cells = &atlas.impostor_cells;
     let lod1_triangles = levels[1].triangles();

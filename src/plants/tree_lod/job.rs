@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 use super::chain::{build_mesh_lods_with, build_tree_lods_with};
@@ -49,14 +50,14 @@ pub fn variant_seed(seed: u64, k: usize) -> u64 {
     }
 }
 
-fn write_glb(scene: &Scene, path: &Path, files: &mut Vec<PathBuf>) -> Result<(usize, usize), TreeLodError> {
+/// Writes `scene` as a glb at `path` and validates it: (errors, warnings) found.
+fn write_glb(scene: &Scene, path: &Path) -> Result<(usize, usize), TreeLodError> {
     export::write_scene(scene, path)?;
     let v = validate_file(path, &ValidateOptions::default())
         .map_err(|e| TreeLodError::Invalid { path: path.to_path_buf(), report: e.to_string() })?;
     if !v.ok() {
         return Err(TreeLodError::Invalid { path: path.to_path_buf(), report: v.to_string() });
     }
-    files.push(path.to_path_buf());
     Ok((v.errors(), v.warnings()))
 }
 
@@ -68,28 +69,53 @@ struct Written {
     warnings: usize,
 }
 
+impl Written {
+    /// A glb written and what validating it found.
+    fn add(&mut self, path: &Path, (errors, warnings): (usize, usize)) {
+        self.files.push(path.to_path_buf());
+        self.errors += errors;
+        self.warnings += warnings;
+    }
+}
+
 /// Writes `chain` as `<dir>/<file_stem>_LOD<n>.glb`, `<file_stem>_atlas*.png` and the MSFT_lod
-/// `<file_stem>.glb`, validating every glb.
+/// `<file_stem>.glb`, validating every glb. The files are encoded and written in parallel; they
+/// are listed (and the first failure reported) in that order.
 fn write_chain(chain: &TreeLods, dir: &Path, file_stem: &str, written: &mut Written) -> Result<(), TreeLodError> {
-    for lod in &chain.levels {
-        let (e, w) = write_glb(&lod.scene, &dir.join(format!("{file_stem}_LOD{}.glb", lod.level)), &mut written.files)?;
-        written.errors += e;
-        written.warnings += w;
+    let mut glbs: Vec<(&Scene, PathBuf)> =
+        chain.levels.iter().map(|lod| (&lod.scene, dir.join(format!("{file_stem}_LOD{}.glb", lod.level)))).collect();
+    glbs.push((&chain.chain, dir.join(format!("{file_stem}.glb"))));
+    let images = || -> Result<Vec<PathBuf>, TreeLodError> {
+        let (mips, normal) = rayon::join(
+            || {
+                if chain.atlas.is_empty() {
+                    return Ok(Vec::new());
+                }
+                write_mip_pngs(dir, &format!("{file_stem}_atlas"), &chain.atlas)
+                    .map_err(|e| TreeLodError::Texture(e.to_string()))
+            },
+            || -> Result<Option<PathBuf>, TreeLodError> {
+                let Some(normals) = &chain.normal_atlas else { return Ok(None) };
+                let path = dir.join(format!("{file_stem}_atlas_normal.png"));
+                let png = normals.encode_png_data().map_err(|e| TreeLodError::Texture(e.to_string()))?;
+                export::write_atomic(&path, &png).map_err(|e| TreeLodError::Texture(e.to_string()))?;
+                Ok(Some(path))
+            },
+        );
+        let mut paths = mips?;
+        paths.extend(normal?);
+        Ok(paths)
+    };
+    let (checked, images) =
+        rayon::join(|| glbs.par_iter().map(|(scene, path)| write_glb(scene, path)).collect::<Vec<_>>(), images);
+    let mut checked = glbs.iter().zip(checked);
+    for ((_, path), found) in checked.by_ref().take(chain.levels.len()) {
+        written.add(path, found?);
     }
-    if !chain.atlas.is_empty() {
-        let pngs = write_mip_pngs(dir, &format!("{file_stem}_atlas"), &chain.atlas)
-            .map_err(|e| TreeLodError::Texture(e.to_string()))?;
-        written.files.extend(pngs);
+    written.files.extend(images?);
+    for ((_, path), found) in checked {
+        written.add(path, found?);
     }
-    if let Some(normals) = &chain.normal_atlas {
-        let path = dir.join(format!("{file_stem}_atlas_normal.png"));
-        let png = normals.encode_png_data().map_err(|e| TreeLodError::Texture(e.to_string()))?;
-        export::write_atomic(&path, &png).map_err(|e| TreeLodError::Texture(e.to_string()))?;
-        written.files.push(path);
-    }
-    let (e, w) = write_glb(&chain.chain, &dir.join(format!("{file_stem}.glb")), &mut written.files)?;
-    written.errors += e;
-    written.warnings += w;
     Ok(())
 }
 
