@@ -107,6 +107,54 @@ pub fn render_mesh(
     total
 }
 
+/// [`render_mesh`] unlit (no vertex colours) into `canvas` and, in the same pass, what
+/// [`Shading::card_normals`] of `view` draws into `normals` (the canvas' size, row-major, as
+/// cleared by the caller): a fragment the alpha test keeps writes both, so `normals` equals a
+/// second, separate render with that shading (test), and each triangle is set up and scanned once
+/// instead of twice. Serial (a bake runs its cells in parallel).
+pub fn render_unlit_and_card_normals(
+    canvas: &mut Canvas,
+    cam: &Camera,
+    view: &crate::bake::raster::OrthoView,
+    mesh: &Mesh,
+    materials: &[Material],
+    textures: &[Image],
+    normals: &mut [[f32; 4]],
+) -> DrawStats {
+    let Shading::CardNormals { right, up, toward } = Shading::card_normals(view) else {
+        unreachable!("card_normals gives CardNormals")
+    };
+    let axes = [right, up, toward];
+    let default_material = Material::default();
+    let identity = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+    let normal_matrix = cofactor3(&identity);
+    let width = canvas.width as usize;
+    let mut total = DrawStats::default();
+    for prim in &mesh.primitives {
+        let material = prim.material.and_then(|m| materials.get(m)).unwrap_or(&default_material);
+        let texture = material.base_color_texture.and_then(|t| textures.get(t));
+        let cull = if material.double_sided { Cull::None } else { Cull::Back };
+        let draw = DrawOptions { cull, ..DrawOptions::default() };
+        let lighting = Lighting::new(prim, &normal_matrix, [0.0, 1.0, 0.0], 0.0);
+        let shader = |f: &Fragment| {
+            // the same alpha test decides both: the normal is written where the colour is
+            let color = shade(f, material, texture, false, None, None)?;
+            let normal = shade(f, material, texture, false, Some(&lighting), Some(&axes));
+            if let (Some(n), Some(slot)) = (normal, normals.get_mut(f.y as usize * width + f.x as usize)) {
+                *slot = n;
+            }
+            Some(color)
+        };
+        let stats = canvas.draw_camera(cam, &identity, prim, &draw, shader);
+        total.triangles += stats.triangles;
+        total.culled += stats.culled;
+        total.skipped += stats.skipped;
+        total.clipped += stats.clipped;
+        total.fragments += stats.fragments;
+    }
+    total
+}
+
 /// The colour of one fragment, or None when the alpha test discards it.
 #[inline]
 fn shade(
@@ -304,6 +352,54 @@ mod tests {
             material: Some(0),
             ..Primitive::default()
         }
+    }
+
+    #[test]
+    fn one_pass_gives_the_colour_and_the_card_normals_two_renders_give() {
+        // two overlapping alpha-masked quads (one tilted, one facing away and double-sided) on a
+        // 32 x 32 view, a texture with holes: colour, normals and stats as the separate passes
+        let view = OrthoView {
+            origin: [-0.5, 4.5, 10.0],
+            right: [1.0, 0.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            forward: [0.0, 0.0, -1.0],
+            pixels_per_metre: 6.4,
+            width: 32,
+            height: 32,
+        };
+        let cam = Camera::Ortho(view);
+        let mut tilted = quad(1.0);
+        tilted.normals = vec![[0.3, 0.2, 0.9], [0.0, 0.1, 1.0], [-0.4, 0.0, 0.8], [0.1, -0.3, 0.9]];
+        let mut behind = quad(-1.0);
+        behind.positions.iter_mut().for_each(|p| *p = [p[0] * 0.7 + 0.9, p[1] * 0.8 + 0.5, -0.5]);
+        behind.material = Some(1);
+        let pixels: Vec<[f32; 4]> =
+            (0..64).map(|i| [(i % 8) as f32 / 8.0, 0.5, 0.2, if (i * 7) % 5 < 2 { 0.1 } else { 1.0 }]).collect();
+        let texture = Image { width: 8, height: 8, pixels };
+        let masked = Material {
+            alpha_mode: AlphaMode::Mask { cutoff: 0.5 },
+            base_color_texture: Some(0),
+            ..Material::default()
+        };
+        let materials = [masked.clone(), Material { double_sided: true, ..masked }];
+        let mesh = Mesh { primitives: vec![behind, tilted], ..Mesh::default() };
+        let serial = |shading| RenderOptions { shading, parallel: false, ..RenderOptions::default() };
+        let textures = [texture];
+        let mut color = cam.canvas([0.0; 4]).unwrap();
+        let stats = render_mesh(&mut color, &cam, &IDENTITY, &mesh, &materials, &textures, &serial(Shading::Unlit));
+        let mut normal = cam.canvas([0.0; 4]).unwrap();
+        let card = serial(Shading::card_normals(&view));
+        render_mesh(&mut normal, &cam, &IDENTITY, &mesh, &materials, &textures, &card);
+        let mut both = cam.canvas([0.0; 4]).unwrap();
+        let mut normals = vec![[0.0f32; 4]; both.color.len()];
+        let one = render_unlit_and_card_normals(&mut both, &cam, &view, &mesh, &materials, &textures, &mut normals);
+        let bits = |c: &[[f32; 4]]| c.iter().flat_map(|p| p.map(f32::to_bits)).collect::<Vec<u32>>();
+        assert_eq!(bits(&both.color), bits(&color.color));
+        assert_eq!(bits(&normals), bits(&normal.color));
+        assert_eq!(one, stats);
+        // the mask left holes and both quads show: the test is not trivially passed
+        let covered = color.color.iter().filter(|c| c[3] > 0.0).count();
+        assert!(stats.fragments > 0 && covered > 100 && covered < 32 * 32, "{covered}");
     }
 
     #[test]

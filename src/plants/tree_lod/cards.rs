@@ -12,13 +12,11 @@ use super::types::{
 use crate::bake::atlas::{dilate, finish_normal_atlas, mip_chain, resolve_supersampled, MipLevel, FLAT_NORMAL};
 use crate::bake::image::Image;
 use crate::bake::raster::{Camera, OrthoView, RasterError};
-use crate::bake::render::{render_mesh, RenderOptions, Shading};
+use crate::bake::render::render_unlit_and_card_normals;
 use crate::bake::views::Renderable;
 use crate::mesh::{AlphaMode, Bounds, CustomAttribute, Material, Mesh, Primitive};
 use crate::plants::tree::TreeError;
 use crate::plants::wind::{self, WIND_ATTRIBUTE, WIND_BRANCH_ATTRIBUTE};
-
-const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
 
 /// A square picture plane: vertical, facing azimuth `azimuth_deg` (0° = +Z, 90° = +X), `side_m`
 /// wide and tall around `centre`.
@@ -78,13 +76,28 @@ pub(super) fn bake(
     mesh: &Mesh,
     materials: &[Material],
     textures: &[Image],
-    shading: Shading,
-) -> Result<(Image, u64), RasterError> {
-    let cam = Camera::Ortho(frame.ortho(px * BAKE_SUPERSAMPLE));
+) -> Result<Baked, RasterError> {
+    let view = frame.ortho(px * BAKE_SUPERSAMPLE);
+    let cam = Camera::Ortho(view);
     let mut canvas = cam.canvas([0.0; 4])?;
-    let opts = RenderOptions { use_vertex_colors: false, shading, parallel: false };
-    let fragments = render_mesh(&mut canvas, &cam, &IDENTITY, mesh, materials, textures, &opts).fragments;
-    Ok((resolve_supersampled(&Image::from_canvas_owned(canvas), BAKE_SUPERSAMPLE), fragments))
+    let mut normals = vec![[0.0f32; 4]; canvas.color.len()];
+    let normal_view = frame.ortho(1);
+    let fragments =
+        render_unlit_and_card_normals(&mut canvas, &cam, &normal_view, mesh, materials, textures, &mut normals)
+            .fragments;
+    let normals = Image { width: canvas.width, height: canvas.height, pixels: normals };
+    Ok(Baked {
+        color: resolve_supersampled(&Image::from_canvas_owned(canvas), BAKE_SUPERSAMPLE),
+        normals: resolve_supersampled(&normals, BAKE_SUPERSAMPLE),
+        fragments,
+    })
+}
+
+/// One baked cell: its colour, its card normals and the fragments drawn.
+pub(super) struct Baked {
+    pub color: Image,
+    pub normals: Image,
+    pub fragments: u64,
 }
 
 /// `a` with `b`'s vertices and triangles after its own (positions, normals, uvs and the custom
@@ -314,26 +327,16 @@ pub(super) fn bake_atlas(
         }
     }
     let (materials, images) = (reference.materials, reference.textures);
-    let rendered: Vec<Result<(Image, u64), RasterError>> = jobs
-        .par_iter()
-        .map(|(cell, card, mesh)| bake(card, cell.inner_px(), mesh, materials, images, Shading::Unlit))
-        .collect();
-    let normals: Vec<Result<(Image, u64), RasterError>> = jobs
-        .par_iter()
-        .map(|(cell, card, mesh)| {
-            bake(card, cell.inner_px(), mesh, materials, images, Shading::card_normals(&card.ortho(1)))
-        })
-        .collect();
+    let baked: Vec<Result<Baked, RasterError>> =
+        jobs.par_iter().map(|(cell, card, mesh)| bake(card, cell.inner_px(), mesh, materials, images)).collect();
     let mut normal_atlas = Image { width: px, height: px, pixels: vec![FLAT_NORMAL; (px as usize) * (px as usize)] };
-    for ((cell, _, _), r) in jobs.iter().zip(normals) {
-        normal_atlas.blit(&r?.0, cell.x + ATLAS_GUTTER_PX, cell.y + ATLAS_GUTTER_PX);
-    }
     let mut atlas = Image { width: px, height: px, pixels: vec![[0.0; 4]; (px as usize) * (px as usize)] };
     let mut fragments = 0;
-    for ((cell, _, _), r) in jobs.iter().zip(rendered) {
-        let (img, f) = r?;
-        fragments += f;
-        atlas.blit(&img, cell.x + ATLAS_GUTTER_PX, cell.y + ATLAS_GUTTER_PX);
+    for ((cell, _, _), b) in jobs.iter().zip(baked) {
+        let b = b?;
+        fragments += b.fragments;
+        atlas.blit(&b.color, cell.x + ATLAS_GUTTER_PX, cell.y + ATLAS_GUTTER_PX);
+        normal_atlas.blit(&b.normals, cell.x + ATLAS_GUTTER_PX, cell.y + ATLAS_GUTTER_PX);
     }
     let mips = if wanted > 2 {
         dilate(&mut atlas, ATLAS_ALPHA_CUTOFF);
