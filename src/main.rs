@@ -624,6 +624,11 @@ fn build(a: BuildArgs, quiet: bool) -> i32 {
     } else if !quiet {
         print!("{table}");
     }
+    for o in &outcomes {
+        for w in &o.warnings {
+            eprintln!("warning: scene `{}`: {w}", o.scene);
+        }
+    }
     scene_build::batch_blame(&outcomes).map_or(0, Blame::exit_code)
 }
 
@@ -653,6 +658,9 @@ fn preset(cmd: PresetCommand, quiet: bool) -> i32 {
                                  above its max_instances {limit}: the build fails if its rules allow more than {limit}; \
                                  lower max_density, narrow the rules or raise max_instances"
                             );
+                        }
+                        for w in preset::lsystem_warnings(&p) {
+                            eprintln!("warning: {}: {w}", f.display());
                         }
                         if !quiet {
                             println!("{}: ok (scene `{}`)", f.display(), p.scene.name);

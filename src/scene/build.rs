@@ -80,6 +80,9 @@ pub struct SceneOutcome {
     pub triangles: usize,
     pub cached_stages: Vec<Stage>,
     pub seconds: f64,
+    /// What the inputs' readers repaired (L-system files: [`crate::scene::preset::lsystem_warnings`]),
+    /// for the caller to show; report.md lists them too.
+    pub warnings: Vec<String>,
 }
 
 /// Reports progress lines: (scene, message).
@@ -282,7 +285,8 @@ fn build_into(
 
     progress(name, "manifest and report");
     let known = runner.used;
-    let files = write_manifest_and_report(preset, dir, &runs, &known.hashes)?;
+    let warnings = crate::scene::preset::lsystem_warnings(preset);
+    let files = write_manifest_and_report(preset, dir, &runs, &known.hashes, &warnings)?;
     if let Err(e) = cache.record_scene(name, &known.entries) {
         progress(
             name,
@@ -306,6 +310,7 @@ fn build_into(
         triangles,
         cached_stages: runs.iter().filter(|r| r.cached()).map(StageRun::stage).collect(),
         seconds: 0.0,
+        warnings,
     })
 }
 
@@ -374,10 +379,15 @@ pub fn build_batch(
             triangles: 0,
             cached_stages: Vec::new(),
             seconds: t0.elapsed().as_secs_f64(),
+            warnings: Vec::new(),
         };
         match r {
             Err(e) => failed("—".into(), e),
-            Ok(p) => build_preset(p, settings, progress).unwrap_or_else(|e| failed(p.scene.name.clone(), &e)),
+            Ok(p) => build_preset(p, settings, progress).unwrap_or_else(|e| SceneOutcome {
+                // a repair may be why it failed
+                warnings: crate::scene::preset::lsystem_warnings(p),
+                ..failed(p.scene.name.clone(), &e)
+            }),
         }
     };
     let jobs = jobs.clamp(1, loaded.len().max(1));
@@ -444,6 +454,7 @@ mod tests {
             triangles: 0,
             cached_stages: Vec::new(),
             seconds: 0.0,
+            warnings: Vec::new(),
         };
         let (ok, input, build) = (outcome(None), outcome(Some(Blame::Input)), outcome(Some(Blame::Build)));
         assert_eq!(batch_blame(&[ok.clone(), ok.clone()]), None);

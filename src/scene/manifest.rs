@@ -209,12 +209,14 @@ fn rel_strings(files: &[PathBuf]) -> Vec<String> {
 /// Writes manifest.json, report.json and report.md into `dir`; returns the number of files in
 /// the scene folder (these three included).
 /// `known` holds sizes and hashes already computed (by the cache) for some of the files; the
-/// others are read and hashed here.
+/// others are read and hashed here. `warnings` (what the input readers repaired) are listed in
+/// both reports.
 pub fn write_manifest_and_report(
     preset: &Preset,
     dir: &Path,
     runs: &[StageRun],
     known: &FileHashes,
+    warnings: &[String],
 ) -> Result<usize, SceneBuildError> {
     let io = |path: &Path, e: String| SceneBuildError::Io { path: path.to_owned(), message: e };
     let mut files = Vec::new();
@@ -324,9 +326,9 @@ pub fn write_manifest_and_report(
     };
     let n_files = manifest.files.len() + 3;
     write_atomic(&dir.join("manifest.json"), pretty(&manifest).as_bytes()).map_err(|e| io(dir, e.to_string()))?;
-    let report = report_json(preset, runs, &manifest.bytes);
+    let report = report_json(preset, runs, &manifest.bytes, warnings);
     write_atomic(&dir.join("report.json"), report.as_bytes()).map_err(|e| io(dir, e.to_string()))?;
-    write_atomic(&dir.join("report.md"), report_md(preset, runs, &manifest.bytes).as_bytes())
+    write_atomic(&dir.join("report.md"), report_md(preset, runs, &manifest.bytes, warnings).as_bytes())
         .map_err(|e| io(dir, e.to_string()))?;
     Ok(n_files)
 }
@@ -338,7 +340,7 @@ fn pretty<T: Serialize>(v: &T) -> String {
 }
 
 /// report.json: measured figures per stage, then `timing` (the only part that varies run to run).
-fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
+fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[String]) -> String {
     use serde_json::{json, Map, Value};
     let mut stages = Map::new();
     let mut timing = Map::new();
@@ -418,6 +420,7 @@ fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
         "scene": preset.scene.name,
         "verdant_version": env!("CARGO_PKG_VERSION"),
         "stages": stages,
+        "warnings": warnings,
         "bytes": bytes,
         "timing": timing,
     });
@@ -425,8 +428,15 @@ fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
 }
 
 /// report.md: the same figures for people.
-fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes) -> String {
+fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[String]) -> String {
     let mut s = format!("# {} — build report\n\nverdant {}\n\n", preset.scene.name, env!("CARGO_PKG_VERSION"));
+    if !warnings.is_empty() {
+        s += "## Warnings\n\nWhat the input readers repaired (the build used the repaired input):\n\n";
+        for w in warnings {
+            s += &format!("- {w}\n");
+        }
+        s += "\n";
+    }
     for r in runs {
         match r {
             StageRun::Terrain { report: t, .. } => {

@@ -197,9 +197,6 @@ pub fn terrain_extent_m(t: &TerrainSettings) -> Option<[f64; 2]> {
     }
 }
 
-/// Upper estimates of each species' count before any work: `max_density` (capped by the Poisson
-/// packing for `poisson`) over the whole terrain; (name, estimate, max_instances) for the species
-/// whose estimate is above its `max_instances` (the build fails if the rules allow that many).
 /// Where in `text` the `index`-th `[[species]]` sets `key` (line and column, 1-based), or where
 /// that species' table starts when it does not set it; `None` when `text` has no such species.
 pub fn species_key_position(text: &str, index: usize, key: &str) -> Option<(usize, usize)> {
@@ -215,6 +212,9 @@ pub fn species_key_position(text: &str, index: usize, key: &str) -> Option<(usiz
     Some(line_column(text, span.start))
 }
 
+/// Upper estimates of each species' count before any work: `max_density` (capped by the Poisson
+/// packing for `poisson`) over the whole terrain; (name, estimate, max_instances) for the species
+/// whose estimate is above its `max_instances` (the build fails if the rules allow that many).
 pub fn instance_estimates_over_limit(p: &Preset) -> Vec<(String, f64, usize)> {
     let Some(area) = p.terrain.as_ref().and_then(terrain_extent_m).map(|[w, h]| w * h) else { return Vec::new() };
     p.species
@@ -229,6 +229,29 @@ pub fn instance_estimates_over_limit(p: &Preset) -> Vec<(String, f64, usize)> {
             };
             let estimate = density * area;
             (estimate > s.rules.max_instances as f64).then(|| (s.rules.name.clone(), estimate, s.rules.max_instances))
+        })
+        .collect()
+}
+
+/// What the L-system reader repaired in each tree species' file, as lparser would have accepted
+/// it (brackets balanced across rules, a stray `)`, a blank inside a rule, ...): one line per
+/// repair naming the file, its line and column, and the species. `verdant preset check` and
+/// `verdant build` print them and report.md lists them, so a file that builds is not silently
+/// different from what its author wrote. A file that does not parse gives none here (loading the
+/// preset reports it as an error).
+pub fn lsystem_warnings(p: &Preset) -> Vec<String> {
+    p.species
+        .iter()
+        .filter_map(|s| match &s.look {
+            PlantLook::Tree(t) => Some((&s.rules.name, t)),
+            _ => None,
+        })
+        .flat_map(|(name, t)| {
+            let warnings = crate::lsystem::parse::read_file(&t.lsystem, t.dialect).map(|p| p.warnings);
+            warnings
+                .unwrap_or_default()
+                .into_iter()
+                .map(move |w| format!("{}: {w} (species `{name}`)", t.lsystem.display()))
         })
         .collect()
 }

@@ -270,6 +270,44 @@ fn a_broken_lsystem_file_is_reported_with_both_positions() {
     assert!(e.contains("nowhere.ls") && e.contains("q.toml:9:"), "{e}");
 }
 
+#[test]
+fn a_repaired_lsystem_is_a_positioned_warning_in_check_build_and_report() {
+    // lparser 4 text with a stray `)` (lparser ignores it; so does the reader, with a warning):
+    // `preset check` and `build` print it with the file, line and column, report.md and
+    // report.json list it, and a build served from the cache still says it
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/trees/stray.ls", "4\n25\n10\nA\nA=F[&FA]^^f)[+FA]\n@\n");
+    let tree = "tree = { variants = 1, height = 6.0, atlas_size = 256, analysis = false, lods = 2 }";
+    write(d, "p/a.toml", &preset("a", tree, "trees/stray.ls"));
+    let expect = |out: &std::process::Output, what: &str| {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let line = err.lines().find(|l| l.starts_with("warning:") && l.contains("stray.ls")).unwrap_or_else(|| {
+            panic!("{what}: no warning naming stray.ls in\n{}", text(out));
+        });
+        assert!(line.contains("line 5, column 12") && line.contains("species `bush`"), "{what}: {line}");
+    };
+    let check = verdant_in(d, &["preset", "check", "p/a.toml"]);
+    ok(&check);
+    expect(&check, "preset check");
+    for pass in ["fresh", "cached"] {
+        let build = verdant_in(d, &["build", "p/a.toml", "--out", "o", "--only", "plants"]);
+        ok(&build);
+        expect(&build, pass);
+        let md = fs::read_to_string(d.join("o/a/report.md")).unwrap();
+        assert!(md.contains("## Warnings") && md.contains("stray.ls: line 5, column 12"), "{pass}:\n{md}");
+        let json = read_json(&d.join("o/a/report.json"));
+        let listed = json["warnings"].as_array().expect("report.json lists the warnings");
+        assert_eq!(listed.len(), 1, "{pass}: {listed:?}");
+    }
+    // a file without repairs warns nothing
+    write(d, "p/trees/bush.ls", BUSH_LS);
+    write(d, "p/b.toml", &preset("b", tree, "trees/bush.ls"));
+    let check = verdant_in(d, &["preset", "check", "p/b.toml"]);
+    ok(&check);
+    assert!(!String::from_utf8_lossy(&check.stderr).contains("warning"), "{}", text(&check));
+}
+
 // ------------------------------------------------------------------------------------ mesh species
 
 /// A lumpy rock as OBJ text: a UV sphere of `rings` × `sectors` quads, displaced by sines, with
