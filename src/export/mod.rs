@@ -2,8 +2,9 @@
 //!
 //! Every writer first checks the whole [`Scene`] (indices in range, finite values, unit normals and
 //! quaternions, a tree-shaped node graph), then builds every output file in memory, and only then
-//! writes them, each through [`write_atomic`]: a scene that cannot be written leaves the previous
-//! outputs untouched.
+//! writes them as one [`FileSet`] (each file staged whole beside its final path, then all renamed
+//! into place): a scene that cannot be written leaves the previous outputs untouched, and a .gltf
+//! is never left beside a .bin it was not written with.
 
 pub mod atomic;
 pub mod check;
@@ -18,7 +19,7 @@ pub mod table;
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 
-pub use atomic::{write_atomic, write_atomic_with};
+pub use atomic::{write_atomic, write_atomic_with, FileSet};
 pub use check::{check_scene, UNIT_LENGTH_TOLERANCE};
 pub use error::{ExportError, SceneProblem, SUPPORTED_EXTENSIONS};
 
@@ -94,12 +95,12 @@ pub fn write_scene_with(scene: &Scene, path: &Path, opts: &gltf::WriteOptions) -
         }
         _ => return Err(ExportError::UnsupportedExtension { path: path.to_path_buf(), ext }),
     };
-    let mut written = Vec::with_capacity(files.len());
+    // replaced as a set: a .gltf never meets a .bin it was not written with
+    let mut set = FileSet::new();
     for (file, bytes) in files {
-        write_atomic(&file, &bytes)?;
-        written.push(file);
+        set.write(&file, &bytes)?;
     }
-    Ok(written)
+    set.commit()
 }
 
 #[cfg(test)]
@@ -107,6 +108,50 @@ mod tests {
     use std::{fs, io};
 
     use super::*;
+
+    #[test]
+    fn a_file_set_replaces_nothing_until_it_commits_and_leaves_nothing_when_dropped() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("x.gltf"), dir.path().join("x.bin"));
+        write_atomic(&a, b"old json").unwrap();
+        write_atomic(&b, b"old bin").unwrap();
+        let names = || {
+            let mut n: Vec<String> =
+                fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into()).collect();
+            n.sort();
+            n
+        };
+        // staged: the old pair is untouched, the new bytes wait in hidden files ending in the
+        // real extension
+        let mut set = FileSet::new();
+        set.write(&b, b"new bin").unwrap();
+        set.write(&a, b"new json").unwrap();
+        let staged = set.staged(&a).unwrap().to_path_buf();
+        assert_eq!(fs::read(&staged).unwrap(), b"new json");
+        assert!(staged.file_name().unwrap().to_string_lossy().starts_with(".x.gltf."));
+        assert_eq!(staged.extension().unwrap(), "gltf");
+        assert_eq!((fs::read(&a).unwrap(), fs::read(&b).unwrap()), (b"old json".to_vec(), b"old bin".to_vec()));
+        // dropped without a commit (an error on the way): the old pair, nothing else
+        drop(set);
+        assert_eq!(names(), ["x.bin", "x.gltf"]);
+        assert_eq!(fs::read(&a).unwrap(), b"old json");
+        // committed: both new, in the order written; nothing else
+        let mut set = FileSet::new();
+        set.write(&b, b"new bin").unwrap();
+        set.write(&a, b"first try").unwrap();
+        set.write(&a, b"new json").unwrap();
+        assert_eq!(set.commit().unwrap(), vec![b.clone(), a.clone()]);
+        assert_eq!((fs::read(&a).unwrap(), fs::read(&b).unwrap()), (b"new json".to_vec(), b"new bin".to_vec()));
+        assert_eq!(names(), ["x.bin", "x.gltf"]);
+        // a path that is a folder is refused while staging: the set writes nothing
+        fs::create_dir(dir.path().join("y.bin")).unwrap();
+        let mut set = FileSet::new();
+        set.write(&a, b"newer json").unwrap();
+        assert!(set.write(&dir.path().join("y.bin"), b"bin").is_err());
+        drop(set);
+        assert_eq!(fs::read(&a).unwrap(), b"new json");
+        assert_eq!(names(), ["x.bin", "x.gltf", "y.bin"]);
+    }
 
     #[test]
     fn atomic_write_replaces_and_cleans_up() {

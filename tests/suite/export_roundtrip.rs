@@ -117,7 +117,8 @@ fn sample_scene() -> Scene {
 fn no_temp_files(dir: &Path) {
     for e in fs::read_dir(dir).unwrap() {
         let name = e.unwrap().file_name().to_string_lossy().to_string();
-        assert!(!name.ends_with(".tmp"), "temporary file left behind: {name}");
+        // `.<name>.<pid>-<n>.tmp[.<ext>]`
+        assert!(!(name.starts_with('.') && name.contains(".tmp")), "temporary file left behind: {name}");
     }
 }
 

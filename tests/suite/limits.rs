@@ -86,3 +86,75 @@ fn threads_are_capped() {
     let dir = tempfile::tempdir().unwrap();
     refused(&verdant_in(dir.path(), &["--threads", "5000", "preset", "check", "x.toml"]), 2, "per core");
 }
+
+/// A small stochastic bush in the thesis' format (random turns: each seed grows another one).
+const BUSH_LS: &str = "recursion 4\nangle 25\nthickness 15\naxiom c(12)FFFA\n\
+                       rule A = !\"[~(20)&FL A]>(120)[~(20)&FL A]>(120)[~(20)&FL A]\n\
+                       rule L = [c(8){.-z.+z.+z.-|-z.+z.+z.}]\n";
+
+/// Every file of a tree chain in `dir` (not the hidden temporaries) with its bytes.
+fn chain_files(dir: &std::path::Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| !e.file_name().to_string_lossy().starts_with('.') && e.path().is_file())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("bush"))
+        .map(|e| (e.file_name().to_string_lossy().to_string(), fs::read(e.path()).unwrap()))
+        .collect()
+}
+
+#[test]
+fn a_tree_chain_is_replaced_as_a_set_or_not_at_all() {
+    // issue 21 item 3: the chain (levels, atlas mips, normal atlas, MSFT_lod file) is written and
+    // validated beside the old files and only then renamed in, so a run that fails or is killed
+    // while writing leaves the previous chain whole
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "bush.ls", BUSH_LS);
+    let args = |seed: &'static str| ["tree", "bush.ls", "-o", "out/bush.glb", "--seed", seed, "--atlas-size", "256"];
+    ok(&verdant_in(d, &args("1")));
+    let old = chain_files(&d.join("out"));
+    assert!(old.len() >= 10, "{:?}", old.keys());
+    // another seed writes other bytes (so an unchanged file below is the old one, not a coincidence)
+    let other = tempfile::tempdir().unwrap();
+    write(other.path(), "bush.ls", BUSH_LS);
+    ok(&verdant_in(other.path(), &args("2")));
+    let new = chain_files(&other.path().join("out"));
+    assert_eq!(new.keys().collect::<Vec<_>>(), old.keys().collect::<Vec<_>>());
+    assert_ne!(new["bush_LOD0.glb"], old["bush_LOD0.glb"]);
+
+    // an error on the way (a folder where one mip goes): nothing replaced, no temporary left
+    fs::remove_file(d.join("out/bush_atlas_mip3.png")).unwrap();
+    fs::create_dir(d.join("out/bush_atlas_mip3.png")).unwrap();
+    let failed = verdant_in(d, &args("2"));
+    assert_ne!(failed.status.code(), Some(0), "{}", text(&failed));
+    assert!(text(&failed).contains("bush_atlas_mip3.png"), "the error names the file:\n{}", text(&failed));
+    let mut kept = old.clone();
+    kept.remove("bush_atlas_mip3.png");
+    assert_eq!(chain_files(&d.join("out")), kept, "a failed run replaced files");
+    let hidden: Vec<String> = fs::read_dir(d.join("out"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(hidden.is_empty(), "temporaries left behind: {hidden:?}");
+    fs::remove_dir(d.join("out/bush_atlas_mip3.png")).unwrap();
+    ok(&verdant_in(d, &args("1")));
+    assert_eq!(chain_files(&d.join("out")), old);
+
+    // killed while writing (the file-size limit is below the largest file: SIGXFSZ, or EFBIG
+    // where the signal is ignored): the old chain is still whole
+    let largest = old.values().map(Vec::len).max().unwrap();
+    let limit_kib = (largest / 2 / 1024).max(1);
+    let bin = env!("CARGO_BIN_EXE_verdant");
+    let killed = std::process::Command::new("bash")
+        .current_dir(d)
+        .args([
+            "-c",
+            &format!("ulimit -f {limit_kib}; exec \"{bin}\" tree bush.ls -o out/bush.glb --seed 2 --atlas-size 256"),
+        ])
+        .output()
+        .unwrap();
+    assert_ne!(killed.status.code(), Some(0), "the limit of {limit_kib} KiB did not stop it:\n{}", text(&killed));
+    assert_eq!(chain_files(&d.join("out")), old, "a killed run replaced files");
+}

@@ -9,8 +9,8 @@ use serde::Serialize;
 
 use super::chain::{build_mesh_lods_with, build_tree_lods_with};
 use super::types::{Progress, TreeLodError, TreeLodOptions, TreeLodReport, TreeLods};
-use crate::bake::atlas::write_mip_pngs;
-use crate::export;
+use crate::bake::image::Image;
+use crate::export::{self, FileSet, SceneProblem};
 use crate::lsystem::{parse, Dialect};
 use crate::mesh::Scene;
 use crate::plants::mesh_asset::{load_obj, MeshAssetStats, ObjOptions};
@@ -50,10 +50,9 @@ pub fn variant_seed(seed: u64, k: usize) -> u64 {
     }
 }
 
-/// Writes `scene` as a glb at `path` and validates it: (errors, warnings) found.
-fn write_glb(scene: &Scene, path: &Path) -> Result<(usize, usize), TreeLodError> {
-    export::write_scene(scene, path)?;
-    let v = validate_file(path, &ValidateOptions::default())
+/// Validates the staged glb meant for `path`: (errors, warnings) found, or why it is invalid.
+fn validate_staged(staged: &Path, path: &Path) -> Result<(usize, usize), TreeLodError> {
+    let v = validate_file(staged, &ValidateOptions::default())
         .map_err(|e| TreeLodError::Invalid { path: path.to_path_buf(), report: e.to_string() })?;
     if !v.ok() {
         return Err(TreeLodError::Invalid { path: path.to_path_buf(), report: v.to_string() });
@@ -79,40 +78,62 @@ impl Written {
 }
 
 /// Writes `chain` as `<dir>/<file_stem>_LOD<n>.glb`, `<file_stem>_atlas*.png` and the MSFT_lod
-/// `<file_stem>.glb`, validating every glb. The files are encoded and written in parallel; they
-/// are listed (and the first failure reported) in that order.
-fn write_chain(chain: &TreeLods, dir: &Path, file_stem: &str, written: &mut Written) -> Result<(), TreeLodError> {
-    let mut glbs: Vec<(&Scene, PathBuf)> =
+/// `<file_stem>.glb` into `set`, validating every glb before anything is replaced. The files are
+/// encoded and validated in parallel; they are listed (and the first failure reported) in that
+/// order.
+fn write_chain(
+    chain: &TreeLods,
+    dir: &Path,
+    file_stem: &str,
+    set: &mut FileSet,
+    written: &mut Written,
+) -> Result<(), TreeLodError> {
+    let texture = |e: &dyn std::fmt::Display| TreeLodError::Texture(e.to_string());
+    let mut scenes: Vec<(&Scene, PathBuf)> =
         chain.levels.iter().map(|lod| (&lod.scene, dir.join(format!("{file_stem}_LOD{}.glb", lod.level)))).collect();
-    glbs.push((&chain.chain, dir.join(format!("{file_stem}.glb"))));
-    let images = || -> Result<Vec<PathBuf>, TreeLodError> {
-        let (mips, normal) = rayon::join(
-            || {
-                if chain.atlas.is_empty() {
-                    return Ok(Vec::new());
-                }
-                write_mip_pngs(dir, &format!("{file_stem}_atlas"), &chain.atlas)
-                    .map_err(|e| TreeLodError::Texture(e.to_string()))
-            },
-            || -> Result<Option<PathBuf>, TreeLodError> {
-                let Some(normals) = &chain.normal_atlas else { return Ok(None) };
-                let path = dir.join(format!("{file_stem}_atlas_normal.png"));
-                let png = normals.encode_png_data().map_err(|e| TreeLodError::Texture(e.to_string()))?;
-                export::write_atomic(&path, &png).map_err(|e| TreeLodError::Texture(e.to_string()))?;
-                Ok(Some(path))
-            },
-        );
-        let mut paths = mips?;
-        paths.extend(normal?);
-        Ok(paths)
-    };
-    let (checked, images) =
-        rayon::join(|| glbs.par_iter().map(|(scene, path)| write_glb(scene, path)).collect::<Vec<_>>(), images);
-    let mut checked = glbs.iter().zip(checked);
-    for ((_, path), found) in checked.by_ref().take(chain.levels.len()) {
+    scenes.push((&chain.chain, dir.join(format!("{file_stem}.glb"))));
+    let glbs: Vec<Result<Vec<u8>, TreeLodError>> = scenes
+        .par_iter()
+        .map(|(scene, path)| Ok(export::gltf::to_glb(scene).map_err(SceneProblem::at(path))?))
+        .collect();
+    let mut images: Vec<(PathBuf, &Image, bool)> = chain
+        .atlas
+        .iter()
+        .enumerate()
+        .map(|(k, level)| {
+            let name = if k == 0 { format!("{file_stem}_atlas.png") } else { format!("{file_stem}_atlas_mip{k}.png") };
+            (dir.join(name), &level.image, false)
+        })
+        .collect();
+    if let Some(normals) = &chain.normal_atlas {
+        images.push((dir.join(format!("{file_stem}_atlas_normal.png")), normals, true));
+    }
+    // colour as sRGB, the normal atlas as data (glTF reads a normalTexture as linear values)
+    let pngs: Vec<Result<Vec<u8>, TreeLodError>> = images
+        .par_iter()
+        .map(|(_, image, data)| {
+            if *data { image.encode_png_data() } else { image.encode_png() }.map_err(|e| texture(&e))
+        })
+        .collect();
+    // staged in the order listed: the levels, the atlas images, the chain
+    let levels = chain.levels.len();
+    let mut glbs = scenes.iter().zip(glbs);
+    for ((_, path), bytes) in glbs.by_ref().take(levels) {
+        set.write(path, &bytes?)?;
+    }
+    for ((path, _, _), bytes) in images.iter().zip(pngs) {
+        set.write(path, &bytes?)?;
+    }
+    for ((_, path), bytes) in glbs {
+        set.write(path, &bytes?)?;
+    }
+    let checked: Vec<Result<(usize, usize), TreeLodError>> =
+        scenes.par_iter().map(|(_, path)| validate_staged(set.staged(path).unwrap_or(path), path)).collect();
+    let mut checked = scenes.iter().zip(checked);
+    for ((_, path), found) in checked.by_ref().take(levels) {
         written.add(path, found?);
     }
-    written.files.extend(images?);
+    written.files.extend(images.into_iter().map(|(p, _, _)| p));
     for ((_, path), found) in checked {
         written.add(path, found?);
     }
@@ -171,10 +192,12 @@ pub fn run_lods_with(job: &TreeLodJob, progress: Progress) -> Result<TreeLodRunR
         chains.push(chain);
     }
     let t_build = t0.elapsed().as_secs_f64();
-    let mut written = Written::default();
+    // every variant's files replaced as one set, after all of them are written and validated
+    let (mut written, mut set) = (Written::default(), FileSet::new());
     for (k, c) in chains.iter().enumerate() {
-        write_chain(c, &dir, &format!("{stem}{}", suffix(k)), &mut written)?;
+        write_chain(c, &dir, &format!("{stem}{}", suffix(k)), &mut set, &mut written)?;
     }
+    set.commit()?;
     let Written { files, errors, warnings } = written;
     let t_total = t0.elapsed().as_secs_f64();
     let first = &chains[0];
@@ -250,8 +273,9 @@ pub fn run_mesh_lods_with(job: &MeshLodJob, progress: Progress) -> Result<MeshLo
     let chain = build_mesh_lods_with(&source, &name, &job.lod, progress)?;
     let stem = job.output.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
     let dir = job.output.parent().map(Path::to_path_buf).unwrap_or_default();
-    let mut written = Written::default();
-    write_chain(&chain, &dir, &stem, &mut written)?;
+    let (mut written, mut set) = (Written::default(), FileSet::new());
+    write_chain(&chain, &dir, &stem, &mut set, &mut written)?;
+    set.commit()?;
     Ok(MeshLodRunReport {
         input: job.input.display().to_string(),
         output: job.output.display().to_string(),
