@@ -144,6 +144,24 @@ pub const DEFAULT_MAX_SAMPLES: usize = 8193 * 8193;
 /// and every error figure loses its meaning (a float TIFF of 10³⁰ m "met" a 1 m bound by 10²⁴ m).
 pub const MAX_ABS_HEIGHT_M: f32 = 1.0e6;
 
+/// A terrain spans at most 40,000 km (Earth's circumference) along either side: a larger sample
+/// spacing is a unit mistake, and near f32's range positions become infinite (a cell size of
+/// 10³⁰⁰ m wrote infinite vertices).
+pub const MAX_EXTENT_M: f64 = 4.0e7;
+
+/// Refuses a cell size that puts a `width` × `height` map beyond [`MAX_EXTENT_M`]: the problem
+/// (without the file, which the caller names).
+pub fn check_extent(width: usize, height: usize, cell_size_m: f64) -> Result<(), String> {
+    let extent = (width.max(height).saturating_sub(1)) as f64 * cell_size_m;
+    if extent <= MAX_EXTENT_M {
+        return Ok(());
+    }
+    Err(format!(
+        "a cell size of {cell_size_m:e} m (--cell-size, or `cell_size` in a preset) makes the {width}×{height} map {extent:e} m across, \
+         beyond the {MAX_EXTENT_M:e} m (Earth's circumference) a terrain may span; give the distance between neighbouring samples in metres"
+    ))
+}
+
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DecodeOptions {
     pub encoding: Encoding,
@@ -241,6 +259,9 @@ pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
         _ => decode_image(path, bytes, encoding, opts)?,
     };
     decoded.heightfield.cell_size_m = opts.cell_size_m;
+    let (w, h) = (decoded.heightfield.width, decoded.heightfield.height);
+    check_extent(w, h, opts.cell_size_m)
+        .map_err(|message| HeightfieldError::Options { path: path.to_owned(), message })?;
     if let Some(k) = decoded.heightfield.heights.iter().position(|h| !(h.is_finite() && h.abs() <= MAX_ABS_HEIGHT_M)) {
         let w = decoded.heightfield.width;
         let h = decoded.heightfield.heights[k];

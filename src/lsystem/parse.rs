@@ -28,6 +28,16 @@ pub fn read_file(path: &Path, dialect: Option<Dialect>) -> Result<Parsed, Lsyste
     parse_bytes(&bytes, path, dialect)
 }
 
+/// A character of an echoed source line as shown: tabs kept (the caret line repeats them),
+/// other control characters escaped.
+fn shown(c: char) -> String {
+    if c == '\t' {
+        "\t".to_string()
+    } else {
+        crate::input::escape(&c.to_string())
+    }
+}
+
 /// Parses the contents of a file; `path` only names it in messages.
 pub fn parse_bytes(bytes: &[u8], path: &Path, dialect: Option<Dialect>) -> Result<Parsed, LsystemError> {
     let source = Source::new(bytes, path);
@@ -132,8 +142,13 @@ impl<'a> Source<'a> {
         let at = before.len();
         let start = at.saturating_sub(CONTEXT);
         let end = (at + CONTEXT).min(all.len());
-        let mut text: String = all[start..end].iter().collect();
-        let mut caret: String = before[start..].iter().map(|&c| if c == '\t' { '\t' } else { ' ' }).collect();
+        // control bytes (an ESC from a pasted colour code) are shown escaped, never sent to the
+        // terminal; the caret keeps its place under the escaped text
+        let mut text: String = all[start..end].iter().map(|c| shown(*c)).collect();
+        let mut caret: String = before[start..]
+            .iter()
+            .map(|&c| if c == '\t' { "\t".to_string() } else { " ".repeat(shown(c).chars().count()) })
+            .collect();
         if start > 0 {
             text.insert(0, '…');
             caret.insert(0, ' ');
@@ -146,7 +161,7 @@ impl<'a> Source<'a> {
             path: self.path.to_path_buf(),
             line: number,
             column: at + 1,
-            message: message.into(),
+            message: crate::input::escape(&message.into()),
             text,
             caret,
             remedy: remedy.into(),
@@ -157,7 +172,7 @@ impl<'a> Source<'a> {
     fn warning(&self, number: usize, col: usize, message: impl Into<String>) -> String {
         let bytes = self.lines.get(number.wrapping_sub(1)).map(|l| l.bytes).unwrap_or(&[]);
         let column = String::from_utf8_lossy(&bytes[..col.min(bytes.len())]).chars().count() + 1;
-        format!("line {number}, column {column}: {}", message.into())
+        format!("line {number}, column {column}: {}", crate::input::escape(&message.into()))
     }
 
     /// An error just past the last line (something missing at the end of the file).

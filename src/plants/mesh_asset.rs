@@ -212,7 +212,17 @@ fn scan(path: &Path, text: &[u8], options: &ObjOptions) -> Result<Vec<String>, M
             }
             for &(col, t) in args {
                 match t.parse::<f64>() {
-                    Ok(x) if x.is_finite() => {}
+                    // models are read as 32-bit floats (tobj, then glTF): a larger number would
+                    // become infinity and its faces vanish as if they had no area
+                    Ok(x) if x.is_finite() && x.abs() <= f32::MAX as f64 => {}
+                    Ok(x) if x.is_finite() => {
+                        return Err(syntax(
+                            col,
+                            format!(
+                                "{t} is beyond the ±3.4e38 a 32-bit float holds (models are stored as 32-bit floats); rescale the model in the program that wrote it"
+                            ),
+                        ))
+                    }
                     _ => return Err(syntax(col, format!("{t:?} is not a finite number"))),
                 }
             }

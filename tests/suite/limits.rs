@@ -158,3 +158,50 @@ fn a_tree_chain_is_replaced_as_a_set_or_not_at_all() {
     assert_ne!(killed.status.code(), Some(0), "the limit of {limit_kib} KiB did not stop it:\n{}", text(&killed));
     assert_eq!(chain_files(&d.join("out")), old, "a killed run replaced files");
 }
+
+#[test]
+fn messages_name_the_input_and_never_echo_control_bytes() {
+    // issue 21 item 5: each of these was a wrong or unsafe message
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // a cell size that overflows f32 positions: was "this is a bug, please report it"
+    let heights: Vec<u8> = (0..16 * 16).flat_map(|i: u32| ((i * 97) as u16).to_le_bytes()).collect();
+    fs::write(d.join("h.r16"), heights).unwrap();
+    let o = verdant_in(d, &["terrain", "h.r16", "--size", "16x16", "--cell-size", "1e300", "-o", "t.glb"]);
+    refused(&o, 2, "Earth's circumference");
+    assert!(
+        !text(&o).contains("bug") && text(&o).contains("h.r16") && text(&o).contains("--cell-size"),
+        "{}",
+        text(&o)
+    );
+    assert!(!d.join("t.glb").exists());
+    // the same in a preset: at the key, without 300 digits
+    let p = write(
+        d,
+        "p.toml",
+        "[scene]\nname = \"x\"\n[terrain]\nprocedural = { kind = \"fbm\", size = 65, relief = 20.0 }\ncell_size = 1e300\n",
+    );
+    let e = verdant::scene::preset::load_preset(&p).unwrap_err().to_string();
+    assert!(e.contains("p.toml:5:13") && e.contains("got 1e300") && e.len() < 400, "{e}");
+    let p = write(
+        d,
+        "q.toml",
+        "[scene]\nname = \"x\"\n[terrain]\nprocedural = { kind = \"fbm\", size = 513, relief = 20.0 }\ncell_size = 1e6\n",
+    );
+    let e = verdant::scene::preset::load_preset(&p).unwrap_err().to_string();
+    assert!(e.contains("q.toml:5:13") && e.contains("Earth's circumference"), "{e}");
+    // an OBJ vertex beyond f32: was "no faces with area"
+    write(d, "big.obj", "v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n");
+    let o = verdant_in(d, &["mesh", "big.obj", "-o", "big.glb"]);
+    refused(&o, 2, "big.obj:2:3: 1e39 is beyond the ±3.4e38");
+    // an escape sequence pasted into an .ls file is shown escaped, the caret under it
+    fs::write(d.join("esc.ls"), b"recursion 2\nangle 20\naxiom F(\x1b[31m)\nrule F = FF\n").unwrap();
+    let o = verdant_in(d, &["tree", "esc.ls", "-o", "esc.glb"]);
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(!err.contains('\u{1b}'), "a raw ESC reached the terminal: {err:?}");
+    assert!(err.contains("`(\\u{1b}[31m)` is not a number"), "{err}");
+    let lines: Vec<&str> = err.lines().collect();
+    let (src, caret) = (lines[1], lines[2]);
+    assert_eq!(src.trim_start(), "axiom F(\\u{1b}[31m)");
+    assert_eq!(caret.find('^'), src.find('('), "the caret is under the `(`:\n{src}\n{caret}");
+}

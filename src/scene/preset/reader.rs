@@ -209,8 +209,11 @@ pub(super) fn number_value(
             format!("write it like `{example}`"),
         ));
     }
-    valid(x)
-        .map_err(|why| t.ctx.at(&v.span(), format!("`{key}` {why}, got {x}"), format!("write it like `{example}`")))?;
+    valid(x).map_err(|why| {
+        // as written in the file, not 300 digits of 1e300
+        let got = if x != 0.0 && !(1e-3..1e9).contains(&x.abs()) { format!("{x:e}") } else { format!("{x}") };
+        t.ctx.at(&v.span(), format!("`{key}` {why}, got {got}"), format!("write it like `{example}`"))
+    })?;
     Ok(x)
 }
 

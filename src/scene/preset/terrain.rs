@@ -22,7 +22,17 @@ pub(super) fn parse_terrain(
     inputs: Inputs,
 ) -> Result<TerrainSettings, PresetError> {
     t.check_keys(TERRAIN_KEYS, &[("[scene]", SCENE_KEYS), ("`procedural = { … }`", PROCEDURAL_KEYS)])?;
-    let cell_size_m = t.number("cell_size", "cell_size = 10.0", positive)?.map_or(1.0, |(x, _)| x);
+    let cell_size = t.number("cell_size", "cell_size = 10.0", |x| {
+        positive(x)?;
+        // one cell alone cannot pass the extent limit; a whole map is checked with its size
+        crate::heightfield::check_extent(2, 2, x).map_err(|_| {
+            format!(
+                "must be at most {:e} m (Earth's circumference): it is the distance between neighbouring samples",
+                crate::heightfield::MAX_EXTENT_M
+            )
+        })
+    })?;
+    let cell_size_m = cell_size.as_ref().map_or(1.0, |(x, _)| *x);
 
     let source = match (t.get("heightmap"), t.get("procedural")) {
         (Some((hk, _)), Some((pk, _))) => {
@@ -51,7 +61,12 @@ pub(super) fn parse_terrain(
                     ));
                 }
             }
-            parse_procedural(t, v, cell_size_m, scene_seed)?
+            let source = parse_procedural(t, v, cell_size_m, scene_seed)?;
+            if let (TerrainSource::Fbm { size, .. }, Some((_, span))) = (&source, &cell_size) {
+                crate::heightfield::check_extent(*size, *size, cell_size_m)
+                    .map_err(|problem| t.ctx.at(span, problem, "lower `cell_size` or `size`"))?;
+            }
+            source
         }
         (Some((_, v)), None) => parse_heightmap(t, v, cell_size_m, inputs)?,
     };
