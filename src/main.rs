@@ -517,13 +517,9 @@ fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
             Blame::Input,
         );
     }
-    match job::run(&job, Some(&output)) {
+    // the mesh files and the report are replaced together
+    match job::run_reporting(&job, Some(&output), a.report.as_deref()) {
         Ok((report, _scene)) => {
-            if let Some(path) = &a.report {
-                if let Err(e) = job::write_json(path, &report) {
-                    return failed(&e);
-                }
-            }
             if !quiet {
                 let out = report.output.as_ref();
                 println!(
@@ -761,15 +757,11 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
         // each step of the chain as it starts: a spinner on a terminal, plain lines otherwise
         let view = verdant::progress::ProgressView::new(quiet);
         let task = lod_job.options.name.clone();
-        let result = tree_lod::run_lods_with(&lod_job, &|step| view.update(&task, step));
+        // the chain's files and the report are replaced together
+        let result = tree_lod::run_lods_reporting(&lod_job, a.report.as_deref(), &|step| view.update(&task, step));
         view.finish();
         return match result {
             Ok(report) => {
-                if let Some(path) = &a.report {
-                    if let Err(e) = tree_lod::write_lod_report(path, &report) {
-                        return failed(&e);
-                    }
-                }
                 if !quiet {
                     print_tree_summary(&report.tree);
                     for v in &report.variants {
@@ -855,15 +847,11 @@ fn mesh(a: MeshArgs, quiet: bool) -> i32 {
     }
     let view = verdant::progress::ProgressView::new(quiet);
     let task = job.input.file_stem().map_or_else(|| "mesh".into(), |s| s.to_string_lossy().into_owned());
-    let result = tree_lod::run_mesh_lods_with(&job, &|step| view.update(&task, step));
+    // the chain's files and the report are replaced together
+    let result = tree_lod::run_mesh_lods_reporting(&job, a.report.as_deref(), &|step| view.update(&task, step));
     view.finish();
     match result {
         Ok(report) => {
-            if let Some(path) = &a.report {
-                if let Err(e) = tree_lod::write_json_report(path, &report) {
-                    return failed(&e);
-                }
-            }
             if !quiet {
                 let s = &report.source;
                 println!(

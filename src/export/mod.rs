@@ -55,6 +55,20 @@ pub fn write_scene(scene: &Scene, path: &Path) -> Result<Vec<PathBuf>, ExportErr
 /// [`write_scene`] with storage options for glTF (`.glb`, `.gltf`); an `.obj` cannot take a
 /// position grid (its numbers are text), which is refused.
 pub fn write_scene_with(scene: &Scene, path: &Path, opts: &gltf::WriteOptions) -> Result<Vec<PathBuf>, ExportError> {
+    // replaced as a set: a .gltf never meets a .bin it was not written with
+    let mut set = FileSet::new();
+    stage_scene_with(&mut set, scene, path, opts)?;
+    set.commit()
+}
+
+/// [`write_scene_with`] into `set` (to be committed with other files, e.g. a report); returns the
+/// paths staged, in order.
+pub fn stage_scene_with(
+    set: &mut FileSet,
+    scene: &Scene,
+    path: &Path,
+    opts: &gltf::WriteOptions,
+) -> Result<Vec<PathBuf>, ExportError> {
     let ext = path.extension().and_then(OsStr::to_str).unwrap_or("").to_ascii_lowercase();
     let stem = match path.file_stem().and_then(OsStr::to_str) {
         Some(s) if !s.is_empty() => s.to_string(),
@@ -95,12 +109,12 @@ pub fn write_scene_with(scene: &Scene, path: &Path, opts: &gltf::WriteOptions) -
         }
         _ => return Err(ExportError::UnsupportedExtension { path: path.to_path_buf(), ext }),
     };
-    // replaced as a set: a .gltf never meets a .bin it was not written with
-    let mut set = FileSet::new();
+    let mut staged = Vec::with_capacity(files.len());
     for (file, bytes) in files {
         set.write(&file, &bytes)?;
+        staged.push(file);
     }
-    set.commit()
+    Ok(staged)
 }
 
 #[cfg(test)]

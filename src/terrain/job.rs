@@ -360,6 +360,17 @@ impl TerrainJob {
 
 /// Runs the job; writes the scene to `output` when given.
 pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Scene), JobError> {
+    run_reporting(job, output, None)
+}
+
+/// [`run`], and the report as JSON to `report` when given: the scene's files and the report are
+/// replaced as one set ([`export::FileSet`]), so a report never describes a mesh that was not
+/// written, nor a mesh lacks the report asked for.
+pub fn run_reporting(
+    job: &TerrainJob,
+    output: Option<&Path>,
+    report_path: Option<&Path>,
+) -> Result<(TerrainReport, Scene), JobError> {
     check_options(job)?;
     let t0 = Instant::now();
     let decoded = load_source(job)?;
@@ -373,9 +384,11 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
     let ([t_mesh, t_analyze, t_build], scene) = (meshed.seconds, meshed.scene);
 
     let t = Instant::now();
+    let mut set = export::FileSet::new();
     let output_summary = match output {
         Some(path) => {
-            let files = export::write_scene_with(
+            let files = export::stage_scene_with(
+                &mut set,
                 &scene,
                 path,
                 &WriteOptions { position_grid: grid, meshopt: job.meshopt && grid.is_some() },
@@ -401,6 +414,10 @@ pub fn run(job: &TerrainJob, output: Option<&Path>) -> Result<(TerrainReport, Sc
             total: t0.elapsed().as_secs_f64(),
         },
     };
+    if let Some(path) = report_path {
+        set.write(path, &json_bytes(&report)?)?;
+    }
+    set.commit()?;
     Ok((report, scene))
 }
 
@@ -487,8 +504,13 @@ pub fn sweep_table(rows: &[SweepRow]) -> String {
 
 /// Writes `value` as pretty JSON, atomically.
 pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), JobError> {
+    export::write_atomic(path, &json_bytes(value)?)?;
+    Ok(())
+}
+
+/// `value` as pretty JSON with a final newline.
+fn json_bytes<T: Serialize>(value: &T) -> Result<Vec<u8>, JobError> {
     let mut text = serde_json::to_string_pretty(value).map_err(|e| JobError::Options(e.to_string()))?;
     text.push('\n');
-    export::write_atomic(path, text.as_bytes())?;
-    Ok(())
+    Ok(text.into_bytes())
 }

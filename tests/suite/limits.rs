@@ -205,3 +205,36 @@ fn messages_name_the_input_and_never_echo_control_bytes() {
     assert_eq!(src.trim_start(), "axiom F(\\u{1b}[31m)");
     assert_eq!(caret.find('^'), src.find('('), "the caret is under the `(`:\n{src}\n{caret}");
 }
+
+#[test]
+fn a_mesh_and_its_report_are_replaced_together() {
+    // issue 21 item 3: `--report` that cannot be written used to fail after the mesh was replaced;
+    // now the .gltf, its .bin and the report are one set
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // a smooth bowl: a looser bound gives another mesh
+    let heights: Vec<u8> =
+        (0..33 * 33).flat_map(|i: u32| (((i % 33).pow(2) + (i / 33).pow(2)) as u16 * 30).to_le_bytes()).collect();
+    fs::write(d.join("h.r16"), heights).unwrap();
+    let run = |error: &str, report: &str| {
+        verdant_in(
+            d,
+            &["terrain", "h.r16", "--size", "33x33", "--max-error", error, "-o", "out/t.gltf", "--report", report],
+        )
+    };
+    ok(&run("0.5", "out/r.json"));
+    let read = |name: &str| fs::read(d.join("out").join(name)).unwrap();
+    let old = (read("t.gltf"), read("t.bin"), read("r.json"));
+    // the report's path is a folder: refused, and neither the mesh nor its .bin replaced
+    fs::create_dir(d.join("out/r_dir")).unwrap();
+    let failed = run("2.0", "out/r_dir");
+    assert_ne!(failed.status.code(), Some(0), "{}", text(&failed));
+    assert!(text(&failed).contains("r_dir"), "the error names the report path:\n{}", text(&failed));
+    assert_eq!((read("t.gltf"), read("t.bin"), read("r.json")), old);
+    let names: Vec<String> =
+        fs::read_dir(d.join("out")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().to_string()).collect();
+    assert!(names.iter().all(|n| !n.starts_with('.')), "temporaries left: {names:?}");
+    // written, all three change together
+    ok(&run("2.0", "out/r.json"));
+    assert!(read("t.bin") != old.1 && read("r.json") != old.2);
+}

@@ -159,6 +159,16 @@ pub fn run_lods(job: &TreeLodJob) -> Result<TreeLodRunReport, TreeLodError> {
 
 /// [`run_lods`], saying each step to `progress` as it starts (with the variant when several).
 pub fn run_lods_with(job: &TreeLodJob, progress: Progress) -> Result<TreeLodRunReport, TreeLodError> {
+    run_lods_reporting(job, None, progress)
+}
+
+/// [`run_lods_with`], and the report as JSON to `report` when given, replaced with the chain's
+/// files as one set: a report never lists files that were not written.
+pub fn run_lods_reporting(
+    job: &TreeLodJob,
+    report: Option<&Path>,
+    progress: Progress,
+) -> Result<TreeLodRunReport, TreeLodError> {
     let t0 = Instant::now();
     check_glb_output(&job.output)?;
     if !(1..=64).contains(&job.variants) {
@@ -197,7 +207,6 @@ pub fn run_lods_with(job: &TreeLodJob, progress: Progress) -> Result<TreeLodRunR
     for (k, c) in chains.iter().enumerate() {
         write_chain(c, &dir, &format!("{stem}{}", suffix(k)), &mut set, &mut written)?;
     }
-    set.commit()?;
     let Written { files, errors, warnings } = written;
     let t_total = t0.elapsed().as_secs_f64();
     let first = &chains[0];
@@ -226,7 +235,12 @@ pub fn run_lods_with(job: &TreeLodJob, progress: Progress) -> Result<TreeLodRunR
             total: t_total,
         },
     };
-    Ok(TreeLodRunReport { tree, variants: chains.into_iter().map(|c| c.report).collect() })
+    let run = TreeLodRunReport { tree, variants: chains.into_iter().map(|c| c.report).collect() };
+    if let Some(path) = report {
+        set.write(path, &json_bytes(&run)?)?;
+    }
+    set.commit()?;
+    Ok(run)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -264,6 +278,16 @@ pub fn run_mesh_lods(job: &MeshLodJob) -> Result<MeshLodRunReport, TreeLodError>
 
 /// [`run_mesh_lods`], saying each step to `progress` as it starts.
 pub fn run_mesh_lods_with(job: &MeshLodJob, progress: Progress) -> Result<MeshLodRunReport, TreeLodError> {
+    run_mesh_lods_reporting(job, None, progress)
+}
+
+/// [`run_mesh_lods_with`], and the report as JSON to `report` when given, replaced with the
+/// chain's files as one set.
+pub fn run_mesh_lods_reporting(
+    job: &MeshLodJob,
+    report: Option<&Path>,
+    progress: Progress,
+) -> Result<MeshLodRunReport, TreeLodError> {
     let t0 = Instant::now();
     check_glb_output(&job.output)?;
     job.lod.check()?;
@@ -275,8 +299,7 @@ pub fn run_mesh_lods_with(job: &MeshLodJob, progress: Progress) -> Result<MeshLo
     let dir = job.output.parent().map(Path::to_path_buf).unwrap_or_default();
     let (mut written, mut set) = (Written::default(), FileSet::new());
     write_chain(&chain, &dir, &stem, &mut set, &mut written)?;
-    set.commit()?;
-    Ok(MeshLodRunReport {
+    let run = MeshLodRunReport {
         input: job.input.display().to_string(),
         output: job.output.display().to_string(),
         files: written.files.iter().map(|f| f.display().to_string()).collect(),
@@ -286,19 +309,18 @@ pub fn run_mesh_lods_with(job: &MeshLodJob, progress: Progress) -> Result<MeshLo
         seconds_load,
         seconds_total: t0.elapsed().as_secs_f64(),
         chain: chain.report,
-    })
+    };
+    if let Some(path) = report {
+        set.write(path, &json_bytes(&run)?)?;
+    }
+    set.commit()?;
+    Ok(run)
 }
 
-/// Writes any serialisable report as pretty JSON (atomically).
-pub fn write_json_report<T: Serialize>(path: &Path, report: &T) -> Result<(), TreeLodError> {
+/// `report` as pretty JSON with a final newline.
+fn json_bytes<T: Serialize>(report: &T) -> Result<Vec<u8>, TreeLodError> {
     let mut text = serde_json::to_string_pretty(report)
         .map_err(|e| TreeLodError::Options(format!("cannot serialise the report: {e}")))?;
     text.push('\n');
-    export::write_atomic(path, text.as_bytes())?;
-    Ok(())
-}
-
-/// Writes a report as pretty JSON (atomically).
-pub fn write_lod_report(path: &Path, report: &TreeLodRunReport) -> Result<(), TreeLodError> {
-    write_json_report(path, report)
+    Ok(text.into_bytes())
 }

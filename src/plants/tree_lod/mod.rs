@@ -22,8 +22,8 @@ mod types;
 
 pub use self::chain::{build_mesh_lods, build_mesh_lods_with, build_tree_lods, build_tree_lods_with};
 pub use self::job::{
-    run_lods, run_lods_with, run_mesh_lods, run_mesh_lods_with, variant_seed, write_json_report, write_lod_report,
-    MeshLodJob, MeshLodRunReport, TreeLodJob, TreeLodRunReport,
+    run_lods, run_lods_reporting, run_lods_with, run_mesh_lods, run_mesh_lods_reporting, run_mesh_lods_with,
+    variant_seed, MeshLodJob, MeshLodRunReport, TreeLodJob, TreeLodRunReport,
 };
 pub use self::simplify::SLOPPY_RATIO;
 pub use self::types::{
