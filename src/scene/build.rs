@@ -170,9 +170,21 @@ pub fn remove_stale_folders(out: &Path, name: &str) {
     }
 }
 
-/// Replaces `final_dir` by `tmp_dir`: the old folder is moved aside first and removed only after
-/// the new one is in place.
+/// Replaces `final_dir` by `tmp_dir`. On Linux the two folders are exchanged in one rename
+/// (renameat2 RENAME_EXCHANGE): a reader sees the old scene or the new one, never no scene; the
+/// old one, now at `tmp_dir`, is removed after. Elsewhere (or on a filesystem without the
+/// exchange) the old folder is moved aside first and removed only after the new one is in place;
+/// a kill between those two renames leaves `.NAME.old-PID`, which the next build of the scene
+/// moves back ([`remove_stale_folders`]).
 fn swap_into_place(tmp_dir: &Path, final_dir: &Path) -> Result<(), SceneBuildError> {
+    #[cfg(target_os = "linux")]
+    if final_dir.is_dir() {
+        use rustix::fs::{renameat_with, RenameFlags, CWD};
+        if renameat_with(CWD, tmp_dir, CWD, final_dir, RenameFlags::EXCHANGE).is_ok() {
+            let _ = fs::remove_dir_all(tmp_dir);
+            return Ok(());
+        }
+    }
     let old = final_dir.with_file_name(format!(
         ".{}.old-{}",
         final_dir.file_name().and_then(|n| n.to_str()).unwrap_or("scene"),
@@ -441,6 +453,41 @@ pub fn summary_table(outcomes: &[SceneOutcome]) -> String {
 mod tests {
     use super::*;
     use crate::scene::error::StageError;
+
+    #[test]
+    fn a_scene_folder_is_swapped_with_no_moment_without_one() {
+        // a reader polling the scene folder while it is replaced 300 times: on Linux (exchange) it
+        // never finds it missing; everywhere the new contents are in place and nothing is left
+        let dir = tempfile::tempdir().unwrap();
+        let final_dir = dir.path().join("scene");
+        fs::create_dir_all(&final_dir).unwrap();
+        fs::write(final_dir.join("v"), "0").unwrap();
+        let done = std::sync::atomic::AtomicBool::new(false);
+        let missing = std::thread::scope(|s| {
+            let reader = s.spawn(|| {
+                let mut missing = 0usize;
+                while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                    missing += usize::from(!final_dir.is_dir());
+                }
+                missing
+            });
+            for k in 1..=300 {
+                let tmp = dir.path().join(format!(".scene.building-{k}"));
+                fs::create_dir_all(&tmp).unwrap();
+                fs::write(tmp.join("v"), k.to_string()).unwrap();
+                swap_into_place(&tmp, &final_dir).unwrap();
+                assert!(!tmp.exists(), "the old scene is removed");
+            }
+            done.store(true, std::sync::atomic::Ordering::Relaxed);
+            reader.join().unwrap()
+        });
+        assert_eq!(fs::read_to_string(final_dir.join("v")).unwrap(), "300");
+        let left: Vec<_> = fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(left, vec![std::ffi::OsString::from("scene")]);
+        if cfg!(target_os = "linux") {
+            assert_eq!(missing, 0, "the scene folder was missing {missing} times while it was swapped");
+        }
+    }
 
     #[test]
     fn a_batch_is_the_builds_fault_when_one_build_failed_else_the_inputs() {
