@@ -238,3 +238,48 @@ fn a_mesh_and_its_report_are_replaced_together() {
     ok(&run("2.0", "out/r.json"));
     assert!(read("t.bin") != old.1 && read("r.json") != old.2);
 }
+
+/// Unmounts its folder when dropped (also when the test fails).
+struct Mounted(std::path::PathBuf);
+
+impl Drop for Mounted {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg(&self.0).status();
+    }
+}
+
+#[test]
+fn a_full_disk_leaves_the_previous_chain_whole() {
+    // issue 21 item 3 on a real full disk: a tmpfs with room for one chain and a half. The first
+    // chain fits; the next cannot be staged beside it (ENOSPC): the error names a file, every old
+    // file is byte-identical and no temporary is left. Needs `mount` (root); skipped otherwise.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "bush.ls", BUSH_LS);
+    let args =
+        |seed: &'static str, out: &'static str| ["tree", "bush.ls", "-o", out, "--seed", seed, "--atlas-size", "256"];
+    ok(&verdant_in(d, &args("1", "probe/bush.glb")));
+    let size: usize = chain_files(&d.join("probe")).values().map(Vec::len).sum();
+    let disk = d.join("disk");
+    fs::create_dir(&disk).unwrap();
+    let kib = (size * 3 / 2).div_ceil(4096) * 4;
+    let mounted = std::process::Command::new("mount")
+        .args(["-t", "tmpfs", "-o", &format!("size={kib}k"), "tmpfs"])
+        .arg(&disk)
+        .output();
+    if !mounted.as_ref().is_ok_and(|o| o.status.success()) {
+        eprintln!("skipped: cannot mount a {kib} KiB tmpfs here (needs root): {mounted:?}");
+        return;
+    }
+    let _unmount = Mounted(disk.clone());
+    ok(&verdant_in(d, &args("1", "disk/bush.glb")));
+    let old = chain_files(&disk);
+    assert_eq!(old, chain_files(&d.join("probe")));
+    let full = verdant_in(d, &args("2", "disk/bush.glb"));
+    assert_ne!(full.status.code(), Some(0), "a {kib} KiB disk held two chains of {size} bytes:\n{}", text(&full));
+    assert!(text(&full).contains("No space left") && text(&full).contains("disk/bush"), "{}", text(&full));
+    assert_eq!(chain_files(&disk), old, "a run on a full disk replaced files");
+    let names: Vec<String> =
+        fs::read_dir(&disk).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().to_string()).collect();
+    assert!(names.iter().all(|n| !n.starts_with('.')), "temporaries left on the full disk: {names:?}");
+}
