@@ -376,33 +376,43 @@ pub fn switch_search_chain(
     let start = if range.start_m.is_finite() { range.start_m.clamp(range.near_m, range.far_m) } else { range.far_m };
     let at =
         |j: i64| start * 2f64.powi(j.div_euclid(steps) as i32) * 2f64.powf(j.rem_euclid(steps) as f64 / steps as f64);
-    let measure_at = |searches: &mut [LevelSearch], levels: &[usize], j: i64| -> bool {
-        let rows = measure(levels, at(j));
-        if rows.len() != levels.len() {
-            return false;
+    // the points of one step, each with the levels it is measured for: measured at once (in
+    // parallel over points as over views, so a step waits for its slowest view once, not once per
+    // point), then recorded in order; whether any was measured
+    let measure_points = |searches: &mut [LevelSearch], points: Vec<(i64, Vec<usize>)>| -> bool {
+        let measured: Vec<(i64, Vec<usize>, Vec<DistanceError>)> = points
+            .into_par_iter()
+            .map(|(j, levels)| {
+                let rows = measure(&levels, at(j));
+                (j, levels, rows)
+            })
+            .collect();
+        let mut any = false;
+        for (j, levels, rows) in measured {
+            if rows.len() == levels.len() {
+                for (&i, r) in levels.iter().zip(rows) {
+                    searches[i].record(j, r);
+                }
+                any = true;
+            }
         }
-        for (&i, r) in levels.iter().zip(rows) {
-            searches[i].record(j, r);
-        }
-        true
+        any
     };
     // every level at the start; then halving towards `near_m` while a level passes (it leaves at
     // its first failure) and doubling towards `far_m` while one fails (it leaves at its first pass)
     let all: Vec<usize> = (0..searches.len()).collect();
-    if measure_at(&mut searches, &all, 0) {
+    if measure_points(&mut searches, vec![(0, all)]) {
         let (mut inward, mut outward) = (-steps, steps);
         loop {
             let passing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].fail.is_none()).collect();
             let failing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].pass.is_none()).collect();
-            let mut walked = false;
-            for (levels, j, ok) in
-                [(passing, inward, at(inward) >= range.near_m), (failing, outward, at(outward) <= range.far_m)]
-            {
-                if ok && !levels.is_empty() {
-                    walked |= measure_at(&mut searches, &levels, j);
-                }
-            }
-            if !walked {
+            let points: Vec<(i64, Vec<usize>)> =
+                [(inward, passing, at(inward) >= range.near_m), (outward, failing, at(outward) <= range.far_m)]
+                    .into_iter()
+                    .filter(|(_, levels, ok)| *ok && !levels.is_empty())
+                    .map(|(j, levels, _)| (j, levels))
+                    .collect();
+            if points.is_empty() || !measure_points(&mut searches, points) {
                 break;
             }
             inward -= steps;
@@ -424,9 +434,7 @@ pub fn switch_search_chain(
         if wanted.is_empty() {
             break;
         }
-        for (j, levels) in wanted {
-            measure_at(&mut searches, &levels, j);
-        }
+        measure_points(&mut searches, wanted.into_iter().collect());
     }
     searches
         .into_iter()
