@@ -247,7 +247,9 @@ pub struct SwitchSearch {
     /// where the error, linear in log-log between the bracket's ends, meets the bound, then at that
     /// probe's neighbour across it (error against distance is close to 1/d near a switch: two
     /// probes usually close a bracket that bisection needs three for), bisecting when a pair of
-    /// probes did not halve the bracket.
+    /// probes did not halve the bracket; and a level halving or doubling alone (sharing its
+    /// distances with no other) goes straight to the point where its error is predicted to meet
+    /// the bound instead.
     pub guided: bool,
 }
 
@@ -403,9 +405,39 @@ pub fn switch_search_chain(
     let all: Vec<usize> = (0..searches.len()).collect();
     if measure_points(&mut searches, vec![(0, all)]) {
         let (mut inward, mut outward) = (-steps, steps);
+        // the lattice's nearest and farthest points inside the range
+        let index = |d: f64| (steps as f64 * (d / start).log2()).round() as i64;
+        let (mut j_near, mut j_far) = (index(range.near_m), index(range.far_m));
+        while at(j_near) < range.near_m {
+            j_near += 1;
+        }
+        while at(j_far) > range.far_m {
+            j_far -= 1;
+        }
         loop {
             let passing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].fail.is_none()).collect();
             let failing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].pass.is_none()).collect();
+            if range.guided {
+                // a level walking alone shares its distances with no other: it goes straight to
+                // where its error, close to 1/d, is predicted to meet the bound (the first point
+                // predicted to pass), rather than halving towards it
+                let predicted = |(j, e): (i64, f64)| {
+                    let k = j as f64 + steps as f64 * (e / view.max_error_px).log2();
+                    k.is_finite().then(|| k.ceil() as i64)
+                };
+                if let [i] = passing[..] {
+                    if let Some(k) = searches[i].pass.and_then(predicted) {
+                        let jp = searches[i].pass.map_or(0, |p| p.0);
+                        inward = k.clamp(j_near.min(jp - 1), jp - 1);
+                    }
+                }
+                if let [i] = failing[..] {
+                    if let Some(k) = searches[i].fail.and_then(predicted) {
+                        let jf = searches[i].fail.map_or(0, |f| f.0);
+                        outward = k.clamp(jf + 1, j_far.max(jf + 1));
+                    }
+                }
+            }
             let points: Vec<(i64, Vec<usize>)> =
                 [(inward, passing, at(inward) >= range.near_m), (outward, failing, at(outward) <= range.far_m)]
                     .into_iter()
