@@ -247,9 +247,9 @@ pub struct SwitchSearch {
     /// where the error, linear in log-log between the bracket's ends, meets the bound, then at that
     /// probe's neighbour across it (error against distance is close to 1/d near a switch: two
     /// probes usually close a bracket that bisection needs three for), bisecting when a pair of
-    /// probes did not halve the bracket; and a level halving or doubling alone (sharing its
-    /// distances with no other) goes straight to the point where its error is predicted to meet
-    /// the bound instead.
+    /// probes did not halve the bracket; and the levels halving inwards (doubling outwards) go
+    /// together straight to the point where the first of them is predicted to meet the bound,
+    /// instead of halving towards it.
     pub guided: bool,
 }
 
@@ -418,24 +418,26 @@ pub fn switch_search_chain(
             let passing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].fail.is_none()).collect();
             let failing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].pass.is_none()).collect();
             if range.guided {
-                // a level walking alone shares its distances with no other: it goes straight to
-                // where its error, close to 1/d, is predicted to meet the bound (the first point
-                // predicted to pass), rather than halving towards it
+                // the walking levels go straight to where the first of them is predicted to cross
+                // the bound (its error close to 1/d: the first point predicted to pass), rather than
+                // halving towards it; they share every point they measure, as when halving
                 let predicted = |(j, e): (i64, f64)| {
                     let k = j as f64 + steps as f64 * (e / view.max_error_px).log2();
                     k.is_finite().then(|| k.ceil() as i64)
                 };
-                if let [i] = passing[..] {
-                    if let Some(k) = searches[i].pass.and_then(predicted) {
-                        let jp = searches[i].pass.map_or(0, |p| p.0);
-                        inward = k.clamp(j_near.min(jp - 1), jp - 1);
-                    }
+                // inwards: all passed at the same point; the farthest predicted crossing first
+                let jp = passing.first().and_then(|&i| searches[i].pass).map(|p| p.0);
+                if let (Some(jp), Some(k)) =
+                    (jp, passing.iter().filter_map(|&i| searches[i].pass.and_then(predicted)).max())
+                {
+                    inward = k.clamp(j_near.min(jp - 1), jp - 1);
                 }
-                if let [i] = failing[..] {
-                    if let Some(k) = searches[i].fail.and_then(predicted) {
-                        let jf = searches[i].fail.map_or(0, |f| f.0);
-                        outward = k.clamp(jf + 1, j_far.max(jf + 1));
-                    }
+                // outwards: all failed at the same point; the nearest predicted crossing first
+                let jf = failing.first().and_then(|&i| searches[i].fail).map(|f| f.0);
+                if let (Some(jf), Some(k)) =
+                    (jf, failing.iter().filter_map(|&i| searches[i].fail.and_then(predicted)).min())
+                {
+                    outward = k.clamp(jf + 1, j_far.max(jf + 1));
                 }
             }
             let points: Vec<(i64, Vec<usize>)> =
