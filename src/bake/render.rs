@@ -74,10 +74,7 @@ pub fn render_mesh(
     let normal_matrix = cofactor3(object_to_world);
     let mut total = DrawStats::default();
     for prim in &mesh.primitives {
-        let material = prim.material.and_then(|m| materials.get(m)).unwrap_or(&default_material);
-        let texture = material.base_color_texture.and_then(|t| textures.get(t));
-        let cull = if material.double_sided { Cull::None } else { Cull::Back };
-        let draw = DrawOptions { cull, ..DrawOptions::default() };
+        let (material, texture, draw) = primitive_material(prim, materials, textures, &default_material);
         let lighting = match opts.shading {
             Shading::Unlit => None,
             Shading::Lambert { light_dir, ambient } => {
@@ -98,11 +95,7 @@ pub fn render_mesh(
         } else {
             canvas.draw_camera(cam, object_to_world, prim, &draw, shader)
         };
-        total.triangles += stats.triangles;
-        total.culled += stats.culled;
-        total.skipped += stats.skipped;
-        total.clipped += stats.clipped;
-        total.fragments += stats.fragments;
+        total.add(&stats);
     }
     total
 }
@@ -131,10 +124,7 @@ pub fn render_unlit_and_card_normals(
     let width = canvas.width as usize;
     let mut total = DrawStats::default();
     for prim in &mesh.primitives {
-        let material = prim.material.and_then(|m| materials.get(m)).unwrap_or(&default_material);
-        let texture = material.base_color_texture.and_then(|t| textures.get(t));
-        let cull = if material.double_sided { Cull::None } else { Cull::Back };
-        let draw = DrawOptions { cull, ..DrawOptions::default() };
+        let (material, texture, draw) = primitive_material(prim, materials, textures, &default_material);
         let lighting = Lighting::new(prim, &normal_matrix, [0.0, 1.0, 0.0], 0.0);
         let shader = |f: &Fragment| {
             // the same alpha test decides both: the normal is written where the colour is
@@ -146,13 +136,23 @@ pub fn render_unlit_and_card_normals(
             Some(color)
         };
         let stats = canvas.draw_camera(cam, &identity, prim, &draw, shader);
-        total.triangles += stats.triangles;
-        total.culled += stats.culled;
-        total.skipped += stats.skipped;
-        total.clipped += stats.clipped;
-        total.fragments += stats.fragments;
+        total.add(&stats);
     }
     total
+}
+
+/// A primitive's material (`default` when absent or out of range), its base-colour texture (none
+/// when out of range) and how it is drawn (single-sided materials cull back faces).
+fn primitive_material<'a>(
+    prim: &Primitive,
+    materials: &'a [Material],
+    textures: &'a [Image],
+    default: &'a Material,
+) -> (&'a Material, Option<&'a Image>, DrawOptions) {
+    let material = prim.material.and_then(|m| materials.get(m)).unwrap_or(default);
+    let texture = material.base_color_texture.and_then(|t| textures.get(t));
+    let cull = if material.double_sided { Cull::None } else { Cull::Back };
+    (material, texture, DrawOptions { cull, ..DrawOptions::default() })
 }
 
 /// The colour of one fragment, or None when the alpha test discards it.

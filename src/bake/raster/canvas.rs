@@ -56,7 +56,8 @@ pub struct DrawStats {
 }
 
 impl DrawStats {
-    pub(super) fn add(&mut self, o: &DrawStats) {
+    /// Adds another draw's counts (a mesh's primitives, a canvas' bands).
+    pub(crate) fn add(&mut self, o: &DrawStats) {
         self.triangles += o.triangles;
         self.culled += o.culled;
         self.skipped += o.skipped;
