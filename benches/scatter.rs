@@ -140,7 +140,9 @@ fn main() {
 
     let t = Instant::now();
     let hf = verdant::synth::fbm(SIZE, 1.0, 400.0, TERRAIN_SEED);
-    let mesh = tin(&hf, &TinOptions { max_error_m: MAX_ERROR_M, max_triangles: None }).expect("tin").mesh;
+    let mesh = tin(&hf, &TinOptions { max_error_m: MAX_ERROR_M, max_triangles: None, ..TinOptions::default() })
+        .expect("tin")
+        .mesh;
     let positions: Vec<[f32; 3]> = mesh.vertices.iter().map(|&[i, j]| hf.position(i as usize, j as usize)).collect();
     let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
     drop(hf);

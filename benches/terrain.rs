@@ -104,9 +104,15 @@ fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
         let t = Instant::now();
         let c = cpu_seconds();
         mesh = match which {
-            "verdant" => tin(&hf, &TinOptions { max_error_m, max_triangles: None }).map_err(|e| e.to_string())?.mesh,
+            "verdant" => {
+                tin(&hf, &TinOptions { max_error_m, max_triangles: None, ..TinOptions::default() })
+                    .map_err(|e| e.to_string())?
+                    .mesh
+            }
             "spade" => {
-                tin_spade(&hf, &TinOptions { max_error_m, max_triangles: None }).map_err(|e| e.to_string())?.mesh
+                tin_spade(&hf, &TinOptions { max_error_m, max_triangles: None, ..TinOptions::default() })
+                    .map_err(|e| e.to_string())?
+                    .mesh
             }
             "delatin" => delatin_mesh(&hf, &heights64, max_error_m),
             other => return Err(format!("unknown implementation {other}")),

@@ -15,6 +15,8 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::heightfield::Heightfield;
+#[cfg(test)]
+use crate::terrain::budget::DEFAULT_MAX_VERTICES;
 use crate::terrain::error::{measure, ErrorStats};
 use crate::terrain::tin::{tin, TinOptions};
 use crate::terrain::{SampleMesh, TerrainError};
@@ -179,6 +181,7 @@ pub fn terrain_lod_chain(
     hf: &Heightfield,
     max_errors_m: &[f64],
     max_triangles: Option<usize>,
+    max_vertices: usize,
     view: &LodView,
 ) -> Result<Vec<LodLevel>, LodError> {
     check_max_errors(max_errors_m)?;
@@ -188,7 +191,7 @@ pub fn terrain_lod_chain(
         .enumerate()
         .map(|(level, &max_error_m)| {
             let start = Instant::now();
-            let r = tin(hf, &TinOptions { max_error_m, max_triangles })
+            let r = tin(hf, &TinOptions { max_error_m, max_triangles, max_vertices })
                 .map_err(|error| LodError::Terrain { level, error })?;
             let stats = measure(hf, &r.mesh);
             Ok(LodLevel {
@@ -269,7 +272,7 @@ mod tests {
         let mut previous: Option<Vec<f64>> = None;
         for budget in [0.5, 1.0, 2.0, 4.0, 8.0] {
             let view = LodView { max_screen_error_px: budget, ..LodView::default() };
-            let chain = terrain_lod_chain(&hf, &errors, None, &view).unwrap();
+            let chain = terrain_lod_chain(&hf, &errors, None, DEFAULT_MAX_VERTICES, &view).unwrap();
             let d: Vec<f64> = chain.iter().map(|l| l.switch_distance_m).collect();
             assert_eq!(d[0], 0.0);
             assert!(d.windows(2).all(|w| w[1] > w[0]), "budget {budget}: {d:?}");
@@ -295,10 +298,13 @@ mod tests {
         assert_eq!(check_max_errors(&[0.0, 0.5, 4.0]), Ok(()));
         let hf = crate::synth::fractal(9, 9, 1.0, 10.0, 0.5, 1);
         let bad_view = LodView { fov_y_deg: 180.0, ..LodView::default() };
-        assert!(matches!(terrain_lod_chain(&hf, &[1.0], None, &bad_view), Err(LodError::InvalidView { .. })));
+        assert!(matches!(
+            terrain_lod_chain(&hf, &[1.0], None, DEFAULT_MAX_VERTICES, &bad_view),
+            Err(LodError::InvalidView { .. })
+        ));
         let tiny = Heightfield { width: 1, height: 1, heights: vec![0.0], cell_size_m: 1.0, exact: None };
         assert!(matches!(
-            terrain_lod_chain(&tiny, &[1.0], None, &LodView::default()),
+            terrain_lod_chain(&tiny, &[1.0], None, DEFAULT_MAX_VERTICES, &LodView::default()),
             Err(LodError::Terrain { level: 0, .. })
         ));
     }

@@ -79,6 +79,8 @@ pub struct TerrainSettings {
     pub mode: MeshMode,
     pub max_error_m: f64,
     pub max_triangles: Option<usize>,
+    /// The meshing work budget in vertices (`max_vertices`; [`crate::terrain::budget`]).
+    pub max_vertices: usize,
     pub grid_step: usize,
     pub chunk: Option<usize>,
     pub skirt_m: Option<f64>,

@@ -107,6 +107,7 @@ pub fn demo_preset() -> Preset {
             mode: MeshMode::Tin,
             max_error_m: 1.0,
             max_triangles: None,
+            max_vertices: crate::terrain::budget::DEFAULT_MAX_VERTICES,
             grid_step: 1,
             chunk: Some(128),
             skirt_m: Some(4.0),

@@ -184,7 +184,8 @@ pub fn run_terrain(
     let chain = if t.lods.is_empty() {
         Vec::new()
     } else {
-        terrain_lod_chain(&hf, &t.lods, t.max_triangles, &preset.lod).map_err(|e| input(e.to_string()))?
+        terrain_lod_chain(&hf, &t.lods, t.max_triangles, t.max_vertices, &preset.lod)
+            .map_err(|e| input(e.to_string()))?
     };
     let chain_s = t1.elapsed().as_secs_f64();
     let ready = chain
@@ -198,6 +199,7 @@ pub fn run_terrain(
         grid_step: t.grid_step,
         max_error_m: t.max_error_m,
         max_triangles: t.max_triangles,
+        max_vertices: t.max_vertices,
     };
     // the same path as `verdant terrain`: mesh (or the shared level), measure as stored, build
     let meshed =

@@ -59,8 +59,35 @@ pub enum TerrainError {
         step_m: f64,
         storage: &'static str,
     },
+    #[error("{}", budget_message(*.limit, *.over, *.max_error_m, *.grid))]
+    OverBudget { limit: usize, over: crate::terrain::budget::OverBudget, max_error_m: f64, grid: bool },
     #[error("internal error: the triangulation could not take sample (column {i}, row {j}); please report this with the heightmap")]
     Internal { i: usize, j: usize },
+}
+
+/// The words of [`TerrainError::OverBudget`]: what was over, the options that change it (by both
+/// names: the flag of `verdant terrain` and the key of a preset's `[terrain]`).
+fn budget_message(limit: usize, over: crate::terrain::budget::OverBudget, max_error_m: f64, grid: bool) -> String {
+    use crate::terrain::budget::OverBudget;
+    let raise = "or raise the budget (`--max-vertices N` for `verdant terrain`, `max_vertices = N` in a preset's \
+                 [terrain]) if this machine has the time and memory: about 5 s and 250 MB per million vertices";
+    match over {
+        OverBudget::Predicted { vertices } if grid => format!(
+            "the grid has {vertices} vertices, over the meshing budget of {limit}; take a larger grid step \
+             (`--grid-step` / `grid_step`), use a TIN, {raise}"
+        ),
+        OverBudget::Predicted { vertices } => format!(
+            "a mesh within {max_error_m} m needs at least about {vertices} vertices ({vertices} samples stand more \
+             than the bound above or below their neighbours' mean: noise, or a map whose heights are scaled too \
+             high), over the meshing budget of {limit}; check the heightmap's encoding and height scale, raise the \
+             bound (`--max-error` / `max_error`), {raise}"
+        ),
+        OverBudget::Reached { error_m } => format!(
+            "the mesh reached the meshing budget of {limit} vertices with its error still {error_m} m, over the \
+             bound of {max_error_m} m; raise the bound (`--max-error` / `max_error`), cap the triangles for a \
+             best-effort mesh (`--max-triangles` / `max_triangles`), {raise}"
+        ),
+    }
 }
 
 /// Checks what every mesher relies on: at least 2×2 samples, a supported size, one finite height per

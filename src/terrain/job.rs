@@ -53,6 +53,8 @@ pub struct TerrainJob {
     pub grid_step: usize,
     pub max_error_m: f64,
     pub max_triangles: Option<usize>,
+    /// The meshing work budget in vertices ([`crate::terrain::budget`]).
+    pub max_vertices: usize,
     pub build: BuildOptions,
     /// Store positions as 16-bit integers (KHR_mesh_quantization); the bound holds as quantized.
     pub quantize: bool,
@@ -169,20 +171,30 @@ pub fn load_source(job: &TerrainJob) -> Result<Decoded, JobError> {
     })
 }
 
-/// Meshes `hf` by `mode`: a grid of every `grid_step` samples, or a TIN within `max_error_m`
-/// (stopping at `max_triangles`). Returns the mesh and whether the triangle limit stopped it.
+/// Meshes `hf` as `settings` ask, at `max_error_m` (a grid of every `grid_step` samples, or a TIN
+/// within the bound, stopping at `max_triangles`), within the vertex budget. Returns the mesh and
+/// whether the triangle limit stopped it.
 pub fn mesh_samples(
     hf: &Heightfield,
-    mode: MeshMode,
-    grid_step: usize,
+    settings: &MeshSettings,
     max_error_m: f64,
-    max_triangles: Option<usize>,
     storage: &Storage,
 ) -> Result<(SampleMesh, bool), TerrainError> {
-    match mode {
-        MeshMode::Grid => Ok((grid(hf, grid_step)?, false)),
+    match settings.mode {
+        MeshMode::Grid => {
+            crate::terrain::budget::check_grid(hf.width, hf.height, settings.grid_step, settings.max_vertices)
+                .map_err(|over| TerrainError::OverBudget {
+                    limit: settings.max_vertices,
+                    over,
+                    max_error_m,
+                    grid: true,
+                })?;
+            Ok((grid(hf, settings.grid_step)?, false))
+        }
         MeshMode::Tin => {
-            let r = tin_stored(hf, &TinOptions { max_error_m, max_triangles }, storage)?;
+            let opts =
+                TinOptions { max_error_m, max_triangles: settings.max_triangles, max_vertices: settings.max_vertices };
+            let r = tin_stored(hf, &opts, storage)?;
             Ok((r.mesh, r.hit_triangle_limit))
         }
     }
@@ -195,7 +207,7 @@ pub fn mesh_heightfield(
     max_error_m: f64,
     storage: &Storage,
 ) -> Result<(SampleMesh, bool), JobError> {
-    mesh_samples(hf, job.mode, job.grid_step, max_error_m, job.max_triangles, storage)
+    mesh_samples(hf, &job.mesh_settings(), max_error_m, storage)
         .map_err(|error| JobError::Terrain { source_label: job.source.label(), error })
 }
 
@@ -246,6 +258,7 @@ pub struct MeshSettings {
     pub grid_step: usize,
     pub max_error_m: f64,
     pub max_triangles: Option<usize>,
+    pub max_vertices: usize,
 }
 
 /// A terrain meshed, measured as stored and built into its textured scene.
@@ -280,15 +293,8 @@ pub fn mesh_and_build(
         Some(ready) => ready,
         None => {
             let t = Instant::now();
-            let (mesh, hit) = mesh_samples(
-                hf,
-                settings.mode,
-                settings.grid_step,
-                settings.max_error_m,
-                settings.max_triangles,
-                storage,
-            )
-            .map_err(|error| JobError::Terrain { source_label: label.to_string(), error })?;
+            let (mesh, hit) = mesh_samples(hf, settings, settings.max_error_m, storage)
+                .map_err(|error| JobError::Terrain { source_label: label.to_string(), error })?;
             t_mesh = t.elapsed().as_secs_f64();
             let t = Instant::now();
             let stats = measure_stored(hf, &mesh, storage);
@@ -354,6 +360,7 @@ impl TerrainJob {
             grid_step: self.grid_step,
             max_error_m: self.max_error_m,
             max_triangles: self.max_triangles,
+            max_vertices: self.max_vertices,
         }
     }
 }

@@ -1,6 +1,7 @@
 //! Terrain: heightfield → triangulation of its samples (grid or greedy TIN) → measured error →
 //! engine-ready meshes (normals, UVs, chunks, skirts, base).
 
+pub mod budget;
 pub mod build;
 pub mod chunks;
 pub mod error;

@@ -19,6 +19,7 @@ use spade::handles::FixedVertexHandle;
 use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use crate::heightfield::Heightfield;
+use crate::terrain::budget::{self, OverBudget, DEFAULT_MAX_VERTICES};
 use crate::terrain::error::{check_heightfield, measure_stored, TerrainError};
 use crate::terrain::plane::plane_height;
 use crate::terrain::sample_mesh::SampleMesh;
@@ -32,11 +33,15 @@ pub struct TinOptions {
     /// Stop refining before the triangle count would exceed this (≥ 2); the error then reached is
     /// reported in [`TinResult::max_error_m`].
     pub max_triangles: Option<usize>,
+    /// The work budget: refuse a map predicted to need more vertices than this before meshing, and
+    /// stop with an error when the mesh reaches it with the error still over the bound
+    /// ([`crate::terrain::budget`]).
+    pub max_vertices: usize,
 }
 
 impl Default for TinOptions {
     fn default() -> Self {
-        TinOptions { max_error_m: 1.0, max_triangles: None }
+        TinOptions { max_error_m: 1.0, max_triangles: None, max_vertices: DEFAULT_MAX_VERTICES }
     }
 }
 
@@ -934,6 +939,9 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
 /// bound holds for the surface as stored.
 pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Result<TinResult, TerrainError> {
     check_input(hf, opts)?;
+    let over_budget =
+        |over| TerrainError::OverBudget { limit: opts.max_vertices, over, max_error_m: opts.max_error_m, grid: false };
+    budget::check_tin(hf, opts.max_error_m, opts.max_vertices).map_err(over_budget)?;
     let (w, h) = (hf.width, hf.height);
     let (xm, ym) = ((w - 1) as u32, (h - 1) as u32);
     let corner = |v: u32, dt: &GreedyDelaunay| {
@@ -975,6 +983,9 @@ pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Res
                 hit_triangle_limit = true;
                 break;
             }
+        }
+        if dt.coords.len() >= opts.max_vertices {
+            return Err(over_budget(OverBudget::Reached { error_m: top.err }));
         }
         prefetch_around(hf, ci as usize, cj as usize);
         dt.insert(top.face, [ci, cj]);
@@ -1115,7 +1126,7 @@ pub(crate) mod tests {
     /// Builds a TIN and checks everything the contract promises.
     fn checked(hf: &Heightfield, max_error_m: f64, max_triangles: Option<usize>) -> TinResult {
         let before = hf.clone();
-        let r = tin(hf, &TinOptions { max_error_m, max_triangles }).expect("tin");
+        let r = tin(hf, &TinOptions { max_error_m, max_triangles, ..TinOptions::default() }).expect("tin");
         assert_eq!(*hf, before, "heights modified");
         check_mesh(hf, &r.mesh);
         let s = measure(hf, &r.mesh);
@@ -1213,17 +1224,43 @@ pub(crate) mod tests {
         let hf = map(4, 4, |_, _| 0.0);
         for bad in [-1.0, f64::NAN, f64::INFINITY] {
             assert!(matches!(
-                tin(&hf, &TinOptions { max_error_m: bad, max_triangles: None }),
+                tin(&hf, &TinOptions { max_error_m: bad, max_triangles: None, ..TinOptions::default() }),
                 Err(TerrainError::InvalidMaxError { .. })
             ));
         }
         assert_eq!(
-            tin(&hf, &TinOptions { max_error_m: 1.0, max_triangles: Some(1) }),
+            tin(&hf, &TinOptions { max_error_m: 1.0, max_triangles: Some(1), ..TinOptions::default() }),
             Err(TerrainError::TriangleLimitTooSmall { limit: 1 })
         );
         let mut nan = hf.clone();
         nan.heights[6] = f32::NAN;
         assert_eq!(tin(&nan, &TinOptions::default()), Err(TerrainError::NonFiniteHeight { i: 2, j: 1 }));
+    }
+
+    /// The work budget: a map whose estimate is within it but whose mesh is not stops at the budget
+    /// with the error it had reached (over the bound); the same map within a budget it fits meshes as
+    /// before; a triangle cap below the budget stops first (best effort, not an error).
+    #[test]
+    fn the_vertex_budget_stops_the_mesher_when_the_estimate_passed() {
+        let hf = crate::synth::fractal(129, 129, 1.0, 200.0, 0.6, 7);
+        let full = tin(&hf, &TinOptions { max_error_m: 4.0, ..TinOptions::default() }).unwrap();
+        let needed = full.mesh.vertices.len();
+        let estimate = budget::sharp_samples(&hf, 4.0);
+        assert!(estimate < needed * 3 / 4, "the test needs a map the estimate underrates: {estimate} vs {needed}");
+        let limit = (estimate + needed) / 2;
+        let opts = TinOptions { max_error_m: 4.0, max_vertices: limit, ..TinOptions::default() };
+        match tin(&hf, &opts) {
+            Err(TerrainError::OverBudget { limit: l, over: OverBudget::Reached { error_m }, .. }) => {
+                assert_eq!(l, limit);
+                assert!(error_m > 4.0, "stopped over the bound: {error_m}");
+            }
+            other => panic!("expected the budget to stop the mesher, got {other:?}"),
+        }
+        let roomy = TinOptions { max_error_m: 4.0, max_vertices: needed, ..TinOptions::default() };
+        assert_eq!(tin(&hf, &roomy).unwrap(), full, "a budget the mesh fits changes nothing");
+        let capped = TinOptions { max_triangles: Some(limit), ..opts };
+        let best_effort = tin(&hf, &capped).unwrap();
+        assert!(best_effort.hit_triangle_limit && best_effort.mesh.vertices.len() < limit);
     }
 
     #[test]
@@ -1304,7 +1341,8 @@ pub(crate) mod tests {
             (map(33, 33, |i, j| if (i, j) == (0, 10) { -50.0 } else { 5.0 }), 0.5),
         ] {
             let ours = checked(&hf, e, None);
-            let theirs = tin_spade(&hf, &TinOptions { max_error_m: e, max_triangles: None }).unwrap();
+            let theirs =
+                tin_spade(&hf, &TinOptions { max_error_m: e, max_triangles: None, ..TinOptions::default() }).unwrap();
             check_mesh(&hf, &theirs.mesh);
             let s = measure(&hf, &theirs.mesh);
             assert_eq!(s.max_error_m, theirs.max_error_m);
@@ -1312,8 +1350,11 @@ pub(crate) mod tests {
             let (a, b) = (ours.mesh.triangles.len() as f64, theirs.mesh.triangles.len() as f64);
             assert!((a - b).abs() <= 0.05 * b + 4.0, "{a} vs {b}");
         }
-        let limited =
-            tin_spade(&noise(20, 20, 1, 100, 1.0), &TinOptions { max_error_m: 0.0, max_triangles: Some(50) }).unwrap();
+        let limited = tin_spade(
+            &noise(20, 20, 1, 100, 1.0),
+            &TinOptions { max_error_m: 0.0, max_triangles: Some(50), ..TinOptions::default() },
+        )
+        .unwrap();
         assert!(limited.hit_triangle_limit && limited.mesh.triangles.len() <= 50);
     }
 
@@ -1327,7 +1368,7 @@ pub(crate) mod tests {
     fn deterministic() {
         let hf = crate::synth::fractal(129, 97, 1.0, 300.0, 0.55, 5);
         let a = checked(&hf, 1.0, None);
-        let b = tin(&hf, &TinOptions { max_error_m: 1.0, max_triangles: None }).unwrap();
+        let b = tin(&hf, &TinOptions { max_error_m: 1.0, max_triangles: None, ..TinOptions::default() }).unwrap();
         assert_eq!(a, b);
         // Looser bounds give fewer triangles.
         let c = checked(&hf, 10.0, None);
@@ -1368,7 +1409,7 @@ pub(crate) mod tests {
             let hf = Heightfield::from_f64(w, h, &heights, cell);
             // a bound of some f32 steps at these heights (~9.8e-4 m)
             let bound = steps * 0.5 * 9.765625e-4;
-            match tin(&hf, &TinOptions { max_error_m: bound, max_triangles: None }) {
+            match tin(&hf, &TinOptions { max_error_m: bound, max_triangles: None, ..TinOptions::default() }) {
                 Ok(r) => {
                     check_mesh(&hf, &r.mesh);
                     let s = measure(&hf, &r.mesh);
@@ -1406,7 +1447,7 @@ pub(crate) mod tests {
             let grid = crate::export::grid::PositionGrid::terrain(&hf, hf.height_range().unwrap().0).unwrap();
             let storage = Storage::quantized(&hf, grid);
             let bound = steps * grid.step[1] as f64;
-            match tin_stored(&hf, &TinOptions { max_error_m: bound, max_triangles: None }, &storage) {
+            match tin_stored(&hf, &TinOptions { max_error_m: bound, max_triangles: None, ..TinOptions::default() }, &storage) {
                 Ok(r) => {
                     check_mesh(&hf, &r.mesh);
                     let s = measure_stored(&hf, &r.mesh, &storage);

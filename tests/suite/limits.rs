@@ -283,3 +283,38 @@ fn a_full_disk_leaves_the_previous_chain_whole() {
         fs::read_dir(&disk).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().to_string()).collect();
     assert!(names.iter().all(|n| !n.starts_with('.')), "temporaries left on the full disk: {names:?}");
 }
+
+#[test]
+fn meshing_work_is_budgeted_before_and_while_meshing() {
+    // issue 21 item 2: a small file whose every sample must be a vertex (a checkerboard) is refused
+    // before meshing, naming the flag on the command line and the key in a preset
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let board: Vec<u8> =
+        (0..129 * 129u32).flat_map(|k| if (k % 129 + k / 129) % 2 == 0 { 0u16 } else { 65535 }.to_le_bytes()).collect();
+    fs::write(d.join("c.r16"), board).unwrap();
+    let terrain = |extra: &[&str]| {
+        let mut args = vec!["terrain", "c.r16", "--size", "129x129", "-o", "c.glb", "--max-vertices", "5000"];
+        args.extend_from_slice(extra);
+        verdant_in(d, &args)
+    };
+    let o = terrain(&[]);
+    refused(&o, 2, "c.r16: a mesh within 1 m needs at least about 16129 vertices");
+    assert!(text(&o).contains("meshing budget of 5000") && text(&o).contains("--max-vertices"), "{}", text(&o));
+    let o = terrain(&["--mode", "grid"]);
+    refused(&o, 2, "the grid has 16641 vertices, over the meshing budget of 5000");
+    ok(&terrain(&["--mode", "grid", "--grid-step", "2"])); // 65² = 4225 vertices
+                                                           // at a bound above the board's step nothing is sharp: two triangles
+    ok(&terrain(&["--max-error", "100"]));
+    // a preset: the key by its name
+    let p = write(
+        d,
+        "p.toml",
+        "[scene]\nname = \"x\"\n[terrain]\nheightmap = \"c.r16\"\nsize = [129, 129]\nmax_vertices = 5000\n",
+    );
+    let o = verdant_in(d, &["build", p.to_str().unwrap(), "--out", "out"]);
+    let t = text(&o);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    assert!(t.contains("needs at least about 16129 vertices") && t.contains("max_vertices = N"), "{t}");
+    assert!(!t.contains("panicked"), "{t}");
+}

@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use verdant::lod::{lod_screen_coverage, msft_screen_coverage, terrain_lod_chain, LodError, LodView};
 use verdant::scene::preview::{preview_view, terrain_preview, write_png};
+use verdant::terrain::budget::DEFAULT_MAX_VERTICES;
 use verdant::terrain::build::{build_scene, BuildOptions};
 use verdant::terrain::error::measure;
 use verdant::terrain::grid::grid;
@@ -17,7 +18,7 @@ fn lod_chain_is_monotone_bounded_and_switches_by_measured_error() {
     let hf = verdant::synth::demo();
     let view = LodView::default();
     let requested = [0.5, 2.0, 8.0, 32.0];
-    let levels = terrain_lod_chain(&hf, &requested, None, &view).unwrap();
+    let levels = terrain_lod_chain(&hf, &requested, None, DEFAULT_MAX_VERTICES, &view).unwrap();
     assert_eq!(levels.len(), 4);
     for (k, l) in levels.iter().enumerate() {
         assert_eq!(l.level, k);
@@ -28,7 +29,12 @@ fn lod_chain_is_monotone_bounded_and_switches_by_measured_error() {
         // the analyzer's figure, not the mesher's
         assert_eq!(l.stats, measure(&hf, &l.mesh));
         // the same TIN the terrain job would build for that bound
-        assert_eq!(l.mesh, tin(&hf, &TinOptions { max_error_m: requested[k], max_triangles: None }).unwrap().mesh);
+        assert_eq!(
+            l.mesh,
+            tin(&hf, &TinOptions { max_error_m: requested[k], max_triangles: None, ..TinOptions::default() })
+                .unwrap()
+                .mesh
+        );
         assert!(l.seconds >= 0.0);
     }
     assert_eq!(levels[0].switch_distance_m, 0.0);
@@ -55,7 +61,7 @@ fn lod_chain_is_monotone_bounded_and_switches_by_measured_error() {
     assert_eq!(cov[0] as f64, lod_screen_coverage(radius, levels[1].switch_distance_m, &view) as f32 as f64);
 
     // deterministic
-    let again = terrain_lod_chain(&hf, &requested, None, &view).unwrap();
+    let again = terrain_lod_chain(&hf, &requested, None, DEFAULT_MAX_VERTICES, &view).unwrap();
     for (a, b) in levels.iter().zip(&again) {
         assert_eq!((&a.mesh, a.stats, a.switch_distance_m), (&b.mesh, b.stats, b.switch_distance_m));
     }
@@ -65,11 +71,11 @@ fn lod_chain_is_monotone_bounded_and_switches_by_measured_error() {
 fn lod_chain_refuses_non_increasing_errors_and_honours_the_triangle_limit() {
     let hf = verdant::synth::fractal(65, 65, 1.0, 50.0, 0.5, 3);
     let view = LodView::default();
-    let err = terrain_lod_chain(&hf, &[1.0, 4.0, 4.0], None, &view).unwrap_err();
+    let err = terrain_lod_chain(&hf, &[1.0, 4.0, 4.0], None, DEFAULT_MAX_VERTICES, &view).unwrap_err();
     assert!(matches!(err, LodError::NotIncreasing { index: 2, .. }), "{err}");
     assert!(err.to_string().contains("strictly increasing"));
 
-    let levels = terrain_lod_chain(&hf, &[0.0, 0.5, 2.0], Some(200), &view).unwrap();
+    let levels = terrain_lod_chain(&hf, &[0.0, 0.5, 2.0], Some(200), DEFAULT_MAX_VERTICES, &view).unwrap();
     assert!(levels.iter().all(|l| l.mesh.triangles.len() <= 200));
     assert!(levels[0].hit_triangle_limit);
     for pair in levels.windows(2) {

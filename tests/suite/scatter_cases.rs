@@ -21,7 +21,7 @@ struct Terrain {
 /// An fBm heightfield (`size`² samples, 1 m apart), its greedy TIN at `max_error_m`, and the index.
 fn terrain(size: usize, relief_m: f64, max_error_m: f64) -> Terrain {
     let hf = verdant::synth::fbm(size, 1.0, relief_m, 0x5ca7);
-    let mesh = tin(&hf, &TinOptions { max_error_m, max_triangles: None }).unwrap().mesh;
+    let mesh = tin(&hf, &TinOptions { max_error_m, max_triangles: None, ..TinOptions::default() }).unwrap().mesh;
     let positions: Vec<[f32; 3]> = mesh.vertices.iter().map(|&[i, j]| hf.position(i as usize, j as usize)).collect();
     let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
     let surface = SurfaceIndex::new(&positions, &indices);

@@ -25,6 +25,7 @@ fn job_for(path: &Path, max_error_m: f64) -> TerrainJob {
         grid_step: 1,
         max_error_m,
         max_triangles: None,
+        max_vertices: verdant::terrain::budget::DEFAULT_MAX_VERTICES,
         build: BuildOptions { chunk_samples: None, skirt_depth_m: None, base_depth_m: None, name: "t".into() },
         quantize: false,
         meshopt: false,

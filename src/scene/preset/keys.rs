@@ -20,6 +20,7 @@ pub const TERRAIN_KEYS: &[&str] = &[
     "mode",
     "max_error",
     "max_triangles",
+    "max_vertices",
     "grid_step",
     "chunk",
     "skirt",

@@ -49,6 +49,7 @@ mode = "tin"
 max_error = 1.0              # tin: largest vertical error allowed at any sample, metres
 # max_triangles = 200000     # tin: stop early at this many triangles (achieved error reported)
 # grid_step = 1              # grid: keep every N-th sample
+# max_vertices = 2097152     # work budget: refuse maps that need more vertices (before meshing)
 
 # Split into chunk×chunk-sample tiles (crack-free), one mesh each.
 chunk = 128

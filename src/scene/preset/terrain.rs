@@ -78,6 +78,9 @@ pub(super) fn parse_terrain(
     let max_error_m = t.number("max_error", "max_error = 1.0", non_negative)?.map_or(1.0, |(x, _)| x);
     let max_triangles =
         t.integer("max_triangles", 2..=u32::MAX as u64, "max_triangles = 200000")?.map(|(n, _)| n as usize);
+    let max_vertices = t
+        .integer("max_vertices", 4..=u32::MAX as u64, "max_vertices = 4000000")?
+        .map_or(crate::terrain::budget::DEFAULT_MAX_VERTICES, |(n, _)| n as usize);
     let grid_step = t.integer("grid_step", 1..=1 << 20, "grid_step = 2")?.map_or(1, |(n, _)| n as usize);
     let chunk = t.integer("chunk", 2..=1 << 20, "chunk = 256")?.map(|(n, _)| n as usize);
     let skirt_m = t.number("skirt", "skirt = 10.0", positive)?.map(|(x, _)| x);
@@ -110,7 +113,18 @@ pub(super) fn parse_terrain(
         }
     }
 
-    Ok(TerrainSettings { source, mode, max_error_m, max_triangles, grid_step, chunk, skirt_m, base_m, lods })
+    Ok(TerrainSettings {
+        source,
+        mode,
+        max_error_m,
+        max_triangles,
+        max_vertices,
+        grid_step,
+        chunk,
+        skirt_m,
+        base_m,
+        lods,
+    })
 }
 
 pub(super) fn parse_procedural(
