@@ -30,6 +30,7 @@ pub mod lod;
 pub mod lsystem;
 pub mod math;
 pub mod mesh;
+pub mod meshopt_guard;
 pub mod plants;
 pub mod progress;
 pub mod random;

@@ -279,13 +279,15 @@ impl Primitive {
 
     /// Reorders triangles and vertices for the GPU's post-transform cache and then for vertex fetch
     /// (meshoptimizer). Triangles keep their winding; the set of triangles is unchanged.
-    pub fn optimize_for_gpu(&mut self) {
+    /// Refused (the primitive unchanged) when meshoptimizer could not take it
+    /// ([`crate::meshopt_guard`]).
+    pub fn optimize_for_gpu(&mut self) -> Result<(), crate::meshopt_guard::FfiError> {
         // points have no triangles to reorder (and every vertex is drawn)
         if self.is_points() || self.indices.is_empty() || self.positions.is_empty() {
-            return;
+            return Ok(());
         }
         let vertex_count = self.positions.len();
-        let cache = meshopt::optimize_vertex_cache(&self.indices, vertex_count);
+        let cache = crate::meshopt_guard::optimize_vertex_cache(&self.indices, vertex_count)?;
         let mut indices = cache;
         // fetch order: vertices renumbered in the order the triangles first use them (what
         // meshopt's vertex-fetch remap does), vertices no triangle uses dropped
@@ -320,6 +322,7 @@ impl Primitive {
             apply(&mut c.values, &remap, new_count);
         }
         self.indices = indices;
+        Ok(())
     }
 }
 
@@ -394,7 +397,7 @@ mod tests {
             v
         };
         let before = tri_set(&p);
-        p.optimize_for_gpu();
+        p.optimize_for_gpu().unwrap();
         assert_eq!(p.positions.len(), 9, "unused vertex dropped");
         assert_eq!(p.uvs.len(), 9);
         assert_eq!(tri_set(&p), before);
@@ -426,7 +429,7 @@ mod tests {
             values: positions.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect(),
         }];
         let mut p = Primitive { positions, custom, indices: vec![0, 3, 2, 2, 3, 4], ..Primitive::default() };
-        p.optimize_for_gpu();
+        p.optimize_for_gpu().unwrap();
         assert_eq!(p.positions.len(), 4);
         assert!(!p.positions.contains(&[9.0, 9.0, 9.0]));
         assert_eq!(p.custom[0].values.len(), 4);

@@ -201,7 +201,7 @@ impl Bin {
 fn compress_views(root: &mut json::Root, bin: &mut Bin, bin_uri: Option<&str>) -> Result<Vec<u8>, SceneProblem> {
     let data = std::mem::take(&mut bin.groups[0]);
     let (mut out, mut fallback_len) = (Vec::with_capacity(data.len() / 2), 0usize);
-    let fail = |e: meshopt::Error| SceneProblem(format!("meshoptimizer could not encode a buffer: {e}"));
+    let fail = |e: crate::meshopt_guard::FfiError| SceneProblem(format!("could not encode a buffer: {e}"));
     for (view, codec) in bin.views.iter_mut().zip(&bin.codecs) {
         let offset = view.byte_offset.map_or(0, |o| o.0 as usize);
         let bytes = &data[offset..offset + view.byte_length.0 as usize];
@@ -222,7 +222,12 @@ fn compress_views(root: &mut json::Root, bin: &mut Bin, bin_uri: Option<&str>) -
                     _ => bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
                 };
                 let vertex_count = indices.iter().max().map_or(0, |&m| m as usize + 1);
-                (meshopt::encode_index_buffer(&indices, vertex_count).map_err(fail)?, "TRIANGLES", size, count)
+                (
+                    crate::meshopt_guard::encode_index_buffer(&indices, vertex_count).map_err(fail)?,
+                    "TRIANGLES",
+                    size,
+                    count,
+                )
             }
         };
         let mut ext = Map::new();
@@ -262,17 +267,20 @@ fn compress_views(root: &mut json::Root, bin: &mut Bin, bin_uri: Option<&str>) -
 
 /// meshoptimizer's vertex codec (version 0, the one EXT_meshopt_compression reads) over elements
 /// of `stride` bytes.
-fn encode_vertices(bytes: &[u8], stride: usize) -> Result<Vec<u8>, meshopt::Error> {
-    fn typed<const N: usize>(bytes: &[u8]) -> Result<Vec<u8>, meshopt::Error> {
+fn encode_vertices(bytes: &[u8], stride: usize) -> Result<Vec<u8>, crate::meshopt_guard::FfiError> {
+    fn typed<const N: usize>(bytes: &[u8]) -> Result<Vec<u8>, crate::meshopt_guard::FfiError> {
         let elements: Vec<[u8; N]> = bytes.chunks_exact(N).map(|c| c.try_into().unwrap_or([0; N])).collect();
-        meshopt::encode_vertex_buffer_level(&elements, 2, Some(0))
+        crate::meshopt_guard::encode_vertex_buffer(&elements)
     }
     match stride {
         4 => typed::<4>(bytes),
         8 => typed::<8>(bytes),
         12 => typed::<12>(bytes),
         16 => typed::<16>(bytes),
-        _ => Err(meshopt::Error::Memory(format!("no vertex codec for {stride}-byte elements").into())),
+        _ => Err(crate::meshopt_guard::FfiError {
+            call: "vertex encoder",
+            problem: format!("no vertex codec for {stride}-byte elements"),
+        }),
     }
 }
 

@@ -119,7 +119,7 @@ pub fn marker(kind: SpeciesKind, name: &str, color: [f32; 4]) -> (Mesh, Vec<Mate
         .enumerate()
         .map(|(k, mut p)| {
             p.material = Some(k);
-            p.optimize_for_gpu();
+            p.optimize_for_gpu().expect("a marker's 30 triangles fit meshoptimizer");
             p
         })
         .collect();

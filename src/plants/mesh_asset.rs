@@ -552,7 +552,7 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAss
                 });
             }
         }
-        p.optimize_for_gpu();
+        p.optimize_for_gpu().map_err(|e| MeshAssetError::Read { path: path.to_path_buf(), problem: e.to_string() })?;
         mesh.primitives.push(p);
     }
     if mesh.primitives.is_empty() {

@@ -48,6 +48,8 @@ impl Default for BuildOptions {
 /// contract of [`SampleMesh`] (the latter points at a mesher bug rather than a user mistake).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum BuildError {
+    #[error(transparent)]
+    Meshopt(#[from] crate::meshopt_guard::FfiError),
     #[error("the terrain name is empty: give the output a name (it names the scene, nodes and meshes)")]
     EmptyName,
     #[error("chunk size {0} is too small: a chunk must span at least 2 samples; pass --chunk 2 or more (64–256 is typical), or leave it out for one mesh")]
@@ -392,7 +394,7 @@ fn finish(name: String, mut primitives: Vec<Primitive>) -> Result<Mesh, BuildErr
         if prim.positions.len() >= u32::MAX as usize {
             return Err(BuildError::TooManyVertices(prim.positions.len()));
         }
-        prim.optimize_for_gpu();
+        prim.optimize_for_gpu()?;
     }
     Ok(Mesh { name, primitives, extras: None })
 }

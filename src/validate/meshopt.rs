@@ -6,6 +6,7 @@ use std::path::Path;
 use serde_json::Value;
 
 use crate::export::gltf::EXT_MESHOPT;
+use crate::meshopt_guard::{self, FfiError};
 
 /// The buffers of a file using EXT_meshopt_compression: the GLB chunk or `.bin` files as stored,
 /// each fallback buffer (no data of its own) filled by decoding every compressed bufferView into
@@ -96,18 +97,18 @@ pub(super) fn meshopt_buffers(
             .and_then(|b| b.get(offset..offset.checked_add(length)?))
             .ok_or(format!("{at}: bytes {offset}..+{length} are not in buffer {source}"))?
             .to_vec();
-        let fail = |e: meshopt::Error| format!("{at}: cannot decode: {e}");
+        let fail = |e: FfiError| format!("{at}: cannot decode: {e}");
         let decoded: Vec<u8> = match (mode, stride) {
             (Some("ATTRIBUTES"), 4) => decode_elements::<4>(&encoded, count).map_err(fail)?,
             (Some("ATTRIBUTES"), 8) => decode_elements::<8>(&encoded, count).map_err(fail)?,
             (Some("ATTRIBUTES"), 12) => decode_elements::<12>(&encoded, count).map_err(fail)?,
             (Some("ATTRIBUTES"), 16) => decode_elements::<16>(&encoded, count).map_err(fail)?,
-            (Some("TRIANGLES"), 2) => meshopt::decode_index_buffer::<u16>(&encoded, count)
+            (Some("TRIANGLES"), 2) => meshopt_guard::decode_index_buffer::<u16>(&encoded, count)
                 .map_err(fail)?
                 .iter()
                 .flat_map(|i| i.to_le_bytes())
                 .collect(),
-            (Some("TRIANGLES"), 4) => meshopt::decode_index_buffer::<u32>(&encoded, count)
+            (Some("TRIANGLES"), 4) => meshopt_guard::decode_index_buffer::<u32>(&encoded, count)
                 .map_err(fail)?
                 .iter()
                 .flat_map(|i| i.to_le_bytes())
@@ -130,12 +131,12 @@ pub(super) fn meshopt_buffers(
 
 /// Decodes `count` elements of N = 4·K bytes (as K native words, so the bytes come back as they
 /// were encoded).
-fn decode_elements<const N: usize>(encoded: &[u8], count: usize) -> Result<Vec<u8>, meshopt::Error> {
-    fn words<const K: usize>(encoded: &[u8], count: usize) -> Result<Vec<u8>, meshopt::Error>
+fn decode_elements<const N: usize>(encoded: &[u8], count: usize) -> Result<Vec<u8>, FfiError> {
+    fn words<const K: usize>(encoded: &[u8], count: usize) -> Result<Vec<u8>, FfiError>
     where
         [u32; K]: Default,
     {
-        Ok(meshopt::decode_vertex_buffer::<[u32; K]>(encoded, count)?
+        Ok(meshopt_guard::decode_vertex_buffer::<[u32; K]>(encoded, count)?
             .into_iter()
             .flatten()
             .flat_map(u32::to_ne_bytes)

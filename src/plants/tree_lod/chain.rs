@@ -121,11 +121,16 @@ pub fn build_tree_lods_with(
     } else {
         None
     };
-    let lod1 = half.as_ref().map(|half| LevelParts {
-        mesh: simplify_below(half.mesh(), SIMPLIFY_RATIO, lod0_triangles),
-        materials: half.scene.materials.clone(),
-        textures: half.scene.textures.clone(),
-    });
+    let lod1 = half
+        .as_ref()
+        .map(|half| -> Result<LevelParts, TreeLodError> {
+            Ok(LevelParts {
+                mesh: simplify_below(half.mesh(), SIMPLIFY_RATIO, lod0_triangles)?,
+                materials: half.scene.materials.clone(),
+                textures: half.scene.textures.clone(),
+            })
+        })
+        .transpose()?;
     let max_level = lod0.stats.max_branch_level;
     let coarse = match &half {
         Some(half) if max_level > 0 && wanted > 2 => CoarseLevel::Cards {
@@ -193,11 +198,15 @@ pub fn build_mesh_lods_with(
     if mesh.triangle_count() == 0 {
         return Err(TreeLodError::Options(format!("{name}: the mesh has no triangles")));
     }
-    let lod1 = (options.lods > 1).then(|| LevelParts {
-        mesh: simplify_below(mesh, SIMPLIFY_RATIO, mesh.triangle_count()),
-        materials: source.scene.materials.clone(),
-        textures: source.scene.textures.clone(),
-    });
+    let lod1 = if options.lods > 1 {
+        Some(LevelParts {
+            mesh: simplify_below(mesh, SIMPLIFY_RATIO, mesh.triangle_count())?,
+            materials: source.scene.materials.clone(),
+            textures: source.scene.textures.clone(),
+        })
+    } else {
+        None
+    };
     let input = ChainInput {
         name: name.to_string(),
         seed: mix64(source.stats.triangles as u64),
@@ -382,10 +391,10 @@ fn textured_levels(
             }
             let below = lod1_triangles.saturating_sub(cards.triangle_count());
             let mut ratio = SIMPLIFY_RATIO;
-            let mut mesh = simplify_below(&kept.mesh, ratio, below);
+            let mut mesh = simplify_below(&kept.mesh, ratio, below)?;
             while mesh.triangle_count() >= below && ratio > 0.01 {
                 ratio /= 2.0;
-                mesh = simplify_below(&kept.mesh, ratio, below);
+                mesh = simplify_below(&kept.mesh, ratio, below)?;
             }
             let mut materials = kept.materials.clone();
             let mut textures = kept.textures.clone();
@@ -404,10 +413,10 @@ fn textured_levels(
         CoarseLevel::Sloppy => {
             let lod0_mesh = &levels[0].scene.meshes[0];
             let mut ratio = SLOPPY_RATIO;
-            let mut mesh = simplify_sloppy(lod0_mesh, ratio);
+            let mut mesh = simplify_sloppy(lod0_mesh, ratio)?;
             while mesh.triangle_count() >= lod1_triangles && ratio > 1e-4 {
                 ratio /= 2.0;
-                mesh = simplify_sloppy(lod0_mesh, ratio);
+                mesh = simplify_sloppy(lod0_mesh, ratio)?;
             }
             if mesh.primitives.is_empty() {
                 // nothing left to decimate: LoD1's mesh, left out below as saving nothing

@@ -3,6 +3,7 @@
 //! branch level (what LoD2's cards stand for).
 
 use crate::mesh::{CustomAttribute, Mesh, Primitive};
+use crate::meshopt_guard::{self, FfiError};
 use crate::plants::tree::{is_flat, TreeMesh};
 
 /// LoD1 and LoD2 keep about this fraction of their input's triangles...
@@ -55,7 +56,7 @@ pub(super) fn subset(p: &Primitive, keep: impl Fn(usize) -> bool) -> Primitive {
 /// meshoptimizer's edge-collapse simplification of every primitive to about `ratio` of its
 /// triangles (never past `max_error` of the extent), zero-area results dropped, then reordered for
 /// the vertex cache and fetch.
-fn simplify(mesh: &Mesh, ratio: f64, max_error: f32) -> Mesh {
+fn simplify(mesh: &Mesh, ratio: f64, max_error: f32) -> Result<Mesh, FfiError> {
     let mut out = Mesh { name: mesh.name.clone(), primitives: Vec::new(), extras: None };
     for p in &mesh.primitives {
         // point leaves stay as they are (a point is already as cheap as it gets)
@@ -63,33 +64,28 @@ fn simplify(mesh: &Mesh, ratio: f64, max_error: f32) -> Mesh {
             out.primitives.push(p.clone());
             continue;
         }
-        let bytes = meshopt::typed_to_bytes(&p.positions);
-        let Ok(adapter) = meshopt::VertexDataAdapter::new(bytes, 12, 0) else {
-            out.primitives.push(p.clone());
-            continue;
-        };
         let target = ((p.indices.len() as f64 * ratio) as usize / 3) * 3;
-        let indices = meshopt::simplify(&p.indices, &adapter, target, max_error, meshopt::SimplifyOptions::None, None);
-        if let Some(q) = simplified(p, &indices) {
+        let indices = meshopt_guard::simplify(&p.indices, &p.positions, target, max_error)?;
+        if let Some(q) = simplified(p, &indices)? {
             out.primitives.push(q);
         }
     }
-    out
+    Ok(out)
 }
 
 /// `p` with the triangles `indices` (those of zero area dropped), its unused vertices removed and
 /// reordered for the vertex cache and fetch; `None` when no triangle is left.
-fn simplified(p: &Primitive, indices: &[u32]) -> Option<Primitive> {
+fn simplified(p: &Primitive, indices: &[u32]) -> Result<Option<Primitive>, FfiError> {
     let kept: Vec<u32> =
         indices.chunks_exact(3).filter(|t| !is_flat(&p.positions, [t[0], t[1], t[2]])).flatten().copied().collect();
     if kept.is_empty() {
-        return None;
+        return Ok(None);
     }
     // compact first: Primitive::optimize_for_gpu assumes every vertex is used (meshopt's fetch
     // remap is as long as the used vertices, not all of them)
     let mut q = subset(&Primitive { indices: kept, ..p.clone() }, |_| true);
-    q.optimize_for_gpu();
-    Some(q)
+    q.optimize_for_gpu()?;
+    Ok(Some(q))
 }
 
 /// The triangles of branch levels above `max_kept` (what LoD2 drops), per primitive.
@@ -109,36 +105,34 @@ pub(super) fn finer_than(tree: &TreeMesh, max_kept: u32) -> Mesh {
 
 /// [`simplify`] with the smallest error bound of SIMPLIFY_MAX_ERRORS that leaves fewer than
 /// `below` triangles (the largest bound's result when none does).
-pub(super) fn simplify_below(mesh: &Mesh, ratio: f64, below: usize) -> Mesh {
+pub(super) fn simplify_below(mesh: &Mesh, ratio: f64, below: usize) -> Result<Mesh, FfiError> {
     let mut out = Mesh::default();
     for max_error in SIMPLIFY_MAX_ERRORS {
-        out = simplify(mesh, ratio, max_error);
+        out = simplify(mesh, ratio, max_error)?;
         if out.triangle_count() < below {
             break;
         }
     }
-    out
+    Ok(out)
 }
 
 /// meshoptimizer's sloppy (vertex-clustering) decimation of every triangle primitive to about
 /// `ratio` of its triangles (more when that would erase the primitive): no topology kept, so it
 /// reaches targets edge collapse cannot; zero-area results dropped, then reordered for the vertex
 /// cache and fetch.
-pub(super) fn simplify_sloppy(mesh: &Mesh, ratio: f64) -> Mesh {
+pub(super) fn simplify_sloppy(mesh: &Mesh, ratio: f64) -> Result<Mesh, FfiError> {
     let mut out = Mesh { name: mesh.name.clone(), primitives: Vec::new(), extras: None };
     for p in mesh.primitives.iter().filter(|p| !p.is_points()) {
-        let bytes = meshopt::typed_to_bytes(&p.positions);
-        let Ok(adapter) = meshopt::VertexDataAdapter::new(bytes, 12, 0) else { continue };
         // vertex clustering can erase a thin part (a trunk, a card) entirely: then ask for more
         let mut r = ratio;
         while r < 1.0 {
             let target = ((p.indices.len() as f64 * r) as usize / 3).max(1) * 3;
-            if let Some(q) = simplified(p, &meshopt::simplify_sloppy(&p.indices, &adapter, target, 1.0, None)) {
+            if let Some(q) = simplified(p, &meshopt_guard::simplify_sloppy(&p.indices, &p.positions, target)?)? {
                 out.primitives.push(q);
                 break;
             }
             r *= 2.0;
         }
     }
-    out
+    Ok(out)
 }

@@ -56,6 +56,8 @@ pub enum TreeLodError {
     Export(#[from] ExportError),
     #[error(transparent)]
     MeshAsset(#[from] MeshAssetError),
+    #[error(transparent)]
+    Meshopt(#[from] crate::meshopt_guard::FfiError),
     #[error("{path} does not pass validation (this is a bug, please report it with the input file):\n{report}")]
     Invalid { path: PathBuf, report: String },
 }
