@@ -50,6 +50,50 @@ fn gltf_json_problems(root: &gltf::json::Root) -> Vec<String> {
             }
         }
     }
+    // arrays and counts the schema requires to be non-empty (the Khronos validator's EMPTY_ENTITY
+    // and VALUE_NOT_IN_RANGE)
+    for (mi, mesh) in root.meshes.iter().enumerate() {
+        if mesh.primitives.is_empty() {
+            problems.push(format!("meshes[{mi}]: no primitives; a mesh has at least one"));
+        }
+        for (pi, prim) in mesh.primitives.iter().enumerate() {
+            if prim.attributes.is_empty() {
+                problems.push(format!("meshes[{mi}].primitives[{pi}]: no attributes; a primitive has at least one"));
+            }
+        }
+    }
+    for (ai, accessor) in root.accessors.iter().enumerate() {
+        if accessor.count.0 == 0 {
+            problems.push(format!("accessors[{ai}]: count 0; an accessor has at least one element"));
+        }
+    }
+    for (bi, buffer) in root.buffers.iter().enumerate() {
+        if buffer.byte_length.0 == 0 {
+            problems.push(format!("buffers[{bi}]: byteLength 0; a buffer has at least one byte"));
+        }
+    }
+    for (vi, view) in root.buffer_views.iter().enumerate() {
+        if view.byte_length.0 == 0 {
+            problems.push(format!("bufferViews[{vi}]: byteLength 0; a view has at least one byte"));
+        }
+    }
+    // image types: glTF's two, and those of the texture extensions the file declares
+    let used = |name: &str| root.extensions_used.iter().any(|e| e == name);
+    let image_types: Vec<&str> = [
+        ("image/png", true),
+        ("image/jpeg", true),
+        ("image/ktx2", used("KHR_texture_basisu")),
+        ("image/webp", used("EXT_texture_webp")),
+        ("image/avif", used("EXT_texture_avif")),
+    ]
+    .into_iter()
+    .filter_map(|(t, ok)| ok.then_some(t))
+    .collect();
+    for (ii, image) in root.images.iter().enumerate() {
+        if let Some(t) = image.mime_type.as_ref().map(|m| m.0.as_str()).filter(|t| !image_types.contains(t)) {
+            problems.push(format!("images[{ii}]: mimeType {t:?} is not one of {}", image_types.join(", ")));
+        }
+    }
     for (ii, image) in root.images.iter().enumerate() {
         match (&image.buffer_view, &image.uri) {
             (Some(_), Some(_)) => {

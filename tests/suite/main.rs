@@ -24,4 +24,5 @@ mod snow_build;
 mod terrain_cases;
 mod tree_lod;
 mod tree_species;
+mod validator_parity;
 mod wind;
