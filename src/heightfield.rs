@@ -204,9 +204,9 @@ pub enum HeightfieldError {
     Io { path: PathBuf, source: std::io::Error },
     #[error("{path}: the file is empty; expected a heightmap (PNG, TIFF, .hgt, .r16/.raw)")]
     Empty { path: PathBuf },
-    #[error("{path}: cannot decode the image: {message}. Is the file complete and really a PNG/TIFF? Re-export it, or pick --encoding hgt/r16 for raw data")]
+    #[error("{path}: cannot decode the image: {message}. Is the file complete and really a PNG/TIFF? Re-export it, or pick --encoding hgt/r16 (`encoding` in a preset) for raw data")]
     Image { path: PathBuf, message: String },
-    #[error("{path}: {width}×{height} = {samples} samples exceeds the limit of {limit}; downsample the map, split it into tiles, or raise --max-samples if this machine has the memory")]
+    #[error("{path}: {width}×{height} = {samples} samples exceeds the limit of {limit}; downsample the map, split it into tiles, or raise --max-samples (`max_samples` in a preset's [terrain]) if this machine has the memory")]
     TooLarge { path: PathBuf, width: usize, height: usize, samples: u128, limit: usize },
     #[error("{path}: {message}")]
     Format { path: PathBuf, message: String },
@@ -225,13 +225,17 @@ pub fn load(path: &Path, opts: &DecodeOptions) -> Result<Decoded, HeightfieldErr
     if !(opts.cell_size_m.is_finite() && opts.cell_size_m > 0.0) {
         return Err(HeightfieldError::Options {
             path: path.to_owned(),
-            message: format!("--cell-size must be a positive number of metres, got {}", opts.cell_size_m),
+            message: format!(
+                "--cell-size (`cell_size` in a preset) must be a positive number of metres, got {}",
+                opts.cell_size_m
+            ),
         });
     }
     if !(opts.height_scale_m.is_finite() && opts.height_offset_m.is_finite()) {
         return Err(HeightfieldError::Options {
             path: path.to_owned(),
-            message: "--height-scale and --height-offset must be finite".into(),
+            message: "--height-scale and --height-offset (`height_scale`, `height_offset` in a preset) must be finite"
+                .into(),
         });
     }
     let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
@@ -281,12 +285,12 @@ pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
                     }
                 };
                 format!(
-                    "--height-scale {} and --height-offset {} take heights there; use metres that fit",
+                    "--height-scale {} and --height-offset {} (`height_scale`, `height_offset` in a preset) take heights there; use metres that fit",
                     metres(opts.height_scale_m),
                     metres(opts.height_offset_m)
                 )
             }
-            _ => "fix or fill the map before meshing (or check --encoding)".into(),
+            _ => "fix or fill the map before meshing (or check --encoding, `encoding` in a preset)".into(),
         };
         return Err(HeightfieldError::format(
             path,
@@ -433,7 +437,7 @@ fn decode_r16(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
             if side * side != n || !bytes.len().is_multiple_of(2) {
                 return Err(HeightfieldError::format(
                     path,
-                    format!("a raw 16-bit heightmap needs its size: pass --size WIDTHxHEIGHT ({} bytes is not a square of 16-bit samples)", bytes.len()),
+                    format!("a raw 16-bit heightmap needs its size: pass --size WIDTHxHEIGHT, or `size = [WIDTH, HEIGHT]` in a preset ({} bytes is not a square of 16-bit samples)", bytes.len()),
                 ));
             }
             (side, side)
@@ -444,7 +448,7 @@ fn decode_r16(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
     if bytes.len() as u128 != expected {
         return Err(HeightfieldError::format(
             path,
-            format!("--size {width}x{height} needs {expected} bytes of little-endian 16-bit samples, but the file has {}; check --size and the byte order", bytes.len()),
+            format!("--size {width}x{height} needs {expected} bytes of little-endian 16-bit samples, but the file has {}; check --size (`size` in a preset) and the byte order", bytes.len()),
         ));
     }
     let (scale, offset) = (opts.height_scale_m, opts.height_offset_m);
@@ -475,7 +479,7 @@ fn decode_image(
         }
     }
     if encoding == Encoding::Float {
-        return Err(HeightfieldError::format(path, "--encoding float needs a 32-bit float TIFF; this file is not one (for 8/16-bit images use gray, terrain-rgb or terrarium)"));
+        return Err(HeightfieldError::format(path, "--encoding float needs a 32-bit float TIFF; this file is not one (for 8/16-bit images use gray, terrain-rgb or terrarium: --encoding, or `encoding` in a preset)"));
     }
     let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| image_error(path, e))?;
     if reader.format().is_none() {
@@ -516,7 +520,7 @@ fn decode_image(
         (D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageLuma16(_) | D::ImageLumaA16(_), e) => {
             return Err(HeightfieldError::format(
                 path,
-                format!("--encoding {e} needs an RGB image, but this one is grayscale; use --encoding gray (or auto)"),
+                format!("--encoding {e} needs an RGB image, but this one is grayscale; use --encoding gray (or auto; `encoding = \"gray\"` in a preset)"),
             ));
         }
         (_, Encoding::Auto | Encoding::Gray) if rgb8.is_some() || rgb16.is_some() => {
@@ -533,7 +537,7 @@ fn decode_image(
                     return Err(HeightfieldError::format(
                         path,
                         format!(
-                            "an RGB image whose channels differ (pixel column {}, row {} is R={} G={} B={}) is not a gray heightmap; choose how to read it: --encoding terrain-rgb (Mapbox), --encoding terrarium (Mapzen), or --encoding gray (uses the mean of R, G, B)",
+                            "an RGB image whose channels differ (pixel column {}, row {} is R={} G={} B={}) is not a gray heightmap; choose how to read it: --encoding terrain-rgb (Mapbox), --encoding terrarium (Mapzen), or --encoding gray (uses the mean of R, G, B); `encoding` in a preset",
                             k % w, k / w, p[0], p[1], p[2]
                         ),
                     ));
@@ -554,7 +558,7 @@ fn decode_image(
             let Some(rgb) = &rgb8 else {
                 return Err(HeightfieldError::format(
                     path,
-                    format!("--encoding {encoding} needs an 8-bit RGB or RGBA image"),
+                    format!("--encoding {encoding} (`encoding` in a preset) needs an 8-bit RGB or RGBA image"),
                 ));
             };
             let raw = rgb.as_raw();
@@ -568,7 +572,7 @@ fn decode_image(
         (_, e) => {
             return Err(HeightfieldError::format(
                 path,
-                format!("unsupported pixel format {:?} for --encoding {e}; use an 8/16-bit gray or RGB PNG/TIFF, or a 32-bit float TIFF", img.color()),
+                format!("unsupported pixel format {:?} for --encoding {e} (`encoding` in a preset); use an 8/16-bit gray or RGB PNG/TIFF, or a 32-bit float TIFF", img.color()),
             ));
         }
     };
@@ -598,7 +602,7 @@ fn decode_float_tiff(
     if !matches!(encoding, Encoding::Auto | Encoding::Float) {
         return Err(HeightfieldError::format(
             path,
-            format!("this is a 32-bit float TIFF (metres); use --encoding float or auto, not {encoding}"),
+            format!("this is a 32-bit float TIFF (metres); use --encoding float or auto (`encoding` in a preset), not {encoding}"),
         ));
     }
     let (w, h) = dec.dimensions().map_err(tiff_err)?;

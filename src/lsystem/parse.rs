@@ -569,13 +569,13 @@ fn parse_v5(source: &Source, warnings: &mut Vec<String>) -> Result<LSystem, Lsys
                         line.number,
                         col,
                         "mutation is not supported (lparser's random edits of the rules)",
-                        "set it to 0 or remove the line; use --seed for variants",
+                        "set it to 0 or remove the line; use --seed (`variants` in a preset) for variants",
                     ));
                 }
             }
             b"trace" | b"no_wait" | b"poly_limit" => {
                 warnings.push(format!(
-                    "line {}: `{key_text}` is ignored (use --max-triangles for a polygon budget)",
+                    "line {}: `{key_text}` is ignored (use --max-triangles, `max_triangles` in a preset's tree, for a polygon budget)",
                     line.number
                 ));
             }

@@ -376,7 +376,7 @@ fn angle_weighted_normals(p: &Primitive) -> Vec<[f32; 3]> {
 pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<SourceMesh, MeshAssetError> {
     if !(options.scale.is_finite() && options.scale > 0.0) {
         return Err(MeshAssetError::Options(format!(
-            "--scale {} must be a positive number (metres per file unit)",
+            "--scale {} (`scale` in a preset's mesh) must be a positive number (metres per file unit)",
             options.scale
         )));
     }

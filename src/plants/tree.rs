@@ -95,10 +95,10 @@ pub enum TreeError {
     #[error("{0}")]
     Expand(LsystemError),
     #[error(
-        "the tree draws more than {limit} segments (--max-segments); lower the recursion depth or raise the limit"
+        "the tree draws more than {limit} segments (--max-segments; `max_segments` in a preset's tree); lower the recursion depth or raise the limit"
     )]
     TooManySegments { limit: u64 },
-    #[error("the tree needs more than {limit} triangles (--max-triangles); lower the recursion depth or --radial-segments, or raise the limit")]
+    #[error("the tree needs more than {limit} triangles (--max-triangles; `max_triangles` in a preset's tree); lower the recursion depth or --radial-segments (`radial_segments`), or raise the limit")]
     TooManyTriangles { limit: u64 },
     #[error("the L-system draws nothing (no segment, leaf or polygon with area); check its axiom and rules")]
     Empty,
@@ -1095,7 +1095,7 @@ pub fn size_warning(stats: &TreeStats, options: &TreeOptions) -> Option<String> 
         return None;
     }
     Some(format!(
-        "the tree is {h:.3} m tall at the L-system's own scale ({} m per step), outside {}–{} m: pass --height METRES (e.g. --height 12) to scale it, or --step",
+        "the tree is {h:.3} m tall at the L-system's own scale ({} m per step), outside {}–{} m: pass --height METRES (e.g. --height 12; `height` in a preset's tree) to scale it, or --step",
         options.metres_per_step, PLAUSIBLE_HEIGHT_M[0], PLAUSIBLE_HEIGHT_M[1]
     ))
 }

@@ -196,6 +196,8 @@ pub struct TreeLook {
     pub lods: usize,
     pub atlas_px: u32,
     pub max_segments: u64,
+    /// Refuse a variant needing more triangles than this (`max_triangles`).
+    pub max_triangles: u64,
     /// Budget of expanded L-system symbols (see [`crate::lsystem::expand::DEFAULT_MAX_SYMBOLS`]).
     pub max_symbols: u64,
     /// Measure image errors and switch distances (the MSFT_lod coverages need them).
@@ -215,6 +217,7 @@ impl Default for TreeLook {
             lods: crate::plants::tree_lod::TREE_LODS,
             atlas_px: 1024,
             max_segments: 200_000,
+            max_triangles: crate::plants::tree::DEFAULT_MAX_TRIANGLES,
             max_symbols: crate::lsystem::expand::DEFAULT_MAX_SYMBOLS,
             analyze: true,
             seed: 0,

@@ -233,6 +233,7 @@ fn tree_options(name: &str, look: &TreeLook, k: usize) -> TreeOptions {
         seed: variant_seed(look.seed, k),
         radial_segments: look.radial_segments,
         max_segments: look.max_segments,
+        max_triangles: look.max_triangles,
         max_symbols: look.max_symbols,
         height_m: look.height_m,
         name: format!("{name}_v{k}"),

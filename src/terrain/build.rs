@@ -52,13 +52,13 @@ pub enum BuildError {
     Meshopt(#[from] crate::meshopt_guard::FfiError),
     #[error("the terrain name is empty: give the output a name (it names the scene, nodes and meshes)")]
     EmptyName,
-    #[error("chunk size {0} is too small: a chunk must span at least 2 samples; pass --chunk 2 or more (64–256 is typical), or leave it out for one mesh")]
+    #[error("chunk size {0} is too small: a chunk must span at least 2 samples; pass --chunk 2 or more (`chunk` in a preset; 64–256 is typical), or leave it out for one mesh")]
     ChunkTooSmall(usize),
     #[error("{option} is {depth_m} m: it must be a positive, finite number of metres (e.g. 10); leave the option out to disable it")]
     InvalidDepth { option: &'static str, depth_m: f64 },
     #[error("{option} of {depth_m} m cannot be represented below a height of {height_m} m in 32-bit floats; use a depth of at least a few centimetres and below 1e6 m")]
     DepthNotRepresentable { option: &'static str, depth_m: f64, height_m: f32 },
-    #[error("a skirt and a base were both asked for: the base already closes the sides, and skirts would add open flaps inside the solid; use --base for a solid or --skirt for engine chunks, not both")]
+    #[error("a skirt and a base were both asked for: the base already closes the sides, and skirts would add open flaps inside the solid; use --base for a solid or --skirt for engine chunks (`base`, `skirt` in a preset), not both")]
     SkirtWithBase,
     #[error(
         "the heightfield is {width}×{height} samples: a terrain needs at least 2×2 samples; use a larger heightmap"
@@ -86,7 +86,7 @@ pub enum BuildError {
     DoesNotCover { covered_cells2: u128, expected_cells2: u128 },
     #[error("the edge from sample {from:?} to {to:?} is on the outside of the triangulation but not on the map's border: a base needs the mesh to cover the whole rectangle (mesher bug)")]
     BorderNotOnRectangle { from: [u32; 2], to: [u32; 2] },
-    #[error("a mesh would need {0} vertices, more than 32-bit indices hold; pass --chunk to split the terrain")]
+    #[error("a mesh would need {0} vertices, more than 32-bit indices hold; pass --chunk (`chunk` in a preset) to split the terrain")]
     TooManyVertices(usize),
 }
 

@@ -46,7 +46,7 @@ pub enum TerrainError {
     #[error("triangle limit {limit} is below 2: the two triangles of the corner rectangle are the coarsest terrain")]
     TriangleLimitTooSmall { limit: usize },
     #[error(
-        "--max-error {max_error_m} m is finer than the file can store the terrain's heights: at sample (column {i}, \
+        "--max-error {max_error_m} m (`max_error` in a preset) is finer than the file can store the terrain's heights: at sample (column {i}, \
          row {j}), {height_m} m, {storage} are {step_m:e} m apart, so the written surface is {achieved_m:e} m \
          off there, at a vertex no further refinement moves; use a bound of at least {achieved_m:e} m"
     )]

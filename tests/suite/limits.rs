@@ -318,3 +318,30 @@ fn meshing_work_is_budgeted_before_and_while_meshing() {
     assert!(t.contains("needs at least about 16129 vertices") && t.contains("max_vertices = N"), "{t}");
     assert!(!t.contains("panicked"), "{t}");
 }
+
+#[test]
+fn preset_builds_name_the_preset_keys_not_only_flags() {
+    // issue 21 item 5: an error met while building a preset names the key the preset has (the
+    // shared readers also name the flag of the command that reads the same input)
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let build = |toml: &str| {
+        let p = write(d, "p.toml", &format!("[scene]\nname = \"x\"\nformats = [\"glb\"]\n{toml}"));
+        let o = verdant_in(d, &["build", p.to_str().unwrap(), "--out", "out", "--force"]);
+        assert_ne!(o.status.code(), Some(0), "{}", text(&o));
+        assert!(!text(&o).contains("panicked"), "{}", text(&o));
+        text(&o)
+    };
+    fs::write(d.join("m.r16"), vec![0u8; 2 * 100]).unwrap();
+    let t = build("[terrain]\nheightmap = \"m.r16\"\nsize = [9, 9]\n");
+    assert!(t.contains("`size` in a preset"), "{t}");
+    let t = build("[terrain]\nheightmap = \"m.r16\"\nsize = [10, 10]\nmax_samples = 50\n");
+    assert!(t.contains("`max_samples` in a preset"), "{t}");
+    write(d, "t.ls", "recursion 3\nangle 25\nthickness 15\naxiom FFA\nrule A = !\"[&FA]>(120)[&FA]>(120)[&FA]\n");
+    let t = build(
+        "[terrain]\nprocedural = { kind = \"fbm\", size = 65, seed = 3, relief = 10.0 }\n\
+         [[species]]\nname = \"t\"\nkind = \"tree\"\nlsystem = \"t.ls\"\nmax_density = 0.001\n\
+         tree = { variants = 1, height = 6.0, max_triangles = 50, analysis = false }\n",
+    );
+    assert!(t.contains("`max_triangles` in a preset's tree"), "{t}");
+}

@@ -729,9 +729,15 @@ fn leaves_and_polygons_are_grouped_by_material() {
 fn budgets_give_clear_errors() {
     let system = sys("recursion 12\nangle 20\nthickness 10\naxiom A\nrule A = F[+A][-A]\n");
     let e = build_tree(&system, &TreeOptions { max_segments: 1000, ..TreeOptions::default() }).unwrap_err();
-    assert!(e.to_string().contains("more than 1000 segments (--max-segments)"), "{e}");
+    assert!(
+        e.to_string().contains("more than 1000 segments (--max-segments; `max_segments` in a preset's tree)"),
+        "{e}"
+    );
     let e = build_tree(&system, &TreeOptions { max_triangles: 5000, ..TreeOptions::default() }).unwrap_err();
-    assert!(e.to_string().contains("more than 5000 triangles (--max-triangles)"), "{e}");
+    assert!(
+        e.to_string().contains("more than 5000 triangles (--max-triangles; `max_triangles` in a preset's tree)"),
+        "{e}"
+    );
     let e = build_tree(&system, &TreeOptions { max_symbols: 3000, ..TreeOptions::default() }).unwrap_err();
     // refused before expanding: the shortest derivation is already longer
     assert!(
@@ -830,7 +836,12 @@ fn cli_tree_writes_the_glb_and_a_report() {
     let o = verdant(&["tree", input.to_str().unwrap(), "-o", target.to_str().unwrap(), "--max-segments", "10"]);
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("bush.ls: the tree draws more than 10 segments (--max-segments)"), "{err}");
+    assert!(
+        err.contains(
+            "bush.ls: the tree draws more than 10 segments (--max-segments; `max_segments` in a preset's tree)"
+        ),
+        "{err}"
+    );
     // forcing a dialect
     let o = verdant(&["tree", input.to_str().unwrap(), "-o", target.to_str().unwrap(), "--dialect", "v5"]);
     assert_eq!(o.status.code(), Some(2));

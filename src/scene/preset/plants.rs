@@ -40,6 +40,7 @@ pub const TREE_KEYS: &[&str] = &[
     "lods",
     "atlas_size",
     "max_segments",
+    "max_triangles",
     "max_symbols",
     "dialect",
     "analysis",
@@ -269,6 +270,9 @@ pub(super) fn apply_tree(t: &Table<'_, '_>, mut tree: TreeLook) -> Result<TreeLo
     }
     if let Some((n, _)) = t.integer("max_segments", 1..=100_000_000, "max_segments = 200000")? {
         tree.max_segments = n;
+    }
+    if let Some((n, _)) = t.integer("max_triangles", 1..=u32::MAX as u64, "max_triangles = 8000000")? {
+        tree.max_triangles = n;
     }
     if let Some((name, span)) = t.string("dialect", "dialect = \"v5\"")? {
         tree.dialect = match name {
