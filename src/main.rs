@@ -781,13 +781,9 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             Err(e) => failed(&e),
         };
     }
-    match tree_job::run(&job) {
+    // the tree's files and the report are replaced together
+    match tree_job::run_reporting(&job, a.report.as_deref()) {
         Ok(report) => {
-            if let Some(path) = &a.report {
-                if let Err(e) = tree_job::write_report(path, &report) {
-                    return failed(&e);
-                }
-            }
             if !quiet {
                 print_tree_summary(&report);
                 for f in &report.files {

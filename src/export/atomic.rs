@@ -47,6 +47,7 @@ where
         _ => PathBuf::from("."),
     };
     fs::create_dir_all(&dir).map_err(io_err)?;
+    sweep_once(&dir);
     if path.is_dir() {
         return Err(io_err(io::Error::new(io::ErrorKind::AlreadyExists, "a folder has this name")));
     }
@@ -74,6 +75,48 @@ where
     }
 }
 
+/// The process id in a temporary file's name `.<name>.<pid>-<n>.tmp[.<ext>]`, if it is one.
+fn temporary_owner(name: &str) -> Option<u32> {
+    let stem = &name[..name.rfind(".tmp")?];
+    if !name.starts_with('.') || !name[stem.len() + 4..].chars().next().is_none_or(|c| c == '.') {
+        return None;
+    }
+    let (pid, n) = stem[stem.rfind('.')? + 1..].split_once('-')?;
+    n.parse::<u64>().ok()?;
+    pid.parse().ok()
+}
+
+/// Removes, once per folder per run, the temporaries that runs killed before they could clean up
+/// left there (a kill signal runs no destructor): those whose process is gone. Only where
+/// /proc tells which processes live (Linux); a temporary of a live process (another verdant
+/// writing into the same folder) is left alone. Best effort: what cannot be removed stays.
+fn sweep_once(dir: &Path) {
+    static SWEPT: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+    let proc = Path::new("/proc");
+    if !proc.join("self").exists() {
+        return;
+    }
+    {
+        let Ok(mut swept) = SWEPT.lock() else { return };
+        let key = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
+        if swept.contains(&key) {
+            return;
+        }
+        swept.push(key);
+    }
+    let Ok(entries) = fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(temporary_owner) else { continue };
+        if pid != std::process::id() && !proc.join(pid.to_string()).exists() {
+            let _ = match entry.file_type() {
+                Ok(t) if t.is_dir() => fs::remove_dir_all(entry.path()),
+                _ => fs::remove_file(entry.path()),
+            };
+        }
+    }
+}
+
 /// Files replaced as one set (a LoD chain with its atlases, a .gltf with its .bin, an .obj with
 /// its .mtl and textures): each is written whole to a temporary file beside its final path, and
 /// only when every one is written (and checked, see [`FileSet::staged`]) does [`FileSet::commit`]
@@ -86,6 +129,8 @@ where
 pub struct FileSet {
     /// (temporary, final) in the order written.
     staged: Vec<(PathBuf, PathBuf)>,
+    /// Hidden staging folders ([`FileSet::folder_beside`]), removed with the set.
+    folders: Vec<PathBuf>,
 }
 
 impl FileSet {
@@ -112,6 +157,34 @@ impl FileSet {
         Ok(())
     }
 
+    /// A new hidden folder beside `path` (`.<name>.<pid>-<n>.tmp.d`), removed when the set is
+    /// committed or dropped: files that can only be checked under their final names (a .gltf and
+    /// the .bin it names, an .obj and its .mtl) are written there, checked, then
+    /// [`FileSet::adopt`]ed.
+    pub fn folder_beside(&mut self, path: &Path) -> Result<PathBuf, ExportError> {
+        static COUNTER: AtomicU64 = AtomicU64::new(0);
+        let io_err = |source: io::Error| ExportError::Io { path: path.to_path_buf(), source };
+        let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        fs::create_dir_all(&dir).map_err(io_err)?;
+        sweep_once(&dir);
+        let folder =
+            dir.join(format!(".{name}.{}-{}.tmp.d", std::process::id(), COUNTER.fetch_add(1, Ordering::Relaxed)));
+        fs::create_dir(&folder).map_err(io_err)?;
+        self.folders.push(folder.clone());
+        Ok(folder)
+    }
+
+    /// Takes `file`, already written (in a [`FileSet::folder_beside`] of the same filesystem),
+    /// into the set as the new contents of `path`.
+    pub fn adopt(&mut self, file: PathBuf, path: PathBuf) {
+        self.staged.retain(|(_, p)| p != &path);
+        self.staged.push((file, path));
+    }
+
     /// Where `path`'s new contents wait until the commit (to validate them before anything is
     /// replaced).
     pub fn staged(&self, path: &Path) -> Option<&Path> {
@@ -135,6 +208,9 @@ impl FileSet {
             }
             done.push(path);
         }
+        for folder in std::mem::take(&mut self.folders) {
+            let _ = fs::remove_dir_all(folder);
+        }
         Ok(done)
     }
 }
@@ -144,6 +220,26 @@ impl Drop for FileSet {
     fn drop(&mut self) {
         for (tmp, _) in &self.staged {
             let _ = fs::remove_file(tmp);
+        }
+        for folder in &self.folders {
+            let _ = fs::remove_dir_all(folder);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn temporaries_are_told_by_their_names() {
+        assert_eq!(temporary_owner(".x.glb.4242-7.tmp.glb"), Some(4242));
+        assert_eq!(temporary_owner(".report.json.17-0.tmp.json"), Some(17));
+        assert_eq!(temporary_owner(".noext.5-1.tmp"), Some(5));
+        for not_ours in
+            ["x.glb.4242-7.tmp.glb", ".x.glb.tmp", ".x.4242.tmp.glb", ".x.a-1.tmp", ".x.1-2.tmpfoo", ".x.1-b.tmp"]
+        {
+            assert_eq!(temporary_owner(not_ours), None, "{not_ours}");
         }
     }
 }

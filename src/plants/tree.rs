@@ -1102,6 +1102,14 @@ pub fn size_warning(stats: &TreeStats, options: &TreeOptions) -> Option<String> 
 
 /// Parses, builds and writes the tree of `job`, then re-reads and validates the file.
 pub fn run(job: &TreeJob) -> Result<TreeReport, TreeError> {
+    run_reporting(job, None)
+}
+
+/// [`run`], and the report as JSON to `report_path` when given: the tree's files are written and
+/// validated in a hidden folder beside the output (a .gltf or .obj is checked with the .bin or .mtl
+/// it names), then moved in together with the report, so a failure leaves the previous files and
+/// report as they were.
+pub fn run_reporting(job: &TreeJob, report_path: Option<&Path>) -> Result<TreeReport, TreeError> {
     let t0 = Instant::now();
     let obj = job.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"));
     if obj && job.options.leaf_points {
@@ -1114,15 +1122,25 @@ pub fn run(job: &TreeJob) -> Result<TreeReport, TreeError> {
     let t_parse = t0.elapsed().as_secs_f64();
     let tree = build_tree(&parsed.system, &job.options).map_err(|e| e.in_file(&job.input))?;
     let t_build = t0.elapsed().as_secs_f64();
-    let files = export::write_scene(&tree.scene, &job.output)?;
+    export::check_output_path(&job.output)?;
+    let mut set = export::FileSet::new();
+    let folder = set.folder_beside(&job.output)?;
+    let file_name = job.output.file_name().unwrap_or_default();
+    let staged = export::write_scene(&tree.scene, &folder.join(file_name))?;
     let t_export = t0.elapsed().as_secs_f64();
-    let validation = validate_file(&job.output, &ValidateOptions::default())
+    let validation = validate_file(&folder.join(file_name), &ValidateOptions::default())
         .map_err(|e| TreeError::Invalid { path: job.output.clone(), report: e.to_string() })?;
     if !validation.ok() {
         return Err(TreeError::Invalid { path: job.output.clone(), report: validation.to_string() });
     }
+    let mut files = Vec::with_capacity(staged.len());
+    for file in staged {
+        let target = job.output.with_file_name(file.file_name().unwrap_or_default());
+        files.push(target.clone());
+        set.adopt(file, target);
+    }
     let t_total = t0.elapsed().as_secs_f64();
-    Ok(TreeReport {
+    let report = TreeReport {
         input: job.input.display().to_string(),
         output: job.output.display().to_string(),
         files: files.iter().map(|f| f.display().to_string()).collect(),
@@ -1142,16 +1160,20 @@ pub fn run(job: &TreeJob) -> Result<TreeReport, TreeError> {
             validate: t_total - t_export,
             total: t_total,
         },
-    })
+    };
+    if let Some(path) = report_path {
+        set.write(path, &report_json(&report)?)?;
+    }
+    set.commit()?;
+    Ok(report)
 }
 
-/// Writes a report as pretty JSON (atomically).
-pub fn write_report(path: &Path, report: &TreeReport) -> Result<(), TreeError> {
+/// A report as pretty JSON.
+fn report_json(report: &TreeReport) -> Result<Vec<u8>, TreeError> {
     let mut text = serde_json::to_string_pretty(report)
         .map_err(|e| TreeError::Options(format!("cannot serialise the report: {e}")))?;
     text.push('\n');
-    export::write_atomic(path, text.as_bytes())?;
-    Ok(())
+    Ok(text.into_bytes())
 }
 
 #[cfg(test)]

@@ -239,6 +239,40 @@ fn a_mesh_and_its_report_are_replaced_together() {
     assert!(read("t.bin") != old.1 && read("r.json") != old.2);
 }
 
+#[test]
+fn a_single_tree_and_its_report_are_replaced_together() {
+    // issue 21 item 3: `verdant tree --lods 1 --report` wrote the report after the mesh (the .gltf
+    // could only be validated once its .bin had its final name); now both are staged in a hidden
+    // folder, validated there and moved in with the report
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "t.ls", "recursion 3\nangle 25\nthickness 15\naxiom FFA\nrule A = !\"[&FA]>(120)[&FA]>(120)[&FA]\n");
+    let run = |height: &str, ext: &str, report: &str| {
+        let out = format!("out/t.{ext}");
+        verdant_in(d, &["tree", "t.ls", "--lods", "1", "--height", height, "-o", &out, "--report", report, "-q"])
+    };
+    let read = |name: &str| fs::read(d.join("out").join(name)).unwrap();
+    for (ext, pair) in [("gltf", "t.bin"), ("obj", "t.mtl")] {
+        ok(&run("5", ext, "out/r.json"));
+        let main = format!("t.{ext}");
+        let old = (read(&main), read(pair), read("r.json"));
+        fs::create_dir_all(d.join("out/r_dir")).unwrap();
+        let failed = run("7", ext, "out/r_dir");
+        assert_ne!(failed.status.code(), Some(0), "{}", text(&failed));
+        assert!(text(&failed).contains("r_dir"), "{}", text(&failed));
+        assert_eq!((read(&main), read(pair), read("r.json")), old, "{ext}: replaced in part");
+        let names: Vec<String> = fs::read_dir(d.join("out"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+            .collect();
+        assert!(names.iter().all(|n| !n.starts_with('.')), "temporaries left: {names:?}");
+        ok(&run("7", ext, "out/r.json"));
+        assert!(read(&main) != old.0 && read("r.json") != old.2, "{ext}: not replaced");
+        let report: serde_json::Value = serde_json::from_slice(&read("r.json")).unwrap();
+        assert!(report["files"].as_array().unwrap().iter().all(|f| !f.as_str().unwrap().contains(".tmp")), "{report}");
+    }
+}
+
 /// Unmounts its folder when dropped (also when the test fails).
 struct Mounted(std::path::PathBuf);
 
@@ -344,4 +378,28 @@ fn preset_builds_name_the_preset_keys_not_only_flags() {
          tree = { variants = 1, height = 6.0, max_triangles = 50, analysis = false }\n",
     );
     assert!(t.contains("`max_triangles` in a preset's tree"), "{t}");
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn temporaries_of_killed_runs_are_removed_by_the_next_run() {
+    // issue 21 item 3: a kill leaves the staged files of its set; the next run writing into the
+    // folder removes those of processes that are gone, and leaves a live process's alone
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let heights: Vec<u8> = (0..16u32).flat_map(|i| ((i * 977) as u16).to_le_bytes()).collect();
+    fs::write(d.join("h.r16"), heights).unwrap();
+    // pid_max is at most 2^22 on Linux: 999999999 is no process
+    let dead = [".t.glb.999999999-0.tmp.glb", ".t.json.999999999-1.tmp.json", ".other.bin.999999998-3.tmp.bin"];
+    for name in dead {
+        fs::write(d.join(name), b"left by a killed run").unwrap();
+    }
+    let live = format!(".t.glb.{}-5.tmp.glb", std::process::id());
+    fs::write(d.join(&live), b"being written by a live process").unwrap();
+    fs::write(d.join("notes.tmp"), b"the user's").unwrap();
+    ok(&verdant_in(d, &["terrain", "h.r16", "--size", "4x4", "-o", "t.glb", "--report", "t.json", "-q"]));
+    for name in dead {
+        assert!(!d.join(name).exists(), "{name} was left");
+    }
+    assert!(d.join(&live).exists() && d.join("notes.tmp").exists());
 }
