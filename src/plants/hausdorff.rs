@@ -101,7 +101,8 @@ impl TriangleBvh {
         // depth ≤ log2(triangles) + 1 with median splits, and each step pushes at most one more
         let mut stack = [0u32; 72];
         let mut top = 1;
-        while top > 0 {
+        // a point on a filed triangle (a level that keeps LoD0's branches) is done: nothing is nearer
+        while top > 0 && best > 0.0 {
             top -= 1;
             let node = self.nodes[stack[top] as usize];
             // skipped only when clearly farther: a triangle's computed distance may round a few
