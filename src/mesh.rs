@@ -49,6 +49,10 @@ pub enum PrimitiveMode {
 pub struct CustomAttribute {
     pub name: String,
     pub values: Vec<[f32; 4]>,
+    /// Written as normalized unsigned bytes (a quarter of the floats' size): for values in 0..1 that
+    /// are already multiples of 1/255, so the file holds exactly these values (the glTF reader gives
+    /// shaders the same floats).
+    pub unit_bytes: bool,
 }
 
 /// A named mesh made of one or more primitives.
@@ -427,6 +431,7 @@ mod tests {
         let custom = vec![CustomAttribute {
             name: "_ID".into(),
             values: positions.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect(),
+            unit_bytes: false,
         }];
         let mut p = Primitive { positions, custom, indices: vec![0, 3, 2, 2, 3, 4], ..Primitive::default() };
         p.optimize_for_gpu().unwrap();

@@ -414,6 +414,17 @@ fn accessor(
     }
 }
 
+/// A VEC4 vertex attribute of values in 0..1 as normalized unsigned bytes over its own new
+/// bufferView (4 bytes a vertex, aligned as glTF asks); values are rounded to the nearest k/255.
+fn unit_byte_accessor(root: &mut json::Root, bin: &mut Bin, values: &[[f32; 4]]) -> Index<json::Accessor> {
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.map(|x| (x.clamp(0.0, 1.0) * 255.0).round() as u8)).collect();
+    let view = bin.push_view(&bytes, Some(ARRAY_BUFFER));
+    bin.codecs[view.value()] = Some(Codec::Attributes { stride: 4, count: values.len() });
+    let mut a = accessor(view, values.len(), json::accessor::ComponentType::U8, json::accessor::Type::Vec4);
+    a.normalized = true;
+    root.push(a)
+}
+
 /// A float accessor over its own new bufferView.
 fn float_accessor<const N: usize>(
     root: &mut json::Root,
@@ -524,7 +535,11 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
                 attributes.insert(Valid(json::mesh::Semantic::Colors(0)), a);
             }
             for c in &p.custom {
-                let a = float_accessor(&mut root, &mut bin, &c.values, Some(ARRAY_BUFFER));
+                let a = if c.unit_bytes {
+                    unit_byte_accessor(&mut root, &mut bin, &c.values)
+                } else {
+                    float_accessor(&mut root, &mut bin, &c.values, Some(ARRAY_BUFFER))
+                };
                 attributes.insert(Valid(json::mesh::Semantic::Extras(c.name[1..].to_string())), a);
             }
             // points draw every vertex in order: no index list

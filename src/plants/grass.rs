@@ -375,7 +375,7 @@ fn push_wind(p: &mut Primitive, blade: &Blade, height_fraction: f32) {
 fn wind_primitive(material: usize) -> Primitive {
     Primitive {
         material: Some(material),
-        custom: vec![CustomAttribute { name: WIND_ATTRIBUTE.into(), values: Vec::new() }],
+        custom: vec![CustomAttribute { name: WIND_ATTRIBUTE.into(), values: Vec::new(), unit_bytes: false }],
         ..Primitive::default()
     }
 }

@@ -211,7 +211,11 @@ impl TreeMesh {
             let custom = p
                 .custom
                 .iter()
-                .map(|c| CustomAttribute { name: c.name.clone(), values: c.values[..cut(c.values.len())].to_vec() })
+                .map(|c| CustomAttribute {
+                    name: c.name.clone(),
+                    values: c.values[..cut(c.values.len())].to_vec(),
+                    unit_bytes: c.unit_bytes,
+                })
                 .collect();
             // every field is set, but Primitive literals end in `..Primitive::default()` (fields get added)
             #[allow(clippy::needless_update)]
@@ -929,7 +933,7 @@ fn assemble(
         let base_color = material_color(system, color);
         if points {
             prim.colors = vec![base_color; prim.positions.len()];
-            prim.custom = vec![CustomAttribute { name: LEAF_SIZE_ATTRIBUTE.into(), values: sizes }];
+            prim.custom = vec![CustomAttribute { name: LEAF_SIZE_ATTRIBUTE.into(), values: sizes, unit_bytes: false }];
         }
         let span = top - ground;
         let sway = prim
@@ -945,8 +949,8 @@ fn assemble(
                 [w, limb_phase, flutter, flutter_phase]
             })
             .collect();
-        prim.custom.push(CustomAttribute { name: WIND_ATTRIBUTE.into(), values: sway });
-        prim.custom.push(CustomAttribute { name: WIND_BRANCH_ATTRIBUTE.into(), values: branch });
+        prim.custom.push(CustomAttribute { name: WIND_ATTRIBUTE.into(), values: sway, unit_bytes: false });
+        prim.custom.push(CustomAttribute { name: WIND_BRANCH_ATTRIBUTE.into(), values: branch, unit_bytes: false });
         let (name, material) = match kind {
             Kind::Bark => {
                 let texture = *bark_texture.get_or_insert_with(|| {

@@ -75,7 +75,7 @@ pub fn height_wind(
             [w, phase, frequency_hz, stiffness]
         })
         .collect();
-    CustomAttribute { name: WIND_ATTRIBUTE.into(), values }
+    CustomAttribute { name: WIND_ATTRIBUTE.into(), values, unit_bytes: false }
 }
 
 /// The attribute named `name` among `custom`, if any.

@@ -74,8 +74,9 @@ impl SnowStageReport {
 }
 
 /// Version of what the snow stage writes for given inputs: part of its cache key (see
-/// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: terrain_snow.glb carries the textured terrain.
-pub const SNOW_ALGORITHM_VERSION: u32 = 2;
+/// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: terrain_snow.glb carries the textured terrain. 3: and its
+/// `_LAYER_WEIGHTS` (terrain 5).
+pub const SNOW_ALGORITHM_VERSION: u32 = 3;
 
 /// Cache key: the terrain's key and the snow settings.
 pub fn snow_key(snow: &SnowSettings, terrain_key: &str) -> String {

@@ -100,7 +100,8 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// material layers, terrain_layers.png. 3: LoD switch distances for the `[lod]` policy (2 px by
 /// default, was 1 px). 4: the error is measured on the vertices as written (f32) against the map's
 /// exact heights, and the TIN refines until that is within the bound; `max_error_f64_m` beside it.
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 4;
+/// 5: every vertex carries its layer weights (`_LAYER_WEIGHTS`).
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 5;
 
 /// The stage in a scene build.
 pub struct TerrainJob<'a> {
@@ -211,7 +212,7 @@ pub fn run_terrain(
     let Meshed { scene, layers, .. } = meshed;
     let textured = |mut scene: Scene| -> Result<Scene, StageError> {
         layers
-            .texture(&mut scene, "terrain")
+            .texture(&mut scene, &hf, "terrain")
             .map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
         Ok(scene)
     };

@@ -35,8 +35,8 @@ fn fail(message: String) -> StageError {
 /// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]).
 /// 2: the species' normal atlases are linear data. 3: the trees' switch distances from the joint
 /// chain search (plants 11). 4: and from small views sampled more finely (plants 12). 5: cards
-/// framed as billboards (plants 13).
-pub const VIEW_ALGORITHM_VERSION: u32 = 5;
+/// framed as billboards (plants 13). 6: the terrain chunks carry `_LAYER_WEIGHTS` (terrain 5).
+pub const VIEW_ALGORITHM_VERSION: u32 = 6;
 
 /// What one view draws.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

@@ -315,7 +315,7 @@ pub fn mesh_and_build(
     let t = Instant::now();
     let mut scene = build_scene(hf, &mesh, build)?;
     let layers = bake_layers(hf);
-    layers.texture(&mut scene, &build.name).map_err(JobError::Texture)?;
+    layers.texture(&mut scene, hf, &build.name).map_err(JobError::Texture)?;
     let t_build = t.elapsed().as_secs_f64();
     let max_error_f64_m = exact_max_error(hf, &mesh, &stats, storage);
     Ok(Meshed {

@@ -32,6 +32,11 @@ pub const SNOWLINE_M: f64 = 2500.0;
 pub const SNOW_FADE_M: f64 = 300.0;
 pub const SNOW_SLOPE_DEG: [f64; 2] = [40.0, 55.0];
 
+/// The per-vertex layer weights on every terrain primitive (VEC4 normalized unsigned bytes: grass,
+/// scree, rock, snow, the weight map's channels, summing to 255/255), for engines that blend
+/// layers by vertex.
+pub const LAYER_WEIGHTS_ATTRIBUTE: &str = "_LAYER_WEIGHTS";
+
 /// Longest side of the baked maps, in texels.
 pub const MAX_LAYER_MAP_PX: u32 = 2048;
 
@@ -100,6 +105,38 @@ fn surface_at(hf: &Heightfield, s: f64, t: f64) -> (f64, f64) {
     (height, up.clamp(-1.0, 1.0).acos().to_degrees())
 }
 
+/// Sets [`LAYER_WEIGHTS_ATTRIBUTE`] on every primitive of `scene` (see [`TerrainLayers::texture`]).
+fn vertex_weights(scene: &mut Scene, hf: &Heightfield) {
+    use rayon::prelude::*;
+    let cell = hf.cell_size_m;
+    for p in scene.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()) {
+        let values: Vec<[f32; 4]> = p
+            .positions
+            .par_iter()
+            .map(|q| {
+                let (height, slope) = surface_at(hf, q[0] as f64 / cell, q[2] as f64 / cell);
+                unit_byte_weights(layer_weights(slope, height)).map(|k| k as f32 / 255.0)
+            })
+            .collect();
+        p.custom.retain(|c| c.name != LAYER_WEIGHTS_ATTRIBUTE);
+        p.custom.push(crate::mesh::CustomAttribute { name: LAYER_WEIGHTS_ATTRIBUTE.into(), values, unit_bytes: true });
+    }
+}
+
+/// Weights summing to 1 as bytes summing to exactly 255: each rounded down, the bytes left over
+/// given to the largest remainders (ties to the earlier layer).
+fn unit_byte_weights(w: [f64; 4]) -> [u8; 4] {
+    let scaled = w.map(|v| v.clamp(0.0, 1.0) * 255.0);
+    let mut k = scaled.map(|v| v.floor() as u32);
+    let mut order = [0usize, 1, 2, 3];
+    order.sort_by(|&a, &b| (scaled[b] - scaled[b].floor()).total_cmp(&(scaled[a] - scaled[a].floor())).then(a.cmp(&b)));
+    let left = 255u32.saturating_sub(k.iter().sum());
+    for &i in order.iter().take(left as usize) {
+        k[i] += 1;
+    }
+    k.map(|v| v.min(255) as u8)
+}
+
 /// Bakes the weight map and the base colour over the whole heightfield (at least 2 × 2 samples).
 /// Texel (x, y) is sampled at its centre, uv ((x + ½)/W, (y + ½)/H), which the planar terrain UVs
 /// map to sample coordinates (u·(w − 1), v·(h − 1)).
@@ -148,9 +185,12 @@ impl TerrainLayers {
         encode_rgba8_png(&self.weights.concat(), w, h)
     }
 
-    /// Puts the base colour on every terrain material of `scene` (materials named `terrain`):
-    /// the texture, and a white factor so the texture's colour is what shows.
-    pub fn texture(&self, scene: &mut Scene, name: &str) -> Result<(), String> {
+    /// Puts the layers on a terrain `scene` built from `hf`: the base colour on every terrain
+    /// material (materials named `terrain`: the texture, and a white factor so the texture's colour
+    /// is what shows), and [`LAYER_WEIGHTS_ATTRIBUTE`] on every primitive, from the surface under
+    /// each vertex (x, z → sample x / cell, z / cell; skirt and base vertices take their border's).
+    pub fn texture(&self, scene: &mut Scene, hf: &Heightfield, name: &str) -> Result<(), String> {
+        vertex_weights(scene, hf);
         let png = self.albedo_png.get_or_init(|| self.albedo.encode_png().map_err(|e| e.to_string())).clone()?;
         scene.textures.push(Texture { name: format!("{name}_base_color"), png });
         let t = scene.textures.len() - 1;
@@ -228,8 +268,38 @@ mod tests {
         assert!(png.starts_with(b"\x89PNG"));
         // the texture goes on the terrain material
         let mut scene = Scene { materials: vec![crate::terrain::build::terrain_material()], ..Scene::default() };
-        layers.texture(&mut scene, "terrain").unwrap();
+        layers.texture(&mut scene, &hf, "terrain").unwrap();
         assert_eq!(scene.materials[0].base_color_texture, Some(0));
         assert_eq!(scene.textures[0].name, "terrain_base_color");
+        // and the weights go on every vertex of the built terrain, skirts included: grass on the
+        // plain, rock on the ramp, each the weights of the surface under it
+        let mesh = crate::terrain::grid::grid(&hf, 1).unwrap();
+        let opts = crate::terrain::build::BuildOptions {
+            chunk_samples: Some(16),
+            skirt_depth_m: Some(2.0),
+            base_depth_m: None,
+            name: "t".into(),
+        };
+        let mut built = crate::terrain::build::build_scene(&hf, &mesh, &opts).unwrap();
+        layers.texture(&mut built, &hf, "t").unwrap();
+        let mut seen = [0usize; 2];
+        for p in built.meshes.iter().flat_map(|m| &m.primitives) {
+            let c = p.custom.iter().find(|c| c.name == LAYER_WEIGHTS_ATTRIBUTE).expect("weights on every primitive");
+            assert_eq!(c.values.len(), p.positions.len());
+            for (q, v) in p.positions.iter().zip(&c.values) {
+                let bytes = v.map(|x| (x * 255.0).round() as u32);
+                assert_eq!(bytes.iter().sum::<u32>(), 255, "{v:?}");
+                assert_eq!(bytes.map(|b| b as f32 / 255.0), *v, "exact multiples of 1/255");
+                let i = (q[0] as f64 / cell).round() as usize;
+                if i < 31 {
+                    assert!(v[0] > 0.99, "grass at x = {}: {v:?}", q[0]);
+                    seen[0] += 1;
+                } else if i > 33 {
+                    assert!(v[2] > 0.99, "rock at x = {}: {v:?}", q[0]);
+                    seen[1] += 1;
+                }
+            }
+        }
+        assert!(seen[0] > 100 && seen[1] > 100, "{seen:?}");
     }
 }

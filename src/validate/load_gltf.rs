@@ -431,9 +431,10 @@ fn read_primitive(
     for (sem, acc) in prim.attributes() {
         if let Semantic::Extras(name) = sem {
             let name = format!("_{name}");
+            let unit_bytes = acc.normalized() && acc.data_type() == gltf::accessor::DataType::U8;
             if let Some((_, v)) = read(issues, &name, Some(acc), &[4]) {
                 let values = v.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
-                p.custom.push(crate::mesh::CustomAttribute { name, values });
+                p.custom.push(crate::mesh::CustomAttribute { name, values, unit_bytes });
             }
         }
     }

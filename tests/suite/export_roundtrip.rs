@@ -30,10 +30,30 @@ fn sample_scene() -> Scene {
         normals: vec![[0.0, s, -s], [0.0, s, -s], [0.0, 0.0, 1.0], [0.6, 0.0, 0.8]],
         uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.1], [0.0, 0.0]],
         colors: vec![[0.2, 0.5, 0.1, 1.0], [0.3, 0.6, 0.1, 0.5], [0.2, 0.7, 0.2, 1.0], [0.1, 0.5, 0.1, 0.0]],
-        custom: vec![CustomAttribute {
-            name: "_WIND".into(),
-            values: vec![[0.0, 0.25, 1.5, 0.8], [0.0, 0.25, 1.5, 0.8], [1.0, 0.25, 1.5, 0.8], [1.0, 0.75, 2.0, 0.3]],
-        }],
+        // in name order, as glTF's attribute map reads them back
+        custom: vec![
+            CustomAttribute {
+                // stored as normalized bytes (the terrain's layer weights): k/255 comes back exactly
+                name: "_LAYER_WEIGHTS".into(),
+                values: vec![
+                    [1.0, 0.0, 0.0, 0.0],
+                    [51.0 / 255.0, 204.0 / 255.0, 0.0, 0.0],
+                    [0.0, 0.0, 1.0, 0.0],
+                    [0.2, 0.2, 0.2, 0.4],
+                ],
+                unit_bytes: true,
+            },
+            CustomAttribute {
+                name: "_WIND".into(),
+                values: vec![
+                    [0.0, 0.25, 1.5, 0.8],
+                    [0.0, 0.25, 1.5, 0.8],
+                    [1.0, 0.25, 1.5, 0.8],
+                    [1.0, 0.75, 2.0, 0.3],
+                ],
+                unit_bytes: false,
+            },
+        ],
         indices: vec![0, 1, 2, 0, 2, 3],
         material: Some(0),
         ..Primitive::default()

@@ -40,6 +40,22 @@ fn base(dir: &Path) -> (Value, Vec<u8>) {
 
 type Plant = fn(&mut Value, &mut Vec<u8>);
 
+/// The accessor of the first primitive's attribute `name`.
+fn attr(d: &Value, name: &str) -> usize {
+    d["meshes"][0]["primitives"][0]["attributes"][name].as_u64().unwrap() as usize
+}
+
+/// The first primitive's index accessor.
+fn indices(d: &Value) -> usize {
+    d["meshes"][0]["primitives"][0]["indices"].as_u64().unwrap() as usize
+}
+
+/// Where accessor `a`'s bufferView starts in the buffer.
+fn view_start(d: &Value, a: usize) -> usize {
+    let v = d["accessors"][a]["bufferView"].as_u64().unwrap() as usize;
+    d["bufferViews"][v]["byteOffset"].as_u64().unwrap_or(0) as usize
+}
+
 /// One defect each, and the Khronos validator's code for it.
 fn cases() -> Vec<(&'static str, Plant)> {
     vec![
@@ -49,32 +65,43 @@ fn cases() -> Vec<(&'static str, Plant)> {
             d["accessors"][0].as_object_mut().unwrap().remove("min");
         }),
         ("MESH_PRIMITIVE_ATTRIBUTES_ACCESSOR_INVALID_FORMAT: NORMAL as VEC2", |d, _| {
-            d["accessors"][1]["type"] = json!("VEC2")
+            let n = attr(d, "NORMAL");
+            d["accessors"][n]["type"] = json!("VEC2")
         }),
         ("MESH_PRIMITIVE_INDICES_ACCESSOR_INVALID_FORMAT: float indices", |d, _| {
-            d["accessors"][3]["componentType"] = json!(5126)
+            let i = indices(d);
+            d["accessors"][i]["componentType"] = json!(5126)
         }),
         ("ACCESSOR_INDEX_OOB: an index past the vertices", |d, bin| {
-            let at = d["bufferViews"][3]["byteOffset"].as_u64().unwrap() as usize;
+            let at = view_start(d, indices(d));
             bin[at..at + 2].copy_from_slice(&9u16.to_le_bytes());
         }),
         ("ACCESSOR_NON_UNIT: a normal of length 2", |d, bin| {
-            let at = d["bufferViews"][1]["byteOffset"].as_u64().unwrap() as usize;
+            let at = view_start(d, attr(d, "NORMAL"));
             for (k, x) in [2.0f32, 0.0, 0.0].iter().enumerate() {
                 bin[at + 4 * k..at + 4 * k + 4].copy_from_slice(&x.to_le_bytes());
             }
         }),
-        ("ACCESSOR_INVALID_FLOAT: a NaN position", |_, bin| bin[4..8].copy_from_slice(&f32::NAN.to_le_bytes())),
-        ("BUFFER_VIEW_TOO_LONG: a view past its buffer", |d, _| d["bufferViews"][4]["byteLength"] = json!(400)),
+        ("ACCESSOR_INVALID_FLOAT: a NaN position", |d, bin| {
+            let at = view_start(d, attr(d, "POSITION")) + 4;
+            bin[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes())
+        }),
+        ("BUFFER_VIEW_TOO_LONG: a view past its buffer", |d, _| {
+            let v = d["images"][0]["bufferView"].as_u64().unwrap() as usize;
+            d["bufferViews"][v]["byteLength"] = json!(100_000)
+        }),
         ("BUFFER_EXTERNAL_BYTELENGTH_MISMATCH: a buffer longer than its file", |d, _| {
-            d["buffers"][0]["byteLength"] = json!(300)
+            let n = d["buffers"][0]["byteLength"].as_u64().unwrap();
+            d["buffers"][0]["byteLength"] = json!(n + 28)
         }),
         ("ACCESSOR_TOTAL_OFFSET_ALIGNMENT: a float accessor at byte 2", |d, _| {
-            d["accessors"][1]["byteOffset"] = json!(2);
-            d["accessors"][1]["count"] = json!(3);
+            let n = attr(d, "NORMAL");
+            d["accessors"][n]["byteOffset"] = json!(2);
+            d["accessors"][n]["count"] = json!(3);
         }),
         ("BUFFER_VIEW_TOO_SMALL_STRIDE: a stride below the element", |d, _| {
-            d["bufferViews"][0]["byteStride"] = json!(4)
+            let v = d["accessors"][attr(d, "POSITION")]["bufferView"].as_u64().unwrap() as usize;
+            d["bufferViews"][v]["byteStride"] = json!(4)
         }),
         ("UNRESOLVED_REFERENCE: a node's mesh", |d, _| d["nodes"][0]["mesh"] = json!(3)),
         ("UNRESOLVED_REFERENCE: a scene's node", |d, _| d["scenes"][0]["nodes"] = json!([1])),
@@ -84,11 +111,20 @@ fn cases() -> Vec<(&'static str, Plant)> {
             d["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = json!(9)
         }),
         ("UNRESOLVED_REFERENCE: a texture's image", |d, _| d["textures"][0]["source"] = json!(5)),
-        ("VALUE_NOT_IN_LIST: an accessor type", |d, _| d["accessors"][2]["type"] = json!("VEC7")),
-        ("VALUE_NOT_IN_LIST: an accessor componentType", |d, _| d["accessors"][2]["componentType"] = json!(5130)),
+        ("VALUE_NOT_IN_LIST: an accessor type", |d, _| {
+            let t = attr(d, "TEXCOORD_0");
+            d["accessors"][t]["type"] = json!("VEC7")
+        }),
+        ("VALUE_NOT_IN_LIST: an accessor componentType", |d, _| {
+            let t = attr(d, "TEXCOORD_0");
+            d["accessors"][t]["componentType"] = json!(5130)
+        }),
         ("VALUE_NOT_IN_LIST: an image mimeType", |d, _| d["images"][0]["mimeType"] = json!("image/gif")),
         ("VALUE_NOT_IN_LIST: a primitive mode", |d, _| d["meshes"][0]["primitives"][0]["mode"] = json!(9)),
-        ("VALUE_NOT_IN_RANGE: an accessor of 0 elements", |d, _| d["accessors"][2]["count"] = json!(0)),
+        ("VALUE_NOT_IN_RANGE: an accessor of 0 elements", |d, _| {
+            let t = attr(d, "TEXCOORD_0");
+            d["accessors"][t]["count"] = json!(0)
+        }),
         ("EMPTY_ENTITY: a mesh without primitives", |d, _| d["meshes"][0]["primitives"] = json!([])),
         ("UNDEFINED_PROPERTY: no asset version", |d, _| {
             d["asset"].as_object_mut().unwrap().remove("version");

@@ -105,7 +105,11 @@ pub(super) struct Baked {
 pub(super) fn appended(mut a: Primitive, b: &Primitive) -> Primitive {
     let base = a.positions.len() as u32;
     if a.positions.is_empty() {
-        a.custom = b.custom.iter().map(|c| CustomAttribute { name: c.name.clone(), values: Vec::new() }).collect();
+        a.custom = b
+            .custom
+            .iter()
+            .map(|c| CustomAttribute { name: c.name.clone(), values: Vec::new(), unit_bytes: c.unit_bytes })
+            .collect();
     }
     a.custom.retain(|c| b.custom.iter().any(|d| d.name == c.name));
     for c in &mut a.custom {
@@ -151,6 +155,7 @@ impl CardWind {
             card.custom.push(CustomAttribute {
                 name: WIND_BRANCH_ATTRIBUTE.into(),
                 values: vec![[weight, phase, 0.0, 0.0]; card.positions.len()],
+                unit_bytes: false,
             });
         }
         card

@@ -40,7 +40,11 @@ pub(super) fn subset(p: &Primitive, keep: impl Fn(usize) -> bool) -> Primitive {
                 }
                 for (k, c) in p.custom.iter().enumerate() {
                     if out.custom.len() <= k {
-                        out.custom.push(CustomAttribute { name: c.name.clone(), values: Vec::new() });
+                        out.custom.push(CustomAttribute {
+                            name: c.name.clone(),
+                            values: Vec::new(),
+                            unit_bytes: c.unit_bytes,
+                        });
                     }
                     if let Some(v) = c.values.get(i) {
                         out.custom[k].values.push(*v);
