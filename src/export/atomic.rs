@@ -42,12 +42,7 @@ where
     let file_name = path
         .file_name()
         .ok_or_else(|| io_err(io::Error::new(io::ErrorKind::InvalidInput, "the path has no file name")))?;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    fs::create_dir_all(&dir).map_err(io_err)?;
-    sweep_once(&dir);
+    let dir = prepared_folder(path).map_err(io_err)?;
     if path.is_dir() {
         return Err(io_err(io::Error::new(io::ErrorKind::AlreadyExists, "a folder has this name")));
     }
@@ -73,6 +68,18 @@ where
             Err(io_err(e))
         }
     }
+}
+
+/// The folder `path` goes in (`.` for a bare file name), created if missing and cleared of killed
+/// runs' temporaries ([`sweep_once`]).
+fn prepared_folder(path: &Path) -> io::Result<PathBuf> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    fs::create_dir_all(&dir)?;
+    sweep_once(&dir);
+    Ok(dir)
 }
 
 /// The process id in a temporary file's name `.<name>.<pid>-<n>.tmp[.<ext>]`, if it is one.
@@ -165,12 +172,7 @@ impl FileSet {
         static COUNTER: AtomicU64 = AtomicU64::new(0);
         let io_err = |source: io::Error| ExportError::Io { path: path.to_path_buf(), source };
         let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        fs::create_dir_all(&dir).map_err(io_err)?;
-        sweep_once(&dir);
+        let dir = prepared_folder(path).map_err(io_err)?;
         let folder =
             dir.join(format!(".{name}.{}-{}.tmp.d", std::process::id(), COUNTER.fetch_add(1, Ordering::Relaxed)));
         fs::create_dir(&folder).map_err(io_err)?;

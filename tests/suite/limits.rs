@@ -387,8 +387,7 @@ fn temporaries_of_killed_runs_are_removed_by_the_next_run() {
     // folder removes those of processes that are gone, and leaves a live process's alone
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let heights: Vec<u8> = (0..16u32).flat_map(|i| ((i * 977) as u16).to_le_bytes()).collect();
-    fs::write(d.join("h.r16"), heights).unwrap();
+    write_small_r16(d);
     // pid_max is at most 2^22 on Linux: 999999999 is no process
     let dead = [".t.glb.999999999-0.tmp.glb", ".t.json.999999999-1.tmp.json", ".other.bin.999999998-3.tmp.bin"];
     for name in dead {

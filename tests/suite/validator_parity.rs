@@ -31,8 +31,7 @@ fn khronos_errors(file: &Path) -> Option<usize> {
 /// A small terrain verdant writes as .gltf + .bin (positions, normals, UVs, indices, an embedded
 /// texture, a material, a sampler): the file every case starts from.
 fn base(dir: &Path) -> (Value, Vec<u8>) {
-    let heights: Vec<u8> = (0..16u32).flat_map(|i| ((i * 977) as u16).to_le_bytes()).collect();
-    fs::write(dir.join("h.r16"), heights).unwrap();
+    write_small_r16(dir);
     ok(&verdant_in(dir, &["terrain", "h.r16", "--size", "4x4", "-o", "base.gltf", "-q"]));
     let doc: Value = serde_json::from_slice(&fs::read(dir.join("base.gltf")).unwrap()).unwrap();
     (doc, fs::read(dir.join("base.bin")).unwrap())
@@ -133,6 +132,32 @@ fn cases() -> Vec<(&'static str, Plant)> {
     ]
 }
 
+/// Runs both validators on each planted file and fails listing the cases the Khronos validator does
+/// not call errors (the case is wrong) and those verdant accepts (verdant is wrong). `khronos` says
+/// whether the Khronos validator is installed.
+fn judge(dir: &Path, khronos: bool, files: &[(&str, PathBuf)]) {
+    let (mut missed, mut not_errors) = (Vec::new(), Vec::new());
+    for (what, file) in files {
+        if khronos {
+            let errors = khronos_errors(file);
+            if !errors.is_some_and(|n| n > 0) {
+                not_errors.push(format!("{what} ({errors:?})"));
+            }
+        }
+        let o = verdant_in(dir, &["validate", file.to_str().unwrap()]);
+        assert!(!text(&o).contains("panicked"), "{what}: {}", text(&o));
+        if o.status.success() {
+            missed.push(*what);
+        }
+    }
+    assert!(not_errors.is_empty(), "cases the Khronos validator does not call errors:\n  {}", not_errors.join("\n  "));
+    assert!(
+        missed.is_empty(),
+        "verdant validate accepts files the Khronos validator rejects:\n  {}",
+        missed.join("\n  ")
+    );
+}
+
 fn write_case(dir: &Path, name: &str, doc: &Value, bin: &[u8]) -> PathBuf {
     let mut doc = doc.clone();
     doc["buffers"][0]["uri"] = json!(format!("{name}.bin"));
@@ -154,29 +179,16 @@ fn every_structural_error_the_khronos_validator_reports_is_reported() {
         Some(n) => assert_eq!(n, 0, "the Khronos validator finds errors in the unchanged file"),
         None => eprintln!("validator_parity: scripts/node_modules/gltf-validator is not installed (scripts/check.sh installs it): comparing with verdant's expectations only"),
     }
-    let (mut missed, mut not_errors) = (Vec::new(), Vec::new());
-    for (k, (what, plant)) in cases().into_iter().enumerate() {
-        let (mut doc, mut bin) = (doc.clone(), bin.clone());
-        plant(&mut doc, &mut bin);
-        let file = write_case(d, &format!("case{k}"), &doc, &bin);
-        if khronos.is_some() {
-            let errors = khronos_errors(&file);
-            if !errors.is_some_and(|n| n > 0) {
-                not_errors.push(format!("{what} ({errors:?})"));
-            }
-        }
-        let o = verdant_in(d, &["validate", file.to_str().unwrap()]);
-        assert!(!text(&o).contains("panicked"), "{what}: {}", text(&o));
-        if o.status.success() {
-            missed.push(what);
-        }
-    }
-    assert!(not_errors.is_empty(), "cases the Khronos validator does not call errors:\n  {}", not_errors.join("\n  "));
-    assert!(
-        missed.is_empty(),
-        "verdant validate accepts files the Khronos validator rejects:\n  {}",
-        missed.join("\n  ")
-    );
+    let files: Vec<(&str, PathBuf)> = cases()
+        .into_iter()
+        .enumerate()
+        .map(|(k, (what, plant))| {
+            let (mut doc, mut bin) = (doc.clone(), bin.clone());
+            plant(&mut doc, &mut bin);
+            (what, write_case(d, &format!("case{k}"), &doc, &bin))
+        })
+        .collect();
+    judge(d, khronos.is_some(), &files);
 }
 
 /// The same over a GLB's container: header and chunk defects.
@@ -184,8 +196,7 @@ fn every_structural_error_the_khronos_validator_reports_is_reported() {
 fn glb_container_errors_the_khronos_validator_reports_are_reported() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let heights: Vec<u8> = (0..16u32).flat_map(|i| ((i * 977) as u16).to_le_bytes()).collect();
-    fs::write(d.join("h.r16"), heights).unwrap();
+    write_small_r16(d);
     ok(&verdant_in(d, &["terrain", "h.r16", "--size", "4x4", "-o", "base.glb", "-q"]));
     let glb = fs::read(d.join("base.glb")).unwrap();
     let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
@@ -214,27 +225,18 @@ fn glb_container_errors_the_khronos_validator_reports_are_reported() {
     if let Some(n) = khronos_here {
         assert_eq!(n, 0, "the Khronos validator finds errors in the unchanged file");
     }
-    let (mut missed, mut not_errors) = (Vec::new(), Vec::new());
-    for (k, (what, plant)) in cases.iter().enumerate() {
-        let mut bytes = glb.clone();
-        plant(&mut bytes);
-        let file = d.join(format!("case{k}.glb"));
-        fs::write(&file, &bytes).unwrap();
-        if khronos_here.is_some() && !khronos_errors(&file).is_some_and(|n| n > 0) {
-            not_errors.push(*what);
-        }
-        let o = verdant_in(d, &["validate", file.to_str().unwrap()]);
-        assert!(!text(&o).contains("panicked"), "{what}: {}", text(&o));
-        if o.status.success() {
-            missed.push(*what);
-        }
-    }
-    assert!(not_errors.is_empty(), "cases the Khronos validator does not call errors:\n  {}", not_errors.join("\n  "));
-    assert!(
-        missed.is_empty(),
-        "verdant validate accepts GLBs the Khronos validator rejects:\n  {}",
-        missed.join("\n  ")
-    );
+    let files: Vec<(&str, PathBuf)> = cases
+        .iter()
+        .enumerate()
+        .map(|(k, (what, plant))| {
+            let mut bytes = glb.clone();
+            plant(&mut bytes);
+            let file = d.join(format!("case{k}.glb"));
+            fs::write(&file, &bytes).unwrap();
+            (*what, file)
+        })
+        .collect();
+    judge(d, khronos_here.is_some(), &files);
 }
 
 /// What verdant writes at the ends of its limits validates, in ours and the Khronos validator:

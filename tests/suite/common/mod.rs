@@ -31,6 +31,15 @@ pub fn write(dir: &Path, rel: &str, text: &str) -> PathBuf {
     path
 }
 
+/// `h.r16` in `dir`: a 4×4 raw 16-bit heightmap (`--size 4x4`), the smallest terrain every
+/// command can mesh.
+pub fn write_small_r16(dir: &Path) -> PathBuf {
+    let heights: Vec<u8> = (0..16u32).flat_map(|i| ((i * 977) as u16).to_le_bytes()).collect();
+    let path = dir.join("h.r16");
+    fs::write(&path, heights).unwrap();
+    path
+}
+
 pub fn read_json(path: &Path) -> Value {
     let text = fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
