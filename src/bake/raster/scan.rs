@@ -144,6 +144,10 @@ pub(super) fn pixel_columns(min_x: i64, max_x: i64, width: u32) -> Option<(i64, 
 /// columns [x0, x1) whose centre the triangle (a, b, c) owns under the top-left rule, in row-major
 /// order. The vertices are ordered so the edge functions are ≥ 0 inside; `e` holds the edge
 /// functions opposite a, b and c (edges b→c, c→a, a→b) at the pixel centre.
+///
+/// Each edge function is linear along a row, so a wide row is not tested pixel by pixel: the
+/// columns where all three are inside are solved for in integers (the same pixels and values as
+/// testing each one; a long thin branch seen at an angle has a wide box and a narrow span).
 #[inline(always)]
 pub(super) fn scan_triangle<C>(pts: [[i64; 2]; 3], x0: i64, x1: i64, ry0: u32, ry1: u32, mut covered: C)
 where
@@ -152,18 +156,58 @@ where
     let [a, b, c] = pts;
     let bias = [edge_bias(b, c), edge_bias(c, a), edge_bias(a, b)];
     let step_x = [-(c[1] - b[1]) * SUBPIXEL, -(a[1] - c[1]) * SUBPIXEL, -(b[1] - a[1]) * SUBPIXEL];
+    let width = x1 - x0;
     for y in ry0..ry1 {
         let py = y as i64 * SUBPIXEL + SUBPIXEL / 2;
         let px = x0 * SUBPIXEL + SUBPIXEL / 2;
         let mut e = [orient(b, c, [px, py]), orient(c, a, [px, py]), orient(a, b, [px, py])];
-        for x in x0..x1 {
-            if e[0] + bias[0] >= 0 && e[1] + bias[1] >= 0 && e[2] + bias[2] >= 0 {
-                covered(x as u32, y, e);
+        if width <= SPAN_MIN_WIDTH {
+            for x in x0..x1 {
+                if e[0] + bias[0] >= 0 && e[1] + bias[1] >= 0 && e[2] + bias[2] >= 0 {
+                    covered(x as u32, y, e);
+                }
+                for d in 0..3 {
+                    e[d] += step_x[d];
+                }
             }
+            continue;
+        }
+        let (mut lo, mut hi) = (0i64, width);
+        for d in 0..3 {
+            let (k0, k1) = inside_steps(e[d] + bias[d], step_x[d]);
+            lo = lo.max(k0);
+            hi = hi.min(k1);
+        }
+        if lo >= hi {
+            continue;
+        }
+        for d in 0..3 {
+            e[d] += lo * step_x[d];
+        }
+        for x in x0 + lo..x0 + hi {
+            covered(x as u32, y, e);
             for d in 0..3 {
                 e[d] += step_x[d];
             }
         }
+    }
+}
+
+/// Rows at most this wide are tested pixel by pixel (three divisions cost more than a few tests).
+const SPAN_MIN_WIDTH: i64 = 6;
+
+/// The steps k ≥ 0 (as a range [k0, k1), k1 possibly unbounded) at which `start + k·step ≥ 0`.
+#[inline(always)]
+fn inside_steps(start: i64, step: i64) -> (i64, i64) {
+    match step.signum() {
+        0 if start >= 0 => (0, i64::MAX),
+        0 => (0, 0),
+        // increasing: from the first k with k·step ≥ −start
+        1 if start >= 0 => (0, i64::MAX),
+        1 => ((-start + step - 1) / step, i64::MAX),
+        // decreasing: up to the last k with k·(−step) ≤ start
+        _ if start < 0 => (0, 0),
+        _ => (0, start / -step + 1),
     }
 }
 
@@ -271,4 +315,68 @@ where
         });
     }
     written
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every pixel of the box tested one by one: what [`scan_triangle`] must reproduce.
+    fn scan_each_pixel(pts: [[i64; 2]; 3], x0: i64, x1: i64, ry0: u32, ry1: u32) -> Vec<(u32, u32, [i64; 3])> {
+        let [a, b, c] = pts;
+        let bias = [edge_bias(b, c), edge_bias(c, a), edge_bias(a, b)];
+        let mut out = Vec::new();
+        for y in ry0..ry1 {
+            for x in x0..x1 {
+                let p = [x * SUBPIXEL + SUBPIXEL / 2, y as i64 * SUBPIXEL + SUBPIXEL / 2];
+                let e = [orient(b, c, p), orient(c, a, p), orient(a, b, p)];
+                if (0..3).all(|d| e[d] + bias[d] >= 0) {
+                    out.push((x as u32, y, e));
+                }
+            }
+        }
+        out
+    }
+
+    proptest::proptest! {
+        /// Solving each row's span gives the same pixels, in the same order, with the same edge
+        /// values as testing every pixel of the box: thin slivers, wide and narrow boxes, edges
+        /// through pixel centres (coordinates on the pixel grid), horizontal and vertical edges.
+        #[test]
+        fn row_spans_are_the_pixels_tested_one_by_one(
+            coords in proptest::collection::vec(-40i64 * SUBPIXEL..80 * SUBPIXEL, 6),
+            on_grid in proptest::bool::ANY,
+            width in 1u32..70,
+            height in 1u32..50,
+        ) {
+            let snap = |v: i64| if on_grid { v / (SUBPIXEL / 2) * (SUBPIXEL / 2) } else { v };
+            let mut pts = [[snap(coords[0]), snap(coords[1])], [snap(coords[2]), snap(coords[3])], [snap(coords[4]), snap(coords[5])]];
+            let area = orient(pts[0], pts[1], pts[2]);
+            proptest::prop_assume!(area != 0);
+            if area < 0 {
+                pts.swap(1, 2);
+            }
+            let min = [0, 1].map(|k| pts.iter().map(|p| p[k]).min().unwrap());
+            let max = [0, 1].map(|k| pts.iter().map(|p| p[k]).max().unwrap());
+            let (Some((x0, x1)), Some((ry0, ry1))) = (pixel_columns(min[0], max[0], width), pixel_rows(min[1], max[1], height)) else {
+                return Ok(());
+            };
+            let mut spans = Vec::new();
+            scan_triangle(pts, x0, x1, ry0, ry1, |x, y, e| spans.push((x, y, e)));
+            proptest::prop_assert_eq!(spans, scan_each_pixel(pts, x0, x1, ry0, ry1));
+        }
+    }
+
+    #[test]
+    fn inside_steps_bounds() {
+        // start + k·step ≥ 0
+        assert_eq!(inside_steps(-10, 3), (4, i64::MAX)); // k = 4: 2 ≥ 0, k = 3: −1
+        assert_eq!(inside_steps(-9, 3), (3, i64::MAX));
+        assert_eq!(inside_steps(5, 3), (0, i64::MAX));
+        assert_eq!(inside_steps(10, -3), (0, 4)); // k = 3: 1 ≥ 0, k = 4: −2
+        assert_eq!(inside_steps(9, -3), (0, 4)); // k = 3: 0
+        assert_eq!(inside_steps(-1, -3), (0, 0));
+        assert_eq!(inside_steps(0, 0), (0, i64::MAX));
+        assert_eq!(inside_steps(-1, 0), (0, 0));
+    }
 }
