@@ -470,7 +470,7 @@ for scene in "${SCENES[@]}"; do
   fi
 done
 
-section "5e. Babylon.js (default loader options) and three.js (GLTFLoader) in headless Chromium load every species file without an error or warning, show LoD0 (Babylon: MSFT_lod levels in order), and see the grass green"
+section "5e. Babylon.js (default loader options) and three.js (GLTFLoader + three_msft_lod.js) in headless Chromium load every species file without an error or warning, show LoD0 (Babylon: MSFT_lod levels in order; three.js: each level shown with exactly its triangles inside its screen-coverage range), and see the grass green"
 # thumbnails of what each engine drew go to out/check/engines/
 green_files=()
 other_files=()

@@ -1,7 +1,9 @@
 // Loads glb files in Babylon.js or three.js (headless Chromium, WebGL through SwiftShader) and checks
 // what a person would see: no loader error or warning, no page error, and for MSFT_lod chains, in
 // Babylon every level arriving in order with exactly the default scene's LoD0 meshes enabled at the
-// end, in three.js (which ignores MSFT_lod) only LoD0 shown.
+// end; in three.js, with the project's MSFT_lod plugin (three_msft_lod.js), only LoD0 shown in the
+// framing view, and from one distance inside each level's MSFT_screencoverage range that level
+// shown, drawing exactly its triangles (renderer.info).
 //
 //   --engine babylon (default) | three
 //
@@ -56,6 +58,7 @@ const server = http.createServer((req, res) => {
   else if (url === '/three.html') file = path.join(here, 'three.html');
   else if (url === '/frame_stats.js') file = path.join(here, 'frame_stats.js');
   else if (url === '/meshopt_shim.js') file = path.join(here, 'meshopt_shim.js');
+  else if (url === '/three_msft_lod.js') file = path.join(here, 'three_msft_lod.js');
   else if (url.startsWith('/node_modules/')) file = path.join(here, url);
   else if (url.startsWith('/files/') && allowed.has(url.slice('/files'.length))) file = url.slice('/files'.length);
   if (!file) { res.writeHead(url === '/favicon.ico' ? 204 : 404); res.end(); return; }
@@ -85,13 +88,24 @@ function expected(file) {
   const stack = [...scene.nodes];
   let meshNodes = 0;
   let levels = 0;
+  // triangles a node and its children draw (triangle lists: indices, else vertices, over 3)
+  const triangles = (n) => {
+    const node = json.nodes[n];
+    const own = node.mesh === undefined ? 0 : json.meshes[node.mesh].primitives.reduce((sum, p) =>
+      sum + json.accessors[p.indices ?? p.attributes.POSITION].count / 3, 0);
+    return own + (node.children ?? []).reduce((sum, c) => sum + triangles(c), 0);
+  };
+  const chains = {};
   while (stack.length) {
-    const node = json.nodes[stack.pop()];
+    const n = stack.pop();
+    const node = json.nodes[n];
     if (node.mesh !== undefined) meshNodes++;
-    levels = Math.max(levels, node.extensions?.MSFT_lod?.ids?.length ?? 0);
+    const ids = node.extensions?.MSFT_lod?.ids ?? [];
+    levels = Math.max(levels, ids.length);
+    if (ids.length) chains[node.name ?? `node ${n}`] = [n, ...ids].map(triangles);
     stack.push(...(node.children ?? []));
   }
-  return { chain: (json.extensionsUsed ?? []).includes('MSFT_lod'), levels: levels + 1 };
+  return { chain: (json.extensionsUsed ?? []).includes('MSFT_lod'), levels: levels + 1, chains };
 }
 
 const browser = await puppeteer.launch({
@@ -108,7 +122,7 @@ if (!['babylon', 'three'].includes(engine)) {
 }
 const engineName = engine === 'three' ? 'three.js' : 'Babylon.js';
 const version = (pkg) => JSON.parse(fs.readFileSync(path.join(here, `node_modules/${pkg}/package.json`))).version;
-console.log(engine === 'three' ? `three.js ${version('three')} (GLTFLoader; MSFT_lod is not read: the default scene is shown)`
+console.log(engine === 'three' ? `three.js ${version('three')} (GLTFLoader with the project's MSFT_lod plugin, three_msft_lod.js)`
   : `Babylon.js ${version('babylonjs')}, MSFT_lod files with range requests ${rangeRequests ? 'on' : 'off (Babylon defaults)'}`);
 for (const file of files) {
   const want = expected(file);
@@ -140,6 +154,22 @@ for (const file of files) {
   if (r.ok && want.chain && engine === 'three') {
     const coarser = r.enabled.filter((n) => /_LOD[1-9]/.test(n));
     if (coarser.length) problems.push(`levels other than LoD0 shown: ${coarser.join(', ')}`);
+    const walked = r.lodWalk ?? [];
+    if (walked.length !== Object.keys(want.chains).length) {
+      problems.push(`${walked.length} LOD objects made of ${Object.keys(want.chains).length} MSFT_lod nodes`);
+    }
+    for (const lod of walked) {
+      const tris = want.chains[lod.name];
+      // every level whose coverage range is not empty must be walked to
+      const reachable = lod.coverage.filter((c, k) => c < (k === 0 ? 1 : lod.coverage[k - 1])).length;
+      if (!tris) problems.push(`LOD ${lod.name} is no MSFT_lod node of the file`);
+      else if (lod.walk.length !== reachable) problems.push(`LOD ${lod.name}: ${lod.walk.length} of ${reachable} levels walked`);
+      for (const w of lod.walk) {
+        if (tris && (w.shown !== w.level || w.triangles !== tris[w.level])) {
+          problems.push(`LOD ${lod.name} at coverage ${w.coverage.toExponential(2)} (${w.distance.toFixed(1)} m): level ${w.shown} shown with ${w.triangles} triangles, expected level ${w.level} with ${tris[w.level]}`);
+        }
+      }
+    }
   } else if (r.ok && want.chain) {
     const inOrder = r.lodLevels.length === want.levels && r.lodLevels.every((l, k) => l === k);
     if (!inOrder) problems.push(`MSFT_lod levels arrived as ${JSON.stringify(r.lodLevels)}, expected 0..${want.levels - 1} in order`);
@@ -163,7 +193,8 @@ for (const file of files) {
   failed += problems.length > 0;
   const colour = seen ? `, frame ${(100 * seen.covered).toFixed(1)} % covered, mean rgb ${seen.mean.map((v) => v.toFixed(2)).join(' ')}, green ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %` : '';
   const drawn = r.ok && view && r.info ? `view ${view.camera.name}: ${r.info.triangles} triangles, ${r.info.calls} draw calls (report: ${view.triangles}, ${view.draw_calls}), ` : '';
-  const what = r.ok ? `${drawn}${r.meshes} meshes, ${r.enabled.length} enabled${want.chain ? `, LoD levels ${JSON.stringify(r.lodLevels)}` : ''}${colour}` : '';
+  const walk = (r.lodWalk ?? []).map((l) => ` ${l.name} by coverage: ${l.walk.map((w) => `LoD${w.shown} ${w.triangles} tris at ${w.distance.toFixed(1)} m`).join(', ')}`).join(';');
+  const what = r.ok ? `${drawn}${r.meshes} meshes, ${r.enabled.length} enabled${want.chain && engine !== 'three' ? `, LoD levels ${JSON.stringify(r.lodLevels)}` : ''}${walk ? ';' + walk : ''}${colour}` : '';
   console.log(`${problems.length ? 'FAIL' : 'ok  '}  ${file}: ${what}${problems.length ? ' — ' + problems.join(' | ') : ''}`);
   await page.close();
 }
