@@ -922,7 +922,7 @@ def scene_main(argv: list[str]) -> int:
 
 # ------------------------------------------------------------------------------------- placements mode
 INSTANCING = "EXT_mesh_gpu_instancing"
-PLACEMENT_HEADER = "x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile"
+PLACEMENT_HEADER = "x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile,variant"
 RAY_SAMPLE = 20_000          # instances ray-cast per species (all of them below this)
 HEIGHT_TOL_GLB_M = 1e-3      # |y (f32, scene.glb) - terrain hit|
 HEIGHT_TOL_CSV_M = 1e-4      # |y (f64, CSV) - terrain hit| (issue 4: exact barycentric height)
@@ -930,29 +930,31 @@ SPACING_REL_TOL = 1e-6
 INSTANCE_ACCESSORS = {"TRANSLATION": "VEC3", "ROTATION": "VEC4", "SCALE": "VEC3"}
 
 
-def read_placements_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 11) float64 (x..yaw_deg, parsed exactly) and (n,) int64 tiles; the header must be exact."""
+def read_placements_csv(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(n, 11) float64 (x..yaw_deg, parsed exactly), (n,) int64 tiles and (n,) int64 variants; the
+    header must be exact."""
     text = path.read_text()
     header, _, body = text.partition("\n")
     if header != PLACEMENT_HEADER:
         raise CheckFailed(f"{path.name}: header {header!r}, expected {PLACEMENT_HEADER!r}")
     if not body.strip():
-        return np.zeros((0, 11)), np.zeros(0, dtype=np.int64)
+        return np.zeros((0, 11)), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     if not body.endswith("\n"):
         raise CheckFailed(f"{path.name}: the last row has no line end")
     fields = body[:-1].replace("\n", ",").split(",")
     rows = body.count("\n")
-    if len(fields) != rows * 12:
-        raise CheckFailed(f"{path.name}: {len(fields)} fields in {rows} rows, expected 12 a row")
-    cells = np.array(fields, dtype=object).reshape(rows, 12)
+    if len(fields) != rows * 13:
+        raise CheckFailed(f"{path.name}: {len(fields)} fields in {rows} rows, expected 13 a row")
+    cells = np.array(fields, dtype=object).reshape(rows, 13)
     try:
         values = cells[:, :11].astype(np.float64)
         tiles = cells[:, 11].astype(np.int64)
+        variants = cells[:, 12].astype(np.int64)
     except ValueError as e:
         raise CheckFailed(f"{path.name}: a cell is not a number ({e})") from None
     if not np.all(np.isfinite(values)):
         raise CheckFailed(f"{path.name}: some values are NaN or infinite")
-    return values, tiles
+    return values, tiles, variants
 
 
 def terrain_of_scene(gltf, buffers) -> trimesh.Trimesh:
@@ -1032,12 +1034,17 @@ def rotate_up(q: np.ndarray, up: np.ndarray) -> np.ndarray:
     return np.stack([2 * (x * y - w * z) * up, (1 - 2 * (x * x + z * z)) * up, 2 * (y * z + w * x) * up], 1)
 
 
-def replay_view(rows: np.ndarray, chain: dict, view: dict, cull: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """What the first view draws of a species, recomputed from its table rows: per row the variant,
-    the level (-1: culled), the distance, and the distance to the nearest threshold (relative), so
-    rows exactly at a switch may go either way."""
+def replay_view(rows: np.ndarray, table_variants: np.ndarray, chain: dict, view: dict,
+                cull: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What the first view draws of a species, recomputed from its table rows: per row the chain's
+    variant (the row's `variant` column through the chain's `pick`), the level (-1: culled), the
+    distance, and the distance to the nearest threshold (relative), so rows exactly at a switch may
+    go either way."""
     n = len(rows)
-    variants = variants_of(rows[:, 0], rows[:, 2], len(chain["variants"]))
+    pick = np.asarray(chain.get("pick") or list(range(len(chain["variants"]))), dtype=np.int64)
+    if n and (table_variants.min() < 0 or table_variants.max() >= len(pick)):
+        raise CheckFailed(f"variant column {table_variants.min()}..{table_variants.max()}, the chain picks from {len(pick)}")
+    variants = pick[table_variants]
     p = rows[:, 0:3].astype(np.float32).astype(np.float64)
     q = rows[:, 3:7].astype(np.float32).astype(np.float64)
     s = rows[:, 8].astype(np.float32).astype(np.float64)
@@ -1150,7 +1157,7 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
         name = entry["name"]
         spec = settings[name]
         csv_path = scene_dir / entry.get("table", f"placements/{name}.csv")
-        values, tiles = read_placements_csv(csv_path)
+        values, tiles, table_variants = read_placements_csv(csv_path)
         n = len(values)
 
         # the first view, replayed from the table
@@ -1166,7 +1173,11 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
                 raise CheckFailed(f"{glb_path.name}: no root node named {name!r} (roots: {sorted(roots)})")
             if root in parent_of:
                 raise CheckFailed(f"{name}: species node is not a root node")
-            variants, level, _, margin = replay_view(values, chain, view, vs["cull"])
+            # each row names its variant: the documented hash of its x and z over the chain's picks
+            pick_n = len(chain.get("pick") or chain["variants"])
+            if n and not np.array_equal(table_variants, variants_of(values[:, 0], values[:, 2], pick_n)):
+                raise CheckFailed(f"{name}: the variant column is not the hash of x and z over {pick_n} variants")
+            variants, level, _, margin = replay_view(values, table_variants, chain, view, vs["cull"])
             expected = {}
             for v in range(len(chain["variants"])):
                 for k in range(len(chain["variants"][v])):

@@ -12,7 +12,8 @@ use crate::export::atomic::write_atomic_with;
 use crate::export::error::ExportError;
 
 /// The columns of a placement table, in order.
-pub const PLACEMENT_COLUMNS: [&str; 12] = ["x", "y", "z", "qx", "qy", "qz", "qw", "sx", "sy", "sz", "yaw_deg", "tile"];
+pub const PLACEMENT_COLUMNS: [&str; 13] =
+    ["x", "y", "z", "qx", "qy", "qz", "qw", "sx", "sy", "sz", "yaw_deg", "tile", "variant"];
 
 /// One placed instance as the table writes it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -24,6 +25,9 @@ pub struct PlacementRow {
     pub scale: [f32; 3],
     pub yaw_deg: f32,
     pub tile: u32,
+    /// Which of its species' meshes the instance shows (the scene's manifest.json maps it to the
+    /// chain and its LoD0 file: `view.chains.<species>.pick[variant]`).
+    pub variant: u32,
 }
 
 /// Anything that is one row of a placement table: the writer reads rows through this, so a
@@ -47,8 +51,8 @@ const ROWS_PER_CHUNK: usize = 4096;
 /// page fault per 4 KiB.
 const CHUNKS_PER_BATCH: usize = 8;
 /// Longest row: a shortest round-trip f64 is at most 24 bytes and an f32 16, a u32 has 10 digits,
-/// and 11 commas + a newline.
-const ROW_MAX: usize = 3 * 24 + 8 * 16 + 10 + 12;
+/// and 12 commas + a newline.
+const ROW_MAX: usize = 3 * 24 + 8 * 16 + 2 * 10 + 13;
 
 /// A chunk's bytes under construction: `buf[..len]` is written. Fields are stored with fixed-size
 /// 8-byte copies (the buffer holds [`ROW_MAX`] per row plus [`SLACK`], which absorbs the
@@ -242,6 +246,8 @@ fn push_row(line: &mut Line<'_>, r: &PlacementRow) -> bool {
         line.push(b',');
     }
     line.put_u64(r.tile as u64);
+    line.push(b',');
+    line.put_u64(r.variant as u64);
     line.push(b'\n');
     true
 }
@@ -446,6 +452,9 @@ pub fn parse_placements_csv(text: &str) -> Result<Vec<PlacementRow>, String> {
             tile: f[11]
                 .parse::<u32>()
                 .map_err(|_| format!("line {at}, column `tile`: `{}` is not a tile number", f[11]))?,
+            variant: f[12]
+                .parse::<u32>()
+                .map_err(|_| format!("line {at}, column `variant`: `{}` is not a variant number", f[12]))?,
         });
     }
     Ok(rows)
@@ -517,7 +526,7 @@ mod tests {
         lines
             .map(|l| {
                 let f: Vec<&str> = l.split(',').collect();
-                assert_eq!(f.len(), 12);
+                assert_eq!(f.len(), 13);
                 let d = |k: usize| f[k].parse::<f64>().unwrap();
                 let s = |k: usize| f[k].parse::<f32>().unwrap();
                 PlacementRow {
@@ -526,6 +535,7 @@ mod tests {
                     scale: [s(7), s(8), s(9)],
                     yaw_deg: s(10),
                     tile: f[11].parse().unwrap(),
+                    variant: f[12].parse().unwrap(),
                 }
             })
             .collect()
@@ -542,6 +552,7 @@ mod tests {
                     scale: [1.0 + k as f32 * 1e-5; 3],
                     yaw_deg: (k % 360) as f32 + 0.25,
                     tile: k / 1000,
+                    variant: k % 3,
                 }
             })
             .collect();
@@ -568,6 +579,7 @@ mod tests {
                     r.rotation.iter().chain(&r.scale).chain([&r.yaw_deg]).map(|&v| fmt.format_finite(v).to_string()),
                 );
                 f.push(r.tile.to_string());
+                f.push(r.variant.to_string());
                 f.join(",") + "\n"
             })
             .collect();
@@ -737,6 +749,7 @@ mod tests {
                 scale: [v.clamp(-1e38, 1e38) as f32, 1e-40, 1.0],
                 yaw_deg: 359.99997,
                 tile: [u32::MAX, 0, 9, 10, 99, 100, 1_000_000_007][k],
+                variant: [0, u32::MAX, 1, 15, 7, 100_000_000, 99_999_999][k],
             })
             .collect();
         assert_eq!(parse(&placements_csv(&rows).unwrap()), rows);
@@ -756,6 +769,7 @@ mod tests {
                 scale: [f, -f, f],
                 yaw_deg: -f,
                 tile: u32::MAX - k as u32,
+                variant: u32::MAX - k as u32,
             };
             let mut buf = vec![0u8; ROW_MAX + SLACK];
             let mut line = Line { buf: &mut buf, len: 0 };
@@ -770,13 +784,14 @@ mod tests {
 
     #[test]
     fn empty_table_has_a_header_and_nan_is_refused() {
-        assert_eq!(placements_csv::<PlacementRow>(&[]).unwrap(), b"x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile\n");
+        assert_eq!(placements_csv::<PlacementRow>(&[]).unwrap(), b"x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile,variant\n");
         let bad = PlacementRow {
             position: [f64::NAN, 0.0, 0.0],
             rotation: [0.0, 0.0, 0.0, 1.0],
             scale: [1.0; 3],
             yaw_deg: 0.0,
             tile: 0,
+            variant: 0,
         };
         assert!(placements_csv(&[bad]).unwrap_err().contains("row 0"));
         let mut rows = vec![
@@ -785,7 +800,8 @@ mod tests {
                 rotation: [0.0, 0.0, 0.0, 1.0],
                 scale: [1.0; 3],
                 yaw_deg: 0.0,
-                tile: 0
+                tile: 0,
+                variant: 0,
             };
             70_000
         ];

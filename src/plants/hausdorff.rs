@@ -259,7 +259,8 @@ impl SampledTriangle<'_> {
             (u, v) = (1.0 - u, 1.0 - v);
         }
         if let Some((uv, img, cutoff, alpha)) = self.mask {
-            let at = [0, 1].map(|k| ((1.0 - u - v) * uv[0][k] as f64 + u * uv[1][k] as f64 + v * uv[2][k] as f64) as f32);
+            let at =
+                [0, 1].map(|k| ((1.0 - u - v) * uv[0][k] as f64 + u * uv[1][k] as f64 + v * uv[2][k] as f64) as f32);
             if img.sample_bilinear(at)[3] * alpha < cutoff {
                 return None;
             }
@@ -304,7 +305,9 @@ pub fn hausdorff(
             let area = 0.5 * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
             let ids = [0, 1, 2].map(|k| p.indices[3 * t + k] as usize);
             let (Some(corner), true) = (
-                ids.map(|i| p.positions.get(i).map(|v| DVec3::from(v.map(f64::from)))).into_iter().collect::<Option<Vec<_>>>(),
+                ids.map(|i| p.positions.get(i).map(|v| DVec3::from(v.map(f64::from))))
+                    .into_iter()
+                    .collect::<Option<Vec<_>>>(),
                 area.is_finite(),
             ) else {
                 // the numbering stays that of the mesh: a skipped triangle keeps its number's hash unused

@@ -22,6 +22,24 @@ pub struct Instance {
     pub yaw_deg: f32,
     /// Placement tile: `tz * tiles_x + tx` over the extent, tiles of `tile_m` from (min_x, min_z).
     pub tile: u32,
+    /// Which of the species' meshes it shows: [`variant_of`] its position (0 until
+    /// [`assign_variants`] gives the species' count).
+    pub variant: u32,
+}
+
+/// Which of `variants` meshes an instance at `position` shows: a hash of its x and z (f64 bits),
+/// so neighbours differ and the choice is reproducible from the position alone. Written in the
+/// placement table's `variant` column.
+pub fn variant_of(position: [f64; 3], variants: usize) -> u32 {
+    let h = mix64(position[0].to_bits() ^ mix64(position[2].to_bits()));
+    (((h >> 32) * variants.max(1) as u64) >> 32) as u32
+}
+
+/// Sets every instance's [`Instance::variant`] for a species of `variants` meshes (in parallel:
+/// each depends on its own position only).
+pub fn assign_variants(instances: &mut [Instance], variants: usize) {
+    use rayon::prelude::*;
+    instances.par_iter_mut().for_each(|i| i.variant = variant_of(i.position, variants));
 }
 
 /// An instance is a row of its placement table (written without a copy).
@@ -34,6 +52,7 @@ impl crate::export::table::ToPlacementRow for Instance {
             scale: self.scale,
             yaw_deg: self.yaw_deg,
             tile: self.tile,
+            variant: self.variant,
         }
     }
 }
@@ -266,4 +285,24 @@ pub(crate) fn unit(h: u64) -> f64 {
     // through i64 (exact below 2^53): one conversion instruction, where u64 → f64 takes a branch
     // and several on x86-64
     ((h >> 11) as i64) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn variants_mix_and_repeat() {
+        let mut counts = [0usize; 3];
+        for k in 0..300 {
+            let p = [k as f64 * 0.37, 0.0, k as f64 * 1.91];
+            let v = variant_of(p, 3);
+            assert_eq!(v, variant_of(p, 3));
+            counts[v as usize] += 1;
+        }
+        assert!(counts.iter().all(|&n| n > 60), "{counts:?}");
+        assert_eq!(variant_of([1.0, 2.0, 3.0], 1), 0);
+        // no variants is read as one
+        assert_eq!(variant_of([1.0, 2.0, 3.0], 0), 0);
+    }
 }

@@ -29,8 +29,8 @@ pub mod storage;
 pub mod surface;
 
 pub use common::{
-    species_key, Instance, RuleCounts, Scatter, ScatterError, Tiling, HEIGHT_STEPS_PER_M, MAX_CANDIDATES, MAX_TILES,
-    POISSON_PACKING, POSITION_STEPS_PER_M, ROTATION_STEPS, SCALE_STEPS, YAW_STEPS_PER_DEG,
+    assign_variants, species_key, variant_of, Instance, RuleCounts, Scatter, ScatterError, Tiling, HEIGHT_STEPS_PER_M,
+    MAX_CANDIDATES, MAX_TILES, POISSON_PACKING, POSITION_STEPS_PER_M, ROTATION_STEPS, SCALE_STEPS, YAW_STEPS_PER_DEG,
 };
 pub use density::DensityMap;
 pub use rules::expected_count;

@@ -311,6 +311,7 @@ impl<'a> Rules<'a> {
             scale: [scale; 3],
             yaw_deg: yaw_deg as f32,
             tile,
+            variant: 0,
         }
     }
 }

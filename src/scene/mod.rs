@@ -153,6 +153,21 @@ pub enum PlantLook {
     Mesh(MeshLook),
 }
 
+impl PlantLook {
+    /// How many variants the placement table's `variant` column picks from (the preset's
+    /// `variants`; one for a mesh or a marker). A tree whose L-system ignores the seed builds fewer
+    /// distinct meshes; the chain's `pick` then maps several variants to one.
+    pub fn table_variants(&self) -> usize {
+        match self {
+            PlantLook::Marker | PlantLook::Mesh(_) => 1,
+            PlantLook::Grass(g) => g.variants,
+            PlantLook::Flower(f) => f.variants,
+            PlantLook::Tree(t) => t.variants,
+        }
+        .max(1)
+    }
+}
+
 /// A mesh species' look: the OBJ file, how it is read and how its chain is built.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MeshLook {

@@ -66,8 +66,12 @@ pub struct PlantReport {
 /// file and mesh, and the switch distance the analyzer measured for the `[lod]` policy.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
 pub struct SpeciesChain {
-    /// Instances pick variant `mix64(x, z) mod len` (see the view stage).
+    /// The distinct variants built: per variant, its levels (LoD0 first).
     pub variants: Vec<Vec<ChainLevel>>,
+    /// The placement table's `variant` column → index in `variants` (one entry per variant the
+    /// preset asks for; several map to one when an L-system ignores the seed). Empty: the identity.
+    #[serde(default)]
+    pub pick: Vec<usize>,
     /// Height of the LoD0 meshes above their origin (largest over the variants, m).
     pub height_m: f64,
     /// Height of the LoD0 bounding-box centre above the origin (m): distances are measured to it.
@@ -101,7 +105,17 @@ impl SpeciesChain {
         if !(lo <= hi) {
             (lo, hi) = (0.0, 0.0);
         }
-        SpeciesChain { variants, height_m: hi.max(0.0), centre_y_m: 0.5 * (lo + hi) }
+        let pick = (0..variants.len()).collect();
+        SpeciesChain { variants, pick, height_m: hi.max(0.0), centre_y_m: 0.5 * (lo + hi) }
+    }
+
+    /// The built variant that table variant `variant` shows; None beyond the table's variants.
+    pub fn shown(&self, variant: u32) -> Option<usize> {
+        let v = variant as usize;
+        if self.pick.is_empty() {
+            return (v < self.variants.len()).then_some(v);
+        }
+        self.pick.get(v).copied().filter(|&k| k < self.variants.len())
     }
 }
 
@@ -173,8 +187,9 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// small analyzer views get up to 4×4 samples per pixel (64 across at least). 13: leaf-cluster
 /// cards frame like billboards (they no longer widen every level's views). 14: the switch search
 /// starts at 128 radii and narrows brackets by interpolation (same switches on ../shared/data,
-/// fewer distances measured in the report).
-pub const PLANTS_ALGORITHM_VERSION: u32 = 14;
+/// fewer distances measured in the report). 15: the chain maps the table's `variant` column to
+/// its meshes (`pick`; the files are unchanged).
+pub const PLANTS_ALGORITHM_VERSION: u32 = 15;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).
@@ -362,7 +377,9 @@ fn run_tree(
             chain: chain.report,
         });
     }
-    let draw = SpeciesChain::with_bounds(levels, &lod0.iter().collect::<Vec<_>>());
+    let mut draw = SpeciesChain::with_bounds(levels, &lod0.iter().collect::<Vec<_>>());
+    // every variant the table may name: those of a seed-independent L-system show its one tree
+    draw.pick = (0..look.variants.max(1)).map(|k| k % count.max(1)).collect();
     Ok((
         TreeSpeciesReport {
             lsystem: look.lsystem.clone(),

@@ -63,8 +63,8 @@ impl ScatterStageReport {
 /// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: scene.glb holds no unused mesh; 3: its terrain is textured; 4:
 /// its plants carry wind in `_WIND`, not COLOR_0; 5: a tree without an L-system instances a
 /// built-in tree; 6: flower cards lit by a normal atlas (with TANGENT); 7: scene.glb moved to the
-/// view stage (tables only).
-pub const SCATTER_ALGORITHM_VERSION: u32 = 7;
+/// view stage (tables only); 8: a `variant` column.
+pub const SCATTER_ALGORITHM_VERSION: u32 = 8;
 
 /// Cache key: the terrain's key, the species and scatter settings, the scene seed, the maps' bytes.
 pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageError> {
@@ -139,7 +139,7 @@ pub fn run_scatter_with_snow(
             }
             _ => None,
         };
-        let result = scatter_species_snow(
+        let mut result = scatter_species_snow(
             &surface,
             extent,
             &species.rules,
@@ -151,6 +151,8 @@ pub fn run_scatter_with_snow(
             thinning,
         )
         .map_err(|e| bad_input(e.to_string()))?;
+        // each row names the variant it shows: the manifest's chain maps it to its meshes
+        crate::scatter::assign_variants(&mut result.instances, species.look.table_variants());
         let generate_s = t1.elapsed().as_secs_f64();
         let stats = analyze(
             &surface,

@@ -140,11 +140,18 @@ pub fn view_key(preset: &Preset, upstream: &[&str]) -> String {
     k.finish()
 }
 
-/// Which variant an instance shows: a hash of its position (f64 bits), so neighbours differ and
-/// the choice is reproducible from the table alone.
-pub fn variant_of(position: [f64; 3], variants: usize) -> usize {
-    let h = crate::random::mix64(position[0].to_bits() ^ crate::random::mix64(position[2].to_bits()));
-    (((h >> 32) * variants as u64) >> 32) as usize
+/// The chain's variant that row `n` of `species`' table shows (its `variant` column through the
+/// chain's `pick`); an error naming the table's line when the column names no variant.
+fn shown(species: &str, chain: &SpeciesChain, n: usize, row: &table::PlacementRow) -> Result<usize, StageError> {
+    chain.shown(row.variant).ok_or_else(|| {
+        fail(format!(
+            "placements/{species}.csv line {}: variant {} is none of the species' {} (the table and the plants do not \
+             match: rebuild the scene)",
+            n + 2,
+            row.variant,
+            chain.pick.len().max(chain.variants.len())
+        ))
+    })
 }
 
 /// Files read once and shared; meshes, materials and textures appended once, equal textures
@@ -341,8 +348,8 @@ pub fn run_view(
         for (s, rows) in preset.species.iter().zip(&rows_of) {
             let Some(chain) = chains.get(s.rules.name.as_str()).filter(|c| !c.variants.is_empty()) else { continue };
             let mut groups: BTreeMap<usize, Instances> = BTreeMap::new();
-            for row in rows {
-                let g = groups.entry(variant_of(row.position, chain.variants.len())).or_default();
+            for (n, row) in rows.iter().enumerate() {
+                let g = groups.entry(shown(&s.rules.name, chain, n, row)?).or_default();
                 g.translations.push(row.position.map(|x| x as f32));
                 g.rotations.push(row.rotation);
                 g.scales.push(row.scale);
@@ -417,8 +424,8 @@ pub fn run_view(
             // (variant, level) → instances
             let mut groups: BTreeMap<(usize, usize), Instances> = BTreeMap::new();
             let mut culled = 0usize;
-            for row in rows {
-                let variant = variant_of(row.position, chain.variants.len());
+            for (n, row) in rows.iter().enumerate() {
+                let variant = shown(&s.rules.name, chain, n, row)?;
                 let v = &chain.variants[variant];
                 let scale = row.scale[1] as f64;
                 let d = camera.distance_to(instance_centre(row, chain.centre_y_m));
@@ -470,8 +477,8 @@ pub fn run_view(
             }
             // full detail: every row at its variant's LoD0, one node per variant
             let mut variants_used = vec![0usize; chain.variants.len()];
-            for row in rows {
-                variants_used[variant_of(row.position, chain.variants.len())] += 1;
+            for (n, row) in rows.iter().enumerate() {
+                variants_used[shown(&s.rules.name, chain, n, row)?] += 1;
             }
             for (variant, &n) in variants_used.iter().enumerate() {
                 if n == 0 {
@@ -639,6 +646,7 @@ mod tests {
             scale: [2.0; 3],
             yaw_deg: 0.0,
             tile: 0,
+            variant: 0,
         };
         assert_eq!(instance_centre(&row, 5.0), [1.0, 12.0, 3.0]);
         // tipped 90° about +Z: up becomes −X
@@ -646,18 +654,5 @@ mod tests {
         let tipped = table::PlacementRow { rotation: [0.0, 0.0, h, h], scale: [1.0; 3], ..row };
         let c = instance_centre(&tipped, 5.0);
         assert!((c[0] - (1.0 - 5.0)).abs() < 1e-5 && (c[1] - 2.0).abs() < 1e-5, "{c:?}");
-    }
-
-    #[test]
-    fn variants_mix_and_repeat() {
-        let mut counts = [0usize; 3];
-        for k in 0..300 {
-            let p = [k as f64 * 0.37, 0.0, k as f64 * 1.91];
-            let v = variant_of(p, 3);
-            assert_eq!(v, variant_of(p, 3));
-            counts[v] += 1;
-        }
-        assert!(counts.iter().all(|&n| n > 60), "{counts:?}");
-        assert_eq!(variant_of([1.0, 2.0, 3.0], 1), 0);
     }
 }

@@ -54,9 +54,10 @@ struct Row {
     scale: [f32; 3],
     yaw: f32,
     tile: u32,
+    variant: u32,
 }
 
-const HEADER: &str = "x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile";
+const HEADER: &str = "x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile,variant";
 
 fn read_csv(path: &Path) -> Vec<Row> {
     let t = fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -66,7 +67,7 @@ fn read_csv(path: &Path) -> Vec<Row> {
     lines
         .map(|l| {
             let f: Vec<&str> = l.split(',').collect();
-            assert_eq!(f.len(), 12, "{}: row {l}", path.display());
+            assert_eq!(f.len(), 13, "{}: row {l}", path.display());
             let d = |k: usize| f[k].parse::<f64>().unwrap_or_else(|e| panic!("{l}: {e}"));
             let s = |k: usize| f[k].parse::<f32>().unwrap_or_else(|e| panic!("{l}: {e}"));
             Row {
@@ -75,6 +76,7 @@ fn read_csv(path: &Path) -> Vec<Row> {
                 scale: [s(7), s(8), s(9)],
                 yaw: s(10),
                 tile: f[11].parse().unwrap(),
+                variant: f[12].parse().unwrap(),
             }
         })
         .collect()
@@ -195,8 +197,8 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
         counts.insert(species, rows.len());
 
         // the first view, replayed here from the table and manifest.json's view section: each
-        // row's variant (the documented hash), distance to its centre, cull and level; scene.glb's
-        // node per (variant, level) holds exactly those rows, in CSV order
+        // row's variant (its column, through the chain's pick), distance to its centre, cull and
+        // level; scene.glb's node per (variant, level) holds exactly those rows, in CSV order
         let root = scene
             .roots
             .iter()
@@ -210,11 +212,15 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
         let factor = view["distance_factor"].as_f64().unwrap();
         let centre_y = chain["centre_y_m"].as_f64().unwrap();
         let variants = chain["variants"].as_array().unwrap();
+        let pick: Vec<usize> = chain["pick"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
+        assert!(!pick.is_empty(), "{species}: the manifest's chain has no pick");
         let key = |t: [f32; 3], q: [f32; 4], s: [f32; 3]| format!("{t:?}{q:?}{s:?}");
         let mut want: BTreeMap<(u64, u64), Vec<String>> = BTreeMap::new();
         let mut culled = 0;
         for r in &rows {
-            let v = verdant::scene::view_stage::variant_of(r.pos, variants.len());
+            // the column is the documented hash of x and z over the species' variants
+            assert_eq!(r.variant, verdant::scatter::variant_of(r.pos, pick.len()), "{species}: variant column");
+            let v = pick[r.variant as usize];
             let s = r.scale[1] as f64;
             let [x, y, z, w] = r.rot.map(|c| c as f64);
             let up = centre_y * s;

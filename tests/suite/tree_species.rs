@@ -133,6 +133,25 @@ fn a_system_that_ignores_the_seed_builds_one_variant() {
     assert_eq!(tree["variants"].as_array().unwrap().len(), 1);
     let scene = verdant::validate::read_scene(&s.join("scene.glb")).unwrap();
     assert_eq!(scene.meshes.iter().filter(|m| m.name.starts_with("bush_v")).count(), 1);
+    // the table still names the three variants asked (the hash over 3), and the chain shows the
+    // one tree for each
+    let rows = verdant::export::table::read_placements_csv(&s.join("placements/bush.csv")).unwrap();
+    assert!(rows.len() > 30, "{} rows", rows.len());
+    let mut seen = [0usize; 3];
+    for r in &rows {
+        assert_eq!(r.variant, verdant::scatter::variant_of(r.position, 3));
+        seen[r.variant as usize] += 1;
+    }
+    assert!(seen.iter().all(|&n| n > 0), "every variant named: {seen:?}");
+    let manifest = read_json(&s.join("manifest.json"));
+    let chain = &manifest["view"]["chains"]["bush"];
+    assert_eq!(chain["pick"], serde_json::json!([0, 0, 0]));
+    assert_eq!(chain["variants"].as_array().unwrap().len(), 1);
+    let instanced = scene.nodes.iter().filter(|n| n.instances.is_some()).count();
+    assert!(instanced >= 1);
+    for n in scene.nodes.iter().filter(|n| n.instances.is_some() && n.name.starts_with("bush")) {
+        assert_eq!(n.extras.as_ref().unwrap()["variant"], 0, "{}", n.name);
+    }
 }
 
 #[test]
