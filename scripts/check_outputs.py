@@ -932,7 +932,9 @@ INSTANCE_ACCESSORS = {"TRANSLATION": "VEC3", "ROTATION": "VEC4", "SCALE": "VEC3"
 
 def read_placements_csv(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(n, 11) float64 (x..yaw_deg, parsed exactly), (n,) int64 tiles and (n,) int64 variants; the
-    header must be exact."""
+    header must be exact. A `.bin` table (`[scatter] table = "binary"`) is read by its layout."""
+    if path.suffix == ".bin":
+        return read_placements_bin(path)
     text = path.read_text()
     header, _, body = text.partition("\n")
     if header != PLACEMENT_HEADER:
@@ -955,6 +957,29 @@ def read_placements_csv(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     if not np.all(np.isfinite(values)):
         raise CheckFailed(f"{path.name}: some values are NaN or infinite")
     return values, tiles, variants
+
+
+def read_placements_bin(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A binary placement table (src/export/table_bin.rs): `VPLT`, version 1, u64 rows, then the
+    arrays position f64x3, rotation f32x4, scale f32x3, yaw f32, tile u32, variant u32."""
+    data = path.read_bytes()
+    if data[:4] != b"VPLT" or int.from_bytes(data[4:8], "little") != 1:
+        raise CheckFailed(f"{path.name}: not a version 1 binary placement table")
+    n = int.from_bytes(data[8:16], "little")
+    if len(data) != 16 + 64 * n:
+        raise CheckFailed(f"{path.name}: {n} rows need {16 + 64 * n} bytes, the file has {len(data)}")
+    o = 16
+    def take(dtype, k):
+        nonlocal o
+        a = np.frombuffer(data, dtype=dtype, count=n * k, offset=o).reshape(n, k)
+        o += a.nbytes
+        return a
+    pos, rot, scale = take("<f8", 3), take("<f4", 4), take("<f4", 3)
+    yaw, tiles, variants = take("<f4", 1), take("<u4", 1), take("<u4", 1)
+    values = np.concatenate([pos, rot.astype(np.float64), scale.astype(np.float64), yaw.astype(np.float64)], axis=1)
+    if not np.all(np.isfinite(values)):
+        raise CheckFailed(f"{path.name}: some values are NaN or infinite")
+    return values, tiles[:, 0].astype(np.int64), variants[:, 0].astype(np.int64)
 
 
 def terrain_of_scene(gltf, buffers) -> trimesh.Trimesh:

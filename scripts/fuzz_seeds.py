@@ -188,6 +188,23 @@ def gltfs(verdant, tmp, maps):
     return seeds
 
 
+def placements_bin():
+    """Binary tables (verdant::export::table_bin): magic, version, row count, then the arrays."""
+    import struct
+    rows = [((0.5, 12.25, 3.0), (0.0, 0.38268343, 0.0, 0.9238795), (1.0, 1.0, 1.0), 45.0, 0, 0),
+            ((-0.0, 1e-7, 123456.789), (0.0, -0.0, 0.0, 1.0), (0.8, 1.2, 0.8), 0.0, 17, 2)]
+    def table(rows):
+        out = b"VPLT" + struct.pack("<IQ", 1, len(rows))
+        out += b"".join(struct.pack("<3d", *r[0]) for r in rows)
+        out += b"".join(struct.pack("<4f", *r[1]) for r in rows)
+        out += b"".join(struct.pack("<3f", *r[2]) for r in rows)
+        out += b"".join(struct.pack("<f", r[3]) for r in rows)
+        out += b"".join(struct.pack("<I", r[4]) for r in rows)
+        out += b"".join(struct.pack("<I", r[5]) for r in rows)
+        return out
+    return {"two.bin": table(rows), "empty.bin": table([])}
+
+
 def placements():
     header = b"x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile,variant\n"
     rows = [
@@ -212,6 +229,7 @@ def main():
             "obj": objs(verdant, tmp),
             "gltf": gltfs(verdant, tmp, maps),
             "placements": placements(),
+            "placements_bin": placements_bin(),
         }
         for target, seeds in corpora.items():
             folder = out / target

@@ -115,6 +115,18 @@ pub fn placements(data: &[u8]) {
         crate::export::table::parse_placements_csv(std::str::from_utf8(&bytes).expect("the writer writes UTF-8"))
             .expect("a table the writer wrote must read back");
     assert!(again == rows, "a placement table does not read back as it was written");
+    // the same rows as a binary table read back equal
+    let bin = crate::export::table_bin::placements_bin(&rows).expect("finite rows that were read must write");
+    let back =
+        crate::export::table_bin::parse_placements_bin(&bin).expect("a binary table the writer wrote must read back");
+    assert!(back == rows, "a binary placement table does not read back as it was written");
+}
+
+/// Any bytes as a binary placement table: an error or rows that write back to the same bytes.
+pub fn placements_bin(data: &[u8]) {
+    let Ok(rows) = crate::export::table_bin::parse_placements_bin(data) else { return };
+    let bytes = crate::export::table_bin::placements_bin(&rows).expect("finite rows that were read must write");
+    assert!(bytes == data, "a binary placement table does not write back to its bytes");
 }
 
 /// Writes `scene` as GLB, reads it back and validates it: the promise every writer makes.

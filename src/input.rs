@@ -23,6 +23,8 @@ pub const MAX_MTL_BYTES: u64 = 16 << 20;
 pub const MAX_TEXTURE_BYTES: u64 = 256 << 20;
 /// Largest glTF / GLB file, and each buffer or image it names.
 pub const MAX_GLTF_BYTES: u64 = 2 << 30;
+/// Largest binary placement table read back (64 bytes a row: about a billion rows).
+pub const MAX_TABLE_BYTES: u64 = 64 << 30;
 
 /// Why a file was not read.
 #[derive(Debug, thiserror::Error)]

@@ -15,6 +15,7 @@ pub mod grid;
 pub mod obj;
 pub mod streaming;
 pub mod table;
+pub mod table_bin;
 
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};

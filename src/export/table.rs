@@ -408,6 +408,35 @@ fn format_batch<R: ToPlacementRow + Sync>(rows: &[R], first: usize, bufs: &mut V
     results.into_iter().collect()
 }
 
+/// How the scatter stage writes placement tables (`[scatter] table`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TableFormat {
+    /// `placements/<species>.csv`, one text row per instance.
+    #[default]
+    Csv,
+    /// `placements/<species>.bin`, little-endian arrays ([`crate::export::table_bin`]).
+    Binary,
+}
+
+impl TableFormat {
+    pub fn extension(self) -> &'static str {
+        match self {
+            TableFormat::Csv => "csv",
+            TableFormat::Binary => "bin",
+        }
+    }
+}
+
+/// Reads a placement table in either format, by its extension (`.bin`: binary, else CSV).
+pub fn read_placements(path: &Path) -> Result<Vec<PlacementRow>, String> {
+    if path.extension().is_some_and(|e| e == "bin") {
+        crate::export::table_bin::read_placements_bin(path)
+    } else {
+        read_placements_csv(path)
+    }
+}
+
 /// Reads a placement table back (the CSV [`write_placements_csv`] writes): the header must name
 /// [`PLACEMENT_COLUMNS`]; every number is parsed exactly (the writer's shortest round-trip form),
 /// so the rows equal those written. Errors name the line.

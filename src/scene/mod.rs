@@ -115,11 +115,13 @@ pub struct Preset {
 pub struct ScatterSettings {
     /// Side of a placement tile in metres (instances are grouped per tile in tables and scene.glb).
     pub tile_m: f64,
+    /// `table`: how the placement tables are written (CSV, or little-endian binary arrays).
+    pub table: crate::export::table::TableFormat,
 }
 
 impl Default for ScatterSettings {
     fn default() -> Self {
-        ScatterSettings { tile_m: 256.0 }
+        ScatterSettings { tile_m: 256.0, table: crate::export::table::TableFormat::Csv }
     }
 }
 

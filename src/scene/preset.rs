@@ -574,7 +574,11 @@ fn parse_scene(t: &Table<'_, '_>) -> Result<SceneSettings, PresetError> {
 fn parse_scatter(t: &Table<'_, '_>) -> Result<ScatterSettings, PresetError> {
     t.check_keys(SCATTER_KEYS, &[("[[species]]", SPECIES_KEYS), ("[terrain]", TERRAIN_KEYS), ("[scene]", SCENE_KEYS)])?;
     let tile_m = t.number("tile", "tile = 256.0", positive)?.map_or(DEFAULT_TILE_M, |(x, _)| x);
-    Ok(ScatterSettings { tile_m })
+    let table = match t.string("table", "table = \"binary\"")? {
+        Some((s, span)) => reader::choice(t, "table", s, &span)?,
+        None => crate::export::table::TableFormat::Csv,
+    };
+    Ok(ScatterSettings { tile_m, table })
 }
 
 #[cfg(test)]

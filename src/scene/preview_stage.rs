@@ -189,7 +189,7 @@ fn placements_from_tables(
             let mut points = Vec::new();
             if let Some((_, rel)) = tables.iter().find(|(n, _)| *n == s.rules.name) {
                 let path = dir.join(rel);
-                let rows = crate::export::table::read_placements_csv(&path)
+                let rows = crate::export::table::read_placements(&path)
                     .map_err(|message| SceneBuildError::Io { path: path.clone(), message })?;
                 points.extend(rows.iter().map(|r| r.position.map(|v| v as f32 as f64)));
             }

@@ -35,6 +35,7 @@ pub struct SpeciesReport {
     pub name: String,
     pub kind: crate::plants::SpeciesKind,
     pub count: usize,
+    /// The placement table (`placements/<species>.csv`, or `.bin` with `[scatter] table = "binary"`).
     pub csv: PathBuf,
     pub rules: RuleCounts,
     pub stats: SpeciesStats,
@@ -166,8 +167,15 @@ pub fn run_scatter_with_snow(
             generate_s,
         )
         .map_err(|e| bad_input(e.to_string()))?;
-        let csv = PathBuf::from("placements").join(format!("{}.csv", species.rules.name));
-        table::write_placements_csv(&scene_dir.join(&csv), &result.instances).map_err(|e| fail(e.to_string()))?;
+        let format = preset.scatter.table;
+        let csv = PathBuf::from("placements").join(format!("{}.{}", species.rules.name, format.extension()));
+        match format {
+            table::TableFormat::Csv => table::write_placements_csv(&scene_dir.join(&csv), &result.instances),
+            table::TableFormat::Binary => {
+                crate::export::table_bin::write_placements_bin(&scene_dir.join(&csv), &result.instances)
+            }
+        }
+        .map_err(|e| fail(e.to_string()))?;
         let report = SpeciesReport {
             name: species.rules.name.clone(),
             kind: species.kind,
@@ -179,6 +187,13 @@ pub fn run_scatter_with_snow(
         };
         // timing stays out of the summary, so the file is byte-identical from run to run
         let mut summary = serde_json::to_value(SpeciesSummary::from(&report)).map_err(|e| fail(e.to_string()))?;
+        if format == table::TableFormat::Binary {
+            // the binary table's header: where each array lies
+            let layout = crate::export::table_bin::layout(report.count as u64);
+            if let Some(o) = summary.as_object_mut() {
+                o.insert("binary".into(), serde_json::to_value(layout).map_err(|e| fail(e.to_string()))?);
+            }
+        }
         if let Some(st) = summary.get_mut("stats").and_then(serde_json::Value::as_object_mut) {
             st.remove("seconds");
             st.remove("analyze_seconds");

@@ -145,8 +145,8 @@ pub fn view_key(preset: &Preset, upstream: &[&str]) -> String {
 fn shown(species: &str, chain: &SpeciesChain, n: usize, row: &table::PlacementRow) -> Result<usize, StageError> {
     chain.shown(row.variant).ok_or_else(|| {
         fail(format!(
-            "placements/{species}.csv line {}: variant {} is none of the species' {} (the table and the plants do not \
-             match: rebuild the scene)",
+            "the placement table of `{species}`, row {n} (line {} of a CSV): variant {} is none of the species' {} (the \
+             table and the plants do not match: rebuild the scene)",
             n + 2,
             row.variant,
             chain.pick.len().max(chain.variants.len())
@@ -332,7 +332,7 @@ pub fn run_view(
             .map(|(_, p)| p.clone())
             .unwrap_or_else(|| PathBuf::from("placements").join(format!("{}.csv", s.rules.name)));
         let path = scene_dir.join(&rel);
-        rows_of.push(table::read_placements_csv(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?);
+        rows_of.push(table::read_placements(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?);
     }
 
     // full detail (first view, when compared): the main terrain, every row at its variant's LoD0

@@ -373,6 +373,18 @@ fn mutated_placement_tables_never_panic() {
     run_mutations("placements", &[table.as_bytes().to_vec()], 400, harness::placements);
 }
 
+#[test]
+fn mutated_binary_placement_tables_never_panic() {
+    let rows = verdant::export::table::parse_placements_csv(
+        "x,y,z,qx,qy,qz,qw,sx,sy,sz,yaw_deg,tile,variant\n\
+         0.5,12.25,3.0,0.0,0.38268343,0.0,0.9238795,1.0,1.0,1.0,45.0,0,0\n\
+         -0.0,1e-7,123456.789,0.0,-0.0,0.0,1.0,0.8,1.2,0.8,0.0,17,2\n",
+    )
+    .unwrap();
+    let seed = verdant::export::table_bin::placements_bin(&rows).unwrap();
+    run_mutations("placements_bin", &[seed], 400, harness::placements_bin);
+}
+
 // ---------------------------------------------------------------------------------------------
 // what the mutations above found, kept as named cases
 

@@ -513,3 +513,49 @@ fn a_slope_range_that_excludes_everything_writes_empty_valid_files() {
     assert!(!read_csv(&s.join("placements/tree.csv")).is_empty());
     ok(&verdant_in(d, &["validate", "o/a/scene.glb"]));
 }
+
+#[test]
+fn binary_tables_hold_the_csv_rows_and_build_the_same_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/a.toml", &forest("a", 3));
+    write(
+        d,
+        "p/b.toml",
+        &forest("a", 3).replace("[scatter]\ntile = 64.0\n", "[scatter]\ntile = 64.0\ntable = \"binary\"\n"),
+    );
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "csv"]));
+    ok(&verdant_in(d, &["build", "p/b.toml", "--out", "bin"]));
+    let (c, b) = (d.join("csv/a"), d.join("bin/a"));
+    for species in ["tree", "grass"] {
+        assert!(!b.join(format!("placements/{species}.csv")).exists(), "{species}: no CSV beside the binary table");
+        let csv = verdant::export::table::read_placements(&c.join(format!("placements/{species}.csv"))).unwrap();
+        let bin = verdant::export::table::read_placements(&b.join(format!("placements/{species}.bin"))).unwrap();
+        assert!(csv.len() > 100, "{species}: {} rows", csv.len());
+        assert_eq!(bin, csv, "{species}: the binary table's rows are the CSV's, exactly");
+        // the JSON header says where each array lies, and the bytes are there
+        let json = read_json(&b.join(format!("placements/{species}.json")));
+        let header = &json["binary"];
+        assert_eq!(header["rows"].as_u64(), Some(csv.len() as u64));
+        let bytes = fs::read(b.join(format!("placements/{species}.bin"))).unwrap();
+        assert_eq!(header["bytes"].as_u64(), Some(bytes.len() as u64));
+        let arrays = header["arrays"].as_array().unwrap();
+        let offset = |name: &str| {
+            arrays.iter().find(|a| a["name"] == name).unwrap_or_else(|| panic!("no array {name}"))["offset"]
+                .as_u64()
+                .unwrap() as usize
+        };
+        let last = csv.len() - 1;
+        let o = offset("position") + 24 * last + 16;
+        assert_eq!(f64::from_le_bytes(bytes[o..o + 8].try_into().unwrap()), csv[last].position[2]);
+        let o = offset("variant") + 4 * last;
+        assert_eq!(u32::from_le_bytes(bytes[o..o + 4].try_into().unwrap()), csv[last].variant);
+        assert_eq!(read_json(&c.join(format!("placements/{species}.json"))).get("binary"), None);
+    }
+    // the scene drawn from either table is the same file
+    assert_eq!(fs::read(c.join("scene.glb")).unwrap(), fs::read(b.join("scene.glb")).unwrap());
+    let manifest = read_json(&b.join("manifest.json"));
+    let tables: Vec<&str> =
+        manifest["scatter"]["species"].as_array().unwrap().iter().map(|s| s["table"].as_str().unwrap()).collect();
+    assert_eq!(tables, ["placements/tree.bin", "placements/grass.bin"]);
+}
