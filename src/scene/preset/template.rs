@@ -61,6 +61,7 @@ lods = [1.0, 4.0, 16.0]
 
 # [scatter]
 # tile = 256.0               # side of a placement tile, metres
+# table = "csv"              # placement tables: "csv", or "binary" (little-endian arrays, for dense species)
 
 # Vegetation: one [[species]] table per species, placed in file order; a species can keep clear
 # only of species declared above it (or of itself). Uncomment to scatter trees and grass.
