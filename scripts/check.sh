@@ -30,7 +30,7 @@ done
 # Pinned checking tools. pyopengl is installed in a second step, after pyrender, because pyrender pins
 # PyOpenGL 3.1.0, which fails under EGL on these machines.
 # rtree: trimesh's pure-Python ray caster (trimesh.ray.ray_triangle) needs its R-tree of triangle bounds.
-PY_PKGS=(trimesh==5.2.0 pyrender==0.1.45 pygltflib==1.16.5 numpy==2.4.6 pillow==12.3.0 scipy==1.17.1 networkx==3.6.1 rtree==1.4.1)
+PY_PKGS=(trimesh==5.2.0 pyrender==0.1.45 pygltflib==1.16.5 numpy==2.4.6 pillow==12.3.0 scipy==1.17.1 networkx==3.6.1 rtree==1.4.1 gdtoolkit==4.3.3)
 PY_PKGS_AFTER=(pyopengl==3.1.10)
 # libopengl0 / libgl1 give PyOpenGL the desktop GL library it loads first (else it falls back to GLES).
 # chromium: Babylon.js renders the species files headless (WebGL through SwiftShader), step 5e.
@@ -550,6 +550,16 @@ for f in "${FILES[@]}"; do
 done
 
 # ---------------------------------------------------------------------------------------------------------
+section "5g. the Godot 4 import script (scripts/engines/godot/verdant_scene.gd) parses and passes gdtoolkit's lint and format check"
+# no Godot on the registries these machines reach: the script is checked statically only
+if "$VENV/bin/gdparse" scripts/engines/godot/verdant_scene.gd > /dev/null \
+  && "$VENV/bin/gdlint" scripts/engines/godot/verdant_scene.gd \
+  && "$VENV/bin/gdformat" --check scripts/engines/godot/verdant_scene.gd; then
+  pass
+else
+  fail "scripts/engines/godot/verdant_scene.gd: gdtoolkit found problems (see above)"
+fi
+
 section "6. Khronos glTF Validator (0 errors, 0 warnings; infos and hints allowed)"
 gltf_files=()
 for f in "${FILES[@]}"; do
