@@ -236,6 +236,18 @@ pub fn lod_screen_coverage(radius_m: f64, nearest_distance_m: f64, view: &LodVie
     }
 }
 
+/// Screen size as Unreal measures a LoD's `ScreenSize` and Unity a LODGroup's relative height (with
+/// the LODGroup's `size` set to the bounding sphere's diameter): the sphere's diameter over the
+/// screen's height at the sphere's centre distance D, r / (D · tan(fov/2)). From the MSFT_lod
+/// coverage c of the same view ([`lod_screen_coverage`]): 2 √(c · aspect / π). A coverage of 1 (the
+/// object fills the screen, as LoD0 always does) gives 1, the engines' LoD0 convention.
+pub fn screen_size_from_coverage(coverage: f64, view: &LodView) -> f64 {
+    if !(coverage < 1.0) {
+        return 1.0;
+    }
+    2.0 * (coverage.max(0.0) * view.aspect / std::f64::consts::PI).sqrt()
+}
+
 /// The node `extras.MSFT_screencoverage` array for a chain: one value per level, finest first;
 /// value k is the smallest coverage at which level k is shown (the coverage at `d_{k+1}`, where
 /// level k+1 takes over), and the last is 0 so the coarsest level is never culled.
@@ -252,6 +264,18 @@ pub fn msft_screen_coverage(levels: &[LodLevel], radius_m: f64, view: &LodView) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn screen_size_is_the_sphere_diameter_over_the_screen_height() {
+        let view = LodView::default();
+        for (r, d) in [(1.0, 50.0), (7.5, 300.0), (0.2, 3.0)] {
+            let c = lod_screen_coverage(r, d - r, &view);
+            let want = r / (d * (view.fov_y_deg.to_radians() * 0.5).tan());
+            let got = screen_size_from_coverage(c, &view);
+            assert!((got - want).abs() < 1e-12 * want.max(1.0), "r {r} at {d} m: {got} vs {want}");
+        }
+        assert_eq!(screen_size_from_coverage(1.0, &view), 1.0);
+    }
 
     #[test]
     fn formula_matches_the_definition() {

@@ -154,6 +154,9 @@ struct PlantLodManifest {
     triangles: usize,
     switch_distance_m: f64,
     screen_coverage: f64,
+    /// Unreal's LoD `ScreenSize` and Unity's LODGroup relative height where the level starts
+    /// (sphere diameter over screen height; see [`crate::lod::screen_size_from_coverage`]).
+    screen_size: f64,
 }
 
 #[derive(Serialize)]
@@ -287,7 +290,7 @@ pub fn write_manifest_and_report(
                     } else {
                         "mesh"
                     },
-                    lods: plant_lods(sp),
+                    lods: plant_lods(sp, &preset.lod),
                 })
                 .collect()
         }),
@@ -527,7 +530,8 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[Stri
 
 /// Per level of a species' chain (per variant for trees): its file, triangles, switch distance
 /// and MSFT_lod screen coverage.
-fn plant_lods(sp: &PlantReport) -> Vec<PlantLodManifest> {
+fn plant_lods(sp: &PlantReport, view: &crate::lod::LodView) -> Vec<PlantLodManifest> {
+    let size = |coverage: f64| crate::lod::screen_size_from_coverage(coverage, view);
     if let Some(g) = &sp.grass {
         return g
             .lods
@@ -540,6 +544,7 @@ fn plant_lods(sp: &PlantReport) -> Vec<PlantLodManifest> {
                 triangles: l.triangles,
                 switch_distance_m: l.switch_distance_m,
                 screen_coverage: l.screen_coverage,
+                screen_size: size(l.screen_coverage),
             })
             .collect();
     }
@@ -555,6 +560,7 @@ fn plant_lods(sp: &PlantReport) -> Vec<PlantLodManifest> {
                 triangles: l.triangles,
                 switch_distance_m: l.switch_distance_m,
                 screen_coverage: l.screen_coverage,
+                screen_size: size(l.screen_coverage),
             })
             .collect()
     };

@@ -190,6 +190,21 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
     let report = read_json(&s.join("report.json"));
     let manifest = read_json(&s.join("manifest.json"));
     assert_eq!(manifest["scatter"]["scene"], "scene.glb");
+    // every analyzed level's Unreal/Unity screen size: the sphere diameter over the screen height
+    // its MSFT coverage implies (16:9 reference screen), 1 for LoD0
+    let mut sized = 0;
+    for plant in manifest["plants"].as_array().unwrap() {
+        for l in plant["lods"].as_array().unwrap() {
+            let (c, size) = (l["screen_coverage"].as_f64().unwrap(), l["screen_size"].as_f64().unwrap());
+            if c >= 1.0 {
+                assert_eq!(size, 1.0, "{l}");
+            } else {
+                assert!((size - 2.0 * (c * (16.0 / 9.0) / std::f64::consts::PI).sqrt()).abs() < 1e-9, "{l}");
+                sized += 1;
+            }
+        }
+    }
+    assert!(sized > 3, "{sized} levels with a screen size below 1");
     let mut counts = BTreeMap::new();
     for (k, species) in ["tree", "grass"].into_iter().enumerate() {
         let rows = read_csv(&s.join(format!("placements/{species}.csv")));

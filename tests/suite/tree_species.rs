@@ -104,6 +104,19 @@ fn variants_are_built_as_chains_and_instanced_by_position() {
     assert_eq!(lods.len(), 10, "5 levels × 2 variants: {lods:?}");
     for l in lods {
         assert!(s.join(l["file"].as_str().unwrap()).is_file(), "{l}");
+        // Unreal/Unity screen size: 1 for LoD0, then the coverage's sphere diameter over the
+        // screen height (16:9 reference screen), never growing along the chain
+        let (c, size) = (l["screen_coverage"].as_f64().unwrap(), l["screen_size"].as_f64().unwrap());
+        if l["level"] == 0 || c >= 1.0 {
+            // LoD0, or a chain built without analysis (every switch at 0: the object fills the screen)
+            assert_eq!(size, 1.0, "{l}");
+        } else {
+            let want = 2.0 * (c * (16.0 / 9.0) / std::f64::consts::PI).sqrt();
+            assert!((size - want).abs() < 1e-9 && size < 1.0, "{l}");
+        }
+    }
+    for pair in lods.windows(2).filter(|p| p[0]["variant"] == p[1]["variant"]) {
+        assert!(pair[1]["screen_size"].as_f64() <= pair[0]["screen_size"].as_f64(), "{pair:?}");
     }
     let report = read_json(&s.join("report.json"));
     let tree = report["stages"]["plants"]["species"].as_array().unwrap().iter().find(|p| p["name"] == "bush").unwrap()
