@@ -1462,7 +1462,10 @@ def write_instanced_scene(d: Path, species: list[dict], required: bool = True, j
         drawn = sum(len(g) for g in groups.values())
         view_species.append(dict(name=sp["name"], placed=len(rows), drawn=drawn, culled=len(rows) - drawn,
                                  cull=dict(distance_m=cull[0], scales_with_view=cull[1])))
-        lines = [PLACEMENT_HEADER] + [",".join([*(repr(float(v)) for v in r), str(int(t))]) for r, t in zip(rows, tiles)]
+        # each row's variant column: the documented hash of x and z (written scalar by scalar)
+        lines = [PLACEMENT_HEADER] + [",".join([*(repr(float(v)) for v in r), str(int(t)),
+                                                 str(self_test_selection(r, switch, centre_y, cull)[0])])
+                                       for r, t in zip(rows, tiles)]
         (d / "placements" / f"{sp['name']}.csv").write_text("\n".join(lines) + "\n")
         per_tile = [dict(tile=int(t), count=int((tiles == t).sum()),
                          aabb_min=rows[tiles == t][:, 0:3].min(axis=0).tolist(),
