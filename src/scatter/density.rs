@@ -22,6 +22,21 @@ impl DensityMap {
         DensityMap { width: 1, height: 1, values: vec![value.clamp(0.0, 1.0)] }
     }
 
+    /// Where this map, read as 8-bit shades (a vegetation-type map: shade N marks type N), holds
+    /// `shade`: 1 there, 0 elsewhere, times `within` (a species' own mask, sampled at this map's
+    /// pixel centres) when given. Sampled bilinearly like any mask, a type's border softens over
+    /// one pixel.
+    pub fn where_shade(&self, shade: u8, within: Option<&DensityMap>) -> DensityMap {
+        let (w, h) = (self.width, self.height);
+        DensityMap::from_fn(w, h, |i, j| {
+            let here = self.values.get(j * w + i).map_or(-1.0, |v| (v * 255.0).round());
+            if here != shade as f32 {
+                return 0.0;
+            }
+            within.map_or(1.0, |m| m.sample((i as f64 + 0.5) / w as f64, (j as f64 + 0.5) / h as f64))
+        })
+    }
+
     /// A map from a function of (column, row); values are clamped to 0..1 (NaN becomes 0).
     pub fn from_fn(width: usize, height: usize, f: impl Fn(usize, usize) -> f32) -> DensityMap {
         let mut values = Vec::with_capacity(width * height);

@@ -117,11 +117,14 @@ pub struct ScatterSettings {
     pub tile_m: f64,
     /// `table`: how the placement tables are written (CSV, or little-endian binary arrays).
     pub table: crate::export::table::TableFormat,
+    /// `vegetation_map`: one grey image over the terrain whose 8-bit shades name vegetation types;
+    /// a species with `vegetation_type = N` is placed only where the shade is N.
+    pub vegetation_map: Option<PathBuf>,
 }
 
 impl Default for ScatterSettings {
     fn default() -> Self {
-        ScatterSettings { tile_m: 256.0, table: crate::export::table::TableFormat::Csv }
+        ScatterSettings { tile_m: 256.0, table: crate::export::table::TableFormat::Csv, vegetation_map: None }
     }
 }
 
@@ -135,6 +138,8 @@ pub struct SpeciesSettings {
     /// `cull_distance` (m): instances farther from the eye are not drawn; `None`: from the LoD
     /// budget (where the coarsest level spans the pixel budget, [`view::cull_distance`]).
     pub cull_distance_m: Option<f64>,
+    /// `vegetation_type`: the shade (0–255) of `[scatter] vegetation_map` where it grows.
+    pub vegetation_type: Option<u8>,
     /// What its instances show: a generated grass clump or flower, or a marker mesh.
     pub look: PlantLook,
 }

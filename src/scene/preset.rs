@@ -136,6 +136,7 @@ pub fn demo_preset() -> Preset {
                 },
                 kind: SpeciesKind::Tree,
                 cull_distance_m: None,
+                vegetation_type: None,
                 // the built-in broadleaf (crate::lsystem::library), 12 m before the instance scale
                 look: PlantLook::Tree(TreeLook {
                     lsystem: library::path_of(library::find("broadleaf").expect("a library species")),
@@ -165,6 +166,7 @@ pub fn demo_preset() -> Preset {
                 },
                 kind: SpeciesKind::Grass,
                 cull_distance_m: None,
+                vegetation_type: None,
                 look: PlantLook::Grass(GrassSettings {
                     seed: species_look_seed(0, "grass", 0),
                     ..GrassSettings::default()
@@ -401,7 +403,7 @@ fn parse(text: &str, path: &Path, inputs: Inputs) -> Result<Preset, PresetError>
     };
     let scatter = match scatter {
         None => ScatterSettings::default(),
-        Some((span, table)) => parse_scatter(&Table { ctx: &ctx, label: "[scatter]".into(), span, table })?,
+        Some((span, table)) => parse_scatter(&Table { ctx: &ctx, label: "[scatter]".into(), span, table }, inputs)?,
     };
     let grass_defaults = match grass_section {
         None => GrassSettings::default(),
@@ -467,7 +469,7 @@ fn parse(text: &str, path: &Path, inputs: Inputs) -> Result<Preset, PresetError>
         for item in items.iter() {
             let DeValue::Table(table) = item.get_ref() else { continue };
             let t = Table { ctx: &ctx, label: "[[species]]".into(), span: item.span(), table };
-            let (s, name_span) = parse_species(&t, &species, &looks, inputs)?;
+            let (s, name_span) = parse_species(&t, &species, &looks, inputs, scatter.vegetation_map.is_some())?;
             // compared ignoring case: `Oak` and `oak` would be one file on some file systems
             if let Some(i) = species.iter().position(|e| e.rules.name.eq_ignore_ascii_case(&s.rules.name)) {
                 let first = &species[i].rules.name;
@@ -571,14 +573,15 @@ fn parse_scene(t: &Table<'_, '_>) -> Result<SceneSettings, PresetError> {
     Ok(SceneSettings { name: name.to_string(), seed, formats })
 }
 
-fn parse_scatter(t: &Table<'_, '_>) -> Result<ScatterSettings, PresetError> {
+fn parse_scatter(t: &Table<'_, '_>, inputs: Inputs) -> Result<ScatterSettings, PresetError> {
     t.check_keys(SCATTER_KEYS, &[("[[species]]", SPECIES_KEYS), ("[terrain]", TERRAIN_KEYS), ("[scene]", SCENE_KEYS)])?;
     let tile_m = t.number("tile", "tile = 256.0", positive)?.map_or(DEFAULT_TILE_M, |(x, _)| x);
     let table = match t.string("table", "table = \"binary\"")? {
         Some((s, span)) => reader::choice(t, "table", s, &span)?,
         None => crate::export::table::TableFormat::Csv,
     };
-    Ok(ScatterSettings { tile_m, table })
+    let vegetation_map = input_path(t, "vegetation_map", "vegetation_map = \"maps/vegetation.png\"", inputs)?;
+    Ok(ScatterSettings { tile_m, table, vegetation_map })
 }
 
 #[cfg(test)]

@@ -73,6 +73,11 @@ pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageEr
     k.add(terrain_key.as_bytes());
     k.add(&preset.scene.seed.to_le_bytes());
     k.add(serde_json::to_string(&preset.scatter).unwrap_or_default().as_bytes());
+    if let Some(map) = &preset.scatter.vegetation_map {
+        let bytes = crate::input::read_limited(map, crate::input::MAX_IMAGE_BYTES, "a vegetation map")
+            .map_err(|e| bad_input(e.to_string()))?;
+        k.add(sha256_hex(&bytes).as_bytes());
+    }
     for s in &preset.species {
         k.add(serde_json::to_string(s).unwrap_or_default().as_bytes());
         crate::scene::plants_stage::add_look_inputs(&mut k, &s.rules.name, &s.look)?;
@@ -126,10 +131,20 @@ pub fn run_scatter_with_snow(
     let extent = surface.bounds();
     let mut placed: Vec<Placed> = Vec::new();
     let mut reports = Vec::new();
+    let vegetation = if preset.species.iter().any(|s| s.vegetation_type.is_some()) {
+        load_map(&preset.scatter.vegetation_map)?
+    } else {
+        None
+    };
     for (index, species) in preset.species.iter().enumerate() {
         let t1 = Instant::now();
         let density = load_map(&species.rules.density_map)?;
         let mask = load_map(&species.rules.mask)?;
+        // a vegetation type grows only where the map of types holds its shade (within its own mask)
+        let mask = match (species.vegetation_type, &vegetation) {
+            (Some(shade), Some(types)) => Some(types.where_shade(shade, mask.as_ref())),
+            _ => mask,
+        };
         let earlier: Vec<(&str, &[Instance])> =
             placed.iter().map(|p| (p.species.rules.name.as_str(), &p.instances[..])).collect();
         let thinning = match (snow_mask, &preset.snow, species.kind) {

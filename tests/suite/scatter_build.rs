@@ -574,3 +574,38 @@ fn binary_tables_hold_the_csv_rows_and_build_the_same_scene() {
         manifest["scatter"]["species"].as_array().unwrap().iter().map(|s| s["table"].as_str().unwrap()).collect();
     assert_eq!(tables, ["placements/tree.bin", "placements/grass.bin"]);
 }
+
+#[test]
+fn a_vegetation_type_grows_only_where_the_map_holds_its_shade() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // shade 1 on the left half of the terrain (x < 128 m), shade 2 on the right
+    write_density(&d.join("p/types.png"), 1.0 / 255.0, 2.0 / 255.0);
+    let species = "[[species]]\nname = \"heath\"\nkind = \"mesh\"\nplacement = \"jittered\"\nmax_density = 0.05\n\
+                   vegetation_type = 1\n\n\
+                   [[species]]\nname = \"fern\"\nkind = \"mesh\"\nplacement = \"jittered\"\nmax_density = 0.05\n\
+                   vegetation_type = 2\n";
+    let text = preset("a", 3, species).replace("[scatter]\n", "[scatter]\nvegetation_map = \"types.png\"\n");
+    write(d, "p/a.toml", &text);
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    let s = d.join("o/a");
+    // 32 pixels across 256 m: a pixel is 8 m, and a type's border softens over one
+    let (heath, fern) = (read_csv(&s.join("placements/heath.csv")), read_csv(&s.join("placements/fern.csv")));
+    assert!(heath.len() > 400 && fern.len() > 400, "{} heath, {} fern", heath.len(), fern.len());
+    assert!(heath.iter().all(|r| r.pos[0] < 128.0 + 8.0), "heath beyond its half");
+    assert!(fern.iter().all(|r| r.pos[0] > 128.0 - 8.0), "fern beyond its half");
+    let mid = |rows: &[Row]| rows.iter().map(|r| r.pos[0]).sum::<f64>() / rows.len() as f64;
+    assert!(mid(&heath) < 70.0 && mid(&fern) > 186.0, "{} {}", mid(&heath), mid(&fern));
+
+    // a type without a map is refused at its key, naming the [scatter] key to add
+    write(d, "p/b.toml", &preset("b", 3, species));
+    let out = verdant_in(d, &["build", "p/b.toml", "--out", "o"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("vegetation_type") && err.contains("vegetation_map") && err.contains("b.toml:"), "{err}");
+    // an edited map is a new scatter input
+    write_density(&d.join("p/types.png"), 2.0 / 255.0, 1.0 / 255.0);
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    let heath = read_csv(&s.join("placements/heath.csv"));
+    assert!(heath.iter().all(|r| r.pos[0] > 128.0 - 8.0), "heath follows the edited map");
+}

@@ -33,6 +33,7 @@ pub const SPECIES_KEYS: &[&str] = &[
     "kind",
     "density_map",
     "mask",
+    "vegetation_type",
     "max_density",
     "placement",
     "min_spacing",
@@ -56,7 +57,7 @@ pub const SPECIES_KEYS: &[&str] = &[
 /// Keys of `[[species]] exclusion = { … }`.
 pub const EXCLUSION_KEYS: &[&str] = &["species", "radius"];
 /// Keys of `[scatter]`.
-pub const SCATTER_KEYS: &[&str] = &["tile", "table"];
+pub const SCATTER_KEYS: &[&str] = &["tile", "table", "vegetation_map"];
 /// Default `max_instances` of a species.
 pub const DEFAULT_MAX_INSTANCES: usize = 5_000_000;
 /// Largest `max_instances` a preset may ask for (a glTF accessor count is a u32).

@@ -364,7 +364,9 @@ pub(super) fn input_path(
     }
     if inputs.decode() {
         let problem = match key {
-            "density_map" | "mask" => crate::scatter::DensityMap::load(&path).err().map(|e| e.to_string()),
+            "density_map" | "mask" | "vegetation_map" => {
+                crate::scatter::DensityMap::load(&path).err().map(|e| e.to_string())
+            }
             "blade_texture" => crate::bake::image::Image::read_png(&path).err().map(|e| e.to_string()),
             _ => None,
         };

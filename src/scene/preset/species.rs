@@ -198,12 +198,14 @@ pub(super) fn value_name_kind(kind: SpeciesKind) -> &'static str {
 }
 
 /// One `[[species]]` table; `earlier` are the species declared before it (in file order), which
-/// its exclusions may name. Returns the settings and the span of the `name` value.
+/// its exclusions may name; `vegetation_map`: whether `[scatter]` names a map of vegetation types
+/// (which `vegetation_type` needs). Returns the settings and the span of the `name` value.
 pub(super) fn parse_species(
     t: &Table<'_, '_>,
     earlier: &[SpeciesSettings],
     looks: &Looks<'_>,
     inputs: Inputs,
+    vegetation_map: bool,
 ) -> Result<(SpeciesSettings, Range<usize>), PresetError> {
     let (name, name_span) = t.string("name", "name = \"oak\"")?.ok_or_else(|| t.missing("name", "name = \"oak\""))?;
     check_species_name(name).map_err(|why| {
@@ -338,6 +340,15 @@ pub(super) fn parse_species(
         .integer("max_instances", 1..=MAX_MAX_INSTANCES, "max_instances = 5000000")?
         .map_or(DEFAULT_MAX_INSTANCES, |(n, _)| n as usize);
     let cull_distance_m = t.number("cull_distance", "cull_distance = 80.0", positive)?.map(|(x, _)| x);
+    let vegetation_type = match t.integer("vegetation_type", 0..=255, "vegetation_type = 3")? {
+        Some((_, span)) if !vegetation_map => return Err(t.ctx.at(
+            &span,
+            format!("{} has a `vegetation_type`, but there is no map of types", t.label),
+            "add `vegetation_map = \"maps/vegetation.png\"` to `[scatter]` (a grey image whose shade N marks where \
+                 `vegetation_type = N` grows), or remove `vegetation_type`",
+        )),
+        other => other.map(|(n, _)| n as u8),
+    };
     let look = parse_look(t, name, kind, looks, seed, inputs)?;
 
     let species = SpeciesSettings {
@@ -360,6 +371,7 @@ pub(super) fn parse_species(
         },
         kind,
         cull_distance_m,
+        vegetation_type,
         look,
     };
     Ok((species, name_span))
