@@ -34,6 +34,31 @@ EXT = "EXT_mesh_gpu_instancing"
 PROTO_PREFIX = "verdant_proto_"
 
 
+
+def table_rows(path):
+    """A placement table's rows as dicts of the CSV's columns: a .csv read as text, a .bin
+    (`[scatter] table = "binary"`: `VPLT`, version 1, u64 rows, then the arrays; see
+    src/export/table_bin.rs) read by its layout."""
+    if not path.endswith(".bin"):
+        with open(path) as f:
+            yield from csv.DictReader(f)
+        return
+    with open(path, "rb") as f:
+        data = f.read()
+    if data[:4] != b"VPLT" or int.from_bytes(data[4:8], "little") != 1:
+        raise ValueError(f"{path}: not a version 1 binary placement table")
+    n = int.from_bytes(data[8:16], "little")
+    o = 16
+    arrays = []
+    for dtype, k in (("<f8", 3), ("<f4", 4), ("<f4", 3), ("<f4", 1), ("<u4", 1), ("<u4", 1)):
+        a = np.frombuffer(data, dtype=dtype, count=n * k, offset=o).reshape(n, k)
+        o += a.nbytes
+        arrays.append(a)
+    pos, rot, scale = arrays[0], arrays[1], arrays[2]
+    for i in range(n):
+        yield {"x": pos[i, 0], "y": pos[i, 1], "z": pos[i, 2], "qx": rot[i, 0], "qy": rot[i, 1], "qz": rot[i, 2],
+               "qw": rot[i, 3], "sx": scale[i, 0], "sy": scale[i, 1], "sz": scale[i, 2]}
+
 def read_glb(path):
     data = open(path, "rb").read()
     if data[:4] != b"glTF":
@@ -261,16 +286,15 @@ def check(scene_dir, per_mesh):
     rows_p, rows_f = [], []
     c = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
     for s in species:
-        with open(os.path.join(scene_dir, s["table"])) as f:
-            for r in csv.DictReader(f):
-                rows_p.append((float(r["x"]), -float(r["z"]), float(r["y"])))
-                x, y, z, w = (float(r[k]) for k in ("qx", "qy", "qz", "qw"))
-                sc = np.array([float(r[k]) for k in ("sx", "sy", "sz")])
-                rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-                # a model vertex v (glTF) must land at C·(R(q)·S·v + t), C the axis change
-                rows_f.append(c @ rot @ np.diag(sc) @ c.T)
+        for r in table_rows(os.path.join(scene_dir, s["table"])):
+            rows_p.append((float(r["x"]), -float(r["z"]), float(r["y"])))
+            x, y, z, w = (float(r[k]) for k in ("qx", "qy", "qz", "qw"))
+            sc = np.array([float(r[k]) for k in ("sx", "sy", "sz")])
+            rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+            # a model vertex v (glTF) must land at C·(R(q)·S·v + t), C the axis change
+            rows_f.append(c @ rot @ np.diag(sc) @ c.T)
     table = np.array(rows_p) if rows_p else np.zeros((0, 3))
     # a sample of Blender's instances: each stands where a table row is, turned and scaled like it
     for k in range(0, len(positions), max(1, len(positions) // 200)):
