@@ -550,6 +550,24 @@ for f in "${FILES[@]}"; do
 done
 
 # ---------------------------------------------------------------------------------------------------------
+section "5f2. every scene_lod.glb (each terrain chunk and placement tile an MSFT_lod chain) loads in Babylon.js with its defaults (levels in order, LoD0 enabled at the end) and in three.js through three_msft_lod.js (levels drawn with exactly their triangles inside their coverage ranges, on a sample of 32 chains)"
+lod_files=()
+for dir in "$OUT"/build/*/; do
+  [ -f "$dir/scene_lod.glb" ] && lod_files+=("$dir/scene_lod.glb")
+done
+if ((${#lod_files[@]})); then
+  for engine in babylon three; do
+    log="$OUT/check_${engine}_scene_lod.log"
+    node scripts/engines/check_babylon.mjs --engine "$engine" --no-range-requests "${lod_files[@]}" > "$log" 2>&1 || true
+    sed 's|'"$OUT"'/||' "$log" | cut -c1-400 || true
+    oks=$(grep -c '^ok ' "$log" || true)
+    for _ in $(seq 1 "$oks"); do pass; done
+    if [ "$oks" -ne "${#lod_files[@]}" ]; then fail "$engine: $((${#lod_files[@]} - oks)) of ${#lod_files[@]} scene_lod.glb files failed (see $log)"; fi
+  done
+else
+  fail "no scene_lod.glb to load"
+fi
+
 section "5g. the Godot 4 import script (scripts/engines/godot/verdant_scene.gd) parses and passes gdtoolkit's lint and format check"
 # no Godot on the registries these machines reach: the script is checked statically only
 if "$VENV/bin/gdparse" scripts/engines/godot/verdant_scene.gd > /dev/null \

@@ -88,10 +88,13 @@ function expected(file) {
   const stack = [...scene.nodes];
   let meshNodes = 0;
   let levels = 0;
-  // triangles a node and its children draw (triangle lists: indices, else vertices, over 3)
+  // triangles a node and its children draw (triangle lists: indices, else vertices, over 3; times
+  // the instances of an EXT_mesh_gpu_instancing node, as renderer.info counts them)
   const triangles = (n) => {
     const node = json.nodes[n];
-    const own = node.mesh === undefined ? 0 : json.meshes[node.mesh].primitives.reduce((sum, p) =>
+    const copies = node.extensions?.EXT_mesh_gpu_instancing
+      ? json.accessors[node.extensions.EXT_mesh_gpu_instancing.attributes.TRANSLATION].count : 1;
+    const own = node.mesh === undefined ? 0 : copies * json.meshes[node.mesh].primitives.reduce((sum, p) =>
       sum + json.accessors[p.indices ?? p.attributes.POSITION].count / 3, 0);
     return own + (node.children ?? []).reduce((sum, c) => sum + triangles(c), 0);
   };
@@ -163,8 +166,8 @@ for (const file of files) {
       if (levels.size !== 1) problems.push(`${chain}: levels ${[...levels].join(', ')} shown at once`);
     }
     const walked = r.lodWalk ?? [];
-    if (walked.length !== Object.keys(want.chains).length) {
-      problems.push(`${walked.length} LOD objects made of ${Object.keys(want.chains).length} MSFT_lod nodes`);
+    if (r.lodCount !== Object.keys(want.chains).length || walked.length !== Math.min(r.lodCount, 32)) {
+      problems.push(`${r.lodCount} LOD objects made of ${Object.keys(want.chains).length} MSFT_lod nodes, ${walked.length} walked`);
     }
     for (const lod of walked) {
       const tris = want.chains[lod.name];

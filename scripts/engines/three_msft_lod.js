@@ -112,7 +112,11 @@ export class MSFTLodPlugin {
       const toParent = parent ? parent.matrixWorld.clone().invert() : base.matrixWorld.clone().identity();
       _box.makeEmpty();
       base.traverse((o) => {
-        if (o.isMesh && o.geometry) {
+        if (o.isInstancedMesh) {
+          // EXT_mesh_gpu_instancing: the box around every instance, not one copy at the origin
+          o.computeBoundingBox();
+          _box.union(o.boundingBox.clone().applyMatrix4(toParent.clone().multiply(o.matrixWorld)));
+        } else if (o.isMesh && o.geometry) {
           if (!o.geometry.boundingBox) o.geometry.computeBoundingBox();
           _box.union(o.geometry.boundingBox.clone().applyMatrix4(toParent.clone().multiply(o.matrixWorld)));
         }

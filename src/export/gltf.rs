@@ -615,25 +615,36 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
         });
     }
 
-    // nodes, with instancing accessors appended after the mesh data
+    // nodes, with instancing accessors appended after the mesh data; nodes with equal instances
+    // (the levels of one MSFT_lod chain) share one set of accessors
     bin.group = 0;
+    let mut written_instances: std::collections::HashMap<u64, Vec<(&crate::mesh::Instances, Value)>> =
+        std::collections::HashMap::new();
     for node in &scene.nodes {
         let mut ext = Map::new();
         if let Some(inst) = node.instances.as_ref().filter(|i| !i.is_empty()) {
-            let mut attributes = Map::new();
-            if !inst.translations.is_empty() {
-                let a = float_accessor(&mut root, &mut bin, &inst.translations, None);
-                attributes.insert("TRANSLATION".into(), Value::from(a.value()));
+            let key = instances_hash(inst);
+            if let Some((_, attributes)) = written_instances.get(&key).and_then(|v| v.iter().find(|(i, _)| *i == inst))
+            {
+                ext.insert(EXT_INSTANCING.into(), serde_json::json!({ "attributes": attributes }));
+            } else {
+                let mut attributes = Map::new();
+                if !inst.translations.is_empty() {
+                    let a = float_accessor(&mut root, &mut bin, &inst.translations, None);
+                    attributes.insert("TRANSLATION".into(), Value::from(a.value()));
+                }
+                if !inst.rotations.is_empty() {
+                    let a = float_accessor(&mut root, &mut bin, &inst.rotations, None);
+                    attributes.insert("ROTATION".into(), Value::from(a.value()));
+                }
+                if !inst.scales.is_empty() {
+                    let a = float_accessor(&mut root, &mut bin, &inst.scales, None);
+                    attributes.insert("SCALE".into(), Value::from(a.value()));
+                }
+                let attributes = Value::Object(attributes);
+                ext.insert(EXT_INSTANCING.into(), serde_json::json!({ "attributes": attributes }));
+                written_instances.entry(key).or_default().push((inst, attributes));
             }
-            if !inst.rotations.is_empty() {
-                let a = float_accessor(&mut root, &mut bin, &inst.rotations, None);
-                attributes.insert("ROTATION".into(), Value::from(a.value()));
-            }
-            if !inst.scales.is_empty() {
-                let a = float_accessor(&mut root, &mut bin, &inst.scales, None);
-                attributes.insert("SCALE".into(), Value::from(a.value()));
-            }
-            ext.insert(EXT_INSTANCING.into(), serde_json::json!({ "attributes": attributes }));
             extensions_used.insert(EXT_INSTANCING);
             extensions_required.insert(EXT_INSTANCING);
         }
@@ -772,6 +783,24 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
     root.extensions_used = extensions_used.into_iter().map(str::to_string).collect();
     root.extensions_required = extensions_required.into_iter().map(str::to_string).collect();
     Ok((root, chunk))
+}
+
+/// A hash of every instance transform's bits (equal instances hash equal; candidates are then
+/// compared in full).
+fn instances_hash(inst: &crate::mesh::Instances) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for t in &inst.translations {
+        t.map(f32::to_bits).hash(&mut h);
+    }
+    for r in &inst.rotations {
+        r.map(f32::to_bits).hash(&mut h);
+    }
+    for s in &inst.scales {
+        s.map(f32::to_bits).hash(&mut h);
+    }
+    (inst.translations.len(), inst.rotations.len(), inst.scales.len()).hash(&mut h);
+    h.finish()
 }
 
 #[cfg(test)]

@@ -111,6 +111,9 @@ fn sizes(files: &[FileEntry]) -> Sizes {
 struct ViewManifest<'a> {
     scene: String,
     bytes: u64,
+    /// scene_lod.glb: every terrain chunk and placement tile as an MSFT_lod chain.
+    lod_scene: String,
+    lod_scene_bytes: u64,
     views: &'a [crate::scene::view_stage::ViewReport],
     chains: std::collections::BTreeMap<&'a str, &'a crate::scene::plants_stage::SpeciesChain>,
 }
@@ -320,6 +323,8 @@ pub fn write_manifest_and_report(
         view: view.map(|v| ViewManifest {
             scene: v.scene_file.to_string_lossy().replace('\\', "/"),
             bytes: v.scene_bytes,
+            lod_scene: v.lod_scene_file.to_string_lossy().replace('\\', "/"),
+            lod_scene_bytes: v.lod_scene_bytes,
             views: &v.views,
             chains: plants.map(|p| p.species.iter().map(|s| (s.name.as_str(), &s.chain)).collect()).unwrap_or_default(),
         }),

@@ -15,6 +15,7 @@ pub mod preview_stage;
 pub mod scatter_stage;
 pub mod snow_stage;
 pub mod terrain_stage;
+mod view_lod;
 pub mod view_render;
 pub mod view_stage;
 

@@ -24,6 +24,7 @@ use crate::scene::pipeline::{Stage, StageJob};
 use crate::scene::plants_stage::{PlantsStageReport, SpeciesChain};
 use crate::scene::terrain_stage::LodInfo;
 use crate::scene::view::{cull_distance, level_at, view_distance_factor, Camera, CullDistance};
+use crate::scene::view_lod::{lod_scene, LodSpecies, LodTerrain};
 use crate::scene::Preset;
 use crate::validate::read_scene;
 
@@ -35,8 +36,9 @@ fn fail(message: String) -> StageError {
 /// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]).
 /// 2: the species' normal atlases are linear data. 3: the trees' switch distances from the joint
 /// chain search (plants 11). 4: and from small views sampled more finely (plants 12). 5: cards
-/// framed as billboards (plants 13). 6: the terrain chunks carry `_LAYER_WEIGHTS` (terrain 5).
-pub const VIEW_ALGORITHM_VERSION: u32 = 6;
+/// framed as billboards (plants 13). 6: the terrain chunks carry `_LAYER_WEIGHTS` (terrain 5). 7:
+/// scene_lod.glb beside scene.glb.
+pub const VIEW_ALGORITHM_VERSION: u32 = 7;
 
 /// What one view draws.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -116,13 +118,16 @@ pub struct ViewStageReport {
     pub scene_file: PathBuf,
     /// Bytes of scene.glb.
     pub scene_bytes: u64,
+    /// scene_lod.glb: every chunk and tile as an MSFT_lod chain ([`crate::scene::view_lod`]).
+    pub lod_scene_file: PathBuf,
+    pub lod_scene_bytes: u64,
     pub views: Vec<ViewReport>,
     pub seconds: f64,
 }
 
 impl ViewStageReport {
     pub fn files(&self) -> Vec<PathBuf> {
-        vec![self.scene_file.clone()]
+        vec![self.scene_file.clone(), self.lod_scene_file.clone()]
     }
 }
 
@@ -142,7 +147,12 @@ pub fn view_key(preset: &Preset, upstream: &[&str]) -> String {
 
 /// The chain's variant that row `n` of `species`' table shows (its `variant` column through the
 /// chain's `pick`); an error naming the table's line when the column names no variant.
-fn shown(species: &str, chain: &SpeciesChain, n: usize, row: &table::PlacementRow) -> Result<usize, StageError> {
+pub(super) fn shown(
+    species: &str,
+    chain: &SpeciesChain,
+    n: usize,
+    row: &table::PlacementRow,
+) -> Result<usize, StageError> {
     chain.shown(row.variant).ok_or_else(|| {
         fail(format!(
             "the placement table of `{species}`, row {n} (line {} of a CSV): variant {} is none of the species' {} (the \
@@ -156,16 +166,16 @@ fn shown(species: &str, chain: &SpeciesChain, n: usize, row: &table::PlacementRo
 
 /// Files read once and shared; meshes, materials and textures appended once, equal textures
 /// and materials stored once (every level file of a tree carries the same atlas).
-struct Assembler<'a> {
-    dir: &'a Path,
-    files: BTreeMap<PathBuf, Scene>,
-    scene: Scene,
+pub(super) struct Assembler<'a> {
+    pub(super) dir: &'a Path,
+    pub(super) files: BTreeMap<PathBuf, Scene>,
+    pub(super) scene: Scene,
     /// (file, mesh index in it) → mesh index in `scene`.
-    meshes: BTreeMap<(PathBuf, usize), usize>,
+    pub(super) meshes: BTreeMap<(PathBuf, usize), usize>,
 }
 
 impl<'a> Assembler<'a> {
-    fn file(&mut self, rel: &Path) -> Result<&Scene, StageError> {
+    pub(super) fn file(&mut self, rel: &Path) -> Result<&Scene, StageError> {
         if !self.files.contains_key(rel) {
             let path = self.dir.join(rel);
             let s = read_scene(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?;
@@ -202,7 +212,7 @@ impl<'a> Assembler<'a> {
     }
 
     /// The mesh `index` of file `rel`, appended once; its index in the assembled scene.
-    fn mesh(&mut self, rel: &Path, index: usize) -> Result<usize, StageError> {
+    pub(super) fn mesh(&mut self, rel: &Path, index: usize) -> Result<usize, StageError> {
         if let Some(&i) = self.meshes.get(&(rel.to_path_buf(), index)) {
             return Ok(i);
         }
@@ -227,7 +237,7 @@ impl<'a> Assembler<'a> {
         Ok(i)
     }
 
-    fn mesh_named(&mut self, rel: &Path, name: &str) -> Result<usize, StageError> {
+    pub(super) fn mesh_named(&mut self, rel: &Path, name: &str) -> Result<usize, StageError> {
         let index = self
             .file(rel)?
             .meshes
@@ -249,7 +259,7 @@ fn first_mesh_file(files: &[PathBuf]) -> Option<&PathBuf> {
     files.iter().find(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("glb" | "gltf" | "obj")))
 }
 
-fn mesh_bounds(m: &Mesh) -> Option<([f64; 3], [f64; 3])> {
+pub(super) fn mesh_bounds(m: &Mesh) -> Option<([f64; 3], [f64; 3])> {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for p in &m.primitives {
@@ -555,7 +565,35 @@ pub fn run_view(
     let scene_file = PathBuf::from("scene.glb");
     export::write_scene(&scene, &scene_dir.join(&scene_file)).map_err(|e| fail(e.to_string()))?;
     let scene_bytes = std::fs::metadata(scene_dir.join(&scene_file)).map(|m| m.len()).unwrap_or(0);
-    Ok(ViewStageReport { scene_file, scene_bytes, views: reports, seconds: t0.elapsed().as_secs_f64() })
+
+    // scene_lod.glb: every chunk and tile with its whole chain, for viewers that switch themselves
+    let mut lod = Assembler { dir: scene_dir, files: asm.files, scene: Scene::default(), meshes: BTreeMap::new() };
+    let species: Vec<LodSpecies> = preset
+        .species
+        .iter()
+        .zip(&rows_of)
+        .filter_map(|(s, rows)| {
+            let chain = *chains.get(s.rules.name.as_str()).filter(|c| !c.variants.is_empty())?;
+            let last = chain.variants.iter().filter_map(|v| v.last()).map(|l| l.switch_distance_m).fold(0.0, f64::max);
+            let cull = cull_distance(s.cull_distance_m, chain.height_m, last, &preset.lod);
+            Some(LodSpecies { name: &s.rules.name, chain, rows, cull })
+        })
+        .collect();
+    let lod_terrain = LodTerrain { main: &main, levels: &levels, chunked, main_file: terrain.main };
+    lod_scene(&mut lod, &lod_terrain, &species, &preset.lod)?;
+    let mut lod_scene = lod.scene;
+    lod_scene.name = format!("{} (levels of detail)", preset.scene.name);
+    let lod_scene_file = PathBuf::from("scene_lod.glb");
+    export::write_scene(&lod_scene, &scene_dir.join(&lod_scene_file)).map_err(|e| fail(e.to_string()))?;
+    let lod_scene_bytes = std::fs::metadata(scene_dir.join(&lod_scene_file)).map(|m| m.len()).unwrap_or(0);
+    Ok(ViewStageReport {
+        scene_file,
+        scene_bytes,
+        lod_scene_file,
+        lod_scene_bytes,
+        views: reports,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
 }
 
 /// Keeps the items `used` marks, in order; returns them and each old index's new one.

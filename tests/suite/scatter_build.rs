@@ -609,3 +609,111 @@ fn a_vegetation_type_grows_only_where_the_map_holds_its_shade() {
     let heath = read_csv(&s.join("placements/heath.csv"));
     assert!(heath.iter().all(|r| r.pos[0] > 128.0 - 8.0), "heath follows the edited map");
 }
+
+#[test]
+fn scene_lod_glb_holds_every_row_in_tile_chains_that_switch_no_earlier_than_the_view_stage() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/a.toml", &forest("a", 3).replace("skirt = 2.0\n", "skirt = 2.0\nlods = [0.5, 2.0, 8.0]\n"));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    let s = d.join("o/a");
+    let scene = verdant::validate::read_scene(&s.join("scene_lod.glb")).expect("scene_lod.glb re-imports");
+    verdant::export::check_scene(&scene).expect("scene_lod.glb is a valid scene");
+    let manifest = read_json(&s.join("manifest.json"));
+    assert_eq!(manifest["view"]["lod_scene"], "scene_lod.glb");
+    let lod = verdant::lod::LodView::default();
+    let root = |name: &str| {
+        scene
+            .roots
+            .iter()
+            .map(|&r| &scene.nodes[r])
+            .find(|n| n.name == name)
+            .unwrap_or_else(|| panic!("no root {name}"))
+    };
+    // terrain: every chunk a chain of the terrain's levels, never culled
+    let terrain = root("terrain");
+    assert!(terrain.children.len() > 1);
+    let terrain_levels = manifest["terrain"]["lods"].as_array().unwrap().len().max(1);
+    assert_eq!(terrain_levels, 3, "the preset's three terrain levels");
+    for &c in &terrain.children {
+        let n = &scene.nodes[c];
+        assert_eq!(n.lods.len() + 1, terrain_levels, "{}", n.name);
+        if terrain_levels > 1 {
+            assert_eq!(n.lod_screen_coverage.last(), Some(&0.0), "{}: the terrain is never culled", n.name);
+        }
+    }
+    for species in ["tree", "grass"] {
+        let rows = read_csv(&s.join(format!("placements/{species}.csv")));
+        let chain = &manifest["view"]["chains"][species];
+        let pick: Vec<usize> = chain["pick"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
+        let mut placed = Vec::new();
+        for &c in &root(species).children {
+            let base = &scene.nodes[c];
+            let e = base.extras.as_ref().unwrap();
+            let (tile, v) = (e["tile"].as_u64().unwrap() as u32, e["variant"].as_u64().unwrap() as usize);
+            let levels = chain["variants"][v].as_array().unwrap();
+            assert_eq!(base.lods.len() + 1, levels.len(), "{}", base.name);
+            let inst = base.instances.as_ref().unwrap();
+            // the tile's rows of this variant, in table order
+            let mine: Vec<&Row> = rows.iter().filter(|r| r.tile == tile && pick[r.variant as usize] == v).collect();
+            assert_eq!(inst.translations.len(), mine.len(), "{}", base.name);
+            for (t, r) in inst.translations.iter().zip(&mine) {
+                assert_eq!(*t, r.pos.map(|x| x as f32));
+            }
+            placed.extend(inst.translations.iter().copied());
+            // each level: the chain's mesh, the same instances
+            for (k, &l) in std::iter::once(&c).chain(&base.lods).enumerate() {
+                let n = &scene.nodes[l];
+                assert_eq!(scene.meshes[n.mesh.unwrap()].name, levels[k]["mesh"].as_str().unwrap(), "{}", n.name);
+                assert_eq!(n.instances.as_ref(), Some(inst), "{}", n.name);
+            }
+            // coverage k is the tile sphere's (around the instances' centres, each within its
+            // height × scale) when its nearest point is at level k+1's switch × the largest scale,
+            // so no instance switches nearer than the view stage switches it; the last ends at the
+            // cull distance
+            let cov = &base.lod_screen_coverage;
+            assert!(cov.windows(2).all(|w| w[1] <= w[0]), "{}: {cov:?}", base.name);
+            let (height, centre_y) = (chain["height_m"].as_f64().unwrap(), chain["centre_y_m"].as_f64().unwrap());
+            let centres: Vec<[f64; 3]> = mine
+                .iter()
+                .map(|r| {
+                    let row = verdant::export::table::PlacementRow {
+                        position: r.pos,
+                        rotation: r.rot,
+                        scale: r.scale,
+                        yaw_deg: r.yaw,
+                        tile: r.tile,
+                        variant: r.variant,
+                    };
+                    verdant::scene::view_stage::instance_centre(&row, centre_y)
+                })
+                .collect();
+            let mid: [f64; 3] = [0, 1, 2].map(|a| {
+                let (lo, hi) =
+                    centres.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| (l.min(c[a]), h.max(c[a])));
+                0.5 * (lo + hi)
+            });
+            let radius = mine
+                .iter()
+                .zip(&centres)
+                .map(|(r, c)| {
+                    let d = ((c[0] - mid[0]).powi(2) + (c[1] - mid[1]).powi(2) + (c[2] - mid[2]).powi(2)).sqrt();
+                    d + height * r.scale[1].max(r.scale[0]).max(r.scale[2]) as f64
+                })
+                .fold(0.0, f64::max);
+            let scale = mine.iter().map(|r| r.scale[1] as f64).fold(0.0, f64::max);
+            for k in 0..levels.len() - 1 {
+                let d = levels[k + 1]["switch_distance_m"].as_f64().unwrap() * scale;
+                let want = verdant::lod::lod_screen_coverage(radius, d, &lod) as f32;
+                assert!(
+                    (cov[k] - want).abs() <= 1e-6 * want.max(1e-6),
+                    "{} level {k}: {} vs {want}",
+                    base.name,
+                    cov[k]
+                );
+            }
+            assert!(*cov.last().unwrap() > 0.0, "{}: culled beyond its cull distance", base.name);
+        }
+        assert_eq!(placed.len(), rows.len(), "{species}: every table row is in scene_lod.glb once");
+    }
+}

@@ -825,7 +825,7 @@ const PINNED: &[(&str, u32, &str)] = &[
     ("plants", 15, "bd7dbfd8b599519f"),
     ("snow", 3, "b891b36bda4257c9"),
     ("scatter", 8, "d86e59612396aacb"),
-    ("view", 6, "53db7038ab15dd52"),
+    ("view", 7, "5981ed80a0997b6a"),
     ("preview", 6, "4e286b58f20f3d60"),
 ];
 
@@ -836,7 +836,7 @@ fn stage_of(rel: &str) -> Option<&'static str> {
         "species" | "atlases" => Some("plants"),
         "snow" => Some("snow"),
         "placements" => Some("scatter"),
-        "scene.glb" => Some("view"),
+        "scene.glb" | "scene_lod.glb" => Some("view"),
         "preview.png" | "map.png" => Some("preview"),
         _ => None,
     }
