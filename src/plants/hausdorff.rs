@@ -338,22 +338,14 @@ pub fn hausdorff(
             let end = cumulative + area;
             while k < samples && target(k) < end {
                 if let Some(q) = tri.point(mix64(seed ^ AREA_SALT ^ mix64(k as u64).rotate_left(17))) {
-                    exact.push(q, 0.0, |d| {
-                        out.max_m = out.max_m.max(d);
-                        sum += d;
-                        out.samples += 1;
-                    });
+                    exact.push(q, 0.0, |d| tally(&mut out, &mut sum, d, true));
                 }
                 k += 1;
             }
             cumulative = end;
         }
     }
-    exact.finish(0.0, |d| {
-        out.max_m = out.max_m.max(d);
-        sum += d;
-        out.samples += 1;
-    });
+    exact.finish(0.0, |d| tally(&mut out, &mut sum, d, true));
 
     // one point on every triangle: for the maximum only, unless nothing was measured exactly (a
     // surface of no area, or all of it cut away), when they are the samples
@@ -366,29 +358,25 @@ pub fn hausdorff(
         let h = mix64(seed ^ mix64((serial as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15)));
         if let Some(q) = tri.point(h) {
             let floor = if only_max { out.max_m } else { 0.0 };
-            coverage.push(q, floor, |d| {
-                out.max_m = out.max_m.max(d);
-                if only_max {
-                    out.coverage_samples += 1;
-                } else {
-                    sum += d;
-                    out.samples += 1;
-                }
-            });
+            coverage.push(q, floor, |d| tally(&mut out, &mut sum, d, !only_max));
         }
     }
     let floor = if only_max { out.max_m } else { 0.0 };
-    coverage.finish(floor, |d| {
-        out.max_m = out.max_m.max(d);
-        if only_max {
-            out.coverage_samples += 1;
-        } else {
-            sum += d;
-            out.samples += 1;
-        }
-    });
+    coverage.finish(floor, |d| tally(&mut out, &mut sum, d, !only_max));
     out.mean_m = if out.samples > 0 { sum / out.samples as f64 } else { 0.0 };
     out
+}
+
+/// Counts a measured distance: toward the maximum always, toward the mean (`sum`, `samples`) when
+/// it was measured exactly, else as a coverage sample.
+fn tally(out: &mut HausdorffError, sum: &mut f64, d: f64, exact: bool) {
+    out.max_m = out.max_m.max(d);
+    if exact {
+        *sum += d;
+        out.samples += 1;
+    } else {
+        out.coverage_samples += 1;
+    }
 }
 
 /// Points gathered in order, measured in parallel batches and handed on in that order (the
