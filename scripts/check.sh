@@ -550,20 +550,26 @@ for f in "${FILES[@]}"; do
 done
 
 # ---------------------------------------------------------------------------------------------------------
-section "5f2. scene_lod.glb (each terrain chunk and placement tile an MSFT_lod chain) of the scenes under 30 MB loads in Babylon.js with its defaults (levels in order, LoD0 enabled at the end) and in three.js through three_msft_lod.js (levels drawn with exactly their triangles inside their coverage ranges, on a sample of 32 chains)"
-# (larger ones are validated like every output; headless Babylon on SwiftShader takes minutes on them)
+section "5f2. scene_lod.glb (each terrain chunk and placement tile an MSFT_lod chain) loads in three.js through three_msft_lod.js (levels drawn with exactly their triangles inside their coverage ranges, on a sample of 32 chains) and, under 50 MB, in Babylon.js with its defaults (levels in order, exactly the default scene's LoD0 triangles enabled at the end)"
+# Babylon's glTF loader ignores MSFT_screencoverage: it ends with every chain at LoD0, the whole
+# scene at full detail (demo: 122 M triangles), which it is not asked to draw (--draw-limit; SwiftShader
+# took 120 s over that one frame). alpine's 77 MB file did not load in headless Babylon within 240 s.
 lod_files=()
+babylon_files=()
 for dir in "$OUT"/build/*/; do
-  if [ -f "$dir/scene_lod.glb" ] && [ "$(stat -c %s "$dir/scene_lod.glb")" -lt 30000000 ]; then lod_files+=("$dir/scene_lod.glb"); fi
+  [ -f "$dir/scene_lod.glb" ] || continue
+  lod_files+=("$dir/scene_lod.glb")
+  if [ "$(stat -c %s "$dir/scene_lod.glb")" -lt 50000000 ]; then babylon_files+=("$dir/scene_lod.glb"); fi
 done
 if ((${#lod_files[@]})); then
   for engine in babylon three; do
+    if [ "$engine" = babylon ]; then engine_files=("${babylon_files[@]}"); else engine_files=("${lod_files[@]}"); fi
     log="$OUT/check_${engine}_scene_lod.log"
-    node scripts/engines/check_babylon.mjs --engine "$engine" --no-range-requests "${lod_files[@]}" > "$log" 2>&1 || true
+    node scripts/engines/check_babylon.mjs --engine "$engine" --no-range-requests "${engine_files[@]}" > "$log" 2>&1 || true
     sed 's|'"$OUT"'/||' "$log" | cut -c1-400 || true
     oks=$(grep -c '^ok ' "$log" || true)
     for _ in $(seq 1 "$oks"); do pass; done
-    if [ "$oks" -ne "${#lod_files[@]}" ]; then fail "$engine: $((${#lod_files[@]} - oks)) of ${#lod_files[@]} scene_lod.glb files failed (see $log)"; fi
+    if [ "$oks" -ne "${#engine_files[@]}" ]; then fail "$engine: $((${#engine_files[@]} - oks)) of ${#engine_files[@]} scene_lod.glb files failed (see $log)"; fi
   done
 else
   fail "no scene_lod.glb to load"

@@ -35,6 +35,7 @@ let rangeRequests = true;
 let expectGreen = false;
 let engine = 'babylon';
 let viewMode = false;
+let drawLimit = 20e6;
 const files = [];
 for (let i = 0; i < args.length; i++) {
   if (args[i] === '--thumbs') thumbs = args[++i];
@@ -42,10 +43,11 @@ for (let i = 0; i < args.length; i++) {
   else if (args[i] === '--green') expectGreen = true;
   else if (args[i] === '--engine') engine = args[++i];
   else if (args[i] === '--view') viewMode = true;
+  else if (args[i] === '--draw-limit') drawLimit = Number(args[++i]);
   else files.push(path.resolve(args[i]));
 }
 if (!files.length) {
-  console.error('usage: node scripts/engines/check_babylon.mjs [--thumbs DIR] [--no-range-requests] FILE.glb...');
+  console.error('usage: node scripts/engines/check_babylon.mjs [--engine babylon|three] [--thumbs DIR] [--no-range-requests] [--green] [--draw-limit TRIANGLES] FILE.glb...');
   process.exit(2);
 }
 
@@ -108,7 +110,8 @@ function expected(file) {
     if (ids.length) chains[node.name ?? `node ${n}`] = [n, ...ids].map(triangles);
     stack.push(...(node.children ?? []));
   }
-  return { chain: (json.extensionsUsed ?? []).includes('MSFT_lod'), levels: levels + 1, chains };
+  const shown = scene.nodes.reduce((sum, n) => sum + triangles(n), 0);
+  return { chain: (json.extensionsUsed ?? []).includes('MSFT_lod'), levels: levels + 1, chains, shown };
 }
 
 const browser = await puppeteer.launch({
@@ -146,7 +149,7 @@ for (const file of files) {
   }
   try {
     r = await page.evaluate((url, options) => window.loadGlb(url, options), `/files${file}`,
-      { rangeRequests: want.chain && rangeRequests, timeoutMs: 120000, view: view?.camera });
+      { rangeRequests: want.chain && rangeRequests, timeoutMs: 120000, view: view?.camera, drawLimit });
   } catch (e) {
     r = { ok: false, error: String(e) };
   }
@@ -181,7 +184,10 @@ for (const file of files) {
         }
       }
     }
-  } else if (r.ok && want.chain) {
+  } else if (r.ok && engine !== 'three' && r.triangles !== want.shown) {
+    problems.push(`Babylon shows ${r.triangles} triangles, the file's default scene has ${want.shown}`);
+  }
+  if (r.ok && want.chain && engine !== 'three') {
     const inOrder = r.lodLevels.length === want.levels && r.lodLevels.every((l, k) => l === k);
     if (!inOrder) problems.push(`MSFT_lod levels arrived as ${JSON.stringify(r.lodLevels)}, expected 0..${want.levels - 1} in order`);
     if (r.enabled.some((n) => !/_LOD0(_primitive\d+)?$/.test(n))) problems.push(`levels other than LoD0 left enabled: ${r.enabled.join(', ')}`);
@@ -192,10 +198,11 @@ for (const file of files) {
     problems.push(`three.js draws ${r.info.triangles} triangles in ${r.info.calls} calls, the view stage reported ${view.triangles} in ${view.draw_calls}`);
   }
   const seen = r.pixels;
+  if (r.ok && expectGreen && !seen) problems.push('not drawn, so not seen as green grass');
   if (r.ok && expectGreen && seen && !(seen.covered >= 0.002 && seen.green >= 0.5 && seen.dark <= 0.2)) {
     problems.push(`not seen as green grass: ${(100 * seen.covered).toFixed(1)} % of the frame covered, green leading on ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %`);
   }
-  if (thumbs && r.ok) {
+  if (thumbs && r.ok && seen) {
     fs.mkdirSync(thumbs, { recursive: true });
     const canvas = await page.$('#c');
     const owner = path.basename(path.dirname(viewMode ? file : path.dirname(file)));
@@ -205,7 +212,8 @@ for (const file of files) {
   const colour = seen ? `, frame ${(100 * seen.covered).toFixed(1)} % covered, mean rgb ${seen.mean.map((v) => v.toFixed(2)).join(' ')}, green ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %` : '';
   const drawn = r.ok && view && r.info ? `view ${view.camera.name}: ${r.info.triangles} triangles, ${r.info.calls} draw calls (report: ${view.triangles}, ${view.draw_calls}), ` : '';
   const walk = (r.lodWalk ?? []).map((l) => ` ${l.name} by coverage: ${l.walk.map((w) => `LoD${w.shown} ${w.triangles} tris at ${w.distance.toFixed(1)} m`).join(', ')}`).join(';');
-  const what = r.ok ? `${drawn}${r.meshes} meshes, ${r.enabled.length} enabled${want.chain && engine !== 'three' ? `, LoD levels ${JSON.stringify(r.lodLevels)}` : ''}${walk ? ';' + walk : ''}${colour}` : '';
+  const undrawn = r.ok && !seen ? `, frame not drawn (${r.triangles} triangles over the ${drawLimit} --draw-limit)` : '';
+  const what = r.ok ? `${drawn}${r.meshes} meshes, ${r.enabled.length} enabled${engine === 'three' ? '' : ` with ${r.triangles} triangles`}${undrawn}${want.chain && engine !== 'three' ? `, LoD levels ${JSON.stringify(r.lodLevels)}` : ''}${walk ? ';' + walk : ''}${colour}` : '';
   console.log(`${problems.length ? 'FAIL' : 'ok  '}  ${file}: ${what}${problems.length ? ' — ' + problems.join(' | ') : ''}`);
   await page.close();
 }
