@@ -415,6 +415,19 @@ else
   echo "skip: $FUJI not found, no bound-as-written check"
 fi
 
+section "5a3. three.js lights every scene's terrain levels like its LoD0 through their normal maps (TANGENT + normalTexture; top-down under a low sun: mean luminance difference under 4 of 255 and under half of what the vertex normals alone give)"
+for dir in "$OUT"/build/*/; do
+  ref="$dir/terrain/terrain_LOD0.glb"
+  levels=("$dir"/terrain/terrain_LOD[1-9]*.glb)
+  if [ ! -f "$ref" ] || [ ! -f "${levels[0]}" ]; then continue; fi
+  log="$OUT/check_three_terrain_lit_$(basename "$dir").log"
+  node scripts/engines/check_babylon.mjs --engine three --lit-against "$ref" "${levels[@]}" > "$log" 2>&1 || true
+  sed 's|'"$OUT"'/||' "$log" | cut -c1-300 || true
+  oks=$(grep -c '^ok ' "$log" || true)
+  for _ in $(seq 1 "$oks"); do pass; done
+  if [ "$oks" -ne "${#levels[@]}" ]; then fail "$(basename "$dir"): $((${#levels[@]} - oks)) of ${#levels[@]} terrain levels not lit like LoD0 (see $log)"; fi
+done
+
 section "5b. check_outputs.py --scene (manifest sha256/sizes, triangle counts, bounds, LoDs, thumbnail, preview; placements vs scene.glb instancing, ray-cast onto the terrain, spacing)"
 : > "$OUT/check_scenes.tsv"
 for scene in "${SCENES[@]}"; do

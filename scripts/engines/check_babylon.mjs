@@ -9,6 +9,7 @@
 //
 //   node scripts/engines/check_babylon.mjs [--thumbs DIR] [--no-range-requests] [--green] FILE.glb...
 //   node scripts/engines/check_babylon.mjs --engine three --view [--thumbs DIR] out/<scene>/scene.glb...
+//   node scripts/engines/check_babylon.mjs --engine three --lit-against terrain_LOD0.glb terrain_LOD1.glb...
 //
 // --view (three.js): each file is a built scene's scene.glb, rendered from its first [[view]]
 // (manifest.json beside it) without frustum culling; three.js' renderer.info must count exactly
@@ -18,6 +19,13 @@
 // green-leading shares). --green: the files are grass, which a person must see as green: at least
 // 0.2 % of the frame covered, green leading on most of it and at most a fifth of it dark (wind data
 // in COLOR_0 rendered grass black and cut it out under the alpha test).
+//
+// --lit-against REF.glb (three.js): each file is a coarse level of REF's terrain; drawn top-down
+// under a low sun, with its normal maps it must differ from REF by under 4 of 255 in mean
+// luminance, and by under half of what it differs with its vertex normals alone.
+//
+// --draw-limit N (Babylon, default 20 M): a file whose enabled meshes add up to more triangles is
+// loaded and counted but its frame not drawn (Babylon ends an MSFT_lod scene at LoD0 everywhere).
 //
 // MSFT_lod files are loaded with the loader's `useRangeRequests` on (Babylon's progressive LoD
 // loading needs it for a .glb); --no-range-requests loads them with Babylon's defaults instead.
@@ -36,6 +44,7 @@ let expectGreen = false;
 let engine = 'babylon';
 let viewMode = false;
 let drawLimit = 20e6;
+let litAgainst = null;
 const files = [];
 for (let i = 0; i < args.length; i++) {
   if (args[i] === '--thumbs') thumbs = args[++i];
@@ -44,6 +53,7 @@ for (let i = 0; i < args.length; i++) {
   else if (args[i] === '--engine') engine = args[++i];
   else if (args[i] === '--view') viewMode = true;
   else if (args[i] === '--draw-limit') drawLimit = Number(args[++i]);
+  else if (args[i] === '--lit-against') litAgainst = path.resolve(args[++i]);
   else files.push(path.resolve(args[i]));
 }
 if (!files.length) {
@@ -52,7 +62,7 @@ if (!files.length) {
 }
 
 // what the page may load: the page, Babylon from node_modules, and the files named on the command line
-const allowed = new Set(files);
+const allowed = new Set(litAgainst ? [...files, litAgainst] : files);
 const server = http.createServer((req, res) => {
   const url = decodeURIComponent(req.url.split('?')[0]);
   let file;
@@ -122,6 +132,9 @@ const browser = await puppeteer.launch({
     '--disable-background-networking', '--disable-component-update', '--disable-sync', '--disable-quic'],
 });
 let failed = 0;
+// --lit-against: the largest mean luminance difference (0..255) a level may show with its normal
+// map, which must also halve the difference it shows without
+const LIT_MAX_DIFFERENCE = 4;
 if (!['babylon', 'three'].includes(engine)) {
   console.error(`--engine ${engine}: use babylon or three`);
   process.exit(2);
@@ -130,7 +143,24 @@ const engineName = engine === 'three' ? 'three.js' : 'Babylon.js';
 const version = (pkg) => JSON.parse(fs.readFileSync(path.join(here, `node_modules/${pkg}/package.json`))).version;
 console.log(engine === 'three' ? `three.js ${version('three')} (GLTFLoader with the project's MSFT_lod plugin, three_msft_lod.js)`
   : `Babylon.js ${version('babylonjs')}, MSFT_lod files with range requests ${rangeRequests ? 'on' : 'off (Babylon defaults)'}`);
+if (litAgainst && engine !== 'three') {
+  console.error('--lit-against needs --engine three');
+  process.exit(2);
+}
 for (const file of files) {
+  if (litAgainst) {
+    // a coarse terrain level must be lit like LoD0 through its normal map (and worse without it)
+    const page = await browser.newPage();
+    await page.goto(`http://127.0.0.1:${port}/three.html`);
+    await page.waitForFunction('window.threeReady === true', { timeout: 60000 });
+    const r = await page.evaluate((ref, url) => window.litDifference(ref, url), `/files${litAgainst}`, `/files${file}`);
+    await page.close();
+    const good = r.ok && r.maps > 0 && r.withMap < LIT_MAX_DIFFERENCE && r.withMap < 0.5 * r.without;
+    failed += !good;
+    const what = r.ok ? `${r.maps} meshes with a normal map and tangents; mean |Δ luminance| against ${path.basename(litAgainst)} ${r.withMap.toFixed(2)} with their normal maps, ${r.without.toFixed(2)} without` : r.error;
+    console.log(`${good ? 'ok  ' : 'FAIL'}  ${file}: ${what}`);
+    continue;
+  }
   const want = expected(file);
   const page = await browser.newPage();
   const pageErrors = [];

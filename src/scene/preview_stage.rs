@@ -25,8 +25,9 @@ fn fail(stage: Stage) -> impl Fn(String) -> StageError {
 /// 2: a tree species without an L-system is drawn at its built-in tree's height. 3: preview.png is
 /// the first view's perspective render of scene.glb, the top-down drawing moved to map.png. 4: lit
 /// through the materials' normal maps. 5: scene.glb's trees switch where the joint chain search
-/// puts them (plants 11), 6: and with small views sampled more finely (plants 12).
-pub const PREVIEW_ALGORITHM_VERSION: u32 = 6;
+/// puts them (plants 11), 6: and with small views sampled more finely (plants 12). 7: the terrain
+/// lit through its normal maps (terrain 6).
+pub const PREVIEW_ALGORITHM_VERSION: u32 = 7;
 
 /// What the preview stage produced.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

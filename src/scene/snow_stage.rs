@@ -75,8 +75,8 @@ impl SnowStageReport {
 
 /// Version of what the snow stage writes for given inputs: part of its cache key (see
 /// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: terrain_snow.glb carries the textured terrain. 3: and its
-/// `_LAYER_WEIGHTS` (terrain 5).
-pub const SNOW_ALGORITHM_VERSION: u32 = 3;
+/// `_LAYER_WEIGHTS` (terrain 5). 4: and its normal map and tangents (terrain 6).
+pub const SNOW_ALGORITHM_VERSION: u32 = 4;
 
 /// Cache key: the terrain's key and the snow settings.
 pub fn snow_key(snow: &SnowSettings, terrain_key: &str) -> String {

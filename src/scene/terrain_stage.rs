@@ -17,6 +17,7 @@ use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
 use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed, TerrainFigures};
+use crate::terrain::normal_map::{bake_normal_map, NormalMapReport};
 use crate::terrain::stored::Storage;
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -36,6 +37,8 @@ pub struct LodInfo {
     pub triangles: usize,
     /// Use this level from this camera distance on (metres), until the next level's distance.
     pub switch_distance_m: f64,
+    /// The level's own normal map (baked against its mesh) and the shading error it removes.
+    pub normal_map: crate::terrain::normal_map::NormalMapReport,
 }
 
 /// What the terrain stage measured. Deterministic fields only; timings live in `seconds`.
@@ -100,8 +103,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// material layers, terrain_layers.png. 3: LoD switch distances for the `[lod]` policy (2 px by
 /// default, was 1 px). 4: the error is measured on the vertices as written (f32) against the map's
 /// exact heights, and the TIN refines until that is within the bound; `max_error_f64_m` beside it.
-/// 5: every vertex carries its layer weights (`_LAYER_WEIGHTS`).
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 5;
+/// 5: every vertex carries its layer weights (`_LAYER_WEIGHTS`). 6: every file a normal map baked
+/// against its own mesh, TANGENT on every vertex (terrain/normal_map.rs).
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 6;
 
 /// The stage in a scene build.
 pub struct TerrainJob<'a> {
@@ -210,11 +214,13 @@ pub fn run_terrain(
     // (a shared level's meshing and measuring time is counted under `lods`)
     let [mesh_s, analyze_s, build_s] = meshed.seconds;
     let Meshed { scene, layers, .. } = meshed;
-    let textured = |mut scene: Scene| -> Result<Scene, StageError> {
+    let textured = |mut scene: Scene, name: &str| -> Result<(Scene, NormalMapReport), StageError> {
         layers
             .texture(&mut scene, &hf, "terrain")
             .map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
-        Ok(scene)
+        let normal = bake_normal_map(&hf, &mut scene, name, layers.report.map_px)
+            .map_err(|e| f(format!("cannot bake the normal map of {name}: {e}")))?;
+        Ok((scene, normal))
     };
 
     let t1 = Instant::now();
@@ -229,8 +235,10 @@ pub fn run_terrain(
     let mut lods = Vec::new();
     for level in chain {
         let stem = format!("terrain_LOD{}", level.level);
-        let lod_scene =
-            textured(build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| input(e.to_string()))?)?;
+        let (lod_scene, normal_map) = textured(
+            build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| input(e.to_string()))?,
+            &stem,
+        )?;
         let files = write_formats(preset, &lod_scene, scene_dir, &stem)?;
         lods.push(LodInfo {
             level: level.level,
@@ -240,6 +248,7 @@ pub fn run_terrain(
             rms_error_m: level.stats.rms_error_m,
             triangles: level.mesh.triangles.len(),
             switch_distance_m: level.switch_distance_m,
+            normal_map,
         });
     }
     let lods_s = chain_s + t1.elapsed().as_secs_f64();

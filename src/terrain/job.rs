@@ -15,6 +15,7 @@ use crate::terrain::build::{build_scene, BuildError, BuildOptions};
 use crate::terrain::error::{exact_max_error, measure_stored, ErrorStats, TerrainError};
 use crate::terrain::grid::grid;
 use crate::terrain::layers::{bake_layers, LayerReport, TerrainLayers};
+use crate::terrain::normal_map::{bake_normal_map, NormalMapReport};
 use crate::terrain::sample_mesh::SampleMesh;
 use crate::terrain::stored::Storage;
 use crate::terrain::tin::{tin_stored, TinOptions};
@@ -142,6 +143,9 @@ pub struct TerrainFigures {
     pub full_grid_triangles: usize,
     /// The material layers baked into the terrain's base-colour texture (terrain/layers.rs).
     pub layers: LayerReport,
+    /// The normal map baked against this mesh and the shading error it removes
+    /// (terrain/normal_map.rs).
+    pub normal_map: NormalMapReport,
 }
 
 /// What `--report` writes: the analyzer's figures, the input and the files, and the time each
@@ -272,6 +276,8 @@ pub struct Meshed {
     pub scene: Scene,
     /// The material layers (the scene's base colour; LoD levels are textured with the same).
     pub layers: TerrainLayers,
+    /// What the normal map baked against this mesh corrects.
+    pub normal_map: NormalMapReport,
     /// Seconds meshing, measuring, building (0 for a mesh given ready).
     pub seconds: [f64; 3],
 }
@@ -279,7 +285,8 @@ pub struct Meshed {
 /// The one path from samples to a textured terrain scene: meshes `hf` as `settings` ask (or takes
 /// `ready`, a mesh already made at the same settings with its stats, e.g. a LoD level), measures it
 /// as `storage` stores it, refuses a TIN over its bound as written (the analyzer has the last
-/// word), builds the scene (`build`: chunks, skirts, base, name) and textures it with the layers.
+/// word), builds the scene (`build`: chunks, skirts, base, name), textures it with the layers and bakes
+/// its normal map against it.
 pub fn mesh_and_build(
     hf: &Heightfield,
     settings: &MeshSettings,
@@ -316,6 +323,7 @@ pub fn mesh_and_build(
     let mut scene = build_scene(hf, &mesh, build)?;
     let layers = bake_layers(hf);
     layers.texture(&mut scene, hf, &build.name).map_err(JobError::Texture)?;
+    let normal_map = bake_normal_map(hf, &mut scene, &build.name, layers.report.map_px).map_err(JobError::Texture)?;
     let t_build = t.elapsed().as_secs_f64();
     let max_error_f64_m = exact_max_error(hf, &mesh, &stats, storage);
     Ok(Meshed {
@@ -325,6 +333,7 @@ pub fn mesh_and_build(
         max_error_f64_m,
         scene,
         layers,
+        normal_map,
         seconds: [t_mesh, t_analyze, t_build],
     })
 }
@@ -349,6 +358,7 @@ impl Meshed {
             triangles: self.mesh.triangles.len(),
             full_grid_triangles: 2 * hf.width.saturating_sub(1) * hf.height.saturating_sub(1),
             layers: self.layers.report.clone(),
+            normal_map: self.normal_map.clone(),
         }
     }
 }

@@ -1,5 +1,6 @@
 //! Terrain: heightfield → triangulation of its samples (grid or greedy TIN) → measured error →
-//! engine-ready meshes (normals, UVs, chunks, skirts, base).
+//! engine-ready meshes (normals, UVs, chunks, skirts, base), coloured by material layers and lit
+//! through a normal map baked against each mesh.
 
 pub mod budget;
 pub mod build;
@@ -8,6 +9,7 @@ pub mod error;
 pub mod grid;
 pub mod job;
 pub mod layers;
+pub mod normal_map;
 pub mod plane;
 pub mod sample_mesh;
 pub mod solid;

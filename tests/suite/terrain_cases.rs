@@ -416,7 +416,13 @@ fn quantized_and_compressed_terrains_keep_the_bound_as_stored() {
         s.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()).for_each(|p| p.indices.clear());
     }
     assert_eq!(without_indices[1], without_indices[2], "the compressed file reads back as the quantized one");
-    assert!(sizes[1] < sizes[0] && sizes[2] * 2 < sizes[1], "sizes f32, quantized, compressed: {sizes:?}");
+    // the textures (base colour, normal map: PNG either way) are the same bytes in all three
+    let textures: u64 = scenes[0].textures.iter().map(|t| t.png.len() as u64).sum();
+    let sizes: Vec<u64> = sizes.iter().map(|s| s - textures).collect();
+    assert!(
+        sizes[1] < sizes[0] && sizes[2] * 2 < sizes[1],
+        "bytes besides textures, f32, quantized, compressed: {sizes:?}"
+    );
     let json = String::from_utf8_lossy(&std::fs::read(dir.path().join("compressed.glb")).unwrap()).to_string();
     assert!(json.contains("KHR_mesh_quantization") && json.contains("EXT_meshopt_compression"));
 
@@ -511,4 +517,112 @@ fn damaged_meshopt_views_are_refused_not_aborted() {
     j["buffers"][fallback]["byteLength"] = (1u64 << 62).into();
     std::fs::write(dir.path().join("bad.gltf"), serde_json::to_vec(&j).unwrap()).unwrap();
     let _ = validate_file(&dir.path().join("bad.gltf"), &ValidateOptions { up_facing: false });
+}
+
+/// A coarse TIN over rolling hills is lit like the map itself through its normal map, checked in
+/// the bytes written: at every texel centre, the file's interpolated vertex normal and TANGENT
+/// (w = +1, bitangent N × T up the image) turn the decoded texel into a normal within a degree of
+/// the map's own (central differences, bilinear between samples), where the vertex normals alone
+/// are several degrees off; the report's figures are these.
+#[test]
+fn a_coarse_terrain_is_lit_like_the_map_through_its_normal_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (97u32, 65u32);
+    let height = |i: u32, j: u32| -> u16 {
+        let (x, z) = (i as f64 / 6.0, j as f64 / 4.5);
+        (1000.0 + 150.0 * x.sin() * z.cos() + 40.0 * (2.3 * x + z).sin()).round() as u16
+    };
+    let png = write_png(dir.path(), "hills.png", w, h, height);
+    let cell = 10.0;
+    let mut job = job_for(&png, 25.0);
+    job.decode.cell_size_m = cell;
+    let (report, _) = run_checked(&job, dir.path(), "glb");
+    let nm = &report.figures.normal_map;
+    assert_eq!(nm.map_px, [128, 64]);
+    let back = read_scene(&dir.path().join("out.glb")).unwrap();
+    let m = &back.materials[0];
+    let t = m.normal_texture.expect("the terrain material has a normal map");
+    let img = image::load_from_memory(&back.textures[t].png).unwrap().to_rgb8();
+    assert_eq!([img.width(), img.height()], nm.map_px);
+
+    // the map's normal at sample coordinates (s, t), from the PNG's heights
+    let hgt = |i: i64, j: i64| height(i.clamp(0, w as i64 - 1) as u32, j.clamp(0, h as i64 - 1) as u32) as f64;
+    let sample_normal = |i: i64, j: i64| -> [f64; 3] {
+        let (i0, i1) = ((i - 1).max(0), (i + 1).min(w as i64 - 1));
+        let (j0, j1) = ((j - 1).max(0), (j + 1).min(h as i64 - 1));
+        let dx = (hgt(i1, j) - hgt(i0, j)) / ((i1 - i0) as f64 * cell);
+        let dz = (hgt(i, j1) - hgt(i, j0)) / ((j1 - j0) as f64 * cell);
+        let l = (dx * dx + 1.0 + dz * dz).sqrt();
+        [-dx / l, 1.0 / l, -dz / l]
+    };
+    let unit = |v: [f64; 3]| {
+        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        v.map(|c| c / l)
+    };
+    let field = |s: f64, t: f64| -> [f64; 3] {
+        let (i0, j0) = (s.floor() as i64, t.floor() as i64);
+        let (fs, ft) = (s - i0 as f64, t - j0 as f64);
+        let (a, b, c, d) = (
+            sample_normal(i0, j0),
+            sample_normal(i0 + 1, j0),
+            sample_normal(i0, j0 + 1),
+            sample_normal(i0 + 1, j0 + 1),
+        );
+        unit(std::array::from_fn(|k| {
+            (a[k] * (1.0 - fs) + b[k] * fs) * (1.0 - ft) + (c[k] * (1.0 - fs) + d[k] * fs) * ft
+        }))
+    };
+    let angle = |a: [f64; 3], b: [f64; 3]| {
+        let (a, b) = (unit(a), unit(b));
+        (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).clamp(-1.0, 1.0).acos().to_degrees()
+    };
+    let (mut seen, mut sum_with, mut max_with, mut sum_without) = (0usize, 0.0f64, 0.0f64, 0.0f64);
+    let mut done = vec![false; (img.width() * img.height()) as usize];
+    for p in back.meshes.iter().flat_map(|m| &m.primitives) {
+        assert_eq!(p.tangents.len(), p.positions.len(), "TANGENT on every terrain vertex");
+        for (n, tg) in p.normals.iter().zip(&p.tangents) {
+            let d = n[0] * tg[0] + n[1] * tg[1] + n[2] * tg[2];
+            assert!(d.abs() < 1e-5 && tg[3] == 1.0, "tangent {tg:?} against normal {n:?}");
+        }
+        for tri in p.indices.chunks_exact(3) {
+            let v = [tri[0], tri[1], tri[2]].map(|k| k as usize);
+            let uv = v.map(|k| p.uvs[k].map(|c| c as f64));
+            let area = (uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1]) - (uv[2][0] - uv[0][0]) * (uv[1][1] - uv[0][1]);
+            for y in 0..img.height() {
+                for x in 0..img.width() {
+                    let (u, vv) = ((x as f64 + 0.5) / img.width() as f64, (y as f64 + 0.5) / img.height() as f64);
+                    let l1 = ((u - uv[0][0]) * (uv[2][1] - uv[0][1]) - (uv[2][0] - uv[0][0]) * (vv - uv[0][1])) / area;
+                    let l2 = ((uv[1][0] - uv[0][0]) * (vv - uv[0][1]) - (u - uv[0][0]) * (uv[1][1] - uv[0][1])) / area;
+                    let bary = [1.0 - l1 - l2, l1, l2];
+                    let k = (y * img.width() + x) as usize;
+                    if done[k] || bary.iter().any(|&b| b < -1e-9) {
+                        continue;
+                    }
+                    done[k] = true;
+                    let lerp = |f: &dyn Fn(usize) -> [f64; 3]| -> [f64; 3] {
+                        std::array::from_fn(|c| (0..3).map(|q| bary[q] * f(v[q])[c]).sum())
+                    };
+                    let n = unit(lerp(&|i| p.normals[i].map(|c| c as f64)));
+                    let t0 = lerp(&|i| [0, 1, 2].map(|c| p.tangents[i][c] as f64));
+                    let d = t0[0] * n[0] + t0[1] * n[1] + t0[2] * n[2];
+                    let t = unit([0, 1, 2].map(|c| t0[c] - d * n[c]));
+                    let b = [n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]];
+                    let px = img.get_pixel(x, y).0.map(|c| c as f64 / 255.0 * 2.0 - 1.0);
+                    let shaded: [f64; 3] = std::array::from_fn(|c| px[0] * t[c] + px[1] * b[c] + px[2] * n[c]);
+                    let truth = field(u * (w - 1) as f64, vv * (h - 1) as f64);
+                    let (with, without) = (angle(shaded, truth), angle(n, truth));
+                    seen += 1;
+                    sum_with += with;
+                    max_with = max_with.max(with);
+                    sum_without += without;
+                }
+            }
+        }
+    }
+    assert_eq!(seen, done.len(), "every texel under a triangle of the file");
+    let (mean_with, mean_without) = (sum_with / seen as f64, sum_without / seen as f64);
+    assert!(max_with < 1.0 && mean_with < 0.3, "lit through the map: mean {mean_with}°, max {max_with}°");
+    assert!(mean_without > 3.0, "the coarse mesh alone is off by only {mean_without}°: the case is too easy");
+    assert!((mean_with - nm.mean_error_deg).abs() < 0.01 && (max_with - nm.max_error_deg).abs() < 0.01, "{nm:?}");
+    assert!((mean_without - nm.mean_error_without_deg).abs() < 0.01, "{nm:?}");
 }

@@ -1,0 +1,264 @@
+//! The terrain's normal map: the height field's normals at texel resolution, in the tangent space
+//! of the mesh that carries them, so a coarse TIN is lit as the full map would be.
+//!
+//! A TIN triangle spans many samples; its vertex normals (the map's normals at its corners)
+//! interpolate to a smooth normal that misses every ridge and gully inside it. Each texel of the
+//! map stores the height field's normal there (bilinear between the samples' central-difference
+//! normals) relative to the frame an engine builds at that point of this mesh: the interpolated
+//! vertex normal N, the TANGENT written with it (along +u = +x, orthogonal to the vertex normal,
+//! w = +1) and B = N × T, which points up the image (towards smaller v, −z) as glTF's normal
+//! textures expect. Every LoD level bakes its own map against its own mesh.
+//!
+//! The analyzer is the shading error: at every texel centre the angle between the height field's
+//! normal and the normal an engine shades with, without the map (the interpolated vertex normal)
+//! and with it (the texel as written, 8 bits a channel, through the same frame).
+
+use serde::{Deserialize, Serialize};
+
+use crate::heightfield::Heightfield;
+use crate::mesh::{Primitive, Scene, Texture};
+
+/// What the normal map corrects, measured at every texel centre the terrain's surface covers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NormalMapReport {
+    /// Map size (width, height) in texels: the layers' size.
+    pub map_px: [u32; 2],
+    /// Texels the surface covers (every texel of a whole map).
+    pub texels: usize,
+    /// Angle (degrees) between the height field's normal and the interpolated vertex normal: the
+    /// shading error without the map, mean and largest.
+    pub mean_error_without_deg: f64,
+    pub max_error_without_deg: f64,
+    /// The same with the map as written (8-bit texels decoded through the tangent frame).
+    pub mean_error_deg: f64,
+    pub max_error_deg: f64,
+}
+
+/// The tangent glTF wants beside a normal map at a vertex with this unit normal: +x with its
+/// component along the normal removed (+z where the normal is nearly ±x, as on a skirt's end
+/// wall), unit length, w = +1 (the bitangent N × T then points towards −z, up the image).
+pub fn terrain_tangent(n: [f32; 3]) -> [f32; 4] {
+    let n = n.map(|c| c as f64);
+    let along = |a: [f64; 3]| {
+        let d = a[0] * n[0] + a[1] * n[1] + a[2] * n[2];
+        let t = [a[0] - d * n[0], a[1] - d * n[1], a[2] - d * n[2]];
+        let len = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
+        (len > 1e-3).then(|| t.map(|c| c / len))
+    };
+    let t = along([1.0, 0.0, 0.0]).or_else(|| along([0.0, 0.0, 1.0])).unwrap_or([1.0, 0.0, 0.0]);
+    [t[0] as f32, t[1] as f32, t[2] as f32, 1.0]
+}
+
+type V3 = [f64; 3];
+
+fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: V3, b: V3) -> V3 {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+fn unit(a: V3) -> V3 {
+    let len = dot(a, a).sqrt();
+    if len > 0.0 && len.is_finite() {
+        a.map(|c| c / len)
+    } else {
+        [0.0, 1.0, 0.0]
+    }
+}
+
+fn angle_deg(a: V3, b: V3) -> f64 {
+    dot(unit(a), unit(b)).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+/// The height field's unit normal at continuous sample coordinates (s, t): bilinear between the
+/// four samples' normals (the vertex normals are these at the samples).
+fn field_normal(hf: &Heightfield, s: f64, t: f64) -> V3 {
+    let (i0, j0) = (s.floor().max(0.0) as usize, t.floor().max(0.0) as usize);
+    let (i0, j0) = (i0.min(hf.width - 1), j0.min(hf.height - 1));
+    let (i1, j1) = ((i0 + 1).min(hf.width - 1), (j0 + 1).min(hf.height - 1));
+    let (fs, ft) = ((s - i0 as f64).clamp(0.0, 1.0), (t - j0 as f64).clamp(0.0, 1.0));
+    let (a, b, c, d) = (hf.normal_at(i0, j0), hf.normal_at(i1, j0), hf.normal_at(i0, j1), hf.normal_at(i1, j1));
+    unit(std::array::from_fn(|k| (a[k] * (1.0 - fs) + b[k] * fs) * (1.0 - ft) + (c[k] * (1.0 - fs) + d[k] * fs) * ft))
+}
+
+/// The orthonormal frame (T, B, N) an engine shades with at barycentric `bary` of a triangle with
+/// these vertex normals and tangents (interpolated, N normalised, T orthogonalised to it).
+fn frame(normals: [[f32; 3]; 3], tangents: [[f32; 4]; 3], bary: [f64; 3]) -> (V3, V3, V3) {
+    let lerp = |v: [[f32; 3]; 3]| -> V3 { std::array::from_fn(|k| (0..3).map(|c| bary[c] * v[c][k] as f64).sum()) };
+    let n = unit(lerp(normals));
+    let t0 = lerp(tangents.map(|t| [t[0], t[1], t[2]]));
+    let t = unit([0, 1, 2].map(|k| t0[k] - dot(t0, n) * n[k]));
+    (t, cross(n, t), n)
+}
+
+fn to_byte(v: f64) -> u8 {
+    ((v * 0.5 + 0.5).clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+fn from_byte(b: u8) -> f64 {
+    b as f64 / 255.0 * 2.0 - 1.0
+}
+
+/// Bakes the normal map of the terrain `scene` (built from `hf`) at `map_px` texels and puts it
+/// on the scene: TANGENT on every primitive of a material named `terrain`, the map (PNG, data not
+/// colour) as those materials' normal texture, named `{name}_normal`. Texel (x, y) is the point at
+/// uv ((x + ½)/W, (y + ½)/H) of the surface (the top faces; skirts and the base, which the planar
+/// UVs map onto the border or the whole map again, do not write it). Returns what the map corrects.
+pub fn bake_normal_map(
+    hf: &Heightfield,
+    scene: &mut Scene,
+    name: &str,
+    map_px: [u32; 2],
+) -> Result<NormalMapReport, String> {
+    let terrain: Vec<bool> = scene.materials.iter().map(|m| m.name == "terrain").collect();
+    let uses_map = |p: &Primitive| p.material.is_some_and(|m| terrain.get(m).copied().unwrap_or(false));
+    for p in scene.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()).filter(|p| uses_map(p)) {
+        if p.normals.len() != p.positions.len() || p.uvs.len() != p.positions.len() {
+            return Err(format!("terrain mesh `{name}` has a primitive without normals or UVs"));
+        }
+        p.tangents = p.normals.iter().map(|&n| terrain_tangent(n)).collect();
+    }
+    let [w, h] = map_px;
+    let (wu, hu) = (w as usize, h as usize);
+    // (0, 0, 1) until a surface triangle covers the texel
+    let mut texels = vec![[128u8, 128, 255, 255]; wu * hu];
+    let mut covered = vec![false; wu * hu];
+    let (mut sum_without, mut max_without) = (0.0f64, 0.0f64);
+    let (mut sum_with, mut max_with) = (0.0f64, 0.0f64);
+    let mut count = 0usize;
+    let span = |n: usize| (n.max(2) - 1) as f64;
+    for p in scene.meshes.iter().flat_map(|m| &m.primitives).filter(|p| uses_map(p)) {
+        for tri in p.indices.chunks_exact(3) {
+            let v = [tri[0] as usize, tri[1] as usize, tri[2] as usize];
+            if v.iter().any(|&k| k >= p.positions.len()) {
+                continue;
+            }
+            let pos = v.map(|k| p.positions[k].map(|c| c as f64));
+            // top faces only: skirt walls have no extent in uv, the base faces down
+            let e1 = [0, 1, 2].map(|k| pos[1][k] - pos[0][k]);
+            let e2 = [0, 1, 2].map(|k| pos[2][k] - pos[0][k]);
+            if cross(e1, e2)[1] <= 0.0 {
+                continue;
+            }
+            let uv = v.map(|k| p.uvs[k].map(|c| c as f64));
+            let area = (uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1]) - (uv[2][0] - uv[0][0]) * (uv[1][1] - uv[0][1]);
+            if area.abs() < 1e-18 {
+                continue;
+            }
+            let normals = v.map(|k| p.normals[k]);
+            let tangents = v.map(|k| p.tangents[k]);
+            // texel centres inside the triangle's uv box
+            let lo = |c: usize, n: u32| {
+                let m = uv.iter().map(|q| q[c]).fold(f64::INFINITY, f64::min);
+                ((m * n as f64 - 0.5).floor().max(0.0) as usize).min(n as usize)
+            };
+            let hi = |c: usize, n: u32| {
+                let m = uv.iter().map(|q| q[c]).fold(f64::NEG_INFINITY, f64::max);
+                ((m * n as f64 - 0.5).ceil().max(0.0) as usize + 1).min(n as usize)
+            };
+            for y in lo(1, h)..hi(1, h) {
+                let tv = (y as f64 + 0.5) / h as f64;
+                for x in lo(0, w)..hi(0, w) {
+                    let tu = (x as f64 + 0.5) / w as f64;
+                    let b1 = ((tu - uv[0][0]) * (uv[2][1] - uv[0][1]) - (uv[2][0] - uv[0][0]) * (tv - uv[0][1])) / area;
+                    let b2 = ((uv[1][0] - uv[0][0]) * (tv - uv[0][1]) - (tu - uv[0][0]) * (uv[1][1] - uv[0][1])) / area;
+                    let bary = [1.0 - b1 - b2, b1, b2];
+                    if bary.iter().any(|&b| b < -1e-9) {
+                        continue;
+                    }
+                    let k = y * wu + x;
+                    if covered[k] {
+                        continue;
+                    }
+                    covered[k] = true;
+                    let (t, b, n) = frame(normals, tangents, bary);
+                    let field = field_normal(hf, tu * span(hf.width), tv * span(hf.height));
+                    let local = [dot(field, t), dot(field, b), dot(field, n)];
+                    let bytes = [to_byte(local[0]), to_byte(local[1]), to_byte(local[2]), 255];
+                    texels[k] = bytes;
+                    let decoded = [0, 1, 2]
+                        .map(|c| from_byte(bytes[0]) * t[c] + from_byte(bytes[1]) * b[c] + from_byte(bytes[2]) * n[c]);
+                    let (without, with) = (angle_deg(n, field), angle_deg(decoded, field));
+                    sum_without += without;
+                    max_without = max_without.max(without);
+                    sum_with += with;
+                    max_with = max_with.max(with);
+                    count += 1;
+                }
+            }
+        }
+    }
+    let png = crate::bake::raster::png::encode_rgba8_png(&texels.concat(), w, h)?;
+    scene.textures.push(Texture { name: format!("{name}_normal"), png });
+    let index = scene.textures.len() - 1;
+    for (m, _) in scene.materials.iter_mut().zip(&terrain).filter(|(_, &t)| t) {
+        m.normal_texture = Some(index);
+    }
+    let mean = |s: f64| if count > 0 { s / count as f64 } else { 0.0 };
+    Ok(NormalMapReport {
+        map_px,
+        texels: count,
+        mean_error_without_deg: mean(sum_without),
+        max_error_without_deg: max_without,
+        mean_error_deg: mean(sum_with),
+        max_error_deg: max_with,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tangents_run_along_x_orthogonal_to_the_normal_with_the_bitangent_up_the_image() {
+        // flat ground: T = +x, and N × T = −z, towards smaller v (up the image), as glTF wants
+        let t = terrain_tangent([0.0, 1.0, 0.0]);
+        assert_eq!(t, [1.0, 0.0, 0.0, 1.0]);
+        let b = cross([0.0, 1.0, 0.0], [1.0, 0.0, 0.0]);
+        assert_eq!(b, [0.0, 0.0, -1.0]);
+        for n in [[0.6, 0.8, 0.0], [0.0, 0.6, -0.8], [-0.48, 0.6, 0.64], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]] {
+            let t = terrain_tangent(n);
+            let d = n[0] * t[0] + n[1] * t[1] + n[2] * t[2];
+            let len = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
+            assert!(d.abs() < 1e-6 && (len - 1.0).abs() < 1e-6 && t[3] == 1.0, "{n:?} -> {t:?}");
+        }
+        // a skirt's end wall facing ±x takes +z
+        assert_eq!(terrain_tangent([1.0, 0.0, 0.0]), [0.0, 0.0, 1.0, 1.0]);
+    }
+
+    #[test]
+    fn a_tilted_plane_needs_no_correction_and_a_bump_under_a_big_triangle_does() {
+        let (w, h) = (33, 17);
+        let plane: Vec<f32> = (0..w * h).map(|k| 0.5 * (k % w) as f32 + 0.25 * (k / w) as f32).collect();
+        let hf = Heightfield { width: w, height: h, cell_size_m: 1.0, heights: plane, exact: None };
+        let coarse = crate::terrain::grid::grid(&hf, 16).unwrap();
+        let opts = crate::terrain::build::BuildOptions {
+            chunk_samples: None,
+            skirt_depth_m: None,
+            base_depth_m: None,
+            name: "t".into(),
+        };
+        let mut scene = crate::terrain::build::build_scene(&hf, &coarse, &opts).unwrap();
+        let r = bake_normal_map(&hf, &mut scene, "t", [32, 16]).unwrap();
+        assert_eq!(r.texels, 32 * 16);
+        assert!(r.max_error_without_deg < 1e-6 && r.max_error_deg < 0.5, "{r:?}");
+        let img = image::load_from_memory(&scene.textures[0].png).unwrap().to_rgba8();
+        assert!(img.pixels().all(|p| p.0 == [128, 128, 255, 255]), "a plane's map is (0, 0, 1) everywhere");
+        assert_eq!(scene.materials[0].normal_texture, Some(0));
+        assert!(scene.meshes.iter().flat_map(|m| &m.primitives).all(|p| p.tangents.len() == p.positions.len()));
+
+        // a bump in the middle of one 16 × 16-cell quad: its vertex normals see none of it
+        let bump: Vec<f32> = (0..w * h)
+            .map(|k| {
+                let (x, z) = ((k % w) as f32 - 8.0, (k / w) as f32 - 8.0);
+                4.0 * (-(x * x + z * z) / 8.0).exp()
+            })
+            .collect();
+        let hf = Heightfield { width: w, height: h, cell_size_m: 1.0, heights: bump, exact: None };
+        let mut scene = crate::terrain::build::build_scene(&hf, &coarse, &opts).unwrap();
+        let r = bake_normal_map(&hf, &mut scene, "t", [32, 16]).unwrap();
+        assert!(r.max_error_without_deg > 30.0 && r.max_error_deg < 0.6, "{r:?}");
+    }
+}
