@@ -415,18 +415,57 @@ else
   echo "skip: $FUJI not found, no bound-as-written check"
 fi
 
-section "5a3. three.js lights every scene's terrain levels like its LoD0 through their normal maps (TANGENT + normalTexture; top-down under a low sun: mean luminance difference under 4 of 255 and under half of what the vertex normals alone give)"
+# The scene-level engine checks (5f, 5f2, 5f3 below) need only the built scenes: they run in the
+# background, one after another, beside the Python and Blender checks (5b-5e, mostly one core), and
+# are reported at their places. Each writes its own log.
+scene_files=()
+lod_files=()
+babylon_lod_files=()
+lit_dirs=()
 for dir in "$OUT"/build/*/; do
-  ref="$dir/terrain/terrain_LOD0.glb"
+  [ -f "$dir/scene.glb" ] && scene_files+=("$dir/scene.glb")
+  if [ -f "$dir/scene_lod.glb" ]; then
+    lod_files+=("$dir/scene_lod.glb")
+    # Babylon's glTF loader ignores MSFT_screencoverage: it ends with every chain at LoD0, the
+    # whole scene at full detail (demo: 122 M triangles), which it is not asked to draw
+    # (--draw-limit; SwiftShader took 120 s over that one frame). alpine's 77 MB file did not
+    # load in headless Babylon within 240 s.
+    if [ "$(stat -c %s "$dir/scene_lod.glb")" -lt 50000000 ]; then babylon_lod_files+=("$dir/scene_lod.glb"); fi
+  fi
   levels=("$dir"/terrain/terrain_LOD[1-9]*.glb)
-  if [ ! -f "$ref" ] || [ ! -f "${levels[0]}" ]; then continue; fi
-  log="$OUT/check_three_terrain_lit_$(basename "$dir").log"
-  node scripts/engines/check_babylon.mjs --engine three --lit-against "$ref" "${levels[@]}" > "$log" 2>&1 || true
-  sed 's|'"$OUT"'/||' "$log" | cut -c1-300 || true
+  if [ -f "$dir/terrain/terrain_LOD0.glb" ] && [ -f "${levels[0]}" ]; then lit_dirs+=("$dir"); fi
+done
+(
+  if ((${#scene_files[@]})); then
+    for engine in three babylon; do
+      node scripts/engines/check_babylon.mjs --engine "$engine" --view --thumbs "$OUT/engines/views" "${scene_files[@]}" \
+        > "$OUT/check_${engine}_views.log" 2>&1 || true
+    done
+  fi
+  if ((${#babylon_lod_files[@]})); then
+    node scripts/engines/check_babylon.mjs --engine babylon --no-range-requests "${babylon_lod_files[@]}" > "$OUT/check_babylon_scene_lod.log" 2>&1 || true
+  fi
+  if ((${#lod_files[@]})); then
+    node scripts/engines/check_babylon.mjs --engine three --no-range-requests "${lod_files[@]}" > "$OUT/check_three_scene_lod.log" 2>&1 || true
+  fi
+  for dir in "${lit_dirs[@]}"; do
+    levels=("$dir"/terrain/terrain_LOD[1-9]*.glb)
+    node scripts/engines/check_babylon.mjs --engine three --lit-against "$dir/terrain/terrain_LOD0.glb" "${levels[@]}" \
+      > "$OUT/check_three_terrain_lit_$(basename "$dir").log" 2>&1 || true
+  done
+) &
+scene_engines_pid=$!
+
+# the log of a background engine run: printed, each `ok` line a pass, short of `want` a failure
+engine_log() {
+  local log="$1" want="$2" what="$3"
+  if [ ! -f "$log" ]; then fail "$what: no log ($log)"; return; fi
+  sed 's|'"$OUT"'/||' "$log" | cut -c1-400 || true
+  local oks
   oks=$(grep -c '^ok ' "$log" || true)
   for _ in $(seq 1 "$oks"); do pass; done
-  if [ "$oks" -ne "${#levels[@]}" ]; then fail "$(basename "$dir"): $((${#levels[@]} - oks)) of ${#levels[@]} terrain levels not lit like LoD0 (see $log)"; fi
-done
+  if [ "$oks" -ne "$want" ]; then fail "$what: $((want - oks)) of $want failed (see $log)"; fi
+}
 
 section "5b. check_outputs.py --scene (manifest sha256/sizes, triangle counts, bounds, LoDs, thumbnail, preview; placements vs scene.glb instancing, ray-cast onto the terrain, spacing)"
 : > "$OUT/check_scenes.tsv"
@@ -527,20 +566,14 @@ else
   fail "no grass or other species files to load in Babylon.js"
 fi
 
-section "5f. three.js draws every scene.glb from its first [[view]] with exactly the triangles and draw calls the view stage reported (renderer.info)"
-scene_files=()
-for dir in "$OUT"/build/*/; do
-  [ -f "$dir/scene.glb" ] && scene_files+=("$dir/scene.glb")
-done
+section "5f. three.js and Babylon.js draw every scene.glb from its first [[view]] with exactly the triangles and draw calls the view stage reported (three.js renderer.info; Babylon active indices, draw calls)"
+wait "$scene_engines_pid"
 if ((${#scene_files[@]})); then
-  log="$OUT/check_three_views.log"
-  node scripts/engines/check_babylon.mjs --engine three --view --thumbs "$OUT/engines/views" "${scene_files[@]}" > "$log" 2>&1 || true
-  sed 's|'"$OUT"'/||' "$log" || true
-  oks=$(grep -c '^ok ' "$log" || true)
-  for _ in $(seq 1 "$oks"); do pass; done
-  if [ "$oks" -ne "${#scene_files[@]}" ]; then fail "three.js views: $((${#scene_files[@]} - oks)) of ${#scene_files[@]} scenes differ from the report (see $log)"; fi
+  for engine in three babylon; do
+    engine_log "$OUT/check_${engine}_views.log" "${#scene_files[@]}" "$engine views: scenes drawn unlike the report"
+  done
 else
-  fail "no scene.glb to draw in three.js"
+  fail "no scene.glb to draw"
 fi
 
 for f in "${FILES[@]}"; do
@@ -564,29 +597,19 @@ done
 
 # ---------------------------------------------------------------------------------------------------------
 section "5f2. scene_lod.glb (each terrain chunk and placement tile an MSFT_lod chain) loads in three.js through three_msft_lod.js (levels drawn with exactly their triangles inside their coverage ranges, on a sample of 32 chains) and, under 50 MB, in Babylon.js with its defaults (levels in order, exactly the default scene's LoD0 triangles enabled at the end)"
-# Babylon's glTF loader ignores MSFT_screencoverage: it ends with every chain at LoD0, the whole
-# scene at full detail (demo: 122 M triangles), which it is not asked to draw (--draw-limit; SwiftShader
-# took 120 s over that one frame). alpine's 77 MB file did not load in headless Babylon within 240 s.
-lod_files=()
-babylon_files=()
-for dir in "$OUT"/build/*/; do
-  [ -f "$dir/scene_lod.glb" ] || continue
-  lod_files+=("$dir/scene_lod.glb")
-  if [ "$(stat -c %s "$dir/scene_lod.glb")" -lt 50000000 ]; then babylon_files+=("$dir/scene_lod.glb"); fi
-done
 if ((${#lod_files[@]})); then
-  for engine in babylon three; do
-    if [ "$engine" = babylon ]; then engine_files=("${babylon_files[@]}"); else engine_files=("${lod_files[@]}"); fi
-    log="$OUT/check_${engine}_scene_lod.log"
-    node scripts/engines/check_babylon.mjs --engine "$engine" --no-range-requests "${engine_files[@]}" > "$log" 2>&1 || true
-    sed 's|'"$OUT"'/||' "$log" | cut -c1-400 || true
-    oks=$(grep -c '^ok ' "$log" || true)
-    for _ in $(seq 1 "$oks"); do pass; done
-    if [ "$oks" -ne "${#engine_files[@]}" ]; then fail "$engine: $((${#engine_files[@]} - oks)) of ${#engine_files[@]} scene_lod.glb files failed (see $log)"; fi
-  done
+  engine_log "$OUT/check_babylon_scene_lod.log" "${#babylon_lod_files[@]}" "babylon: scene_lod.glb files"
+  engine_log "$OUT/check_three_scene_lod.log" "${#lod_files[@]}" "three: scene_lod.glb files"
 else
   fail "no scene_lod.glb to load"
 fi
+
+section "5f3. three.js lights every scene's terrain levels like its LoD0 through their normal maps (TANGENT + normalTexture; top-down under a low sun: mean luminance difference under 4 of 255 and under half of what the vertex normals alone give)"
+for dir in "${lit_dirs[@]}"; do
+  levels=("$dir"/terrain/terrain_LOD[1-9]*.glb)
+  engine_log "$OUT/check_three_terrain_lit_$(basename "$dir").log" "${#levels[@]}" "$(basename "$dir"): terrain levels not lit like LoD0"
+done
+if ((${#lit_dirs[@]} == 0)); then fail "no scene with terrain levels to light"; fi
 
 section "5g. the Godot 4 import script (scripts/engines/godot/verdant_scene.gd) parses and passes gdtoolkit's lint and format check"
 # no Godot on the registries these machines reach: the script is checked statically only

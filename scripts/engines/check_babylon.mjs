@@ -8,12 +8,12 @@
 //   --engine babylon (default) | three
 //
 //   node scripts/engines/check_babylon.mjs [--thumbs DIR] [--no-range-requests] [--green] FILE.glb...
-//   node scripts/engines/check_babylon.mjs --engine three --view [--thumbs DIR] out/<scene>/scene.glb...
+//   node scripts/engines/check_babylon.mjs [--engine three] --view [--thumbs DIR] out/<scene>/scene.glb...
 //   node scripts/engines/check_babylon.mjs --engine three --lit-against terrain_LOD0.glb terrain_LOD1.glb...
 //
-// --view (three.js): each file is a built scene's scene.glb, rendered from its first [[view]]
-// (manifest.json beside it) without frustum culling; three.js' renderer.info must count exactly
-// the triangles and draw calls the view stage reported.
+// --view: each file is a built scene's scene.glb, rendered from its first [[view]] (manifest.json
+// beside it) without frustum culling; the engine must count exactly the triangles and draw calls
+// the view stage reported (three.js: renderer.info; Babylon: active indices / 3, draw calls).
 //
 // Every file's frame is measured where it is not the sky (covered share, mean colour, dark and
 // green-leading shares). --green: the files are grass, which a person must see as green: at least
@@ -223,9 +223,8 @@ for (const file of files) {
     if (r.enabled.some((n) => !/_LOD0(_primitive\d+)?$/.test(n))) problems.push(`levels other than LoD0 left enabled: ${r.enabled.join(', ')}`);
   }
   if (viewMode && !view) problems.push('no view in manifest.json beside the file');
-  if (viewMode && view && engine !== 'three') problems.push('--view needs --engine three');
   if (r.ok && view && r.info && (r.info.triangles !== view.triangles || r.info.calls !== view.draw_calls)) {
-    problems.push(`three.js draws ${r.info.triangles} triangles in ${r.info.calls} calls, the view stage reported ${view.triangles} in ${view.draw_calls}`);
+    problems.push(`${engineName} draws ${r.info.triangles} triangles in ${r.info.calls} calls, the view stage reported ${view.triangles} in ${view.draw_calls}`);
   }
   const seen = r.pixels;
   if (r.ok && expectGreen && !seen) problems.push('not drawn, so not seen as green grass');
