@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Babylon.js or three.js in headless Chromium on glb files (check.sh step 5e runs it on every species file).
 #
-#   bash scripts/check_babylon.sh [--engine babylon|three] [--thumbs DIR] [--no-range-requests] [--green] FILE.glb...
+#   bash scripts/check_babylon.sh [--engine babylon|three] [--thumbs DIR] [--no-range-requests] [--green] [--view] [--draw-limit N] [--lit-against REF.glb] FILE.glb...
 #
 # Installs Debian's chromium with apt when missing and Babylon.js 9.28, three.js 0.187 and
 # puppeteer-core into scripts/engines/node_modules (git-ignored), then runs scripts/engines/check_babylon.mjs.
