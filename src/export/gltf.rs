@@ -360,17 +360,28 @@ mod quantized {
         root.push(acc)
     }
 
+    /// TANGENT as normalized SHORT VEC4 (KHR_mesh_quantization; 8 bytes a vertex instead of 16).
     /// Tangents follow the node's matrix: divided by the grid's steps (renormalised) so it gives
-    /// them back; handedness kept.
-    pub(super) fn tangents_in_grid_space(tangents: &[[f32; 4]], grid: &PositionGrid) -> Vec<[f32; 4]> {
-        tangents
-            .iter()
-            .map(|t| {
-                let v = [0, 1, 2].map(|a| t[a] as f64 / grid.step[a] as f64);
-                let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(f64::MIN_POSITIVE);
-                [(v[0] / len) as f32, (v[1] / len) as f32, (v[2] / len) as f32, t[3]]
-            })
-            .collect()
+    /// them back; the handedness w stays ±1 exactly (±32767).
+    pub(super) fn tangents(
+        root: &mut json::Root,
+        bin: &mut Bin,
+        tangents: &[[f32; 4]],
+        grid: &PositionGrid,
+    ) -> Index<json::Accessor> {
+        let mut bytes = Vec::with_capacity(tangents.len() * 8);
+        for t in tangents {
+            let v = [0, 1, 2].map(|a| t[a] as f64 / grid.step[a] as f64);
+            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(f64::MIN_POSITIVE);
+            let w = if t[3] < 0.0 { -1.0 } else { 1.0 };
+            for c in [v[0] / len, v[1] / len, v[2] / len, w] {
+                bytes.extend_from_slice(&((c * 32767.0).round() as i16).to_le_bytes());
+            }
+        }
+        let view = strided_view(bin, &bytes, 8);
+        let mut acc = accessor(view, tangents.len(), json::accessor::ComponentType::I16, json::accessor::Type::Vec4);
+        acc.normalized = true;
+        root.push(acc)
     }
 
     /// The node transform T·R·S followed by the grid's Tr(origin)·Sc(step), as one TRS:
@@ -523,11 +534,10 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
                 attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), a);
             }
             if !p.tangents.is_empty() {
-                let tangents = match &opts.position_grid {
-                    None => p.tangents.clone(),
-                    Some(grid) => quantized::tangents_in_grid_space(&p.tangents, grid),
+                let a = match &opts.position_grid {
+                    None => float_accessor(&mut root, &mut bin, &p.tangents, Some(ARRAY_BUFFER)),
+                    Some(grid) => quantized::tangents(&mut root, &mut bin, &p.tangents, grid),
                 };
-                let a = float_accessor(&mut root, &mut bin, &tangents, Some(ARRAY_BUFFER));
                 attributes.insert(Valid(json::mesh::Semantic::Tangents), a);
             }
             if !p.colors.is_empty() {
