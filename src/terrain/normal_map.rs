@@ -51,21 +51,11 @@ pub fn terrain_tangent(n: [f32; 3]) -> [f32; 4] {
 
 type V3 = [f64; 3];
 
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
+use crate::math::{cross3 as cross, dot3 as dot};
 
-fn cross(a: V3, b: V3) -> V3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
+/// `a` at unit length; straight up when it has none.
 fn unit(a: V3) -> V3 {
-    let len = dot(a, a).sqrt();
-    if len > 0.0 && len.is_finite() {
-        a.map(|c| c / len)
-    } else {
-        [0.0, 1.0, 0.0]
-    }
+    crate::math::normalize3(a).unwrap_or([0.0, 1.0, 0.0])
 }
 
 fn angle_deg(a: V3, b: V3) -> f64 {
