@@ -99,6 +99,34 @@ impl Heightfield {
         let len = (dhdx * dhdx + 1.0 + dhdz * dhdz).sqrt();
         [-dhdx / len, 1.0 / len, -dhdz / len]
     }
+
+    /// The four samples around continuous sample coordinates (s, t) (clamped to the map) and the
+    /// fractions between them: ((i0, j0), (i1, j1), (fs, ft)).
+    fn bilinear_cell(&self, s: f64, t: f64) -> ((usize, usize), (usize, usize), (f64, f64)) {
+        let (i0, j0) = (s.floor().max(0.0) as usize, t.floor().max(0.0) as usize);
+        let (i0, j0) = (i0.min(self.width - 1), j0.min(self.height - 1));
+        let (i1, j1) = ((i0 + 1).min(self.width - 1), (j0 + 1).min(self.height - 1));
+        ((i0, j0), (i1, j1), ((s - i0 as f64).clamp(0.0, 1.0), (t - j0 as f64).clamp(0.0, 1.0)))
+    }
+
+    /// The height bilinearly interpolated at continuous sample coordinates (s, t) (x = s·cell,
+    /// z = t·cell), clamped to the map.
+    pub fn height_bilinear(&self, s: f64, t: f64) -> f64 {
+        let ((i0, j0), (i1, j1), (fs, ft)) = self.bilinear_cell(s, t);
+        let h = |i, j| self.at(i, j) as f64;
+        let lerp = |a: f64, b: f64, f: f64| a + (b - a) * f;
+        lerp(lerp(h(i0, j0), h(i1, j0), fs), lerp(h(i0, j1), h(i1, j1), fs), ft)
+    }
+
+    /// The unit normal at continuous sample coordinates (s, t): the four surrounding samples'
+    /// [`Heightfield::normal_at`] bilinearly interpolated and normalised (straight up if they cancel).
+    pub fn normal_bilinear(&self, s: f64, t: f64) -> [f64; 3] {
+        let ((i0, j0), (i1, j1), (fs, ft)) = self.bilinear_cell(s, t);
+        let (a, b, c, d) = (self.normal_at(i0, j0), self.normal_at(i1, j0), self.normal_at(i0, j1), self.normal_at(i1, j1));
+        let n: [f64; 3] =
+            std::array::from_fn(|k| (a[k] * (1.0 - fs) + b[k] * fs) * (1.0 - ft) + (c[k] * (1.0 - fs) + d[k] * fs) * ft);
+        crate::math::normalize3(n).unwrap_or([0.0, 1.0, 0.0])
+    }
 }
 
 /// How the pixel values of a heightmap file map to metres.

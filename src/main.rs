@@ -483,6 +483,7 @@ fn terrain(a: TerrainArgs, quiet: bool) -> i32 {
             skirt_depth_m: a.skirt,
             base_depth_m: a.base,
             name: name.clone(),
+            snow: Default::default(),
         },
         quantize: a.quantize || a.compress,
         meshopt: a.compress,

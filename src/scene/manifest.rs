@@ -670,6 +670,18 @@ fn snow_md(r: &SnowStageReport) -> String {
             r.layer_triangles
         )),
     );
+    let g = &r.layer_agreement;
+    s += &format!(
+        "The terrain's snow layer (its base colour and `_LAYER_WEIGHTS`) follows this cover: on {} surface vertices, \
+         mean |layer − cover| {:.4}, max {:.4}; covered (≥ ½) {:.1} % by the cover, {:.1} % by the layer.
+
+",
+        g.vertices,
+        g.mean_abs_difference,
+        g.max_abs_difference,
+        100.0 * g.covered_fraction_cover,
+        100.0 * g.covered_fraction_layer,
+    );
     for (title, unit, bands) in [("slope", "°", &a.cover_by_slope), ("altitude", " m", &a.cover_by_altitude)] {
         s += &format!("| {title} band | vertices | mean weight | covered (≥ ½) |\n|---|---|---|---|\n");
         for b in bands {

@@ -53,6 +53,59 @@ pub struct SnowSeconds {
     pub total: f64,
 }
 
+/// How closely the terrain's snow layer (the snow channel of `_LAYER_WEIGHTS`, which its base
+/// colour blends by) follows the cover (`_SNOW`) on the terrain's vertices: the terrain stage bakes
+/// the layer from the heightfield with the same cover settings, so only byte rounding and the
+/// skirts (which take their border's layers) part them.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
+pub struct LayerAgreement {
+    /// Vertices compared (skirt and base vertices, below the surface, left out).
+    pub vertices: usize,
+    pub mean_abs_difference: f64,
+    pub max_abs_difference: f64,
+    /// Share of the compared vertices covered (weight ≥ ½) by the cover and by the layer.
+    pub covered_fraction_cover: f64,
+    pub covered_fraction_layer: f64,
+}
+
+/// Compares the snow channel of `_LAYER_WEIGHTS` with `_SNOW` on every surface vertex of `terrain`:
+/// the highest vertex of its primitive at its (x, z) (a skirt or base vertex hangs below a
+/// surface vertex and takes its layers).
+pub fn layer_agreement(terrain: &Scene) -> LayerAgreement {
+    use crate::terrain::layers::LAYER_WEIGHTS_ATTRIBUTE;
+    let (mut n, mut sum, mut max, mut cov, mut lay) = (0usize, 0.0f64, 0.0f64, 0usize, 0usize);
+    for p in terrain.meshes.iter().flat_map(|m| &m.primitives) {
+        let find = |name: &str| p.custom.iter().find(|c| c.name == name && c.values.len() == p.positions.len());
+        let (Some(snow), Some(layers)) = (find(snow::SNOW_ATTRIBUTE), find(LAYER_WEIGHTS_ATTRIBUTE)) else {
+            continue;
+        };
+        let mut top = std::collections::HashMap::new();
+        for q in &p.positions {
+            let y = top.entry((q[0].to_bits(), q[2].to_bits())).or_insert(q[1]);
+            *y = y.max(q[1]);
+        }
+        for (q, (s, l)) in p.positions.iter().zip(snow.values.iter().zip(&layers.values)) {
+            if top.get(&(q[0].to_bits(), q[2].to_bits())).is_some_and(|&y| q[1] < y) {
+                continue;
+            }
+            let d = (s[0] as f64 - l[3] as f64).abs();
+            n += 1;
+            sum += d;
+            max = max.max(d);
+            cov += usize::from(s[0] >= 0.5);
+            lay += usize::from(l[3] >= 0.5);
+        }
+    }
+    let share = |k: usize| if n == 0 { 0.0 } else { k as f64 / n as f64 };
+    LayerAgreement {
+        vertices: n,
+        mean_abs_difference: if n == 0 { 0.0 } else { sum / n as f64 },
+        max_abs_difference: max,
+        covered_fraction_cover: share(cov),
+        covered_fraction_layer: share(lay),
+    }
+}
+
 /// What the snow stage wrote and measured.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct SnowStageReport {
@@ -64,6 +117,9 @@ pub struct SnowStageReport {
     pub particles: usize,
     pub layer_triangles: usize,
     pub analysis: SnowReport,
+    /// The terrain's snow layer against the cover (see [`LayerAgreement`]).
+    #[serde(default)]
+    pub layer_agreement: LayerAgreement,
     pub seconds: SnowSeconds,
 }
 
@@ -75,8 +131,9 @@ impl SnowStageReport {
 
 /// Version of what the snow stage writes for given inputs: part of its cache key (see
 /// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: terrain_snow.glb carries the textured terrain. 3: and its
-/// `_LAYER_WEIGHTS` (terrain 5). 4: and its normal map and tangents (terrain 6).
-pub const SNOW_ALGORITHM_VERSION: u32 = 4;
+/// `_LAYER_WEIGHTS` (terrain 5). 4: and its normal map and tangents (terrain 6). 5: its snow layer
+/// follows the cover (terrain 7); the report's layer_agreement.
+pub const SNOW_ALGORITHM_VERSION: u32 = 5;
 
 /// Cache key: the terrain's key and the snow settings.
 pub fn snow_key(snow: &SnowSettings, terrain_key: &str) -> String {
@@ -141,6 +198,7 @@ pub fn run_snow(
     info.width = stored.width;
     info.height = stored.height;
     let analysis = snow::analyze(&atlas, &s.emitter, &particles, Some(&covered), Some(&stored));
+    let layer_agreement = layer_agreement(&covered);
     let analyze_s = t1.elapsed().as_secs_f64();
 
     let layer_file = layer.as_ref().map(|_| PathBuf::from(SNOW_DIR).join("snow_layer.glb"));
@@ -153,6 +211,7 @@ pub fn run_snow(
         particles: particles.len(),
         layer_triangles,
         analysis,
+        layer_agreement,
         seconds: SnowSeconds {
             atlas: atlas_s,
             particles: particles_s,

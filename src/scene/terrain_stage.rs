@@ -16,6 +16,7 @@ use crate::scene::pipeline::{Stage, StageJob};
 use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
+use crate::terrain::layers::SnowRule;
 use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed, TerrainFigures};
 use crate::terrain::normal_map::{bake_normal_map, NormalMapReport};
 use crate::terrain::stored::Storage;
@@ -104,8 +105,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// default, was 1 px). 4: the error is measured on the vertices as written (f32) against the map's
 /// exact heights, and the TIN refines until that is within the bound; `max_error_f64_m` beside it.
 /// 5: every vertex carries its layer weights (`_LAYER_WEIGHTS`). 6: every file a normal map baked
-/// against its own mesh, TANGENT on every vertex (terrain/normal_map.rs).
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 6;
+/// against its own mesh, TANGENT on every vertex (terrain/normal_map.rs). 7: the snow layer follows
+/// the preset's `[snow]` cover when it has one; slopes from the normalised bilinear normal.
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 7;
 
 /// The stage in a scene build.
 pub struct TerrainJob<'a> {
@@ -140,12 +142,23 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
     if !t.lods.is_empty() {
         k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
     }
+    if let Some(snow) = &preset.snow {
+        // the snow layer follows the scene's cover (see [`snow_rule`])
+        k.add(serde_json::to_string(&snow.cover).unwrap_or_default().as_bytes());
+    }
     if let TerrainSource::Heightmap { path, .. } = &t.source {
         let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
             .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))?;
         k.add(sha256_hex(&bytes).as_bytes());
     }
     Ok(k.finish())
+}
+
+/// Where the terrain's snow layer lies: the preset's `[snow]` cover when it has one (the base
+/// colour then shows the snow the snow stage's mask and the thinned plants follow), else the
+/// fixed snowline.
+pub fn snow_rule(preset: &Preset) -> SnowRule {
+    preset.snow.as_ref().map_or(SnowRule::Snowline, |s| SnowRule::Cover(s.cover.clone()))
 }
 
 /// How errors name the terrain's heights: the heightmap's path, or the procedural kind.
@@ -197,8 +210,14 @@ pub fn run_terrain(
         .iter()
         .find(|l| t.mode == MeshMode::Tin && l.max_error_requested_m == t.max_error_m)
         .map(|l| (l.mesh.clone(), l.hit_triangle_limit, l.stats));
-    let build_opts =
-        |name: String| BuildOptions { chunk_samples: t.chunk, skirt_depth_m: t.skirt_m, base_depth_m: t.base_m, name };
+    let snow = snow_rule(preset);
+    let build_opts = |name: String| BuildOptions {
+        chunk_samples: t.chunk,
+        skirt_depth_m: t.skirt_m,
+        base_depth_m: t.base_m,
+        name,
+        snow: snow.clone(),
+    };
     let settings = MeshSettings {
         mode: t.mode,
         grid_step: t.grid_step,

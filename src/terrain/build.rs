@@ -36,11 +36,19 @@ pub struct BuildOptions {
     pub base_depth_m: Option<f64>,
     /// Name of the scene, its root node and (without chunks) its mesh.
     pub name: String,
+    /// Where the material layers put snow (the base colour and `_LAYER_WEIGHTS`).
+    pub snow: crate::terrain::layers::SnowRule,
 }
 
 impl Default for BuildOptions {
     fn default() -> Self {
-        BuildOptions { chunk_samples: None, skirt_depth_m: None, base_depth_m: None, name: "terrain".to_string() }
+        BuildOptions {
+            chunk_samples: None,
+            skirt_depth_m: None,
+            base_depth_m: None,
+            name: "terrain".to_string(),
+            snow: Default::default(),
+        }
     }
 }
 
@@ -483,7 +491,7 @@ mod tests {
     }
 
     fn opts(chunk: Option<usize>, skirt: Option<f64>, base: Option<f64>) -> BuildOptions {
-        BuildOptions { chunk_samples: chunk, skirt_depth_m: skirt, base_depth_m: base, name: "t".into() }
+        BuildOptions { chunk_samples: chunk, skirt_depth_m: skirt, base_depth_m: base, name: "t".into(), ..Default::default() }
     }
 
     // ---- scene inspection -----------------------------------------------------------------------

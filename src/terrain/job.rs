@@ -321,7 +321,7 @@ pub fn mesh_and_build(
     }
     let t = Instant::now();
     let mut scene = build_scene(hf, &mesh, build)?;
-    let layers = bake_layers(hf);
+    let layers = bake_layers(hf, &build.snow);
     layers.texture(&mut scene, hf, &build.name).map_err(JobError::Texture)?;
     let normal_map = bake_normal_map(hf, &mut scene, &build.name, layers.report.map_px).map_err(JobError::Texture)?;
     let t_build = t.elapsed().as_secs_f64();

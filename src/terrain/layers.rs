@@ -2,7 +2,9 @@
 //!
 //! Each texel of a map covering the terrain gets four layer weights from the surface there (the
 //! terrain walk-through thesis' surface attributes): grass on gentle ground, scree on moderate
-//! slopes, rock on steep ones, snow above the snowline unless too steep to hold it. The weights
+//! slopes, rock on steep ones, snow where the [`SnowRule`] puts it: above a fixed snowline unless
+//! too steep to hold it, or, in a scene with `[snow]`, exactly the snow stage's cover (the weight
+//! [`crate::snow::snow_weight`] gives the surface: snow line with its noise, slope, wind). The weights
 //! are written as an RGBA weight map (R grass, G scree, B rock, A snow; the splat/alpha-map layout
 //! Unity terrain and Unreal landscape layers import), and blended with each layer's albedo into a
 //! base-colour texture (no lighting baked in) that terrain.glb's material samples through its
@@ -15,6 +17,7 @@ use crate::bake::image::Image;
 use crate::bake::raster::png::encode_rgba8_png;
 use crate::heightfield::Heightfield;
 use crate::mesh::{Scene, Texture};
+use crate::snow::CoverSettings;
 
 /// The layers, in weight-map channel order (R, G, B, A).
 pub const LAYER_NAMES: [&str; 4] = ["grass", "scree", "rock", "snow"];
@@ -45,12 +48,58 @@ fn smoothstep(edge: [f64; 2], x: f64) -> f64 {
     t * t * (3.0 - 2.0 * t)
 }
 
-/// The four layer weights (summing to 1) of ground with this slope and height.
+/// Where the snow layer lies.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum SnowRule {
+    /// Above [`SNOWLINE_M`], fading in over [`SNOW_FADE_M`], on slopes under [`SNOW_SLOPE_DEG`]
+    /// (a terrain built alone, or a scene without `[snow]`).
+    #[default]
+    Snowline,
+    /// The scene's snow cover (its preset's `[snow]`): the weight the snow stage puts on each vertex
+    /// as `_SNOW`, from the same settings, so the base colour shows the snow the mask and the
+    /// thinned plants follow.
+    Cover(CoverSettings),
+}
+
+impl SnowRule {
+    /// The snow weight (0–1) of the surface at world `position` with unit `normal`.
+    pub fn weight(&self, position: [f64; 3], normal: [f64; 3]) -> f64 {
+        match self {
+            SnowRule::Snowline => {
+                let slope_deg = normal[1].clamp(-1.0, 1.0).acos().to_degrees();
+                smoothstep([SNOWLINE_M, SNOWLINE_M + SNOW_FADE_M], position[1])
+                    * (1.0 - smoothstep(SNOW_SLOPE_DEG, slope_deg))
+            }
+            SnowRule::Cover(c) => {
+                let w = crate::snow::snow_weight(c, position.map(|v| v as f32), normal.map(|v| v as f32))[0];
+                (w as f64).clamp(0.0, 1.0)
+            }
+        }
+    }
+
+    /// How the report names the rule.
+    pub fn label(&self) -> &'static str {
+        match self {
+            SnowRule::Snowline => "snowline",
+            SnowRule::Cover(_) => "snow cover",
+        }
+    }
+}
+
+/// The four layer weights (summing to 1) of ground with this slope and height under the fixed
+/// snowline ([`SnowRule::Snowline`]).
 pub fn layer_weights(slope_deg: f64, height_m: f64) -> [f64; 4] {
-    let rock = smoothstep(ROCK_SLOPE_DEG, slope_deg);
-    let scree = smoothstep(SCREE_SLOPE_DEG, slope_deg) * (1.0 - rock);
     let snow_cover =
         smoothstep([SNOWLINE_M, SNOWLINE_M + SNOW_FADE_M], height_m) * (1.0 - smoothstep(SNOW_SLOPE_DEG, slope_deg));
+    weights_with_snow(slope_deg, snow_cover)
+}
+
+/// The four layer weights (summing to 1) of ground with this slope under this much snow (0–1):
+/// the snow takes its share, the rest is grass, scree and rock by slope.
+pub fn weights_with_snow(slope_deg: f64, snow_cover: f64) -> [f64; 4] {
+    let snow_cover = snow_cover.clamp(0.0, 1.0);
+    let rock = smoothstep(ROCK_SLOPE_DEG, slope_deg);
+    let scree = smoothstep(SCREE_SLOPE_DEG, slope_deg) * (1.0 - rock);
     let rest = 1.0 - snow_cover;
     let (rock, scree) = (rock * rest, scree * rest);
     let grass = (1.0 - rock - scree - snow_cover).max(0.0);
@@ -76,7 +125,15 @@ pub struct LayerReport {
     pub layers: Vec<String>,
     /// Mean weight of each layer over the map (sums to 1).
     pub coverage: Vec<f64>,
+    /// The fixed snowline (used when `snow` is "snowline").
     pub snowline_m: f64,
+    /// Where the snow layer comes from: "snowline" or "snow cover" (the scene's `[snow]`).
+    #[serde(default = "default_snow_source")]
+    pub snow: String,
+}
+
+fn default_snow_source() -> String {
+    SnowRule::Snowline.label().into()
 }
 
 /// The baked layers of one heightfield.
@@ -87,26 +144,24 @@ pub struct TerrainLayers {
     /// The base colour (linear RGBA) the weights blend to.
     pub albedo: Image,
     pub report: LayerReport,
+    /// Where the snow layer lies (the per-vertex weights follow the same rule).
+    pub snow: SnowRule,
     /// `albedo` as PNG, encoded on first use (every LoD scene shares it).
     albedo_png: std::sync::OnceLock<Result<Vec<u8>, String>>,
 }
 
-/// Bilinear height and surface slope (degrees) at continuous sample coordinates (s, t).
-fn surface_at(hf: &Heightfield, s: f64, t: f64) -> (f64, f64) {
-    let (i0, j0) = (s.floor().max(0.0) as usize, t.floor().max(0.0) as usize);
-    let (i0, j0) = (i0.min(hf.width - 1), j0.min(hf.height - 1));
-    let (i1, j1) = ((i0 + 1).min(hf.width - 1), (j0 + 1).min(hf.height - 1));
-    let (fs, ft) = ((s - i0 as f64).clamp(0.0, 1.0), (t - j0 as f64).clamp(0.0, 1.0));
-    let lerp = |a: f64, b: f64, f: f64| a + (b - a) * f;
-    let h = |i, j| hf.at(i, j) as f64;
-    let height = lerp(lerp(h(i0, j0), h(i1, j0), fs), lerp(h(i0, j1), h(i1, j1), fs), ft);
-    let ny = |i, j| hf.normal_at(i, j)[1];
-    let up = lerp(lerp(ny(i0, j0), ny(i1, j0), fs), lerp(ny(i0, j1), ny(i1, j1), fs), ft);
-    (height, up.clamp(-1.0, 1.0).acos().to_degrees())
+/// The layer weights of the surface at continuous sample coordinates (s, t): bilinear height and
+/// normal (see [`Heightfield::normal_bilinear`]), the slope from that normal, the snow from `snow`.
+fn weights_at(hf: &Heightfield, snow: &SnowRule, s: f64, t: f64) -> [f64; 4] {
+    let height = hf.height_bilinear(s, t);
+    let normal = hf.normal_bilinear(s, t);
+    let slope_deg = normal[1].clamp(-1.0, 1.0).acos().to_degrees();
+    let position = [s * hf.cell_size_m, height, t * hf.cell_size_m];
+    weights_with_snow(slope_deg, snow.weight(position, normal))
 }
 
 /// Sets [`LAYER_WEIGHTS_ATTRIBUTE`] on every primitive of `scene` (see [`TerrainLayers::texture`]).
-fn vertex_weights(scene: &mut Scene, hf: &Heightfield) {
+fn vertex_weights(scene: &mut Scene, hf: &Heightfield, snow: &SnowRule) {
     use rayon::prelude::*;
     let cell = hf.cell_size_m;
     for p in scene.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()) {
@@ -114,8 +169,8 @@ fn vertex_weights(scene: &mut Scene, hf: &Heightfield) {
             .positions
             .par_iter()
             .map(|q| {
-                let (height, slope) = surface_at(hf, q[0] as f64 / cell, q[2] as f64 / cell);
-                unit_byte_weights(layer_weights(slope, height)).map(|k| k as f32 / 255.0)
+                unit_byte_weights(weights_at(hf, snow, q[0] as f64 / cell, q[2] as f64 / cell))
+                    .map(|k| k as f32 / 255.0)
             })
             .collect();
         p.custom.retain(|c| c.name != LAYER_WEIGHTS_ATTRIBUTE);
@@ -139,8 +194,8 @@ fn unit_byte_weights(w: [f64; 4]) -> [u8; 4] {
 
 /// Bakes the weight map and the base colour over the whole heightfield (at least 2 × 2 samples).
 /// Texel (x, y) is sampled at its centre, uv ((x + ½)/W, (y + ½)/H), which the planar terrain UVs
-/// map to sample coordinates (u·(w − 1), v·(h − 1)).
-pub fn bake_layers(hf: &Heightfield) -> TerrainLayers {
+/// map to sample coordinates (u·(w − 1), v·(h − 1)). `snow` says where the snow layer lies.
+pub fn bake_layers(hf: &Heightfield, snow: &SnowRule) -> TerrainLayers {
     let (w, h) = (map_px(hf.width), map_px(hf.height));
     let n = (w * h) as usize;
     let mut weights = Vec::with_capacity(n);
@@ -150,8 +205,7 @@ pub fn bake_layers(hf: &Heightfield) -> TerrainLayers {
         let t = (y as f64 + 0.5) / h as f64 * (hf.height - 1) as f64;
         for x in 0..w {
             let s = (x as f64 + 0.5) / w as f64 * (hf.width - 1) as f64;
-            let (height, slope) = surface_at(hf, s, t);
-            let wts = layer_weights(slope, height);
+            let wts = weights_at(hf, snow, s, t);
             let mut colour = [0.0f32; 4];
             colour[3] = 1.0;
             for (k, &wk) in wts.iter().enumerate() {
@@ -173,7 +227,9 @@ pub fn bake_layers(hf: &Heightfield) -> TerrainLayers {
             layers: LAYER_NAMES.iter().map(|s| s.to_string()).collect(),
             coverage,
             snowline_m: SNOWLINE_M,
+            snow: snow.label().into(),
         },
+        snow: snow.clone(),
         albedo_png: std::sync::OnceLock::new(),
     }
 }
@@ -190,7 +246,7 @@ impl TerrainLayers {
     /// is what shows), and [`LAYER_WEIGHTS_ATTRIBUTE`] on every primitive, from the surface under
     /// each vertex (x, z → sample x / cell, z / cell; skirt and base vertices take their border's).
     pub fn texture(&self, scene: &mut Scene, hf: &Heightfield, name: &str) -> Result<(), String> {
-        vertex_weights(scene, hf);
+        vertex_weights(scene, hf, &self.snow);
         let png = self.albedo_png.get_or_init(|| self.albedo.encode_png().map_err(|e| e.to_string())).clone()?;
         scene.textures.push(Texture { name: format!("{name}_base_color"), png });
         let t = scene.textures.len() - 1;
@@ -230,6 +286,42 @@ mod tests {
     }
 
     #[test]
+    fn a_snow_cover_rule_puts_snow_where_the_cover_does() {
+        // a gentle ramp (about 6°) rising 0.1 m a cell along x: the cover's line at 3 m, a sharp
+        // transition, no noise or wind, so snow exactly where the ramp is above 3 m
+        let (w, h) = (65, 17);
+        let heights: Vec<f32> = (0..w * h).map(|k| (k % w) as f32 * 0.1).collect();
+        let hf = Heightfield { width: w, height: h, cell_size_m: 1.0, heights, exact: None };
+        let cover = CoverSettings { snow_line_m: 3.0, transition_m: 0.0, wind_scour: 0.0, ..CoverSettings::default() };
+        let layers = bake_layers(&hf, &SnowRule::Cover(cover.clone()));
+        assert_eq!(layers.report.snow, "snow cover");
+        let [mw, mh] = layers.report.map_px;
+        for y in 0..mh {
+            for x in 0..mw {
+                let s = (x as f64 + 0.5) / mw as f64 * (w - 1) as f64;
+                let want = if s * 0.1 >= 3.0 { 255 } else { 0 };
+                assert_eq!(layers.weights[(y * mw + x) as usize][3], want, "texel ({x}, {y}) at height {}", s * 0.1);
+            }
+        }
+        // the same weight the snow stage gives a vertex with this position and normal
+        let rule = SnowRule::Cover(CoverSettings { transition_m: 4.0, snow_line_noise_m: 2.0, ..cover });
+        let n = hf.normal_bilinear(40.0, 8.0);
+        let q = [40.0, hf.height_bilinear(40.0, 8.0), 8.0];
+        let direct = crate::snow::snow_weight(
+            match &rule {
+                SnowRule::Cover(c) => c,
+                _ => unreachable!(),
+            },
+            q.map(|v| v as f32),
+            n.map(|v| v as f32),
+        )[0];
+        assert!(direct > 0.05 && direct < 0.95, "{direct}");
+        assert_eq!(rule.weight(q, n), direct as f64);
+        // the fixed snowline puts none on this low ramp
+        assert!(bake_layers(&hf, &SnowRule::Snowline).weights.iter().all(|t| t[3] == 0));
+    }
+
+    #[test]
     fn map_sizes_are_powers_of_two_near_the_sample_spacing() {
         assert_eq!(map_px(513), 512);
         assert_eq!(map_px(512), 512);
@@ -256,7 +348,7 @@ mod tests {
             })
             .collect();
         let hf = Heightfield { width: w, height: h, cell_size_m: cell, heights, exact: None };
-        let layers = bake_layers(&hf);
+        let layers = bake_layers(&hf, &SnowRule::Snowline);
         assert_eq!(layers.report.map_px, [64, 32]);
         let at = |x: usize, y: usize| layers.weights[y * 64 + x];
         assert!(at(4, 16)[0] == 255, "{:?}", at(4, 16));
@@ -279,6 +371,7 @@ mod tests {
             skirt_depth_m: Some(2.0),
             base_depth_m: None,
             name: "t".into(),
+            ..Default::default()
         };
         let mut built = crate::terrain::build::build_scene(&hf, &mesh, &opts).unwrap();
         layers.texture(&mut built, &hf, "t").unwrap();

@@ -62,17 +62,6 @@ fn angle_deg(a: V3, b: V3) -> f64 {
     dot(unit(a), unit(b)).clamp(-1.0, 1.0).acos().to_degrees()
 }
 
-/// The height field's unit normal at continuous sample coordinates (s, t): bilinear between the
-/// four samples' normals (the vertex normals are these at the samples).
-fn field_normal(hf: &Heightfield, s: f64, t: f64) -> V3 {
-    let (i0, j0) = (s.floor().max(0.0) as usize, t.floor().max(0.0) as usize);
-    let (i0, j0) = (i0.min(hf.width - 1), j0.min(hf.height - 1));
-    let (i1, j1) = ((i0 + 1).min(hf.width - 1), (j0 + 1).min(hf.height - 1));
-    let (fs, ft) = ((s - i0 as f64).clamp(0.0, 1.0), (t - j0 as f64).clamp(0.0, 1.0));
-    let (a, b, c, d) = (hf.normal_at(i0, j0), hf.normal_at(i1, j0), hf.normal_at(i0, j1), hf.normal_at(i1, j1));
-    unit(std::array::from_fn(|k| (a[k] * (1.0 - fs) + b[k] * fs) * (1.0 - ft) + (c[k] * (1.0 - fs) + d[k] * fs) * ft))
-}
-
 /// The orthonormal frame (T, B, N) an engine shades with at barycentric `bary` of a triangle with
 /// these vertex normals and tangents (interpolated, N normalised, T orthogonalised to it).
 fn frame(normals: [[f32; 3]; 3], tangents: [[f32; 4]; 3], bary: [f64; 3]) -> (V3, V3, V3) {
@@ -164,7 +153,7 @@ pub fn bake_normal_map(
                     }
                     covered[k] = true;
                     let (t, b, n) = frame(normals, tangents, bary);
-                    let field = field_normal(hf, tu * span(hf.width), tv * span(hf.height));
+                    let field = hf.normal_bilinear(tu * span(hf.width), tv * span(hf.height));
                     let local = [dot(field, t), dot(field, b), dot(field, n)];
                     let bytes = [to_byte(local[0]), to_byte(local[1]), to_byte(local[2]), 255];
                     texels[k] = bytes;
@@ -229,6 +218,7 @@ mod tests {
             skirt_depth_m: None,
             base_depth_m: None,
             name: "t".into(),
+            ..Default::default()
         };
         let mut scene = crate::terrain::build::build_scene(&hf, &coarse, &opts).unwrap();
         let r = bake_normal_map(&hf, &mut scene, "t", [32, 16]).unwrap();

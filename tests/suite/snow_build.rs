@@ -413,3 +413,82 @@ fn a_preset_without_snow_writes_no_snow_folder() {
         fs::read(s.join("placements/grass.csv")).unwrap()
     );
 }
+
+/// The surface vertices of a terrain scene's primitives (the highest at each x, z: skirts hang
+/// below) with their `name` attribute.
+fn surface_attribute(scene: &verdant::mesh::Scene, name: &str) -> Vec<([f32; 3], [f32; 4])> {
+    let mut out = Vec::new();
+    for p in scene.meshes.iter().flat_map(|m| &m.primitives) {
+        let c = p.custom.iter().find(|c| c.name == name).unwrap_or_else(|| panic!("{name} on every primitive"));
+        assert_eq!(c.values.len(), p.positions.len());
+        let mut top = std::collections::HashMap::new();
+        for q in &p.positions {
+            let y = top.entry((q[0].to_bits(), q[2].to_bits())).or_insert(q[1]);
+            *y = y.max(q[1]);
+        }
+        for (q, v) in p.positions.iter().zip(&c.values) {
+            if q[1] >= top[&(q[0].to_bits(), q[2].to_bits())] {
+                out.push((*q, *v));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_terrain_shows_the_snow_the_cover_puts_down() {
+    // issue 15 item 2: terrain layers from the snow cover (winter_valley showed no snow in engines:
+    // the layers had a fixed 2,500 m snowline)
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "p/s.toml", &preset("s", &format!("{GRASS}\n{SNOW}")));
+    write(d, "p/n.toml", &preset("n", GRASS));
+    build(d, "p/s.toml", "o", &[]);
+    build(d, "p/n.toml", "o", &[]);
+    let s = d.join("o/s");
+    let terrain = verdant::validate::read_scene(&s.join("terrain/terrain.glb")).unwrap();
+    let snowy = verdant::validate::read_scene(&s.join("snow/terrain_snow.glb")).unwrap();
+    // on every surface vertex, the snow layer is the cover's weight to a byte
+    let layers = surface_attribute(&terrain, "_LAYER_WEIGHTS");
+    let cover = surface_attribute(&snowy, "_SNOW");
+    assert_eq!(layers.len(), cover.len());
+    let (mut covered, mut bare) = (0, 0);
+    for ((q, l), (q2, c)) in layers.iter().zip(&cover) {
+        assert_eq!(q, q2);
+        assert!((l[3] - c[0]).abs() <= 1.0 / 255.0 + 1e-6, "at {q:?}: layer snow {} cover {}", l[3], c[0]);
+        covered += usize::from(c[0] >= 0.95);
+        bare += usize::from(c[0] <= 0.05);
+    }
+    assert!(covered > 100 && bare > 100, "a snow line at 20 m on 0..50 m terrain: {covered} covered, {bare} bare");
+
+    // the base colour an engine shows: snow-white texels where the cover is full, none where bare
+    let material = terrain.materials.iter().find(|m| m.name == "terrain").unwrap();
+    let png = &terrain.textures[material.base_color_texture.unwrap()].png;
+    let img = image::load_from_memory(png).unwrap().to_rgb8();
+    let extent = 128.0 * 2.0;
+    let texel = |q: &[f32; 3]| {
+        let x = ((q[0] / extent) * img.width() as f32).clamp(0.0, img.width() as f32 - 1.0) as u32;
+        let y = ((q[2] / extent) * img.height() as f32).clamp(0.0, img.height() as f32 - 1.0) as u32;
+        img.get_pixel(x, y).0
+    };
+    let white = |p: [u8; 3]| p.iter().all(|&c| c >= 200);
+    let (mut agree, mut total) = (0usize, 0usize);
+    for (q, c) in &cover {
+        if c[0] >= 0.95 || c[0] <= 0.05 {
+            total += 1;
+            agree += usize::from(white(texel(q)) == (c[0] >= 0.95));
+        }
+    }
+    assert!(agree as f64 >= 0.97 * total as f64, "{agree} of {total} texels white exactly where the cover is full");
+
+    // the report says where the snow came from and how closely the layer follows the cover
+    let r = read_json(&s.join("report.json"));
+    assert_eq!(r["stages"]["terrain"]["layers"]["snow"], "snow cover");
+    let a = &r["stages"]["snow"]["layer_agreement"];
+    assert!(a["max_abs_difference"].as_f64().unwrap() <= 1.0 / 255.0 + 1e-6, "{a}");
+    assert_eq!(a["vertices"].as_u64().unwrap() as usize, cover.len());
+    // without [snow], the fixed snowline (far above this terrain): no snow at all
+    let n = read_json(&d.join("o/n/report.json"));
+    assert_eq!(n["stages"]["terrain"]["layers"]["snow"], "snowline");
+    assert_eq!(n["stages"]["terrain"]["layers"]["coverage"][3], 0.0);
+}

@@ -26,7 +26,7 @@ fn job_for(path: &Path, max_error_m: f64) -> TerrainJob {
         max_error_m,
         max_triangles: None,
         max_vertices: verdant::terrain::budget::DEFAULT_MAX_VERTICES,
-        build: BuildOptions { chunk_samples: None, skirt_depth_m: None, base_depth_m: None, name: "t".into() },
+        build: BuildOptions { name: "t".into(), ..BuildOptions::default() },
         quantize: false,
         meshopt: false,
     }
@@ -373,7 +373,7 @@ fn quantized_and_compressed_terrains_keep_the_bound_as_stored() {
         ..DecodeOptions::default()
     };
     job.build =
-        BuildOptions { chunk_samples: Some(32), skirt_depth_m: Some(4.0), base_depth_m: None, name: "q".into() };
+        BuildOptions { chunk_samples: Some(32), skirt_depth_m: Some(4.0), name: "q".into(), ..BuildOptions::default() };
     let mut sizes = Vec::new();
     let mut scenes = Vec::new();
     for (name, quantize, meshopt) in
