@@ -13,7 +13,8 @@
 //
 // --view: each file is a built scene's scene.glb, rendered from its first [[view]] (manifest.json
 // beside it) without frustum culling; the engine must count exactly the triangles and draw calls
-// the view stage reported (three.js: renderer.info; Babylon: active indices / 3, draw calls).
+// the view stage reported (three.js: renderer.info; Babylon: active indices / 3, draw calls), and
+// a scene with [snow] must show it: at least a tenth of the covered frame snow-white.
 //
 // Every file's frame is measured where it is not the sky (covered share, mean colour, dark and
 // green-leading shares). --green: the files are grass, which a person must see as green: at least
@@ -173,9 +174,11 @@ for (const file of files) {
   if (engine === 'three') await page.waitForFunction('window.threeReady === true', { timeout: 60000 });
   let r;
   let view = null;
+  let snowScene = false;
   if (viewMode) {
     const manifest = JSON.parse(fs.readFileSync(path.join(path.dirname(file), 'manifest.json'), 'utf8'));
     view = manifest.view?.views?.[0] ?? null;
+    snowScene = Boolean(manifest.snow);
   }
   try {
     r = await page.evaluate((url, options) => window.loadGlb(url, options), `/files${file}`,
@@ -231,6 +234,11 @@ for (const file of files) {
   if (r.ok && expectGreen && seen && !(seen.covered >= 0.002 && seen.green >= 0.5 && seen.dark <= 0.2)) {
     problems.push(`not seen as green grass: ${(100 * seen.covered).toFixed(1)} % of the frame covered, green leading on ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %`);
   }
+  // a [snow] scene's terrain shows its cover in the base colour (it showed none when the layers had
+  // a fixed 2,500 m snowline): a tenth of what the view covers must be snow-white
+  if (r.ok && snowScene && seen && !(seen.white >= 0.1)) {
+    problems.push(`a [snow] scene seen without snow: ${(100 * seen.white).toFixed(1)} % of the covered frame white`);
+  }
   if (thumbs && r.ok && seen) {
     fs.mkdirSync(thumbs, { recursive: true });
     const canvas = await page.$('#c');
@@ -238,7 +246,7 @@ for (const file of files) {
     await canvas.screenshot({ path: path.join(thumbs, `${engine}_${owner}_${path.basename(file, '.glb')}.png`) });
   }
   failed += problems.length > 0;
-  const colour = seen ? `, frame ${(100 * seen.covered).toFixed(1)} % covered, mean rgb ${seen.mean.map((v) => v.toFixed(2)).join(' ')}, green ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %` : '';
+  const colour = seen ? `, frame ${(100 * seen.covered).toFixed(1)} % covered, mean rgb ${seen.mean.map((v) => v.toFixed(2)).join(' ')}, green ${(100 * seen.green).toFixed(0)} %, dark ${(100 * seen.dark).toFixed(0)} %, white ${(100 * seen.white).toFixed(0)} %` : '';
   const drawn = r.ok && view && r.info ? `view ${view.camera.name}: ${r.info.triangles} triangles, ${r.info.calls} draw calls (report: ${view.triangles}, ${view.draw_calls}), ` : '';
   const walk = (r.lodWalk ?? []).map((l) => ` ${l.name} by coverage: ${l.walk.map((w) => `LoD${w.shown} ${w.triangles} tris at ${w.distance.toFixed(1)} m`).join(', ')}`).join(';');
   const undrawn = r.ok && !seen ? `, frame not drawn (${r.triangles} triangles over the ${drawLimit} --draw-limit)` : '';
