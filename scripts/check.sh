@@ -30,7 +30,7 @@ done
 # Pinned checking tools. pyopengl is installed in a second step, after pyrender, because pyrender pins
 # PyOpenGL 3.1.0, which fails under EGL on these machines.
 # rtree: trimesh's pure-Python ray caster (trimesh.ray.ray_triangle) needs its R-tree of triangle bounds.
-PY_PKGS=(trimesh==5.2.0 pyrender==0.1.45 pygltflib==1.16.5 numpy==2.4.6 pillow==12.3.0 scipy==1.17.1 networkx==3.6.1 rtree==1.4.1 gdtoolkit==4.3.3)
+PY_PKGS=(trimesh==5.2.0 pyrender==0.1.45 pygltflib==1.16.5 numpy==2.4.6 pillow==12.3.0 scipy==1.17.1 networkx==3.6.1 rtree==1.4.1 gdtoolkit==4.3.3 unreal-stub==0.3)
 PY_PKGS_AFTER=(pyopengl==3.1.10)
 # libopengl0 / libgl1 give PyOpenGL the desktop GL library it loads first (else it falls back to GLES).
 # chromium: Babylon.js renders the species files headless (WebGL through SwiftShader), step 5e.
@@ -619,6 +619,20 @@ if "$VENV/bin/gdparse" scripts/engines/godot/verdant_scene.gd > /dev/null \
   pass
 else
   fail "scripts/engines/godot/verdant_scene.gd: gdtoolkit found problems (see above)"
+fi
+
+section "5g2. the Unreal Engine 5 import script (scripts/engines/unreal/verdant_unreal.py): every Unreal name it uses is in the UE 5.6 Python API (PyPI unreal-stub); on every built scene it places each table row once, with the chain's LODs and screen sizes, at C M C^-1 of its glTF transform"
+# no Unreal Engine on the registries these machines reach: the script's editor part is checked
+# against the API's names, its reading and converting part is run on the built scenes
+unreal_stub=$(ls "$VENV"/lib/python3*/site-packages/unreal/unreal.py 2>/dev/null | head -1)
+scene_dirs=()
+for dir in "$OUT"/build/*/; do [ -f "$dir/manifest.json" ] && scene_dirs+=("${dir%/}"); done
+if [ -z "$unreal_stub" ]; then
+  fail "unreal-stub is not installed in $VENV"
+elif "$PY" scripts/check_engine_scripts.py --unreal-stub "$unreal_stub" "${scene_dirs[@]}"; then
+  pass
+else
+  fail "scripts/engines/unreal/verdant_unreal.py: see the FAIL lines above"
 fi
 
 section "6. Khronos glTF Validator (0 errors, 0 warnings; infos and hints allowed)"
