@@ -34,7 +34,8 @@ PY_PKGS=(trimesh==5.2.0 pyrender==0.1.45 pygltflib==1.16.5 numpy==2.4.6 pillow==
 PY_PKGS_AFTER=(pyopengl==3.1.10)
 # libopengl0 / libgl1 give PyOpenGL the desktop GL library it loads first (else it falls back to GLES).
 # chromium: Babylon.js renders the species files headless (WebGL through SwiftShader), step 5e.
-APT_PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgl1 chromium)
+# mono-mcs: the Unity import script's data side is compiled and run on the built scenes, step 5g3.
+APT_PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgl1 chromium mono-mcs)
 
 export PYOPENGL_PLATFORM=egl
 VENV="$ROOT/.venv"
@@ -633,6 +634,20 @@ elif "$PY" scripts/check_engine_scripts.py --unreal-stub "$unreal_stub" "${scene
   pass
 else
   fail "scripts/engines/unreal/verdant_unreal.py: see the FAIL lines above"
+fi
+
+section "5g3. the Unity import scripts (scripts/engines/unity/): VerdantData.cs compiled with Mono and run on every built scene (each table row planned once, LODGroup transitions strictly decreasing from the screen sizes, one sphere behind them, Unity transforms = F M F of the glTF ones); the UnityEngine/UnityEditor files parse"
+# no Unity on the registries these machines reach: its data side runs here, its engine side parses
+unity_exe="$OUT/check_unity_data.exe"
+if ! command -v mcs > /dev/null || ! command -v mono > /dev/null; then
+  fail "Mono (apt mono-mcs) is not installed"
+elif mcs -nologo -out:"$unity_exe" scripts/engines/unity/VerdantData.cs scripts/engines/unity/check/CheckVerdantData.cs \
+  && mcs --parse scripts/engines/unity/VerdantInstances.cs \
+  && mcs --parse scripts/engines/unity/Editor/VerdantImporter.cs \
+  && mono "$unity_exe" "${scene_dirs[@]}"; then
+  pass
+else
+  fail "scripts/engines/unity/: see the errors or FAIL lines above"
 fi
 
 section "6. Khronos glTF Validator (0 errors, 0 warnings; infos and hints allowed)"
