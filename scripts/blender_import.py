@@ -1,8 +1,8 @@
 """Import a verdant scene folder into Blender fast: the terrain, and every species as Geometry Nodes
 instances of one object per mesh, instead of one object per instance.
 
-    blender --background --python scripts/blender_import.py -- SCENE_DIR [--save FILE.blend] [--check]
-    python scripts/blender_import.py SCENE_DIR [--save FILE.blend] [--check]   (the PyPI bpy module)
+    blender --background --python scripts/blender_import.py -- SCENE_DIR [--save FILE.blend] [--check] [--render FILE.png]
+    python scripts/blender_import.py SCENE_DIR [--save FILE.blend] [--check] [--render FILE.png]   (the PyPI bpy module)
 
 Blender's glTF importer (4.x) expands EXT_mesh_gpu_instancing into an object per instance: the
 demo's scene.glb took 19 minutes and made 122 507 objects. This script reads scene.glb itself, hands
@@ -15,6 +15,10 @@ Blender +Z up ((x, y, z) → (x, −z, y)).
 --check: afterwards, count the instances Blender's evaluated scene holds and compare them with
 what manifest.json says the first view draws and, for a sample, with the placement tables' rows
 (exit 1 on a mismatch). Prints the seconds and the object and instance counts either way.
+
+--render FILE.png: renders the first [[view]] (Cycles on the CPU, 480 px across, 16 samples, a sun
+and a sky-coloured world, the Standard view transform) and checks what a person sees in it: the
+scene, its snow when the preset has [snow], green ground cover when it has grass (exit 1 if not).
 """
 
 import base64
@@ -312,6 +316,99 @@ def check(scene_dir, per_mesh):
     return problems
 
 
+def render_view(scene_dir, out_png, width=480, engine="CYCLES", samples=16):
+    """Renders the first [[view]] of manifest.json (its eye, direction and vertical field of view, at
+    `width` pixels across with the view's aspect) under a sun and a sky-coloured world, to
+    `out_png`; returns the seconds it took."""
+    from mathutils import Vector
+
+    started = time.time()
+    manifest = json.load(open(os.path.join(scene_dir, "manifest.json")))
+    cam = manifest["view"]["views"][0]["camera"]
+    scene = bpy.context.scene
+    data = bpy.data.cameras.new("verdant_view")
+    data.sensor_fit = "VERTICAL"
+    data.angle_y = np.radians(cam["fov_y_deg"])
+    data.clip_start = 0.1
+    data.clip_end = 1e6
+    obj = bpy.data.objects.new("verdant_view", data)
+    scene.collection.objects.link(obj)
+    obj.location = Vector(to_blender(np.array([cam["eye"]], dtype=float))[0])
+    forward = Vector(to_blender(np.array([cam["forward"]], dtype=float))[0])
+    obj.rotation_mode = "QUATERNION"
+    obj.rotation_quaternion = forward.to_track_quat("-Z", "Y")
+    scene.camera = obj
+    sun = bpy.data.objects.new("verdant_sun", bpy.data.lights.new("verdant_sun", "SUN"))
+    sun.data.energy = 3.0
+    sun.rotation_euler = (np.radians(40.0), 0.0, np.radians(30.0))
+    scene.collection.objects.link(sun)
+    world = bpy.data.worlds.new("verdant_sky")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.55, 0.7, 0.9, 1.0)
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 1.0
+    scene.world = world
+    w, h = cam["size_px"]
+    scene.render.resolution_x = width
+    scene.render.resolution_y = max(1, round(width * h / w))
+    scene.render.resolution_percentage = 100
+    scene.render.engine = engine
+    if engine == "CYCLES":
+        scene.cycles.device = "CPU"
+        scene.cycles.samples = samples
+        scene.cycles.use_denoising = False
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.filepath = os.path.abspath(out_png)
+    bpy.ops.render.render(write_still=True)
+    return time.time() - started
+
+
+def frame_stats(png):
+    """What a rendered frame shows where it is not the sky (the top-left pixel's colour), as
+    scripts/engines/frame_stats.js measures it for three.js and Babylon: the share covered, and of
+    the covered pixels the dark (luminance < 0.08), green-leading and snow-white shares."""
+    img = bpy.data.images.load(os.path.abspath(png))
+    w, h = img.size
+    px = (np.array(img.pixels[:], dtype=np.float32).reshape(h, w, 4)[:, :, :3] * 255.0).round()
+    bpy.data.images.remove(img)
+    sky = px[h - 1, 0]  # rows run bottom-up: the last is the top
+    covered = np.abs(px - sky).sum(axis=2) >= 12
+    n = max(int(covered.sum()), 1)
+    c = px[covered]
+    lum = 0.2126 * c[:, 0] + 0.7152 * c[:, 1] + 0.0722 * c[:, 2]
+    green = (c[:, 1] > c[:, 0]) & (c[:, 1] > c[:, 2])
+    white = (c.min(axis=1) > 0.7 * 255) & (c.max(axis=1) - c.min(axis=1) < 0.12 * 255)
+    return {
+        "covered": covered.sum() / (w * h),
+        "dark": (lum < 0.08 * 255).sum() / n,
+        "green": green.sum() / n,
+        "white": white.sum() / n,
+    }
+
+
+def frame_summary(png):
+    s = frame_stats(png)
+    return ", ".join(f"{k} {100 * v:.0f} %" for k, v in s.items())
+
+
+def rendered_problems(scene_dir, png):
+    """What a person must see in the first view: the scene (not an empty or black frame), its snow
+    when the preset has [snow], green ground cover when it has grass and no snow."""
+    manifest = json.load(open(os.path.join(scene_dir, "manifest.json")))
+    s = frame_stats(png)
+    problems = []
+    if s["covered"] < 0.2:
+        problems.append(f"only {100 * s['covered']:.0f} % of the frame shows the scene")
+    if s["dark"] > 0.2:
+        problems.append(f"{100 * s['dark']:.0f} % of what is shown is dark")
+    if manifest.get("snow") and s["white"] < 0.1:
+        problems.append(f"a [snow] scene with {100 * s['white']:.0f} % of it snow-white")
+    kinds = {p.get("look") for p in manifest.get("plants", [])}
+    if not manifest.get("snow") and "grass" in kinds and s["green"] < 0.25:
+        problems.append(f"a scene with grass, green leading on only {100 * s['green']:.0f} % of it")
+    return problems
+
+
 def main(argv):
     if not argv or argv[0].startswith("-"):
         print(__doc__)
@@ -329,6 +426,14 @@ def main(argv):
         status = 1 if problems else 0
         if not problems:
             print("ok   every instance the view draws is an instance in Blender's evaluated scene, where its table row says")
+    if "--render" in argv:
+        out = argv[argv.index("--render") + 1]
+        seconds = render_view(scene_dir, out)
+        problems = rendered_problems(scene_dir, out)
+        for p in problems:
+            print(f"FAIL render: {p}")
+        status = 1 if problems else status
+        print(f"{'FAIL' if problems else 'ok  '} rendered the first view to {out} in {seconds:.1f} s: {frame_summary(out)}")
     if "--save" in argv:
         out = argv[argv.index("--save") + 1]
         bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(out))

@@ -510,13 +510,15 @@ else
   fail "no species chain files to import into Blender"
 fi
 
-section "5d2. Blender (bpy) imports every scene through scripts/blender_import.py: one object per mesh, every placement an instance, positions and frames as the tables say"
+section "5d2. Blender (bpy) imports every scene through scripts/blender_import.py: one object per mesh, every placement an instance, positions and frames as the tables say; it renders the first view (Cycles, out/check/engines/views/blender_<scene>.png) showing the scene, its snow, its green grass"
+mkdir -p "$OUT/engines/views"
 for scene in "${SCENES[@]}"; do
   dir="$BUILD_OUT/$scene"
   [ -f "$dir/scene.glb" ] || continue
-  "$BPY" scripts/blender_import.py "$dir" --check 2>&1 | grep -v ' | INFO: \|^$' > "$OUT/blender_import_$scene.log" || true
+  "$BPY" scripts/blender_import.py "$dir" --check --render "$OUT/engines/views/blender_$scene.png" 2>&1 \
+    | grep -v ' | INFO: \|^$\|^Fra:\|^Saved: \|^Time: ' > "$OUT/blender_import_$scene.log" || true
   cat "$OUT/blender_import_$scene.log"
-  if grep -q '^ok ' "$OUT/blender_import_$scene.log"; then
+  if [ "$(grep -c '^ok ' "$OUT/blender_import_$scene.log")" -ge 2 ] && ! grep -q '^FAIL' "$OUT/blender_import_$scene.log"; then
     pass
   else
     fail "blender_import.py $scene (see $OUT/blender_import_$scene.log)"
