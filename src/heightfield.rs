@@ -122,9 +122,11 @@ impl Heightfield {
     /// [`Heightfield::normal_at`] bilinearly interpolated and normalised (straight up if they cancel).
     pub fn normal_bilinear(&self, s: f64, t: f64) -> [f64; 3] {
         let ((i0, j0), (i1, j1), (fs, ft)) = self.bilinear_cell(s, t);
-        let (a, b, c, d) = (self.normal_at(i0, j0), self.normal_at(i1, j0), self.normal_at(i0, j1), self.normal_at(i1, j1));
-        let n: [f64; 3] =
-            std::array::from_fn(|k| (a[k] * (1.0 - fs) + b[k] * fs) * (1.0 - ft) + (c[k] * (1.0 - fs) + d[k] * fs) * ft);
+        let (a, b, c, d) =
+            (self.normal_at(i0, j0), self.normal_at(i1, j0), self.normal_at(i0, j1), self.normal_at(i1, j1));
+        let n: [f64; 3] = std::array::from_fn(|k| {
+            (a[k] * (1.0 - fs) + b[k] * fs) * (1.0 - ft) + (c[k] * (1.0 - fs) + d[k] * fs) * ft
+        });
         crate::math::normalize3(n).unwrap_or([0.0, 1.0, 0.0])
     }
 }

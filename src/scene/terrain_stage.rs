@@ -16,8 +16,8 @@ use crate::scene::pipeline::{Stage, StageJob};
 use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
-use crate::terrain::layers::SnowRule;
 use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed, TerrainFigures};
+use crate::terrain::layers::SnowRule;
 use crate::terrain::normal_map::{bake_normal_map, NormalMapReport};
 use crate::terrain::stored::Storage;
 

@@ -491,7 +491,13 @@ mod tests {
     }
 
     fn opts(chunk: Option<usize>, skirt: Option<f64>, base: Option<f64>) -> BuildOptions {
-        BuildOptions { chunk_samples: chunk, skirt_depth_m: skirt, base_depth_m: base, name: "t".into(), ..Default::default() }
+        BuildOptions {
+            chunk_samples: chunk,
+            skirt_depth_m: skirt,
+            base_depth_m: base,
+            name: "t".into(),
+            ..Default::default()
+        }
     }
 
     // ---- scene inspection -----------------------------------------------------------------------
