@@ -457,6 +457,31 @@ done
 ) &
 scene_engines_pid=$!
 
+# The engine import scripts that cannot run here (Unreal, Unity: 5g2, 5g3) are checked on the built
+# scenes in the background as well. No Unreal or Unity on the registries these machines reach: the
+# Unreal script's editor part is looked up in the engine's API listing and its reading and
+# converting part run; the Unity data side is compiled with Mono and run, its engine side parsed.
+unreal_stub=$(ls "$VENV"/lib/python3*/site-packages/unreal/unreal.py 2>/dev/null | head -1)
+unity_exe="$OUT/check_unity_data.exe"
+scene_dirs=()
+for dir in "$OUT"/build/*/; do [ -f "$dir/manifest.json" ] && scene_dirs+=("${dir%/}"); done
+(
+  if [ -n "$unreal_stub" ]; then
+    { "$PY" scripts/check_engine_scripts.py --unreal-stub "$unreal_stub" "${scene_dirs[@]}"; echo "rc=$?"; } \
+      > "$OUT/check_unreal_script.log" 2>&1
+  fi
+  if command -v mcs > /dev/null && command -v mono > /dev/null; then
+    {
+      mcs -nologo -out:"$unity_exe" scripts/engines/unity/VerdantData.cs scripts/engines/unity/check/CheckVerdantData.cs \
+        && mcs --parse scripts/engines/unity/VerdantInstances.cs \
+        && mcs --parse scripts/engines/unity/Editor/VerdantImporter.cs \
+        && mono "$unity_exe" "${scene_dirs[@]}"
+      echo "rc=$?"
+    } > "$OUT/check_unity_script.log" 2>&1
+  fi
+) &
+engine_scripts_pid=$!
+
 # the log of a background engine run: printed, each `ok` line a pass, short of `want` a failure
 engine_log() {
   local log="$1" want="$2" what="$3"
@@ -625,31 +650,24 @@ else
 fi
 
 section "5g2. the Unreal Engine 5 import script (scripts/engines/unreal/verdant_unreal.py): every Unreal name it uses is in the UE 5.6 Python API (PyPI unreal-stub); on every built scene it places each table row once, with the chain's LODs and screen sizes, at C M C^-1 of its glTF transform"
-# no Unreal Engine on the registries these machines reach: the script's editor part is checked
-# against the API's names, its reading and converting part is run on the built scenes
-unreal_stub=$(ls "$VENV"/lib/python3*/site-packages/unreal/unreal.py 2>/dev/null | head -1)
-scene_dirs=()
-for dir in "$OUT"/build/*/; do [ -f "$dir/manifest.json" ] && scene_dirs+=("${dir%/}"); done
+wait "$engine_scripts_pid"
+script_log() {
+  local log="$1" what="$2"
+  if [ ! -f "$log" ]; then fail "$what: no log ($log)"; return; fi
+  grep -v '^rc=' "$log" | sed 's|'"$OUT"'/||' || true
+  if [ "$(tail -1 "$log")" = "rc=0" ]; then pass; else fail "$what: see the errors or FAIL lines above"; fi
+}
 if [ -z "$unreal_stub" ]; then
   fail "unreal-stub is not installed in $VENV"
-elif "$PY" scripts/check_engine_scripts.py --unreal-stub "$unreal_stub" "${scene_dirs[@]}"; then
-  pass
 else
-  fail "scripts/engines/unreal/verdant_unreal.py: see the FAIL lines above"
+  script_log "$OUT/check_unreal_script.log" "scripts/engines/unreal/verdant_unreal.py"
 fi
 
 section "5g3. the Unity import scripts (scripts/engines/unity/): VerdantData.cs compiled with Mono and run on every built scene (each table row planned once, LODGroup transitions strictly decreasing from the screen sizes, one sphere behind them, Unity transforms = F M F of the glTF ones); the UnityEngine/UnityEditor files parse"
-# no Unity on the registries these machines reach: its data side runs here, its engine side parses
-unity_exe="$OUT/check_unity_data.exe"
 if ! command -v mcs > /dev/null || ! command -v mono > /dev/null; then
   fail "Mono (apt mono-mcs) is not installed"
-elif mcs -nologo -out:"$unity_exe" scripts/engines/unity/VerdantData.cs scripts/engines/unity/check/CheckVerdantData.cs \
-  && mcs --parse scripts/engines/unity/VerdantInstances.cs \
-  && mcs --parse scripts/engines/unity/Editor/VerdantImporter.cs \
-  && mono "$unity_exe" "${scene_dirs[@]}"; then
-  pass
 else
-  fail "scripts/engines/unity/: see the errors or FAIL lines above"
+  script_log "$OUT/check_unity_script.log" "scripts/engines/unity/"
 fi
 
 section "6. Khronos glTF Validator (0 errors, 0 warnings; infos and hints allowed)"

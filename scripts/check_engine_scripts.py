@@ -94,7 +94,14 @@ def quat_matrix(q: np.ndarray) -> np.ndarray:
 def check_scene(scene_dir: str) -> list[str]:
     problems = []
     manifest = verdant_unreal.read_manifest(scene_dir)
-    plans = verdant_unreal.plan(scene_dir)
+    tables: dict[str, list] = {}
+
+    def read(path: str) -> list:
+        if path not in tables:
+            tables[path] = verdant_unreal.read_table(path)
+        return tables[path]
+
+    plans = verdant_unreal.plan(scene_dir, read)
     chains = manifest.get("view", {}).get("chains", {})
     placed: dict[str, int] = {}
     for p in plans:
@@ -117,7 +124,7 @@ def check_scene(scene_dir: str) -> list[str]:
     for entry in manifest.get("scatter", {}).get("species", []):
         if entry["name"] not in chains:
             continue
-        rows = verdant_unreal.read_table(os.path.join(scene_dir, entry["table"]))
+        rows = read(os.path.join(scene_dir, entry["table"]))
         if not rows:
             continue
         t = np.array([r.position for r in rows])

@@ -1,13 +1,13 @@
 //! Plants: the meshes instanced species show — grass clumps with their levels of detail and baked
-//! atlases, flowers as crossed billboards, L-system trees, and small marker meshes for kinds
-//! without a generator in the scene build yet.
+//! atlases, flowers as crossed billboards, L-system trees, OBJ models, and the species palette the
+//! preview draws them with.
 
 pub mod flower;
 pub mod grass;
 pub mod grass_asset;
 pub mod hausdorff;
-pub mod marker;
 pub mod mesh_asset;
+pub mod palette;
 pub mod texture;
 pub mod tree;
 pub mod tree_lod;

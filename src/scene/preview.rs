@@ -407,8 +407,8 @@ pub struct PreviewLayer {
     pub positions: Vec<[f64; 3]>,
 }
 
-/// Width seen from above of one instance of a species, times the middle of its scale range: a
-/// marker's from plants/marker.rs proportions (a tree's crown is half its height wide, grass and
+/// Width seen from above of one instance of a species, times the middle of its scale range: the
+/// kind's nominal height (plants/palette.rs) in these proportions (a tree's crown is half its height wide, grass and
 /// flower cards 0.6 of it, a mesh box its height); an L-system tree scaled to a height as wide as
 /// [`TREE_CROWN_PER_HEIGHT`] of it (an estimate, so the preview needs no tree built).
 pub fn footprint_m(species: &crate::scene::SpeciesSettings) -> f64 {
@@ -424,7 +424,7 @@ pub fn footprint_m(species: &crate::scene::SpeciesSettings) -> f64 {
         SpeciesKind::Grass | SpeciesKind::Flower => 0.6,
         SpeciesKind::Mesh => 1.0,
     };
-    crate::plants::marker::nominal_height_m(kind) as f64 * width_per_height * mid_scale
+    crate::plants::palette::nominal_height_m(kind) as f64 * width_per_height * mid_scale
 }
 
 /// Crown width over height assumed for L-system trees in the preview (broad-leaved trees are about

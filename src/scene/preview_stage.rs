@@ -8,7 +8,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::mesh::Scene;
-use crate::plants::marker;
+use crate::plants::palette;
 use crate::scene::cache::KeyBuilder;
 use crate::scene::error::{SceneBuildError, StageError};
 use crate::scene::pipeline::{read_back, Stage, StageJob, TerrainHandoff};
@@ -195,7 +195,7 @@ fn placements_from_tables(
                 points.extend(rows.iter().map(|r| r.position.map(|v| v as f32 as f64)));
             }
             Ok(PreviewLayer {
-                color: marker::species_color(s.kind, index),
+                color: palette::species_color(s.kind, index),
                 kind: s.kind,
                 footprint_m: footprint_m(s),
                 positions: points,

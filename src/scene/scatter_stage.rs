@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::export::{self, table};
 use crate::mesh::Scene;
-use crate::plants::marker;
+use crate::plants::palette;
 use crate::scatter::density::DensityMap;
 use crate::scatter::rules::SnowThinning;
 use crate::scatter::stats::{analyze, SpeciesStats};
@@ -220,7 +220,7 @@ pub fn run_scatter_with_snow(
         reports.push(report);
         placed.push(Placed {
             species: species.clone(),
-            color: marker::species_color(species.kind, index),
+            color: palette::species_color(species.kind, index),
             instances: result.instances,
         });
     }

@@ -36,7 +36,7 @@ import os
 import struct
 import sys
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -138,9 +138,9 @@ def gltf_to_unreal(position: Vec3, rotation: Quat, scale: Vec3) -> tuple[Vec3, Q
     return (x * u, z * u, y * u), (-qx, -qz, -qy, qw), (sx, sz, sy)
 
 
-def plan(scene_dir: str) -> list[FoliagePlan]:
+def plan(scene_dir: str, read: Callable[[str], list[Row]] = read_table) -> list[FoliagePlan]:
     """What the import makes for the scene folder: per species and built variant, its levels,
-    cull distance and every instance's Unreal transform."""
+    cull distance and every instance's Unreal transform (`read` reads a table's rows)."""
     manifest = read_manifest(scene_dir)
     view = manifest.get("view", {})
     chains = view.get("chains", {})
@@ -164,7 +164,7 @@ def plan(scene_dir: str) -> list[FoliagePlan]:
         variants = chain.get("variants", [])
         pick = chain.get("pick", list(range(len(variants))))
         groups: dict[int, list[Row]] = {}
-        for row in read_table(os.path.join(scene_dir, entry["table"])):
+        for row in read(os.path.join(scene_dir, entry["table"])):
             built = pick[row.variant] if row.variant < len(pick) else row.variant
             if built >= len(variants):
                 raise ValueError(f"{entry['table']}: a row names variant {row.variant} of {len(variants)}")
