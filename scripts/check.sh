@@ -466,16 +466,26 @@ unity_exe="$OUT/check_unity_data.exe"
 scene_dirs=()
 for dir in "$OUT"/build/*/; do [ -f "$dir/manifest.json" ] && scene_dirs+=("${dir%/}"); done
 (
+  # winter_valley again with binary placement tables: both scripts must read them as the CSV rows
+  pair=()
+  if [ -d "$BUILD_OUT/winter_valley" ]; then
+    sed -e 's/^name = "winter_valley"/name = "winter_valley_binary"/' -e 's/^\[scatter\]/[scatter]\ntable = "binary"/' \
+      presets/winter_valley.toml > "$OUT/winter_valley_binary.toml"
+    if "$BIN" build "$OUT/winter_valley_binary.toml" --out "$OUT/build_binary" > "$OUT/build_binary.log" 2>&1; then
+      pair=(--pair "$BUILD_OUT/winter_valley" "$OUT/build_binary/winter_valley_binary")
+    fi
+  fi
   if [ -n "$unreal_stub" ]; then
-    { "$PY" scripts/check_engine_scripts.py --unreal-stub "$unreal_stub" "${scene_dirs[@]}"; echo "rc=$?"; } \
+    { "$PY" scripts/check_engine_scripts.py --unreal-stub "$unreal_stub" "${pair[@]}" "${scene_dirs[@]}"; echo "rc=$?"; } \
       > "$OUT/check_unreal_script.log" 2>&1
+    if [ ${#pair[@]} -eq 0 ]; then echo "FAIL the binary-table build of winter_valley (see $OUT/build_binary.log)" >> "$OUT/check_unreal_script.log"; echo "rc=1" >> "$OUT/check_unreal_script.log"; fi
   fi
   if command -v mcs > /dev/null && command -v mono > /dev/null; then
     {
       mcs -nologo -out:"$unity_exe" scripts/engines/unity/VerdantData.cs scripts/engines/unity/check/CheckVerdantData.cs \
         && mcs --parse scripts/engines/unity/VerdantInstances.cs \
         && mcs --parse scripts/engines/unity/Editor/VerdantImporter.cs \
-        && mono "$unity_exe" "${scene_dirs[@]}"
+        && mono "$unity_exe" "${pair[@]}" "${scene_dirs[@]}"
       echo "rc=$?"
     } > "$OUT/check_unity_script.log" 2>&1
   fi
@@ -649,7 +659,7 @@ else
   fail "scripts/engines/godot/verdant_scene.gd: gdtoolkit found problems (see above)"
 fi
 
-section "5g2. the Unreal Engine 5 import script (scripts/engines/unreal/verdant_unreal.py): every Unreal name it uses is in the UE 5.6 Python API (PyPI unreal-stub); on every built scene it places each table row once, with the chain's LODs and screen sizes, at C M C^-1 of its glTF transform"
+section "5g2. the Unreal Engine 5 import script (scripts/engines/unreal/verdant_unreal.py): every Unreal name it uses is in the UE 5.6 Python API (PyPI unreal-stub); on every built scene it places each table row once, with the chain's LODs and screen sizes, at C M C^-1 of its glTF transform; it reads binary tables as their CSV rows"
 wait "$engine_scripts_pid"
 script_log() {
   local log="$1" what="$2"
@@ -663,7 +673,7 @@ else
   script_log "$OUT/check_unreal_script.log" "scripts/engines/unreal/verdant_unreal.py"
 fi
 
-section "5g3. the Unity import scripts (scripts/engines/unity/): VerdantData.cs compiled with Mono and run on every built scene (each table row planned once, LODGroup transitions strictly decreasing from the screen sizes, one sphere behind them, Unity transforms = F M F of the glTF ones); the UnityEngine/UnityEditor files parse"
+section "5g3. the Unity import scripts (scripts/engines/unity/): VerdantData.cs compiled with Mono and run on every built scene (each table row planned once, LODGroup transitions strictly decreasing from the screen sizes, one sphere behind them, Unity transforms = F M F of the glTF ones; binary tables read as their CSV rows); the UnityEngine/UnityEditor files parse"
 if ! command -v mcs > /dev/null || ! command -v mono > /dev/null; then
   fail "Mono (apt mono-mcs) is not installed"
 else

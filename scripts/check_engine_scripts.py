@@ -1,6 +1,6 @@
 """Checks the engine import scripts that cannot run on this machine (no Unreal or Unity here).
 
-    python scripts/check_engine_scripts.py --unreal-stub PATH/unreal.py SCENE_DIR...
+    python scripts/check_engine_scripts.py --unreal-stub PATH/unreal.py [--pair CSV_SCENE BINARY_SCENE] SCENE_DIR...
 
 Unreal (scripts/engines/unreal/verdant_unreal.py):
 - every `unreal` name and every method, property and editor property its editor part
@@ -11,7 +11,9 @@ Unreal (scripts/engines/unreal/verdant_unreal.py):
   every instance's Unreal transform is C M C^-1 of its glTF one (C: the glTF importer's
   (x, y, z) -> (x, z, y) * 100), composed the way Unreal composes a transform (scale, rotate by
   the quaternion, translate), to 1e-5 of the row's size.
-Prints `ok` / `FAIL` lines; exits 1 on any failure.
+--pair: the same scene built with CSV and with binary tables (`[scatter] table = "binary"`): the
+script's binary reader gives every CSV row (to 1e-6). Prints `ok` / `FAIL` lines; exits 1 on any
+failure.
 """
 
 from __future__ import annotations
@@ -153,9 +155,44 @@ def check_scene(scene_dir: str) -> list[str]:
     return problems
 
 
+def check_pair(csv_dir: str, bin_dir: str) -> list[str]:
+    """The same scene built with CSV and with binary tables: every species' rows read the same."""
+    problems = []
+    tables = []
+    for d in (csv_dir, bin_dir):
+        m = verdant_unreal.read_manifest(d)
+        tables.append({e["name"]: os.path.join(d, e["table"]) for e in m.get("scatter", {}).get("species", [])})
+    rows = 0
+    for name, path in sorted(tables[0].items()):
+        other = tables[1].get(name)
+        if other is None or not other.endswith(".bin"):
+            problems.append(f"{name}: no binary table in {bin_dir}")
+            continue
+        a, b = verdant_unreal.read_table(path), verdant_unreal.read_table(other)
+        if len(a) != len(b):
+            problems.append(f"{name}: {len(a)} CSV rows, {len(b)} binary rows")
+            continue
+        for r, q in zip(a, b):
+            same = r.tile == q.tile and r.variant == q.variant and all(
+                abs(x - y) <= 1e-6 * max(1.0, abs(x))
+                for x, y in zip(r.position + r.rotation + r.scale, q.position + q.rotation + q.scale)
+            )
+            if not same:
+                problems.append(f"{name}: CSV row {r} reads {q} from the binary table")
+                break
+        rows += len(a)
+    print(
+        f"{'FAIL' if problems else 'ok  '}  {bin_dir}: {rows} binary table rows read as their CSV rows"
+        + "".join(f"\n      {p}" for p in problems)
+    )
+    return problems
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--unreal-stub", required=True, help="unreal.py of PyPI unreal-stub")
+    ap.add_argument("--pair", nargs=2, metavar=("CSV_SCENE", "BINARY_SCENE"), action="append", default=[],
+                    help="a scene built with CSV tables and the same with binary tables: their rows must read the same")
     ap.add_argument("scenes", nargs="+")
     a = ap.parse_args()
     with open(a.unreal_stub, encoding="utf-8-sig") as f:
@@ -163,6 +200,8 @@ def main() -> int:
     problems = check_unreal_api(os.path.join(HERE, "engines", "unreal", "verdant_unreal.py"), stub)
     for d in a.scenes:
         problems += check_scene(d)
+    for csv_dir, bin_dir in a.pair:
+        problems += check_pair(csv_dir, bin_dir)
     return 1 if problems else 0
 
 

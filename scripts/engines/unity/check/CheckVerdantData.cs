@@ -2,13 +2,14 @@
 // (check.sh step 5g3 compiles both with Mono's mcs):
 //
 //   mcs -out:check.exe scripts/engines/unity/VerdantData.cs scripts/engines/unity/check/CheckVerdantData.cs
-//   mono check.exe out/check/build/demo ...
+//   mono check.exe [--pair CSV_SCENE BINARY_SCENE] out/check/build/demo ...
 //
 // Per scene: every table row planned once (per species, the manifest's count); each variant's
 // levels are the chain's, its LOD transitions 1 > t0 >= t1 >= ... >= 0, and the sphere behind the
 // screen sizes is the same at every level's switch (LODGroup.size); every row's Unity transform,
 // composed as Unity composes it (T R S), equals F M F of its glTF transform M (F = diag(-1, 1, 1),
-// glTFast's mirror) to 1e-5 of its size. Exits 1 on any failure.
+// glTFast's mirror) to 1e-5 of its size. --pair: the same scene built with CSV and with binary
+// tables reads the same rows from both (to 1e-6). Exits 1 on any failure.
 using System;
 using System.Collections.Generic;
 using Verdant;
@@ -26,9 +27,63 @@ static class CheckVerdantData
         };
     }
 
-    static int Main(string[] args)
+    static Dictionary<string, string> Tables(string dir)
+    {
+        var m = SceneData.ReadManifest(dir);
+        var t = new Dictionary<string, string>();
+        foreach (Dictionary<string, object> e in (List<object>)((Dictionary<string, object>)m["scatter"])["species"])
+            t[(string)e["name"]] = System.IO.Path.Combine(dir, (string)e["table"]);
+        return t;
+    }
+
+    static bool Near(double a, double b) { return Math.Abs(a - b) <= 1e-6 * Math.Max(1.0, Math.Abs(a)); }
+
+    // the same scene built with CSV and with binary tables: every row reads the same from both
+    static bool CheckPair(string csvDir, string binDir)
+    {
+        var problems = new List<string>();
+        var a = Tables(csvDir);
+        var b = Tables(binDir);
+        int rows = 0;
+        foreach (var kv in a)
+        {
+            string other;
+            if (!b.TryGetValue(kv.Key, out other) || !other.EndsWith(".bin")) { problems.Add(kv.Key + ": no binary table in " + binDir); continue; }
+            var x = SceneData.ReadTable(kv.Value);
+            var y = SceneData.ReadTable(other);
+            if (x.Count != y.Count) { problems.Add(kv.Key + ": " + x.Count + " CSV rows, " + y.Count + " binary rows"); continue; }
+            for (int i = 0; i < x.Count; i++)
+            {
+                var r = x[i];
+                var q = y[i];
+                bool same = r.Tile == q.Tile && r.Variant == q.Variant && Near(r.X, q.X) && Near(r.Y, q.Y) && Near(r.Z, q.Z)
+                    && Near(r.Qx, q.Qx) && Near(r.Qy, q.Qy) && Near(r.Qz, q.Qz) && Near(r.Qw, q.Qw)
+                    && Near(r.Sx, q.Sx) && Near(r.Sy, q.Sy) && Near(r.Sz, q.Sz);
+                if (!same) { problems.Add(kv.Key + ": row " + i + " reads differently from the binary table"); break; }
+            }
+            rows += x.Count;
+        }
+        Console.WriteLine((problems.Count > 0 ? "FAIL  " : "ok    ") + binDir + ": " + rows + " binary table rows read as their CSV rows"
+            + (problems.Count > 0 ? "\n      " + string.Join("\n      ", problems) : ""));
+        return problems.Count == 0;
+    }
+
+    static int Main(string[] argv)
     {
         int failed = 0;
+        var args = new List<string>();
+        for (int i = 0; i < argv.Length; i++)
+        {
+            if (argv[i] == "--pair" && i + 2 < argv.Length)
+            {
+                if (!CheckPair(argv[i + 1], argv[i + 2])) failed++;
+                i += 2;
+            }
+            else
+            {
+                args.Add(argv[i]);
+            }
+        }
         foreach (var dir in args)
         {
             var problems = new List<string>();
