@@ -361,6 +361,23 @@ fn orientation_half((ys, yw): (f64, f64), n: [f64; 3], align: f64) -> [f32; 4] {
     [(tx * yw - tz * ys) as f32, (tw * ys) as f32, (tz * yw + tx * ys) as f32, (tw * yw) as f32]
 }
 
+/// The species' density at every texel centre of a `w` × `h` map over the extent, as a fraction
+/// of its effective max density ([`Rules::effective_max_density`]): density map · mask · terrain
+/// rules (slope, altitude, water) · the share snow thinning leaves; exclusions not counted. Texel
+/// (x, y) lies at ((x + ½)/w, (y + ½)/h) of the extent, row 0 at its minimum z (the layout of the
+/// terrain's weight map). Row-major; the same values at any thread count.
+pub fn weight_map(rules: &Rules, w: u32, h: u32) -> Vec<f32> {
+    use rayon::prelude::*;
+    let [x0, z0, x1, z1] = rules.tiling.extent;
+    (0..h)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            let z = z0 + (y as f64 + 0.5) / h as f64 * (z1 - z0);
+            (0..w).map(move |x| rules.weight(x0 + (x as f64 + 0.5) / w as f64 * (x1 - x0), z).clamp(0.0, 1.0) as f32)
+        })
+        .collect()
+}
+
 /// Fraction-weighted mean of [`Rules::weight`] over the whole extent on `samples`² points.
 pub fn estimate(rules: &Rules, samples: usize) -> f64 {
     estimate_region(rules, rules.tiling.extent, samples)

@@ -39,13 +39,41 @@ pub struct SpeciesReport {
     pub csv: PathBuf,
     pub rules: RuleCounts,
     pub stats: SpeciesStats,
+    /// Its channel of the density weight maps.
+    #[serde(default)]
+    pub density_weight: Option<DensityWeight>,
     pub seconds: f64,
+}
+
+/// One density weight map (`placements/density_<k>.png`): four species per RGBA image.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct DensityMapInfo {
+    pub file: PathBuf,
+    /// The species in channel order R, G, B, A (fewer in the last map: the rest are 0).
+    pub species: Vec<String>,
+    pub size_px: [u32; 2],
+}
+
+/// What a species' density weight channel holds, and the analyzer's check of it.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct DensityWeight {
+    pub file: PathBuf,
+    /// 0 = R … 3 = A.
+    pub channel: usize,
+    /// Instances per m² where the channel is 255.
+    pub max_density: f64,
+    /// Σ (channel / 255) × texel area × max_density: the count the map predicts (exclusions and
+    /// Poisson spacing aside), beside the analyzer's expected count (`stats.expected`).
+    pub expected_from_map: f64,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct ScatterStageReport {
     pub tile_m: f64,
     pub species: Vec<SpeciesReport>,
+    /// Each species' density over the terrain as weight maps (the layout of terrain_layers.png).
+    #[serde(default)]
+    pub density_maps: Vec<DensityMapInfo>,
     pub seconds: f64,
 }
 
@@ -56,6 +84,7 @@ impl ScatterStageReport {
             files.push(s.csv.clone());
             files.push(s.csv.with_extension("json"));
         }
+        files.extend(self.density_maps.iter().map(|m| m.file.clone()));
         files
     }
 }
@@ -64,8 +93,8 @@ impl ScatterStageReport {
 /// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: scene.glb holds no unused mesh; 3: its terrain is textured; 4:
 /// its plants carry wind in `_WIND`, not COLOR_0; 5: a tree without an L-system instances a
 /// built-in tree; 6: flower cards lit by a normal atlas (with TANGENT); 7: scene.glb moved to the
-/// view stage (tables only); 8: a `variant` column.
-pub const SCATTER_ALGORITHM_VERSION: u32 = 8;
+/// view stage (tables only); 8: a `variant` column; 9: density weight maps (placements/density_<k>.png).
+pub const SCATTER_ALGORITHM_VERSION: u32 = 9;
 
 /// Cache key: the terrain's key, the species and scatter settings, the scene seed, the maps' bytes.
 pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageError> {
@@ -96,6 +125,55 @@ pub fn surface_of(terrain: &Scene) -> SurfaceIndex {
     let parts: Vec<(&[[f32; 3]], &[u32])> =
         terrain.meshes.iter().flat_map(|m| m.primitives.iter().map(|p| (&p.positions[..], &p.indices[..]))).collect();
     SurfaceIndex::from_parts(&parts)
+}
+
+/// The size of the terrain's weight map (its base-colour texture, which has the same texels), so
+/// the density maps share its texel grid; 512 on the long side when the terrain has none.
+fn layer_map_size(terrain: &Scene, extent: [f64; 4]) -> [u32; 2] {
+    let from_texture = terrain
+        .materials
+        .iter()
+        .find(|m| m.name == "terrain")
+        .and_then(|m| m.base_color_texture)
+        .and_then(|t| terrain.textures.get(t))
+        .and_then(|t| {
+            image::ImageReader::new(std::io::Cursor::new(&t.png)).with_guessed_format().ok()?.into_dimensions().ok()
+        });
+    match from_texture {
+        Some((w, h)) if w > 0 && h > 0 => [w, h],
+        _ => {
+            let (w, h) = (extent[2] - extent[0], extent[3] - extent[1]);
+            let long = w.max(h).max(1e-9);
+            [((512.0 * w / long).round() as u32).max(1), ((512.0 * h / long).round() as u32).max(1)]
+        }
+    }
+}
+
+/// Species per density weight map (RGBA).
+const SPECIES_PER_DENSITY_MAP: usize = 4;
+
+/// Writes the density weight maps: species `4k … 4k + 3` (in preset order) in the R, G, B, A of
+/// `placements/density_<k>.png`, each channel its species' density over its max (255 = max).
+fn write_density_maps(
+    scene_dir: &Path,
+    size: [u32; 2],
+    weights: &[(String, Vec<f32>)],
+) -> Result<Vec<DensityMapInfo>, StageError> {
+    let n = (size[0] * size[1]) as usize;
+    let mut maps = Vec::new();
+    for (k, group) in weights.chunks(SPECIES_PER_DENSITY_MAP).enumerate() {
+        let mut rgba = vec![0u8; 4 * n];
+        for (c, (_, w)) in group.iter().enumerate() {
+            for (i, v) in w.iter().enumerate() {
+                rgba[4 * i + c] = (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+            }
+        }
+        let file = PathBuf::from("placements").join(format!("density_{k}.png"));
+        let png = crate::bake::raster::png::encode_rgba8_png(&rgba, size[0], size[1]).map_err(fail)?;
+        export::write_atomic(&scene_dir.join(&file), &png).map_err(|e| fail(e.to_string()))?;
+        maps.push(DensityMapInfo { file, species: group.iter().map(|(s, _)| s.clone()).collect(), size_px: size });
+    }
+    Ok(maps)
 }
 
 fn load_map(path: &Option<PathBuf>) -> Result<Option<DensityMap>, StageError> {
@@ -131,6 +209,8 @@ pub fn run_scatter_with_snow(
     let extent = surface.bounds();
     let mut placed: Vec<Placed> = Vec::new();
     let mut reports = Vec::new();
+    let map_size = layer_map_size(terrain, extent);
+    let mut weights: Vec<(String, Vec<f32>)> = Vec::new();
     let vegetation = if preset.species.iter().any(|s| s.vegetation_type.is_some()) {
         load_map(&preset.scatter.vegetation_map)?
     } else {
@@ -167,6 +247,33 @@ pub fn run_scatter_with_snow(
             thinning,
         )
         .map_err(|e| bad_input(e.to_string()))?;
+        // its density over the terrain, on the weight map's texels (exclusions aside)
+        let density_weight = {
+            let tiling =
+                crate::scatter::Tiling::new(extent, preset.scatter.tile_m).map_err(|e| bad_input(e.to_string()))?;
+            let mut rules = crate::scatter::rules::Rules::without_exclusions(
+                &surface,
+                tiling,
+                &species.rules,
+                density.as_ref(),
+                mask.as_ref(),
+                preset.scene.seed,
+            )
+            .map_err(|e| bad_input(e.to_string()))?;
+            rules.snow = thinning;
+            let w = crate::scatter::rules::weight_map(&rules, map_size[0], map_size[1]);
+            let texel_m2 = (extent[2] - extent[0]) * (extent[3] - extent[1]) / w.len().max(1) as f64;
+            // what the map as written (bytes) predicts
+            let sum: f64 = w.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as f64 / 255.0).sum();
+            let k = weights.len();
+            weights.push((species.rules.name.clone(), w));
+            DensityWeight {
+                file: PathBuf::from("placements").join(format!("density_{}.png", k / SPECIES_PER_DENSITY_MAP)),
+                channel: k % SPECIES_PER_DENSITY_MAP,
+                max_density: rules.effective_max_density,
+                expected_from_map: sum * texel_m2 * rules.effective_max_density,
+            }
+        };
         // each row names the variant it shows: the manifest's chain maps it to its meshes
         crate::scatter::assign_variants(&mut result.instances, species.look.table_variants());
         let generate_s = t1.elapsed().as_secs_f64();
@@ -198,6 +305,7 @@ pub fn run_scatter_with_snow(
             csv: csv.clone(),
             rules: result.counts,
             stats,
+            density_weight: Some(density_weight),
             seconds: t1.elapsed().as_secs_f64(),
         };
         // timing stays out of the summary, so the file is byte-identical from run to run
@@ -224,8 +332,13 @@ pub fn run_scatter_with_snow(
             instances: result.instances,
         });
     }
-    let report =
-        ScatterStageReport { tile_m: preset.scatter.tile_m, species: reports, seconds: t0.elapsed().as_secs_f64() };
+    let density_maps = write_density_maps(scene_dir, map_size, &weights)?;
+    let report = ScatterStageReport {
+        tile_m: preset.scatter.tile_m,
+        species: reports,
+        density_maps,
+        seconds: t0.elapsed().as_secs_f64(),
+    };
     Ok((report, placed))
 }
 

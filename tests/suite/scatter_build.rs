@@ -151,6 +151,7 @@ fn placements_and_scene_glb_are_byte_identical_across_runs_threads_and_jobs() {
         assert_eq!(
             first.keys().collect::<Vec<_>>(),
             [
+                "placements/density_0.png",
                 "placements/grass.csv",
                 "placements/grass.json",
                 "placements/tree.csv",
@@ -715,5 +716,88 @@ fn scene_lod_glb_holds_every_row_in_tile_chains_that_switch_no_earlier_than_the_
             assert!(*cov.last().unwrap() > 0.0, "{}: culled beyond its cull distance", base.name);
         }
         assert_eq!(placed.len(), rows.len(), "{species}: every table row is in scene_lod.glb once");
+    }
+}
+
+// ------------------------------------------------------------------------------ density weight maps
+
+#[test]
+fn density_weight_maps_hold_each_species_density_on_the_terrain_layer_texels() {
+    // issue 15 item 2: the species' densities as weight maps (RGBA, four species an image), on the
+    // texel grid of terrain_layers.png; each channel is the density the rules leave (map, slope,
+    // altitude), and the count it predicts is the analyzer's expected count
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_density(&d.join("p/maps/grass.png"), 0.0, 1.0);
+    let mapped = GRASS
+        .replace("placement = \"jittered\"\n", "placement = \"jittered\"\ndensity_map = \"maps/grass.png\"\n")
+        .replace("exclusion = { species = \"tree\", radius = 1.5 }\n", "");
+    let low = "[[species]]\nname = \"low\"\nkind = \"flower\"\nmax_density = 0.05\naltitude = [-1000.0, 20.0]\n";
+    let five = (0..3)
+        .map(|k| format!("[[species]]\nname = \"f{k}\"\nkind = \"flower\"\nmax_density = 0.01\nslope = [0.0, 10.0]\n"))
+        .collect::<String>();
+    write(d, "p/a.toml", &preset("a", 3, &format!("{TREE}\n{mapped}\n{low}\n{five}")));
+    let o = verdant_in(d, &["build", "p/a.toml", "--out", "o", "--skip", "view,preview"]);
+    ok(&o);
+    let s = d.join("o/a");
+    let r = read_json(&s.join("report.json"));
+    let scatter = &r["stages"]["scatter"];
+    // six species: two maps, the second with two channels in use
+    let maps = scatter["density_maps"].as_array().unwrap();
+    assert_eq!(maps.len(), 2, "{maps:?}");
+    assert_eq!(maps[0]["species"], serde_json::json!(["tree", "grass", "low", "f0"]));
+    assert_eq!(maps[1]["species"], serde_json::json!(["f1", "f2"]));
+    let layers = image::open(s.join("terrain/terrain_layers.png")).unwrap();
+    let img = image::open(s.join("placements/density_0.png")).unwrap().to_rgba8();
+    assert_eq!((img.width(), img.height()), (layers.width(), layers.height()), "the terrain layers' texels");
+    let second = image::open(s.join("placements/density_1.png")).unwrap().to_rgba8();
+    assert!(second.pixels().all(|p| p.0[2] == 0 && p.0[3] == 0), "unused channels are 0");
+    let listed: Vec<String> = read_json(&s.join("manifest.json"))["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["path"].as_str().unwrap().to_string())
+        .collect();
+    assert!(listed.iter().any(|f| f == "placements/density_1.png"), "{listed:?}");
+
+    // grass: 0 over the map's left half, 255 over its right half (no slope or altitude limits)
+    let w = img.width();
+    for (x, _, p) in img.enumerate_pixels() {
+        let u = (x as f64 + 0.5) / w as f64;
+        if u < 0.45 {
+            assert_eq!(p.0[1], 0, "grass at u = {u}");
+        } else if u > 0.55 {
+            assert_eq!(p.0[1], 255, "grass at u = {u}");
+        }
+    }
+    // low: only below 20 m. The terrain's height at a texel, from its placed instances' heights:
+    // every placed `low` instance lies on a texel the map says it may grow on
+    let low_rows = read_csv(&s.join("placements/low.csv"));
+    assert!(!low_rows.is_empty());
+    let extent = 128.0 * 2.0;
+    let texel = |p: [f64; 3]| {
+        let x = ((p[0] / extent) * w as f64).floor().clamp(0.0, w as f64 - 1.0) as u32;
+        let y = ((p[2] / extent) * img.height() as f64).floor().clamp(0.0, img.height() as f64 - 1.0) as u32;
+        img.get_pixel(x, y).0
+    };
+    let on = low_rows.iter().filter(|r| texel(r.pos)[2] > 0).count();
+    assert!(
+        on as f64 >= 0.98 * low_rows.len() as f64,
+        "{on} of {} low instances on texels it grows on",
+        low_rows.len()
+    );
+    let high = img.pixels().filter(|p| p.0[2] == 0).count();
+    assert!(high > 1000, "the altitude limit leaves {high} texels without `low`");
+
+    // the count each map predicts is the analyzer's expected count (same integrand, other samples)
+    for sp in scatter["species"].as_array().unwrap() {
+        let dw = &sp["density_weight"];
+        let (from_map, expected) =
+            (dw["expected_from_map"].as_f64().unwrap(), sp["stats"]["expected"].as_f64().unwrap());
+        assert!(
+            (from_map - expected).abs() <= 0.03 * expected + 2.0,
+            "{}: map predicts {from_map:.1}, the analyzer expects {expected:.1}",
+            sp["name"]
+        );
     }
 }

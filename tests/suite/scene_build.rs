@@ -824,7 +824,7 @@ const PINNED: &[(&str, u32, &str)] = &[
     ("terrain", 7, "74bbefc3b826d512"),
     ("plants", 15, "bd7dbfd8b599519f"),
     ("snow", 5, "53c5ffe04ee0fb94"),
-    ("scatter", 8, "d86e59612396aacb"),
+    ("scatter", 9, "3a6dddc0e8298719"),
     ("view", 9, "4298fd3436c68e7b"),
     ("preview", 8, "d2385e615244590f"),
 ];
