@@ -35,6 +35,12 @@ import verdant_unreal  # noqa: E402
 PYTHON_METHODS = {n for t in (str, list, dict) for n in dir(t)} | set(dir(builtins)) | {"path", "join", "basename"}
 
 
+def report(subject: str, summary: str, problems: list[str]) -> list[str]:
+    """Prints one `ok` / `FAIL` line (and the problems under it); returns the problems."""
+    print(f"{'FAIL' if problems else 'ok  '}  {subject}: {summary}" + "".join(f"\n      {p}" for p in problems))
+    return problems
+
+
 def unreal_names(stub_text: str) -> tuple[set[str], set[str]]:
     """(module-level classes and functions, member names: methods and documented properties)."""
     top = set(re.findall(r"^(?:class|def) (\w+)", stub_text, re.M))
@@ -72,12 +78,12 @@ def check_unreal_api(script: str, stub_text: str) -> list[str]:
         problems.append(f".{name} is no method or property of the UE Python API")
     for name in sorted(editor_props - members):
         problems.append(f"editor property {name!r} is not in the UE Python API")
-    print(
-        f"{'FAIL' if problems else 'ok  '}  {os.path.relpath(script)}: {len(used_top)} unreal names, "
-        f"{len(used_members)} members, {len(editor_props)} editor properties looked up in the UE 5.6 API"
-        + ("".join(f"\n      {p}" for p in problems))
+    return report(
+        os.path.relpath(script),
+        f"{len(used_top)} unreal names, {len(used_members)} members, "
+        f"{len(editor_props)} editor properties looked up in the UE 5.6 API",
+        problems,
     )
-    return problems
 
 
 def quat_matrix(q: np.ndarray) -> np.ndarray:
@@ -147,12 +153,12 @@ def check_scene(scene_dir: str) -> list[str]:
         rows_checked += len(rows)
     if worst > 1e-5:
         problems.append(f"Unreal transforms differ from C M C^-1 by up to {worst:.2e}")
-    print(
-        f"{'FAIL' if problems else 'ok  '}  {scene_dir}: {len(plans)} foliage types, {sum(placed.values())} instances, "
-        f"{rows_checked} rows' Unreal transforms = C M C^-1 (worst {worst:.1e})"
-        + ("".join(f"\n      {p}" for p in problems))
+    return report(
+        scene_dir,
+        f"{len(plans)} foliage types, {sum(placed.values())} instances, "
+        f"{rows_checked} rows' Unreal transforms = C M C^-1 (worst {worst:.1e})",
+        problems,
     )
-    return problems
 
 
 def check_pair(csv_dir: str, bin_dir: str) -> list[str]:
@@ -181,11 +187,7 @@ def check_pair(csv_dir: str, bin_dir: str) -> list[str]:
                 problems.append(f"{name}: CSV row {r} reads {q} from the binary table")
                 break
         rows += len(a)
-    print(
-        f"{'FAIL' if problems else 'ok  '}  {bin_dir}: {rows} binary table rows read as their CSV rows"
-        + "".join(f"\n      {p}" for p in problems)
-    )
-    return problems
+    return report(bin_dir, f"{rows} binary table rows read as their CSV rows", problems)
 
 
 def main() -> int:
