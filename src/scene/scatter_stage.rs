@@ -152,20 +152,59 @@ fn layer_map_size(terrain: &Scene, extent: [f64; 4]) -> [u32; 2] {
 /// Species per density weight map (RGBA).
 const SPECIES_PER_DENSITY_MAP: usize = 4;
 
+/// The `index`-th species' density weights as the bytes its channel holds (255 = its effective
+/// max density) and what they say: its file and channel, and the count the bytes predict.
+#[allow(clippy::too_many_arguments)]
+fn species_density(
+    surface: &SurfaceIndex,
+    extent: [f64; 4],
+    size: [u32; 2],
+    preset: &Preset,
+    species: &SpeciesSettings,
+    (density, mask): (Option<&DensityMap>, Option<&DensityMap>),
+    thinning: Option<SnowThinning<'_>>,
+    index: usize,
+) -> Result<(Vec<u8>, DensityWeight), StageError> {
+    let tiling = crate::scatter::Tiling::new(extent, preset.scatter.tile_m).map_err(|e| bad_input(e.to_string()))?;
+    let mut rules = crate::scatter::rules::Rules::without_exclusions(
+        surface,
+        tiling,
+        &species.rules,
+        density,
+        mask,
+        preset.scene.seed,
+    )
+    .map_err(|e| bad_input(e.to_string()))?;
+    rules.snow = thinning;
+    let bytes: Vec<u8> = crate::scatter::rules::weight_map(&rules, size[0], size[1])
+        .into_iter()
+        .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+        .collect();
+    let texel_m2 = (extent[2] - extent[0]) * (extent[3] - extent[1]) / bytes.len().max(1) as f64;
+    let sum: f64 = bytes.iter().map(|&b| b as f64 / 255.0).sum();
+    let weight = DensityWeight {
+        file: PathBuf::from("placements").join(format!("density_{}.png", index / SPECIES_PER_DENSITY_MAP)),
+        channel: index % SPECIES_PER_DENSITY_MAP,
+        max_density: rules.effective_max_density,
+        expected_from_map: sum * texel_m2 * rules.effective_max_density,
+    };
+    Ok((bytes, weight))
+}
+
 /// Writes the density weight maps: species `4k … 4k + 3` (in preset order) in the R, G, B, A of
 /// `placements/density_<k>.png`, each channel its species' density over its max (255 = max).
 fn write_density_maps(
     scene_dir: &Path,
     size: [u32; 2],
-    weights: &[(String, Vec<f32>)],
+    weights: &[(String, Vec<u8>)],
 ) -> Result<Vec<DensityMapInfo>, StageError> {
     let n = (size[0] * size[1]) as usize;
     let mut maps = Vec::new();
     for (k, group) in weights.chunks(SPECIES_PER_DENSITY_MAP).enumerate() {
         let mut rgba = vec![0u8; 4 * n];
         for (c, (_, w)) in group.iter().enumerate() {
-            for (i, v) in w.iter().enumerate() {
-                rgba[4 * i + c] = (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+            for (i, &b) in w.iter().enumerate() {
+                rgba[4 * i + c] = b;
             }
         }
         let file = PathBuf::from("placements").join(format!("density_{k}.png"));
@@ -210,7 +249,7 @@ pub fn run_scatter_with_snow(
     let mut placed: Vec<Placed> = Vec::new();
     let mut reports = Vec::new();
     let map_size = layer_map_size(terrain, extent);
-    let mut weights: Vec<(String, Vec<f32>)> = Vec::new();
+    let mut weights: Vec<(String, Vec<u8>)> = Vec::new();
     let vegetation = if preset.species.iter().any(|s| s.vegetation_type.is_some()) {
         load_map(&preset.scatter.vegetation_map)?
     } else {
@@ -248,32 +287,17 @@ pub fn run_scatter_with_snow(
         )
         .map_err(|e| bad_input(e.to_string()))?;
         // its density over the terrain, on the weight map's texels (exclusions aside)
-        let density_weight = {
-            let tiling =
-                crate::scatter::Tiling::new(extent, preset.scatter.tile_m).map_err(|e| bad_input(e.to_string()))?;
-            let mut rules = crate::scatter::rules::Rules::without_exclusions(
-                &surface,
-                tiling,
-                &species.rules,
-                density.as_ref(),
-                mask.as_ref(),
-                preset.scene.seed,
-            )
-            .map_err(|e| bad_input(e.to_string()))?;
-            rules.snow = thinning;
-            let w = crate::scatter::rules::weight_map(&rules, map_size[0], map_size[1]);
-            let texel_m2 = (extent[2] - extent[0]) * (extent[3] - extent[1]) / w.len().max(1) as f64;
-            // what the map as written (bytes) predicts
-            let sum: f64 = w.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as f64 / 255.0).sum();
-            let k = weights.len();
-            weights.push((species.rules.name.clone(), w));
-            DensityWeight {
-                file: PathBuf::from("placements").join(format!("density_{}.png", k / SPECIES_PER_DENSITY_MAP)),
-                channel: k % SPECIES_PER_DENSITY_MAP,
-                max_density: rules.effective_max_density,
-                expected_from_map: sum * texel_m2 * rules.effective_max_density,
-            }
-        };
+        let (bytes, density_weight) = species_density(
+            &surface,
+            extent,
+            map_size,
+            preset,
+            species,
+            (density.as_ref(), mask.as_ref()),
+            thinning,
+            weights.len(),
+        )?;
+        weights.push((species.rules.name.clone(), bytes));
         // each row names the variant it shows: the manifest's chain maps it to its meshes
         crate::scatter::assign_variants(&mut result.instances, species.look.table_variants());
         let generate_s = t1.elapsed().as_secs_f64();
