@@ -482,6 +482,25 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[Stri
                         shading(&l.normal_map)
                     );
                 }
+                let layers = &t.figures.layers;
+                let shares: Vec<String> = layers
+                    .layers
+                    .iter()
+                    .zip(&layers.coverage)
+                    .map(|(name, c)| format!("{name} {:.1} %", 100.0 * c))
+                    .collect();
+                s += &format!(
+                    "\nMaterial layers ({}×{} texels, `terrain_layers*.png`; snow from the {}{}): {}\n",
+                    layers.map_px[0],
+                    layers.map_px[1],
+                    layers.snow,
+                    if layers.layers.len() > 4 {
+                        ", soil where the species' rules leave the gentle ground bare"
+                    } else {
+                        ""
+                    },
+                    shares.join(", ")
+                );
                 if !t.chunks.is_empty() {
                     s += &format!(
                         "\n{} chunks; {} triangles written in all (skirts and base included)\n",

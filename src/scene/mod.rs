@@ -7,6 +7,7 @@
 pub mod build;
 pub mod cache;
 pub mod error;
+pub mod ground_cover;
 pub mod manifest;
 pub mod pipeline;
 pub mod plants_stage;

@@ -215,10 +215,6 @@ fn write_density_maps(
     Ok(maps)
 }
 
-fn load_map(path: &Option<PathBuf>) -> Result<Option<DensityMap>, StageError> {
-    path.as_ref().map(|p| DensityMap::load(p).map_err(|e| bad_input(e.to_string()))).transpose()
-}
-
 /// The placed instances of one species, for the preview.
 pub struct Placed {
     pub species: SpeciesSettings,
@@ -250,20 +246,11 @@ pub fn run_scatter_with_snow(
     let mut reports = Vec::new();
     let map_size = layer_map_size(terrain, extent);
     let mut weights: Vec<(String, Vec<u8>)> = Vec::new();
-    let vegetation = if preset.species.iter().any(|s| s.vegetation_type.is_some()) {
-        load_map(&preset.scatter.vegetation_map)?
-    } else {
-        None
-    };
+    let vegetation = crate::scene::ground_cover::vegetation_map(preset, "scatter")?;
     for (index, species) in preset.species.iter().enumerate() {
         let t1 = Instant::now();
-        let density = load_map(&species.rules.density_map)?;
-        let mask = load_map(&species.rules.mask)?;
         // a vegetation type grows only where the map of types holds its shade (within its own mask)
-        let mask = match (species.vegetation_type, &vegetation) {
-            (Some(shade), Some(types)) => Some(types.where_shade(shade, mask.as_ref())),
-            _ => mask,
-        };
+        let (density, mask) = crate::scene::ground_cover::rule_maps(species, vegetation.as_ref(), "scatter")?;
         let earlier: Vec<(&str, &[Instance])> =
             placed.iter().map(|p| (p.species.rules.name.as_str(), &p.instances[..])).collect();
         let thinning = match (snow_mask, &preset.snow, species.kind) {

@@ -132,8 +132,9 @@ impl SnowStageReport {
 /// Version of what the snow stage writes for given inputs: part of its cache key (see
 /// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: terrain_snow.glb carries the textured terrain. 3: and its
 /// `_LAYER_WEIGHTS` (terrain 5). 4: and its normal map and tangents (terrain 6). 5: its snow layer
-/// follows the cover (terrain 7); the report's layer_agreement.
-pub const SNOW_ALGORITHM_VERSION: u32 = 5;
+/// follows the cover (terrain 7); the report's layer_agreement. 6: its soil layer and `_SURFACE`
+/// (terrain 8).
+pub const SNOW_ALGORITHM_VERSION: u32 = 6;
 
 /// Cache key: the terrain's key and the snow settings.
 pub fn snow_key(snow: &SnowSettings, terrain_key: &str) -> String {

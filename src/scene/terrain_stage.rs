@@ -17,7 +17,7 @@ use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
 use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed, TerrainFigures};
-use crate::terrain::layers::SnowRule;
+use crate::terrain::layers::{bake_layers_with, SnowRule};
 use crate::terrain::normal_map::{bake_normal_map, NormalMapReport};
 use crate::terrain::stored::Storage;
 
@@ -106,8 +106,10 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// exact heights, and the TIN refines until that is within the bound; `max_error_f64_m` beside it.
 /// 5: every vertex carries its layer weights (`_LAYER_WEIGHTS`). 6: every file a normal map baked
 /// against its own mesh, TANGENT on every vertex (terrain/normal_map.rs). 7: the snow layer follows
-/// the preset's `[snow]` cover when it has one; slopes from the normalised bilinear normal.
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 7;
+/// the preset's `[snow]` cover when it has one; slopes from the normalised bilinear normal. 8: in a
+/// scene with species, the soil layer (terrain_layers_1.png, `_LAYER_WEIGHTS_1`) and `_SURFACE`
+/// from what grows (scene/ground_cover.rs).
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 8;
 
 /// The stage in a scene build.
 pub struct TerrainJob<'a> {
@@ -145,6 +147,10 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
     if let Some(snow) = &preset.snow {
         // the snow layer follows the scene's cover (see [`snow_rule`])
         k.add(serde_json::to_string(&snow.cover).unwrap_or_default().as_bytes());
+    }
+    if !preset.species.is_empty() {
+        // the soil layer and `_SURFACE` follow what grows (scene/ground_cover.rs)
+        crate::scene::ground_cover::add_key(&mut k, preset);
     }
     if let TerrainSource::Heightmap { path, .. } = &t.source {
         let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
@@ -229,10 +235,21 @@ pub fn run_terrain(
     let meshed =
         mesh_and_build(&hf, &settings, &Storage::f32(&hf), &build_opts("terrain".into()), &source_label(t), ready)
             .map_err(|e| StageError::of(Stage::Terrain.name(), &e, e.to_string()))?;
-    let figures = meshed.figures(&hf, &settings, voids_filled);
+    let mut figures = meshed.figures(&hf, &settings, voids_filled);
     // (a shared level's meshing and measuring time is counted under `lods`)
-    let [mesh_s, analyze_s, build_s] = meshed.seconds;
-    let Meshed { scene, layers, .. } = meshed;
+    let [mesh_s, mut analyze_s, build_s] = meshed.seconds;
+    let Meshed { mut scene, mut layers, .. } = meshed;
+    // what grows on it: the soil layer and every vertex's `_SURFACE`, from the species' rules on
+    // this surface (the densities the scatter stage's density maps hold)
+    let t1 = Instant::now();
+    if let Some(cover) = crate::scene::ground_cover::cover(preset, &scene, layers.report.map_px) {
+        layers = bake_layers_with(&hf, &snow, Some(std::sync::Arc::new(cover)));
+        layers
+            .texture(&mut scene, &hf, "terrain")
+            .map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
+        figures.layers = layers.report.clone();
+    }
+    analyze_s += t1.elapsed().as_secs_f64();
     let textured = |mut scene: Scene, name: &str| -> Result<(Scene, NormalMapReport), StageError> {
         layers
             .texture(&mut scene, &hf, "terrain")
@@ -244,10 +261,12 @@ pub fn run_terrain(
 
     let t1 = Instant::now();
     let mut files = write_formats(preset, &scene, scene_dir, "terrain")?;
-    let weights = PathBuf::from("terrain").join("terrain_layers.png");
-    let png = layers.weights_png().map_err(|e| f(format!("cannot encode the layer weight map: {e}")))?;
-    export::write_atomic(&scene_dir.join(&weights), &png).map_err(|e| f(e.to_string()))?;
-    files.push(weights);
+    let pngs = layers.weight_pngs().map_err(|e| f(format!("cannot encode the layer weight map: {e}")))?;
+    for (k, png) in pngs.iter().enumerate() {
+        let weights = PathBuf::from("terrain").join(layer_map_name(k));
+        export::write_atomic(&scene_dir.join(&weights), png).map_err(|e| f(e.to_string()))?;
+        files.push(weights);
+    }
     let export_s = t1.elapsed().as_secs_f64();
 
     let t1 = Instant::now();
@@ -304,6 +323,16 @@ pub fn run_terrain(
         },
     };
     Ok((report, scene))
+}
+
+/// File name of the k-th layer weight map (layers 4k … 4k + 3): `terrain_layers.png`, then
+/// `terrain_layers_1.png` (soil).
+pub fn layer_map_name(k: usize) -> String {
+    if k == 0 {
+        "terrain_layers.png".into()
+    } else {
+        format!("terrain_layers_{k}.png")
+    }
 }
 
 /// Every file the terrain stage wrote, LoD levels included (scene-relative).

@@ -38,8 +38,9 @@ fn fail(message: String) -> StageError {
 /// chain search (plants 11). 4: and from small views sampled more finely (plants 12). 5: cards
 /// framed as billboards (plants 13). 6: the terrain chunks carry `_LAYER_WEIGHTS` (terrain 5). 7:
 /// scene_lod.glb beside scene.glb. 8: the terrain chunks' normal maps and tangents (terrain 6). 9:
-/// their snow layer from the scene's snow cover (terrain 7).
-pub const VIEW_ALGORITHM_VERSION: u32 = 9;
+/// their snow layer from the scene's snow cover (terrain 7). 10: their soil layer, `_LAYER_WEIGHTS_1`
+/// and `_SURFACE` (terrain 8).
+pub const VIEW_ALGORITHM_VERSION: u32 = 10;
 
 /// What one view draws.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

@@ -4,12 +4,15 @@
 //! terrain walk-through thesis' surface attributes): grass on gentle ground, scree on moderate
 //! slopes, rock on steep ones, snow where the [`SnowRule`] puts it: above a fixed snowline unless
 //! too steep to hold it, or, in a scene with `[snow]`, exactly the snow stage's cover (the weight
-//! [`crate::snow::snow_weight`] gives the surface: snow line with its noise, slope, wind). The weights
-//! are written as an RGBA weight map (R grass, G scree, B rock, A snow; the splat/alpha-map layout
-//! Unity terrain and Unreal landscape layers import), and blended with each layer's albedo into a
-//! base-colour texture (no lighting baked in) that terrain.glb's material samples through its
-//! planar UVs, so every viewer shows the terrain coloured. The analyzer is the coverage: the share
-//! of the map each layer covers.
+//! [`crate::snow::snow_weight`] gives the surface: snow line with its noise, slope, wind). In a
+//! scene with species, a fifth layer, soil, takes the gentle ground the vegetation leaves bare (or,
+//! without grass species, the forest floor under trees: [`VegetationCover::soil_share`]). The
+//! weights are written as RGBA weight maps, four layers an image (R grass, G scree, B rock, A snow;
+//! then R soil; the splat/alpha-map layout Unity terrain and Unreal landscape layers import), and
+//! blended with each layer's albedo into a base-colour texture (no lighting baked in) that
+//! terrain.glb's material samples through its planar UVs, so every viewer shows the terrain
+//! coloured. With a vegetation cover every vertex also carries `_SURFACE`: the thesis' TEXTURE,
+//! TYPE, DENSITY and SIZE. The analyzer is the coverage: the share of the map each layer covers.
 
 use serde::{Deserialize, Serialize};
 
@@ -18,13 +21,24 @@ use crate::bake::raster::png::encode_rgba8_png;
 use crate::heightfield::Heightfield;
 use crate::mesh::{Scene, Texture};
 use crate::snow::CoverSettings;
+use crate::terrain::vegetation::VegetationCover;
 
-/// The layers, in weight-map channel order (R, G, B, A).
-pub const LAYER_NAMES: [&str; 4] = ["grass", "scree", "rock", "snow"];
+/// The layers, in weight-map channel order (terrain_layers.png's R, G, B, A, then
+/// terrain_layers_1.png's R). Soil is baked only with a vegetation cover.
+pub const LAYER_NAMES: [&str; 5] = ["grass", "scree", "rock", "snow", "soil"];
 
-/// Each layer's albedo, linear RGB (sRGB (84, 112, 46), (128, 112, 88), (112, 108, 102), (236, 240, 246)).
-pub const LAYER_ALBEDO: [[f32; 3]; 4] =
-    [[0.0887, 0.162, 0.0273], [0.216, 0.162, 0.0976], [0.162, 0.150, 0.133], [0.838, 0.871, 0.922]];
+/// Each layer's albedo, linear RGB (sRGB (84, 112, 46), (128, 112, 88), (112, 108, 102), (236, 240, 246),
+/// (96, 74, 50)).
+pub const LAYER_ALBEDO: [[f32; 3]; 5] = [
+    [0.0887, 0.162, 0.0273],
+    [0.216, 0.162, 0.0976],
+    [0.162, 0.150, 0.133],
+    [0.838, 0.871, 0.922],
+    [0.117, 0.0685, 0.0319],
+];
+
+/// Layers per weight map (RGBA).
+pub const LAYERS_PER_MAP: usize = 4;
 
 /// Slopes (degrees) where scree starts and is full, then rock starts and is full.
 pub const SCREE_SLOPE_DEG: [f64; 2] = [18.0, 30.0];
@@ -39,6 +53,16 @@ pub const SNOW_SLOPE_DEG: [f64; 2] = [40.0, 55.0];
 /// scree, rock, snow, the weight map's channels, summing to 255/255), for engines that blend
 /// layers by vertex.
 pub const LAYER_WEIGHTS_ATTRIBUTE: &str = "_LAYER_WEIGHTS";
+
+/// The fifth layer's per-vertex weight (VEC4 normalized unsigned bytes: soil, 0, 0, 0; the bytes of
+/// both attributes sum to 255/255), written with a vegetation cover.
+pub const LAYER_WEIGHTS_1_ATTRIBUTE: &str = "_LAYER_WEIGHTS_1";
+
+/// The terrain walk-through thesis' surface attributes per vertex (VEC4 float), written with a
+/// vegetation cover: TEXTURE (index in [`LAYER_NAMES`] of the layer with the largest weight), TYPE
+/// (1-based preset index of the species covering the most ground, 0 where nothing grows), DENSITY
+/// (that species' instances per m²), SIZE (its plant height in metres).
+pub const SURFACE_ATTRIBUTE: &str = "_SURFACE";
 
 /// Longest side of the baked maps, in texels.
 pub const MAX_LAYER_MAP_PX: u32 = 2048;
@@ -139,51 +163,73 @@ fn default_snow_source() -> String {
 /// The baked layers of one heightfield.
 #[derive(Debug, Clone)]
 pub struct TerrainLayers {
-    /// RGBA8 weights per texel, row 0 at the map's top (v = 0), as written to the weight map.
-    pub weights: Vec<[u8; 4]>,
+    /// RGBA8 weights per texel of each weight map (layers `4k … 4k + 3` in map k; one map without
+    /// a vegetation cover, two with its soil layer), row 0 at the map's top (v = 0), as written.
+    pub weights: Vec<Vec<[u8; 4]>>,
     /// The base colour (linear RGBA) the weights blend to.
     pub albedo: Image,
     pub report: LayerReport,
     /// Where the snow layer lies (the per-vertex weights follow the same rule).
     pub snow: SnowRule,
+    /// What grows where (the soil layer and `_SURFACE`); `None` for a terrain built alone.
+    pub cover: Option<std::sync::Arc<VegetationCover>>,
     /// `albedo` as PNG, encoded on first use (every LoD scene shares it).
     albedo_png: std::sync::OnceLock<Result<Vec<u8>, String>>,
 }
 
 /// The layer weights of the surface at continuous sample coordinates (s, t): bilinear height and
-/// normal (see [`Heightfield::normal_bilinear`]), the slope from that normal, the snow from `snow`.
-fn weights_at(hf: &Heightfield, snow: &SnowRule, s: f64, t: f64) -> [f64; 4] {
+/// normal (see [`Heightfield::normal_bilinear`]), the slope from that normal, the snow from `snow`,
+/// the soil share of the gentle ground from `cover` (none without one).
+fn weights_at(hf: &Heightfield, snow: &SnowRule, cover: Option<&VegetationCover>, s: f64, t: f64) -> [f64; 5] {
     let height = hf.height_bilinear(s, t);
     let normal = hf.normal_bilinear(s, t);
     let slope_deg = normal[1].clamp(-1.0, 1.0).acos().to_degrees();
     let position = [s * hf.cell_size_m, height, t * hf.cell_size_m];
-    weights_with_snow(slope_deg, snow.weight(position, normal))
+    let [grass, scree, rock, snow] = weights_with_snow(slope_deg, snow.weight(position, normal));
+    let soil = cover.map_or(0.0, |c| grass * c.soil_share(position[0], position[2]).clamp(0.0, 1.0));
+    [grass - soil, scree, rock, snow, soil]
 }
 
-/// Sets [`LAYER_WEIGHTS_ATTRIBUTE`] on every primitive of `scene` (see [`TerrainLayers::texture`]).
-fn vertex_weights(scene: &mut Scene, hf: &Heightfield, snow: &SnowRule) {
+/// Sets [`LAYER_WEIGHTS_ATTRIBUTE`] on every primitive of `scene` and, with a vegetation cover,
+/// [`LAYER_WEIGHTS_1_ATTRIBUTE`] and [`SURFACE_ATTRIBUTE`] (see [`TerrainLayers::texture`]).
+fn vertex_weights(scene: &mut Scene, hf: &Heightfield, snow: &SnowRule, cover: Option<&VegetationCover>) {
+    use crate::mesh::CustomAttribute;
     use rayon::prelude::*;
     let cell = hf.cell_size_m;
     for p in scene.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()) {
-        let values: Vec<[f32; 4]> = p
+        let per_vertex: Vec<([f32; 4], [f32; 4], [f32; 4])> = p
             .positions
             .par_iter()
             .map(|q| {
-                unit_byte_weights(weights_at(hf, snow, q[0] as f64 / cell, q[2] as f64 / cell))
-                    .map(|k| k as f32 / 255.0)
+                let w = weights_at(hf, snow, cover, q[0] as f64 / cell, q[2] as f64 / cell);
+                let bytes = unit_byte_weights(w).map(|k| k as f32 / 255.0);
+                let texture = (0..w.len()).fold(0, |best, k| if w[k] > w[best] { k } else { best });
+                let surface = cover.map_or([0.0; 4], |c| {
+                    let at = c.at(q[0] as f64, q[2] as f64);
+                    [texture as f32, at.dominant as f32, at.density as f32, at.height_m as f32]
+                });
+                ([bytes[0], bytes[1], bytes[2], bytes[3]], [bytes[4], 0.0, 0.0, 0.0], surface)
             })
             .collect();
-        p.custom.retain(|c| c.name != LAYER_WEIGHTS_ATTRIBUTE);
-        p.custom.push(crate::mesh::CustomAttribute { name: LAYER_WEIGHTS_ATTRIBUTE.into(), values, unit_bytes: true });
+        let names = [LAYER_WEIGHTS_ATTRIBUTE, LAYER_WEIGHTS_1_ATTRIBUTE, SURFACE_ATTRIBUTE];
+        p.custom.retain(|c| !names.contains(&c.name.as_str()));
+        let values = per_vertex.iter().map(|v| v.0).collect();
+        p.custom.push(CustomAttribute { name: LAYER_WEIGHTS_ATTRIBUTE.into(), values, unit_bytes: true });
+        if cover.is_some() {
+            let values = per_vertex.iter().map(|v| v.1).collect();
+            p.custom.push(CustomAttribute { name: LAYER_WEIGHTS_1_ATTRIBUTE.into(), values, unit_bytes: true });
+            let values = per_vertex.iter().map(|v| v.2).collect();
+            p.custom.push(CustomAttribute { name: SURFACE_ATTRIBUTE.into(), values, unit_bytes: false });
+        }
     }
 }
 
 /// Weights summing to 1 as bytes summing to exactly 255: each rounded down, the bytes left over
 /// given to the largest remainders (ties to the earlier layer).
-fn unit_byte_weights(w: [f64; 4]) -> [u8; 4] {
+fn unit_byte_weights<const N: usize>(w: [f64; N]) -> [u8; N] {
     let scaled = w.map(|v| v.clamp(0.0, 1.0) * 255.0);
     let mut k = scaled.map(|v| v.floor() as u32);
-    let mut order = [0usize, 1, 2, 3];
+    let mut order: [usize; N] = std::array::from_fn(|i| i);
     order.sort_by(|&a, &b| (scaled[b] - scaled[b].floor()).total_cmp(&(scaled[a] - scaled[a].floor())).then(a.cmp(&b)));
     let left = 255u32.saturating_sub(k.iter().sum());
     for &i in order.iter().take(left as usize) {
@@ -196,60 +242,94 @@ fn unit_byte_weights(w: [f64; 4]) -> [u8; 4] {
 /// Texel (x, y) is sampled at its centre, uv ((x + ½)/W, (y + ½)/H), which the planar terrain UVs
 /// map to sample coordinates (u·(w − 1), v·(h − 1)). `snow` says where the snow layer lies.
 pub fn bake_layers(hf: &Heightfield, snow: &SnowRule) -> TerrainLayers {
+    bake_layers_with(hf, snow, None)
+}
+
+/// [`bake_layers`] with what grows on the terrain: the soil layer (a second weight map) and
+/// `_SURFACE` on every vertex the layers texture. The cover's texels should be the map's (same
+/// size over the terrain's extent) so the soil follows the density maps texel for texel.
+pub fn bake_layers_with(
+    hf: &Heightfield,
+    snow: &SnowRule,
+    cover: Option<std::sync::Arc<VegetationCover>>,
+) -> TerrainLayers {
+    use rayon::prelude::*;
     let (w, h) = (map_px(hf.width), map_px(hf.height));
-    let n = (w * h) as usize;
-    let mut weights = Vec::with_capacity(n);
-    let mut pixels = Vec::with_capacity(n);
-    let mut sums = [0.0f64; 4];
-    for y in 0..h {
-        let t = (y as f64 + 0.5) / h as f64 * (hf.height - 1) as f64;
-        for x in 0..w {
-            let s = (x as f64 + 0.5) / w as f64 * (hf.width - 1) as f64;
-            let wts = weights_at(hf, snow, s, t);
-            let mut colour = [0.0f32; 4];
-            colour[3] = 1.0;
-            for (k, &wk) in wts.iter().enumerate() {
-                sums[k] += wk;
-                for c in 0..3 {
-                    colour[c] += wk as f32 * LAYER_ALBEDO[k][c];
-                }
+    let layers = if cover.is_some() { LAYER_NAMES.len() } else { LAYERS_PER_MAP };
+    let texels: Vec<[f64; 5]> = (0..h)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            let t = (y as f64 + 0.5) / h as f64 * (hf.height - 1) as f64;
+            let cover = cover.as_deref();
+            (0..w).map(move |x| weights_at(hf, snow, cover, (x as f64 + 0.5) / w as f64 * (hf.width - 1) as f64, t))
+        })
+        .collect();
+    let mut sums = [0.0f64; 5];
+    let mut weights = vec![Vec::with_capacity(texels.len()); layers.div_ceil(LAYERS_PER_MAP)];
+    let mut pixels = Vec::with_capacity(texels.len());
+    for wts in &texels {
+        let mut colour = [0.0f32, 0.0, 0.0, 1.0];
+        for (k, &wk) in wts.iter().enumerate() {
+            sums[k] += wk;
+            for c in 0..3 {
+                colour[c] += wk as f32 * LAYER_ALBEDO[k][c];
             }
-            weights.push(wts.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8));
-            pixels.push(colour);
         }
+        let bytes = wts.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8);
+        for (m, map) in weights.iter_mut().enumerate() {
+            map.push(std::array::from_fn(|c| bytes.get(LAYERS_PER_MAP * m + c).copied().unwrap_or(0)));
+        }
+        pixels.push(colour);
     }
-    let coverage = sums.iter().map(|s| s / n as f64).collect();
+    let n = texels.len().max(1) as f64;
     TerrainLayers {
         weights,
         albedo: Image { width: w, height: h, pixels },
         report: LayerReport {
             map_px: [w, h],
-            layers: LAYER_NAMES.iter().map(|s| s.to_string()).collect(),
-            coverage,
+            layers: LAYER_NAMES[..layers].iter().map(|s| s.to_string()).collect(),
+            coverage: sums[..layers].iter().map(|s| s / n).collect(),
             snowline_m: SNOWLINE_M,
             snow: snow.label().into(),
         },
         snow: snow.clone(),
+        cover,
         albedo_png: std::sync::OnceLock::new(),
     }
 }
 
 impl TerrainLayers {
-    /// The weight map as PNG bytes (RGBA8, stored as is: weights, not colours).
+    /// The first weight map as PNG bytes (RGBA8, stored as is: weights, not colours).
     pub fn weights_png(&self) -> Result<Vec<u8>, String> {
+        self.weight_pngs().map(|mut v| v.swap_remove(0))
+    }
+
+    /// Every weight map as PNG bytes (map k holds layers 4k … 4k + 3).
+    pub fn weight_pngs(&self) -> Result<Vec<Vec<u8>>, String> {
         let [w, h] = self.report.map_px;
-        encode_rgba8_png(&self.weights.concat(), w, h)
+        self.weights.iter().map(|m| encode_rgba8_png(&m.concat(), w, h)).collect()
     }
 
     /// Puts the layers on a terrain `scene` built from `hf`: the base colour on every terrain
-    /// material (materials named `terrain`: the texture, and a white factor so the texture's colour
-    /// is what shows), and [`LAYER_WEIGHTS_ATTRIBUTE`] on every primitive, from the surface under
-    /// each vertex (x, z → sample x / cell, z / cell; skirt and base vertices take their border's).
+    /// material (materials named `terrain`: the texture, replacing one of the same name, and a
+    /// white factor so the texture's colour is what shows), and [`LAYER_WEIGHTS_ATTRIBUTE`] (with
+    /// a cover also [`LAYER_WEIGHTS_1_ATTRIBUTE`] and [`SURFACE_ATTRIBUTE`]) on every primitive,
+    /// from the surface under each vertex (x, z → sample x / cell, z / cell; skirt and base
+    /// vertices take their border's).
     pub fn texture(&self, scene: &mut Scene, hf: &Heightfield, name: &str) -> Result<(), String> {
-        vertex_weights(scene, hf, &self.snow);
+        vertex_weights(scene, hf, &self.snow, self.cover.as_deref());
         let png = self.albedo_png.get_or_init(|| self.albedo.encode_png().map_err(|e| e.to_string())).clone()?;
-        scene.textures.push(Texture { name: format!("{name}_base_color"), png });
-        let t = scene.textures.len() - 1;
+        let texture = Texture { name: format!("{name}_base_color"), png };
+        let t = match scene.textures.iter().position(|t| t.name == texture.name) {
+            Some(t) => {
+                scene.textures[t] = texture;
+                t
+            }
+            None => {
+                scene.textures.push(texture);
+                scene.textures.len() - 1
+            }
+        };
         for m in scene.materials.iter_mut().filter(|m| m.name == "terrain") {
             m.base_color_texture = Some(t);
             m.base_color = [1.0, 1.0, 1.0, 1.0];
@@ -300,7 +380,7 @@ mod tests {
             for x in 0..mw {
                 let s = (x as f64 + 0.5) / mw as f64 * (w - 1) as f64;
                 let want = if s * 0.1 >= 3.0 { 255 } else { 0 };
-                assert_eq!(layers.weights[(y * mw + x) as usize][3], want, "texel ({x}, {y}) at height {}", s * 0.1);
+                assert_eq!(layers.weights[0][(y * mw + x) as usize][3], want, "texel ({x}, {y}) at height {}", s * 0.1);
             }
         }
         // the same weight the snow stage gives a vertex with this position and normal
@@ -318,7 +398,7 @@ mod tests {
         assert!(direct > 0.05 && direct < 0.95, "{direct}");
         assert_eq!(rule.weight(q, n), direct as f64);
         // the fixed snowline puts none on this low ramp
-        assert!(bake_layers(&hf, &SnowRule::Snowline).weights.iter().all(|t| t[3] == 0));
+        assert!(bake_layers(&hf, &SnowRule::Snowline).weights[0].iter().all(|t| t[3] == 0));
     }
 
     #[test]
@@ -350,7 +430,7 @@ mod tests {
         let hf = Heightfield { width: w, height: h, cell_size_m: cell, heights, exact: None };
         let layers = bake_layers(&hf, &SnowRule::Snowline);
         assert_eq!(layers.report.map_px, [64, 32]);
-        let at = |x: usize, y: usize| layers.weights[y * 64 + x];
+        let at = |x: usize, y: usize| layers.weights[0][y * 64 + x];
         assert!(at(4, 16)[0] == 255, "{:?}", at(4, 16));
         assert!(at(60, 16)[2] == 255, "{:?}", at(60, 16));
         let c = &layers.report.coverage;

@@ -15,6 +15,7 @@ pub mod sample_mesh;
 pub mod solid;
 pub mod stored;
 pub mod tin;
+pub mod vegetation;
 
 pub use error::TerrainError;
 pub use sample_mesh::SampleMesh;

@@ -454,23 +454,32 @@ fn scatter_cache_hits_on_rebuild_and_misses_on_species_or_density_map_changes() 
     assert_eq!(scatter_files(&s), first, "a cached scatter stage restored different bytes");
     assert_eq!(fs::read(s.join("manifest.json")).unwrap(), manifest, "a cached build wrote another manifest");
 
-    // a species setting changes: the scatter misses, the terrain hits
+    // a species setting changes: the scatter misses, and so does the terrain, whose `_SURFACE`
+    // carries the species' densities (its mesh stays the same)
+    let terrain_before = read_json(&s.join("report.json"))["stages"]["terrain"]["triangles"].clone();
+    let glb_before = fs::read(s.join("terrain/terrain.glb")).unwrap();
     write(
         d,
         "p/a.toml",
         &preset("a", 3, &format!("{}\n{mapped}", TREE.replace("max_density = 0.01", "max_density = 0.005"))),
     );
     build();
-    assert!(timing_cached(&s, "terrain"), "the terrain should come from the cache");
+    assert!(!timing_cached(&s, "terrain"), "the terrain's surface attributes follow the species");
     assert!(!timing_cached(&s, "scatter"), "a changed max_density must recompute the scatter");
+    assert_eq!(read_json(&s.join("report.json"))["stages"]["terrain"]["triangles"], terrain_before);
+    assert!(terrain_before.as_u64().is_some_and(|t| t > 0));
+    assert_ne!(fs::read(s.join("terrain/terrain.glb")).unwrap(), glb_before);
     let fewer = read_csv(&s.join("placements/tree.csv")).len();
     assert!(fewer < read_csv_bytes(&first["placements/tree.csv"]) * 3 / 4, "{fewer} trees after halving max_density");
 
-    // the density map's bytes change (same path, same preset): scatter misses, terrain hits
+    // the density map's bytes change (same path, same preset): scatter misses, and the terrain
+    // (its soil layer follows the grass)
     let before = scatter_files(&s);
+    let soil_before = fs::read(s.join("terrain/terrain_layers_1.png")).unwrap();
     write_density(&d.join("p/maps/grass.png"), 0.8, 0.2);
     build();
-    assert!(timing_cached(&s, "terrain"));
+    assert!(!timing_cached(&s, "terrain"));
+    assert_ne!(fs::read(s.join("terrain/terrain_layers_1.png")).unwrap(), soil_before, "the soil follows the grass");
     assert!(!timing_cached(&s, "scatter"), "a changed density map must recompute the scatter");
     assert_ne!(scatter_files(&s)["placements/grass.csv"], before["placements/grass.csv"]);
     assert_eq!(scatter_files(&s)["placements/tree.csv"], before["placements/tree.csv"], "the trees do not use the map");
@@ -800,4 +809,105 @@ fn density_weight_maps_hold_each_species_density_on_the_terrain_layer_texels() {
             sp["name"]
         );
     }
+}
+
+#[test]
+fn the_terrain_shows_what_grows_on_it_soil_layer_and_surface_attributes() {
+    // issue 15 item 2: the species' densities drive the terrain's material layers (soil where the
+    // grass leaves the gentle ground bare) and the terrain walk-through thesis' surface attributes
+    // (TEXTURE, TYPE, DENSITY, SIZE) travel with the mesh as `_SURFACE`
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // grass on the map's right half; trees only on its first rows (a mask 1 where row < 8 of 16)
+    write_density(&d.join("p/maps/grass.png"), 0.0, 1.0);
+    let mask = ImageBuffer::from_fn(32, 16, |_, j| Luma([if j < 8 { 65535u16 } else { 0 }]));
+    mask.save(d.join("p/maps/trees.png")).unwrap();
+    let tree = TREE.replace("max_density = 0.01\n", "max_density = 0.01\nmask = \"maps/trees.png\"\n");
+    let grass = GRASS
+        .replace("placement = \"jittered\"\n", "placement = \"jittered\"\ndensity_map = \"maps/grass.png\"\n")
+        .replace("exclusion = { species = \"tree\", radius = 1.5 }\n", "");
+    write(d, "p/a.toml", &preset("a", 3, &format!("{tree}\n{grass}")));
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o", "--skip", "view,preview"]));
+    let s = d.join("o/a");
+    let r = read_json(&s.join("report.json"));
+    let layers = &r["stages"]["terrain"]["layers"];
+    assert_eq!(layers["layers"], serde_json::json!(["grass", "scree", "rock", "snow", "soil"]));
+    let listed = read_json(&s.join("manifest.json"))["files"].to_string();
+    assert!(listed.contains("terrain/terrain_layers_1.png"), "{listed}");
+
+    // the soil takes the gentle ground the grass leaves bare, texel for texel with the grass
+    // density map the scatter stage wrote
+    let first = image::open(s.join("terrain/terrain_layers.png")).unwrap().to_rgba8();
+    let second = image::open(s.join("terrain/terrain_layers_1.png")).unwrap().to_rgba8();
+    let density = image::open(s.join("placements/density_0.png")).unwrap().to_rgba8();
+    assert_eq!(first.dimensions(), second.dimensions());
+    assert_eq!(first.dimensions(), density.dimensions());
+    let (mut bare, mut grown) = (0, 0);
+    for ((a, b), dn) in first.pixels().zip(second.pixels()).zip(density.pixels()) {
+        assert!(b.0[1] == 0 && b.0[2] == 0 && b.0[3] == 0, "only R holds a layer: {b:?}");
+        let gentle = a.0[0] as f64 + b.0[0] as f64;
+        let want = gentle * (1.0 - dn.0[1] as f64 / 255.0);
+        assert!((b.0[0] as f64 - want).abs() <= 2.0, "soil {} for gentle {gentle}, grass density {}", b.0[0], dn.0[1]);
+        if gentle > 200.0 && dn.0[1] == 0 {
+            bare += 1;
+        } else if gentle > 200.0 && dn.0[1] == 255 {
+            grown += 1;
+            assert_eq!(b.0[0], 0, "no soil under full grass");
+        }
+    }
+    assert!(bare > 1000 && grown > 1000, "{bare} bare and {grown} grass texels of gentle ground");
+
+    // every vertex of terrain.glb as re-read: five weights summing to 255/255 over the two
+    // attributes, TEXTURE the largest, TYPE/DENSITY/SIZE those of the species covering the most
+    // ground under it (trees wherever they grow; grass where alone; nothing: 0)
+    let back = verdant::validate::read_scene(&s.join("terrain/terrain.glb")).unwrap();
+    for p in back.meshes.iter().flat_map(|m| &m.primitives) {
+        let get = |name: &str| &p.custom.iter().find(|c| c.name == name).expect(name).values;
+        let (w0, w1) = (get("_LAYER_WEIGHTS"), get("_LAYER_WEIGHTS_1"));
+        for ((a, b), surface) in w0.iter().zip(w1).zip(get("_SURFACE")) {
+            let bytes: Vec<u32> = a.iter().chain(&b[..1]).map(|v| (v * 255.0).round() as u32).collect();
+            assert_eq!(bytes.iter().sum::<u32>(), 255, "{a:?} {b:?}");
+            assert_eq!(&b[1..], &[0.0; 3]);
+            let top = *bytes.iter().max().unwrap();
+            assert!(bytes[surface[0] as usize] + 1 >= top, "TEXTURE {} of {bytes:?}", surface[0]);
+        }
+    }
+    let species = r["stages"]["scatter"]["species"].as_array().unwrap();
+    let max_density = |k: usize| species[k]["density_weight"]["max_density"].as_f64().unwrap();
+    let (w, h) = density.dimensions();
+    let extent = 256.0;
+    let mut seen = [0usize; 3];
+    for (q, v) in surface_attribute(&back, "_SURFACE") {
+        // the density map's texels whose centres surround the vertex (bilinear support)
+        let fx = (q[0] as f64 / extent * w as f64 - 0.5).clamp(0.0, w as f64 - 1.0);
+        let fz = (q[2] as f64 / extent * h as f64 - 0.5).clamp(0.0, h as f64 - 1.0);
+        let texels: Vec<[u8; 4]> = [(0, 0), (1, 0), (0, 1), (1, 1)]
+            .iter()
+            .map(|(di, dj)| {
+                let (i, j) = ((fx.floor() as u32 + di).min(w - 1), (fz.floor() as u32 + dj).min(h - 1));
+                density.get_pixel(i, j).0
+            })
+            .collect();
+        let pure = |c: usize, b: u8| texels.iter().all(|t| t[c] == b);
+        let [texture, kind, dens, size] = v;
+        assert!((0.0..5.0).contains(&texture) && texture.fract() == 0.0, "{v:?}");
+        if pure(0, 255) {
+            assert_eq!(kind, 1.0, "trees grow at {q:?}: {v:?}");
+            assert!((dens as f64 - max_density(0)).abs() < 1e-6, "{v:?} vs {}", max_density(0));
+            assert!(size > 2.0, "a tree's height {size}");
+            seen[0] += 1;
+        } else if pure(0, 0) && pure(1, 255) {
+            assert_eq!(kind, 2.0, "grass alone at {q:?}: {v:?}");
+            assert!((dens as f64 - max_density(1)).abs() < 1e-6, "{v:?} vs {}", max_density(1));
+            assert!(size > 0.1 && size < 1.0, "a grass clump's height {size}");
+            seen[1] += 1;
+        } else if pure(0, 0) && pure(1, 0) {
+            assert_eq!([kind, dens, size], [0.0; 3], "nothing grows at {q:?}");
+            seen[2] += 1;
+        }
+    }
+    assert!(seen.iter().all(|&n| n > 30), "vertices under trees, grass alone, nothing: {seen:?}");
+    // the report says what covers the terrain
+    let md = std::fs::read_to_string(s.join("report.md")).unwrap();
+    assert!(md.contains("Material layers (") && md.contains("soil "), "{md}");
 }

@@ -414,27 +414,6 @@ fn a_preset_without_snow_writes_no_snow_folder() {
     );
 }
 
-/// The surface vertices of a terrain scene's primitives (the highest at each x, z: skirts hang
-/// below) with their `name` attribute.
-fn surface_attribute(scene: &verdant::mesh::Scene, name: &str) -> Vec<([f32; 3], [f32; 4])> {
-    let mut out = Vec::new();
-    for p in scene.meshes.iter().flat_map(|m| &m.primitives) {
-        let c = p.custom.iter().find(|c| c.name == name).unwrap_or_else(|| panic!("{name} on every primitive"));
-        assert_eq!(c.values.len(), p.positions.len());
-        let mut top = std::collections::HashMap::new();
-        for q in &p.positions {
-            let y = top.entry((q[0].to_bits(), q[2].to_bits())).or_insert(q[1]);
-            *y = y.max(q[1]);
-        }
-        for (q, v) in p.positions.iter().zip(&c.values) {
-            if q[1] >= top[&(q[0].to_bits(), q[2].to_bits())] {
-                out.push((*q, *v));
-            }
-        }
-    }
-    out
-}
-
 #[test]
 fn the_terrain_shows_the_snow_the_cover_puts_down() {
     // issue 15 item 2: terrain layers from the snow cover (winter_valley showed no snow in engines:
