@@ -116,7 +116,7 @@ impl LodView {
 }
 
 /// One level of a terrain LoD chain.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LodLevel {
     /// 0 is the finest.
     pub level: usize,

@@ -228,7 +228,11 @@ fn build_into(
     let mut terrain: Option<TerrainHandoff> = None;
     let mut terrain_lods: Vec<LodInfo> = Vec::new();
     if let (true, Some(t)) = (wants(Stage::Terrain), &preset.terrain) {
-        let ran = runner.run(&TerrainJob { preset, terrain: t })?;
+        let memo = crate::scene::terrain_stage::MeshMemo { cache: &cache, force: settings.force };
+        let job = TerrainJob { preset, terrain: t, memo: Some(memo) };
+        let ran = runner.run(&job)?;
+        // the terrain's meshes, kept apart from its files: `cache prune` keeps them with the scene
+        runner.used.entries.extend(job.memo_entry());
         terrain = Some(TerrainHandoff::new(dir, &ran.report.files, ran.key, ran.artifact));
         terrain_lods = ran.report.lods.clone();
         runs.push(StageRun::Terrain { report: ran.report, cached: ran.cached, seconds: ran.seconds });

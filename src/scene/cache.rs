@@ -204,6 +204,29 @@ impl Cache {
         files: &[PathBuf],
         stage_json: &str,
     ) -> io::Result<FileHashes> {
+        self.store_entry(stage, key, scene_dir, files, stage_json, None)
+    }
+
+    /// Stores an entry of no scene files: `stage_json` and `blob` (written as `blob.bin` in the
+    /// entry folder, e.g. arrays too large for JSON), replacing one of the same key.
+    pub fn store_blob(&self, stage: &str, key: &str, stage_json: &str, blob: &[u8]) -> io::Result<()> {
+        self.store_entry(stage, key, Path::new(""), &[], stage_json, Some(blob)).map(|_| ())
+    }
+
+    /// An entry's `blob.bin` (see [`Cache::store_blob`]).
+    pub fn read_blob(entry: &Path) -> io::Result<Vec<u8>> {
+        fs::read(entry.join("blob.bin"))
+    }
+
+    fn store_entry(
+        &self,
+        stage: &str,
+        key: &str,
+        scene_dir: &Path,
+        files: &[PathBuf],
+        stage_json: &str,
+        blob: Option<&[u8]>,
+    ) -> io::Result<FileHashes> {
         static SERIAL: AtomicU64 = AtomicU64::new(0);
         let dir = self.entry(stage, key);
         fs::create_dir_all(&self.root)?;
@@ -215,6 +238,7 @@ impl Cache {
         ));
         let mut hashes = FileHashes::new();
         let result = (|| {
+            fs::create_dir_all(&tmp)?;
             for rel in files {
                 let bytes = fs::read(scene_dir.join(rel))?;
                 let dst = tmp.join(rel);
@@ -226,6 +250,9 @@ impl Cache {
             }
             let table = serde_json::to_string(&hashes).map_err(io::Error::other)?;
             fs::write(tmp.join("files.json"), table)?;
+            if let Some(blob) = blob {
+                fs::write(tmp.join("blob.bin"), blob)?;
+            }
             fs::write(tmp.join("stage.json"), stage_json)?;
             // a store follows a failed lookup: an entry already there is damaged, replace it
             if dir.exists() {

@@ -115,6 +115,100 @@ pub const TERRAIN_ALGORITHM_VERSION: u32 = 8;
 pub struct TerrainJob<'a> {
     pub preset: &'a Preset,
     pub terrain: &'a TerrainSettings,
+    /// Where the meshes are kept apart from the stage's files (see [`MeshMemo`]); `None`: always
+    /// mesh.
+    pub memo: Option<MeshMemo<'a>>,
+}
+
+/// The terrain's meshes (the main TIN and its LoD chain) kept in the cache under a key of what
+/// they depend on alone (the terrain settings, the `[lod]` policy, the heightmap's bytes), so a
+/// build whose terrain stage misses for another reason (a species edit changes the soil layer and
+/// `_SURFACE`; a `[snow]` cover, the snow layer; the formats) re-textures and re-writes the
+/// terrain without meshing it again. The entry is `terrain-mesh-<key>` beside the stage entries.
+#[derive(Clone, Copy)]
+pub struct MeshMemo<'a> {
+    pub cache: &'a crate::scene::cache::Cache,
+    /// `--force`: mesh again and replace the entry.
+    pub force: bool,
+}
+
+/// The cache stage name of the terrain's meshes.
+pub const MESH_MEMO_STAGE: &str = "terrain-mesh";
+
+/// What the memo keeps: the LoD chain as meshed and measured, and the main mesh with its figures.
+/// In the entry, `stage.json` holds them with the meshes' arrays left empty and their lengths in
+/// `sizes`; `blob.bin` holds the arrays (little-endian u32: each mesh's vertices then triangles,
+/// chain levels first, then the main mesh).
+#[derive(Serialize, Deserialize)]
+struct Meshes {
+    chain: Vec<crate::lod::LodLevel>,
+    main: (crate::terrain::sample_mesh::SampleMesh, bool, crate::terrain::error::ErrorStats),
+    #[serde(default)]
+    sizes: Vec<[usize; 2]>,
+}
+
+impl Meshes {
+    fn meshes_mut(&mut self) -> impl Iterator<Item = &mut crate::terrain::sample_mesh::SampleMesh> {
+        self.chain.iter_mut().map(|l| &mut l.mesh).chain(std::iter::once(&mut self.main.0))
+    }
+
+    /// Moves the arrays out into a blob (and their lengths into `sizes`).
+    fn to_blob(&mut self) -> Vec<u8> {
+        let mut blob = Vec::new();
+        let mut sizes = Vec::new();
+        for m in self.meshes_mut() {
+            sizes.push([m.vertices.len(), m.triangles.len()]);
+            blob.extend(m.vertices.iter().flatten().flat_map(|v| v.to_le_bytes()));
+            blob.extend(m.triangles.iter().flatten().flat_map(|v| v.to_le_bytes()));
+            *m = Default::default();
+        }
+        self.sizes = sizes;
+        blob
+    }
+
+    /// Puts the arrays back from a blob; `None` when it does not match `sizes`.
+    fn from_blob(mut self, blob: &[u8]) -> Option<Meshes> {
+        let mut words = blob.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]));
+        let expected: usize = self.sizes.iter().map(|[v, t]| 2 * v + 3 * t).sum();
+        if blob.len() != 4 * expected {
+            return None;
+        }
+        let sizes = std::mem::take(&mut self.sizes);
+        if self.chain.len() + 1 != sizes.len() {
+            return None;
+        }
+        for (m, [v, t]) in self.meshes_mut().zip(sizes) {
+            m.vertices = (0..v).map(|_| [words.next().unwrap_or(0), words.next().unwrap_or(0)]).collect();
+            m.triangles = (0..t)
+                .map(|_| [words.next().unwrap_or(0), words.next().unwrap_or(0), words.next().unwrap_or(0)])
+                .collect();
+        }
+        Some(self)
+    }
+}
+
+/// Key of the terrain's meshes: what meshing reads (not the formats, snow or species).
+pub fn mesh_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageError> {
+    let mut k = KeyBuilder::new(MESH_MEMO_STAGE, TERRAIN_ALGORITHM_VERSION);
+    k.add(serde_json::to_string(t).unwrap_or_default().as_bytes());
+    if !t.lods.is_empty() {
+        k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
+    }
+    if let TerrainSource::Heightmap { path, .. } = &t.source {
+        let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+            .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))?;
+        k.add(sha256_hex(&bytes).as_bytes());
+    }
+    Ok(k.finish())
+}
+
+impl TerrainJob<'_> {
+    /// The memo's entry name (what `verdant cache prune` keeps for this scene), when it has one.
+    pub fn memo_entry(&self) -> Option<String> {
+        self.memo?;
+        let key = mesh_key(self.preset, self.terrain).ok()?;
+        Some(crate::scene::cache::Cache::entry_name(MESH_MEMO_STAGE, &key))
+    }
 }
 
 impl StageJob for TerrainJob<'_> {
@@ -132,7 +226,7 @@ impl StageJob for TerrainJob<'_> {
     }
 
     fn run(&self, dir: &Path) -> Result<(TerrainStageReport, Scene), SceneBuildError> {
-        Ok(run_terrain(self.preset, self.terrain, dir)?)
+        Ok(run_terrain_memo(self.preset, self.terrain, dir, self.memo)?)
     }
 }
 
@@ -195,6 +289,16 @@ pub fn run_terrain(
     t: &TerrainSettings,
     scene_dir: &Path,
 ) -> Result<(TerrainStageReport, Scene), StageError> {
+    run_terrain_memo(preset, t, scene_dir, None)
+}
+
+/// [`run_terrain`], taking the meshes from `memo` when it holds them (and storing them when not).
+pub fn run_terrain_memo(
+    preset: &Preset,
+    t: &TerrainSettings,
+    scene_dir: &Path,
+    memo: Option<MeshMemo<'_>>,
+) -> Result<(TerrainStageReport, Scene), StageError> {
     let f = fail(Stage::Terrain);
     // the settings or the map at fault: a chain the map cannot have, chunks or skirts it cannot take
     let input = bad_input(Stage::Terrain);
@@ -202,20 +306,37 @@ pub fn run_terrain(
     let (hf, voids_filled, input_sha256) = terrain_heights(t)?;
     let decode_s = t0.elapsed().as_secs_f64();
 
+    // the meshes as an earlier build of the same terrain made them (an entry that does not read
+    // back is meshed again and replaced)
+    let memo_key = memo.map(|_| mesh_key(preset, t)).transpose()?;
+    let remembered: Option<Meshes> = match (memo, &memo_key) {
+        (Some(m), Some(key)) if !m.force => m.cache.lookup(MESH_MEMO_STAGE, key).and_then(|(json, entry)| {
+            let meshes: Meshes = serde_json::from_str(&json).ok()?;
+            meshes.from_blob(&crate::scene::cache::Cache::read_blob(&entry).ok()?)
+        }),
+        _ => None,
+    };
+    let from_memo = remembered.is_some();
+
     // The LoD chain meshes its levels in parallel; when one of them is the main mesh's bound,
     // the main mesh is taken from the chain instead of being computed twice.
     let t1 = Instant::now();
-    let chain = if t.lods.is_empty() {
-        Vec::new()
-    } else {
-        terrain_lod_chain(&hf, &t.lods, t.max_triangles, t.max_vertices, &preset.lod)
-            .map_err(|e| input(e.to_string()))?
+    let (mut chain, remembered_main) = match remembered {
+        Some(m) => (m.chain, Some(m.main)),
+        None if t.lods.is_empty() => (Vec::new(), None),
+        None => (
+            terrain_lod_chain(&hf, &t.lods, t.max_triangles, t.max_vertices, &preset.lod)
+                .map_err(|e| input(e.to_string()))?,
+            None,
+        ),
     };
     let chain_s = t1.elapsed().as_secs_f64();
-    let ready = chain
-        .iter()
-        .find(|l| t.mode == MeshMode::Tin && l.max_error_requested_m == t.max_error_m)
-        .map(|l| (l.mesh.clone(), l.hit_triangle_limit, l.stats));
+    let ready = remembered_main.or_else(|| {
+        chain
+            .iter()
+            .find(|l| t.mode == MeshMode::Tin && l.max_error_requested_m == t.max_error_m)
+            .map(|l| (l.mesh.clone(), l.hit_triangle_limit, l.stats))
+    });
     let snow = snow_rule(preset);
     let build_opts = |name: String| BuildOptions {
         chunk_samples: t.chunk,
@@ -235,6 +356,19 @@ pub fn run_terrain(
     let meshed =
         mesh_and_build(&hf, &settings, &Storage::f32(&hf), &build_opts("terrain".into()), &source_label(t), ready)
             .map_err(|e| StageError::of(Stage::Terrain.name(), &e, e.to_string()))?;
+    if let (Some(m), Some(key), false) = (memo, &memo_key, from_memo) {
+        // kept for the next build of this terrain (a store that fails only costs a re-mesh then)
+        let mut meshes =
+            Meshes { chain, main: (meshed.mesh.clone(), meshed.hit_triangle_limit, meshed.stats), sizes: Vec::new() };
+        let blob = meshes.to_blob();
+        if let Ok(json) = serde_json::to_string(&meshes) {
+            let _ = m.cache.store_blob(MESH_MEMO_STAGE, key, &json, &blob);
+        }
+        chain = meshes
+            .from_blob(&blob)
+            .ok_or_else(|| f("the terrain's meshes did not read back from their own arrays".into()))?
+            .chain;
+    }
     let mut figures = meshed.figures(&hf, &settings, voids_filled);
     // (a shared level's meshing and measuring time is counted under `lods`)
     let [mesh_s, mut analyze_s, build_s] = meshed.seconds;

@@ -111,7 +111,7 @@ pub(crate) fn check_heightfield(hf: &Heightfield) -> Result<(), TerrainError> {
 }
 
 /// What [`measure`] found.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ErrorStats {
     /// Largest |mesh height − sample height| over all covered samples, in metres.
     pub max_error_m: f64,

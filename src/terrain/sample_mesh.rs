@@ -2,7 +2,7 @@
 
 /// A triangulation whose vertices are heightmap samples: the plain data between the meshers
 /// (`grid`, `tin`), the error analyzer (`error`) and mesh building.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SampleMesh {
     /// Sample coordinates (column i, row j) of each vertex.
     pub vertices: Vec<[u32; 2]>,

@@ -469,6 +469,26 @@ fn scatter_cache_hits_on_rebuild_and_misses_on_species_or_density_map_changes() 
     assert_eq!(read_json(&s.join("report.json"))["stages"]["terrain"]["triangles"], terrain_before);
     assert!(terrain_before.as_u64().is_some_and(|t| t > 0));
     assert_ne!(fs::read(s.join("terrain/terrain.glb")).unwrap(), glb_before);
+    // ... re-textured, not re-meshed: the meshes come from the cache's terrain-mesh entry, and the
+    // terrain is byte for byte what a build without any cache writes
+    let timing = read_json(&s.join("report.json"))["timing"]["terrain"]["computed_in"].clone();
+    assert_eq!(timing["mesh"], 0.0, "the terrain was meshed again: {timing}");
+    let memo = fs::read_dir(d.join("o/.cache"))
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with("terrain-mesh-"));
+    assert_eq!(memo.count(), 1);
+    // `cache prune` keeps it with the scene built from it
+    ok(&verdant_in(d, &["cache", "prune", "--out", "o"]));
+    let kept = fs::read_dir(d.join("o/.cache")).unwrap().flatten();
+    assert_eq!(kept.filter(|e| e.file_name().to_string_lossy().starts_with("terrain-mesh-")).count(), 1);
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "fresh"]));
+    let terrain_files = |root: &Path| {
+        let mut t = tree(&root.join("a"));
+        t.retain(|k, _| k.starts_with("terrain/"));
+        t
+    };
+    assert_eq!(terrain_files(&d.join("o")), terrain_files(&d.join("fresh")), "the memo changed the terrain");
     let fewer = read_csv(&s.join("placements/tree.csv")).len();
     assert!(fewer < read_csv_bytes(&first["placements/tree.csv"]) * 3 / 4, "{fewer} trees after halving max_density");
 

@@ -510,14 +510,25 @@ fn a_damaged_cache_entry_is_recomputed() {
     let d = dir.path();
     write(d, "p/a.toml", &small_preset("a", 3));
     ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
-    let entry = fs::read_dir(d.join("o/.cache"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.file_name().unwrap().to_string_lossy().starts_with("terrain-"));
-    fs::remove_file(entry.unwrap().join("terrain/terrain_LOD1.glb")).unwrap();
+    let entry = |stage: &str| {
+        fs::read_dir(d.join("o/.cache")).unwrap().map(|e| e.unwrap().path()).find(|p| {
+            let name = p.file_name().unwrap().to_string_lossy().to_string();
+            name.strip_prefix(stage).is_some_and(|key| key.len() == 32 && key.bytes().all(|b| b.is_ascii_hexdigit()))
+        })
+    };
+    fs::remove_file(entry("terrain-").unwrap().join("terrain/terrain_LOD1.glb")).unwrap();
     let o = verdant_in(d, &["build", "p/a.toml", "--out", "o"]);
     ok(&o);
     assert!(d.join("o/a/terrain/terrain_LOD1.glb").is_file());
+    // the terrain's meshes kept apart (terrain-mesh-…) cut short: meshed again, the same files
+    let before = tree(&d.join("o/a/terrain"));
+    fs::remove_dir_all(entry("terrain-").unwrap()).unwrap();
+    let blob = entry("terrain-mesh-").expect("the terrain's meshes are kept").join("blob.bin");
+    let bytes = fs::read(&blob).unwrap();
+    fs::write(&blob, &bytes[..bytes.len() / 2]).unwrap();
+    ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
+    assert_eq!(tree(&d.join("o/a/terrain")), before);
+    assert_eq!(fs::read(&blob).unwrap(), bytes, "the damaged entry was replaced");
 }
 
 // -------------------------------------------------------------------------------- manifest, preview
