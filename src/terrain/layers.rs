@@ -402,6 +402,56 @@ mod tests {
     }
 
     #[test]
+    fn a_vegetation_cover_turns_bare_gentle_ground_to_soil_and_puts_surface_on_every_vertex() {
+        use crate::terrain::vegetation::{Ground, SpeciesCover, VegetationCover};
+        // a flat plain 64 m square: grass grows on its right half only
+        let (w, h) = (65, 65);
+        let hf = Heightfield { width: w, height: h, cell_size_m: 1.0, heights: vec![0.0; w * h], exact: None };
+        let size = [map_px(w), map_px(h)];
+        let weights = (0..size[0] * size[1]).map(|k| if k % size[0] >= size[0] / 2 { 1.0 } else { 0.0 }).collect();
+        let grass =
+            SpeciesCover { ground: Ground::Grass, max_density: 4.0, height_m: 0.3, footprint_m2: 0.05, weights };
+        let cover = VegetationCover { extent: [0.0, 0.0, (w - 1) as f64, (h - 1) as f64], size, species: vec![grass] };
+        let layers = bake_layers_with(&hf, &SnowRule::Snowline, Some(std::sync::Arc::new(cover)));
+        assert_eq!(layers.report.layers, LAYER_NAMES);
+        assert_eq!(layers.weights.len(), 2, "two weight maps");
+        let c = &layers.report.coverage;
+        assert!((c[0] - 0.5).abs() < 1e-9 && (c[4] - 0.5).abs() < 1e-9, "{c:?}");
+        assert_eq!(layers.weight_pngs().unwrap().len(), 2);
+        let texel = |x: u32| (layers.weights[0][x as usize], layers.weights[1][x as usize]);
+        assert_eq!(texel(0), ([0, 0, 0, 0], [255, 0, 0, 0]), "bare: soil");
+        assert_eq!(texel(size[0] - 1), ([255, 0, 0, 0], [0, 0, 0, 0]), "grass where it grows");
+        // every vertex: five bytes summing to 255, TEXTURE the larger layer, the grass's TYPE,
+        // DENSITY and SIZE where it grows, nothing where it does not
+        let mut scene = crate::terrain::build::build_scene(
+            &hf,
+            &crate::terrain::grid::grid(&hf, 8).unwrap(),
+            &crate::terrain::build::BuildOptions::default(),
+        )
+        .unwrap();
+        layers.texture(&mut scene, &hf, "terrain").unwrap();
+        let p = &scene.meshes[0].primitives[0];
+        let get = |name: &str| &p.custom.iter().find(|c| c.name == name).unwrap().values;
+        for (((q, a), b), surface) in p
+            .positions
+            .iter()
+            .zip(get(LAYER_WEIGHTS_ATTRIBUTE))
+            .zip(get(LAYER_WEIGHTS_1_ATTRIBUTE))
+            .zip(get(SURFACE_ATTRIBUTE))
+        {
+            let total: f32 = a.iter().sum::<f32>() + b[0];
+            assert!((total - 1.0).abs() < 1e-5, "{a:?} {b:?}");
+            if q[0] < 28.0 {
+                assert_eq!((a[0], b[0]), (0.0, 1.0), "soil at {q:?}");
+                assert_eq!(*surface, [4.0, 0.0, 0.0, 0.0], "at {q:?}");
+            } else if q[0] > 36.0 {
+                assert_eq!((a[0], b[0]), (1.0, 0.0), "grass at {q:?}");
+                assert_eq!(*surface, [0.0, 1.0, 4.0, 0.3], "at {q:?}");
+            }
+        }
+    }
+
+    #[test]
     fn map_sizes_are_powers_of_two_near_the_sample_spacing() {
         assert_eq!(map_px(513), 512);
         assert_eq!(map_px(512), 512);
