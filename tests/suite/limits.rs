@@ -402,3 +402,35 @@ fn temporaries_of_killed_runs_are_removed_by_the_next_run() {
     }
     assert!(d.join(&live).exists() && d.join("notes.tmp").exists());
 }
+
+#[test]
+fn a_tree_over_the_default_triangle_budget_is_refused_before_its_chain() {
+    // issue 21 item 2 (and the lsystem fuzz target's slow units): a 27-byte bush at recursion 11
+    // needs 2.36 M triangles, within the former default of 4 M, and its default chain took 53 s
+    // and 3 GB; the default budget (300,000) refuses it before any LoD work, naming the flag
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let bush = |depth: u32| format!("recursion {depth}\nangle 30\nthickness 20\naxiom A\nrule A = F[+A][-A]^A\n");
+    write(d, "b11.ls", &bush(11));
+    let o = verdant_in(d, &["tree", "b11.ls", "-o", "b11.glb"]);
+    refused(&o, 2, "the tree needs more than 300000 triangles (--max-triangles");
+    assert!(!d.join("b11.glb").exists());
+    // the same bush at recursion 7 (about 29k triangles) is well within it
+    write(d, "b7.ls", &bush(7));
+    ok(&verdant_in(d, &["tree", "b7.ls", "-o", "b7.glb", "--lods", "2", "--no-analysis"]));
+    // and the budget is the default of a preset's tree too
+    write(d, "b10.ls", &bush(10));
+    let p = write(
+        d,
+        "p.toml",
+        "[scene]\nname = \"x\"\nformats = [\"glb\"]\n\
+         [terrain]\nprocedural = { kind = \"fbm\", size = 65, seed = 3, relief = 10.0 }\n\
+         [[species]]\nname = \"b\"\nkind = \"tree\"\nlsystem = \"b10.ls\"\nmax_density = 0.001\n\
+         tree = { variants = 1, height = 3.0 }\n",
+    );
+    let o = verdant_in(d, &["build", p.to_str().unwrap(), "--out", "out"]);
+    let t = text(&o);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    assert!(t.contains("more than 300000 triangles") && t.contains("`max_triangles` in a preset's tree"), "{t}");
+    assert!(!t.contains("panicked"), "{t}");
+}
