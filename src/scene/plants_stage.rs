@@ -188,8 +188,9 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// cards frame like billboards (they no longer widen every level's views). 14: the switch search
 /// starts at 128 radii and narrows brackets by interpolation (same switches on ../shared/data,
 /// fewer distances measured in the report). 15: the chain maps the table's `variant` column to
-/// its meshes (`pick`; the files are unchanged).
-pub const PLANTS_ALGORITHM_VERSION: u32 = 15;
+/// its meshes (`pick`; the files are unchanged). 16: a tree's LoD1 is its rebuild with half the
+/// radial segments, simplified only when that saves nothing (edge collapse flattened the twigs).
+pub const PLANTS_ALGORITHM_VERSION: u32 = 16;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).

@@ -183,7 +183,7 @@ fn cli_tree_and_mesh_say_each_chain_step_as_it_starts_and_quiet_silences_them() 
     let steps: Vec<&str> = err.lines().filter(|l| l.starts_with("[bush] ")).collect();
     let want = [
         "[bush] LoD0: growing the tree",
-        "[bush] LoD1: half the radial segments, simplified",
+        "[bush] LoD1: half the radial segments",
         "[bush] cards, billboards and the impostor",
     ];
     for w in want {
@@ -397,9 +397,9 @@ fn point_leaf_chains_keep_points_at_lod0_and_stay_valid() {
 
 #[test]
 fn a_tree_too_small_for_a_level_still_yields_a_valid_chain() {
-    // one trunk segment, no leaves (written here by hand): its cards level has as many triangles as
-    // the billboards would, so the billboards save nothing and are left out (this used to be an
-    // error asking for --lods 3)
+    // one trunk segment of 4 sides, no leaves (written here by hand): its cards level has as many
+    // triangles as the billboards would (8), so the billboards save nothing and are left out (this
+    // used to be an error asking for --lods 3)
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("stick.ls");
     std::fs::write(&input, "1\n28\n18\nX(100)=F\n@\n").unwrap();
@@ -407,7 +407,7 @@ fn a_tree_too_small_for_a_level_still_yields_a_valid_chain() {
         input: input.clone(),
         output: dir.path().join("out/stick.glb"),
         dialect: None,
-        options: TreeOptions { name: "stick".into(), ..TreeOptions::default() },
+        options: TreeOptions { name: "stick".into(), radial_segments: 4, ..TreeOptions::default() },
         lod: small_atlas(),
         variants: 1,
     };
