@@ -1059,6 +1059,27 @@ def rotate_up(q: np.ndarray, up: np.ndarray) -> np.ndarray:
     return np.stack([2 * (x * y - w * z) * up, (1 - 2 * (x * x + z * z)) * up, 2 * (y * z + w * x) * up], 1)
 
 
+def rotate_vec(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(n, 3): each unit quaternion q (x, y, z, w) applied to the row of v: v + 2w (q × v) + 2 q × (q × v)."""
+    u, w = q[:, 0:3], q[:, 3:4]
+    t = 2 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def impostor_views(rows: np.ndarray, eye, impostor: dict) -> np.ndarray:
+    """The baked impostor view each row shows to the eye, as docs/scene.md documents it:
+    k = round(atan2(dx, dz) / step) mod views, (dx, dz) from the instance's centre to the eye in the
+    instance's own frame (its rotation and scale undone)."""
+    p = rows[:, 0:3].astype(np.float32).astype(np.float64)
+    q = rows[:, 3:7].astype(np.float32).astype(np.float64)
+    s = rows[:, 7:10].astype(np.float32).astype(np.float64)
+    centre = p + rotate_vec(q, s * np.asarray(impostor["centre"], dtype=np.float64))
+    d = np.asarray(eye, dtype=np.float64) - centre
+    local = rotate_vec(q * np.array([-1.0, -1.0, -1.0, 1.0]), d) / s
+    k = np.round(np.degrees(np.arctan2(local[:, 0], local[:, 2])) / impostor["azimuth_step_deg"])
+    return np.mod(k.astype(np.int64), int(impostor["views"]))
+
+
 def replay_view(rows: np.ndarray, table_variants: np.ndarray, chain: dict, view: dict,
                 cull: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """What the first view draws of a species, recomputed from its table rows: per row the chain's
@@ -1207,8 +1228,21 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
             for v in range(len(chain["variants"])):
                 for k in range(len(chain["variants"][v])):
                     sel = (variants == v) & (level == k)
-                    if sel.any():
-                        expected[(v, k)] = values[sel]
+                    if not sel.any():
+                        continue
+                    # an impostor level: one node per baked view the rows show (docs/scene.md)
+                    lv = chain["variants"][v][k]
+                    impostor = None
+                    if lv.get("file") and (scene_dir / lv["file"]).is_file():
+                        lv_gltf = pygltflib.GLTF2().load(str(scene_dir / lv["file"]))
+                        lv_mesh = next((m for m in lv_gltf.meshes if m.name == lv["mesh"]), None)
+                        impostor = ((lv_mesh.extras or {}) if lv_mesh else {}).get("verdant_impostor")
+                    if impostor is None:
+                        expected[(v, k, None)] = values[sel]
+                        continue
+                    shown = impostor_views(values[sel], view["camera"]["eye"], impostor)
+                    for b in np.unique(shown):
+                        expected[(v, k, int(b))] = values[sel][shown == b]
             got = {}
             for c in gltf.nodes[root].children or []:
                 child = gltf.nodes[c]
@@ -1217,18 +1251,21 @@ def check_placements(scene_dir: Path, manifest: dict | None = None, report: dict
                     raise CheckFailed(f"{name}: child node {child.name!r} is not an instanced node with extras "
                                       f"species/variant/level")
                 v, k = int(ex["variant"]), int(ex["level"])
+                b = ex.get("verdant_impostor_view")
+                b = None if b is None else int(b)
                 want_mesh = chain["variants"][v][k]["mesh"]
-                if gltf.meshes[child.mesh].name != want_mesh or ex.get("mesh") != want_mesh:
+                shown_mesh = want_mesh if b is None else f"{want_mesh}_view{b}"
+                if gltf.meshes[child.mesh].name != shown_mesh or ex.get("mesh") != want_mesh:
                     raise CheckFailed(f"{name}: node {child.name!r} (variant {v}, LOD{k}) shows mesh "
-                                      f"{gltf.meshes[child.mesh].name!r}, the chain says {want_mesh!r}")
+                                      f"{gltf.meshes[child.mesh].name!r}, the chain says {shown_mesh!r}")
                 if not np.allclose(node_matrix(child), np.eye(4), atol=0):
                     raise CheckFailed(f"{name}: node {child.name!r} has a transform; instances are world positions")
-                if (v, k) in got:
-                    raise CheckFailed(f"{name}: two nodes for variant {v} LOD{k}")
-                got[(v, k)] = np.concatenate(instances[c], axis=1)
+                if (v, k, b) in got:
+                    raise CheckFailed(f"{name}: two nodes for variant {v} LOD{k} (impostor view {b})")
+                got[(v, k, b)] = np.concatenate(instances[c], axis=1)
                 claimed.add(c)
             borderline = int((margin < 1e-9).sum())
-            keys = sorted(set(expected) | set(got))
+            keys = sorted(set(expected) | set(got), key=lambda t: (t[0], t[1], -1 if t[2] is None else t[2]))
             mismatched = []
             for key in keys:
                 want = expected.get(key, np.zeros((0, 11)))

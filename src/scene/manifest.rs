@@ -823,8 +823,9 @@ fn view_section(v: &crate::scene::view_stage::ViewStageReport) -> String {
             s += &match &c.skipped {
                 Some(why) => format!("Image against full detail: not rendered ({why}).\n\n"),
                 None => format!(
-                    "Image against full detail ({}×{} px, the project's rasterizer): {:.2} % of pixels differ by more than {} (linear), colour RMSE {:.4}; {:.1} s.\n\n",
-                    c.size_px[0], c.size_px[1], 100.0 * c.differing, c.threshold, c.color_rmse, c.seconds
+                    "Image against full detail ({}×{} px, {} samples per pixel, the project's rasterizer): {:.2} % of pixels differ by more than {} (linear), colour RMSE {:.4}; {:.2} % of single samples (no anti-aliasing); {:.1} s.\n\n",
+                    c.size_px[0], c.size_px[1], c.samples_per_pixel, 100.0 * c.differing, c.threshold,
+                    c.color_rmse, 100.0 * c.differing_samples, c.seconds
                 ),
             };
         }

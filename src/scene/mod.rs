@@ -8,6 +8,7 @@ pub mod build;
 pub mod cache;
 pub mod error;
 pub mod ground_cover;
+pub mod impostor;
 pub mod manifest;
 pub mod pipeline;
 pub mod plants_stage;

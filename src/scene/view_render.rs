@@ -84,6 +84,11 @@ pub fn render_view(scene: &Scene, camera: &Camera, width: u32, height: u32) -> R
         })
         .collect::<Result<_, _>>()?;
     let cam = raster_camera(camera, width, height);
+    let RasterCamera::Perspective(view) = &cam else { unreachable!("raster_camera is a perspective") };
+    let may_see = view.sphere_test().map_err(|e| e.to_string())?;
+    // per mesh, a sphere around its vertices (object space): an instance whose sphere lies outside
+    // the view is skipped, not drawn triangle by triangle (exact: it covers no pixel)
+    let spheres: Vec<Option<([f64; 3], f64)>> = scene.meshes.iter().map(bounding_sphere).collect();
     let mut figures = RenderFigures::default();
     let identity = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
     let mut stack: Vec<(usize, [[f64; 4]; 3])> = scene.roots.iter().rev().map(|&r| (r, identity)).collect();
@@ -104,10 +109,15 @@ pub fn render_view(scene: &Scene, camera: &Camera, width: u32, height: u32) -> R
                 Some(inst) => {
                     for k in 0..inst.translations.len() {
                         let m = mul(&world, &trs_matrix(inst.translations[k], inst.rotations[k], inst.scales[k]));
+                        figures.instances += 1;
+                        if spheres[node.mesh.unwrap_or(0)]
+                            .is_some_and(|(c, r)| !may_see(transform(&m, c), r * max_scale(&m)))
+                        {
+                            continue;
+                        }
                         figures.triangles +=
                             render_mesh(&mut canvas, &cam, &m, mesh, &scene.materials, &textures, &opts).triangles
                                 as u64;
-                        figures.instances += 1;
                     }
                 }
                 None => {
@@ -122,23 +132,84 @@ pub fn render_view(scene: &Scene, camera: &Camera, width: u32, height: u32) -> R
     Ok((canvas, figures))
 }
 
+/// The centre of `mesh`'s bounding box and the distance from it to its farthest vertex; None
+/// without vertices.
+fn bounding_sphere(mesh: &crate::mesh::Mesh) -> Option<([f64; 3], f64)> {
+    let (lo, hi) = crate::scene::view_stage::mesh_bounds(mesh)?;
+    let c = [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a]));
+    let r2 = mesh
+        .primitives
+        .iter()
+        .flat_map(|p| &p.positions)
+        .map(|p| (0..3).map(|a| (p[a] as f64 - c[a]).powi(2)).sum::<f64>())
+        .fold(0.0, f64::max);
+    // a little slack for f32 rounding of the transformed vertices
+    Some((c, r2.sqrt() * (1.0 + 1e-6) + 1e-6))
+}
+
+fn transform(m: &[[f64; 4]; 3], p: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3])
+}
+
+/// The largest factor by which `m` stretches a length (bounded by its columns' lengths).
+fn max_scale(m: &[[f64; 4]; 3]) -> f64 {
+    (0..3).map(|c| (0..3).map(|r| m[r][c] * m[r][c]).sum::<f64>()).sum::<f64>().sqrt()
+}
+
 fn node_matrix(n: &Node) -> [[f64; 4]; 3] {
     trs_matrix(n.translation, n.rotation, n.scale)
 }
 
-/// How two renders of one view differ: the share of pixels whose colour differs by more than
-/// `threshold` in any channel (0..1), and the colour RMSE over all pixels and channels.
-pub fn image_difference(a: &Canvas, b: &Canvas, threshold: f32) -> (f64, f64) {
-    let n = a.color.len().min(b.color.len()).max(1);
-    let (mut differing, mut sq) = (0usize, 0.0f64);
-    for (p, q) in a.color.iter().zip(&b.color) {
-        let d = (0..3).map(|c| (p[c] - q[c]).abs()).fold(0.0f32, f32::max);
-        if d > threshold {
-            differing += 1;
+/// How two renders of one view differ ([`image_difference`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Difference {
+    /// Share of pixels (each the box-filtered mean of its samples, linear colour) whose colour
+    /// differs by more than the threshold in some channel.
+    pub differing: f64,
+    /// Colour RMSE of those pixels over every channel.
+    pub color_rmse: f64,
+    /// The same share over single samples (the image without anti-aliasing).
+    pub differing_samples: f64,
+}
+
+/// How two renders of one view, each `samples` × `samples` samples per pixel (the canvases are
+/// that many times the image's size), differ once resolved as an engine's anti-aliasing resolves
+/// them: every pixel the mean of its samples in linear colour. A share of the pixels that differ
+/// by more than `threshold` in any channel, the colour RMSE, and the share of single samples that
+/// differ (what an aliased render would count: a sub-pixel leaf or a culled flower there is a whole
+/// pixel or none).
+pub fn image_difference(a: &Canvas, b: &Canvas, samples: u32, threshold: f32) -> Difference {
+    let k = samples.max(1) as usize;
+    let (w, h) = (a.width.min(b.width) as usize, a.height.min(b.height) as usize);
+    let (pw, ph) = (w / k, h / k);
+    let (mut differing, mut differing_samples, mut sq) = (0usize, 0usize, 0.0f64);
+    let over = |p: &[f32; 4], q: &[f32; 4]| (0..3).any(|c| (p[c] - q[c]).abs() > threshold);
+    let at = |c: &Canvas, x: usize, y: usize| c.color[y * c.width as usize + x];
+    for py in 0..ph {
+        for px in 0..pw {
+            let (mut ma, mut mb) = ([0.0f32; 4], [0.0f32; 4]);
+            for y in py * k..(py + 1) * k {
+                for x in px * k..(px + 1) * k {
+                    let (p, q) = (at(a, x, y), at(b, x, y));
+                    differing_samples += over(&p, &q) as usize;
+                    for c in 0..3 {
+                        ma[c] += p[c];
+                        mb[c] += q[c];
+                    }
+                }
+            }
+            let n = (k * k) as f32;
+            let (ma, mb) = (ma.map(|v| v / n), mb.map(|v| v / n));
+            differing += over(&ma, &mb) as usize;
+            sq += (0..3).map(|c| ((ma[c] - mb[c]) as f64).powi(2)).sum::<f64>();
         }
-        sq += (0..3).map(|c| ((p[c] - q[c]) as f64).powi(2)).sum::<f64>();
     }
-    (differing as f64 / n as f64, (sq / (3 * n) as f64).sqrt())
+    let pixels = (pw * ph).max(1);
+    Difference {
+        differing: differing as f64 / pixels as f64,
+        color_rmse: (sq / (3 * pixels) as f64).sqrt(),
+        differing_samples: differing_samples as f64 / (pixels * k * k) as f64,
+    }
 }
 
 #[cfg(test)]
@@ -160,11 +231,27 @@ mod tests {
     #[test]
     fn identical_renders_do_not_differ() {
         let c = Canvas::new(4, 4, SKY).unwrap();
-        assert_eq!(image_difference(&c, &c, 0.05), (0.0, 0.0));
+        assert_eq!(image_difference(&c, &c, 1, 0.05), Difference::default());
         let mut d = c.clone();
         d.color[0] = [0.0, 0.0, 0.0, 1.0];
-        let (share, rmse) = image_difference(&c, &d, 0.05);
-        assert_eq!(share, 1.0 / 16.0);
-        assert!(rmse > 0.0);
+        let one = image_difference(&c, &d, 1, 0.05);
+        assert_eq!((one.differing, one.differing_samples), (1.0 / 16.0, 1.0 / 16.0));
+        assert!(one.color_rmse > 0.0);
+    }
+
+    #[test]
+    fn pixels_are_compared_as_the_mean_of_their_samples() {
+        // 2 × 2 pixels of 2 × 2 samples: one black sample in pixel 0 moves its mean by a quarter
+        // of the sky's colour (over the threshold); a sample a little off in pixel 3 does not count
+        let c = Canvas::new(4, 4, SKY).unwrap();
+        let mut d = c.clone();
+        d.color[0] = [0.0, 0.0, 0.0, 1.0];
+        d.color[3 * 4 + 3] = [SKY[0] + 0.08, SKY[1], SKY[2], 1.0];
+        let r = image_difference(&c, &d, 2, 0.05);
+        assert_eq!(r.differing, 0.25, "pixel 0 only: 0.08 / 4 = 0.02 in pixel 3");
+        assert_eq!(r.differing_samples, 2.0 / 16.0);
+        let quarter = [SKY[0] / 4.0, SKY[1] / 4.0, SKY[2] / 4.0];
+        let want = ((quarter.iter().map(|v| (*v as f64).powi(2)).sum::<f64>() + 0.02f64.powi(2)) / 12.0).sqrt();
+        assert!((r.color_rmse - want).abs() < 1e-6, "{} vs {want}", r.color_rmse);
     }
 }

@@ -82,6 +82,16 @@ fn read_csv(path: &Path) -> Vec<Row> {
         .collect()
 }
 
+/// `v` rotated by the unit quaternion `q` (x, y, z, w): v + 2w (q × v) + 2 q × (q × v).
+fn rotate(q: [f32; 4], v: [f64; 3]) -> [f64; 3] {
+    let [x, y, z, w] = q.map(|c| c as f64);
+    let cross =
+        |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let t = cross([x, y, z], v).map(|c| 2.0 * c);
+    let u = cross([x, y, z], t);
+    [v[0] + w * t[0] + u[0], v[1] + w * t[1] + u[1], v[2] + w * t[2] + u[2]]
+}
+
 fn dist_xz(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
@@ -187,6 +197,7 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
     write(d, "p/a.toml", &forest("a", 3));
     ok(&verdant_in(d, &["build", "p/a.toml", "--out", "o"]));
     let s = d.join("o/a");
+    let s_dir = s.clone();
     let scene = verdant::validate::read_scene(&s.join("scene.glb")).expect("scene.glb re-imports");
     let report = read_json(&s.join("report.json"));
     let manifest = read_json(&s.join("manifest.json"));
@@ -231,7 +242,9 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
         let pick: Vec<usize> = chain["pick"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
         assert!(!pick.is_empty(), "{species}: the manifest's chain has no pick");
         let key = |t: [f32; 3], q: [f32; 4], s: [f32; 3]| format!("{t:?}{q:?}{s:?}");
-        let mut want: BTreeMap<(u64, u64), Vec<String>> = BTreeMap::new();
+        // an impostor level's baked views (its mesh extras in the species file), per (variant, level)
+        let mut impostor_of: BTreeMap<(usize, usize), Option<serde_json::Value>> = BTreeMap::new();
+        let mut want: BTreeMap<(u64, u64, Option<u64>), Vec<String>> = BTreeMap::new();
         let mut culled = 0;
         for r in &rows {
             // the column is the documented hash of x and z over the species' variants
@@ -261,25 +274,49 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
                 .map(|(n, _)| n)
                 .max()
                 .unwrap();
-            want.entry((v as u64, level as u64)).or_default().push(key(
+            let impostor = impostor_of
+                .entry((v, level))
+                .or_insert_with(|| {
+                    let l = &variants[v][level];
+                    let file = verdant::validate::read_scene(&s_dir.join(l["file"].as_str().unwrap())).unwrap();
+                    let mesh = file.meshes.iter().find(|m| m.name == l["mesh"].as_str().unwrap()).unwrap();
+                    mesh.extras.as_ref().and_then(|e| e.get("verdant_impostor")).cloned()
+                })
+                .clone();
+            // the documented view: k = round(atan2(dx, dz) / step) mod views, (dx, dz) from the
+            // instance's centre to the eye in its own frame
+            let view = impostor.map(|e| {
+                let c: Vec<f64> = e["centre"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+                let sc = r.scale.map(|v| v as f64);
+                let local_c = [c[0] * sc[0], c[1] * sc[1], c[2] * sc[2]];
+                let world_c = rotate(r.rot, local_c);
+                let p = r.pos.map(|v| v as f32 as f64);
+                let d = [eye[0] - p[0] - world_c[0], eye[1] - p[1] - world_c[1], eye[2] - p[2] - world_c[2]];
+                let l = rotate([-r.rot[0], -r.rot[1], -r.rot[2], r.rot[3]], d);
+                let step = e["azimuth_step_deg"].as_f64().unwrap();
+                let views = e["views"].as_i64().unwrap();
+                ((((l[0] / sc[0]).atan2(l[2] / sc[2]).to_degrees() / step).round() as i64).rem_euclid(views)) as u64
+            });
+            want.entry((v as u64, level as u64, view)).or_default().push(key(
                 [r.pos[0] as f32, r.pos[1] as f32, r.pos[2] as f32],
                 r.rot,
                 r.scale,
             ));
         }
         assert_eq!(view["species"][k]["culled"].as_u64(), Some(culled), "{species}: culled rows");
-        let mut got: BTreeMap<(u64, u64), Vec<String>> = BTreeMap::new();
+        let mut got: BTreeMap<(u64, u64, Option<u64>), Vec<String>> = BTreeMap::new();
         for &c in &root.children {
             let node = &scene.nodes[c];
             let e = node.extras.as_ref().unwrap_or_else(|| panic!("{}: no extras", node.name));
             let (v, level) = (e["variant"].as_u64().unwrap(), e["level"].as_u64().unwrap());
+            let view = e.get("verdant_impostor_view").map(|k| k.as_u64().unwrap());
             let mesh = &scene.meshes[node.mesh.unwrap_or_else(|| panic!("{}: no mesh", node.name))];
-            assert_eq!(
-                mesh.name,
-                variants[v as usize][level as usize]["mesh"].as_str().unwrap(),
-                "{}: the chain's mesh",
-                node.name
-            );
+            let chain_mesh = variants[v as usize][level as usize]["mesh"].as_str().unwrap();
+            let want_name = match view {
+                Some(k) => format!("{chain_mesh}_view{k}"),
+                None => chain_mesh.to_string(),
+            };
+            assert_eq!(mesh.name, want_name, "{}: the chain's mesh (its baked view for an impostor)", node.name);
             assert_eq!(node.name, format!("{species}_{}", mesh.name));
             let inst = node.instances.as_ref().unwrap_or_else(|| panic!("{} is not instanced", node.name));
             assert_eq!(inst.translations.len(), inst.rotations.len());
@@ -287,7 +324,39 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
             let keys: Vec<String> = (0..inst.translations.len())
                 .map(|i| key(inst.translations[i], inst.rotations[i], inst.scales[i]))
                 .collect();
-            assert!(got.insert((v, level), keys).is_none(), "{species}: two nodes for variant {v} LOD{level}");
+            if view.is_some() {
+                // what a person sees: every impostor quad faces the eye within half a step (22.5°)
+                let n = mesh.primitives[0].normals[0].map(|c| c as f64);
+                let p0 = mesh.primitives[0].positions.iter().fold([0.0f64; 3], |a, p| {
+                    [a[0] + p[0] as f64 / 4.0, a[1] + p[1] as f64 / 4.0, a[2] + p[2] as f64 / 4.0]
+                });
+                for i in 0..inst.translations.len() {
+                    let q = inst.rotations[i];
+                    let wn = rotate(q, n);
+                    let sc = inst.scales[i].map(|c| c as f64);
+                    let c = rotate(q, [p0[0] * sc[0], p0[1] * sc[1], p0[2] * sc[2]]);
+                    let t = inst.translations[i].map(|c| c as f64);
+                    let to_eye = [eye[0] - t[0] - c[0], eye[2] - t[2] - c[2]];
+                    let cos = (wn[0] * to_eye[0] + wn[2] * to_eye[1])
+                        / ((wn[0] * wn[0] + wn[2] * wn[2]).sqrt()
+                            * (to_eye[0] * to_eye[0] + to_eye[1] * to_eye[1]).sqrt());
+                    assert!(
+                        cos >= (22.5f64 + 0.01).to_radians().cos(),
+                        "{}: instance {i} faces {:.1}° off the eye",
+                        node.name,
+                        cos.acos().to_degrees()
+                    );
+                }
+            }
+            assert!(
+                got.insert((v, level, view), keys).is_none(),
+                "{species}: two nodes for variant {v} LOD{level} {view:?}"
+            );
+        }
+        if species == "tree" {
+            // the trees' impostors show more than one baked view (random yaws, one eye)
+            let views: std::collections::BTreeSet<u64> = got.keys().filter_map(|k| k.2).collect();
+            assert!(views.len() > 2, "impostor views drawn: {views:?}");
         }
         assert_eq!(got, want, "{species}: scene.glb = the table replayed for the first view (CSV order within a node)");
         assert!(got.len() > 1, "{species}: more than one mesh and level drawn: {:?}", got.keys().collect::<Vec<_>>());

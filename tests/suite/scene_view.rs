@@ -219,13 +219,19 @@ fn the_preview_is_the_first_view_and_full_detail_can_be_compared() {
     assert!(img["color_rmse"].as_f64().unwrap().is_finite());
     // LoD changes what is drawn but the picture stays close: well under a tenth of the pixels
     assert!(differing < 0.1, "{differing}");
+    // pixels resolved from 4 × 4 samples; the share of single samples beside it
+    assert_eq!(img["samples_per_pixel"].as_u64(), Some(16), "{img}");
+    assert_eq!(img["size_px"], serde_json::json!([960, 540]), "{img}");
+    let samples = img["differing_samples"].as_f64().unwrap();
+    assert!((0.0..0.1).contains(&samples) && samples > 0.0, "{img}");
     // preview.png: the perspective render, not the map; the map beside it
     let preview = image::open(d.join("o/cmp/preview.png")).unwrap().to_rgba8();
     assert_eq!(preview.dimensions(), (1280, 720));
     let sky = preview.get_pixel(640, 2).0;
     assert!(sky[2] > sky[0] && sky[2] > 180, "the top of the view is sky: {sky:?}");
     assert!(d.join("o/cmp/map.png").is_file());
-    assert!(std::fs::read_to_string(d.join("o/cmp/report.md")).unwrap().contains("Image against full detail"));
+    let md = std::fs::read_to_string(d.join("o/cmp/report.md")).unwrap();
+    assert!(md.contains("Image against full detail") && md.contains("16 samples per pixel"), "{md}");
     // without the flag: no comparison
     ok(&verdant_in(d, &["build", "p/cmp.toml", "--out", "o2"]));
     assert!(read_json(&d.join("o2/cmp/report.json"))["stages"]["view"]["views"][0]["image"].is_null());

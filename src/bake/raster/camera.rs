@@ -187,6 +187,25 @@ impl PerspectiveView {
         self.check()?;
         Canvas::new(self.width, self.height, clear)
     }
+
+    /// A test of spheres (world centre, radius) against the view's frustum: false only for a
+    /// sphere wholly nearer than the near plane or wholly outside one of the image's four sides, so
+    /// a mesh inside such a sphere covers no pixel and may be skipped (a true may still draw
+    /// nothing).
+    pub fn sphere_test(&self) -> Result<impl Fn([f64; 3], f64) -> bool, RasterError> {
+        let f = self.frame()?;
+        let (hw, hh) = (f.size[0] * 0.5, f.size[1] * 0.5);
+        let (nx, ny) = ((f.focal_px * f.focal_px + hw * hw).sqrt(), (f.focal_px * f.focal_px + hh * hh).sqrt());
+        Ok(move |c: [f64; 3], r: f64| {
+            let v = f.view.apply(c);
+            let fx = f.focal_px;
+            !(v[2] + r < f.near
+                || (fx * v[0] - hw * v[2]) / nx > r
+                || (-fx * v[0] - hw * v[2]) / nx > r
+                || (fx * v[1] - hh * v[2]) / ny > r
+                || (-fx * v[1] - hh * v[2]) / ny > r)
+        })
+    }
 }
 
 impl PerspFrame {

@@ -500,3 +500,41 @@ fn ortho_view_maps_corners_and_png_roundtrips() {
     assert_eq!(img.get_pixel(0, 0).0, [255, 188, 0, 255]);
     assert_eq!(img.get_pixel(1, 0).0, [0, 0, 0, 0]);
 }
+
+proptest::proptest! {
+    /// A sphere [`PerspectiveView::sphere_test`] rejects has no point that projects into the image
+    /// in front of the near plane (sampled over its surface and inside).
+    #[test]
+    fn a_rejected_sphere_shows_nothing(c in proptest::array::uniform3(-12.0f64..12.0), r in 0.01f64..4.0) {
+        let v = low_camera();
+        let sees = v.sphere_test().unwrap();
+        if !sees(c, r) {
+            for i in 0..200 {
+                // points spread over the ball (a spiral of directions, three radii)
+                let t = i as f64 * 2.399_963;
+                let y = 1.0 - 2.0 * (i as f64 + 0.5) / 200.0;
+                let s = (1.0 - y * y).sqrt();
+                for f in [0.3, 0.7, 1.0] {
+                    let p = [c[0] + f * r * s * t.cos(), c[1] + f * r * y, c[2] + f * r * s * t.sin()];
+                    if let Some([x, y, _]) = v.to_pixel(p) {
+                        proptest::prop_assert!(
+                            !(0.0..=v.width as f64).contains(&x) || !(0.0..=v.height as f64).contains(&y),
+                            "{p:?} of a rejected sphere shows at ({x}, {y})"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn spheres_in_front_are_seen_and_behind_or_aside_are_not() {
+    let v = low_camera();
+    let sees = v.sphere_test().unwrap();
+    assert!(sees(v.target, 0.5), "on the view axis");
+    let behind = [2.0 * v.eye[0] - v.target[0], 2.0 * v.eye[1] - v.target[1], 2.0 * v.eye[2] - v.target[2]];
+    assert!(!sees(behind, 0.5), "behind the eye");
+    assert!(sees(behind, 7.0), "behind the eye, but reaching past it");
+    assert!(!sees([v.eye[0] + 40.0, v.eye[1], v.eye[2] - 3.0], 1.0), "far aside");
+}
