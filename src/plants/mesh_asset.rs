@@ -25,8 +25,15 @@ use crate::bake::raster::png::encode_rgba8_png;
 use crate::mesh::{AlphaMode, Bounds, Material, Mesh, Primitive, Scene, Texture};
 use crate::plants::tree::is_flat;
 
+/// Vertex positions an OBJ may define (`--max-vertices` / `[mesh] max_vertices`), checked while
+/// scanning.
 pub const DEFAULT_MAX_VERTICES: usize = 2_000_000;
-pub const DEFAULT_MAX_TRIANGLES: usize = 4_000_000;
+/// Triangles an OBJ may have (`--max-triangles` / `[mesh] max_triangles`), checked while scanning:
+/// a model's default LoD chain costs about its triangles, as a tree's does, so the budget is the
+/// trees' (the bush of ../shared/data exported as a 262k-triangle OBJ builds its default chain in
+/// about 5.5 s here, a 1 M-triangle wavy sheet in about 5 s; a 3.9 M-triangle model ran past 5 min
+/// under the former 4 M default).
+pub const DEFAULT_MAX_TRIANGLES: usize = 300_000;
 /// Textures larger than this on a side are refused (a 8192² RGBA texture is 256 MiB decoded).
 pub const MAX_TEXTURE_SIDE_PX: u32 = 8192;
 /// The colour of faces without a material.
@@ -47,7 +54,8 @@ pub enum MeshAssetError {
     #[error("{path}: material {material:?} has the texture {texture} but its faces have no texture coordinates (vt); export UVs or remove the map_Kd line")]
     NoTexCoords { path: PathBuf, material: String, texture: String },
     #[error(
-        "{path}: {count} {what}, over the limit of {limit}; simplify the model first or raise the limit (max_{what})"
+        "{path}: {count} {what}, over the limit of {limit}; simplify the model first or raise the limit \
+         (--max-{what} of `verdant mesh`; `max_{what}` in a preset's [mesh])"
     )]
     TooLarge { path: PathBuf, what: &'static str, count: usize, limit: usize },
     #[error("{path}: no faces with area; export the model's faces (f lines)")]

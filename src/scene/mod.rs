@@ -189,6 +189,9 @@ pub struct MeshLook {
     pub lods: usize,
     pub atlas_px: u32,
     pub analyze: bool,
+    /// Budgets of the model as read (`max_vertices`, `max_triangles`).
+    pub max_vertices: usize,
+    pub max_triangles: usize,
 }
 
 impl Default for MeshLook {
@@ -200,6 +203,8 @@ impl Default for MeshLook {
             lods: crate::plants::tree_lod::TREE_LODS,
             atlas_px: 1024,
             analyze: true,
+            max_vertices: crate::plants::mesh_asset::DEFAULT_MAX_VERTICES,
+            max_triangles: crate::plants::mesh_asset::DEFAULT_MAX_TRIANGLES,
         }
     }
 }

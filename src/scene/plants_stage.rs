@@ -298,7 +298,13 @@ pub struct MeshSpeciesReport {
 }
 
 fn load_model(name: &str, look: &MeshLook) -> Result<SourceMesh, StageError> {
-    let options = ObjOptions { scale: look.scale, up_axis: look.up_axis, ..ObjOptions::default() };
+    let options = ObjOptions {
+        scale: look.scale,
+        up_axis: look.up_axis,
+        max_vertices: look.max_vertices,
+        max_triangles: look.max_triangles,
+        ..ObjOptions::default()
+    };
     load_obj(&look.obj, &options).map_err(|e| failure(&e, format!("species `{name}`: {e}")))
 }
 

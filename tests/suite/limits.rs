@@ -434,3 +434,60 @@ fn a_tree_over_the_default_triangle_budget_is_refused_before_its_chain() {
     assert!(t.contains("more than 300000 triangles") && t.contains("`max_triangles` in a preset's tree"), "{t}");
     assert!(!t.contains("panicked"), "{t}");
 }
+
+#[test]
+fn an_obj_over_the_default_triangle_budget_is_refused_naming_the_flag_and_the_preset_key() {
+    // issue 21 item 2: an OBJ model's default chain costs about its triangles, as a tree's does;
+    // under the former 4 M default a 3.9 M-triangle model ran past 5 min. A 301,088-triangle sheet
+    // (written here) is refused while it is read, the message naming the flag and the preset key
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sheet = |n: usize| {
+        let mut s = String::with_capacity(n * n * 40);
+        for j in 0..=n {
+            for i in 0..=n {
+                s += &format!("v {} {} {}\n", i as f64 * 0.01, ((i * 7 + j * 3) % 5) as f64 * 0.001, j as f64 * 0.01);
+            }
+        }
+        for j in 0..n {
+            for i in 0..n {
+                let a = j * (n + 1) + i + 1;
+                s += &format!("f {a} {} {}\nf {} {} {}\n", a + n + 1, a + 1, a + 1, a + n + 1, a + n + 2);
+            }
+        }
+        s
+    };
+    write(d, "big.obj", &sheet(388));
+    let o = verdant_in(d, &["mesh", "big.obj", "-o", "big.glb"]);
+    refused(&o, 2, "over the limit of 300000");
+    let t = text(&o);
+    assert!(
+        t.contains("big.obj") && t.contains("--max-triangles") && t.contains("`max_triangles` in a preset's [mesh]"),
+        "{t}"
+    );
+    assert!(!d.join("big.glb").exists());
+    // raised on the command line, it is read (LoD0 alone, to keep the test short)
+    ok(&verdant_in(
+        d,
+        &["mesh", "big.obj", "-o", "big.glb", "--max-triangles", "400000", "--lods", "1", "--no-analysis"],
+    ));
+    // the preset key exists and lowers it for a small model
+    write(d, "small.obj", &sheet(10));
+    let p = write(
+        d,
+        "p.toml",
+        "[scene]\nname = \"x\"\nformats = [\"glb\"]\n\
+         [terrain]\nprocedural = { kind = \"fbm\", size = 65, seed = 3, relief = 10.0 }\n\
+         [[species]]\nname = \"m\"\nkind = \"mesh\"\nobj = \"small.obj\"\nmax_density = 0.001\n\
+         mesh = { max_triangles = 100, lods = 1 }\n",
+    );
+    let o = verdant_in(d, &["build", p.to_str().unwrap(), "--out", "out"]);
+    let t = text(&o);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("small.obj: 101 triangles, over the limit of 100")
+            && t.contains("`max_triangles` in a preset's [mesh]"),
+        "{t}"
+    );
+    assert!(!t.contains("panicked"), "{t}");
+}

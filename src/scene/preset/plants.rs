@@ -46,7 +46,7 @@ pub const TREE_KEYS: &[&str] = &[
     "analysis",
 ];
 /// Keys of `[mesh]` and `mesh = { … }` (the model itself is the species' `obj`).
-pub const MESH_KEYS: &[&str] = &["scale", "up_axis", "lods", "atlas_size", "analysis"];
+pub const MESH_KEYS: &[&str] = &["scale", "up_axis", "lods", "atlas_size", "analysis", "max_vertices", "max_triangles"];
 /// Keys of `[flower]` and `flower = { … }`.
 pub const FLOWER_KEYS: &[&str] =
     &["petals", "petal_color", "center_color", "stem_color", "height", "head", "variants", "alpha_cutoff", "atlas_px"];
@@ -332,6 +332,12 @@ pub(super) fn apply_mesh(t: &Table<'_, '_>, mut mesh: MeshLook) -> Result<MeshLo
         };
     }
     chain_keys(t, &mut mesh.lods, &mut mesh.atlas_px, &mut mesh.analyze)?;
+    if let Some((n, _)) = t.integer("max_vertices", 3..=u32::MAX as u64, "max_vertices = 4000000")? {
+        mesh.max_vertices = n as usize;
+    }
+    if let Some((n, _)) = t.integer("max_triangles", 1..=u32::MAX as u64, "max_triangles = 1000000")? {
+        mesh.max_triangles = n as usize;
+    }
     Ok(mesh)
 }
 
