@@ -7,8 +7,10 @@
 //! so the view stage does what the shader would: each impostor instance shows view k's quad (the
 //! quad turned to azimuth k about the vertical through the centre, textured with cell k), k the
 //! baked view nearest the direction from the instance's centre to the eye in the instance's own
-//! frame. The quad then faces the eye within half a step (22.5° for 8 views): what the tree
-//! analyzer measured the impostor as.
+//! frame. The quad then faces the eye within half a step (22.5° for 8 views; at worst cos 22.5° =
+//! 92 % of its width), with the picture baked from that side. The tree analyzer measures view k's
+//! card turned the rest of the way to the eye; turning each instance that remainder too would move
+//! its transform off the table's row, which engines replay, so scene.glb keeps the rows'.
 
 use serde_json::Value;
 
@@ -81,7 +83,8 @@ impl ImpostorViews {
 
     /// `base` (the impostor's quad, showing view 0) as view `k`: turned to azimuth k·step about the
     /// vertical through the centre (positions, normals, tangents), textured with cell k. Named
-    /// `<base>_view<k>`; its extras are the base's plus the view's index.
+    /// `<base>_view<k>`; its extras name the view only (the base's `verdant_impostor` recipe, which
+    /// says the quad faces +Z and shows cell 0, no longer holds for it).
     pub fn mesh(&self, base: &Mesh, k: usize) -> Mesh {
         let a = (k as f64 * self.step_deg).to_radians();
         let (sin, cos) = a.sin_cos();
@@ -115,6 +118,7 @@ impl ImpostorViews {
             Some(Value::Object(m)) => m,
             _ => serde_json::Map::new(),
         };
+        extras.remove(IMPOSTOR_EXTRAS_KEY);
         extras.insert(IMPOSTOR_VIEW_EXTRAS_KEY.into(), Value::from(k));
         out.extras = Some(Value::Object(extras));
         out
@@ -186,7 +190,8 @@ mod tests {
         let m = v.mesh(&base, 2);
         assert_eq!(m.name, "t_LOD4_view2");
         assert_eq!(m.extras.as_ref().unwrap()[IMPOSTOR_VIEW_EXTRAS_KEY], 2);
-        assert!(m.extras.as_ref().unwrap().get(IMPOSTOR_EXTRAS_KEY).is_some(), "the base's extras kept");
+        assert!(m.extras.as_ref().unwrap().get(IMPOSTOR_EXTRAS_KEY).is_none(), "the recipe for the +Z quad dropped");
+        assert!(ImpostorViews::of(&m).is_none(), "a turned view is not turned again");
         let p = &m.primitives[0];
         // view 2 faces +X: the quad lies in x = 0, spanning z from +1 (its left) to −1
         for n in &p.normals {

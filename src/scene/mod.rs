@@ -194,6 +194,19 @@ pub struct MeshLook {
     pub max_triangles: usize,
 }
 
+impl MeshLook {
+    /// How the plants stage (and `preset check`) reads the model: scale, up axis, budgets.
+    pub fn obj_options(&self) -> crate::plants::mesh_asset::ObjOptions {
+        crate::plants::mesh_asset::ObjOptions {
+            scale: self.scale,
+            up_axis: self.up_axis,
+            max_vertices: self.max_vertices,
+            max_triangles: self.max_triangles,
+            ..Default::default()
+        }
+    }
+}
+
 impl Default for MeshLook {
     fn default() -> Self {
         MeshLook {

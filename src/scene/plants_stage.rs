@@ -18,7 +18,7 @@ use crate::mesh::Mesh;
 use crate::plants::flower::{build_flower, FlowerReport};
 use crate::plants::grass::GrassSettings;
 use crate::plants::grass_asset::{build_grass_with, GrassAsset, GrassReport};
-use crate::plants::mesh_asset::{load_obj, MeshAssetStats, ObjOptions, SourceMesh};
+use crate::plants::mesh_asset::{load_obj, MeshAssetStats, SourceMesh};
 use crate::plants::tree::{TreeOptions, TreeStats};
 use crate::plants::tree_lod::{
     build_mesh_lods, build_tree_lods, variant_seed, TreeLodOptions, TreeLodReport, TreeLods,
@@ -298,14 +298,7 @@ pub struct MeshSpeciesReport {
 }
 
 fn load_model(name: &str, look: &MeshLook) -> Result<SourceMesh, StageError> {
-    let options = ObjOptions {
-        scale: look.scale,
-        up_axis: look.up_axis,
-        max_vertices: look.max_vertices,
-        max_triangles: look.max_triangles,
-        ..ObjOptions::default()
-    };
-    load_obj(&look.obj, &options).map_err(|e| failure(&e, format!("species `{name}`: {e}")))
+    load_obj(&look.obj, &look.obj_options()).map_err(|e| failure(&e, format!("species `{name}`: {e}")))
 }
 
 /// Builds and writes a mesh species' chain: `species/<name>.glb`, `species/<name>_LOD<n>.glb`,

@@ -137,6 +137,26 @@ fn a_self_copying_rule_is_refused_before_expanding() {
     harness::lsystem(SLOW_V5.as_bytes());
 }
 
+/// The lsystem target's timeout of session 37 (39 bytes, written here from its bytes): an lparser v4
+/// file whose rule branches four times at recursion 6, with a stray 0xFF byte, draws 298,592
+/// triangles, just within the trees' default budget of 300,000. `verdant tree` builds it in 1.3 s
+/// (release); the fuzz build (AddressSanitizer, coverage) took 6.5 s alone and over libFuzzer's 10 s
+/// while the machine also compiled. Not a hang: the triangle budget is what bounds it.
+const BUSHY_V4: &[u8] = b"6\n30\n10\nX\nX=N[+X-X\\+X{.XcF[@-X\\+X{.\xff\n@\n";
+
+#[test]
+fn a_tree_just_within_the_default_triangle_budget_builds_and_a_lower_budget_refuses_it() {
+    let parsed = verdant::lsystem::parse::parse_bytes(BUSHY_V4, Path::new("bushy.ls"), None).unwrap();
+    let options = verdant::plants::tree::TreeOptions::default();
+    let tree = verdant::plants::tree::build_tree(&parsed.system, &options).unwrap();
+    let triangles = tree.mesh().triangle_count();
+    assert!(triangles > 250_000 && triangles as u64 <= options.max_triangles, "{triangles}");
+    let lower = verdant::plants::tree::TreeOptions { max_triangles: 250_000, ..options };
+    let err = verdant::plants::tree::build_tree(&parsed.system, &lower).expect_err("over a 250k budget");
+    assert!(err.to_string().contains("more than 250000 triangles"), "{err}");
+    harness::lsystem(BUSHY_V4);
+}
+
 /// The files of ../shared/data/bad, when it is there, through their harness entries.
 #[test]
 fn the_shared_bad_inputs_pass_their_harness_entries() {

@@ -480,6 +480,22 @@ fn an_obj_over_the_default_triangle_budget_is_refused_naming_the_flag_and_the_pr
         d,
         &["mesh", "big.obj", "-o", "big.glb", "--max-triangles", "400000", "--lods", "1", "--no-analysis"],
     ));
+    // `preset check` reads the model with the preset's budgets, as the build does
+    let big = |key: &str| {
+        write(
+            d,
+            "big.toml",
+            &format!(
+                "[scene]\nname = \"x\"\nformats = [\"glb\"]\n\
+                 [terrain]\nprocedural = {{ kind = \"fbm\", size = 65, seed = 3, relief = 10.0 }}\n\
+                 [[species]]\nname = \"s\"\nmax_density = 0.001\nkind = \"mesh\"\nobj = \"big.obj\"\n{key}\n"
+            ),
+        )
+    };
+    let o = verdant_in(d, &["preset", "check", big("").to_str().unwrap()]);
+    assert_ne!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(text(&o).contains("over the limit of 300000") && text(&o).contains("max_triangles"), "{}", text(&o));
+    ok(&verdant_in(d, &["preset", "check", big("mesh = { max_triangles = 400000 }").to_str().unwrap()]));
     // the preset key exists and lowers it for a small model
     write(d, "small.obj", &sheet(10));
     let t =

@@ -324,6 +324,27 @@ fn scene_glb_instances_equal_the_csv_rows_and_json_and_report_agree() {
             let keys: Vec<String> = (0..inst.translations.len())
                 .map(|i| key(inst.translations[i], inst.rotations[i], inst.scales[i]))
                 .collect();
+            if let Some(k) = view {
+                // the turned quad shows cell k of the atlas, not mirrored: its corner farthest to the
+                // quad's right (azimuth k·step: right = (cos, 0, −sin)) has the cell's largest u
+                let e = impostor_of[&(v as usize, level as usize)].as_ref().expect("an impostor level");
+                let cell: Vec<f64> =
+                    e["cells_uv"][k as usize].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+                let p = &mesh.primitives[0];
+                let (lo_u, hi_u) =
+                    p.uvs.iter().fold((f64::MAX, f64::MIN), |(a, b), t| (a.min(t[0] as f64), b.max(t[0] as f64)));
+                let (lo_v, hi_v) =
+                    p.uvs.iter().fold((f64::MAX, f64::MIN), |(a, b), t| (a.min(t[1] as f64), b.max(t[1] as f64)));
+                for (got, want) in [lo_u, lo_v, hi_u, hi_v].iter().zip(&cell) {
+                    assert!((got - want).abs() < 1e-6, "{}: uvs {lo_u} {lo_v} {hi_u} {hi_v}, cell {cell:?}", node.name);
+                }
+                let a = (k as f64 * e["azimuth_step_deg"].as_f64().unwrap()).to_radians();
+                let right = |q: &[f32; 3]| q[0] as f64 * a.cos() - q[2] as f64 * a.sin();
+                let far_right = (0..p.positions.len())
+                    .max_by(|&i, &j| right(&p.positions[i]).total_cmp(&right(&p.positions[j])))
+                    .unwrap();
+                assert!((p.uvs[far_right][0] as f64 - cell[2]).abs() < 1e-6, "{}: the picture is mirrored", node.name);
+            }
             if view.is_some() {
                 // what a person sees: every impostor quad faces the eye within half a step (22.5°)
                 let n = mesh.primitives[0].normals[0].map(|c| c as f64);

@@ -836,7 +836,7 @@ const PINNED: &[(&str, u32, &str)] = &[
     ("plants", 16, "314b79f5bdaa8936"),
     ("snow", 6, "fd411b374b62d06b"),
     ("scatter", 9, "3a6dddc0e8298719"),
-    ("view", 11, "21640869310fe847"),
+    ("view", 11, "643e8f44b58997e5"),
     ("preview", 10, "f8b1f2f822ef54ba"),
 ];
 

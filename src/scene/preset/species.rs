@@ -169,17 +169,12 @@ pub(super) fn parse_look(
             };
             if inputs.decode() {
                 // the model as the plants stage loads it (scale, up axis, MTL, textures, limits)
-                let options = crate::plants::mesh_asset::ObjOptions {
-                    scale: look.scale,
-                    up_axis: look.up_axis,
-                    ..Default::default()
-                };
-                if let Err(e) = crate::plants::mesh_asset::load_obj(&look.obj, &options) {
+                if let Err(e) = crate::plants::mesh_asset::load_obj(&look.obj, &look.obj_options()) {
                     let (_, v) = t.get("obj").expect("obj was read above");
                     return Err(t.ctx.at(
                         &v.span(),
                         format!("the model of {} does not load:\n{e}", t.label),
-                        "fix the OBJ (or its MTL and textures), or `mesh = { scale, up_axis }`",
+                        "fix the OBJ (or its MTL and textures), or `mesh = { scale, up_axis, max_vertices, max_triangles }`",
                     ));
                 }
             }
