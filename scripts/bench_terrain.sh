@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Terrain benchmark: greedy TIN vs the delatin crate on Puget Sound (10 m, 50 m) and a 2049² fractal.
+# Terrain benchmark: greedy TIN vs the delatin crate on Mt Fuji (10 m), Puget Sound (10 m, 50 m) and a 2049² fractal (1, 5, 20 m).
 # Run from anywhere; uses ../shared/data relative to the repo root (override with VERDANT_DATA).
 # Arguments go to the bench: an input filter (e.g. `puget`) and/or `--no-delatin`.
 set -euo pipefail

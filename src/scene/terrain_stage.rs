@@ -108,8 +108,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// against its own mesh, TANGENT on every vertex (terrain/normal_map.rs). 7: the snow layer follows
 /// the preset's `[snow]` cover when it has one; slopes from the normalised bilinear normal. 8: in a
 /// scene with species, the soil layer (terrain_layers_1.png, `_LAYER_WEIGHTS_1`) and `_SURFACE`
-/// from what grows (scene/ground_cover.rs).
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 8;
+/// from what grows (scene/ground_cover.rs). 9: maps over 480 samples a side are meshed as
+/// regions of about 320 cells in parallel, joined along seams fixed first (terrain/regions.rs).
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 9;
 
 /// The stage in a scene build.
 pub struct TerrainJob<'a> {

@@ -11,6 +11,7 @@ pub mod job;
 pub mod layers;
 pub mod normal_map;
 pub mod plane;
+pub(crate) mod regions;
 pub mod sample_mesh;
 pub mod solid;
 pub mod stored;

@@ -937,23 +937,110 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
 
 /// [`tin`] for a file that stores the vertices as `storage` says (f32, or a 16-bit grid): the
 /// bound holds for the surface as stored.
+///
+/// Without a triangle limit, a map of more than [`REGION_CELLS`](super::regions::REGION_CELLS)
+/// cells a side is meshed as a grid of regions in parallel, joined along seams fixed before
+/// meshing ([`super::regions`]); the regions depend only on the map's size, so the mesh is the same
+/// at any thread count. With a triangle limit the whole map is one region (the limit picks the
+/// worst samples of the whole map).
 pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Result<TinResult, TerrainError> {
     check_input(hf, opts)?;
     let over_budget =
         |over| TerrainError::OverBudget { limit: opts.max_vertices, over, max_error_m: opts.max_error_m, grid: false };
     budget::check_tin(hf, opts.max_error_m, opts.max_vertices).map_err(over_budget)?;
-    let (w, h) = (hf.width, hf.height);
-    let (xm, ym) = ((w - 1) as u32, (h - 1) as u32);
+    let (mesh, max_error_m, hit_triangle_limit) = if opts.max_triangles.is_some() {
+        let whole = Rect { i0: 0, j0: 0, i1: (hf.width - 1) as u32, j1: (hf.height - 1) as u32 };
+        let r = mesh_region(hf, opts, storage, whole, &[])?;
+        (SampleMesh { vertices: r.vertices, triangles: r.triangles }, r.max_error_m, r.hit_triangle_limit)
+    } else {
+        let (mesh, max_error_m) = super::regions::mesh_by_regions(hf, opts, storage)?;
+        (mesh, max_error_m, false)
+    };
+    if mesh.vertices.len() > opts.max_vertices {
+        return Err(over_budget(OverBudget::Reached { error_m: max_error_m }));
+    }
+    let as_stored = !storage.is_exact();
+    if !as_stored || max_error_m <= opts.max_error_m || hit_triangle_limit {
+        return Ok(TinResult { mesh, max_error_m, hit_triangle_limit });
+    }
+    // Every face's samples other than its corners are within the bound as stored; what is left
+    // over is at vertices, whose stored heights the bound is finer than.
+    let stats = measure_stored(hf, &mesh, storage);
+    let [i, j] = stats.worst_sample;
+    let height_m = hf.reference(j as usize * hf.width + i as usize);
+    let (step_m, storage_kind) = storage.height_step(height_m);
+    Err(TerrainError::BelowStoragePrecision {
+        max_error_m: opts.max_error_m,
+        achieved_m: stats.max_error_m,
+        i: i as usize,
+        j: j as usize,
+        height_m,
+        step_m,
+        storage: storage_kind,
+    })
+}
+
+/// A rectangle of samples, corners included: columns `i0..=i1`, rows `j0..=j1`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Rect {
+    pub i0: u32,
+    pub j0: u32,
+    pub i1: u32,
+    pub j1: u32,
+}
+
+/// One rectangle of the map meshed by greedy insertion.
+pub(crate) struct RegionMesh {
+    /// Samples (i, j), the rectangle's corners first, then `border`, then as inserted.
+    pub vertices: Vec<[u32; 2]>,
+    /// Clockwise seen from +Y, as [`SampleMesh`] holds them.
+    pub triangles: Vec<[u32; 3]>,
+    /// Largest error over the rectangle's samples (as stored, when the storage rounds).
+    pub max_error_m: f64,
+    pub hit_triangle_limit: bool,
+}
+
+/// Greedy insertion over the samples of `rect` alone, starting from its corners and the `border`
+/// samples (on its sides, none a corner; a seam shared with a neighbouring rectangle), which stay
+/// vertices: the sides between them are hull edges, never flipped, so two rectangles that start
+/// from the same seam samples meet without a crack as long as neither inserts another sample on it.
+pub(crate) fn mesh_region(
+    hf: &Heightfield,
+    opts: &TinOptions,
+    storage: &Storage,
+    rect: Rect,
+    border: &[[u32; 2]],
+) -> Result<RegionMesh, TerrainError> {
+    let over_budget =
+        |over| TerrainError::OverBudget { limit: opts.max_vertices, over, max_error_m: opts.max_error_m, grid: false };
+    let w = hf.width;
+    let Rect { i0, j0, i1, j1 } = rect;
     let corner = |v: u32, dt: &GreedyDelaunay| {
         let [i, j] = dt.coords[v as usize];
         Corner { x: i as i64, y: j as i64, h: hf.at(i as usize, j as usize) }
     };
     let mut dt = GreedyDelaunay::default();
-    // Corners 0 = (0, 0), 1 = (W, 0), 2 = (W, H), 3 = (0, H); triangles (0, 1, 2) and (0, 2, 3),
-    // counter-clockwise in (i, j), sharing the diagonal 2 → 0 / 0 → 2.
-    dt.coords.extend_from_slice(&[[0, 0], [xm, 0], [xm, ym], [0, ym]]);
+    // Corners 0 = (i0, j0), 1 = (i1, j0), 2 = (i1, j1), 3 = (i0, j1); triangles (0, 1, 2) and
+    // (0, 2, 3), counter-clockwise in (i, j), sharing the diagonal 2 → 0 / 0 → 2.
+    dt.coords.extend_from_slice(&[[i0, j0], [i1, j0], [i1, j1], [i0, j1]]);
     dt.set_triangle(0, [0, 1, 2], [NO_EDGE, NO_EDGE, NO_EDGE]);
     dt.set_triangle(1, [0, 2, 3], [2, NO_EDGE, NO_EDGE]);
+    // The seam samples: each splits the hull edge it lies on (found among the border half-edges).
+    for &p in border {
+        let pp = [p[0] as i64, p[1] as i64];
+        let holder = (0..dt.tri.len() as u32).find(|&e| {
+            if dt.twin[e as usize] != NO_EDGE {
+                return false;
+            }
+            let (a, b) = (dt.point(dt.tri[e as usize]), dt.point(dt.tri[next_edge(e) as usize]));
+            orient(a, b, pp) == 0 && (pp[0] - a[0]) * (pp[0] - b[0]) + (pp[1] - a[1]) * (pp[1] - b[1]) < 0
+        });
+        let Some(e) = holder else {
+            debug_assert!(false, "seam sample {p:?} is not inside a side of {rect:?}");
+            continue;
+        };
+        dt.insert(e / 3, p);
+    }
     let mut faces: Vec<FaceSlot> = Vec::new();
     let mut queue = FaceQueue::default();
     // The file stores f32 positions: where they can differ from the samples, faces near the bound
@@ -968,7 +1055,7 @@ pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Res
         }
         record_scan(faces, queue, t, &scan, w as u32);
     };
-    for t in 0..2 {
+    for t in 0..dt.triangle_count() as u32 {
         rescan(&dt, &mut faces, &mut queue, t);
     }
 
@@ -976,7 +1063,7 @@ pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Res
     while let Some(top) = queue.peek(&faces) {
         let (ci, cj) = (top.sample % w as u32, top.sample / w as u32);
         // Inserting on the rectangle's border splits one triangle, anywhere else two (net).
-        let on_border = ci == 0 || cj == 0 || ci == xm || cj == ym;
+        let on_border = ci == i0 || cj == j0 || ci == i1 || cj == j1;
         let added = if on_border { 1 } else { 2 };
         if let Some(limit) = opts.max_triangles {
             if dt.triangle_count() + added > limit {
@@ -997,29 +1084,12 @@ pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Res
     }
 
     let mesh = SampleMesh {
-        vertices: dt.coords.clone(),
+        vertices: std::mem::take(&mut dt.coords),
         // Counter-clockwise in (i, j) is clockwise seen from +Y: swap two corners.
         triangles: dt.tri.chunks_exact(3).map(|c| [c[0], c[2], c[1]]).collect(),
     };
     let max_error_m = achieved_error(hf, &faces, 0, &mesh, as_stored.then_some(storage));
-    if !as_stored || max_error_m <= opts.max_error_m || hit_triangle_limit {
-        return Ok(TinResult { mesh, max_error_m, hit_triangle_limit });
-    }
-    // Every face's samples other than its corners are within the bound as stored; what is left
-    // over is at vertices, whose stored heights the bound is finer than.
-    let stats = measure_stored(hf, &mesh, storage);
-    let [i, j] = stats.worst_sample;
-    let height_m = hf.reference(j as usize * hf.width + i as usize);
-    let (step_m, storage_kind) = storage.height_step(height_m);
-    Err(TerrainError::BelowStoragePrecision {
-        max_error_m: opts.max_error_m,
-        achieved_m: stats.max_error_m,
-        i: i as usize,
-        j: j as usize,
-        height_m,
-        step_m,
-        storage: storage_kind,
-    })
+    Ok(RegionMesh { vertices: mesh.vertices, triangles: mesh.triangles, max_error_m, hit_triangle_limit })
 }
 
 /// A face's scan as stored (see [`Storage`]): a face the mesher found above the bound stays
