@@ -35,7 +35,8 @@ PY_PKGS_AFTER=(pyopengl==3.1.10)
 # libopengl0 / libgl1 give PyOpenGL the desktop GL library it loads first (else it falls back to GLES).
 # chromium: Babylon.js renders the species files headless (WebGL through SwiftShader), step 5e.
 # mono-mcs: the Unity import script's data side is compiled and run on the built scenes, step 5g3.
-APT_PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgl1 chromium mono-mcs)
+# parallel: GNU parallel runs the sharded build's recipe (scripts/shard/parallel.sh), step 3c.
+APT_PKGS=(libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0 libgl1 chromium mono-mcs parallel)
 
 export PYOPENGL_PLATFORM=egl
 VENV="$ROOT/.venv"
@@ -348,6 +349,40 @@ if find "$BUILD_OUT" -maxdepth 1 -name '.*.building-*' | grep -q .; then
   fail "temporary .NAME.building-* folders left in $BUILD_OUT"
 fi
 echo "built ${#SCENES[@]} scenes (${SCENES[*]}); presets took $presets_seconds"
+
+# ---------------------------------------------------------------------------------------------------------
+section "3c. Sharded build: the demo in 2 shards under GNU parallel, merged, against 3b's demo"
+# scripts/shard/parallel.sh as a user runs it; the merged scene must equal the single build byte for
+# byte (report.json/report.md without their timing sections, the only place runs may differ).
+SHARD_OUT="$OUT/sharded"
+rm -rf "$SHARD_OUT"
+t=$SECONDS
+if VERDANT="$BIN" bash scripts/shard/parallel.sh 2 "$SHARD_OUT" > "$OUT/sharded.log" 2>&1; then
+  if "$PY" - "$BUILD_OUT/demo" "$SHARD_OUT/demo" <<'PY'
+import json, os, re, sys
+a, b = sys.argv[1], sys.argv[2]
+def files(root):
+    return sorted(os.path.relpath(os.path.join(d, f), root) for d, _, fs in os.walk(root) for f in fs)
+def body(root, rel):
+    data = open(os.path.join(root, rel), "rb").read()
+    if rel == "report.json":
+        v = json.loads(data); v.pop("timing"); return json.dumps(v, sort_keys=True).encode()
+    if rel == "report.md":
+        return data[: data.index(b"## Timing")]
+    return data
+fa, fb = files(a), files(b)
+if fa != fb:
+    sys.exit(f"the merged demo holds other files: only single {sorted(set(fa) - set(fb))[:5]}, only merged {sorted(set(fb) - set(fa))[:5]}")
+differ = [r for r in fa if body(a, r) != body(b, r)]
+if differ:
+    sys.exit(f"{len(differ)} files differ between the single and the merged demo: {differ[:5]}")
+print(f"sharded demo: {len(fa)} files, byte-identical to the single build (reports without timing)")
+PY
+  then pass; else fail "the sharded demo differs from the single build"; fi
+else
+  fail "scripts/shard/parallel.sh 2 exited non-zero: $(tail -5 "$OUT/sharded.log")"
+fi
+echo "(sharded demo: $(elapsed "$t"))"
 
 # ---------------------------------------------------------------------------------------------------------
 section "4. verdant validate (re-import + invariants; --up-facing except with skirts or a base)"

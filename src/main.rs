@@ -16,6 +16,7 @@ use verdant::plants::tree_lod::{self, MeshLodJob, TreeLodJob, TreeLodOptions};
 use verdant::scene::build::{self as scene_build, BuildSettings, PresetSource};
 use verdant::scene::pipeline::Stage;
 use verdant::scene::preset;
+use verdant::scene::shard::Shard;
 use verdant::terrain::build::BuildOptions;
 use verdant::terrain::job::{self, MeshMode, Source, TerrainJob};
 use verdant::validate::{validate_file, ValidateOptions};
@@ -59,6 +60,13 @@ enum Command {
     ///
     /// Example: verdant build presets/*.toml --jobs 2
     Build(BuildArgs),
+    /// Join the shard folders of `verdant build --shard I/N` into the scenes a single build makes
+    /// (byte for byte): checks that all N shards of each preset are there and built from the same
+    /// inputs, brings their cache entries in, and builds the rest (snow, placements, scene.glb,
+    /// preview, manifest and report) into --out.
+    ///
+    /// Example: verdant merge presets/alpine.toml --shards shards/0 shards/1 --out out
+    Merge(MergeArgs),
     /// Check a preset without building, or write a commented template.
     #[command(subcommand)]
     Preset(PresetCommand),
@@ -253,6 +261,29 @@ struct BuildArgs {
     /// single samples too). Skipped above 5 G full-detail triangles (said in the report).
     #[arg(long)]
     compare_full_detail: bool,
+    /// Build only shard I of N (I/N, 0 ≤ I < N) into --out's cache: the scene's independent units
+    /// (the terrain stage, each plant species), unit k going to shard k mod N. `verdant merge` then
+    /// joins the N shard folders into the scene a single build makes, byte for byte. --only and
+    /// --skip do not apply. See docs/sharding.md (GNU parallel, Slurm, Kubernetes).
+    #[arg(long, value_name = "I/N")]
+    shard: Option<Shard>,
+}
+
+#[derive(Args)]
+struct MergeArgs {
+    /// Preset files (.toml), as given to the shards. None: the embedded demo scene.
+    #[arg(value_name = "PRESET")]
+    presets: Vec<PathBuf>,
+    /// The shard folders (each the --out of one `verdant build --shard I/N`), all N of them, in any
+    /// order.
+    #[arg(long, value_name = "DIR", num_args = 1.., required = true)]
+    shards: Vec<PathBuf>,
+    /// Output folder; each scene goes to <DIR>/<scene>/, as `verdant build` puts it.
+    #[arg(long, value_name = "DIR", default_value = "out")]
+    out: PathBuf,
+    /// Presets merged at the same time (as `verdant build --jobs`).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    jobs: usize,
 }
 
 #[derive(Subcommand)]
@@ -413,6 +444,7 @@ fn main() -> ExitCode {
         Command::Terrain(args) => terrain(args, cli.quiet),
         Command::Validate(args) => validate(args, cli.quiet),
         Command::Build(args) => build(args, cli.quiet),
+        Command::Merge(args) => merge(args, cli.quiet),
         Command::Preset(cmd) => preset(cmd, cli.quiet),
         Command::Cache(cmd) => cache(cmd, cli.quiet),
         Command::Tree(args) => tree(args, cli.quiet),
@@ -614,25 +646,50 @@ fn build(a: BuildArgs, quiet: bool) -> i32 {
     } else {
         a.presets.iter().cloned().map(PresetSource::File).collect()
     };
-    let settings =
-        BuildSettings { out_dir: a.out.clone(), stages, force: a.force, compare_full_detail: a.compare_full_detail };
+    let settings = BuildSettings {
+        out_dir: a.out.clone(),
+        stages,
+        force: a.force,
+        compare_full_detail: a.compare_full_detail,
+        shard: a.shard,
+    };
     let progress = scene_build::ProgressView::new(quiet);
     let outcomes =
         scene_build::build_batch(&sources, &settings, a.jobs, &|scene: &str, msg: &str| progress.update(scene, msg));
     progress.finish();
-    let table = scene_build::summary_table(&outcomes);
+    report_outcomes(&outcomes, quiet)
+}
+
+fn merge(a: MergeArgs, quiet: bool) -> i32 {
+    let sources: Vec<PresetSource> = if a.presets.is_empty() {
+        vec![PresetSource::Resolved(Box::new(preset::demo_preset()))]
+    } else {
+        a.presets.iter().cloned().map(PresetSource::File).collect()
+    };
+    let settings = BuildSettings { out_dir: a.out.clone(), ..BuildSettings::default() };
+    let progress = scene_build::ProgressView::new(quiet);
+    let outcomes = scene_build::merge_batch(&sources, &a.shards, &settings, a.jobs, &|scene: &str, msg: &str| {
+        progress.update(scene, msg)
+    });
+    progress.finish();
+    report_outcomes(&outcomes, quiet)
+}
+
+/// Prints the batch's table (to stderr when a scene failed) and its warnings; the exit code.
+fn report_outcomes(outcomes: &[scene_build::SceneOutcome], quiet: bool) -> i32 {
+    let table = scene_build::summary_table(outcomes);
     let failed = outcomes.iter().any(|o| o.error.is_some());
     if failed {
         eprint!("{table}");
     } else if !quiet {
         print!("{table}");
     }
-    for o in &outcomes {
+    for o in outcomes {
         for w in &o.warnings {
             eprintln!("warning: scene `{}`: {w}", o.scene);
         }
     }
-    scene_build::batch_blame(&outcomes).map_or(0, Blame::exit_code)
+    scene_build::batch_blame(outcomes).map_or(0, Blame::exit_code)
 }
 
 fn preset(cmd: PresetCommand, quiet: bool) -> i32 {

@@ -21,6 +21,7 @@ use crate::scene::preset::load_preset;
 use crate::scene::preview::{footprint_m, PreviewLayer};
 use crate::scene::preview_stage::{PreviewJob, PreviewPlacements};
 use crate::scene::scatter_stage::{Placed, ScatterJob};
+use crate::scene::shard::{self, Shard};
 use crate::scene::snow_stage::{self, SnowJob};
 use crate::scene::terrain_stage::{LodInfo, TerrainJob};
 use crate::scene::view_stage::{TerrainInput, ViewJob, ViewStageReport};
@@ -36,6 +37,8 @@ pub struct BuildSettings {
     /// Render each scene's first view with LoD and at full detail and report how the images differ
     /// (`--compare-full-detail`; full detail can be billions of triangles, so it is asked for).
     pub compare_full_detail: bool,
+    /// Build only this shard's units into `out_dir`'s cache (`--shard i/N`; [`crate::scene::shard`]).
+    pub shard: Option<Shard>,
 }
 
 impl Default for BuildSettings {
@@ -45,6 +48,7 @@ impl Default for BuildSettings {
             stages: Stage::ALL.to_vec(),
             force: false,
             compare_full_detail: false,
+            shard: None,
         }
     }
 }
@@ -85,6 +89,24 @@ pub struct SceneOutcome {
     pub warnings: Vec<String>,
 }
 
+impl SceneOutcome {
+    /// A scene that failed with `e` after `seconds`.
+    fn failed(preset: String, scene: String, e: &SceneBuildError, seconds: f64) -> SceneOutcome {
+        SceneOutcome {
+            preset,
+            scene,
+            error: Some(e.to_string()),
+            blame: Some(e.blame()),
+            dir: None,
+            files: 0,
+            triangles: 0,
+            cached_stages: Vec::new(),
+            seconds,
+            warnings: Vec::new(),
+        }
+    }
+}
+
 /// Reports progress lines: (scene, message).
 pub type Progress<'a> = &'a (dyn Fn(&str, &str) + Sync);
 
@@ -97,6 +119,21 @@ pub fn build_preset(
     let t0 = Instant::now();
     let name = &preset.scene.name;
     let out = &settings.out_dir;
+    if let Some(part) = settings.shard {
+        let record = shard::build_shard(preset, out, part, settings.force, &|m: &str| progress(name, m))?;
+        return Ok(SceneOutcome {
+            preset: preset_label(preset),
+            scene: name.clone(),
+            error: None,
+            blame: None,
+            dir: Some(out.clone()),
+            files: record.built.len(),
+            triangles: 0,
+            cached_stages: Vec::new(),
+            seconds: t0.elapsed().as_secs_f64(),
+            warnings: crate::scene::preset::lsystem_warnings(preset),
+        });
+    }
     for stage in [Stage::Snow, Stage::Scatter, Stage::Preview] {
         let applies = stage != Stage::Snow || preset.snow.is_some();
         if applies
@@ -249,7 +286,11 @@ fn build_into(
 
     let mut plants: Option<(PlantsStageReport, String)> = None;
     if wants(Stage::Plants) && plants_stage::has_plants(preset) {
-        let ran = runner.run(&PlantsJob { preset })?;
+        let memo = plants_stage::SpeciesMemo { cache: &cache, force: settings.force };
+        let job = PlantsJob { preset, memo: Some(memo) };
+        let ran = runner.run(&job)?;
+        // each species' entry, kept apart: `cache prune` keeps them with the scene
+        runner.used.entries.extend(job.memo_entries());
         plants = Some((ran.report.clone(), ran.key));
         runs.push(StageRun::Plants { report: ran.report, cached: ran.cached, seconds: ran.seconds });
     }
@@ -385,17 +426,8 @@ pub fn build_batch(
 
     let run_one = |(label, r): &(String, Result<Preset, SceneBuildError>)| -> SceneOutcome {
         let t0 = Instant::now();
-        let failed = |scene: String, e: &SceneBuildError| SceneOutcome {
-            preset: label.clone(),
-            scene,
-            error: Some(e.to_string()),
-            blame: Some(e.blame()),
-            dir: None,
-            files: 0,
-            triangles: 0,
-            cached_stages: Vec::new(),
-            seconds: t0.elapsed().as_secs_f64(),
-            warnings: Vec::new(),
+        let failed = |scene: String, e: &SceneBuildError| {
+            SceneOutcome::failed(label.clone(), scene, e, t0.elapsed().as_secs_f64())
         };
         match r {
             Err(e) => failed("—".into(), e),
@@ -425,6 +457,53 @@ pub fn build_batch(
     let mut outcomes: Vec<(usize, SceneOutcome)> = per_worker.drain(..).flatten().collect();
     outcomes.sort_by_key(|(k, _)| *k);
     outcomes.into_iter().map(|(_, o)| o).collect()
+}
+
+/// Merges sharded builds: for every preset, checks that `shard_dirs` hold all its shards and brings
+/// their cache entries into `settings.out_dir` ([`shard::gather`]), then builds it there (every
+/// unit a shard made is served from the cache). A preset whose shards do not check out fails alone.
+pub fn merge_batch(
+    sources: &[PresetSource],
+    shard_dirs: &[PathBuf],
+    settings: &BuildSettings,
+    jobs: usize,
+    progress: Progress,
+) -> Vec<SceneOutcome> {
+    let mut ready: Vec<(usize, PresetSource)> = Vec::new();
+    let mut failed: Vec<(usize, SceneOutcome)> = Vec::new();
+    for (k, source) in sources.iter().enumerate() {
+        let loaded = match source {
+            PresetSource::File(p) => load_preset(p).map_err(SceneBuildError::from),
+            PresetSource::Resolved(p) => Ok((**p).clone()),
+        };
+        let mut scene = "—".to_string();
+        let gathered = loaded.and_then(|p| {
+            scene = p.scene.name.clone();
+            let brought = shard::gather(&p, shard_dirs, &settings.out_dir)?;
+            progress(
+                &p.scene.name,
+                &format!("merge: {brought} cache entries brought from {} shards", shard_dirs.len()),
+            );
+            Ok(p)
+        });
+        match gathered {
+            Ok(p) => ready.push((k, PresetSource::Resolved(Box::new(p)))),
+            Err(e) => {
+                let label = match source {
+                    PresetSource::File(p) => p.display().to_string(),
+                    PresetSource::Resolved(p) => preset_label(p),
+                };
+                failed.push((k, SceneOutcome::failed(label, scene, &e, 0.0)));
+            }
+        }
+    }
+    let settings = BuildSettings { shard: None, force: false, ..settings.clone() };
+    let sources: Vec<PresetSource> = ready.iter().map(|(_, s)| s.clone()).collect();
+    let built = build_batch(&sources, &settings, jobs, progress);
+    let mut all: Vec<(usize, SceneOutcome)> = ready.into_iter().map(|(k, _)| k).zip(built).collect();
+    all.extend(failed);
+    all.sort_by_key(|(k, _)| *k);
+    all.into_iter().map(|(_, o)| o).collect()
 }
 
 /// The end-of-batch table: scene, status, files, triangles, seconds.

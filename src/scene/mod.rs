@@ -15,6 +15,7 @@ pub mod plants_stage;
 pub mod preview;
 pub mod preview_stage;
 pub mod scatter_stage;
+pub mod shard;
 pub mod snow_stage;
 pub mod terrain_stage;
 mod view_lod;

@@ -23,10 +23,10 @@ use crate::plants::tree::{TreeOptions, TreeStats};
 use crate::plants::tree_lod::{
     build_mesh_lods, build_tree_lods, variant_seed, TreeLodOptions, TreeLodReport, TreeLods,
 };
-use crate::scene::cache::{sha256_hex, KeyBuilder};
+use crate::scene::cache::{sha256_hex, Cache, KeyBuilder};
 use crate::scene::error::{SceneBuildError, StageError};
 use crate::scene::pipeline::{Stage, StageJob};
-use crate::scene::{MeshLook, PlantLook, Preset, TreeLook};
+use crate::scene::{MeshLook, PlantLook, Preset, SpeciesSettings, TreeLook};
 
 fn fail(message: String) -> StageError {
     StageError::Failed { stage: "plants", message }
@@ -419,80 +419,154 @@ fn write_mips(
 }
 
 pub fn run_plants(preset: &Preset, scene_dir: &Path) -> Result<PlantsStageReport, StageError> {
+    run_plants_memo(preset, scene_dir, None)
+}
+
+/// [`run_plants`], each species served from its own cache entry when `memo` has it (and stored
+/// there when built): a species edit rebuilds that species alone, and the shards of a sharded build
+/// make species apart ([`crate::scene::shard`]).
+pub fn run_plants_memo(
+    preset: &Preset,
+    scene_dir: &Path,
+    memo: Option<SpeciesMemo>,
+) -> Result<PlantsStageReport, StageError> {
     let t0 = Instant::now();
     let mut species = Vec::new();
     for s in &preset.species {
-        let t1 = Instant::now();
-        let mut files = Vec::new();
-        let name = &s.rules.name;
-        let (mut tree_report, mut mesh_report) = (None, None);
-        let draw;
-        let (grass_report, flower_report) = match &s.look {
-            PlantLook::Marker => continue,
-            PlantLook::Tree(t) => {
-                let (report, chain) = run_tree(name, t, &preset.lod, scene_dir, &mut files)?;
-                (tree_report, draw) = (Some(report), chain);
-                (None, None)
-            }
-            PlantLook::Mesh(m) => {
-                let (report, chain) = run_mesh(name, m, &preset.lod, scene_dir, &mut files)?;
-                (mesh_report, draw) = (Some(report), chain);
-                (None, None)
-            }
-            PlantLook::Grass(g) => {
-                let blade = user_blade(g)?;
-                let asset = build_grass_with(name, g, blade.as_ref(), true, &preset.lod)
-                    .map_err(|e| fail(format!("species `{name}`: {e}")))?;
-                draw = grass_chain(name, g, &asset);
-                for (n, scene) in asset.lod_scenes.iter().enumerate() {
-                    write(scene, scene_dir, PathBuf::from("species").join(format!("{name}_LOD{n}.glb")), &mut files)?;
-                }
-                write(&asset.chain, scene_dir, PathBuf::from("species").join(format!("{name}.glb")), &mut files)?;
-                write(&asset.far, scene_dir, PathBuf::from("species").join(format!("{name}_far.glb")), &mut files)?;
-                write_mips(scene_dir, name, &asset.atlas, &mut files)?;
-                write_mips(scene_dir, &format!("{name}_blade"), &asset.blade, &mut files)?;
-                let density = PathBuf::from("atlases").join(format!("{name}_density.png"));
-                let png = asset.density_atlas.encode_png().map_err(|e| fail(e.to_string()))?;
-                export::write_atomic(&scene_dir.join(&density), &png).map_err(|e| fail(e.to_string()))?;
-                files.push(density);
-                write_normal_atlas(scene_dir, name, &asset.normal_atlas, &mut files)?;
-                (Some(asset.report), None)
-            }
-            PlantLook::Flower(f) => {
-                let asset = build_flower(name, f).map_err(|e| fail(format!("species `{name}`: {e}")))?;
-                let file = PathBuf::from("species").join(format!("{name}.glb"));
-                let levels = asset
-                    .scene
-                    .meshes
-                    .iter()
-                    .map(|m| {
-                        vec![ChainLevel {
-                            file: file.clone(),
-                            mesh: m.name.clone(),
-                            triangles: m.triangle_count(),
-                            switch_distance_m: 0.0,
-                        }]
-                    })
-                    .collect();
-                draw = SpeciesChain::with_bounds(levels, &asset.scene.meshes.iter().collect::<Vec<_>>());
-                write(&asset.scene, scene_dir, file, &mut files)?;
-                write_mips(scene_dir, name, &asset.atlas, &mut files)?;
-                write_normal_atlas(scene_dir, name, &asset.normal_atlas, &mut files)?;
-                (None, Some(asset.report))
-            }
-        };
-        species.push(PlantReport {
-            name: name.clone(),
-            files,
-            grass: grass_report,
-            flower: flower_report,
-            tree: tree_report,
-            mesh: mesh_report,
-            chain: draw,
-            seconds: t1.elapsed().as_secs_f64(),
-        });
+        if let Some(report) = species_unit(preset, s, scene_dir, memo)? {
+            species.push(report);
+        }
     }
     Ok(PlantsStageReport { species, seconds: t0.elapsed().as_secs_f64() })
+}
+
+/// The cache entries of single species: `plants-species-<key>`.
+pub const SPECIES_MEMO_STAGE: &str = "plants-species";
+
+/// Where species are kept apart in the cache, and whether to ignore what is there (`--force`).
+#[derive(Clone, Copy)]
+pub struct SpeciesMemo<'a> {
+    pub cache: &'a Cache,
+    pub force: bool,
+}
+
+/// Key of one species' unit: the plants stage's version, the `[lod]` policy, the species' name,
+/// look and input files.
+pub fn species_key(preset: &Preset, s: &SpeciesSettings) -> Result<String, StageError> {
+    let mut k = KeyBuilder::new(SPECIES_MEMO_STAGE, PLANTS_ALGORITHM_VERSION);
+    k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
+    k.add(s.rules.name.as_bytes());
+    k.add(serde_json::to_string(&s.look).unwrap_or_default().as_bytes());
+    add_look_inputs(&mut k, &s.rules.name, &s.look)?;
+    Ok(k.finish())
+}
+
+/// Does the plants stage make something for this species (not a marker-drawn one)?
+pub fn makes(s: &SpeciesSettings) -> bool {
+    !matches!(s.look, PlantLook::Marker)
+}
+
+/// One species of the plants stage: restored from `memo` when its entry is there and whole, else
+/// built into `scene_dir` (and stored in `memo`). `None` for a species this stage makes nothing of.
+pub fn species_unit(
+    preset: &Preset,
+    s: &SpeciesSettings,
+    scene_dir: &Path,
+    memo: Option<SpeciesMemo>,
+) -> Result<Option<PlantReport>, StageError> {
+    if !makes(s) {
+        return Ok(None);
+    }
+    let Some(memo) = memo else { return run_species(preset, s, scene_dir) };
+    let key = species_key(preset, s)?;
+    let cached = if memo.force { None } else { memo.cache.lookup(SPECIES_MEMO_STAGE, &key) };
+    if let Some((json, entry)) = cached {
+        if let Ok(report) = serde_json::from_str::<PlantReport>(&json) {
+            if Cache::restore(&entry, scene_dir, &report.files).is_ok() {
+                return Ok(Some(report));
+            }
+        }
+    }
+    let report = run_species(preset, s, scene_dir)?;
+    if let Some(r) = &report {
+        let json = serde_json::to_string_pretty(r).unwrap_or_default();
+        // a species that cannot be stored is only rebuilt next time
+        let _ = memo.cache.store(SPECIES_MEMO_STAGE, &key, scene_dir, &r.files, &json);
+    }
+    Ok(report)
+}
+
+/// Builds one species' files into `scene_dir`.
+fn run_species(preset: &Preset, s: &SpeciesSettings, scene_dir: &Path) -> Result<Option<PlantReport>, StageError> {
+    let t1 = Instant::now();
+    let mut files = Vec::new();
+    let name = &s.rules.name;
+    let (mut tree_report, mut mesh_report) = (None, None);
+    let draw;
+    let (grass_report, flower_report) = match &s.look {
+        PlantLook::Marker => return Ok(None),
+        PlantLook::Tree(t) => {
+            let (report, chain) = run_tree(name, t, &preset.lod, scene_dir, &mut files)?;
+            (tree_report, draw) = (Some(report), chain);
+            (None, None)
+        }
+        PlantLook::Mesh(m) => {
+            let (report, chain) = run_mesh(name, m, &preset.lod, scene_dir, &mut files)?;
+            (mesh_report, draw) = (Some(report), chain);
+            (None, None)
+        }
+        PlantLook::Grass(g) => {
+            let blade = user_blade(g)?;
+            let asset = build_grass_with(name, g, blade.as_ref(), true, &preset.lod)
+                .map_err(|e| fail(format!("species `{name}`: {e}")))?;
+            draw = grass_chain(name, g, &asset);
+            for (n, scene) in asset.lod_scenes.iter().enumerate() {
+                write(scene, scene_dir, PathBuf::from("species").join(format!("{name}_LOD{n}.glb")), &mut files)?;
+            }
+            write(&asset.chain, scene_dir, PathBuf::from("species").join(format!("{name}.glb")), &mut files)?;
+            write(&asset.far, scene_dir, PathBuf::from("species").join(format!("{name}_far.glb")), &mut files)?;
+            write_mips(scene_dir, name, &asset.atlas, &mut files)?;
+            write_mips(scene_dir, &format!("{name}_blade"), &asset.blade, &mut files)?;
+            let density = PathBuf::from("atlases").join(format!("{name}_density.png"));
+            let png = asset.density_atlas.encode_png().map_err(|e| fail(e.to_string()))?;
+            export::write_atomic(&scene_dir.join(&density), &png).map_err(|e| fail(e.to_string()))?;
+            files.push(density);
+            write_normal_atlas(scene_dir, name, &asset.normal_atlas, &mut files)?;
+            (Some(asset.report), None)
+        }
+        PlantLook::Flower(f) => {
+            let asset = build_flower(name, f).map_err(|e| fail(format!("species `{name}`: {e}")))?;
+            let file = PathBuf::from("species").join(format!("{name}.glb"));
+            let levels = asset
+                .scene
+                .meshes
+                .iter()
+                .map(|m| {
+                    vec![ChainLevel {
+                        file: file.clone(),
+                        mesh: m.name.clone(),
+                        triangles: m.triangle_count(),
+                        switch_distance_m: 0.0,
+                    }]
+                })
+                .collect();
+            draw = SpeciesChain::with_bounds(levels, &asset.scene.meshes.iter().collect::<Vec<_>>());
+            write(&asset.scene, scene_dir, file, &mut files)?;
+            write_mips(scene_dir, name, &asset.atlas, &mut files)?;
+            write_normal_atlas(scene_dir, name, &asset.normal_atlas, &mut files)?;
+            (None, Some(asset.report))
+        }
+    };
+    Ok(Some(PlantReport {
+        name: name.clone(),
+        files,
+        grass: grass_report,
+        flower: flower_report,
+        tree: tree_report,
+        mesh: mesh_report,
+        chain: draw,
+        seconds: t1.elapsed().as_secs_f64(),
+    }))
 }
 
 /// A grass species' chain: the densest clumps (density is applied once, by the scatter's
@@ -528,6 +602,22 @@ fn grass_chain(name: &str, g: &GrassSettings, asset: &GrassAsset) -> SpeciesChai
 /// The stage in a scene build.
 pub struct PlantsJob<'a> {
     pub preset: &'a Preset,
+    /// Species kept apart in the cache (None: each built here).
+    pub memo: Option<SpeciesMemo<'a>>,
+}
+
+impl PlantsJob<'_> {
+    /// The species' entry names (what `verdant cache prune` keeps for this scene).
+    pub fn memo_entries(&self) -> Vec<String> {
+        if self.memo.is_none() {
+            return Vec::new();
+        }
+        let species = self.preset.species.iter().filter(|s| makes(s));
+        species
+            .filter_map(|s| species_key(self.preset, s).ok())
+            .map(|k| Cache::entry_name(SPECIES_MEMO_STAGE, &k))
+            .collect()
+    }
 }
 
 impl StageJob for PlantsJob<'_> {
@@ -544,6 +634,6 @@ impl StageJob for PlantsJob<'_> {
     }
 
     fn run(&self, dir: &Path) -> Result<(PlantsStageReport, ()), SceneBuildError> {
-        Ok((run_plants(self.preset, dir)?, ()))
+        Ok((run_plants_memo(self.preset, dir, self.memo)?, ()))
     }
 }

@@ -19,6 +19,7 @@ mod scatter_build;
 mod scatter_cases;
 mod scene_build;
 mod scene_view;
+mod sharding;
 mod snow;
 mod snow_build;
 mod terrain_cases;

@@ -10,7 +10,6 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use image::{ImageBuffer, Luma};
-use serde_json::Value;
 use verdant::scene::build::{build_batch, build_preset, BuildSettings, PresetSource};
 use verdant::scene::cache::sha256_hex;
 use verdant::scene::pipeline::Stage;
@@ -46,42 +45,6 @@ fn write_heightmap(path: &Path, phase: f32) {
         Luma([(v.clamp(0.0, 1.0) * 65535.0) as u16])
     });
     img.save(path).unwrap();
-}
-
-/// report.json without its `timing` section; report.md without its `## Timing` section.
-fn without_timing(rel: &str, bytes: &[u8]) -> Vec<u8> {
-    if rel.ends_with("report.json") {
-        let mut v: Value = serde_json::from_slice(bytes).unwrap();
-        assert!(v.get("timing").is_some(), "{rel} has no timing section");
-        v.as_object_mut().unwrap().remove("timing");
-        serde_json::to_vec_pretty(&v).unwrap()
-    } else if rel.ends_with("report.md") {
-        let s = String::from_utf8(bytes.to_vec()).unwrap();
-        let cut = s.find("## Timing").unwrap_or_else(|| panic!("{rel} has no timing section"));
-        s.as_bytes()[..cut].to_vec()
-    } else {
-        bytes.to_vec()
-    }
-}
-
-/// Asserts two scene trees are byte-identical, reports compared without their timing.
-fn assert_same_tree(a: &Path, b: &Path) {
-    let (ta, tb) = (tree(a), tree(b));
-    assert_eq!(
-        ta.keys().collect::<Vec<_>>(),
-        tb.keys().collect::<Vec<_>>(),
-        "{} and {} hold different files",
-        a.display(),
-        b.display()
-    );
-    for (rel, bytes) in &ta {
-        assert!(
-            without_timing(rel, bytes) == without_timing(rel, &tb[rel]),
-            "{rel} differs between {} and {}",
-            a.display(),
-            b.display()
-        );
-    }
 }
 
 /// Hidden temporary folders (`.NAME.building-*`, `.NAME.old-*`) left in an output folder.
@@ -762,8 +725,7 @@ fn library_batch_keeps_order_and_reports_failures() {
         t.source = load_preset(&good).unwrap().terrain.unwrap().source;
         t.chunk = Some(64);
     }
-    let settings =
-        BuildSettings { out_dir: d.join("out"), stages: Stage::ALL.to_vec(), force: false, compare_full_detail: false };
+    let settings = BuildSettings { out_dir: d.join("out"), ..BuildSettings::default() };
     let sources = vec![
         PresetSource::File(bad.clone()),
         PresetSource::Resolved(Box::new(demo.clone())),

@@ -149,3 +149,39 @@ pub fn surface_attribute(scene: &verdant::mesh::Scene, name: &str) -> Vec<([f32;
     }
     out
 }
+
+/// report.json without its `timing` section; report.md without its `## Timing` section.
+pub fn without_timing(rel: &str, bytes: &[u8]) -> Vec<u8> {
+    if rel.ends_with("report.json") {
+        let mut v: Value = serde_json::from_slice(bytes).unwrap();
+        assert!(v.get("timing").is_some(), "{rel} has no timing section");
+        v.as_object_mut().unwrap().remove("timing");
+        serde_json::to_vec_pretty(&v).unwrap()
+    } else if rel.ends_with("report.md") {
+        let s = String::from_utf8(bytes.to_vec()).unwrap();
+        let cut = s.find("## Timing").unwrap_or_else(|| panic!("{rel} has no timing section"));
+        s.as_bytes()[..cut].to_vec()
+    } else {
+        bytes.to_vec()
+    }
+}
+
+/// Asserts two scene trees are byte-identical, reports compared without their timing.
+pub fn assert_same_tree(a: &Path, b: &Path) {
+    let (ta, tb) = (tree(a), tree(b));
+    assert_eq!(
+        ta.keys().collect::<Vec<_>>(),
+        tb.keys().collect::<Vec<_>>(),
+        "{} and {} hold different files",
+        a.display(),
+        b.display()
+    );
+    for (rel, bytes) in &ta {
+        assert!(
+            without_timing(rel, bytes) == without_timing(rel, &tb[rel]),
+            "{rel} differs between {} and {}",
+            a.display(),
+            b.display()
+        );
+    }
+}

@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# A sharded build with GNU parallel: N shards of the given presets (none: the embedded demo), then the
+# merge into OUT. On this machine by default; on ssh hosts with PARALLEL_SSHLOGIN (GNU parallel's
+# --sshlogin list, e.g. "2/node1,2/node2"), which must see this folder at the same path (a shared
+# file system: the shard folders are written there and the merge reads them back).
+#
+#   scripts/shard/parallel.sh N OUT [PRESET...]
+#   VERDANT=target/release/verdant scripts/shard/parallel.sh 4 out presets/alpine.toml
+#
+# Each shard is `verdant build PRESET... --shard i/N --out OUT/.shards/i`; the merge is
+# `verdant merge PRESET... --shards OUT/.shards/* --out OUT`. Any shard failing stops the run
+# (--halt now,fail=1) before the merge.
+set -euo pipefail
+if [ $# -lt 2 ]; then
+  echo "usage: $0 N OUT [PRESET...]" >&2
+  exit 2
+fi
+n="$1"; out="$2"; shift 2
+verdant="${VERDANT:-verdant}"
+shards="$out/.shards"
+remote=()
+if [ -n "${PARALLEL_SSHLOGIN:-}" ]; then
+  remote=(--sshlogin "$PARALLEL_SSHLOGIN" --workdir "$PWD")
+fi
+seq 0 $((n - 1)) | parallel --will-cite --halt now,fail=1 "${remote[@]}" \
+  "$verdant" -q build "$@" --shard "{}/$n" --out "$shards/{}"
+mapfile -t dirs < <(seq -f "$shards/%g" 0 $((n - 1)))
+"$verdant" merge "$@" --shards "${dirs[@]}" --out "$out"

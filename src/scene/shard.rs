@@ -1,0 +1,272 @@
+//! Sharded builds: a scene's independent units of work built by N processes (on one machine or
+//! many), then merged into the scene a single build makes, byte for byte.
+//!
+//! A unit is work whose result is a cache entry: the terrain stage (its files and its meshes), and
+//! each species the plants stage makes. Unit k of a preset (in the order [`units`] lists them) is
+//! built by shard k mod N: `verdant build PRESET --shard i/N --out DIR` builds shard i's units into
+//! `DIR/.cache/` and writes `DIR/<scene>.shard.json` (which units, which entries). `verdant merge
+//! PRESET --shards DIR... --out OUT` checks that the N shards of the same preset are all there,
+//! brings their entries into `OUT/.cache/` and builds the scene there: every unit is served from
+//! the cache exactly as a rebuild of an unchanged scene is, so the scene is the one a single build
+//! makes, whatever N and whichever shard finished first. The stages that read every unit (snow,
+//! scatter, view, preview) and the manifest run in the merge.
+//!
+//! Not split yet (issue 18): the terrain meshed region by region (`terrain/regions.rs` meshes
+//! regions apart already) and the placements tile by tile.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+use crate::scene::cache::Cache;
+use crate::scene::error::SceneBuildError;
+use crate::scene::pipeline::{CacheUse, StageJob, StageRunner};
+use crate::scene::plants_stage::{self, SpeciesMemo, SPECIES_MEMO_STAGE};
+use crate::scene::terrain_stage::{MeshMemo, TerrainJob};
+use crate::scene::Preset;
+
+/// Shard `index` of `count` (`--shard i/N`, 0 ≤ i < N).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+/// Most shards a build may be cut into.
+pub const MAX_SHARDS: usize = 65_536;
+
+impl FromStr for Shard {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Shard, String> {
+        let usage = || format!("`{s}`: a shard is INDEX/COUNT, 0 ≤ INDEX < COUNT ≤ {MAX_SHARDS} (e.g. 0/4)");
+        let (i, n) = s.split_once('/').ok_or_else(usage)?;
+        let (index, count): (usize, usize) =
+            (i.trim().parse().map_err(|_| usage())?, n.trim().parse().map_err(|_| usage())?);
+        if count == 0 || index >= count || count > MAX_SHARDS {
+            return Err(usage());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+/// One unit of a preset's build and the cache entries it leaves.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Unit {
+    /// `terrain`, or `species <name>`.
+    pub name: String,
+    pub entries: Vec<String>,
+}
+
+/// What a shard built (`<scene>.shard.json` in its folder).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShardRecord {
+    pub scene: String,
+    pub shard: usize,
+    pub of: usize,
+    /// Every unit of the preset, in order (the merge checks its own preset lists the same).
+    pub units: Vec<Unit>,
+    /// Indices into `units` this shard built.
+    pub built: Vec<usize>,
+}
+
+/// The units of `preset`, in order: the terrain stage (when the preset has a terrain), then every
+/// species the plants stage makes, in preset order.
+pub fn units(preset: &Preset, out: &Path) -> Result<Vec<Unit>, SceneBuildError> {
+    let cache = Cache::new(out);
+    let mut units = Vec::new();
+    if let Some(t) = &preset.terrain {
+        let job = TerrainJob { preset, terrain: t, memo: Some(MeshMemo { cache: &cache, force: false }) };
+        let mut entries = vec![Cache::entry_name("terrain", &job.key()?)];
+        entries.extend(job.memo_entry());
+        units.push(Unit { name: "terrain".into(), entries });
+    }
+    for s in preset.species.iter().filter(|s| plants_stage::makes(s)) {
+        let key = plants_stage::species_key(preset, s)?;
+        units.push(Unit {
+            name: format!("species {}", s.rules.name),
+            entries: vec![Cache::entry_name(SPECIES_MEMO_STAGE, &key)],
+        });
+    }
+    Ok(units)
+}
+
+/// The record's file in a shard folder.
+pub fn record_path(shard_dir: &Path, scene: &str) -> PathBuf {
+    shard_dir.join(format!("{scene}.shard.json"))
+}
+
+/// Builds shard `shard`'s units of `preset` into `out/.cache/` and records them in
+/// `out/<scene>.shard.json`. Scene files are made in a temporary folder and removed: the cache
+/// entries are the shard's output.
+pub fn build_shard(
+    preset: &Preset,
+    out: &Path,
+    shard: Shard,
+    force: bool,
+    say: &dyn Fn(&str),
+) -> Result<ShardRecord, SceneBuildError> {
+    let name = &preset.scene.name;
+    let io = |path: &Path| {
+        let path = path.to_owned();
+        move |e: std::io::Error| SceneBuildError::Io { path: path.clone(), message: e.to_string() }
+    };
+    fs::create_dir_all(out).map_err(io(out))?;
+    let cache = Cache::new(out);
+    let all = units(preset, out)?;
+    let mine: Vec<usize> = (0..all.len()).filter(|k| k % shard.count == shard.index).collect();
+    let tmp = out.join(format!(".{name}.shard-{}", std::process::id()));
+    let _ = fs::remove_dir_all(&tmp);
+    fs::create_dir_all(&tmp).map_err(io(&tmp))?;
+    let result = (|| -> Result<(), SceneBuildError> {
+        let mut runner = StageRunner { cache: &cache, force, dir: &tmp, used: CacheUse::default(), progress: say };
+        let species: Vec<_> = preset.species.iter().filter(|s| plants_stage::makes(s)).collect();
+        let first_species = usize::from(preset.terrain.is_some());
+        for &k in &mine {
+            say(&format!("shard {}/{}: {}", shard.index, shard.count, all[k].name));
+            if k < first_species {
+                let t = preset.terrain.as_ref().expect("unit 0 is the terrain when there is one");
+                let memo = Some(MeshMemo { cache: &cache, force });
+                runner.run(&TerrainJob { preset, terrain: t, memo })?;
+            } else {
+                let s = species[k - first_species];
+                plants_stage::species_unit(preset, s, &tmp, Some(SpeciesMemo { cache: &cache, force }))?;
+            }
+        }
+        Ok(())
+    })();
+    let _ = fs::remove_dir_all(&tmp);
+    result?;
+    let record = ShardRecord { scene: name.clone(), shard: shard.index, of: shard.count, units: all, built: mine };
+    let path = record_path(out, name);
+    let text = serde_json::to_string_pretty(&record).unwrap_or_default();
+    crate::export::write_atomic(&path, text.as_bytes())
+        .map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })?;
+    Ok(record)
+}
+
+/// Checks that `shard_dirs` hold all N shards of `preset` (each once, all of the same N, every unit
+/// built by one of them, from the same inputs) and brings their entries into `out/.cache/`. Then a
+/// build of `preset` into `out` serves every unit from the cache.
+pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usize, SceneBuildError> {
+    let name = &preset.scene.name;
+    let usage = |m: String| SceneBuildError::Usage(m);
+    let mut records: Vec<(PathBuf, ShardRecord)> = Vec::new();
+    for dir in shard_dirs {
+        let path = record_path(dir, name);
+        let text = fs::read_to_string(&path).map_err(|e| {
+            usage(format!("{}: {e}: not a shard folder of scene `{name}` (build it with --shard i/N)", path.display()))
+        })?;
+        let record: ShardRecord =
+            serde_json::from_str(&text).map_err(|e| usage(format!("{}: not a shard record: {e}", path.display())))?;
+        records.push((path, record));
+    }
+    let Some(count) = records.first().map(|(_, r)| r.of) else {
+        return Err(usage(format!("scene `{name}`: no shard folder given (--shards DIR...)")));
+    };
+    let mut seen: Vec<Option<&PathBuf>> = vec![None; count];
+    for (path, r) in &records {
+        if r.of != count {
+            return Err(usage(format!(
+                "{}: shard {}/{} of another split than {}/{count} (every shard must be built with the same N)",
+                path.display(),
+                r.shard,
+                r.of,
+                records[0].1.shard
+            )));
+        }
+        match seen.get_mut(r.shard) {
+            Some(Some(first)) => {
+                return Err(usage(format!(
+                    "shard {}/{count} given twice: {} and {}",
+                    r.shard,
+                    first.display(),
+                    path.display()
+                )))
+            }
+            Some(slot) => *slot = Some(path),
+            None => return Err(usage(format!("{}: shard {} is not below {count}", path.display(), r.shard))),
+        }
+    }
+    if let Some(missing) = seen.iter().position(Option::is_none) {
+        return Err(usage(format!(
+            "scene `{name}`: shard {missing}/{count} is missing; build it (verdant build … --shard {missing}/{count}) and give its folder"
+        )));
+    }
+    // the units of this preset, as this merge sees it: each must be in its shard's record
+    let expected = units(preset, out)?;
+    for (k, unit) in expected.iter().enumerate() {
+        let shard = k % count;
+        let (path, record) = records.iter().find(|(_, r)| r.shard == shard).expect("every shard is present");
+        let built = record.built.iter().any(|&b| record.units.get(b) == Some(unit));
+        if !built {
+            return Err(usage(format!(
+                "{}: shard {shard}/{count} did not build {} from these inputs (was it built from another version of the preset or its files?); build the shard again",
+                path.display(),
+                unit.name
+            )));
+        }
+    }
+    let cache = Cache::new(out);
+    fs::create_dir_all(&cache.root)
+        .map_err(|e| SceneBuildError::Io { path: cache.root.clone(), message: e.to_string() })?;
+    let mut brought = 0;
+    for (k, unit) in expected.iter().enumerate() {
+        let dir = &shard_dirs[records.iter().position(|(_, r)| r.shard == k % count).expect("present")];
+        for entry in &unit.entries {
+            let (src, dst) = (Cache::new(dir).root.join(entry), cache.root.join(entry));
+            if dst.join("stage.json").exists() {
+                continue;
+            }
+            copy_entry(&src, &dst, &cache.root)
+                .map_err(|e| SceneBuildError::Io { path: src.clone(), message: e.to_string() })?;
+            brought += 1;
+        }
+    }
+    Ok(brought)
+}
+
+/// Copies an entry folder (hard links where possible) into the cache under a temporary name and
+/// renames it into place, so a merge that is stopped never leaves half an entry.
+fn copy_entry(src: &Path, dst: &Path, root: &Path) -> std::io::Result<()> {
+    let tmp = root.join(format!(
+        ".{}.merge-{}",
+        dst.file_name().and_then(|n| n.to_str()).unwrap_or("entry"),
+        std::process::id()
+    ));
+    let _ = fs::remove_dir_all(&tmp);
+    fn walk(from: &Path, to: &Path) -> std::io::Result<()> {
+        fs::create_dir_all(to)?;
+        for item in fs::read_dir(from)? {
+            let item = item?;
+            let (s, d) = (item.path(), to.join(item.file_name()));
+            if item.file_type()?.is_dir() {
+                walk(&s, &d)?;
+            } else if fs::hard_link(&s, &d).is_err() {
+                fs::copy(&s, &d)?;
+            }
+        }
+        Ok(())
+    }
+    let result = walk(src, &tmp).and_then(|()| fs::rename(&tmp, dst));
+    if result.is_err() {
+        let _ = fs::remove_dir_all(&tmp);
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_shard_is_index_over_count() {
+        assert_eq!("0/1".parse::<Shard>(), Ok(Shard { index: 0, count: 1 }));
+        assert_eq!(" 3 / 4 ".parse::<Shard>(), Ok(Shard { index: 3, count: 4 }));
+        for bad in ["4/4", "1/0", "x/2", "2", "-1/3", "0/65537", ""] {
+            let e = bad.parse::<Shard>().unwrap_err();
+            assert!(e.contains("INDEX/COUNT"), "{bad}: {e}");
+        }
+    }
+}
