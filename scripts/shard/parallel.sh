@@ -22,7 +22,8 @@ remote=()
 if [ -n "${PARALLEL_SSHLOGIN:-}" ]; then
   remote=(--sshlogin "$PARALLEL_SSHLOGIN" --workdir "$PWD")
 fi
-seq 0 $((n - 1)) | parallel --will-cite --halt now,fail=1 "${remote[@]}" \
+# -q: each argument quoted as given (preset paths with spaces); ${remote[@]+…}: bash < 4.4 with set -u
+seq 0 $((n - 1)) | parallel --will-cite -q --halt now,fail=1 ${remote[@]+"${remote[@]}"} \
   "$verdant" -q build "$@" --shard "{}/$n" --out "$shards/{}"
 mapfile -t dirs < <(seq -f "$shards/%g" 0 $((n - 1)))
 "$verdant" merge "$@" --shards "${dirs[@]}" --out "$out"

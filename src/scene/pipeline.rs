@@ -116,11 +116,17 @@ pub struct TerrainHandoff {
 }
 
 impl TerrainHandoff {
+    /// `files` are the terrain stage's files; the main one is its first glTF (`.glb`/`.gltf`), else
+    /// its first OBJ. An OBJ does not read back as the scene that was written (its reader rebuilds
+    /// the vertices), so with an OBJ main file the in-memory `scene` is not used: later stages read
+    /// the file whether the terrain stage ran or was served from the cache, and make the same bytes.
     pub fn new(dir: &Path, files: &[PathBuf], key: String, scene: Option<Scene>) -> TerrainHandoff {
-        let is_mesh = |p: &&PathBuf| matches!(p.extension().and_then(|e| e.to_str()), Some("glb" | "gltf" | "obj"));
-        let main = files.iter().find(is_mesh).cloned().unwrap_or_default();
+        let ext = |p: &&PathBuf| p.extension().and_then(|e| e.to_str()).map(str::to_owned);
+        let gltf = files.iter().find(|p| matches!(ext(p).as_deref(), Some("glb" | "gltf")));
+        let main =
+            gltf.or_else(|| files.iter().find(|p| ext(p).as_deref() == Some("obj"))).cloned().unwrap_or_default();
         let cell = OnceCell::new();
-        if let Some(scene) = scene {
+        if let (Some(scene), true) = (scene, gltf.is_some()) {
             let _ = cell.set(scene);
         }
         TerrainHandoff { cell, dir: dir.to_path_buf(), main, key }

@@ -17,10 +17,11 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use serde::{Deserialize, Serialize};
 
-use crate::scene::cache::Cache;
+use crate::scene::cache::{process_alive, Cache};
 use crate::scene::error::SceneBuildError;
 use crate::scene::pipeline::{CacheUse, StageJob, StageRunner};
 use crate::scene::plants_stage::{self, SpeciesMemo, SPECIES_MEMO_STAGE};
@@ -62,6 +63,9 @@ pub struct Unit {
 /// What a shard built (`<scene>.shard.json` in its folder).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ShardRecord {
+    /// The binary that built the shard (`verdant <version> <arch>-<os>`): the merge refuses shards of
+    /// another, whose bytes need not be the same.
+    pub built_by: String,
     pub scene: String,
     pub shard: usize,
     pub of: usize,
@@ -92,6 +96,11 @@ pub fn units(preset: &Preset, out: &Path) -> Result<Vec<Unit>, SceneBuildError> 
     Ok(units)
 }
 
+/// What [`ShardRecord::built_by`] says of this binary.
+pub fn this_binary() -> String {
+    format!("verdant {} {}-{}", env!("CARGO_PKG_VERSION"), std::env::consts::ARCH, std::env::consts::OS)
+}
+
 /// The record's file in a shard folder.
 pub fn record_path(shard_dir: &Path, scene: &str) -> PathBuf {
     shard_dir.join(format!("{scene}.shard.json"))
@@ -116,6 +125,7 @@ pub fn build_shard(
     let cache = Cache::new(out);
     let all = units(preset, out)?;
     let mine: Vec<usize> = (0..all.len()).filter(|k| k % shard.count == shard.index).collect();
+    remove_stale_shard_folders(out, name);
     let tmp = out.join(format!(".{name}.shard-{}", std::process::id()));
     let _ = fs::remove_dir_all(&tmp);
     fs::create_dir_all(&tmp).map_err(io(&tmp))?;
@@ -138,12 +148,48 @@ pub fn build_shard(
     })();
     let _ = fs::remove_dir_all(&tmp);
     result?;
-    let record = ShardRecord { scene: name.clone(), shard: shard.index, of: shard.count, units: all, built: mine };
+    // every entry the record names must be there (a store that failed, e.g. on a full disk, is
+    // only a miss for a single build, but a merge would find nothing)
+    for &k in &mine {
+        for entry in &all[k].entries {
+            if !cache.root.join(entry).join("stage.json").is_file() {
+                return Err(SceneBuildError::Io {
+                    path: cache.root.join(entry),
+                    message: format!(
+                        "{}'s cache entry could not be stored (is the disk full?); build the shard again",
+                        all[k].name
+                    ),
+                });
+            }
+        }
+    }
+    let record = ShardRecord {
+        built_by: this_binary(),
+        scene: name.clone(),
+        shard: shard.index,
+        of: shard.count,
+        units: all,
+        built: mine,
+    };
     let path = record_path(out, name);
     let text = serde_json::to_string_pretty(&record).unwrap_or_default();
     crate::export::write_atomic(&path, text.as_bytes())
         .map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })?;
     Ok(record)
+}
+
+/// Removes the `.NAME.shard-PID` folders of shards of scene `name` that were killed (their process
+/// is gone); folders of running processes are left alone.
+fn remove_stale_shard_folders(out: &Path, name: &str) {
+    let Ok(items) = fs::read_dir(out) else { return };
+    let prefix = format!(".{name}.shard-");
+    for item in items.flatten() {
+        let file = item.file_name().to_string_lossy().to_string();
+        let Some(pid) = file.strip_prefix(&prefix).and_then(|p| p.parse::<u32>().ok()) else { continue };
+        if pid != std::process::id() && !process_alive(pid) {
+            let _ = fs::remove_dir_all(item.path());
+        }
+    }
 }
 
 /// Checks that `shard_dirs` hold all N shards of `preset` (each once, all of the same N, every unit
@@ -165,6 +211,19 @@ pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usi
     let Some(count) = records.first().map(|(_, r)| r.of) else {
         return Err(usage(format!("scene `{name}`: no shard folder given (--shards DIR...)")));
     };
+    if count == 0 || count > MAX_SHARDS {
+        return Err(usage(format!("{}: a split into {count} shards (1 … {MAX_SHARDS})", records[0].0.display())));
+    }
+    for (path, r) in &records {
+        if r.built_by != this_binary() {
+            return Err(usage(format!(
+                "{}: built by {}, this is {}: build every shard and the merge with one binary (their bytes may differ)",
+                path.display(),
+                r.built_by,
+                this_binary()
+            )));
+        }
+    }
     let mut seen: Vec<Option<&PathBuf>> = vec![None; count];
     for (path, r) in &records {
         if r.of != count {
@@ -202,7 +261,7 @@ pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usi
         let built = record.built.iter().any(|&b| record.units.get(b) == Some(unit));
         if !built {
             return Err(usage(format!(
-                "{}: shard {shard}/{count} did not build {} from these inputs (was it built from another version of the preset or its files?); build the shard again",
+                "{}: shard {shard}/{count} did not build {} from these inputs (was it built from another version of the preset or its files, or from the preset given by another path?); build the shard again",
                 path.display(),
                 unit.name
             )));
@@ -230,12 +289,17 @@ pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usi
 /// Copies an entry folder (hard links where possible) into the cache under a temporary name and
 /// renames it into place, so a merge that is stopped never leaves half an entry.
 fn copy_entry(src: &Path, dst: &Path, root: &Path) -> std::io::Result<()> {
+    static SERIAL: AtomicU64 = AtomicU64::new(0);
+    // `.tmp-<pid>-<n>` as the cache's own stores name theirs (`verdant cache prune` removes those of
+    // processes that are gone); the clock's nanoseconds keep two containers whose merges both run
+    // as pid 1 apart
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
     let tmp = root.join(format!(
-        ".{}.merge-{}",
+        ".{}.tmp-{}-{}{nanos:09}",
         dst.file_name().and_then(|n| n.to_str()).unwrap_or("entry"),
-        std::process::id()
+        std::process::id(),
+        SERIAL.fetch_add(1, Ordering::Relaxed)
     ));
-    let _ = fs::remove_dir_all(&tmp);
     fn walk(from: &Path, to: &Path) -> std::io::Result<()> {
         fs::create_dir_all(to)?;
         for item in fs::read_dir(from)? {
@@ -253,12 +317,29 @@ fn copy_entry(src: &Path, dst: &Path, root: &Path) -> std::io::Result<()> {
     if result.is_err() {
         let _ = fs::remove_dir_all(&tmp);
     }
-    result
+    match result {
+        // another merge put the same entry (same name: same contents) in place first
+        Err(_) if dst.join("stage.json").is_file() => Ok(()),
+        other => other,
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn folders_of_killed_shards_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let (dead, mine, other) =
+            (".w.shard-4294967295", format!(".w.shard-{}", std::process::id()), ".v.shard-4294967295");
+        for f in [dead, mine.as_str(), other] {
+            fs::create_dir_all(dir.path().join(f)).unwrap();
+        }
+        remove_stale_shard_folders(dir.path(), "w");
+        assert!(!dir.path().join(dead).exists(), "a killed shard's folder is removed");
+        assert!(dir.path().join(&mine).exists() && dir.path().join(other).exists(), "others are left");
+    }
 
     #[test]
     fn a_shard_is_index_over_count() {

@@ -54,6 +54,9 @@ pub enum OverBudget {
     Predicted { vertices: usize },
     /// The TIN mesher reached the budget with the error still at `error_m`.
     Reached { error_m: f64 },
+    /// The regions of a large map, meshed in parallel, needed more vertices together than the
+    /// budget (found while meshing, or when they were joined; `terrain/regions.rs`).
+    Exceeded,
 }
 
 /// Refuses a TIN over the budget before meshing when the map's sharp samples alone exceed it

@@ -82,6 +82,11 @@ fn budget_message(limit: usize, over: crate::terrain::budget::OverBudget, max_er
              high), over the meshing budget of {limit}; check the heightmap's encoding and height scale, raise the \
              bound (`--max-error` / `max_error`), {raise}"
         ),
+        OverBudget::Exceeded => format!(
+            "a mesh within {max_error_m} m needs more than the meshing budget of {limit} vertices (its regions \
+             went over it together while meshing); raise the bound (`--max-error` / `max_error`), cap the \
+             triangles for a best-effort mesh (`--max-triangles` / `max_triangles`), {raise}"
+        ),
         OverBudget::Reached { error_m } => format!(
             "the mesh reached the meshing budget of {limit} vertices with its error still {error_m} m, over the \
              bound of {max_error_m} m; raise the bound (`--max-error` / `max_error`), cap the triangles for a \

@@ -14,6 +14,7 @@
 //! the peer's).
 
 use std::collections::HashMap;
+use std::sync::atomic::AtomicUsize;
 
 use rayon::prelude::*;
 
@@ -21,7 +22,7 @@ use crate::heightfield::Heightfield;
 use crate::terrain::error::TerrainError;
 use crate::terrain::sample_mesh::SampleMesh;
 use crate::terrain::stored::Storage;
-use crate::terrain::tin::{mesh_region, Rect, RegionMesh, TinOptions};
+use crate::terrain::tin::{mesh_region, Rect, RegionMesh, SharedBudget, TinOptions};
 
 /// About this many cells along a region's side; a map of fewer than 1.5 times this many cells a
 /// side is one region along it (no seam). Small enough that a 512² map is cut in four (both cores
@@ -123,7 +124,7 @@ fn mesh_by_regions_with(
     let (nx, ny) = (xs.len() - 1, ys.len() - 1);
     let rect = |rx: usize, ry: usize| Rect { i0: xs[rx], j0: ys[ry], i1: xs[rx + 1], j1: ys[ry + 1] };
     if nx * ny == 1 {
-        let r = mesh_region(hf, opts, storage, rect(0, 0), &[])?;
+        let r = mesh_region(hf, opts, storage, rect(0, 0), &[], None)?;
         return Ok((SampleMesh { vertices: r.vertices, triangles: r.triangles }, r.max_error_m, 1));
     }
     // A region's seams: left, right (vertical), bottom, top (horizontal), where it has a neighbour.
@@ -161,19 +162,31 @@ fn mesh_by_regions_with(
     let mut meshes: Vec<Option<RegionMesh>> = (0..regions.len()).map(|_| None).collect();
     let mut dirty: Vec<bool> = vec![true; regions.len()];
     let mut rounds = 0;
+    let (inner_x, inner_y) = (&xs[1..nx], &ys[1..ny]);
     loop {
         let todo: Vec<usize> = (0..regions.len()).filter(|&k| dirty[k]).collect();
         if todo.is_empty() {
             break;
         }
         rounds += 1;
+        // the vertices the joined mesh will hold for sure: every region corner and seam sample once,
+        // and what the regions not meshed again inserted off the cut lines
+        let fixed = (nx + 1) * (ny + 1)
+            + seam_samples.values().map(Vec::len).sum::<usize>()
+            + (0..regions.len())
+                .filter(|&k| !dirty[k])
+                .filter_map(|k| meshes[k].as_ref())
+                .map(|m| m.inserted_inside)
+                .sum::<usize>();
+        let count = AtomicUsize::new(fixed);
+        let shared = SharedBudget { count: &count, limit: opts.max_vertices, cuts: (inner_x, inner_y) };
         let built: Vec<(usize, Result<RegionMesh, TerrainError>)> = todo
             .par_iter()
             .map(|&k| {
                 let (rx, ry) = regions[k];
                 let border: Vec<[u32; 2]> =
                     seams_of(rx, ry).iter().flat_map(|s| seam_samples[s].iter().map(move |&t| s.sample(t))).collect();
-                (k, mesh_region(hf, opts, storage, rect(rx, ry), &border))
+                (k, mesh_region(hf, opts, storage, rect(rx, ry), &border, Some(&shared)))
             })
             .collect();
         dirty.fill(false);
@@ -295,6 +308,28 @@ mod tests {
             assert_eq!(stats.max_error_m, one.max_error_m, "{w}×{h}: the reported error is the analyzer's");
             assert!(one.max_error_m <= bound, "{w}×{h}: {} over {bound}", one.max_error_m);
         }
+    }
+
+    #[test]
+    fn regions_going_over_the_vertex_budget_together_stop_with_the_same_error_at_any_thread_count() {
+        // 1300² samples (16 regions, each far below the budget alone): a budget of half the mesh's
+        // vertices stops the regions together, with the same error at 1 and 2 threads; a budget the
+        // mesh fits exactly changes nothing
+        let hf = crate::synth::fractal(1300, 1300, 1.0, 300.0, 0.6, 21);
+        let full = tin(&hf, &TinOptions { max_error_m: 2.0, ..TinOptions::default() }).unwrap();
+        let needed = full.mesh.vertices.len();
+        let over = TinOptions { max_error_m: 2.0, max_vertices: needed / 2, ..TinOptions::default() };
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            match pool.install(|| tin(&hf, &over)) {
+                Err(TerrainError::OverBudget { over: crate::terrain::budget::OverBudget::Exceeded, limit, .. }) => {
+                    assert_eq!(limit, needed / 2)
+                }
+                other => panic!("{threads} threads: expected the budget to stop the regions, got {other:?}"),
+            }
+        }
+        let exact = TinOptions { max_error_m: 2.0, max_vertices: needed, ..TinOptions::default() };
+        assert_eq!(tin(&hf, &exact).unwrap(), full, "a budget the mesh fits exactly changes nothing");
     }
 
     #[test]

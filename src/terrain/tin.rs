@@ -950,14 +950,14 @@ pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Res
     budget::check_tin(hf, opts.max_error_m, opts.max_vertices).map_err(over_budget)?;
     let (mesh, max_error_m, hit_triangle_limit) = if opts.max_triangles.is_some() {
         let whole = Rect { i0: 0, j0: 0, i1: (hf.width - 1) as u32, j1: (hf.height - 1) as u32 };
-        let r = mesh_region(hf, opts, storage, whole, &[])?;
+        let r = mesh_region(hf, opts, storage, whole, &[], None)?;
         (SampleMesh { vertices: r.vertices, triangles: r.triangles }, r.max_error_m, r.hit_triangle_limit)
     } else {
         let (mesh, max_error_m) = super::regions::mesh_by_regions(hf, opts, storage)?;
         (mesh, max_error_m, false)
     };
     if mesh.vertices.len() > opts.max_vertices {
-        return Err(over_budget(OverBudget::Reached { error_m: max_error_m }));
+        return Err(over_budget(OverBudget::Exceeded));
     }
     let as_stored = !storage.is_exact();
     if !as_stored || max_error_m <= opts.max_error_m || hit_triangle_limit {
@@ -989,6 +989,17 @@ pub(crate) struct Rect {
     pub j1: u32,
 }
 
+/// The vertex budget shared by the regions of one map while they mesh in parallel: every vertex a
+/// region inserts off the cut lines is in the joined mesh exactly once, so once their count (with
+/// the vertices every region starts from) passes the budget, the joined mesh would too, whatever
+/// the thread count: meshing stops there instead of after the whole map.
+pub(crate) struct SharedBudget<'a> {
+    pub count: &'a std::sync::atomic::AtomicUsize,
+    pub limit: usize,
+    /// The cut lines (columns, rows) between regions.
+    pub cuts: (&'a [u32], &'a [u32]),
+}
+
 /// One rectangle of the map meshed by greedy insertion.
 pub(crate) struct RegionMesh {
     /// Samples (i, j), the rectangle's corners first, then `border`, then as inserted.
@@ -998,6 +1009,8 @@ pub(crate) struct RegionMesh {
     /// Largest error over the rectangle's samples (as stored, when the storage rounds).
     pub max_error_m: f64,
     pub hit_triangle_limit: bool,
+    /// Vertices inserted off the cut lines (counted in the [`SharedBudget`]).
+    pub inserted_inside: usize,
 }
 
 /// Greedy insertion over the samples of `rect` alone, starting from its corners and the `border`
@@ -1010,6 +1023,7 @@ pub(crate) fn mesh_region(
     storage: &Storage,
     rect: Rect,
     border: &[[u32; 2]],
+    shared: Option<&SharedBudget>,
 ) -> Result<RegionMesh, TerrainError> {
     let over_budget =
         |over| TerrainError::OverBudget { limit: opts.max_vertices, over, max_error_m: opts.max_error_m, grid: false };
@@ -1060,10 +1074,20 @@ pub(crate) fn mesh_region(
     }
 
     let mut hit_triangle_limit = false;
+    let mut inserted_inside = 0;
     while let Some(top) = queue.peek(&faces) {
         let (ci, cj) = (top.sample % w as u32, top.sample / w as u32);
         // Inserting on the rectangle's border splits one triangle, anywhere else two (net).
         let on_border = ci == i0 || cj == j0 || ci == i1 || cj == j1;
+        if let Some(b) = shared {
+            let on_cut = b.cuts.0.binary_search(&ci).is_ok() || b.cuts.1.binary_search(&cj).is_ok();
+            if !on_cut {
+                inserted_inside += 1;
+                if b.count.fetch_add(1, std::sync::atomic::Ordering::Relaxed) >= b.limit {
+                    return Err(over_budget(OverBudget::Exceeded));
+                }
+            }
+        }
         let added = if on_border { 1 } else { 2 };
         if let Some(limit) = opts.max_triangles {
             if dt.triangle_count() + added > limit {
@@ -1071,7 +1095,8 @@ pub(crate) fn mesh_region(
                 break;
             }
         }
-        if dt.coords.len() >= opts.max_vertices {
+        // one region alone (the whole map): its own count is the mesh's; regions share theirs above
+        if shared.is_none() && dt.coords.len() >= opts.max_vertices {
             return Err(over_budget(OverBudget::Reached { error_m: top.err }));
         }
         prefetch_around(hf, ci as usize, cj as usize);
@@ -1089,7 +1114,13 @@ pub(crate) fn mesh_region(
         triangles: dt.tri.chunks_exact(3).map(|c| [c[0], c[2], c[1]]).collect(),
     };
     let max_error_m = achieved_error(hf, &faces, 0, &mesh, as_stored.then_some(storage));
-    Ok(RegionMesh { vertices: mesh.vertices, triangles: mesh.triangles, max_error_m, hit_triangle_limit })
+    Ok(RegionMesh {
+        vertices: mesh.vertices,
+        triangles: mesh.triangles,
+        max_error_m,
+        hit_triangle_limit,
+        inserted_inside,
+    })
 }
 
 /// A face's scan as stored (see [`Storage`]): a face the mesher found above the bound stays

@@ -2,6 +2,7 @@
 //! in any shard order, against one `verdant build` of the same preset, byte for byte; and the
 //! merge's refusals (a shard missing, given twice, of another split, built from other inputs).
 
+use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
@@ -85,6 +86,19 @@ fn a_merged_sharded_build_is_byte_identical_to_one_build_for_any_n_and_shard_ord
 }
 
 #[test]
+fn a_preset_whose_first_format_is_obj_merges_to_the_same_bytes() {
+    // later stages read the terrain back from its first file: OBJ here, glTF + .bin second
+    let dir = setup();
+    let cwd = dir.path();
+    write(cwd, "world.toml", &preset(0.4).replace("formats = [\"glb\"]", "formats = [\"obj\", \"gltf\"]"));
+    ok(&verdant_in(cwd, &["-q", "build", "world.toml", "--out", "single"]));
+    let shards = run_shards(cwd, "shards", 2);
+    ok(&merge(cwd, &shards, "merged"));
+    assert!(cwd.join("merged/world/terrain/terrain.obj").is_file());
+    assert_same_tree(&cwd.join("single/world"), &cwd.join("merged/world"));
+}
+
+#[test]
 fn a_merge_refuses_missing_duplicate_foreign_and_stale_shards() {
     let dir = setup();
     let cwd = dir.path();
@@ -102,6 +116,14 @@ fn a_merge_refuses_missing_duplicate_foreign_and_stale_shards() {
     refused(&[two[0].clone(), two[0].clone(), two[1].clone()], &["given twice"]);
     refused(&[two[0].clone(), three[1].clone()], &["another split", "same N"]);
     refused(&[PathBuf::from("nowhere")], &["nowhere", "not a shard folder"]);
+    // a shard of another binary (its bytes need not be this one's)
+    let record = cwd.join("two/1/world.shard.json");
+    let original = fs::read_to_string(&record).unwrap();
+    let mut other: serde_json::Value = serde_json::from_str(&original).unwrap();
+    other["built_by"] = "verdant 0.0.1 riscv64-linux".into();
+    fs::write(&record, serde_json::to_string(&other).unwrap()).unwrap();
+    refused(&two, &["built by verdant 0.0.1 riscv64-linux", "one binary"]);
+    fs::write(&record, original).unwrap();
     // the preset edited after the shards were built: the grass unit no longer matches, nor the
     // terrain (its soil layer reads the species' densities), which shard 0 is named for first
     write(cwd, "world.toml", &preset(0.3));
@@ -134,4 +156,69 @@ fn editing_one_species_rebuilds_that_species_alone() {
     assert_eq!(new.len(), 1, "only the flower was built again: {new:?}");
     ok(&verdant_in(cwd, &["-q", "build", "world.toml", "--out", "fresh"]));
     assert_same_tree(&cwd.join("fresh/world"), &cwd.join("out/world"));
+}
+
+/// The Slurm and Kubernetes recipes cannot meet their schedulers here: each is run the way its
+/// scheduler would run it (the array task's or the indexed pod's variables set, `verdant` on PATH),
+/// shard by shard, then its merge; the scene must equal one build.
+#[test]
+fn the_slurm_and_kubernetes_recipes_build_the_shards_and_merge_as_their_schedulers_would_run_them() {
+    let dir = setup();
+    let cwd = dir.path();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let bin_dir = Path::new(env!("CARGO_BIN_EXE_verdant")).parent().unwrap().to_path_buf();
+    let path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap_or_default());
+    ok(&verdant_in(cwd, &["-q", "build", "world.toml", "--out", "single"]));
+    let run = |script: &str, env: &[(&str, String)]| {
+        let o = Command::new("bash")
+            .arg(root.join("scripts/shard").join(script))
+            .current_dir(cwd)
+            .env("PATH", &path)
+            .envs(env.iter().map(|(k, v)| (*k, v.as_str())))
+            .output()
+            .unwrap();
+        ok(&o);
+    };
+    // Slurm: `sbatch --array=3-5` (a 3-task array not starting at 0), the merge job by hand
+    let out = cwd.join("slurm").display().to_string();
+    for task in 3..=5 {
+        run(
+            "slurm.sbatch",
+            &[
+                ("SLURM_ARRAY_TASK_ID", task.to_string()),
+                ("SLURM_ARRAY_TASK_MIN", "3".into()),
+                ("SLURM_ARRAY_TASK_COUNT", "3".into()),
+                ("SLURM_ARRAY_JOB_ID", "77".into()),
+                ("NO_MERGE", "1".into()),
+                ("PRESET", "world.toml".into()),
+                ("OUT", out.clone()),
+            ],
+        );
+    }
+    run("slurm_merge.sbatch", &[("PRESET", "world.toml".into()), ("OUT", out.clone()), ("SHARDS", "3".into())]);
+    assert_same_tree(&cwd.join("single/world"), &cwd.join("slurm/world"));
+    // Kubernetes: each pod's and the merge's container command from k8s-indexed-job.yaml, with the
+    // Job's env (SHARDS, PRESET) and the pod's JOB_COMPLETION_INDEX, in the shared volume's folder
+    let yaml = fs::read_to_string(root.join("scripts/shard/k8s-indexed-job.yaml")).unwrap();
+    let lines: Vec<String> =
+        yaml.lines().filter(|l| l.trim().starts_with("- exec verdant")).map(|l| l.trim()[2..].to_string()).collect();
+    assert_eq!(lines.len(), 2, "the YAML holds a shard and a merge command");
+    let shards = yaml.lines().find_map(|l| l.trim().strip_prefix("completions: ")).unwrap().parse::<usize>().unwrap();
+    let sh = |command: &str, index: Option<usize>| {
+        let mut c = Command::new("sh");
+        c.args(["-c", command]).current_dir(cwd.join("k8s")).env("PATH", &path);
+        c.env("SHARDS", shards.to_string()).env("PRESET", "world.toml");
+        if let Some(i) = index {
+            c.env("JOB_COMPLETION_INDEX", i.to_string());
+        }
+        ok(&c.output().unwrap());
+    };
+    fs::create_dir_all(cwd.join("k8s")).unwrap();
+    fs::copy(cwd.join("world.toml"), cwd.join("k8s/world.toml")).unwrap();
+    fs::copy(cwd.join("rock.obj"), cwd.join("k8s/rock.obj")).unwrap();
+    for i in (0..shards).rev() {
+        sh(&lines[0], Some(i));
+    }
+    sh(&lines[1], None);
+    assert_same_tree(&cwd.join("single/world"), &cwd.join("k8s/out/world"));
 }

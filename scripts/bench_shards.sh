@@ -1,0 +1,76 @@
+#!/usr/bin/env bash
+# Sharded build benchmark (issue 18): each preset built whole, then in 2 and 4 shards run at the same
+# time (GNU parallel, one process per shard, all on this machine) and merged. Prints per split: the
+# shards' wall time (all at once), the slowest shard, the merge, the total, the peak memory of each
+# shard and of the merge, the shard folders' and the scene's bytes, and whether the merged scene is
+# byte-identical to the whole build (reports without timing).
+#
+#   scripts/bench_shards.sh [PRESET.toml ...]      default: presets/alpine.toml (10 km, ~600k instances)
+#
+# VERDANT_BIN=path/to/verdant uses that binary instead of building target/release/verdant. Needs GNU
+# parallel (apt `parallel`; scripts/check.sh installs it) and /usr/bin/time.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+if [ -n "${VERDANT_BIN:-}" ]; then
+  BIN="$VERDANT_BIN"
+else
+  cargo build --release --quiet
+  BIN="$PWD/target/release/verdant"
+fi
+command -v parallel > /dev/null || { echo "bench_shards.sh: GNU parallel is needed (apt install parallel)" >&2; exit 2; }
+[ -x /usr/bin/time ] || { echo "bench_shards.sh: /usr/bin/time is needed (apt install time)" >&2; exit 2; }
+TMP="$(mktemp -d "${TMPDIR:-/tmp}/verdant-shards.XXXXXX")"
+trap 'rm -rf "$TMP"' EXIT
+if (($#)); then presets=("$@"); else presets=(presets/alpine.toml); fi
+now() { date +%s.%N; }
+minus() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.3f", a - b }'; }
+peak_mb() { awk -F': ' '/Maximum resident set size/ {printf "%.0f", $2 / 1024}' "$1"; }
+bytes_mb() { du -sb "$1" | awk '{printf "%.1f", $1 / 1048576}'; }
+
+printf '%-14s %6s %9s %9s %8s %8s  %-28s %8s %9s %9s  %s\n' \
+  preset shards "shards s" "slowest s" "merge s" "total s" "peak MB per shard" "merge MB" "shards MB" "scene MB" identical
+for preset in "${presets[@]}"; do
+  name="$(basename "$preset" .toml)"
+  whole="$TMP/$name-whole"
+  t0="$(now)"
+  /usr/bin/time -v -o "$TMP/whole.time" "$BIN" -q build "$preset" --out "$whole" > /dev/null
+  t1="$(now)"
+  scene="$(find "$whole" -mindepth 1 -maxdepth 1 -type d ! -name '.*' | head -1)"
+  printf '%-14s %6s %9s %9s %8s %8.1f  %-28s %8s %9s %9s  %s\n' "$name" 1 - - - "$(minus "$t1" "$t0")" \
+    "$(peak_mb "$TMP/whole.time") (whole build)" - - "$(bytes_mb "$scene")" -
+  for n in 2 4; do
+    out="$TMP/$name-$n"
+    t0="$(now)"
+    seq 0 $((n - 1)) | parallel --will-cite --halt now,fail=1 \
+      "/usr/bin/time -v -o $out.{}.time $BIN -q build $preset --shard {}/$n --out $out/.shards/{} > /dev/null; date +%s.%N > $out.{}.end"
+    t1="$(now)"
+    mapfile -t dirs < <(seq -f "$out/.shards/%g" 0 $((n - 1)))
+    /usr/bin/time -v -o "$out.merge.time" "$BIN" -q merge "$preset" --shards "${dirs[@]}" --out "$out" > /dev/null
+    t2="$(now)"
+    slowest=0; peaks=()
+    for i in $(seq 0 $((n - 1))); do
+      e="$(cat "$out.$i.end")"
+      d="$(minus "$e" "$t0")"
+      slowest="$(awk -v a="$d" -v b="$slowest" 'BEGIN { print (a > b ? a : b) }')"
+      peaks+=("$(peak_mb "$out.$i.time")")
+    done
+    merged="$out/$(basename "$scene")"
+    same=yes
+    python3 - "$scene" "$merged" <<'PY' || same=NO
+import json, os, sys
+a, b = sys.argv[1:3]
+def files(root):
+    return sorted(os.path.relpath(os.path.join(d, f), root) for d, _, fs in os.walk(root) for f in fs)
+def body(root, rel):
+    data = open(os.path.join(root, rel), "rb").read()
+    if rel == "report.json":
+        v = json.loads(data); v.pop("timing"); return json.dumps(v, sort_keys=True).encode()
+    return data[: data.index(b"## Timing")] if rel == "report.md" else data
+sys.exit(0 if files(a) == files(b) and all(body(a, r) == body(b, r) for r in files(a)) else 1)
+PY
+    printf '%-14s %6s %9.1f %9.1f %8.1f %8.1f  %-28s %8s %9s %9s  %s\n' "$name" "$n" "$(minus "$t1" "$t0")" \
+      "$slowest" "$(minus "$t2" "$t1")" "$(minus "$t2" "$t0")" "$(IFS=/; echo "${peaks[*]}")" \
+      "$(peak_mb "$out.merge.time")" "$(bytes_mb "$out/.shards")" "$(bytes_mb "$merged")" "$same"
+  done
+done
+echo "shards run at the same time on this machine ($(nproc) cores); a unit is the terrain stage or one plant species (docs/sharding.md)"
