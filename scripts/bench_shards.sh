@@ -56,18 +56,7 @@ for preset in "${presets[@]}"; do
     done
     merged="$out/$(basename "$scene")"
     same=yes
-    python3 - "$scene" "$merged" <<'PY' || same=NO
-import json, os, sys
-a, b = sys.argv[1:3]
-def files(root):
-    return sorted(os.path.relpath(os.path.join(d, f), root) for d, _, fs in os.walk(root) for f in fs)
-def body(root, rel):
-    data = open(os.path.join(root, rel), "rb").read()
-    if rel == "report.json":
-        v = json.loads(data); v.pop("timing"); return json.dumps(v, sort_keys=True).encode()
-    return data[: data.index(b"## Timing")] if rel == "report.md" else data
-sys.exit(0 if files(a) == files(b) and all(body(a, r) == body(b, r) for r in files(a)) else 1)
-PY
+    python3 scripts/same_scene.py "$scene" "$merged" > /dev/null || same=NO
     printf '%-14s %6s %9.1f %9.1f %8.1f %8.1f  %-28s %8s %9s %9s  %s\n' "$name" "$n" "$(minus "$t1" "$t0")" \
       "$slowest" "$(minus "$t2" "$t1")" "$(minus "$t2" "$t0")" "$(IFS=/; echo "${peaks[*]}")" \
       "$(peak_mb "$out.merge.time")" "$(bytes_mb "$out/.shards")" "$(bytes_mb "$merged")" "$same"

@@ -358,26 +358,7 @@ SHARD_OUT="$OUT/sharded"
 rm -rf "$SHARD_OUT"
 t=$SECONDS
 if VERDANT="$BIN" bash scripts/shard/parallel.sh 2 "$SHARD_OUT" > "$OUT/sharded.log" 2>&1; then
-  if "$PY" - "$BUILD_OUT/demo" "$SHARD_OUT/demo" <<'PY'
-import json, os, re, sys
-a, b = sys.argv[1], sys.argv[2]
-def files(root):
-    return sorted(os.path.relpath(os.path.join(d, f), root) for d, _, fs in os.walk(root) for f in fs)
-def body(root, rel):
-    data = open(os.path.join(root, rel), "rb").read()
-    if rel == "report.json":
-        v = json.loads(data); v.pop("timing"); return json.dumps(v, sort_keys=True).encode()
-    if rel == "report.md":
-        return data[: data.index(b"## Timing")]
-    return data
-fa, fb = files(a), files(b)
-if fa != fb:
-    sys.exit(f"the merged demo holds other files: only single {sorted(set(fa) - set(fb))[:5]}, only merged {sorted(set(fb) - set(fa))[:5]}")
-differ = [r for r in fa if body(a, r) != body(b, r)]
-if differ:
-    sys.exit(f"{len(differ)} files differ between the single and the merged demo: {differ[:5]}")
-print(f"sharded demo: {len(fa)} files, byte-identical to the single build (reports without timing)")
-PY
+  if "$PY" scripts/same_scene.py "$BUILD_OUT/demo" "$SHARD_OUT/demo"
   then pass; else fail "the sharded demo differs from the single build"; fi
 else
   fail "scripts/shard/parallel.sh 2 exited non-zero: $(tail -5 "$OUT/sharded.log")"
