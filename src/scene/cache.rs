@@ -186,6 +186,56 @@ impl Cache {
         Ok(CacheCleanup { entries_removed: entries, entries_kept: 0, bytes_freed })
     }
 
+    /// A temporary folder name for entry `name`, `.<name>.tmp-<pid>-<n><ns>`: unique per process
+    /// and call (threads of one batch may store the same key at once), and with the clock's
+    /// nanoseconds across containers whose processes share a pid (1) and a cache. [`Cache::prune`]
+    /// removes those of processes that are gone.
+    fn temp_for(&self, name: &str) -> PathBuf {
+        static SERIAL: AtomicU64 = AtomicU64::new(0);
+        let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
+        self.root.join(format!(
+            ".{name}.tmp-{}-{}{nanos:09}",
+            std::process::id(),
+            SERIAL.fetch_add(1, Ordering::Relaxed)
+        ))
+    }
+
+    /// Brings the entry folder `src` of another cache (a shard's) into this one under its own name:
+    /// linked (or copied) under a temporary name and renamed into place, so a stopped import never
+    /// leaves half an entry. An entry already here is kept (same name, same contents); another
+    /// process putting it in place first is not an error. Returns whether it was brought.
+    pub fn import(&self, src: &Path) -> io::Result<bool> {
+        let name = src.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        let dst = self.root.join(name);
+        if dst.join("stage.json").is_file() {
+            return Ok(false);
+        }
+        fs::create_dir_all(&self.root)?;
+        let tmp = self.temp_for(name);
+        fn walk(from: &Path, to: &Path) -> io::Result<()> {
+            fs::create_dir_all(to)?;
+            for item in fs::read_dir(from)? {
+                let item = item?;
+                let (s, d) = (item.path(), to.join(item.file_name()));
+                if item.file_type()?.is_dir() {
+                    walk(&s, &d)?;
+                } else if fs::hard_link(&s, &d).is_err() {
+                    fs::copy(&s, &d)?;
+                }
+            }
+            Ok(())
+        }
+        let result = walk(src, &tmp).and_then(|()| fs::rename(&tmp, &dst));
+        if result.is_err() {
+            let _ = fs::remove_dir_all(&tmp);
+        }
+        match result {
+            Ok(()) => Ok(true),
+            Err(_) if dst.join("stage.json").is_file() => Ok(false),
+            Err(e) => Err(e),
+        }
+    }
+
     /// The stored `stage.json` text and the entry folder, when present.
     pub fn lookup(&self, stage: &str, key: &str) -> Option<(String, PathBuf)> {
         let dir = self.entry(stage, key);
@@ -227,15 +277,9 @@ impl Cache {
         stage_json: &str,
         blob: Option<&[u8]>,
     ) -> io::Result<FileHashes> {
-        static SERIAL: AtomicU64 = AtomicU64::new(0);
         let dir = self.entry(stage, key);
         fs::create_dir_all(&self.root)?;
-        // unique per process and call: threads of one batch may store the same key at once
-        let tmp = self.root.join(format!(
-            ".{stage}-{key}.tmp-{}-{}",
-            std::process::id(),
-            SERIAL.fetch_add(1, Ordering::Relaxed)
-        ));
+        let tmp = self.temp_for(&Self::entry_name(stage, key));
         let mut hashes = FileHashes::new();
         let result = (|| {
             fs::create_dir_all(&tmp)?;

@@ -17,11 +17,10 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use serde::{Deserialize, Serialize};
 
-use crate::scene::cache::{process_alive, Cache};
+use crate::scene::cache::{process_alive, temp_owner, Cache};
 use crate::scene::error::SceneBuildError;
 use crate::scene::pipeline::{CacheUse, StageJob, StageRunner};
 use crate::scene::plants_stage::{self, SpeciesMemo, SPECIES_MEMO_STAGE};
@@ -185,7 +184,10 @@ fn remove_stale_shard_folders(out: &Path, name: &str) {
     let prefix = format!(".{name}.shard-");
     for item in items.flatten() {
         let file = item.file_name().to_string_lossy().to_string();
-        let Some(pid) = file.strip_prefix(&prefix).and_then(|p| p.parse::<u32>().ok()) else { continue };
+        if !file.starts_with(&prefix) {
+            continue;
+        }
+        let Some(pid) = temp_owner(&file, ".shard-") else { continue };
         if pid != std::process::id() && !process_alive(pid) {
             let _ = fs::remove_dir_all(item.path());
         }
@@ -268,60 +270,17 @@ pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usi
         }
     }
     let cache = Cache::new(out);
-    fs::create_dir_all(&cache.root)
-        .map_err(|e| SceneBuildError::Io { path: cache.root.clone(), message: e.to_string() })?;
     let mut brought = 0;
     for (k, unit) in expected.iter().enumerate() {
         let dir = &shard_dirs[records.iter().position(|(_, r)| r.shard == k % count).expect("present")];
         for entry in &unit.entries {
-            let (src, dst) = (Cache::new(dir).root.join(entry), cache.root.join(entry));
-            if dst.join("stage.json").exists() {
-                continue;
-            }
-            copy_entry(&src, &dst, &cache.root)
-                .map_err(|e| SceneBuildError::Io { path: src.clone(), message: e.to_string() })?;
-            brought += 1;
+            let src = Cache::new(dir).root.join(entry);
+            let fresh =
+                cache.import(&src).map_err(|e| SceneBuildError::Io { path: src.clone(), message: e.to_string() })?;
+            brought += usize::from(fresh);
         }
     }
     Ok(brought)
-}
-
-/// Copies an entry folder (hard links where possible) into the cache under a temporary name and
-/// renames it into place, so a merge that is stopped never leaves half an entry.
-fn copy_entry(src: &Path, dst: &Path, root: &Path) -> std::io::Result<()> {
-    static SERIAL: AtomicU64 = AtomicU64::new(0);
-    // `.tmp-<pid>-<n>` as the cache's own stores name theirs (`verdant cache prune` removes those of
-    // processes that are gone); the clock's nanoseconds keep two containers whose merges both run
-    // as pid 1 apart
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
-    let tmp = root.join(format!(
-        ".{}.tmp-{}-{}{nanos:09}",
-        dst.file_name().and_then(|n| n.to_str()).unwrap_or("entry"),
-        std::process::id(),
-        SERIAL.fetch_add(1, Ordering::Relaxed)
-    ));
-    fn walk(from: &Path, to: &Path) -> std::io::Result<()> {
-        fs::create_dir_all(to)?;
-        for item in fs::read_dir(from)? {
-            let item = item?;
-            let (s, d) = (item.path(), to.join(item.file_name()));
-            if item.file_type()?.is_dir() {
-                walk(&s, &d)?;
-            } else if fs::hard_link(&s, &d).is_err() {
-                fs::copy(&s, &d)?;
-            }
-        }
-        Ok(())
-    }
-    let result = walk(src, &tmp).and_then(|()| fs::rename(&tmp, dst));
-    if result.is_err() {
-        let _ = fs::remove_dir_all(&tmp);
-    }
-    match result {
-        // another merge put the same entry (same name: same contents) in place first
-        Err(_) if dst.join("stage.json").is_file() => Ok(()),
-        other => other,
-    }
 }
 
 #[cfg(test)]
