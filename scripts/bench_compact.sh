@@ -26,10 +26,13 @@ if [ ! -x "$GLTFPACK" ]; then
   npm install --silent --no-audit --no-fund --prefix .tools/gltfpack gltfpack@1.3.0 >/dev/null
 fi
 PY="$PWD/.tools/bench-venv/bin/python"
+if [ -x "$PY" ] && ! "$PY" -c "import scipy" 2>/dev/null; then
+  "$PY" -m pip install -q --disable-pip-version-check scipy==1.17.1
+fi
 if [ ! -x "$PY" ]; then
   echo "creating .tools/bench-venv (numpy, pillow, pygltflib)"
   python3 -m venv .tools/bench-venv
-  "$PY" -m pip install -q --disable-pip-version-check numpy==2.4.6 pillow==12.3.0 pygltflib==1.16.5
+  "$PY" -m pip install -q --disable-pip-version-check numpy==2.4.6 pillow==12.3.0 pygltflib==1.16.5 scipy==1.17.1
 fi
 TMP="$(mktemp -d "${TMPDIR:-/tmp}/verdant-bench-compact.XXXXXX")"
 trap 'rm -rf "$TMP"' EXIT
@@ -98,3 +101,55 @@ for c in "${cases[@]}"; do
   done
 done
 echo "ratio: verdant --quantize / gltfpack -vp 16 and verdant --compress / gltfpack -vp 16 -c, bytes"
+
+# Species: LoD chains of `verdant tree` and `verdant mesh`, each level's file and the MSFT_lod chain
+# file. gltfpack runs on verdant's f32 files with -kn (keep every level's node: it does not know
+# MSFT_lod and would drop the coarser levels otherwise) and -vp 16; it drops custom attributes
+# (verdant's _WIND and _WIND_BRANCH, 32 bytes a vertex, application data every engine script reads),
+# so sizes are compared both as written and without those bytes ("w/o _attrs"). Errors: the largest
+# distance from a stored vertex to the nearest f32 vertex, world space, the same measure for both
+# (scripts/compact_stats.py; a compressed file is measured by its uncompressed twin, meshopt being
+# lossless). Images (the atlases, PNG) are the same bytes in both and counted in the totals.
+echo
+printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12s\n' case file writer bytes "w/o _attrs" images ratio "ratio w/o" "error m"
+species=(
+  "broadleaf|tree builtin:broadleaf"
+  "conifer-type-tree|tree $DATA/lsystems/lparser-v4/conifer-type-tree.ls --height 12"
+  "tree1|tree $DATA/lsystems/lparser-v5/tree1.ls --height 10"
+  "boulder|mesh presets/models/boulder.obj"
+)
+field() { "$PY" -c "import json,sys; print(json.loads(sys.argv[1])[sys.argv[2]])" "$1" "$2"; }
+for c in "${species[@]}"; do
+  IFS='|' read -r name cmd <<<"$c"
+  read -ra args <<<"$cmd"
+  if [[ "${args[1]}" == "$DATA"/* && ! -f "${args[1]}" ]]; then echo "skip $name: ${args[1]} not found"; continue; fi
+  d="$TMP/$name"; mkdir -p "$d"
+  "$BIN" -q "${args[@]}" -o "$d/f.glb"
+  "$BIN" -q "${args[@]}" -o "$d/q.glb" --quantize
+  "$BIN" -q "${args[@]}" -o "$d/c.glb" --compress
+  for level in _LOD0 _LOD1 ""; do
+    [ -f "$d/f$level.glb" ] || continue
+    "$GLTFPACK" -i "$d/f$level.glb" -o "$d/gp$level.glb" -kn -vp 16 >/dev/null 2>&1
+    "$GLTFPACK" -i "$d/f$level.glb" -o "$d/gpc$level.glb" -kn -vp 16 -c >/dev/null 2>&1
+    label="${level#_}"; label="${label:-chain}"
+    declare -A got=() err=()
+    for w in q c gp gpc; do
+      twin="$w"; [ "$w" = c ] && twin=q; [ "$w" = gpc ] && twin=gp
+      got[$w]=$("$PY" scripts/compact_stats.py "$d/$w$level.glb" --json)
+      err[$w]=$("$PY" scripts/compact_stats.py "$d/$twin$level.glb" --reference "$d/f$level.glb" --json)
+    done
+    for pair in "q gp verdant --quantize" "gp - gltfpack -vp 16" "c gpc verdant --compress" "gpc - gltfpack -vp 16 -c"; do
+      read -r w peer label_w <<<"$pair"
+      bytes=$(field "${got[$w]}" bytes); custom=$(field "${got[$w]}" custom_bytes); images=$(field "${got[$w]}" image_bytes)
+      e=$(field "${err[$w]}" position_error_m)
+      ratio="-"; ratio2="-"
+      if [ "$peer" != - ]; then
+        pb=$(field "${got[$peer]}" bytes)
+        ratio=$(awk -v a="$bytes" -v b="$pb" 'BEGIN { printf "%.3f", a / b }')
+        ratio2=$(awk -v a="$bytes" -v c="$custom" -v b="$pb" 'BEGIN { printf "%.3f", (a - c) / b }')
+      fi
+      printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12.7f\n' "$name" "$label" "$label_w" "$bytes" $((bytes - custom)) "$images" "$ratio" "$ratio2" "$e"
+    done
+  done
+done
+echo "ratio: verdant / gltfpack in bytes as written; 'ratio w/o': verdant without the custom attributes gltfpack drops"

@@ -432,6 +432,124 @@ else
   echo "skip: $FUJI not found, no bound-as-written check"
 fi
 
+section "5a3. compact species (verdant tree|mesh --quantize/--compress): every vertex within the quantization the report states of the f32 file (compact_stats.py), files valid (verdant, Khronos), and three.js and Babylon.js show the frame the f32 file shows"
+sp="$OUT/compact_species"
+mkdir -p "$sp"
+species_compact=()
+for src in "tree builtin:broadleaf" "mesh presets/models/boulder.obj"; do
+  read -r cmd input <<<"$src"
+  name=$(basename "${input#builtin:}" .obj)
+  for variant in f32 quantize compress; do
+    flag=()
+    if [ "$variant" != f32 ]; then flag=(--"$variant"); fi
+    if ! "$BIN" -q "$cmd" "$input" -o "$sp/${name}_$variant.glb" --report "$sp/${name}_$variant.json" "${flag[@]}"; then
+      fail "verdant $cmd $input ${flag[*]}"; continue
+    fi
+    pass
+    if [ "$variant" = f32 ]; then continue; fi
+    species_compact+=("$sp/${name}_$variant.glb" "$sp/${name}_${variant}_LOD0.glb")
+    for f in "$sp/${name}_$variant"{,_LOD0,_LOD1}.glb; do
+      if "$BIN" validate --quiet "$f"; then pass; else fail "verdant validate ${f##*/}"; fi
+    done
+    # meshopt is lossless: the compressed files are the quantized ones, checked by the Rust tests
+    # (compact_species); here the quantized files' vertices against the f32 files'
+    if [ "$variant" = quantize ]; then
+      for level in "" _LOD0 _LOD1; do
+        if "$PY" - "$sp/${name}_quantize$level.glb" "$sp/${name}_f32$level.glb" "$sp/${name}_quantize.json" <<'PYEOF'
+import json, subprocess, sys
+q, f, report = sys.argv[1:4]
+got = json.loads(subprocess.run([sys.executable, "scripts/compact_stats.py", q, "--reference", f, "--json"],
+                                check=True, capture_output=True, text=True).stdout)
+def values(x):
+    if isinstance(x, dict):
+        for k, v in x.items():
+            if k == "quantization_m":
+                yield v
+            else:
+                yield from values(v)
+    elif isinstance(x, list):
+        for v in x:
+            yield from values(v)
+stated = max(values(json.load(open(report))))
+ok = 0 < stated < 1e-2 and got["position_error_m"] <= stated * (1 + 1e-6) + 1e-7
+print(f"{'ok' if ok else 'FAIL'}  {q.split('/')[-1]}: vertices within {got['position_error_m']:.7f} m of the f32 file's, the report states {stated:.7f} m")
+sys.exit(0 if ok else 1)
+PYEOF
+        then pass; else fail "${name}_quantize$level.glb: vertices further from the f32 file than the report states"; fi
+      done
+    fi
+  done
+done
+if ((${#species_compact[@]})); then
+  if node scripts/gltf_validate.mjs "${species_compact[@]}"; then pass; else fail "Khronos glTF Validator on the compact species files"; fi
+  for engine in babylon three; do
+    log="$OUT/check_${engine}_species_compact.log"
+    node scripts/engines/check_babylon.mjs --engine "$engine" "${species_compact[@]}" "$sp"/*_f32.glb "$sp"/*_f32_LOD0.glb > "$log" 2>&1 || true
+    sed 's|'"$OUT"'/||' "$log" || true
+    n=$((${#species_compact[@]} + 4)); oks=$(grep -c '^ok ' "$log" || true)
+    if [ "$oks" -eq "$n" ]; then pass; else fail "$engine: $((n - oks)) of $n species files failed (see $log)"; fi
+    # what a person sees: the compact file's frame as the f32 file's (coverage and mean colour)
+    if "$PY" - "$log" <<'PYEOF'
+import re, sys
+frames = {}
+for line in open(sys.argv[1]):
+    m = re.match(r"ok\s+(\S+): .*frame ([0-9.]+) % covered, mean rgb ([0-9.]+) ([0-9.]+) ([0-9.]+)", line)
+    if m:
+        frames[m.group(1).split("/")[-1]] = [float(x) for x in m.groups()[1:]]
+bad = []
+for name, got in frames.items():
+    for variant in ("_quantize", "_compress"):
+        if variant in name:
+            ref = frames.get(name.replace(variant, "_f32"))
+            if ref is None or abs(got[0] - ref[0]) > 0.2 or max(abs(a - b) for a, b in zip(got[1:], ref[1:])) > 0.02:
+                bad.append(f"{name}: {got} vs the f32 file's {ref}")
+print("\n".join(bad) or f"{len(frames)} frames: every compact file as its f32 file (coverage within 0.2 %, mean colour within 0.02)")
+sys.exit(1 if bad else 0)
+PYEOF
+    then pass; else fail "$engine: a compact species file does not look like its f32 file"; fi
+  done
+fi
+
+# a scene with `compact = "compress"` (meadow): species, scene.glb and scene_lod.glb compressed; the
+# files valid (verdant, Khronos) and scene.glb drawn by three.js and Babylon.js from its first view
+# with exactly the triangles and draw calls the view stage reported, looking as the f32 meadow does
+if [ -f "$BUILD_OUT/meadow/scene.glb" ]; then
+  # (its L-system path made absolute: the preset is written beside the outputs)
+  sed -e 's/^name = "meadow"/name = "meadow_compact"/' -e 's/^formats = \["glb"\]/formats = ["glb"]\ncompact = "compress"/' \
+    -e 's|^lsystem = "lsystems/|lsystem = "'"$ROOT"'/presets/lsystems/|' presets/meadow.toml > "$OUT/meadow_compact.toml"
+  if "$BIN" -q build "$OUT/meadow_compact.toml" --out "$OUT/build_compact" > "$OUT/build_compact.log" 2>&1; then
+    pass
+    mc="$OUT/build_compact/meadow_compact"
+    if "$BIN" validate --quiet "$mc"/scene.glb "$mc"/scene_lod.glb "$mc"/species/*.glb; then pass; else fail "verdant validate meadow_compact"; fi
+    if node scripts/gltf_validate.mjs "$mc"/scene.glb "$mc"/scene_lod.glb "$mc"/species/*.glb > "$OUT/khronos_meadow_compact.log" 2>&1; then
+      pass; tail -1 "$OUT/khronos_meadow_compact.log"
+    else
+      fail "Khronos glTF Validator on meadow_compact (see $OUT/khronos_meadow_compact.log)"
+    fi
+    "$PY" -c "import json,sys; v=json.load(open(sys.argv[1]))['stages']['view']; print(f\"meadow_compact: scene.glb {v['scene_bytes']} bytes, scene_lod.glb {v['lod_scene_bytes']}; vertices moved up to {v['quantization_m']:.5f} m, terrain {v['terrain_quantization_m']:.5f} m\")" "$mc/report.json" || true
+    for engine in three babylon; do
+      log="$OUT/check_${engine}_meadow_compact.log"
+      node scripts/engines/check_babylon.mjs --engine "$engine" --view "$mc/scene.glb" "$BUILD_OUT/meadow/scene.glb" > "$log" 2>&1 || true
+      sed 's|'"$OUT"'/||' "$log" | cut -c1-300 || true
+      if [ "$(grep -c '^ok ' "$log" || true)" -eq 2 ]; then pass; else fail "$engine: meadow_compact's or meadow's view (see $log)"; fi
+      if "$PY" - "$log" <<'PYEOF'
+import re, sys
+frames = []
+for line in open(sys.argv[1]):
+    m = re.match(r"ok\s+(\S+): .*frame ([0-9.]+) % covered, mean rgb ([0-9.]+) ([0-9.]+) ([0-9.]+)", line)
+    if m:
+        frames.append([float(x) for x in m.groups()[1:]])
+ok = len(frames) == 2 and abs(frames[0][0] - frames[1][0]) <= 0.3 and max(abs(a - b) for a, b in zip(frames[0][1:], frames[1][1:])) <= 0.02
+print(f"meadow_compact's frame {frames[0] if frames else None} vs meadow's {frames[1] if len(frames) > 1 else None}")
+sys.exit(0 if ok else 1)
+PYEOF
+      then pass; else fail "$engine: meadow_compact does not look like meadow"; fi
+    done
+  else
+    fail "verdant build meadow with compact = \"compress\" (see $OUT/build_compact.log)"
+  fi
+fi
+
 # The scene-level engine checks (5f, 5f2, 5f3 below) need only the built scenes: they run in the
 # background, one after another, beside the Python and Blender checks (5b-5e, mostly one core), and
 # are reported at their places. Each writes its own log.

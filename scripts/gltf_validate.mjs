@@ -63,14 +63,28 @@ function instancingAccessors(doc) {
   return used;
 }
 
+// Buffers only EXT_meshopt_compression's bufferView extensions name (the compressed data of a file
+// without raw views, e.g. no images): used, through an extension the validator cannot read.
+function meshoptBuffers(doc) {
+  const used = new Set();
+  for (const v of doc.bufferViews ?? []) {
+    const ext = v.extensions?.EXT_meshopt_compression;
+    if (ext && Number.isInteger(ext.buffer)) used.add(ext.buffer);
+  }
+  return used;
+}
+
 // Splits UNUSED_OBJECT messages into really unused, instancing (a validator blind spot), uv without texture.
 function unusedObjects(messages, doc) {
   const instancing = instancingAccessors(doc);
-  const out = { unused: [], instancing: 0, uvWithoutTexture: 0 };
+  const meshopt = meshoptBuffers(doc);
+  const out = { unused: [], instancing: 0, uvWithoutTexture: 0, meshopt: 0 };
   for (const m of messages) {
     if (m.code !== 'UNUSED_OBJECT') continue;
     const accessor = /^\/accessors\/(\d+)$/.exec(m.pointer ?? '');
-    if (accessor && instancing.has(Number(accessor[1]))) out.instancing++;
+    const buffer = /^\/buffers\/(\d+)$/.exec(m.pointer ?? '');
+    if (buffer && meshopt.has(Number(buffer[1]))) out.meshopt++;
+    else if (accessor && instancing.has(Number(accessor[1]))) out.instancing++;
     else if (/\/attributes\/TEXCOORD_\d+$/.test(m.pointer ?? '')) out.uvWithoutTexture++;
     else out.unused.push(m.pointer ?? '?');
   }
@@ -123,7 +137,8 @@ for (const file of files) {
       `${numInfos} infos, ${numHints} hints${minorText ? ` (${minorText})` : ''}; ` +
       `unused objects ${unused.unused.length}, uv without texture ${unused.uvWithoutTexture} ` +
       `(not counted: ${unused.instancing} accessors EXT_mesh_gpu_instancing names` +
-      `${levelBuffers ? `, ${levelBuffers} MSFT_lod level buffers as data: URIs` : ''})`);
+      `${levelBuffers ? `, ${levelBuffers} MSFT_lod level buffers as data: URIs` : ''}` +
+      `${unused.meshopt ? `, ${unused.meshopt} buffer of EXT_meshopt_compression data` : ''})`);
     if (bad) {
       status = 'FAIL';
       failed++;

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use verdant::export::quantize::Compact;
 use verdant::failure::{Blame, Failure};
 use verdant::heightfield::{DecodeOptions, Encoding, DEFAULT_MAX_SAMPLES};
 use verdant::lsystem::expand::DEFAULT_MAX_SYMBOLS;
@@ -142,6 +143,18 @@ struct MeshArgs {
     /// what the fast figures are checked against in scripts/bench_trees.sh.
     #[arg(long, value_enum, value_name = "DETAIL", default_value_t = AnalysisArg::Fast)]
     analysis: AnalysisArg,
+    /// glb/gltf: store vertex data compactly (KHR_mesh_quantization): positions as 16-bit
+    /// integers on a grid per mesh (its largest side over 65,535; one grid for a LoD chain),
+    /// normals and tangents 8-bit, texture coordinates 16-bit (outside 0..1 through the material's
+    /// KHR_texture_transform). The quantization is folded into each level's reported error
+    /// (`stored_error_m`).
+    #[arg(long)]
+    quantize: bool,
+    /// glb/gltf: --quantize, then compress vertex, index and instance data with meshoptimizer's
+    /// codecs (EXT_meshopt_compression: lossless; loaders need its decoder, which three.js and
+    /// Babylon.js ship).
+    #[arg(long)]
+    compress: bool,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -232,6 +245,18 @@ struct TreeArgs {
     /// length, width in metres) for engines that draw leaf sprites; .glb/.gltf only.
     #[arg(long)]
     point_leaves: bool,
+    /// glb/gltf: store vertex data compactly (KHR_mesh_quantization): positions as 16-bit
+    /// integers on a grid per mesh (its largest side over 65,535; one grid for a LoD chain),
+    /// normals and tangents 8-bit, texture coordinates 16-bit (outside 0..1 through the material's
+    /// KHR_texture_transform). The quantization is folded into each level's reported error
+    /// (`stored_error_m`).
+    #[arg(long)]
+    quantize: bool,
+    /// glb/gltf: --quantize, then compress vertex, index and instance data with meshoptimizer's
+    /// codecs (EXT_meshopt_compression: lossless; loaders need its decoder, which three.js and
+    /// Babylon.js ship).
+    #[arg(long)]
+    compress: bool,
 }
 
 #[derive(Args)]
@@ -796,6 +821,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
             name,
             ..TreeOptions::default()
         },
+        compact: Compact::from_flags(a.quantize, a.compress),
     };
     if let Err(e) = verdant::export::check_output_path(&job.output) {
         return failed(&e);
@@ -814,6 +840,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
                 lods,
                 atlas_px: a.atlas_size,
                 analyze: !a.no_analysis,
+                compact: job.compact,
                 ..TreeLodOptions::default().with_analysis(a.analysis.detail())
             },
             variants: a.variants,
@@ -856,7 +883,7 @@ fn tree(a: TreeArgs, quiet: bool) -> i32 {
 }
 
 fn print_lod_table(v: &tree_lod::TreeLodReport) {
-    println!("  {}: level triangles bytes hausdorff_max_m switch_m", v.name);
+    println!("  {}: level triangles bytes hausdorff_max_m (as stored) switch_m", v.name);
     for l in &v.lods {
         println!(
             "    LoD{} {:<10} {:>8} {:>9} {:>10.4} {:>9.1}{}",
@@ -864,7 +891,7 @@ fn print_lod_table(v: &tree_lod::TreeLodReport) {
             l.kind,
             l.triangles,
             l.bytes,
-            l.geometric_error.max_m,
+            l.stored_error_m,
             l.switch_distance_m,
             if l.never_passes { " (never passes)" } else { "" }
         );
@@ -899,6 +926,7 @@ fn mesh(a: MeshArgs, quiet: bool) -> i32 {
             lods: a.lods,
             atlas_px: a.atlas_size,
             analyze: !a.no_analysis,
+            compact: Compact::from_flags(a.quantize, a.compress),
             ..TreeLodOptions::default().with_analysis(a.analysis.detail())
         },
     };

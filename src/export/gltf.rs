@@ -24,6 +24,7 @@ use super::check::check_scene;
 use super::compact::compact;
 use super::error::SceneProblem;
 use super::grid::PositionGrid;
+use super::quantize::{place, place_instances, plan, MeshGrid, Quantization, UvRange};
 use super::streaming::{base64, load_groups};
 use crate::mesh::{AlphaMode, PrimitiveMode, Scene};
 
@@ -45,18 +46,25 @@ const ELEMENT_ARRAY_BUFFER: json::buffer::Target = json::buffer::Target::Element
 
 /// KHR_mesh_quantization: integer vertex attributes, dequantized by the node transform.
 pub const KHR_QUANTIZATION: &str = "KHR_mesh_quantization";
+/// KHR_texture_transform: puts quantized texture coordinates outside 0..1 back (offset, scale).
+pub const KHR_TEXTURE_TRANSFORM: &str = "KHR_texture_transform";
 
 /// How vertex data is stored.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct WriteOptions {
-    /// Store every mesh's positions as 16-bit integers on this grid (KHR_mesh_quantization): the
-    /// node holding a mesh gets the grid's scale and translation, normals become 16-bit normalized
-    /// (pre-scaled so the node's scale turns them back), UVs within 0..1 16-bit normalized.
-    pub position_grid: Option<PositionGrid>,
+    /// Store positions as 16-bit integers (KHR_mesh_quantization, see [`super::quantize`]): on
+    /// one grid for every mesh (normals 16-bit, pre-scaled so the node's scale turns them back), or
+    /// on a uniform grid per mesh family (normals and tangents 8-bit); the node (or its instances)
+    /// gets the grid's scale and translation; texture coordinates 16-bit normalized.
+    pub quantization: Quantization,
     /// Compress vertex and index data with meshoptimizer's codecs (EXT_meshopt_compression,
     /// lossless; required by the file, so loaders need its decoder). MSFT_lod levels then stay in
     /// the one binary chunk (no streaming buffers).
     pub meshopt: bool,
+    /// With [`Quantization::PerMesh`]: meshes of these names (and their families) are stored on
+    /// the grid given instead of their own (a chunked terrain's chunks on one grid: the seams stay
+    /// closed).
+    pub mesh_grids: Vec<(String, MeshGrid)>,
 }
 
 /// EXT_meshopt_compression: bufferViews decoded by meshoptimizer's vertex and index codecs.
@@ -104,7 +112,7 @@ pub fn to_gltf_with(scene: &Scene, bin_name: &str, opts: &WriteOptions) -> Resul
 /// an f32 step, times 65,535 across the grid.
 fn json_bytes(root: &json::Root, pretty: bool, opts: &WriteOptions) -> Result<Vec<u8>, SceneProblem> {
     let fail = |e: serde_json::Error| SceneProblem(format!("cannot serialise the glTF JSON: {e}"));
-    if opts.position_grid.is_none() {
+    if !opts.quantization.is_on() {
         return if pretty { root.to_vec_pretty() } else { root.to_vec() }.map_err(fail);
     }
     let mut value = serde_json::to_value(root).map_err(fail)?;
@@ -197,8 +205,13 @@ impl Bin {
 /// EXT_meshopt_compression over the one group of `bin`: every vertex and index view's bytes are
 /// encoded (vertex codec version 0, index codec version 1, as the extension specifies) into buffer
 /// 0, which also keeps the other views (images) as they are; the views themselves move to buffer
-/// 1, a fallback buffer without data that the decoder fills. Returns buffer 0's bytes.
-fn compress_views(root: &mut json::Root, bin: &mut Bin, bin_uri: Option<&str>) -> Result<Vec<u8>, SceneProblem> {
+/// 1, a fallback buffer without data that the decoder fills. Returns buffer 0's bytes and whether
+/// any view was encoded (a view whose encoding is not smaller stays as it is).
+fn compress_views(
+    root: &mut json::Root,
+    bin: &mut Bin,
+    bin_uri: Option<&str>,
+) -> Result<(Vec<u8>, bool), SceneProblem> {
     let data = std::mem::take(&mut bin.groups[0]);
     let (mut out, mut fallback_len) = (Vec::with_capacity(data.len() / 2), 0usize);
     let fail = |e: crate::meshopt_guard::FfiError| SceneProblem(format!("could not encode a buffer: {e}"));
@@ -206,10 +219,13 @@ fn compress_views(root: &mut json::Root, bin: &mut Bin, bin_uri: Option<&str>) -
         let offset = view.byte_offset.map_or(0, |o| o.0 as usize);
         let bytes = &data[offset..offset + view.byte_length.0 as usize];
         out.resize(out.len().next_multiple_of(4), 0);
-        let Some(codec) = codec else {
+        let raw = |view: &mut json::buffer::View, out: &mut Vec<u8>| {
             view.byte_offset = (!out.is_empty()).then(|| USize64::from(out.len()));
             view.buffer = Index::new(0);
             out.extend_from_slice(bytes);
+        };
+        let Some(codec) = codec else {
+            raw(view, &mut out);
             continue;
         };
         let (encoded, mode, stride, count) = match *codec {
@@ -230,6 +246,11 @@ fn compress_views(root: &mut json::Root, bin: &mut Bin, bin_uri: Option<&str>) -
                 )
             }
         };
+        // a few vertices encode larger than they are (the codec's headers): such a view stays raw
+        if encoded.len() >= bytes.len() {
+            raw(view, &mut out);
+            continue;
+        }
         let mut ext = Map::new();
         ext.insert(
             EXT_MESHOPT.into(),
@@ -253,6 +274,10 @@ fn compress_views(root: &mut json::Root, bin: &mut Bin, bin_uri: Option<&str>) -
         extensions: None,
         extras: None,
     });
+    if fallback_len == 0 {
+        // nothing encoded smaller than it is: no compressed view, no fallback buffer
+        return Ok((out, false));
+    }
     let mut ext = Map::new();
     ext.insert(EXT_MESHOPT.into(), serde_json::json!({ "fallback": true }));
     root.buffers.push(json::Buffer {
@@ -262,7 +287,7 @@ fn compress_views(root: &mut json::Root, bin: &mut Bin, bin_uri: Option<&str>) -
         extensions: Some(json::extensions::buffer::Buffer { others: ext }),
         extras: None,
     });
-    Ok(out)
+    Ok((out, true))
 }
 
 /// meshoptimizer's vertex codec (version 0, the one EXT_meshopt_compression reads) over elements
@@ -326,10 +351,33 @@ mod quantized {
         Ok(root.push(acc))
     }
 
+    /// NORMAL as normalized BYTE VEC3 (4-byte elements) on a uniform grid, whose scale leaves
+    /// normals as they are; else as SHORT, see [`normals16`].
+    pub(super) fn normals(
+        root: &mut json::Root,
+        bin: &mut Bin,
+        normals: &[[f32; 3]],
+        grid: &MeshGrid,
+    ) -> Index<json::Accessor> {
+        if !grid.uniform {
+            return normals16(root, bin, normals, &grid.grid);
+        }
+        let bytes: Vec<u8> = normals.iter().flat_map(|n| snorm8([n[0], n[1], n[2], 0.0])).collect();
+        let view = strided_view(bin, &bytes, 4);
+        let mut acc = accessor(view, normals.len(), json::accessor::ComponentType::I8, json::accessor::Type::Vec3);
+        acc.normalized = true;
+        root.push(acc)
+    }
+
+    /// Four components in -1..1 as normalized signed bytes.
+    fn snorm8(v: [f32; 4]) -> [u8; 4] {
+        v.map(|c| ((c.clamp(-1.0, 1.0) * 127.0).round() as i8) as u8)
+    }
+
     /// NORMAL as normalized SHORT VEC3: each normal scaled by the grid's steps and renormalised,
     /// so that the node's (non-uniform) scale, applied to normals by its inverse transpose, gives
     /// the normal back. 16 bits, as the scale can make the stored normal nearly flat.
-    pub(super) fn normals(
+    fn normals16(
         root: &mut json::Root,
         bin: &mut Bin,
         normals: &[[f32; 3]],
@@ -350,12 +398,45 @@ mod quantized {
         root.push(acc)
     }
 
-    /// TEXCOORD_0 within 0..1 as normalized UNSIGNED_SHORT VEC2.
-    pub(super) fn unit_uvs(root: &mut json::Root, bin: &mut Bin, uvs: &[[f32; 2]]) -> Index<json::Accessor> {
-        let bytes: Vec<u8> =
-            uvs.iter().flatten().flat_map(|&u| ((u as f64 * 65535.0).round() as u16).to_le_bytes()).collect();
+    /// TEXCOORD_0 within 0..1, or within `range` (put back by the material's
+    /// KHR_texture_transform), as normalized UNSIGNED_SHORT VEC2.
+    pub(super) fn uvs(
+        root: &mut json::Root,
+        bin: &mut Bin,
+        uvs: &[[f32; 2]],
+        range: Option<&UvRange>,
+    ) -> Index<json::Accessor> {
+        let bytes: Vec<u8> = uvs
+            .iter()
+            .flat_map(|uv| {
+                [0, 1].map(|a| match range {
+                    Some(r) => r.quantize(a, uv[a]),
+                    None => (uv[a] as f64 * 65535.0).round() as u16,
+                })
+            })
+            .flat_map(u16::to_le_bytes)
+            .collect();
         let view = strided_view(bin, &bytes, 4);
         let mut acc = accessor(view, uvs.len(), json::accessor::ComponentType::U16, json::accessor::Type::Vec2);
+        acc.normalized = true;
+        root.push(acc)
+    }
+
+    /// TANGENT as normalized BYTE VEC4 on a uniform grid (4 bytes a vertex instead of 16; the
+    /// handedness w stays ±1 exactly), else as SHORT, see [`tangents16`].
+    pub(super) fn tangents(
+        root: &mut json::Root,
+        bin: &mut Bin,
+        tangents: &[[f32; 4]],
+        grid: &MeshGrid,
+    ) -> Index<json::Accessor> {
+        if !grid.uniform {
+            return tangents16(root, bin, tangents, &grid.grid);
+        }
+        let bytes: Vec<u8> =
+            tangents.iter().flat_map(|t| snorm8([t[0], t[1], t[2], if t[3] < 0.0 { -1.0 } else { 1.0 }])).collect();
+        let view = strided_view(bin, &bytes, 4);
+        let mut acc = accessor(view, tangents.len(), json::accessor::ComponentType::I8, json::accessor::Type::Vec4);
         acc.normalized = true;
         root.push(acc)
     }
@@ -363,7 +444,7 @@ mod quantized {
     /// TANGENT as normalized SHORT VEC4 (KHR_mesh_quantization; 8 bytes a vertex instead of 16).
     /// Tangents follow the node's matrix: divided by the grid's steps (renormalised) so it gives
     /// them back; the handedness w stays ±1 exactly (±32767).
-    pub(super) fn tangents(
+    fn tangents16(
         root: &mut json::Root,
         bin: &mut Bin,
         tangents: &[[f32; 4]],
@@ -382,20 +463,6 @@ mod quantized {
         let mut acc = accessor(view, tangents.len(), json::accessor::ComponentType::I16, json::accessor::Type::Vec4);
         acc.normalized = true;
         root.push(acc)
-    }
-
-    /// The node transform T·R·S followed by the grid's Tr(origin)·Sc(step), as one TRS:
-    /// translation T + R(S∘origin), scale S∘step (rotation unchanged).
-    pub(super) fn place(
-        rotation: [f32; 4],
-        translation: [f32; 3],
-        scale: [f32; 3],
-        grid: &PositionGrid,
-    ) -> ([f32; 3], [f32; 3]) {
-        let so = [0, 1, 2].map(|a| scale[a] * grid.origin[a]);
-        let r = glam::Quat::from_array(rotation).mul_vec3(glam::Vec3::from_array(so));
-        let t = [translation[0] + r.x, translation[1] + r.y, translation[2] + r.z];
-        (t, [0, 1, 2].map(|a| scale[a] * grid.step[a]))
     }
 }
 
@@ -457,6 +524,15 @@ fn float_accessor<const N: usize>(
     root.push(accessor(view, values.len(), json::accessor::ComponentType::F32, type_))
 }
 
+/// Instance transforms compress as vertex data do (EXT_meshopt_compression's ATTRIBUTES mode).
+fn instance_codec(root: &json::Root, bin: &mut Bin, a: Index<json::Accessor>) {
+    let acc = &root.accessors[a.value()];
+    if let (Some(view), Valid(t)) = (acc.buffer_view, &acc.type_) {
+        let stride = 4 * t.multiplicity();
+        bin.codecs[view.value()] = Some(Codec::Attributes { stride, count: acc.count.0 as usize });
+    }
+}
+
 /// Exact JSON for an f32: its f64 value, so readers in either precision get the same number back.
 fn exact(x: f32) -> Value {
     Value::from(x as f64)
@@ -479,6 +555,7 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
     let (compacted, _) = compact(scene);
     let lod_roots = compacted.lod_roots;
     let scene: &Scene = &compacted.scene;
+    let stored = plan(scene, &opts.quantization, &opts.mesh_grids);
     let mut root = json::Root {
         asset: json::Asset { generator: Some(GENERATOR.to_string()), version: "2.0".into(), ..Default::default() },
         ..Default::default()
@@ -499,9 +576,10 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
     for (mi, mesh) in scene.meshes.iter().enumerate() {
         bin.group = groups.as_ref().map_or(0, |g| g.mesh[mi]);
         let mut primitives = Vec::with_capacity(mesh.primitives.len());
+        let grid = stored.mesh[mi].as_ref();
         for p in &mesh.primitives {
             let mut attributes = std::collections::BTreeMap::new();
-            let pos = match &opts.position_grid {
+            let pos = match grid {
                 None => {
                     let pos = float_accessor(&mut root, &mut bin, &p.positions, Some(ARRAY_BUFFER));
                     let bounds = p.bounds().ok_or_else(|| SceneProblem("a primitive has no positions".into()))?;
@@ -513,12 +591,12 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
                 Some(grid) => {
                     extensions_used.insert(KHR_QUANTIZATION);
                     extensions_required.insert(KHR_QUANTIZATION);
-                    quantized::positions(&mut root, &mut bin, &p.positions, grid)?
+                    quantized::positions(&mut root, &mut bin, &p.positions, &grid.grid)?
                 }
             };
             attributes.insert(Valid(json::mesh::Semantic::Positions), pos);
             if !p.normals.is_empty() {
-                let a = match &opts.position_grid {
+                let a = match grid {
                     None => float_accessor(&mut root, &mut bin, &p.normals, Some(ARRAY_BUFFER)),
                     Some(grid) => quantized::normals(&mut root, &mut bin, &p.normals, grid),
                 };
@@ -526,15 +604,16 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
             }
             if !p.uvs.is_empty() {
                 let unit = p.uvs.iter().flatten().all(|&u| (0.0..=1.0).contains(&u));
-                let a = if opts.position_grid.is_some() && unit {
-                    quantized::unit_uvs(&mut root, &mut bin, &p.uvs)
+                let range = p.material.and_then(|k| stored.uv[k].as_ref());
+                let a = if grid.is_some() && (unit || range.is_some()) {
+                    quantized::uvs(&mut root, &mut bin, &p.uvs, range)
                 } else {
                     float_accessor(&mut root, &mut bin, &p.uvs, Some(ARRAY_BUFFER))
                 };
                 attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), a);
             }
             if !p.tangents.is_empty() {
-                let a = match &opts.position_grid {
+                let a = match grid {
                     None => float_accessor(&mut root, &mut bin, &p.tangents, Some(ARRAY_BUFFER)),
                     Some(grid) => quantized::tangents(&mut root, &mut bin, &p.tangents, grid),
                 };
@@ -588,7 +667,18 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
     }
 
     // materials
-    for m in &scene.materials {
+    for (k, m) in scene.materials.iter().enumerate() {
+        // quantized texture coordinates outside 0..1 are put back by every texture the material samples
+        let uv_transform = stored.uv[k].map(|r| {
+            extensions_used.insert(KHR_TEXTURE_TRANSFORM);
+            extensions_required.insert(KHR_TEXTURE_TRANSFORM);
+            let mut ext = Map::new();
+            ext.insert(
+                KHR_TEXTURE_TRANSFORM.into(),
+                serde_json::json!({ "offset": r.offset.map(exact), "scale": r.scale.map(exact) }),
+            );
+            json::extensions::texture::Info { others: ext, ..Default::default() }
+        });
         let (alpha_mode, alpha_cutoff) = match m.alpha_mode {
             AlphaMode::Opaque => (json::material::AlphaMode::Opaque, None),
             AlphaMode::Mask { cutoff } => (json::material::AlphaMode::Mask, Some(json::material::AlphaCutoff(cutoff))),
@@ -597,7 +687,7 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
         let base_color_texture = m.base_color_texture.map(|t| json::texture::Info {
             index: Index::new(t as u32),
             tex_coord: 0,
-            extensions: None,
+            extensions: uv_transform.clone(),
             extras: None,
         });
         root.push(json::Material {
@@ -609,7 +699,10 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
                 index: Index::new(t as u32),
                 scale: 1.0,
                 tex_coord: 0,
-                extensions: None,
+                extensions: uv_transform.as_ref().map(|e| json::extensions::material::NormalTexture {
+                    others: e.others.clone(),
+                    ..Default::default()
+                }),
                 extras: None,
             }),
             pbr_metallic_roughness: json::material::PbrMetallicRoughness {
@@ -630,9 +723,20 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
     bin.group = 0;
     let mut written_instances: std::collections::HashMap<u64, Vec<(&crate::mesh::Instances, Value)>> =
         std::collections::HashMap::new();
-    for node in &scene.nodes {
+    let grid_of = |node: &crate::mesh::Node| node.mesh.and_then(|m| stored.mesh[m].as_ref());
+    // an instanced quantized mesh: its instances carry the grid (the node's transform applies after theirs)
+    let placed: Vec<Option<crate::mesh::Instances>> = scene
+        .nodes
+        .iter()
+        .map(|node| match (grid_of(node), node.instances.as_ref().filter(|i| !i.is_empty())) {
+            (Some(g), Some(inst)) => Some(place_instances(inst, &g.grid)),
+            _ => None,
+        })
+        .collect();
+    for (ni, node) in scene.nodes.iter().enumerate() {
         let mut ext = Map::new();
-        if let Some(inst) = node.instances.as_ref().filter(|i| !i.is_empty()) {
+        let instances = placed[ni].as_ref().or(node.instances.as_ref());
+        if let Some(inst) = instances.filter(|i| !i.is_empty()) {
             let key = instances_hash(inst);
             if let Some((_, attributes)) = written_instances.get(&key).and_then(|v| v.iter().find(|(i, _)| *i == inst))
             {
@@ -641,14 +745,17 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
                 let mut attributes = Map::new();
                 if !inst.translations.is_empty() {
                     let a = float_accessor(&mut root, &mut bin, &inst.translations, None);
+                    instance_codec(&root, &mut bin, a);
                     attributes.insert("TRANSLATION".into(), Value::from(a.value()));
                 }
                 if !inst.rotations.is_empty() {
                     let a = float_accessor(&mut root, &mut bin, &inst.rotations, None);
+                    instance_codec(&root, &mut bin, a);
                     attributes.insert("ROTATION".into(), Value::from(a.value()));
                 }
                 if !inst.scales.is_empty() {
                     let a = float_accessor(&mut root, &mut bin, &inst.scales, None);
+                    instance_codec(&root, &mut bin, a);
                     attributes.insert("SCALE".into(), Value::from(a.value()));
                 }
                 let attributes = Value::Object(attributes);
@@ -672,16 +779,17 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
                 extras = Some(Value::Object(map));
             }
         }
-        // a quantized mesh is placed by its node: the grid's scale and origin join its transform
+        // a quantized mesh is placed by its node (or its instances, above): the grid's scale and
+        // origin join its transform
         let (mut translation, mut scale) = (node.translation, node.scale);
-        if let (Some(grid), Some(_)) = (&opts.position_grid, node.mesh) {
-            if !node.children.is_empty() || node.instances.is_some() {
+        if let (Some(grid), None) = (grid_of(node), &placed[ni]) {
+            if !node.children.is_empty() {
                 return Err(SceneProblem(format!(
-                    "node {:?} holds a mesh and children or instances: quantized positions need the node to itself; write without quantization",
+                    "node {:?} holds a mesh and children: quantized positions on one grid need the node to itself; write without quantization",
                     node.name
                 )));
             }
-            (translation, scale) = quantized::place(node.rotation, translation, scale, grid);
+            (translation, scale) = place(node.rotation, translation, scale, &grid.grid);
         }
         let is = |v: &[f32], identity: &[f32]| v == identity;
         root.push(json::Node {
@@ -753,9 +861,11 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
     }
     // (a scene with no vertex or index data has nothing to compress)
     if opts.meshopt && bin.codecs.iter().any(Option::is_some) {
-        let chunk = compress_views(&mut root, &mut bin, bin_uri)?;
-        extensions_used.insert(EXT_MESHOPT);
-        extensions_required.insert(EXT_MESHOPT);
+        let (chunk, compressed) = compress_views(&mut root, &mut bin, bin_uri)?;
+        if compressed {
+            extensions_used.insert(EXT_MESHOPT);
+            extensions_required.insert(EXT_MESHOPT);
+        }
         root.buffer_views = bin.views;
         root.extensions_used = extensions_used.into_iter().map(str::to_string).collect();
         root.extensions_required = extensions_required.into_iter().map(str::to_string).collect();
@@ -849,7 +959,7 @@ mod tests {
         let grid = PositionGrid { origin: [1.5, -20.0, 3.0], step: [0.5, 0.25, 2.0] };
         let rotation = glam::Quat::from_euler(glam::EulerRot::YXZ, 0.7, -0.3, 0.2).to_array();
         let (t, s) = ([10.0, 5.0, -2.0], [2.0, 0.5, 1.5]);
-        let (t2, s2) = quantized::place(rotation, t, s, &grid);
+        let (t2, s2) = place(rotation, t, s, &grid);
         let r = glam::Quat::from_array(rotation);
         for q in [[0.0f32, 0.0, 0.0], [3.0, 7.0, 11.0], [65535.0, 1.0, 2.0]] {
             let local = glam::Vec3::from_array([0, 1, 2].map(|a| grid.origin[a] + grid.step[a] * q[a]));
@@ -862,7 +972,7 @@ mod tests {
     #[test]
     fn positions_off_the_grid_are_refused() {
         let grid = PositionGrid { origin: [0.0; 3], step: [1.0; 3] };
-        let opts = WriteOptions { position_grid: Some(grid), meshopt: false };
+        let opts = WriteOptions { quantization: Quantization::Grid(grid), ..WriteOptions::default() };
         assert!(to_glb_with(&triangle_scene(2), &opts).is_ok());
         let mut far = triangle_scene(2);
         far.meshes[0].primitives[0].positions[0] = [70000.0, 0.0, 0.0];

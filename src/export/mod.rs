@@ -13,6 +13,7 @@ pub mod error;
 pub mod gltf;
 pub mod grid;
 pub mod obj;
+pub mod quantize;
 pub mod streaming;
 pub mod table;
 pub mod table_bin;
@@ -92,7 +93,7 @@ pub fn stage_scene_with(
             files.push((path.to_path_buf(), json));
             files
         }
-        "obj" if opts.position_grid.is_some() => {
+        "obj" if opts.quantization.is_on() => {
             return Err(ExportError::InvalidScene {
                 path: path.to_path_buf(),
                 problem: "quantized positions (--quantize) are a glTF feature (KHR_mesh_quantization); write .glb or .gltf, or leave --quantize out".into(),

@@ -1060,6 +1060,8 @@ pub struct TreeJob {
     /// None: detect the dialect.
     pub dialect: Option<Dialect>,
     pub options: TreeOptions,
+    /// How a glTF output stores vertex data (16-bit grid per mesh, meshopt compression).
+    pub compact: crate::export::quantize::Compact,
 }
 
 #[derive(Debug, Clone, Default, Serialize)]
@@ -1135,7 +1137,13 @@ pub fn run_reporting(job: &TreeJob, report_path: Option<&Path>) -> Result<TreeRe
     let mut set = export::FileSet::new();
     let folder = set.folder_beside(&job.output)?;
     let file_name = job.output.file_name().unwrap_or_default();
-    let staged = export::write_scene(&tree.scene, &folder.join(file_name))?;
+    if job.compact != crate::export::quantize::Compact::None && obj {
+        return Err(TreeError::Options(format!(
+            "{}: --quantize and --compress store glTF integer positions (KHR_mesh_quantization), which an .obj cannot hold; write .glb or .gltf, or leave them out",
+            job.output.display()
+        )));
+    }
+    let staged = export::write_scene_with(&tree.scene, &folder.join(file_name), &job.compact.write_options())?;
     let t_export = t0.elapsed().as_secs_f64();
     let validation = validate_file(&folder.join(file_name), &ValidateOptions::default())
         .map_err(|e| TreeError::Invalid { path: job.output.clone(), report: e.to_string() })?;

@@ -21,6 +21,7 @@ pub mod terrain_stage;
 mod view_lod;
 pub mod view_render;
 pub mod view_stage;
+mod view_store;
 
 use std::path::PathBuf;
 
@@ -63,6 +64,8 @@ pub struct SceneSettings {
     pub seed: u64,
     /// At least one; the first is the primary format.
     pub formats: Vec<Format>,
+    /// How the species files, scene.glb and scene_lod.glb store vertex data (`compact`).
+    pub compact: crate::export::quantize::Compact,
 }
 
 /// Where the terrain's heights come from.

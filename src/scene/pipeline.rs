@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use crate::mesh::Scene;
 use crate::scene::cache::{Cache, FileHashes};
 use crate::scene::error::SceneBuildError;
-use crate::validate::read_scene;
+use crate::validate::read_scene_dequantized;
 
 /// One stage of a scene build.
 pub trait StageJob {
@@ -101,7 +101,7 @@ impl StageRunner<'_> {
 /// A scene file read back as later stages see it (what a cache hit hands on).
 pub fn read_back(dir: &Path, rel: &Path) -> Result<Scene, SceneBuildError> {
     let path = dir.join(rel);
-    read_scene(&path).map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })
+    read_scene_dequantized(&path).map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })
 }
 
 /// The terrain as later stages take it: in memory when the terrain stage ran, else read back from

@@ -10,6 +10,8 @@ use serde::{Deserialize, Serialize};
 use crate::bake::atlas::write_mip_pngs;
 use crate::bake::image::Image;
 use crate::export;
+use crate::export::gltf::WriteOptions;
+use crate::export::quantize::Compact;
 use crate::failure::Failure;
 use crate::lod::LodView;
 use crate::lsystem::parse;
@@ -59,7 +61,25 @@ pub struct PlantReport {
     pub mesh: Option<MeshSpeciesReport>,
     /// What the view stage draws the species' instances with (typed: the view stage reads it).
     pub chain: SpeciesChain,
+    /// The farthest any vertex of the species' files lies from the mesh built (`[scene] compact`:
+    /// 16-bit positions; 0 for f32). Tree and mesh chains also fold it into each level's error.
+    #[serde(default)]
+    pub quantization_m: f64,
     pub seconds: f64,
+}
+
+/// What every species file of a build is made with: the `[lod]` policy its switch distances are
+/// measured for, and how its glb files store vertex data (`[scene] compact`).
+#[derive(Debug, Clone, Copy)]
+pub struct SpeciesOutput<'a> {
+    pub policy: &'a LodView,
+    pub compact: Compact,
+}
+
+impl SpeciesOutput<'_> {
+    pub fn of(preset: &Preset) -> SpeciesOutput<'_> {
+        SpeciesOutput { policy: &preset.lod, compact: preset.scene.compact }
+    }
 }
 
 /// A species' meshes as the plants stage wrote them, for the view stage: per variant, each level's
@@ -197,12 +217,21 @@ pub const PLANTS_ALGORITHM_VERSION: u32 = 16;
 pub fn plants_key(preset: &Preset) -> Result<String, StageError> {
     let mut k = KeyBuilder::new("plants", PLANTS_ALGORITHM_VERSION);
     k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
+    add_compact(&mut k, preset);
     for s in &preset.species {
         k.add(s.rules.name.as_bytes());
         k.add(serde_json::to_string(&s.look).unwrap_or_default().as_bytes());
         add_look_inputs(&mut k, &s.rules.name, &s.look)?;
     }
     Ok(k.finish())
+}
+
+/// How the species and scene files store vertex data, in a stage's key (nothing for f32 files, so
+/// the keys of builds without `compact` are as they were).
+pub fn add_compact(k: &mut KeyBuilder, preset: &Preset) {
+    if preset.scene.compact != Compact::None {
+        k.add(b"compact=").add(format!("{:?}", preset.scene.compact).as_bytes());
+    }
 }
 
 /// Adds the bytes of the files a look reads to a cache key (the scatter stage's key too: its
@@ -259,12 +288,13 @@ fn tree_options(name: &str, look: &TreeLook, k: usize) -> TreeOptions {
 
 /// Writes a chain: `species/<stem>.glb` (MSFT_lod; returned), `species/<stem>_LOD<n>.glb` and
 /// `atlases/<stem>*.png`.
-fn write_chain(chain: &TreeLods, dir: &Path, stem: &str, files: &mut Vec<PathBuf>) -> Result<PathBuf, StageError> {
+fn write_chain(chain: &TreeLods, dir: &Path, stem: &str, store: &mut Store<'_>) -> Result<PathBuf, StageError> {
     for level in &chain.levels {
-        write(&level.scene, dir, PathBuf::from("species").join(format!("{stem}_LOD{}.glb", level.level)), files)?;
+        store.write(&level.scene, dir, PathBuf::from("species").join(format!("{stem}_LOD{}.glb", level.level)))?;
     }
     let file = PathBuf::from("species").join(format!("{stem}.glb"));
-    write(&chain.chain, dir, file.clone(), files)?;
+    store.write(&chain.chain, dir, file.clone())?;
+    let files = &mut store.files;
     if !chain.atlas.is_empty() {
         write_mips(dir, stem, &chain.atlas, files)?;
     }
@@ -306,25 +336,26 @@ fn load_model(name: &str, look: &MeshLook) -> Result<SourceMesh, StageError> {
 fn run_mesh(
     name: &str,
     look: &MeshLook,
-    policy: &LodView,
+    out: SpeciesOutput<'_>,
     dir: &Path,
-    files: &mut Vec<PathBuf>,
+    store: &mut Store<'_>,
 ) -> Result<(MeshSpeciesReport, SpeciesChain), StageError> {
-    let (source, chain) = mesh_chain(name, look, policy)?;
-    let file = write_chain(&chain, dir, name, files)?;
+    let (source, chain) = mesh_chain(name, look, out)?;
+    let file = write_chain(&chain, dir, name, store)?;
     let lod0: Vec<&Mesh> = chain.levels.first().and_then(|l| l.scene.meshes.first()).into_iter().collect();
     let draw = SpeciesChain::with_bounds(vec![tree_levels(&chain, name, look.analyze)], &lod0);
     Ok((MeshSpeciesReport { obj: look.obj.clone(), file, stats: source.stats, chain: chain.report }, draw))
 }
 
 /// A mesh species' model as loaded and the LoD chain the plants stage writes for it.
-pub fn mesh_chain(name: &str, look: &MeshLook, policy: &LodView) -> Result<(SourceMesh, TreeLods), StageError> {
+pub fn mesh_chain(name: &str, look: &MeshLook, out: SpeciesOutput<'_>) -> Result<(SourceMesh, TreeLods), StageError> {
     let source = load_model(name, look)?;
     let lod = TreeLodOptions {
         lods: look.lods,
         atlas_px: look.atlas_px,
         analyze: look.analyze,
-        policy: *policy,
+        policy: *out.policy,
+        compact: out.compact,
         ..TreeLodOptions::default()
     };
     let chain = build_mesh_lods(&source, name, &lod)
@@ -338,13 +369,14 @@ pub fn tree_chain(
     look: &TreeLook,
     system: &LSystem,
     k: usize,
-    policy: &LodView,
+    out: SpeciesOutput<'_>,
 ) -> Result<TreeLods, StageError> {
     let lod = TreeLodOptions {
         lods: look.lods,
         atlas_px: look.atlas_px,
         analyze: look.analyze,
-        policy: *policy,
+        policy: *out.policy,
+        compact: out.compact,
         ..TreeLodOptions::default()
     };
     build_tree_lods(system, &tree_options(name, look, k), &lod)
@@ -356,18 +388,18 @@ pub fn tree_chain(
 fn run_tree(
     name: &str,
     look: &TreeLook,
-    policy: &LodView,
+    out: SpeciesOutput<'_>,
     dir: &Path,
-    files: &mut Vec<PathBuf>,
+    store: &mut Store<'_>,
 ) -> Result<(TreeSpeciesReport, SpeciesChain), StageError> {
     let system = read_lsystem(name, look)?;
     let count = distinct_variants(&system, look);
     let mut variants = Vec::with_capacity(count);
     let (mut levels, mut lod0) = (Vec::with_capacity(count), Vec::with_capacity(count));
     for k in 0..count {
-        let chain = tree_chain(name, look, &system, k, policy)?;
+        let chain = tree_chain(name, look, &system, k, out)?;
         let stem = format!("{name}_v{k}");
-        let file = write_chain(&chain, dir, &stem, files)?;
+        let file = write_chain(&chain, dir, &stem, store)?;
         levels.push(tree_levels(&chain, &stem, look.analyze));
         lod0.extend(chain.levels.first().and_then(|l| l.scene.meshes.first()).cloned());
         variants.push(TreeVariantReport {
@@ -401,10 +433,22 @@ pub fn user_blade(settings: &GrassSettings) -> Result<Option<Image>, StageError>
     }
 }
 
-fn write(scene: &crate::mesh::Scene, dir: &Path, rel: PathBuf, files: &mut Vec<PathBuf>) -> Result<(), StageError> {
-    export::write_scene(scene, &dir.join(&rel)).map_err(|e| fail(e.to_string()))?;
-    files.push(rel);
-    Ok(())
+/// The files a species writes, how its glb files store vertex data, and the farthest any vertex
+/// of them moved in storage.
+pub(crate) struct Store<'a> {
+    files: &'a mut Vec<PathBuf>,
+    options: WriteOptions,
+    quantization_m: f64,
+}
+
+impl Store<'_> {
+    fn write(&mut self, scene: &crate::mesh::Scene, dir: &Path, rel: PathBuf) -> Result<(), StageError> {
+        export::write_scene_with(scene, &dir.join(&rel), &self.options).map_err(|e| fail(e.to_string()))?;
+        let moved = crate::export::quantize::position_error(scene, &self.options.quantization);
+        self.quantization_m = self.quantization_m.max(moved);
+        self.files.push(rel);
+        Ok(())
+    }
 }
 
 fn write_mips(
@@ -455,6 +499,7 @@ pub struct SpeciesMemo<'a> {
 pub fn species_key(preset: &Preset, s: &SpeciesSettings) -> Result<String, StageError> {
     let mut k = KeyBuilder::new(SPECIES_MEMO_STAGE, PLANTS_ALGORITHM_VERSION);
     k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
+    add_compact(&mut k, preset);
     k.add(s.rules.name.as_bytes());
     k.add(serde_json::to_string(&s.look).unwrap_or_default().as_bytes());
     add_look_inputs(&mut k, &s.rules.name, &s.look)?;
@@ -500,18 +545,20 @@ pub fn species_unit(
 fn run_species(preset: &Preset, s: &SpeciesSettings, scene_dir: &Path) -> Result<Option<PlantReport>, StageError> {
     let t1 = Instant::now();
     let mut files = Vec::new();
+    let out = SpeciesOutput::of(preset);
+    let mut store = Store { files: &mut files, options: out.compact.write_options(), quantization_m: 0.0 };
     let name = &s.rules.name;
     let (mut tree_report, mut mesh_report) = (None, None);
     let draw;
     let (grass_report, flower_report) = match &s.look {
         PlantLook::Marker => return Ok(None),
         PlantLook::Tree(t) => {
-            let (report, chain) = run_tree(name, t, &preset.lod, scene_dir, &mut files)?;
+            let (report, chain) = run_tree(name, t, out, scene_dir, &mut store)?;
             (tree_report, draw) = (Some(report), chain);
             (None, None)
         }
         PlantLook::Mesh(m) => {
-            let (report, chain) = run_mesh(name, m, &preset.lod, scene_dir, &mut files)?;
+            let (report, chain) = run_mesh(name, m, out, scene_dir, &mut store)?;
             (mesh_report, draw) = (Some(report), chain);
             (None, None)
         }
@@ -521,17 +568,18 @@ fn run_species(preset: &Preset, s: &SpeciesSettings, scene_dir: &Path) -> Result
                 .map_err(|e| fail(format!("species `{name}`: {e}")))?;
             draw = grass_chain(name, g, &asset);
             for (n, scene) in asset.lod_scenes.iter().enumerate() {
-                write(scene, scene_dir, PathBuf::from("species").join(format!("{name}_LOD{n}.glb")), &mut files)?;
+                store.write(scene, scene_dir, PathBuf::from("species").join(format!("{name}_LOD{n}.glb")))?;
             }
-            write(&asset.chain, scene_dir, PathBuf::from("species").join(format!("{name}.glb")), &mut files)?;
-            write(&asset.far, scene_dir, PathBuf::from("species").join(format!("{name}_far.glb")), &mut files)?;
-            write_mips(scene_dir, name, &asset.atlas, &mut files)?;
-            write_mips(scene_dir, &format!("{name}_blade"), &asset.blade, &mut files)?;
+            store.write(&asset.chain, scene_dir, PathBuf::from("species").join(format!("{name}.glb")))?;
+            store.write(&asset.far, scene_dir, PathBuf::from("species").join(format!("{name}_far.glb")))?;
+            let files = &mut store.files;
+            write_mips(scene_dir, name, &asset.atlas, files)?;
+            write_mips(scene_dir, &format!("{name}_blade"), &asset.blade, files)?;
             let density = PathBuf::from("atlases").join(format!("{name}_density.png"));
             let png = asset.density_atlas.encode_png().map_err(|e| fail(e.to_string()))?;
             export::write_atomic(&scene_dir.join(&density), &png).map_err(|e| fail(e.to_string()))?;
             files.push(density);
-            write_normal_atlas(scene_dir, name, &asset.normal_atlas, &mut files)?;
+            write_normal_atlas(scene_dir, name, &asset.normal_atlas, files)?;
             (Some(asset.report), None)
         }
         PlantLook::Flower(f) => {
@@ -551,14 +599,16 @@ fn run_species(preset: &Preset, s: &SpeciesSettings, scene_dir: &Path) -> Result
                 })
                 .collect();
             draw = SpeciesChain::with_bounds(levels, &asset.scene.meshes.iter().collect::<Vec<_>>());
-            write(&asset.scene, scene_dir, file, &mut files)?;
-            write_mips(scene_dir, name, &asset.atlas, &mut files)?;
-            write_normal_atlas(scene_dir, name, &asset.normal_atlas, &mut files)?;
+            store.write(&asset.scene, scene_dir, file)?;
+            write_mips(scene_dir, name, &asset.atlas, store.files)?;
+            write_normal_atlas(scene_dir, name, &asset.normal_atlas, store.files)?;
             (None, Some(asset.report))
         }
     };
+    let quantization_m = store.quantization_m;
     Ok(Some(PlantReport {
         name: name.clone(),
+        quantization_m,
         files,
         grass: grass_report,
         flower: flower_report,

@@ -42,6 +42,7 @@ use super::{
     Format, MeshLook, PlantLook, Preset, ScatterSettings, SceneSettings, SpeciesSettings, TerrainSettings,
     TerrainSource, TreeLook,
 };
+use crate::export::quantize::Compact;
 use crate::heightfield::Heightfield;
 use crate::lsystem::library;
 use crate::plants::flower::FlowerSettings;
@@ -95,7 +96,7 @@ pub fn parse_preset(text: &str, path: &Path) -> Result<Preset, PresetError> {
 pub fn demo_preset() -> Preset {
     Preset {
         path: None,
-        scene: SceneSettings { name: "demo".into(), seed: 0, formats: vec![Format::Glb] },
+        scene: SceneSettings { name: "demo".into(), seed: 0, formats: vec![Format::Glb], compact: Compact::None },
         terrain: Some(TerrainSettings {
             source: TerrainSource::Fbm {
                 size: 513,
@@ -570,7 +571,16 @@ fn parse_scene(t: &Table<'_, '_>) -> Result<SceneSettings, PresetError> {
     } else {
         formats.push(Format::Glb);
     }
-    Ok(SceneSettings { name: name.to_string(), seed, formats })
+    let compact = match t.string("compact", "compact = \"compress\"")? {
+        None => Compact::None,
+        Some(("none", _)) => Compact::None,
+        Some(("quantize", _)) => Compact::Quantize,
+        Some(("compress", _)) => Compact::Compress,
+        Some((other, span)) => {
+            return Err(unknown_value(t, "compact", other, &["none", "quantize", "compress"], &span))
+        }
+    };
+    Ok(SceneSettings { name: name.to_string(), seed, formats, compact })
 }
 
 fn parse_scatter(t: &Table<'_, '_>, inputs: Inputs) -> Result<ScatterSettings, PresetError> {

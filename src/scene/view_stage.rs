@@ -27,7 +27,7 @@ use crate::scene::terrain_stage::LodInfo;
 use crate::scene::view::{cull_distance, level_at, view_distance_factor, Camera, CullDistance};
 use crate::scene::view_lod::{lod_scene, LodSpecies, LodTerrain};
 use crate::scene::Preset;
-use crate::validate::read_scene;
+use crate::validate::read_scene_dequantized;
 
 fn fail(message: String) -> StageError {
     StageError::Failed { stage: "view", message }
@@ -144,6 +144,16 @@ pub struct ViewStageReport {
     /// scene_lod.glb: every chunk and tile as an MSFT_lod chain ([`crate::scene::view_lod`]).
     pub lod_scene_file: PathBuf,
     pub lod_scene_bytes: u64,
+    /// The farthest any vertex of scene.glb and scene_lod.glb lies from the mesh assembled
+    /// (`[scene] compact`: 16-bit positions; 0 for f32), in the mesh's own frame (an instance's
+    /// scale multiplies it).
+    #[serde(default)]
+    pub quantization_m: f64,
+    /// The same for the terrain's meshes alone, all on one grid over the terrain (seams closed):
+    /// its vertices move up to this far in any direction, so in these files the terrain's vertical
+    /// error may grow by this much times (1 + the steepest slope).
+    #[serde(default)]
+    pub terrain_quantization_m: f64,
     pub views: Vec<ViewReport>,
     pub seconds: f64,
 }
@@ -162,6 +172,7 @@ pub fn view_key(preset: &Preset, upstream: &[&str]) -> String {
     }
     k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
     k.add(serde_json::to_string(&preset.views).unwrap_or_default().as_bytes());
+    crate::scene::plants_stage::add_compact(&mut k, preset);
     for s in &preset.species {
         k.add(s.rules.name.as_bytes()).add(serde_json::to_string(&s.cull_distance_m).unwrap_or_default().as_bytes());
     }
@@ -203,7 +214,7 @@ impl<'a> Assembler<'a> {
     pub(super) fn file(&mut self, rel: &Path) -> Result<&Scene, StageError> {
         if !self.files.contains_key(rel) {
             let path = self.dir.join(rel);
-            let s = read_scene(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?;
+            let s = read_scene_dequantized(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?;
             self.files.insert(rel.to_path_buf(), s);
         }
         Ok(&self.files[rel])
@@ -627,13 +638,23 @@ pub fn run_view(
         }
     }
 
+    // `[scene] compact`: the terrain on its own grid (the main mesh's and every level's chunks)
+    let mut terrain_meshes: Vec<Mesh> = main.meshes.clone();
+    for (f, _) in &levels {
+        terrain_meshes.extend(asm.file(f)?.meshes.iter().cloned());
+    }
+    let (store, terrain_quantization_m) =
+        crate::scene::view_store::scene_store(preset, &terrain_meshes.iter().collect::<Vec<_>>());
+    drop(terrain_meshes);
     // meshes appended only for the full-detail count are not instanced by any node: drop them
     let mut scene = asm.scene;
     prune_unused_meshes(&mut scene);
     scene.name = preset.scene.name.clone();
     scene.extras = Some(serde_json::json!({ "verdant_view": reports.first().map(|r| &r.camera) }));
     let scene_file = PathBuf::from("scene.glb");
-    export::write_scene(&scene, &scene_dir.join(&scene_file)).map_err(|e| fail(e.to_string()))?;
+    export::write_scene_with(&scene, &scene_dir.join(&scene_file), &store).map_err(|e| fail(e.to_string()))?;
+    // (measured once written: the writer checked the scene)
+    let quantization_m = crate::export::quantize::position_error_with(&scene, &store.quantization, &store.mesh_grids);
     let scene_bytes = std::fs::metadata(scene_dir.join(&scene_file)).map(|m| m.len()).unwrap_or(0);
 
     // scene_lod.glb: every chunk and tile with its whole chain, for viewers that switch themselves
@@ -654,13 +675,20 @@ pub fn run_view(
     let mut lod_scene = lod.scene;
     lod_scene.name = format!("{} (levels of detail)", preset.scene.name);
     let lod_scene_file = PathBuf::from("scene_lod.glb");
-    export::write_scene(&lod_scene, &scene_dir.join(&lod_scene_file)).map_err(|e| fail(e.to_string()))?;
+    export::write_scene_with(&lod_scene, &scene_dir.join(&lod_scene_file), &store).map_err(|e| fail(e.to_string()))?;
+    let quantization_m = quantization_m.max(crate::export::quantize::position_error_with(
+        &lod_scene,
+        &store.quantization,
+        &store.mesh_grids,
+    ));
     let lod_scene_bytes = std::fs::metadata(scene_dir.join(&lod_scene_file)).map(|m| m.len()).unwrap_or(0);
     Ok(ViewStageReport {
         scene_file,
         scene_bytes,
         lod_scene_file,
         lod_scene_bytes,
+        quantization_m,
+        terrain_quantization_m,
         views: reports,
         seconds: t0.elapsed().as_secs_f64(),
     })

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::export::gltf::WriteOptions;
 use crate::export::grid::PositionGrid;
+use crate::export::quantize::Quantization;
 use crate::export::{self, ExportError};
 use crate::heightfield::{self, DecodeOptions, Decoded, Encoding, Heightfield, HeightfieldError};
 use crate::mesh::{Bounds, Scene};
@@ -408,7 +409,11 @@ pub fn run_reporting(
                 &mut set,
                 &scene,
                 path,
-                &WriteOptions { position_grid: grid, meshopt: job.meshopt && grid.is_some() },
+                &WriteOptions {
+                    quantization: grid.map_or(Quantization::Off, Quantization::Grid),
+                    meshopt: job.meshopt && grid.is_some(),
+                    ..WriteOptions::default()
+                },
             )?;
             Some(summarize(&scene, files.iter().map(|f| f.display().to_string()).collect()))
         }

@@ -37,13 +37,14 @@ impl Drop for Finder<'_> {
 pub(super) fn check_scene_data(
     scene: &Scene,
     declared: &[Vec<Option<Bounds>>],
+    quantized: &[bool],
     opts: &ValidateOptions,
     issues: &mut Vec<Issue>,
 ) {
     for (mi, mesh) in scene.meshes.iter().enumerate() {
         for (pi, p) in mesh.primitives.iter().enumerate() {
             let loc = format!("mesh {mi} {:?} primitive {pi}", mesh.name);
-            check_primitive(p, &loc, issues);
+            check_primitive(p, &loc, quantized.get(mi).copied().unwrap_or(false), issues);
             if let Some(Some(d)) = declared.get(mi).and_then(|m| m.get(pi)) {
                 if let Some(b) = p.bounds() {
                     if b.min != d.min || b.max != d.max {
@@ -107,7 +108,9 @@ fn length(v: &[f32]) -> f64 {
     v.iter().map(|&x| x as f64 * x as f64).sum::<f64>().sqrt()
 }
 
-fn check_primitive(p: &Primitive, loc: &str, issues: &mut Vec<Issue>) {
+/// `quantized`: positions stored as integers (KHR_mesh_quantization), where a sliver thinner than
+/// a grid step collapses to zero area: it draws nothing, and is reported as a warning.
+fn check_primitive(p: &Primitive, loc: &str, quantized: bool, issues: &mut Vec<Issue>) {
     let n = p.positions.len();
     let points = p.mode == PrimitiveMode::Points;
     if !points && !p.indices.len().is_multiple_of(3) {
@@ -155,6 +158,7 @@ fn check_primitive(p: &Primitive, loc: &str, issues: &mut Vec<Issue>) {
     if points {
         return;
     }
+    let mut collapsed = 0usize;
     let mut f = Finder { issues, loc: loc.into(), what: "degenerate triangles", count: 0 };
     for t in 0..p.indices.len() / 3 {
         let [a, b, c] = [p.indices[3 * t], p.indices[3 * t + 1], p.indices[3 * t + 2]];
@@ -166,8 +170,20 @@ fn check_primitive(p: &Primitive, loc: &str, issues: &mut Vec<Issue>) {
             continue;
         }
         if triangle_is_flat(p, t) {
-            f.found(format!("triangle {t}"), "has zero area".into());
+            if quantized {
+                collapsed += 1;
+            } else {
+                f.found(format!("triangle {t}"), "has zero area".into());
+            }
         }
+    }
+    drop(f);
+    if collapsed > 0 {
+        issues.push(issue(
+            Severity::Warning,
+            loc,
+            format!("{collapsed} triangles have zero area on the 16-bit position grid (slivers thinner than a grid step; they draw nothing)"),
+        ));
     }
 }
 
@@ -254,7 +270,7 @@ mod tests {
             ..Primitive::default()
         };
         let mut issues = Vec::new();
-        check_primitive(&p, "p", &mut issues);
+        check_primitive(&p, "p", false, &mut issues);
         assert_eq!(issues.len(), 2, "{issues:?}");
         assert!(issues[0].message.contains("zero area"));
         assert!(issues[1].message.contains("repeats"));

@@ -10,7 +10,9 @@ use super::accessor::{read_floats, read_indices, view_bytes};
 use super::meshopt::meshopt_buffers;
 use super::options::{Loaded, ValidateError};
 use super::report::{issue, Issue, Severity};
-use crate::export::gltf::{EXT_INSTANCING, EXT_LOD, EXT_MESHOPT, KHR_QUANTIZATION, LOD_COVERAGE_KEY};
+use crate::export::gltf::{
+    EXT_INSTANCING, EXT_LOD, EXT_MESHOPT, KHR_QUANTIZATION, KHR_TEXTURE_TRANSFORM, LOD_COVERAGE_KEY,
+};
 use crate::mesh::{AlphaMode, Bounds, Instances, Material, Mesh, Node, Primitive, PrimitiveMode, Scene, Texture};
 
 /// References gltf-json's validation or the gltf crate follow without a bounds check: every
@@ -137,7 +139,7 @@ pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
             let at = path().to_string();
             let ours = matches!(error, JsonError::Unsupported)
                 && at.starts_with("extensionsRequired")
-                && [EXT_INSTANCING, KHR_QUANTIZATION, EXT_MESHOPT]
+                && [EXT_INSTANCING, KHR_QUANTIZATION, EXT_MESHOPT, KHR_TEXTURE_TRANSFORM]
                     .iter()
                     .any(|ext| root.extensions_required.iter().any(|e| e == ext) && at.contains(ext));
             if !ours {
@@ -198,6 +200,7 @@ pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
     let mut issues = node_graph_issues(&doc);
     let mut scene = Scene::default();
     let mut declared_bounds = Vec::new();
+    let mut quantized = Vec::new();
 
     // KHR_mesh_quantization must be required where positions are not float (a reader without it
     // would misread them)
@@ -206,6 +209,9 @@ pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
         let mesh_name = mesh.name().unwrap_or("").to_string();
         let mut out = Mesh { name: mesh_name.clone(), primitives: Vec::new(), extras: parse_extras(mesh.extras()) };
         let mut declared = Vec::new();
+        quantized.push(mesh.primitives().any(|p| {
+            p.get(&gltf::Semantic::Positions).is_some_and(|a| a.data_type() != gltf::accessor::DataType::F32)
+        }));
         for (pi, prim) in mesh.primitives().enumerate() {
             let loc = format!("mesh {} {:?} primitive {pi}", mesh.index(), mesh_name);
             let (p, bounds) = read_primitive(&prim, &buffers, &loc, quantization_used, &mut issues);
@@ -216,8 +222,32 @@ pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
         declared_bounds.push(declared);
     }
 
+    // KHR_texture_transform: the coordinates as the material's textures sample them (verdant's
+    // materials hold none, so the transform is applied to the coordinates read)
+    let mut uv_transforms: Vec<Option<UvTransform>> = Vec::new();
     for m in doc.materials() {
+        let loc = format!("material {} {:?}", m.index().unwrap_or(0), m.name().unwrap_or(""));
         let pbr = m.pbr_metallic_roughness();
+        let base = pbr.base_color_texture().map(|i| uv_transform(i.extension_value(KHR_TEXTURE_TRANSFORM)));
+        let normal = m.normal_texture().map(|n| uv_transform(n.extension_value(KHR_TEXTURE_TRANSFORM)));
+        let t = match (base, normal) {
+            (Some(Err(e)), _) | (_, Some(Err(e))) => {
+                issues.push(issue(Severity::Error, &loc, e));
+                None
+            }
+            (Some(Ok(a)), Some(Ok(b))) if a != b => {
+                issues.push(issue(
+                    Severity::Error,
+                    &loc,
+                    format!("{KHR_TEXTURE_TRANSFORM} differs between baseColorTexture and normalTexture (verdant reads one set of coordinates per material)"),
+                ));
+                None
+            }
+            (Some(Ok(a)), _) => a,
+            (None, Some(Ok(b))) => b,
+            (None, None) => None,
+        };
+        uv_transforms.push(t);
         let alpha_mode = match m.alpha_mode() {
             gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
             gltf::material::AlphaMode::Mask => AlphaMode::Mask { cutoff: m.alpha_cutoff().unwrap_or(0.5) },
@@ -233,6 +263,16 @@ pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
             alpha_mode,
             double_sided: m.double_sided(),
         });
+    }
+
+    for mesh in &mut scene.meshes {
+        for p in &mut mesh.primitives {
+            if let Some(Some(t)) = p.material.and_then(|k| uv_transforms.get(k)) {
+                for uv in &mut p.uvs {
+                    *uv = [0, 1].map(|a| t.offset[a] + t.scale[a] * uv[a]);
+                }
+            }
+        }
     }
 
     for t in doc.textures() {
@@ -334,7 +374,118 @@ pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
         scene.roots = s.nodes().map(|n| n.index()).collect();
         scene.extras = parse_extras(s.extras());
     }
-    Ok(Loaded { scene, issues, declared_bounds })
+    Ok(Loaded { scene, issues, declared_bounds, quantized })
+}
+
+/// How far from unit length a normalized integer direction may be, as rounding to its type allows
+/// (half a step on each component, with a margin); None for floats, which must be unit length.
+fn integer_unit_tolerance(acc: &gltf::Accessor) -> Option<f32> {
+    use gltf::accessor::DataType;
+    match acc.data_type() {
+        DataType::I8 => Some(0.012),
+        DataType::I16 => Some(1e-4),
+        _ => None,
+    }
+}
+
+/// Directions stored as normalized integers (KHR_mesh_quantization) as the unit vectors they stand
+/// for, as shaders normalise them; one stored further from unit length than its rounding allows
+/// is an error.
+fn renormalize(dirs: &mut [[f32; 3]], tol: f32, what: &str, loc: &str, issues: &mut Vec<Issue>) {
+    let mut bad = 0usize;
+    for d in dirs.iter_mut() {
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if (l - 1.0).abs() > tol || !l.is_finite() {
+            bad += 1;
+            continue;
+        }
+        *d = d.map(|c| c / l);
+    }
+    if bad > 0 {
+        issues.push(issue(
+            Severity::Error,
+            loc,
+            format!("{bad} {what} values are further from unit length than their integer type's rounding ({tol})"),
+        ));
+    }
+}
+
+/// A KHR_texture_transform's offset and scale (uv' = offset + scale·uv).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct UvTransform {
+    offset: [f32; 2],
+    scale: [f32; 2],
+}
+
+/// The transform a texture reference's extension states, if any; rotation and texCoord overrides
+/// are refused (verdant writes neither).
+fn uv_transform(ext: Option<&Value>) -> Result<Option<UvTransform>, String> {
+    let Some(ext) = ext else { return Ok(None) };
+    if ext.get("rotation").and_then(Value::as_f64).is_some_and(|r| r != 0.0) || ext.get("texCoord").is_some() {
+        return Err(format!("{KHR_TEXTURE_TRANSFORM} with rotation or texCoord is not supported by verdant"));
+    }
+    let pair = |key: &str, default: f32| -> Result<[f32; 2], String> {
+        match ext.get(key) {
+            None => Ok([default; 2]),
+            Some(v) => v
+                .as_array()
+                .filter(|a| a.len() == 2)
+                .and_then(|a| Some([a[0].as_f64()? as f32, a[1].as_f64()? as f32]))
+                .filter(|p| p.iter().all(|x| x.is_finite()))
+                .ok_or_else(|| format!("{KHR_TEXTURE_TRANSFORM} {key} is not two finite numbers")),
+        }
+    };
+    Ok(Some(UvTransform { offset: pair("offset", 0.0)?, scale: pair("scale", 1.0)? }))
+}
+
+/// Puts each quantized mesh (integer positions placed by its node, KHR_mesh_quantization) into
+/// its node's frame: positions, normals and tangents take the node's translation and scale, which
+/// become identity. Done where every node showing the mesh has the same transform and no instances
+/// (a verdant file's quantized mesh nodes; an instanced mesh keeps its grid in its instances and
+/// stays as stored). The world-space geometry is unchanged.
+pub(super) fn bake_quantized(scene: &mut Scene, quantized: &[bool]) {
+    for (m, &q) in quantized.iter().enumerate() {
+        if !q {
+            continue;
+        }
+        let showing: Vec<usize> = (0..scene.nodes.len()).filter(|&n| scene.nodes[n].mesh == Some(m)).collect();
+        let Some(&first) = showing.first() else { continue };
+        let (t, r, s) = (scene.nodes[first].translation, scene.nodes[first].rotation, scene.nodes[first].scale);
+        let same = showing.iter().all(|&n| {
+            let node = &scene.nodes[n];
+            node.instances.is_none() && node.translation == t && node.rotation == r && node.scale == s
+        });
+        if !same || s.iter().any(|&x| x == 0.0 || !x.is_finite()) {
+            continue;
+        }
+        // world = T + R(S∘q) = R(R⁻¹T + S∘q)
+        let rot = glam::DQuat::from_array(r.map(f64::from));
+        let back = rot.inverse() * glam::DVec3::from_array(t.map(f64::from));
+        let unit = |v: [f64; 3]| {
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            if l > 0.0 {
+                v.map(|c| (c / l) as f32)
+            } else {
+                v.map(|c| c as f32)
+            }
+        };
+        for p in &mut scene.meshes[m].primitives {
+            for v in &mut p.positions {
+                *v = [0, 1, 2].map(|a| (back[a] + s[a] as f64 * v[a] as f64) as f32);
+            }
+            for n in &mut p.normals {
+                *n = unit([0, 1, 2].map(|a| n[a] as f64 / s[a] as f64));
+            }
+            for tg in &mut p.tangents {
+                let d = unit([0, 1, 2].map(|a| tg[a] as f64 * s[a] as f64));
+                *tg = [d[0], d[1], d[2], tg[3]];
+            }
+        }
+        for &n in &showing {
+            scene.nodes[n].translation = [0.0; 3];
+            scene.nodes[n].scale = [1.0; 3];
+        }
+    }
 }
 
 fn parse_extras(raw: &gltf::json::Extras) -> Option<Value> {
@@ -418,12 +569,24 @@ fn read_primitive(
     }
     if let Some((_, v)) = read(issues, "NORMAL", prim.get(&Semantic::Normals), &[3]) {
         p.normals = v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let tol = prim.get(&Semantic::Normals).and_then(|a| integer_unit_tolerance(&a));
+        if let Some(tol) = tol {
+            renormalize(&mut p.normals, tol, "NORMAL", loc, issues);
+        }
     }
     if let Some((_, v)) = read(issues, "TEXCOORD_0", prim.get(&Semantic::TexCoords(0)), &[2]) {
         p.uvs = v.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
     }
     if let Some((_, v)) = read(issues, "TANGENT", prim.get(&Semantic::Tangents), &[4]) {
         p.tangents = v.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+        let tol = prim.get(&Semantic::Tangents).and_then(|a| integer_unit_tolerance(&a));
+        if let Some(tol) = tol {
+            let mut xyz: Vec<[f32; 3]> = p.tangents.iter().map(|t| [t[0], t[1], t[2]]).collect();
+            renormalize(&mut xyz, tol, "TANGENT", loc, issues);
+            for (t, d) in p.tangents.iter_mut().zip(xyz) {
+                *t = [d[0], d[1], d[2], t[3]];
+            }
+        }
     }
     if let Some((d, v)) = read(issues, "COLOR_0", prim.get(&Semantic::Colors(0)), &[3, 4]) {
         p.colors = v.chunks_exact(d).map(|c| [c[0], c[1], c[2], if d == 4 { c[3] } else { 1.0 }]).collect();

@@ -47,7 +47,7 @@ fn placed_bounds(scene: &Scene, mesh: usize, m: &Mesh) -> Option<Bounds> {
 pub fn validate_file(path: &Path, opts: &ValidateOptions) -> Result<ValidationReport, ValidateError> {
     let loaded = load(path)?;
     let mut issues = loaded.issues;
-    check_scene_data(&loaded.scene, &loaded.declared_bounds, opts, &mut issues);
+    check_scene_data(&loaded.scene, &loaded.declared_bounds, &loaded.quantized, opts, &mut issues);
     let meshes = loaded
         .scene
         .meshes
@@ -83,6 +83,24 @@ pub fn read_scene(path: &Path) -> Result<Scene, ValidateError> {
         });
     }
     Ok(loaded.scene)
+}
+
+/// [`read_scene`], with every quantized mesh (KHR_mesh_quantization: integers placed by their
+/// node) put into its node's frame as floats, the node's translation and scale then identity:
+/// what a stage that takes meshes out of a file to place them itself needs (a mesh shown by nodes
+/// of different transforms or by instances stays as stored). Positions are rounded to f32 once
+/// more: measure a file's exact error with [`read_scene`].
+pub fn read_scene_dequantized(path: &Path) -> Result<Scene, ValidateError> {
+    let loaded = load(path)?;
+    if let Some(i) = loaded.issues.iter().find(|i| i.severity == Severity::Error) {
+        return Err(ValidateError::Parse {
+            path: path.to_path_buf(),
+            problem: format!("{}: {}", i.location, i.message),
+        });
+    }
+    let mut scene = loaded.scene;
+    load_gltf::bake_quantized(&mut scene, &loaded.quantized);
+    Ok(scene)
 }
 
 fn load(path: &Path) -> Result<Loaded, ValidateError> {

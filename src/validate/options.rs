@@ -40,4 +40,6 @@ pub(super) struct Loaded {
     pub scene: Scene,
     pub issues: Vec<Issue>,
     pub declared_bounds: Vec<Vec<Option<Bounds>>>,
+    /// Per mesh: positions stored as integers (KHR_mesh_quantization), placed by their node.
+    pub quantized: Vec<bool>,
 }

@@ -11,7 +11,7 @@ use verdant::mesh::Scene;
 use verdant::plants::flower::build_flower;
 use verdant::plants::grass_asset::build_grass;
 use verdant::plants::tree_lod::{atlas_cell_rects, TreeLods};
-use verdant::scene::plants_stage::{mesh_chain, read_lsystem, tree_chain, user_blade};
+use verdant::scene::plants_stage::{mesh_chain, read_lsystem, tree_chain, user_blade, SpeciesOutput};
 use verdant::scene::preset::{demo_preset, load_preset};
 use verdant::scene::{PlantLook, Preset};
 
@@ -189,14 +189,19 @@ fn every_shipped_card_stays_inside_its_atlas_cell() {
                     let system = read_lsystem(&s.rules.name, t).unwrap();
                     check_chain(
                         &what,
-                        &tree_chain(&s.rules.name, t, &system, 0, &preset.lod).unwrap(),
+                        &tree_chain(&s.rules.name, t, &system, 0, SpeciesOutput::of(&preset)).unwrap(),
                         t.atlas_px,
                         true,
                     );
                     kinds.insert("tree");
                 }
                 PlantLook::Mesh(m) => {
-                    check_chain(&what, &mesh_chain(&s.rules.name, m, &preset.lod).unwrap().1, m.atlas_px, false);
+                    check_chain(
+                        &what,
+                        &mesh_chain(&s.rules.name, m, SpeciesOutput::of(&preset)).unwrap().1,
+                        m.atlas_px,
+                        false,
+                    );
                     kinds.insert("mesh");
                 }
             }

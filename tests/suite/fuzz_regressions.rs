@@ -378,7 +378,11 @@ fn mutated_gltf_files_never_panic() {
     // reader decodes meshoptimizer streams, whose C decoder must never see a shape it asserts on
     let grid = verdant::export::grid::PositionGrid::terrain(&hf, 0.0).unwrap();
     for meshopt in [false, true] {
-        let opts = verdant::export::gltf::WriteOptions { position_grid: Some(grid), meshopt };
+        let opts = verdant::export::gltf::WriteOptions {
+            quantization: verdant::export::quantize::Quantization::Grid(grid),
+            meshopt,
+            ..verdant::export::gltf::WriteOptions::default()
+        };
         seeds.push(verdant::export::gltf::to_glb_with(&scene, &opts).unwrap());
     }
     run_mutations("gltf", &seeds, 150, harness::gltf);

@@ -6,6 +6,7 @@ mod atlas_cells;
 mod bake;
 mod cli;
 mod common;
+mod compact_species;
 mod export_roundtrip;
 mod fuzz_regressions;
 mod grass;

@@ -38,7 +38,9 @@ pub(super) fn measure_levels(
     let mut lods = Vec::with_capacity(levels.len());
     for lod in levels {
         let mesh = &lod.scene.meshes[0];
-        let bytes = crate::export::gltf::to_glb(&lod.scene).map_err(|e| TreeLodError::Texture(e.0))?.len();
+        let store = options.compact.write_options();
+        let bytes = crate::export::gltf::to_glb_with(&lod.scene, &store).map_err(|e| TreeLodError::Texture(e.0))?.len();
+        let quantization_m = crate::export::quantize::position_error(&lod.scene, &store.quantization);
         let geometric_error = match (&grid, lod.level) {
             (Some(grid), n) if n > 0 => hausdorff(
                 mesh,
@@ -56,7 +58,9 @@ pub(super) fn measure_levels(
             triangles: lod.triangles(),
             vertices: mesh.vertex_count(),
             bytes,
+            stored_error_m: geometric_error.max_m,
             geometric_error,
+            quantization_m,
             near_distance_m: 0.0,
             near_iou: 1.0,
             near_color_rmse: 0.0,
@@ -89,6 +93,7 @@ pub(super) fn measure_levels(
             triangles: l.triangles,
             bytes: l.bytes,
             hausdorff_max_m: l.geometric_error.max_m,
+            stored_error_m: l.stored_error_m,
             worst_iou_at_switch: l.switch_iou,
             switch_distance_m: l.switch_distance_m,
             triangle_ratio: l.triangles as f64 / lod0_triangles,

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use serde_json::json;
 
-use super::analyze::measure_levels;
+use super::analyze::{measure_levels, Measured};
 use super::cards::{
     appended, atlas_material, bake_atlas, branch_of, clusters, BakedAtlas, CardFrame, CardWind, Cluster, ModelFrame,
 };
@@ -289,8 +289,9 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<TreeLods, 
     let (levels, left_out) = without_levels_that_save_nothing(&name, levels);
     let seconds_cards = cards_started.elapsed().as_secs_f64();
 
-    let measured = measure_levels(&levels, &reference, &frame, &atlas.impostor_cells, seed, options, progress)?;
+    let mut measured = measure_levels(&levels, &reference, &frame, &atlas.impostor_cells, seed, options, progress)?;
     let chain = chain_scene(&name, &levels, &measured.lods);
+    fold_quantization(&mut measured, &chain, options);
     let report = TreeLodReport {
         name: name.clone(),
         seed,
@@ -521,6 +522,21 @@ fn without_levels_that_save_nothing(name: &str, levels: Vec<TreeLod>) -> (Vec<Tr
         }
     }
     (kept, left_out)
+}
+
+/// Each level's error as stored: the chain file's levels share one grid (over all of them), which
+/// may be coarser than a level file's own, so a level's quantization is the larger of the two;
+/// LoD0's is added to every level's, as the reference itself moved.
+pub(super) fn fold_quantization(measured: &mut Measured, chain: &Scene, options: &TreeLodOptions) {
+    let in_chain = crate::export::quantize::position_error(chain, &options.compact.write_options().quantization);
+    for l in &mut measured.lods {
+        l.quantization_m = l.quantization_m.max(in_chain);
+    }
+    let lod0 = measured.lods.first().map_or(0.0, |l| l.quantization_m);
+    for (l, row) in measured.lods.iter_mut().zip(&mut measured.table) {
+        l.stored_error_m = l.geometric_error.max_m + l.quantization_m + if l.level > 0 { lod0 } else { 0.0 };
+        row.stored_error_m = l.stored_error_m;
+    }
 }
 
 /// `<name>.glb`: LoD0's node with MSFT_lod to the coarser levels' nodes (not roots) and

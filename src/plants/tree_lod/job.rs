@@ -87,6 +87,7 @@ fn write_chain(
     file_stem: &str,
     set: &mut FileSet,
     written: &mut Written,
+    store: &export::gltf::WriteOptions,
 ) -> Result<(), TreeLodError> {
     let texture = |e: &dyn std::fmt::Display| TreeLodError::Texture(e.to_string());
     let mut scenes: Vec<(&Scene, PathBuf)> =
@@ -94,7 +95,7 @@ fn write_chain(
     scenes.push((&chain.chain, dir.join(format!("{file_stem}.glb"))));
     let glbs: Vec<Result<Vec<u8>, TreeLodError>> = scenes
         .par_iter()
-        .map(|(scene, path)| Ok(export::gltf::to_glb(scene).map_err(SceneProblem::at(path))?))
+        .map(|(scene, path)| Ok(export::gltf::to_glb_with(scene, store).map_err(SceneProblem::at(path))?))
         .collect();
     let mut images: Vec<(PathBuf, &Image, bool)> = chain
         .atlas
@@ -205,7 +206,14 @@ pub fn run_lods_reporting(
     // every variant's files replaced as one set, after all of them are written and validated
     let (mut written, mut set) = (Written::default(), FileSet::new());
     for (k, c) in chains.iter().enumerate() {
-        write_chain(c, &dir, &format!("{stem}{}", suffix(k)), &mut set, &mut written)?;
+        write_chain(
+            c,
+            &dir,
+            &format!("{stem}{}", suffix(k)),
+            &mut set,
+            &mut written,
+            &job.lod.compact.write_options(),
+        )?;
     }
     let Written { files, errors, warnings } = written;
     let t_total = t0.elapsed().as_secs_f64();
@@ -298,7 +306,7 @@ pub fn run_mesh_lods_reporting(
     let stem = job.output.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
     let dir = job.output.parent().map(Path::to_path_buf).unwrap_or_default();
     let (mut written, mut set) = (Written::default(), FileSet::new());
-    write_chain(&chain, &dir, &stem, &mut set, &mut written)?;
+    write_chain(&chain, &dir, &stem, &mut set, &mut written, &job.lod.compact.write_options())?;
     let run = MeshLodRunReport {
         input: job.input.display().to_string(),
         output: job.output.display().to_string(),

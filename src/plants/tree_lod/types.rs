@@ -98,6 +98,9 @@ pub struct TreeLodOptions {
     pub guided_search: bool,
     /// The LoD policy switch distances are found for (`[lod]`: pixel budget and screen).
     pub policy: LodView,
+    /// How the chain's glb files store vertex data; the quantization is folded into each level's
+    /// reported geometric error.
+    pub compact: crate::export::quantize::Compact,
 }
 
 /// How thoroughly the chain's image analyzer measures (`verdant tree|mesh --analysis`).
@@ -176,6 +179,7 @@ impl Default for TreeLodOptions {
             search_start_radii: AnalysisDetail::Fast.search_start_radii(),
             guided_search: AnalysisDetail::Fast.guided_search(),
             policy: LodView::default(),
+            compact: crate::export::quantize::Compact::None,
         }
     }
 }
@@ -280,8 +284,17 @@ pub struct TreeLodFigures {
     pub vertices: usize,
     /// Size of `<name>_LOD<n>.glb`.
     pub bytes: usize,
-    /// One-sided Hausdorff distance LoD_k → LoD0 (sampled; masked texels excluded).
+    /// One-sided Hausdorff distance LoD_k → LoD0 (sampled; masked texels excluded), of the
+    /// meshes as built.
     pub geometric_error: HausdorffError,
+    /// The farthest any vertex of this level moves in its files (16-bit positions: `--quantize`,
+    /// `--compress`; 0 for f32), in the level's file and in the chain's, whichever is more.
+    #[serde(default)]
+    pub quantization_m: f64,
+    /// The geometric error of the level as stored: `geometric_error.max_m` plus this level's and
+    /// LoD0's quantization (a surface point moves at most as far as its triangle's corners).
+    #[serde(default)]
+    pub stored_error_m: f64,
     /// Worst over 8 azimuths × 3 elevations at the nearest measured distance and at the switch.
     pub near_distance_m: f64,
     pub near_iou: f64,
@@ -304,6 +317,9 @@ pub struct SpeedErrorRow {
     pub triangles: usize,
     pub bytes: usize,
     pub hausdorff_max_m: f64,
+    /// `hausdorff_max_m` with the quantization of the files folded in ([`TreeLodFigures::stored_error_m`]).
+    #[serde(default)]
+    pub stored_error_m: f64,
     pub worst_iou_at_switch: f64,
     pub switch_distance_m: f64,
     /// Triangles relative to LoD0 (what the level saves the GPU).

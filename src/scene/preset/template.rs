@@ -26,6 +26,9 @@ name = "{NAME}"
 seed = 0
 # Mesh formats written, first = primary: "glb", "gltf" (+ .bin), "obj" (+ .mtl).
 formats = ["glb"]
+# How species files, scene.glb and scene_lod.glb store vertex data: "none" (f32), "quantize"
+# (16-bit positions, KHR_mesh_quantization), "compress" (+ EXT_meshopt_compression).
+compact = "none"
 
 [terrain]
 # Heights come from EITHER a heightmap file OR a procedural map (exactly one of the two).
