@@ -18,6 +18,13 @@
 // URI on purpose: Babylon.js streams MSFT_lod levels in order only for data behind a URI, and with
 // the data in the binary chunk its default loader fails on the file. Any other data: URI in a GLB,
 // or this one on another buffer, still fails.
+//
+// And MESH_PRIMITIVE_GENERATED_TANGENT_SPACE on a primitive with integer positions
+// (KHR_mesh_quantization) whose every node has a non-uniform scale (`verdant terrain --quantize`):
+// such a mesh is written without TANGENT on purpose. Babylon.js builds its normal-map frame from the
+// node's matrix itself rather than its inverse transpose, so with the grid's scale any stored tangent
+// frame lights the terrain wrongly there; without one, engines derive the frame from the surface and
+// three.js and Babylon.js light it as the f32 file (check.sh 5a2 compares the frames).
 import { readFile, appendFile } from 'node:fs/promises';
 import path from 'node:path';
 import validator from 'gltf-validator';
@@ -124,8 +131,20 @@ for (const file of files) {
       return m.code === 'DATA_URI_GLB' && k && /^MSFT_lod level \d+/.test(doc?.buffers?.[Number(k[1])]?.name ?? '');
     };
     const levelBuffers = report.issues.messages.filter(isLevelBuffer).length;
-    const messages = report.issues.messages.filter((m) => !isLevelBuffer(m));
-    const numWarnings = report.issues.numWarnings - levelBuffers;
+    // quantized meshes on a non-uniform grid, written without TANGENT (see the header)
+    const isOmittedTangents = (m) => {
+      const k = /^\/meshes\/(\d+)\/primitives\/(\d+)\/material$/.exec(m.pointer ?? '');
+      if (m.code !== 'MESH_PRIMITIVE_GENERATED_TANGENT_SPACE' || !k) return false;
+      const mesh = Number(k[1]);
+      const position = doc?.meshes?.[mesh]?.primitives?.[Number(k[2])]?.attributes?.POSITION;
+      const integer = Number.isInteger(position) && doc.accessors?.[position]?.componentType !== 5126;
+      const nodes = (doc?.nodes ?? []).filter((n) => n.mesh === mesh);
+      const nonUniform = (n) => Array.isArray(n.scale) && !(n.scale[0] === n.scale[1] && n.scale[1] === n.scale[2]);
+      return integer && nodes.length > 0 && nodes.every(nonUniform);
+    };
+    const omittedTangents = report.issues.messages.filter(isOmittedTangents).length;
+    const messages = report.issues.messages.filter((m) => !isLevelBuffer(m) && !isOmittedTangents(m));
+    const numWarnings = report.issues.numWarnings - levelBuffers - omittedTangents;
     const unused = unusedObjects(messages, doc);
     counts = `${numErrors}/${numWarnings}/${numInfos}/${numHints} unused ${unused.unused.length + unused.uvWithoutTexture}`;
     const bad = numErrors > 0 || numWarnings > 0 || unused.unused.length > 0 || unused.uvWithoutTexture > 0;
@@ -138,7 +157,8 @@ for (const file of files) {
       `unused objects ${unused.unused.length}, uv without texture ${unused.uvWithoutTexture} ` +
       `(not counted: ${unused.instancing} accessors EXT_mesh_gpu_instancing names` +
       `${levelBuffers ? `, ${levelBuffers} MSFT_lod level buffers as data: URIs` : ''}` +
-      `${unused.meshopt ? `, ${unused.meshopt} buffer of EXT_meshopt_compression data` : ''})`);
+      `${unused.meshopt ? `, ${unused.meshopt} buffer of EXT_meshopt_compression data` : ''}` +
+      `${omittedTangents ? `, ${omittedTangents} quantized non-uniformly scaled primitives without TANGENT` : ''})`);
     if (bad) {
       status = 'FAIL';
       failed++;

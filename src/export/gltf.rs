@@ -48,6 +48,10 @@ const ELEMENT_ARRAY_BUFFER: json::buffer::Target = json::buffer::Target::Element
 pub const KHR_QUANTIZATION: &str = "KHR_mesh_quantization";
 /// KHR_texture_transform: puts quantized texture coordinates outside 0..1 back (offset, scale).
 pub const KHR_TEXTURE_TRANSFORM: &str = "KHR_texture_transform";
+/// Key in a quantized mesh's extras holding its grid (`origin`, `step`: a stored integer q is at
+/// origin + step·q in the mesh's own frame): the node's transform carries the grid too, but a
+/// reader that places the mesh itself needs the mesh's own coordinates.
+pub const GRID_EXTRAS_KEY: &str = "verdant_quantization_grid";
 
 /// How vertex data is stored.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -363,8 +367,18 @@ mod quantized {
             return normals16(root, bin, normals, &grid.grid);
         }
         let bytes: Vec<u8> = normals.iter().flat_map(|n| snorm8([n[0], n[1], n[2], 0.0])).collect();
-        let view = strided_view(bin, &bytes, 4);
-        let mut acc = accessor(view, normals.len(), json::accessor::ComponentType::I8, json::accessor::Type::Vec3);
+        snorm8_accessor(root, bin, &bytes, json::accessor::Type::Vec3)
+    }
+
+    /// Normalized signed bytes, 4 a vertex (`type_` VEC3 or VEC4), over their own view.
+    fn snorm8_accessor(
+        root: &mut json::Root,
+        bin: &mut Bin,
+        bytes: &[u8],
+        type_: json::accessor::Type,
+    ) -> Index<json::Accessor> {
+        let view = strided_view(bin, bytes, 4);
+        let mut acc = accessor(view, bytes.len() / 4, json::accessor::ComponentType::I8, type_);
         acc.normalized = true;
         root.push(acc)
     }
@@ -422,47 +436,12 @@ mod quantized {
         root.push(acc)
     }
 
-    /// TANGENT as normalized BYTE VEC4 on a uniform grid (4 bytes a vertex instead of 16; the
-    /// handedness w stays ±1 exactly), else as SHORT, see [`tangents16`].
-    pub(super) fn tangents(
-        root: &mut json::Root,
-        bin: &mut Bin,
-        tangents: &[[f32; 4]],
-        grid: &MeshGrid,
-    ) -> Index<json::Accessor> {
-        if !grid.uniform {
-            return tangents16(root, bin, tangents, &grid.grid);
-        }
+    /// TANGENT as normalized BYTE VEC4, on a uniform grid (4 bytes a vertex instead of 16; the
+    /// handedness w stays ±1 exactly).
+    pub(super) fn tangents(root: &mut json::Root, bin: &mut Bin, tangents: &[[f32; 4]]) -> Index<json::Accessor> {
         let bytes: Vec<u8> =
             tangents.iter().flat_map(|t| snorm8([t[0], t[1], t[2], if t[3] < 0.0 { -1.0 } else { 1.0 }])).collect();
-        let view = strided_view(bin, &bytes, 4);
-        let mut acc = accessor(view, tangents.len(), json::accessor::ComponentType::I8, json::accessor::Type::Vec4);
-        acc.normalized = true;
-        root.push(acc)
-    }
-
-    /// TANGENT as normalized SHORT VEC4 (KHR_mesh_quantization; 8 bytes a vertex instead of 16).
-    /// Tangents follow the node's matrix: divided by the grid's steps (renormalised) so it gives
-    /// them back; the handedness w stays ±1 exactly (±32767).
-    fn tangents16(
-        root: &mut json::Root,
-        bin: &mut Bin,
-        tangents: &[[f32; 4]],
-        grid: &PositionGrid,
-    ) -> Index<json::Accessor> {
-        let mut bytes = Vec::with_capacity(tangents.len() * 8);
-        for t in tangents {
-            let v = [0, 1, 2].map(|a| t[a] as f64 / grid.step[a] as f64);
-            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(f64::MIN_POSITIVE);
-            let w = if t[3] < 0.0 { -1.0 } else { 1.0 };
-            for c in [v[0] / len, v[1] / len, v[2] / len, w] {
-                bytes.extend_from_slice(&((c * 32767.0).round() as i16).to_le_bytes());
-            }
-        }
-        let view = strided_view(bin, &bytes, 8);
-        let mut acc = accessor(view, tangents.len(), json::accessor::ComponentType::I16, json::accessor::Type::Vec4);
-        acc.normalized = true;
-        root.push(acc)
+        snorm8_accessor(root, bin, &bytes, json::accessor::Type::Vec4)
     }
 }
 
@@ -612,10 +591,13 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
                 };
                 attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), a);
             }
-            if !p.tangents.is_empty() {
+            // not on a non-uniform grid: Babylon.js builds its normal-map frame from the node's
+            // matrix itself (not its inverse transpose), which the grid's scale bends flat; without
+            // TANGENT, engines derive the frame from the surface (three.js and Babylon alike)
+            if !p.tangents.is_empty() && grid.is_none_or(|g| g.uniform) {
                 let a = match grid {
                     None => float_accessor(&mut root, &mut bin, &p.tangents, Some(ARRAY_BUFFER)),
-                    Some(grid) => quantized::tangents(&mut root, &mut bin, &p.tangents, grid),
+                    Some(_) => quantized::tangents(&mut root, &mut bin, &p.tangents),
                 };
                 attributes.insert(Valid(json::mesh::Semantic::Tangents), a);
             }
@@ -662,7 +644,21 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
                 targets: None,
             });
         }
-        let extras = mesh.extras.as_ref().map(raw_json).transpose()?;
+        // the grid, for readers that take the mesh out of its node (verdant's stages): exact f32s
+        let extras = match (grid, &mesh.extras) {
+            (Some(g), None | Some(Value::Object(_))) => {
+                let mut map = match &mesh.extras {
+                    Some(Value::Object(m)) => m.clone(),
+                    _ => Map::new(),
+                };
+                map.insert(
+                    GRID_EXTRAS_KEY.into(),
+                    serde_json::json!({ "origin": g.grid.origin.map(exact), "step": g.grid.step.map(exact) }),
+                );
+                Some(raw_json(&Value::Object(map))?)
+            }
+            _ => mesh.extras.as_ref().map(raw_json).transpose()?,
+        };
         root.push(json::Mesh { extensions: None, extras, name: opt_name(&mesh.name), primitives, weights: None });
     }
 

@@ -11,8 +11,9 @@ use super::meshopt::meshopt_buffers;
 use super::options::{Loaded, ValidateError};
 use super::report::{issue, Issue, Severity};
 use crate::export::gltf::{
-    EXT_INSTANCING, EXT_LOD, EXT_MESHOPT, KHR_QUANTIZATION, KHR_TEXTURE_TRANSFORM, LOD_COVERAGE_KEY,
+    EXT_INSTANCING, EXT_LOD, EXT_MESHOPT, GRID_EXTRAS_KEY, KHR_QUANTIZATION, KHR_TEXTURE_TRANSFORM, LOD_COVERAGE_KEY,
 };
+use crate::export::grid::PositionGrid;
 use crate::mesh::{AlphaMode, Bounds, Instances, Material, Mesh, Node, Primitive, PrimitiveMode, Scene, Texture};
 
 /// References gltf-json's validation or the gltf crate follow without a bounds check: every
@@ -201,13 +202,27 @@ pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
     let mut scene = Scene::default();
     let mut declared_bounds = Vec::new();
     let mut quantized = Vec::new();
+    let mut grids = Vec::new();
 
     // KHR_mesh_quantization must be required where positions are not float (a reader without it
     // would misread them)
     let quantization_used = doc.extensions_required().any(|e| e == KHR_QUANTIZATION);
     for mesh in doc.meshes() {
         let mesh_name = mesh.name().unwrap_or("").to_string();
-        let mut out = Mesh { name: mesh_name.clone(), primitives: Vec::new(), extras: parse_extras(mesh.extras()) };
+        let mut extras = parse_extras(mesh.extras());
+        // the writer's note of the grid (taken out, so extras read back as the scene had them)
+        let grid = match &mut extras {
+            Some(Value::Object(map)) => {
+                let g = map.remove(GRID_EXTRAS_KEY).and_then(|g| grid_of(&g));
+                if map.is_empty() {
+                    extras = None;
+                }
+                g
+            }
+            _ => None,
+        };
+        grids.push(grid);
+        let mut out = Mesh { name: mesh_name.clone(), primitives: Vec::new(), extras };
         let mut declared = Vec::new();
         quantized.push(mesh.primitives().any(|p| {
             p.get(&gltf::Semantic::Positions).is_some_and(|a| a.data_type() != gltf::accessor::DataType::F32)
@@ -374,7 +389,18 @@ pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
         scene.roots = s.nodes().map(|n| n.index()).collect();
         scene.extras = parse_extras(s.extras());
     }
-    Ok(Loaded { scene, issues, declared_bounds, quantized })
+    Ok(Loaded { scene, issues, declared_bounds, quantized, grids })
+}
+
+/// A grid noted in a mesh's extras ([`GRID_EXTRAS_KEY`]): finite origin, positive finite steps.
+fn grid_of(v: &Value) -> Option<PositionGrid> {
+    let three = |key: &str| -> Option<[f32; 3]> {
+        let a = v.get(key)?.as_array()?;
+        let t: [f32; 3] = [a.first()?.as_f64()? as f32, a.get(1)?.as_f64()? as f32, a.get(2)?.as_f64()? as f32];
+        (a.len() == 3 && t.iter().all(|x| x.is_finite())).then_some(t)
+    };
+    let (origin, step) = (three("origin")?, three("step")?);
+    step.iter().all(|&s| s > 0.0).then_some(PositionGrid { origin, step })
 }
 
 /// How far from unit length a normalized integer direction may be, as rounding to its type allows
@@ -439,13 +465,18 @@ fn uv_transform(ext: Option<&Value>) -> Result<Option<UvTransform>, String> {
 }
 
 /// Puts each quantized mesh (integer positions placed by its node, KHR_mesh_quantization) into
-/// its node's frame: positions, normals and tangents take the node's translation and scale, which
+/// its own frame: exactly, by the grid its extras note (verdant's files; every node and instance
+/// showing it gets its own transform back); else into its node's frame: positions, normals and tangents take the node's translation and scale, which
 /// become identity. Done where every node showing the mesh has the same transform and no instances
 /// (a verdant file's quantized mesh nodes; an instanced mesh keeps its grid in its instances and
 /// stays as stored). The world-space geometry is unchanged.
-pub(super) fn bake_quantized(scene: &mut Scene, quantized: &[bool]) {
+pub(super) fn bake_quantized(scene: &mut Scene, quantized: &[bool], grids: &[Option<PositionGrid>]) {
     for (m, &q) in quantized.iter().enumerate() {
         if !q {
+            continue;
+        }
+        if let Some(Some(grid)) = grids.get(m) {
+            bake_on_grid(scene, m, grid);
             continue;
         }
         let showing: Vec<usize> = (0..scene.nodes.len()).filter(|&n| scene.nodes[n].mesh == Some(m)).collect();
@@ -707,4 +738,47 @@ fn node_graph_issues(doc: &gltf::Document) -> Vec<Issue> {
         }
     }
     issues
+}
+
+/// Mesh `m` off its grid: positions origin + step·q (normals of a non-uniform grid, stored scaled
+/// by the steps, turned back), and every node or instance showing it without the grid's part of
+/// its transform (scale S·step and translation T + R(S∘origin) back to S and T).
+fn bake_on_grid(scene: &mut Scene, m: usize, grid: &PositionGrid) {
+    let (o, st) = (grid.origin.map(f64::from), grid.step.map(f64::from));
+    let uniform = st[0] == st[1] && st[1] == st[2];
+    for p in &mut scene.meshes[m].primitives {
+        for v in &mut p.positions {
+            *v = [0, 1, 2].map(|a| (o[a] + st[a] * v[a] as f64) as f32);
+        }
+        if !uniform {
+            for n in &mut p.normals {
+                let d = [0, 1, 2].map(|a| n[a] as f64 / st[a]);
+                let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(f64::MIN_POSITIVE);
+                *n = d.map(|c| (c / l) as f32);
+            }
+        }
+    }
+    let unplace = |r: [f32; 4], t: [f32; 3], s: [f32; 3]| -> ([f32; 3], [f32; 3]) {
+        let s0 = [0, 1, 2].map(|a| s[a] as f64 / st[a]);
+        let off = glam::DQuat::from_array(r.map(f64::from)) * glam::DVec3::from_array([0, 1, 2].map(|a| s0[a] * o[a]));
+        ([0, 1, 2].map(|a| (t[a] as f64 - off[a]) as f32), s0.map(|x| x as f32))
+    };
+    for node in scene.nodes.iter_mut().filter(|n| n.mesh == Some(m)) {
+        match &mut node.instances {
+            Some(inst) if !inst.is_empty() => {
+                let n = inst.len();
+                let (mut ts, mut ss) = (Vec::with_capacity(n), Vec::with_capacity(n));
+                for k in 0..n {
+                    let r = inst.rotations.get(k).copied().unwrap_or([0.0, 0.0, 0.0, 1.0]);
+                    let t = inst.translations.get(k).copied().unwrap_or([0.0; 3]);
+                    let s = inst.scales.get(k).copied().unwrap_or([1.0; 3]);
+                    let (t0, s0) = unplace(r, t, s);
+                    ts.push(t0);
+                    ss.push(s0);
+                }
+                (inst.translations, inst.scales) = (ts, ss);
+            }
+            _ => (node.translation, node.scale) = unplace(node.rotation, node.translation, node.scale),
+        }
+    }
 }

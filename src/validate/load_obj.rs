@@ -13,7 +13,13 @@ pub(super) fn load_obj(path: &Path) -> Result<Loaded, ValidateError> {
     // tobj rejects out-of-range faces without saying where; find them ourselves, with line numbers
     let issues = scan_obj_faces(&String::from_utf8_lossy(&text));
     if !issues.is_empty() {
-        return Ok(Loaded { scene: Scene::default(), issues, declared_bounds: Vec::new(), quantized: Vec::new() });
+        return Ok(Loaded {
+            scene: Scene::default(),
+            issues,
+            declared_bounds: Vec::new(),
+            quantized: Vec::new(),
+            grids: Vec::new(),
+        });
     }
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let (models, materials) = crate::input::load_obj_bounded(path, &text, &opts)
@@ -88,7 +94,7 @@ pub(super) fn load_obj(path: &Path) -> Result<Loaded, ValidateError> {
         }
     }
     let declared_bounds = Vec::new();
-    Ok(Loaded { scene, issues, declared_bounds, quantized: Vec::new() })
+    Ok(Loaded { scene, issues, declared_bounds, quantized: Vec::new(), grids: Vec::new() })
 }
 
 /// Finds face corners that name a vertex, uv or normal not defined before them.

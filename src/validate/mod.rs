@@ -75,6 +75,11 @@ pub fn validate_file(path: &Path, opts: &ValidateOptions) -> Result<ValidationRe
 /// hierarchy, welded vertices, materials from the MTL) into the in-memory [`Scene`].
 /// A file whose content cannot be represented (a missing POSITION, a damaged accessor) is an error.
 pub fn read_scene(path: &Path) -> Result<Scene, ValidateError> {
+    Ok(load_without_errors(path)?.scene)
+}
+
+/// The file loaded, or its first error as a parse error.
+fn load_without_errors(path: &Path) -> Result<Loaded, ValidateError> {
     let loaded = load(path)?;
     if let Some(i) = loaded.issues.iter().find(|i| i.severity == Severity::Error) {
         return Err(ValidateError::Parse {
@@ -82,7 +87,7 @@ pub fn read_scene(path: &Path) -> Result<Scene, ValidateError> {
             problem: format!("{}: {}", i.location, i.message),
         });
     }
-    Ok(loaded.scene)
+    Ok(loaded)
 }
 
 /// [`read_scene`], with every quantized mesh (KHR_mesh_quantization: integers placed by their
@@ -91,15 +96,9 @@ pub fn read_scene(path: &Path) -> Result<Scene, ValidateError> {
 /// of different transforms or by instances stays as stored). Positions are rounded to f32 once
 /// more: measure a file's exact error with [`read_scene`].
 pub fn read_scene_dequantized(path: &Path) -> Result<Scene, ValidateError> {
-    let loaded = load(path)?;
-    if let Some(i) = loaded.issues.iter().find(|i| i.severity == Severity::Error) {
-        return Err(ValidateError::Parse {
-            path: path.to_path_buf(),
-            problem: format!("{}: {}", i.location, i.message),
-        });
-    }
+    let loaded = load_without_errors(path)?;
     let mut scene = loaded.scene;
-    load_gltf::bake_quantized(&mut scene, &loaded.quantized);
+    load_gltf::bake_quantized(&mut scene, &loaded.quantized, &loaded.grids);
     Ok(scene)
 }
 

@@ -42,4 +42,6 @@ pub(super) struct Loaded {
     pub declared_bounds: Vec<Vec<Option<Bounds>>>,
     /// Per mesh: positions stored as integers (KHR_mesh_quantization), placed by their node.
     pub quantized: Vec<bool>,
+    /// Per mesh: the grid its extras note (verdant's quantized files).
+    pub grids: Vec<Option<crate::export::grid::PositionGrid>>,
 }

@@ -342,11 +342,41 @@ fn compact_scenes_store_species_and_scene_files_within_the_reported_quantization
         assert_eq!(a["triangles"], b["triangles"]);
         assert_eq!(a["draw_calls"], b["draw_calls"]);
     }
+    // every instance where the f32 scene puts it (the species meshes as the view stage read them
+    // back from their compact files, the grid in the instance transforms): each node's first and
+    // last instance, vertex by vertex, within the reported figures (a mesh read back from its
+    // species file moved by up to the species' figure, then by up to the scene's)
+    let species_q = species(&rq).iter().map(|s| s["quantization_m"].as_f64().unwrap()).fold(0.0, f64::max);
+    let bound = view(&rq, "quantization_m") + species_q;
+    let instanced = |s: &Scene, n: &Node, k: usize| -> Vec<glam::DVec3> {
+        let inst = n.instances.as_ref().unwrap();
+        let k = k.min(inst.len() - 1);
+        let r = glam::DQuat::from_array(inst.rotations[k].map(f64::from));
+        let sc = glam::DVec3::from_array(inst.scales[k].map(f64::from));
+        let t = glam::DVec3::from_array(inst.translations[k].map(f64::from));
+        s.meshes[n.mesh.unwrap()]
+            .primitives
+            .iter()
+            .flat_map(|p| &p.positions)
+            .map(|p| t + r * (sc * glam::DVec3::from_array(p.map(f64::from))))
+            .collect()
+    };
+    let (sf, sq) = (read_scene(&d.join("o/f/scene.glb")).unwrap(), read_scene(&d.join("o/q/scene.glb")).unwrap());
+    let mut checked = 0;
+    for nf in sf.nodes.iter().filter(|n| n.instances.as_ref().is_some_and(|i| !i.is_empty())) {
+        let nq = sq.nodes.iter().find(|n| n.name == nf.name).unwrap_or_else(|| panic!("{} missing", nf.name));
+        for k in [0, usize::MAX] {
+            let scale = nf.instances.as_ref().unwrap().scales.iter().flatten().fold(1.0f32, |m, &x| m.max(x)) as f64;
+            for (a, b) in instanced(&sf, nf, k).iter().zip(instanced(&sq, nq, k)) {
+                assert!((*a - b).length() <= bound * scale * (1.0 + 1e-4) + 1e-4, "{}: {a} vs {b}", nf.name);
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 0);
     // one grid for the terrain's chunks: a seam vertex has the same integers in both chunks, so
     // the chunks meet exactly (world positions of the quantized scene.glb's terrain vertices that
     // coincide in the f32 file coincide here too)
-    let sf = read_scene(&d.join("o/f/scene.glb")).unwrap();
-    let sq = read_scene(&d.join("o/q/scene.glb")).unwrap();
     let terrain = |s: &Scene| -> Vec<Vec<[f64; 3]>> {
         let mut t = s.clone();
         t.nodes.retain(|n| n.mesh.is_some_and(|m| s.meshes[m].name.starts_with("terrain")) && n.instances.is_none());
@@ -373,4 +403,67 @@ fn compact_scenes_store_species_and_scene_files_within_the_reported_quantization
         }
     }
     assert!(shared > 100, "{shared} seam points");
+}
+
+/// What the view stage reads back from a compact species file: each mesh in its own frame and each
+/// node (a clump laid out beside the others) and instance with its own transform, within the
+/// quantization (the grid noted in the mesh's extras, which read back without it).
+#[test]
+fn dequantized_reads_give_meshes_nodes_and_instances_back() {
+    let quad = |z: f32| Primitive {
+        positions: vec![[-0.25, 0.2, z], [0.25, 0.2, z], [0.25, 0.7, z + 0.5], [-0.25, 0.7, z]],
+        normals: vec![[0.0, 0.0, 1.0]; 4],
+        indices: vec![0, 1, 2, 0, 2, 3],
+        ..Primitive::default()
+    };
+    let mut scene = Scene::default();
+    scene.meshes.push(Mesh {
+        name: "clump0".into(),
+        primitives: vec![quad(0.0)],
+        extras: Some(serde_json::json!({"k": 1})),
+    });
+    scene.meshes.push(Mesh { name: "clump1".into(), primitives: vec![quad(-0.3)], extras: None });
+    scene.nodes.push(Node {
+        name: "a".into(),
+        mesh: Some(0),
+        translation: [0.0, 0.0, 1.5],
+        scale: [2.0; 3],
+        ..Node::default()
+    });
+    scene.nodes.push(Node {
+        name: "b".into(),
+        mesh: Some(1),
+        translation: [3.0, 1.0, -2.0],
+        rotation: [0.0, 0.38268343, 0.0, 0.9238795],
+        instances: Some(Instances {
+            translations: vec![[10.0, 0.0, 5.0], [-4.0, 2.0, 1.0]],
+            rotations: vec![[0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 0.0]],
+            scales: vec![[1.0; 3], [0.5, 2.0, 0.5]],
+        }),
+        ..Node::default()
+    });
+    scene.roots = vec![0, 1];
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("clumps.glb");
+    let opts = Compact::Compress.write_options();
+    std::fs::write(&path, to_glb_with(&scene, &opts).unwrap()).unwrap();
+    let err = position_error(&scene, &opts.quantization);
+    let back = verdant::validate::read_scene_dequantized(&path).unwrap();
+    assert_eq!(back.meshes[0].extras, scene.meshes[0].extras, "the grid note is taken out of the extras");
+    assert_eq!(back.meshes[1].extras, None);
+    for (a, b) in scene.meshes.iter().zip(&back.meshes) {
+        for (p, q) in a.primitives[0].positions.iter().zip(&b.primitives[0].positions) {
+            let d = (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f32>().sqrt() as f64;
+            assert!(d <= err * (1.0 + 1e-5) + 1e-6, "{}: {p:?} read back as {q:?}", a.name);
+        }
+    }
+    let close = |a: [f32; 3], b: [f32; 3]| (0..3).all(|k| (a[k] - b[k]).abs() <= 1e-4 * (1.0 + a[k].abs()));
+    for (a, b) in scene.nodes.iter().zip(&back.nodes) {
+        assert!(close(a.translation, b.translation) && close(a.scale, b.scale), "{a:?}\n{b:?}");
+        if let (Some(x), Some(y)) = (&a.instances, &b.instances) {
+            for k in 0..2 {
+                assert!(close(x.translations[k], y.translations[k]) && close(x.scales[k], y.scales[k]), "{x:?}\n{y:?}");
+            }
+        }
+    }
 }
