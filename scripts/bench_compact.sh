@@ -119,6 +119,31 @@ species=(
   "boulder|mesh presets/models/boulder.obj"
 )
 field() { "$PY" -c "import json,sys; print(json.loads(sys.argv[1])[sys.argv[2]])" "$1" "$2"; }
+# compare CASE FILE DIR SUFFIX QLABEL CLABEL: rows for DIR/{q,c,gp,gpc}SUFFIX.glb against DIR/fSUFFIX.glb
+# (a compressed file's error is its uncompressed twin's: meshopt is lossless)
+compare() {
+  local name="$1" label="$2" d="$3" level="$4" qlabel="$5" clabel="$6"
+  declare -A got=() err=()
+  local w twin
+  for w in q c gp gpc; do
+    twin="$w"; [ "$w" = c ] && twin=q; [ "$w" = gpc ] && twin=gp
+    got[$w]=$("$PY" scripts/compact_stats.py "$d/$w$level.glb" --json)
+    err[$w]=$("$PY" scripts/compact_stats.py "$d/$twin$level.glb" --reference "$d/f$level.glb" --json)
+  done
+  local pair peer label_w bytes custom images e ratio ratio2 pb
+  for pair in "q gp $qlabel" "gp - gltfpack -vp 16" "c gpc $clabel" "gpc - gltfpack -vp 16 -c"; do
+    read -r w peer label_w <<<"$pair"
+    bytes=$(field "${got[$w]}" bytes); custom=$(field "${got[$w]}" custom_bytes); images=$(field "${got[$w]}" image_bytes)
+    e=$(field "${err[$w]}" position_error_m)
+    ratio="-"; ratio2="-"
+    if [ "$peer" != - ]; then
+      pb=$(field "${got[$peer]}" bytes)
+      ratio=$(awk -v a="$bytes" -v b="$pb" 'BEGIN { printf "%.3f", a / b }')
+      ratio2=$(awk -v a="$bytes" -v c="$custom" -v b="$pb" 'BEGIN { printf "%.3f", (a - c) / b }')
+    fi
+    printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12.7f\n' "$name" "$label" "$label_w" "$bytes" $((bytes - custom)) "$images" "$ratio" "$ratio2" "$e"
+  done
+}
 for c in "${species[@]}"; do
   IFS='|' read -r name cmd <<<"$c"
   read -ra args <<<"$cmd"
@@ -132,24 +157,7 @@ for c in "${species[@]}"; do
     "$GLTFPACK" -i "$d/f$level.glb" -o "$d/gp$level.glb" -kn -vp 16 >/dev/null 2>&1
     "$GLTFPACK" -i "$d/f$level.glb" -o "$d/gpc$level.glb" -kn -vp 16 -c >/dev/null 2>&1
     label="${level#_}"; label="${label:-chain}"
-    declare -A got=() err=()
-    for w in q c gp gpc; do
-      twin="$w"; [ "$w" = c ] && twin=q; [ "$w" = gpc ] && twin=gp
-      got[$w]=$("$PY" scripts/compact_stats.py "$d/$w$level.glb" --json)
-      err[$w]=$("$PY" scripts/compact_stats.py "$d/$twin$level.glb" --reference "$d/f$level.glb" --json)
-    done
-    for pair in "q gp verdant --quantize" "gp - gltfpack -vp 16" "c gpc verdant --compress" "gpc - gltfpack -vp 16 -c"; do
-      read -r w peer label_w <<<"$pair"
-      bytes=$(field "${got[$w]}" bytes); custom=$(field "${got[$w]}" custom_bytes); images=$(field "${got[$w]}" image_bytes)
-      e=$(field "${err[$w]}" position_error_m)
-      ratio="-"; ratio2="-"
-      if [ "$peer" != - ]; then
-        pb=$(field "${got[$peer]}" bytes)
-        ratio=$(awk -v a="$bytes" -v b="$pb" 'BEGIN { printf "%.3f", a / b }')
-        ratio2=$(awk -v a="$bytes" -v c="$custom" -v b="$pb" 'BEGIN { printf "%.3f", (a - c) / b }')
-      fi
-      printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12.7f\n' "$name" "$label" "$label_w" "$bytes" $((bytes - custom)) "$images" "$ratio" "$ratio2" "$e"
-    done
+    compare "$name" "$label" "$d" "$level" "verdant --quantize" "verdant --compress"
   done
 done
 echo "ratio: verdant / gltfpack in bytes as written; 'ratio w/o': verdant without the custom attributes gltfpack drops"
@@ -169,22 +177,5 @@ s="$TMP/scenes"
 cp "$s/meadow_none/scene.glb" "$s/f.glb"; cp "$s/meadow_quantize/scene.glb" "$s/q.glb"; cp "$s/meadow_compress/scene.glb" "$s/c.glb"
 "$GLTFPACK" -i "$s/f.glb" -o "$s/gp.glb" -kn -vp 16 >/dev/null 2>&1
 "$GLTFPACK" -i "$s/f.glb" -o "$s/gpc.glb" -kn -vp 16 -c >/dev/null 2>&1
-declare -A got=() err=()
-for w in q c gp gpc; do
-  twin="$w"; [ "$w" = c ] && twin=q; [ "$w" = gpc ] && twin=gp
-  got[$w]=$("$PY" scripts/compact_stats.py "$s/$w.glb" --json)
-  err[$w]=$("$PY" scripts/compact_stats.py "$s/$twin.glb" --reference "$s/f.glb" --json)
-done
-for pair in "q gp verdant compact=quantize" "gp - gltfpack -vp 16" "c gpc verdant compact=compress" "gpc - gltfpack -vp 16 -c"; do
-  read -r w peer label_w <<<"$pair"
-  bytes=$(field "${got[$w]}" bytes); custom=$(field "${got[$w]}" custom_bytes); images=$(field "${got[$w]}" image_bytes)
-  e=$(field "${err[$w]}" position_error_m)
-  ratio="-"; ratio2="-"
-  if [ "$peer" != - ]; then
-    pb=$(field "${got[$peer]}" bytes)
-    ratio=$(awk -v a="$bytes" -v b="$pb" 'BEGIN { printf "%.3f", a / b }')
-    ratio2=$(awk -v a="$bytes" -v c="$custom" -v b="$pb" 'BEGIN { printf "%.3f", (a - c) / b }')
-  fi
-  printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12.7f\n' meadow scene "$label_w" "$bytes" $((bytes - custom)) "$images" "$ratio" "$ratio2" "$e"
-done
+compare meadow scene "$s" "" "verdant compact=quantize" "verdant compact=compress"
 echo "(scene errors: the farthest a vertex of the first instance of each node lies from the f32 scene's nearest)"
