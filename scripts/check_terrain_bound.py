@@ -8,7 +8,8 @@ KHR_mesh_quantization stores them, evaluated in float64), decodes the heightmap 
 offset + v/vmax·scale), and for
 every sample under a triangle evaluates the stored surface at the sample's place (x = i·cell,
 z = j·cell) by barycentric interpolation through the stored vertices. Prints the largest error and
-fails when it exceeds --max-error, or when a sample is left uncovered.
+fails when it exceeds --max-error (by more than 1e-12 relative: float64 evaluation noise), or when a
+sample is left uncovered.
 
 Usage: check_terrain_bound.py FILE.glb --heightmap MAP.png --encoding terrain-rgb --cell-size 30
        --max-error 0.5 [--expect-report REPORT.json]
@@ -135,7 +136,10 @@ def main() -> int:
     uncovered = int((~covered).sum())
     print(f"{a.file}: {surface_triangles} surface triangles; largest error as written {worst!r} m at sample {worst_at} "
           f"(bound {a.max_error} m), {uncovered} samples uncovered")
-    ok = worst <= a.max_error and uncovered == 0
+    # float64 evaluation noise: barycentric interpolation in another operation order than verdant's
+    # analyzer lands a few ulps either side of an error exactly at the bound (Puget Sound at 10 m:
+    # 10.000000000000028); more than 1e-12 relative is over
+    ok = worst <= a.max_error * (1 + 1e-12) and uncovered == 0
     if a.expect_report:
         reported = json.load(open(a.expect_report))["max_error"]
         if abs(reported - worst) > 1e-9 * max(1.0, worst):
