@@ -141,8 +141,14 @@ pub fn plan(scene: &Scene, q: &Quantization, named: &[(String, MeshGrid)]) -> Pl
                     }
                 }
             }
-            // a node with children cannot carry its mesh's grid: that family stays f32
+            // a node with children cannot carry its mesh's grid, and a mesh whose extras are not a
+            // JSON object cannot note it for readers: that family stays f32
             let mut blocked = vec![false; meshes];
+            for (m, mesh) in scene.meshes.iter().enumerate() {
+                if mesh.extras.as_ref().is_some_and(|e| !e.is_object()) {
+                    blocked[family[m]] = true;
+                }
+            }
             for node in &scene.nodes {
                 if let (Some(m), false) = (node.mesh, node.children.is_empty()) {
                     blocked[family[m]] = true;

@@ -210,7 +210,7 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// fewer distances measured in the report). 15: the chain maps the table's `variant` column to
 /// its meshes (`pick`; the files are unchanged). 16: a tree's LoD1 is its rebuild with half the
 /// radial segments, simplified only when that saves nothing (edge collapse flattened the twigs).
-pub const PLANTS_ALGORITHM_VERSION: u32 = 16;
+pub const PLANTS_ALGORITHM_VERSION: u32 = 17;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).

@@ -144,9 +144,10 @@ pub struct ViewStageReport {
     /// scene_lod.glb: every chunk and tile as an MSFT_lod chain ([`crate::scene::view_lod`]).
     pub lod_scene_file: PathBuf,
     pub lod_scene_bytes: u64,
-    /// The farthest any vertex of scene.glb and scene_lod.glb lies from the mesh assembled
+    /// The farthest any vertex of scene.glb and scene_lod.glb lies from the mesh built
     /// (`[scene] compact`: 16-bit positions; 0 for f32), in the mesh's own frame (an instance's
-    /// scale multiplies it).
+    /// scale multiplies it): what storing them here moved them plus what their species files
+    /// had (the view stage reads the species meshes back from those).
     #[serde(default)]
     pub quantization_m: f64,
     /// The same for the terrain's meshes alone, all on one grid over the terrain (seams closed):
@@ -681,6 +682,10 @@ pub fn run_view(
         &store.quantization,
         &store.mesh_grids,
     ));
+    // the species meshes were read back from their compact files: they had already moved by up to
+    // their species' figure before these files stored them again
+    let species_m = plants.map_or(0.0, |p| p.species.iter().map(|s| s.quantization_m).fold(0.0, f64::max));
+    let quantization_m = quantization_m + species_m;
     let lod_scene_bytes = std::fs::metadata(scene_dir.join(&lod_scene_file)).map(|m| m.len()).unwrap_or(0);
     Ok(ViewStageReport {
         scene_file,

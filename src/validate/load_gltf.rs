@@ -484,7 +484,11 @@ pub(super) fn bake_quantized(scene: &mut Scene, quantized: &[bool], grids: &[Opt
         let (t, r, s) = (scene.nodes[first].translation, scene.nodes[first].rotation, scene.nodes[first].scale);
         let same = showing.iter().all(|&n| {
             let node = &scene.nodes[n];
-            node.instances.is_none() && node.translation == t && node.rotation == r && node.scale == s
+            node.instances.is_none()
+                && node.children.is_empty() // (its children would move with the baked transform)
+                && node.translation == t
+                && node.rotation == r
+                && node.scale == s
         });
         if !same || s.iter().any(|&x| x == 0.0 || !x.is_finite()) {
             continue;

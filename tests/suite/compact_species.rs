@@ -344,10 +344,11 @@ fn compact_scenes_store_species_and_scene_files_within_the_reported_quantization
     }
     // every instance where the f32 scene puts it (the species meshes as the view stage read them
     // back from their compact files, the grid in the instance transforms): each node's first and
-    // last instance, vertex by vertex, within the reported figures (a mesh read back from its
-    // species file moved by up to the species' figure, then by up to the scene's)
+    // last instance, vertex by vertex, within the view stage's figure (which counts what the
+    // species files had moved the meshes it read back from them)
     let species_q = species(&rq).iter().map(|s| s["quantization_m"].as_f64().unwrap()).fold(0.0, f64::max);
-    let bound = view(&rq, "quantization_m") + species_q;
+    let bound = view(&rq, "quantization_m");
+    assert!(bound >= species_q);
     let instanced = |s: &Scene, n: &Node, k: usize| -> Vec<glam::DVec3> {
         let inst = n.instances.as_ref().unwrap();
         let k = k.min(inst.len() - 1);
