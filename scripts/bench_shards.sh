@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # Sharded build benchmark (issue 18): each preset built whole, then in 2 and 4 shards run at the same
-# time (GNU parallel, one process per shard, all on this machine) and merged. Prints per split: the
-# shards' wall time (all at once), the slowest shard, the merge, the total, the peak memory of each
+# time (GNU parallel, one process per shard, all on this machine) and in 3 shards one after another,
+# each split merged. Prints per split: the shards' wall time, the slowest shard, the merge, the
+# total, the peak memory of each
 # shard and of the merge, the shard folders' and the scene's bytes, and whether the merged scene is
 # byte-identical to the whole build (reports without timing).
 #
 #   scripts/bench_shards.sh [PRESET.toml ...]      default: presets/alpine.toml (10 km, ~600k instances)
+#                                                  and presets/worlds/highlands.toml (8193² at 1 m, ~1.3 M)
 #
 # VERDANT_BIN=path/to/verdant uses that binary instead of building target/release/verdant. Needs GNU
 # parallel (apt `parallel`; scripts/check.sh installs it) and /usr/bin/time.
@@ -21,7 +23,7 @@ command -v parallel > /dev/null || { echo "bench_shards.sh: GNU parallel is need
 [ -x /usr/bin/time ] || { echo "bench_shards.sh: /usr/bin/time is needed (apt install time)" >&2; exit 2; }
 TMP="$(mktemp -d "${TMPDIR:-/tmp}/verdant-shards.XXXXXX")"
 trap 'rm -rf "$TMP"' EXIT
-if (($#)); then presets=("$@"); else presets=(presets/alpine.toml); fi
+if (($#)); then presets=("$@"); else presets=(presets/alpine.toml presets/worlds/highlands.toml); fi
 now() { date +%s.%N; }
 minus() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.3f", a - b }'; }
 peak_mb() { awk -F': ' '/Maximum resident set size/ {printf "%.0f", $2 / 1024}' "$1"; }
@@ -38,28 +40,41 @@ for preset in "${presets[@]}"; do
   scene="$(find "$whole" -mindepth 1 -maxdepth 1 -type d ! -name '.*' | head -1)"
   printf '%-14s %6s %9s %9s %8s %8.1f  %-28s %8s %9s %9s  %s\n' "$name" 1 - - - "$(minus "$t1" "$t0")" \
     "$(peak_mb "$TMP/whole.time") (whole build)" - - "$(bytes_mb "$scene")" -
-  for n in 2 4; do
-    out="$TMP/$name-$n"
+  for split in "2 parallel" "4 parallel" "3 sequence"; do
+    read -r n mode <<<"$split"
+    out="$TMP/$name-$n-$mode"
     t0="$(now)"
-    seq 0 $((n - 1)) | parallel --will-cite --halt now,fail=1 \
-      "/usr/bin/time -v -o $out.{}.time $BIN -q build $preset --shard {}/$n --out $out/.shards/{} > /dev/null; date +%s.%N > $out.{}.end"
+    if [ "$mode" = parallel ]; then
+      seq 0 $((n - 1)) | parallel --will-cite --halt now,fail=1 \
+        "/usr/bin/time -v -o $out.{}.time $BIN -q build $preset --shard {}/$n --out $out/.shards/{} > /dev/null; date +%s.%N > $out.{}.end"
+    else
+      # one machine, one shard after another (issue 18 item 4): memory is the largest shard's or the merge's
+      for i in $(seq 0 $((n - 1))); do
+        /usr/bin/time -v -o "$out.$i.time" "$BIN" -q build "$preset" --shard "$i/$n" --out "$out/.shards/$i" > /dev/null
+        date +%s.%N > "$out.$i.end"
+      done
+    fi
     t1="$(now)"
     mapfile -t dirs < <(seq -f "$out/.shards/%g" 0 $((n - 1)))
     /usr/bin/time -v -o "$out.merge.time" "$BIN" -q merge "$preset" --shards "${dirs[@]}" --out "$out" > /dev/null
     t2="$(now)"
-    slowest=0; peaks=()
+    slowest=0; peaks=(); start="$t0"
     for i in $(seq 0 $((n - 1))); do
       e="$(cat "$out.$i.end")"
-      d="$(minus "$e" "$t0")"
+      d="$(minus "$e" "$start")"
       slowest="$(awk -v a="$d" -v b="$slowest" 'BEGIN { print (a > b ? a : b) }')"
       peaks+=("$(peak_mb "$out.$i.time")")
+      [ "$mode" = sequence ] && start="$e"
     done
     merged="$out/$(basename "$scene")"
     same=yes
     python3 scripts/same_scene.py "$scene" "$merged" > /dev/null || same=NO
-    printf '%-14s %6s %9.1f %9.1f %8.1f %8.1f  %-28s %8s %9s %9s  %s\n' "$name" "$n" "$(minus "$t1" "$t0")" \
+    label="$n"; [ "$mode" = sequence ] && label="$n seq"
+    printf '%-14s %6s %9.1f %9.1f %8.1f %8.1f  %-28s %8s %9s %9s  %s\n' "$name" "$label" "$(minus "$t1" "$t0")" \
       "$slowest" "$(minus "$t2" "$t1")" "$(minus "$t2" "$t0")" "$(IFS=/; echo "${peaks[*]}")" \
       "$(peak_mb "$out.merge.time")" "$(bytes_mb "$out/.shards")" "$(bytes_mb "$merged")" "$same"
+    rm -rf "$out"
   done
 done
-echo "shards run at the same time on this machine ($(nproc) cores); a unit is the terrain stage or one plant species (docs/sharding.md)"
+echo "N: shards at the same time on this machine ($(nproc) cores); N seq: one after another (slowest = the longest shard);"
+echo "a unit is the terrain stage or one plant species (docs/sharding.md)"

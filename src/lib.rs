@@ -29,6 +29,7 @@ pub mod input;
 pub mod lod;
 pub mod lsystem;
 pub mod math;
+pub mod memory;
 pub mod mesh;
 pub mod meshopt_guard;
 pub mod plants;

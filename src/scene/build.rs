@@ -272,7 +272,7 @@ fn build_into(
         runner.used.entries.extend(job.memo_entry());
         terrain = Some(TerrainHandoff::new(dir, &ran.report.files, ran.key, ran.artifact));
         terrain_lods = ran.report.lods.clone();
-        runs.push(StageRun::Terrain { report: ran.report, cached: ran.cached, seconds: ran.seconds });
+        runs.push(StageRun::Terrain { cost: ran.cost, report: ran.report, cached: ran.cached });
     }
 
     // the snow cover as stored in snow/cover_mask.png (cached or not, the same values), and its key
@@ -280,7 +280,7 @@ fn build_into(
     if let (true, Some(snow), Some(terrain)) = (wants(Stage::Snow), &preset.snow, &terrain) {
         let ran = runner.run(&SnowJob { preset, snow, terrain })?;
         cover = Some((snow_stage::load_mask(dir, &ran.report.mask)?, ran.key));
-        runs.push(StageRun::Snow { report: ran.report, cached: ran.cached, seconds: ran.seconds });
+        runs.push(StageRun::Snow { cost: ran.cost, report: ran.report, cached: ran.cached });
     }
     let cover_ref = cover.as_ref().map(|(m, k)| (m, k.as_str()));
 
@@ -292,7 +292,7 @@ fn build_into(
         // each species' entry, kept apart: `cache prune` keeps them with the scene
         runner.used.entries.extend(job.memo_entries());
         plants = Some((ran.report.clone(), ran.key));
-        runs.push(StageRun::Plants { report: ran.report, cached: ran.cached, seconds: ran.seconds });
+        runs.push(StageRun::Plants { cost: ran.cost, report: ran.report, cached: ran.cached });
     }
 
     // what the preview draws of the placements, and the scatter stage's key; the view stage's
@@ -303,7 +303,7 @@ fn build_into(
         let ran = runner.run(&ScatterJob { preset, terrain, cover: cover_ref })?;
         let tables: Vec<(String, PathBuf)> =
             ran.report.species.iter().map(|s| (s.name.clone(), s.csv.clone())).collect();
-        runs.push(StageRun::Scatter { report: ran.report, cached: ran.cached, seconds: ran.seconds });
+        runs.push(StageRun::Scatter { cost: ran.cost, report: ran.report, cached: ran.cached });
         if wants(Stage::View) {
             let plants_key = plants.as_ref().map_or("", |(_, k)| k.as_str());
             let job = ViewJob {
@@ -316,7 +316,7 @@ fn build_into(
             };
             let view = runner.run(&job)?;
             drawn = Some((view.report.clone(), view.key));
-            runs.push(StageRun::View { report: view.report, cached: view.cached, seconds: view.seconds });
+            runs.push(StageRun::View { cost: view.cost, report: view.report, cached: view.cached });
         }
         // positions as stored (f32), so a preview drawn after a cached scatter is the same
         let layers = ran.artifact.map(|placed| placed.iter().map(preview_layer).collect());
@@ -337,7 +337,7 @@ fn build_into(
             view: drawn.as_ref().map(|(r, k)| (r, k.as_str())),
         };
         let ran = runner.run(&job)?;
-        runs.push(StageRun::Preview { report: ran.report, cached: ran.cached, seconds: ran.seconds });
+        runs.push(StageRun::Preview { cost: ran.cost, report: ran.report, cached: ran.cached });
     }
 
     progress(name, "manifest and report");

@@ -12,6 +12,7 @@ use crate::plants::grass_asset::GRASS_LOD_KINDS;
 use crate::plants::tree_lod::TreeLodReport;
 use crate::scene::cache::{sha256_hex, FileHashes};
 use crate::scene::error::SceneBuildError;
+use crate::scene::pipeline::Cost;
 use crate::scene::pipeline::Stage;
 use crate::scene::plants_stage::{PlantReport, PlantsStageReport};
 use crate::scene::preview_stage::PreviewStageReport;
@@ -23,12 +24,12 @@ use crate::scene::Preset;
 /// One stage's result in this build.
 #[derive(Debug, Clone)]
 pub enum StageRun {
-    Terrain { report: TerrainStageReport, cached: bool, seconds: f64 },
-    Plants { report: PlantsStageReport, cached: bool, seconds: f64 },
-    Scatter { report: ScatterStageReport, cached: bool, seconds: f64 },
-    Preview { report: PreviewStageReport, cached: bool, seconds: f64 },
-    Snow { report: SnowStageReport, cached: bool, seconds: f64 },
-    View { report: crate::scene::view_stage::ViewStageReport, cached: bool, seconds: f64 },
+    Terrain { report: TerrainStageReport, cached: bool, cost: Cost },
+    Plants { report: PlantsStageReport, cached: bool, cost: Cost },
+    Scatter { report: ScatterStageReport, cached: bool, cost: Cost },
+    Preview { report: PreviewStageReport, cached: bool, cost: Cost },
+    Snow { report: SnowStageReport, cached: bool, cost: Cost },
+    View { report: crate::scene::view_stage::ViewStageReport, cached: bool, cost: Cost },
 }
 
 impl StageRun {
@@ -52,15 +53,18 @@ impl StageRun {
             | StageRun::View { cached, .. } => *cached,
         }
     }
-    pub fn seconds(&self) -> f64 {
+    pub fn cost(&self) -> Cost {
         match self {
-            StageRun::Terrain { seconds, .. }
-            | StageRun::Plants { seconds, .. }
-            | StageRun::Scatter { seconds, .. }
-            | StageRun::Preview { seconds, .. }
-            | StageRun::Snow { seconds, .. }
-            | StageRun::View { seconds, .. } => *seconds,
+            StageRun::Terrain { cost, .. }
+            | StageRun::Plants { cost, .. }
+            | StageRun::Scatter { cost, .. }
+            | StageRun::Preview { cost, .. }
+            | StageRun::Snow { cost, .. }
+            | StageRun::View { cost, .. } => *cost,
         }
+    }
+    pub fn seconds(&self) -> f64 {
+        self.cost().seconds
     }
 }
 
@@ -353,11 +357,11 @@ fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[St
     let mut stages = Map::new();
     let mut timing = Map::new();
     for r in runs {
-        let (name, mut value, cached, seconds) = match r {
-            StageRun::Terrain { report, cached, seconds } => {
-                ("terrain", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds)
+        let (name, mut value, cached, cost) = match r {
+            StageRun::Terrain { report, cached, cost } => {
+                ("terrain", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *cost)
             }
-            StageRun::Scatter { report, cached, seconds } => {
+            StageRun::Scatter { report, cached, cost } => {
                 let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
                 // per-species seconds are timing too
                 if let Some(list) = v.get_mut("species").and_then(Value::as_array_mut) {
@@ -371,22 +375,22 @@ fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[St
                         }
                     }
                 }
-                ("scatter", v, *cached, *seconds)
+                ("scatter", v, *cached, *cost)
             }
-            StageRun::Preview { report, cached, seconds } => {
-                ("preview", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds)
+            StageRun::Preview { report, cached, cost } => {
+                ("preview", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *cost)
             }
-            StageRun::Snow { report, cached, seconds } => {
-                ("snow", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *seconds)
+            StageRun::Snow { report, cached, cost } => {
+                ("snow", serde_json::to_value(report).unwrap_or(Value::Null), *cached, *cost)
             }
-            StageRun::View { report, cached, seconds } => {
+            StageRun::View { report, cached, cost } => {
                 let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
                 if let Some(o) = v.as_object_mut() {
                     o.remove("seconds");
                 }
-                ("view", v, *cached, *seconds)
+                ("view", v, *cached, *cost)
             }
-            StageRun::Plants { report, cached, seconds } => {
+            StageRun::Plants { report, cached, cost } => {
                 let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
                 if let Some(list) = v.get_mut("species").and_then(Value::as_array_mut) {
                     for sp in list {
@@ -414,16 +418,26 @@ fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[St
                         }
                     }
                 }
-                ("plants", v, *cached, *seconds)
+                ("plants", v, *cached, *cost)
             }
         };
         // the stage's own seconds are from the run that computed it: timing, not results
         let computed = value.as_object_mut().and_then(|o| o.remove("seconds")).unwrap_or(Value::Null);
         stages.insert(name.into(), value);
-        timing.insert(name.into(), json!({ "cached": cached, "seconds": seconds, "computed_in": computed }));
+        let mut t = json!({ "cached": cached, "seconds": cost.seconds, "computed_in": computed });
+        if let Some(peak) = cost.peak_bytes {
+            t["peak_memory_mib"] = json!(crate::memory::mib(peak));
+        }
+        timing.insert(name.into(), t);
     }
     let total: f64 = runs.iter().map(StageRun::seconds).sum();
     timing.insert("total_seconds".into(), json!(total));
+    // the process's own mark (it sees spikes between samples) or the largest sample (the kernel
+    // updates its mark lazily), whichever is larger
+    let sampled = runs.iter().filter_map(|r| r.cost().peak_bytes).max();
+    if let Some(peak) = crate::memory::peak_rss_bytes().max(sampled) {
+        timing.insert("process_peak_memory_mib".into(), json!(crate::memory::mib(peak)));
+    }
     let v = json!({
         "scene": preset.scene.name,
         "verdant_version": env!("CARGO_PKG_VERSION"),
@@ -555,9 +569,17 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[Stri
     for (part, b) in &bytes.by_part {
         s += &format!("| {part} | {:.2} |\n", *b as f64 / 1e6);
     }
-    s += "\n## Timing\n\n| stage | cached | seconds |\n|---|---|---|\n";
+    s += "\n## Timing\n\nPeak memory: the process's resident set at its largest during the stage, sampled every \
+          2 ms (what it still holds of earlier stages included).\n\n| stage | cached | seconds | peak memory (MiB) |\n|---|---|---|---|\n";
     for r in runs {
-        s += &format!("| {} | {} | {:.3} |\n", r.stage().name(), if r.cached() { "yes" } else { "no" }, r.seconds());
+        let cost = r.cost();
+        let peak = cost.peak_bytes.map_or("—".to_string(), |b| format!("{:.0}", crate::memory::mib(b)));
+        s += &format!(
+            "| {} | {} | {:.3} | {peak} |\n",
+            r.stage().name(),
+            if r.cached() { "yes" } else { "no" },
+            cost.seconds
+        );
     }
     s
 }

@@ -44,8 +44,18 @@ pub struct Ran<R, X> {
     pub artifact: Option<X>,
     pub cached: bool,
     pub key: String,
-    /// Wall time of this run (the cache lookup and restore, or the computation and store).
+    /// Wall time and peak memory of this run (the cache lookup and restore, or the computation
+    /// and store).
+    pub cost: Cost,
+}
+
+/// What running a stage cost (timing: it varies run to run).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cost {
     pub seconds: f64,
+    /// The process's resident memory at its largest during the run, bytes, sampled
+    /// ([`crate::memory::measure`]; `None` where the platform does not tell).
+    pub peak_bytes: Option<u64>,
 }
 
 /// The cache as one build used it.
@@ -72,6 +82,11 @@ impl StageRunner<'_> {
     /// whole (an entry that does not read back is recomputed and replaced); otherwise runs it and
     /// stores what it wrote.
     pub fn run<J: StageJob>(&mut self, job: &J) -> Result<Ran<J::Report, J::Artifact>, SceneBuildError> {
+        let (ran, peak) = crate::memory::measure(|| self.run_unmeasured(job));
+        ran.map(|ran| Ran { cost: Cost { peak_bytes: peak, ..ran.cost }, ..ran })
+    }
+
+    fn run_unmeasured<J: StageJob>(&mut self, job: &J) -> Result<Ran<J::Report, J::Artifact>, SceneBuildError> {
         let t0 = Instant::now();
         let stage = J::STAGE.name();
         let key = job.key()?;
@@ -85,7 +100,13 @@ impl StageRunner<'_> {
         if let Some((report, hashes)) = restored {
             self.used.hashes.extend(hashes);
             (self.progress)(&format!("{stage}: cached"));
-            return Ok(Ran { report, artifact: None, cached: true, key, seconds: t0.elapsed().as_secs_f64() });
+            return Ok(Ran {
+                report,
+                artifact: None,
+                cached: true,
+                key,
+                cost: Cost { seconds: t0.elapsed().as_secs_f64(), peak_bytes: None },
+            });
         }
         (self.progress)(&format!("{stage}: running"));
         let (report, artifact) = job.run(self.dir)?;
@@ -94,7 +115,13 @@ impl StageRunner<'_> {
             Ok(hashes) => self.used.hashes.extend(hashes),
             Err(e) => (self.progress)(&format!("{stage}: could not store the cache entry ({e}); continuing")),
         }
-        Ok(Ran { report, artifact: Some(artifact), cached: false, key, seconds: t0.elapsed().as_secs_f64() })
+        Ok(Ran {
+            report,
+            artifact: Some(artifact),
+            cached: false,
+            key,
+            cost: Cost { seconds: t0.elapsed().as_secs_f64(), peak_bytes: None },
+        })
     }
 }
 

@@ -72,6 +72,10 @@ pub struct ShardRecord {
     pub units: Vec<Unit>,
     /// Indices into `units` this shard built.
     pub built: Vec<usize>,
+    /// The shard process's peak resident memory, MiB (timing, not results: it varies run to run;
+    /// absent where the platform does not tell).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_memory_mib: Option<f64>,
 }
 
 /// The units of `preset`, in order: the terrain stage (when the preset has a terrain), then every
@@ -169,7 +173,17 @@ pub fn build_shard(
         of: shard.count,
         units: all,
         built: mine,
+        peak_memory_mib: crate::memory::peak_rss_bytes().map(crate::memory::mib),
     };
+    if let Some(mib) = record.peak_memory_mib {
+        say(&format!(
+            "shard {}/{}: {} of {} units, peak memory {mib:.0} MiB",
+            shard.index,
+            shard.count,
+            record.built.len(),
+            record.units.len()
+        ));
+    }
     let path = record_path(out, name);
     let text = serde_json::to_string_pretty(&record).unwrap_or_default();
     crate::export::write_atomic(&path, text.as_bytes())

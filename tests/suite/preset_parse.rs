@@ -40,19 +40,40 @@ const PROC: &str = "procedural = { kind = \"fbm\", size = 65, relief = 10.0 }";
 
 #[test]
 fn shipped_presets_load() {
-    let dir = manifest_dir().join("presets");
     let mut names = Vec::new();
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.extension().is_some_and(|e| e == "toml") {
-            let preset = load_preset(&path).unwrap_or_else(|e| panic!("{e}"));
-            assert!(preset.terrain.is_some(), "{}", path.display());
-            names.push(preset.scene.name);
+    for dir in [manifest_dir().join("presets"), manifest_dir().join("presets/worlds")] {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let preset = load_preset(&path).unwrap_or_else(|e| panic!("{e}"));
+                assert!(preset.terrain.is_some(), "{}", path.display());
+                names.push(preset.scene.name);
+            }
         }
     }
     names.sort();
-    assert!(names.len() >= 2, "{names:?}");
-    assert!(names.contains(&"alpine".to_string()) && names.contains(&"meadow".to_string()));
+    assert!(names.len() >= 3, "{names:?}");
+    for name in ["alpine", "meadow", "highlands"] {
+        assert!(names.contains(&name.to_string()), "{name} not in {names:?}");
+    }
+}
+
+/// Issue 18 item 4: a world-sized procedural preset (8193² samples at 1 m with grass and trees),
+/// split by `--shard` into units a machine builds one after another (check.sh step 3d builds it so).
+#[test]
+fn the_world_preset_is_world_sized_with_grass_and_trees() {
+    let p = load_preset(&manifest_dir().join("presets/worlds/highlands.toml")).unwrap();
+    let t = p.terrain.as_ref().unwrap();
+    match &t.source {
+        TerrainSource::Fbm { size, cell_size_m, .. } => assert_eq!((*size, *cell_size_m), (8193, 1.0)),
+        other => panic!("{other:?}"),
+    }
+    let kinds: Vec<String> = p.species.iter().map(|s| format!("{:?}", s.kind)).collect();
+    assert!(kinds.iter().any(|k| k == "Tree") && kinds.iter().any(|k| k == "Grass"), "{kinds:?}");
+    let out = tempfile::tempdir().unwrap();
+    let units = verdant::scene::shard::units(&p, out.path()).unwrap();
+    let names: Vec<&str> = units.iter().map(|u| u.name.as_str()).collect();
+    assert_eq!(names, ["terrain", "species pine", "species grass"]);
 }
 
 #[test]
