@@ -25,7 +25,7 @@ use super::compact::compact;
 use super::error::SceneProblem;
 use super::grid::PositionGrid;
 use super::quantize::{place, place_instances, plan, MeshGrid, Quantization, UvRange};
-use super::streaming::{base64, load_groups};
+use super::streaming::{load_groups, push_base64};
 use crate::mesh::{AlphaMode, PrimitiveMode, Scene};
 
 /// `asset.generator` of every file written.
@@ -90,9 +90,60 @@ pub fn to_glb(scene: &Scene) -> Result<Vec<u8>, SceneProblem> {
 
 /// [`to_glb`] with storage options.
 pub fn to_glb_with(scene: &Scene, opts: &WriteOptions) -> Result<Vec<u8>, SceneProblem> {
+    let glb = to_glb_parts(scene, opts)?;
+    let mut out = Vec::with_capacity(glb.byte_len());
+    glb.write(&mut out).map_err(|e| SceneProblem(e.to_string()))?;
+    Ok(out)
+}
+
+/// [`to_glb_with`] as its two chunks, for writing straight to a file ([`Glb::write`]) without
+/// the whole container in memory beside them; the glTF tree is dropped once serialised.
+pub fn to_glb_parts(scene: &Scene, opts: &WriteOptions) -> Result<Glb, SceneProblem> {
     let (root, bin) = build(scene, None, opts)?;
     let json = json_bytes(&root, false, opts)?;
-    glb_container(&json, &bin)
+    drop(root);
+    let glb = Glb { json, bin };
+    u32::try_from(glb.byte_len()).map_err(|_| {
+        SceneProblem(format!(
+            "the GLB would be {} bytes, over the format's 4 GiB limit; split the scene",
+            glb.byte_len()
+        ))
+    })?;
+    Ok(glb)
+}
+
+/// A GLB's JSON and BIN chunks (unpadded), at most 4 GiB together ([`to_glb_parts`] checks).
+pub struct Glb {
+    json: Vec<u8>,
+    bin: Vec<u8>,
+}
+
+impl Glb {
+    /// The container's length in bytes (header, chunks and their padding).
+    pub fn byte_len(&self) -> usize {
+        let bin = if self.bin.is_empty() { 0 } else { 8 + self.bin.len().next_multiple_of(4) };
+        12 + 8 + self.json.len().next_multiple_of(4) + bin
+    }
+
+    /// Writes the container: header, JSON chunk padded with spaces, BIN chunk (when there is data)
+    /// padded with zeros (glTF 2.0 §4.4).
+    pub fn write(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
+        let (json_len, bin_len) = (self.json.len().next_multiple_of(4), self.bin.len().next_multiple_of(4));
+        w.write_all(b"glTF")?;
+        w.write_all(&2u32.to_le_bytes())?;
+        w.write_all(&(self.byte_len() as u32).to_le_bytes())?;
+        w.write_all(&(json_len as u32).to_le_bytes())?;
+        w.write_all(b"JSON")?;
+        w.write_all(&self.json)?;
+        w.write_all(&b"   "[..json_len - self.json.len()])?;
+        if !self.bin.is_empty() {
+            w.write_all(&(bin_len as u32).to_le_bytes())?;
+            w.write_all(b"BIN\0")?;
+            w.write_all(&self.bin)?;
+            w.write_all(&[0u8; 3][..bin_len - self.bin.len()])?;
+        }
+        Ok(())
+    }
 }
 
 /// The scene as `.gltf` JSON (pretty-printed) and the contents of the `.bin` file it refers to as
@@ -132,32 +183,6 @@ fn json_bytes(root: &json::Root, pretty: bool, opts: &WriteOptions) -> Result<Ve
         }
     }
     if pretty { serde_json::to_vec_pretty(&value) } else { serde_json::to_vec(&value) }.map_err(fail)
-}
-
-/// Wraps JSON and binary chunks in the GLB container: 12-byte header, JSON chunk padded with
-/// spaces, BIN chunk (omitted when empty) padded with zeros.
-fn glb_container(json: &[u8], bin: &[u8]) -> Result<Vec<u8>, SceneProblem> {
-    let json_len = json.len().next_multiple_of(4);
-    let bin_len = bin.len().next_multiple_of(4);
-    let total = 12 + 8 + json_len + if bin.is_empty() { 0 } else { 8 + bin_len };
-    let total32 = u32::try_from(total).map_err(|_| {
-        SceneProblem(format!("the GLB would be {total} bytes, over the format's 4 GiB limit; split the scene"))
-    })?;
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&total32.to_le_bytes());
-    out.extend_from_slice(&(json_len as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(json);
-    out.resize(20 + json_len, b' ');
-    if !bin.is_empty() {
-        out.extend_from_slice(&(bin_len as u32).to_le_bytes());
-        out.extend_from_slice(b"BIN\0");
-        out.extend_from_slice(bin);
-        out.resize(total, 0);
-    }
-    Ok(out)
 }
 
 /// Percent-encodes everything but RFC 3986 unreserved characters (a relative URI for a file name).
@@ -879,7 +904,9 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
         let uri = if g == 0 {
             bin_uri.map(str::to_string)
         } else {
-            Some(format!("data:application/octet-stream;base64,{}", base64(&data)))
+            let mut uri = String::from("data:application/octet-stream;base64,");
+            push_base64(&mut uri, &data);
+            Some(uri)
         };
         root.buffers.push(json::Buffer {
             byte_length: USize64::from(data.len()),

@@ -80,8 +80,10 @@ pub fn stage_scene_with(
     // Build everything first, write afterwards: a scene error never touches the disk.
     let files: Vec<(PathBuf, Vec<u8>)> = match ext.as_str() {
         "glb" => {
-            let bytes = gltf::to_glb_with(scene, opts).map_err(SceneProblem::at(path))?;
-            vec![(path.to_path_buf(), bytes)]
+            // streamed from its chunks: a large scene's container is never a third copy in memory
+            let glb = gltf::to_glb_parts(scene, opts).map_err(SceneProblem::at(path))?;
+            set.write_with(path, |w| glb.write(w))?;
+            return Ok(vec![path.to_path_buf()]);
         }
         "gltf" => {
             let bin_name = format!("{stem}.bin");

@@ -72,8 +72,16 @@ pub fn load_groups(scene: &Scene) -> Option<LoadGroups> {
 
 /// Standard base64 (RFC 4648 §4) with padding, for `data:` URIs.
 pub fn base64(bytes: &[u8]) -> String {
+    let mut out = String::new();
+    push_base64(&mut out, bytes);
+    out
+}
+
+/// `bytes` in base64 appended to `out` (a URI's prefix written first is not copied again: a
+/// world's level buffers run to a hundred megabytes).
+pub fn push_base64(out: &mut String, bytes: &[u8]) {
     const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    out.reserve(bytes.len().div_ceil(3) * 4);
     for chunk in bytes.chunks(3) {
         let b = [chunk[0], *chunk.get(1).unwrap_or(&0), *chunk.get(2).unwrap_or(&0)];
         let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
@@ -85,7 +93,6 @@ pub fn base64(bytes: &[u8]) -> String {
             }
         }
     }
-    out
 }
 
 #[cfg(test)]

@@ -11,12 +11,13 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
 use crate::export::{self, table};
-use crate::mesh::{Instances, Material, Mesh, Node, Scene, Texture};
+use crate::mesh::{Instances, Mesh, Node, Scene};
 use crate::scatter::surface::SurfaceIndex;
 use crate::scene::cache::KeyBuilder;
 use crate::scene::error::{SceneBuildError, StageError};
@@ -203,49 +204,65 @@ pub(super) fn shown(
 /// and materials stored once (every level file of a tree carries the same atlas).
 pub(super) struct Assembler<'a> {
     pub(super) dir: &'a Path,
-    pub(super) files: BTreeMap<PathBuf, Scene>,
+    /// Shared, not copied: the main terrain file is also held by the stage while it assembles.
+    pub(super) files: BTreeMap<PathBuf, Rc<Scene>>,
     pub(super) scene: Scene,
     /// (file, mesh index in it) → mesh index in `scene`.
     pub(super) meshes: BTreeMap<(PathBuf, usize), usize>,
+    /// (file, material index in it) → material index in `scene` (a terrain's ~1000 chunks share one
+    /// material whose textures need not be compared again for each).
+    materials: BTreeMap<(PathBuf, usize), usize>,
     /// (file, impostor mesh name, baked view) → its view's mesh in `scene` ([`ImpostorViews::mesh`]).
     pub(super) impostor_views: BTreeMap<(PathBuf, String, usize), usize>,
 }
 
 impl<'a> Assembler<'a> {
     pub(super) fn file(&mut self, rel: &Path) -> Result<&Scene, StageError> {
+        Ok(self.shared(rel)?)
+    }
+
+    /// [`Assembler::file`] as a shared handle (no copy of the scene).
+    pub(super) fn shared(&mut self, rel: &Path) -> Result<&Rc<Scene>, StageError> {
         if !self.files.contains_key(rel) {
             let path = self.dir.join(rel);
             let s = read_scene_dequantized(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?;
-            self.files.insert(rel.to_path_buf(), s);
+            self.files.insert(rel.to_path_buf(), Rc::new(s));
         }
         Ok(&self.files[rel])
     }
 
-    fn texture(&mut self, t: &Texture) -> usize {
-        match self.scene.textures.iter().position(|o| o.png == t.png) {
-            Some(i) => i,
-            None => {
-                self.scene.textures.push(t.clone());
-                self.scene.textures.len() - 1
-            }
+    /// Material `index` of file `rel` (already read) with its textures, appended once; `None` when
+    /// the file has no such material.
+    fn material_of(&mut self, rel: &Path, index: usize) -> Option<usize> {
+        let key = (rel.to_path_buf(), index);
+        if let Some(&i) = self.materials.get(&key) {
+            return Some(i);
         }
-    }
-
-    fn material(&mut self, m: &Material, textures: &[Texture]) -> usize {
+        let src = &self.files[rel];
+        let m = src.materials.get(index)?;
         let mut map = BTreeMap::new();
         for i in m.textures() {
-            if let Some(t) = textures.get(i) {
-                map.insert(i, self.texture(t));
+            if let Some(t) = src.textures.get(i) {
+                let at = match self.scene.textures.iter().position(|o| o.png == t.png) {
+                    Some(at) => at,
+                    None => {
+                        self.scene.textures.push(t.clone());
+                        self.scene.textures.len() - 1
+                    }
+                };
+                map.insert(i, at);
             }
         }
         let m = m.with_textures(|i| map.get(&i).copied());
-        match self.scene.materials.iter().position(|o| *o == m) {
-            Some(i) => i,
+        let at = match self.scene.materials.iter().position(|o| *o == m) {
+            Some(at) => at,
             None => {
                 self.scene.materials.push(m);
                 self.scene.materials.len() - 1
             }
-        }
+        };
+        self.materials.insert(key, at);
+        Some(at)
     }
 
     /// The mesh `index` of file `rel`, appended once; its index in the assembled scene.
@@ -253,20 +270,11 @@ impl<'a> Assembler<'a> {
         if let Some(&i) = self.meshes.get(&(rel.to_path_buf(), index)) {
             return Ok(i);
         }
-        let src = self.file(rel)?;
-        let Some(mesh) = src.meshes.get(index).cloned() else {
+        let Some(mut mesh) = self.file(rel)?.meshes.get(index).cloned() else {
             return Err(fail(format!("{}: has no mesh #{index}", rel.display())));
         };
-        let (materials, textures) = (src.materials.clone(), src.textures.clone());
-        let mut mesh: Mesh = mesh;
         for p in &mut mesh.primitives {
-            p.material = match p.material {
-                Some(m) => match materials.get(m) {
-                    Some(mat) => Some(self.material(mat, &textures)),
-                    None => None,
-                },
-                None => None,
-            };
+            p.material = p.material.and_then(|m| self.material_of(rel, m));
         }
         self.scene.meshes.push(mesh);
         let i = self.scene.meshes.len() - 1;
@@ -299,6 +307,7 @@ impl<'a> Assembler<'a> {
             files: BTreeMap::new(),
             scene: Scene::default(),
             meshes: BTreeMap::new(),
+            materials: BTreeMap::new(),
             impostor_views: BTreeMap::new(),
         }
     }
@@ -370,19 +379,22 @@ pub fn run_view(
 ) -> Result<ViewStageReport, StageError> {
     let t0 = Instant::now();
     let mut asm = Assembler::new(scene_dir);
-    let main = asm.file(terrain.main)?.clone();
-    let surface = {
+    let main = Rc::clone(asm.shared(terrain.main)?);
+    // the surface only places the cameras: dropped before anything is assembled (1.7 M triangles
+    // index into ~230 MB)
+    let cameras: Vec<Camera> = {
         let parts: Vec<(&[[f32; 3]], &[u32])> =
             main.meshes.iter().flat_map(|m| m.primitives.iter().map(|p| (&p.positions[..], &p.indices[..]))).collect();
-        SurfaceIndex::from_parts(&parts)
+        let surface = SurfaceIndex::from_parts(&parts);
+        let extent = surface.bounds();
+        let cameras: Vec<Camera> = preset
+            .views
+            .iter()
+            .map(|v| v.resolve(extent, |x, z| surface.height_at(x, z).map(|(h, _)| h)))
+            .collect::<Result<_, _>>()
+            .map_err(fail)?;
+        cameras
     };
-    let extent = surface.bounds();
-    let cameras: Vec<Camera> = preset
-        .views
-        .iter()
-        .map(|v| v.resolve(extent, |x, z| surface.height_at(x, z).map(|(h, _)| h)))
-        .collect::<Result<_, _>>()
-        .map_err(fail)?;
 
     // terrain levels: per level, its file (same chunk layout as the main mesh) and switch distance
     let mut levels: Vec<(PathBuf, f64)> = Vec::new();
@@ -639,13 +651,14 @@ pub fn run_view(
         }
     }
 
+    drop(full);
     // `[scene] compact`: the terrain on its own grid (the main mesh's and every level's chunks)
-    let mut terrain_meshes: Vec<Mesh> = main.meshes.clone();
     for (f, _) in &levels {
-        terrain_meshes.extend(asm.file(f)?.meshes.iter().cloned());
+        asm.file(f)?;
     }
-    let (store, terrain_quantization_m) =
-        crate::scene::view_store::scene_store(preset, &terrain_meshes.iter().collect::<Vec<_>>());
+    let terrain_meshes: Vec<&Mesh> =
+        main.meshes.iter().chain(levels.iter().flat_map(|(f, _)| asm.files[f].meshes.iter())).collect();
+    let (store, terrain_quantization_m) = crate::scene::view_store::scene_store(preset, &terrain_meshes);
     drop(terrain_meshes);
     // meshes appended only for the full-detail count are not instanced by any node: drop them
     let mut scene = asm.scene;
@@ -657,6 +670,7 @@ pub fn run_view(
     // (measured once written: the writer checked the scene)
     let quantization_m = crate::export::quantize::position_error_with(&scene, &store.quantization, &store.mesh_grids);
     let scene_bytes = std::fs::metadata(scene_dir.join(&scene_file)).map(|m| m.len()).unwrap_or(0);
+    drop(scene);
 
     // scene_lod.glb: every chunk and tile with its whole chain, for viewers that switch themselves
     let mut lod = Assembler { files: asm.files, ..Assembler::new(scene_dir) };
@@ -673,7 +687,13 @@ pub fn run_view(
         .collect();
     let lod_terrain = LodTerrain { main: &main, levels: &levels, chunked, main_file: terrain.main };
     lod_scene(&mut lod, &lod_terrain, &species, &preset.lod)?;
-    let mut lod_scene = lod.scene;
+    // what it was assembled from is not needed for the write (at a world's size, the read files,
+    // the placement rows and the main terrain are as large as the scene)
+    let Assembler { scene: mut lod_scene, files, .. } = lod;
+    drop(species);
+    drop(files);
+    drop(rows_of);
+    drop(main);
     lod_scene.name = format!("{} (levels of detail)", preset.scene.name);
     let lod_scene_file = PathBuf::from("scene_lod.glb");
     export::write_scene_with(&lod_scene, &scene_dir.join(&lod_scene_file), &store).map_err(|e| fail(e.to_string()))?;
