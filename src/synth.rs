@@ -199,22 +199,33 @@ pub fn noise_map(kind: NoiseKind, size: usize, cell_size_m: f64, relief_m: f64, 
             }
         }
     };
-    let mut raw = vec![0.0f64; side * side];
-    raw.par_chunks_mut(side).enumerate().for_each(|(j, row)| {
-        for (i, v) in row.iter_mut().enumerate() {
-            *v = sample(i, j);
+    // The raw f64 samples are kept as pairs of 32-bit words in the buffer that then becomes the
+    // f32 heights, in place: 8 bytes a sample at most, instead of the raw map (8) beside the
+    // heights (4).
+    let n = side * side;
+    let mut words = vec![0u32; 2 * n];
+    words.par_chunks_mut(2 * side).enumerate().for_each(|(j, row)| {
+        for (i, pair) in row.chunks_exact_mut(2).enumerate() {
+            let bits = sample(i, j).to_bits();
+            pair[0] = bits as u32;
+            pair[1] = (bits >> 32) as u32;
         }
     });
-    let lo = raw.iter().cloned().fold(f64::INFINITY, f64::min);
-    let hi = raw.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let raw = |words: &[u32], k: usize| f64::from_bits(words[2 * k] as u64 | (words[2 * k + 1] as u64) << 32);
+    let lo = (0..n).map(|k| raw(&words, k)).fold(f64::INFINITY, f64::min);
+    let hi = (0..n).map(|k| raw(&words, k)).fold(f64::NEG_INFINITY, f64::max);
     let scale = if hi > lo { relief_m / (hi - lo) } else { 0.0 };
-    Heightfield {
-        width: side,
-        height: side,
-        heights: raw.iter().map(|&v| (((v - lo) * scale) as f32).clamp(0.0, relief_m as f32)).collect(),
-        cell_size_m,
-        exact: None,
+    // Height k goes to word k, which is read (as part of sample k / 2) before it is written: sample
+    // k lies in words 2k and 2k + 1, never before word k.
+    for k in 0..n {
+        let v = raw(&words, k);
+        words[k] = ((((v - lo) * scale) as f32).clamp(0.0, relief_m as f32)).to_bits();
     }
+    words.truncate(n);
+    words.shrink_to_fit();
+    // (u32 → f32 of the same size: the standard library collects this in the same allocation)
+    let heights: Vec<f32> = words.into_iter().map(f32::from_bits).collect();
+    Heightfield { width: side, height: side, heights, cell_size_m, exact: None }
 }
 
 /// Fractional Brownian motion of gradient noise: a `size` × `size` map in [0, `relief_m`] metres.

@@ -371,6 +371,13 @@ pub fn run_terrain_memo(
             .chain;
     }
     let mut figures = meshed.figures(&hf, &settings, voids_filled);
+    // The chain level the main mesh is (the same mesh, built with the same options but its name):
+    // its files are the main scene's under the level's names, written from the main scene itself
+    // rather than built, textured and baked a second time beside it.
+    let main_level = chain
+        .iter()
+        .find(|l| t.mode == MeshMode::Tin && l.max_error_requested_m == t.max_error_m && l.mesh == meshed.mesh)
+        .map(|l| l.level);
     // (a shared level's meshing and measuring time is counted under `lods`)
     let [mesh_s, mut analyze_s, build_s] = meshed.seconds;
     let Meshed { mut scene, mut layers, .. } = meshed;
@@ -408,11 +415,18 @@ pub fn run_terrain_memo(
     let mut lods = Vec::new();
     for level in chain {
         let stem = format!("terrain_LOD{}", level.level);
-        let (lod_scene, normal_map) = textured(
-            build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| input(e.to_string()))?,
-            &stem,
-        )?;
-        let files = write_formats(preset, &lod_scene, scene_dir, &stem)?;
+        let (files, normal_map) = if main_level == Some(level.level) {
+            rename_terrain(&mut scene, "terrain", &stem);
+            let files = write_formats(preset, &scene, scene_dir, &stem);
+            rename_terrain(&mut scene, &stem, "terrain");
+            (files?, figures.normal_map.clone())
+        } else {
+            let (lod_scene, normal_map) = textured(
+                build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| input(e.to_string()))?,
+                &stem,
+            )?;
+            (write_formats(preset, &lod_scene, scene_dir, &stem)?, normal_map)
+        };
         lods.push(LodInfo {
             level: level.level,
             files,
@@ -458,6 +472,24 @@ pub fn run_terrain_memo(
         },
     };
     Ok((report, scene))
+}
+
+/// Renames a terrain scene built under the name `from` as building it under `to` names it: the
+/// scene, its nodes and meshes (`{from}`, `{from}_chunk_<ci>_<cj>`, `{from}_base`) and its normal
+/// map (`{from}_normal`; the base colour is `terrain_base_color` in every terrain scene).
+fn rename_terrain(scene: &mut Scene, from: &str, to: &str) {
+    let rename = |name: &mut String| {
+        if let Some(rest) = name.strip_prefix(from).filter(|r| r.is_empty() || r.starts_with('_')) {
+            *name = format!("{to}{rest}");
+        }
+    };
+    rename(&mut scene.name);
+    scene.nodes.iter_mut().for_each(|n| rename(&mut n.name));
+    scene.meshes.iter_mut().for_each(|m| rename(&mut m.name));
+    let normal = format!("{from}_normal");
+    for texture in scene.textures.iter_mut().filter(|t| t.name == normal) {
+        texture.name = format!("{to}_normal");
+    }
 }
 
 /// File name of the k-th layer weight map (layers 4k … 4k + 3): `terrain_layers.png`, then

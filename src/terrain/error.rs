@@ -131,6 +131,9 @@ pub struct ErrorStats {
 /// Triangles measured per parallel task: large enough to amortise scheduling, small enough to balance.
 const TRIANGLES_PER_TASK: usize = 4096;
 
+/// Samples measured at a time (a band of whole rows; 16 MiB of slots).
+const BAND_SAMPLES: usize = 1 << 21;
+
 /// Which surface is measured against the map's reference heights ([`Heightfield::reference`]).
 #[derive(Clone, Copy)]
 enum Surface<'a> {
@@ -179,24 +182,39 @@ fn measure_surface(hf: &Heightfield, mesh: &SampleMesh, surface: Surface) -> Err
     if w == 0 || h == 0 || w.checked_mul(h) != Some(hf.heights.len()) || w > MAX_SIDE_SAMPLES || h > MAX_SIDE_SAMPLES {
         return empty;
     }
-    // Per sample: 0 = not covered, else (bits of the error as f64) + 1. Non-negative f64 bit patterns
-    // order like the values, so an atomic max keeps the largest error whatever the thread order.
-    let slots: Vec<AtomicU64> = (0..w * h).map(|_| AtomicU64::new(0)).collect();
-
-    mesh.triangles.par_chunks(TRIANGLES_PER_TASK).for_each(|chunk| {
-        for tri in chunk {
-            let Some(corners) = triangle_corners(mesh, tri, w, h) else { continue };
-            scan_triangle(hf, corners, surface, &slots);
+    // The map is measured a band of rows at a time, so the per-sample slots cover one band, not
+    // the whole map (8 bytes a sample: 537 MB at 8193², once per LoD level measured at the same
+    // time). Each triangle is scanned in every band its rows reach, clipped to the band's rows.
+    let band = (BAND_SAMPLES / w).clamp(1, h);
+    let mut by_band: Vec<Vec<u32>> = vec![Vec::new(); h.div_ceil(band)];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let Some(c) = triangle_corners(mesh, tri, w, h) else { continue };
+        for list in &mut by_band[c[0][1] as usize / band..=c[2][1] as usize / band] {
+            list.push(t as u32);
         }
-    });
-
-    // Reduce per row in parallel, then rows in order, so the RMS sum is the same at any thread count.
-    let rows: Vec<(f64, usize, f64, usize)> = (0..h)
-        .into_par_iter()
-        .map(|j| {
+    }
+    // Per sample of the band: 0 = not covered, else (bits of the error as f64) + 1. Non-negative
+    // f64 bit patterns order like the values, so an atomic max keeps the largest error whatever
+    // the thread order.
+    let mut slots: Vec<AtomicU64> = (0..band * w).map(|_| AtomicU64::new(0)).collect();
+    let mut rows: Vec<(f64, usize, f64, usize)> = Vec::with_capacity(h);
+    for (b, list) in by_band.iter().enumerate() {
+        let (j_lo, j_hi) = (b * band, ((b + 1) * band).min(h) - 1);
+        if b > 0 {
+            slots.iter_mut().for_each(|s| *s.get_mut() = 0);
+        }
+        list.par_chunks(TRIANGLES_PER_TASK).for_each(|chunk| {
+            for &t in chunk {
+                let Some(corners) = triangle_corners(mesh, &mesh.triangles[t as usize], w, h) else { continue };
+                scan_triangle(hf, corners, surface, &slots, j_lo as i64, j_hi as i64);
+            }
+        });
+        // Reduce per row in parallel, then rows in order, so the RMS sum is the same at any thread
+        // count.
+        rows.par_extend((j_lo..=j_hi).into_par_iter().map(|j| {
             let (mut sum_sq, mut covered, mut max, mut worst) = (0.0f64, 0usize, -1.0f64, 0usize);
             for i in 0..w {
-                let v = slots[j * w + i].load(Ordering::Relaxed);
+                let v = slots[(j - j_lo) * w + i].load(Ordering::Relaxed);
                 if v == 0 {
                     continue;
                 }
@@ -209,8 +227,8 @@ fn measure_surface(hf: &Heightfield, mesh: &SampleMesh, surface: Surface) -> Err
                 }
             }
             (sum_sq, covered, max, worst)
-        })
-        .collect();
+        }));
+    }
     let (mut sum_sq, mut covered, mut max, mut worst) = (0.0f64, 0usize, -1.0f64, 0usize);
     for (s, c, m, k) in rows {
         sum_sq += s;
@@ -255,9 +273,9 @@ fn orient(a: [i64; 2], b: [i64; 2], p: [i64; 2]) -> i64 {
     (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
 }
 
-/// Visits every sample of the triangle's bounding box, keeps those inside the closed triangle and
-/// records their error.
-fn scan_triangle(hf: &Heightfield, c: [[i64; 2]; 3], surface: Surface, slots: &[AtomicU64]) {
+/// Visits every sample of the triangle's bounding box in rows `j_lo..=j_hi`, keeps those inside the
+/// closed triangle and records their error (`slots` holds those rows, from row `j_lo` on).
+fn scan_triangle(hf: &Heightfield, c: [[i64; 2]; 3], surface: Surface, slots: &[AtomicU64], j_lo: i64, j_hi: i64) {
     let w = hf.width;
     let sign = orient(c[0], c[1], c[2]).signum();
     let area = orient(c[0], c[1], c[2]) * sign;
@@ -266,7 +284,7 @@ fn scan_triangle(hf: &Heightfield, c: [[i64; 2]; 3], surface: Surface, slots: &[
         Surface::Exact => c.map(|p| hf.reference(p[1] as usize * w + p[0] as usize)),
     };
     let (i0, i1) = (c.iter().map(|p| p[0]).min().unwrap_or(0), c.iter().map(|p| p[0]).max().unwrap_or(0));
-    let (j0, j1) = (c[0][1], c[2][1]);
+    let (j0, j1) = (c[0][1].max(j_lo), c[2][1].min(j_hi));
     for j in j0..=j1 {
         for i in i0..=i1 {
             let p = [i, j];
@@ -281,7 +299,7 @@ fn scan_triangle(hf: &Heightfield, c: [[i64; 2]; 3], surface: Surface, slots: &[
                 Surface::Exact => plane_height(wts, hc, area),
             };
             let err = (surface_m - hf.reference(k)).abs();
-            slots[k].fetch_max(err.to_bits() + 1, Ordering::Relaxed);
+            slots[(j - j_lo) as usize * w + i as usize].fetch_max(err.to_bits() + 1, Ordering::Relaxed);
         }
     }
 }

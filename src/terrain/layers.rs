@@ -16,8 +16,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::bake::image::Image;
-use crate::bake::raster::png::encode_rgba8_png;
+use crate::bake::raster::png::{encode_rgba8_png, rgba8};
 use crate::heightfield::Heightfield;
 use crate::mesh::{Scene, Texture};
 use crate::snow::CoverSettings;
@@ -63,6 +62,9 @@ pub const LAYER_WEIGHTS_1_ATTRIBUTE: &str = "_LAYER_WEIGHTS_1";
 /// (1-based preset index of the species covering the most ground, 0 where nothing grows), DENSITY
 /// (that species' instances per m²), SIZE (its plant height in metres).
 pub const SURFACE_ATTRIBUTE: &str = "_SURFACE";
+
+/// Texels weighed at a time while baking (whole rows; 5 MiB of f64 weights).
+const BAKE_BAND_TEXELS: u32 = 1 << 17;
 
 /// Longest side of the baked maps, in texels.
 pub const MAX_LAYER_MAP_PX: u32 = 2048;
@@ -166,14 +168,15 @@ pub struct TerrainLayers {
     /// RGBA8 weights per texel of each weight map (layers `4k … 4k + 3` in map k; one map without
     /// a vegetation cover, two with its soil layer), row 0 at the map's top (v = 0), as written.
     pub weights: Vec<Vec<[u8; 4]>>,
-    /// The base colour (linear RGBA) the weights blend to.
-    pub albedo: Image,
+    /// The base colour the weights blend to, as sRGB-encoded 8-bit RGBA (what its PNG holds;
+    /// [`crate::bake::raster::png::rgba8`] of the linear colour), `report.map_px` in size.
+    pub albedo_rgba8: Vec<u8>,
     pub report: LayerReport,
     /// Where the snow layer lies (the per-vertex weights follow the same rule).
     pub snow: SnowRule,
     /// What grows where (the soil layer and `_SURFACE`); `None` for a terrain built alone.
     pub cover: Option<std::sync::Arc<VegetationCover>>,
-    /// `albedo` as PNG, encoded on first use (every LoD scene shares it).
+    /// `albedo_rgba8` as PNG, encoded on first use (every LoD scene shares it).
     albedo_png: std::sync::OnceLock<Result<Vec<u8>, String>>,
 }
 
@@ -256,35 +259,45 @@ pub fn bake_layers_with(
     use rayon::prelude::*;
     let (w, h) = (map_px(hf.width), map_px(hf.height));
     let layers = if cover.is_some() { LAYER_NAMES.len() } else { LAYERS_PER_MAP };
-    let texels: Vec<[f64; 5]> = (0..h)
-        .into_par_iter()
-        .flat_map_iter(|y| {
+    let texels = w as usize * h as usize;
+    let mut sums = [0.0f64; 5];
+    let mut weights = vec![Vec::with_capacity(texels); layers.div_ceil(LAYERS_PER_MAP)];
+    let mut albedo = Vec::with_capacity(4 * texels);
+    // A band of rows at a time (weighed in parallel, then folded in texel order, as one pass over
+    // the whole map would): the f64 weights of every texel are never all held (40 bytes a texel,
+    // 168 MB at 2048², and as much again while collected).
+    let rows = (BAKE_BAND_TEXELS / w).max(1);
+    let mut band: Vec<[f64; 5]> = Vec::new();
+    let mut pixels: Vec<[f32; 4]> = Vec::new();
+    for y0 in (0..h).step_by(rows as usize) {
+        band.clear();
+        band.par_extend((y0..(y0 + rows).min(h)).into_par_iter().flat_map_iter(|y| {
             let t = (y as f64 + 0.5) / h as f64 * (hf.height - 1) as f64;
             let cover = cover.as_deref();
             (0..w).map(move |x| weights_at(hf, snow, cover, (x as f64 + 0.5) / w as f64 * (hf.width - 1) as f64, t))
-        })
-        .collect();
-    let mut sums = [0.0f64; 5];
-    let mut weights = vec![Vec::with_capacity(texels.len()); layers.div_ceil(LAYERS_PER_MAP)];
-    let mut pixels = Vec::with_capacity(texels.len());
-    for wts in &texels {
-        let mut colour = [0.0f32, 0.0, 0.0, 1.0];
-        for (k, &wk) in wts.iter().enumerate() {
-            sums[k] += wk;
-            for c in 0..3 {
-                colour[c] += wk as f32 * LAYER_ALBEDO[k][c];
+        }));
+        pixels.clear();
+        for wts in &band {
+            let mut colour = [0.0f32, 0.0, 0.0, 1.0];
+            for (k, &wk) in wts.iter().enumerate() {
+                sums[k] += wk;
+                for c in 0..3 {
+                    colour[c] += wk as f32 * LAYER_ALBEDO[k][c];
+                }
             }
+            let bytes = wts.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8);
+            for (m, map) in weights.iter_mut().enumerate() {
+                map.push(std::array::from_fn(|c| bytes.get(LAYERS_PER_MAP * m + c).copied().unwrap_or(0)));
+            }
+            pixels.push(colour);
         }
-        let bytes = wts.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8);
-        for (m, map) in weights.iter_mut().enumerate() {
-            map.push(std::array::from_fn(|c| bytes.get(LAYERS_PER_MAP * m + c).copied().unwrap_or(0)));
-        }
-        pixels.push(colour);
+        // the base colour as the PNG holds it (sRGB 8-bit), not as linear f32 (4 times the bytes)
+        albedo.extend(rgba8(&pixels));
     }
-    let n = texels.len().max(1) as f64;
+    let n = texels.max(1) as f64;
     TerrainLayers {
         weights,
-        albedo: Image { width: w, height: h, pixels },
+        albedo_rgba8: albedo,
         report: LayerReport {
             map_px: [w, h],
             layers: LAYER_NAMES[..layers].iter().map(|s| s.to_string()).collect(),
@@ -318,7 +331,8 @@ impl TerrainLayers {
     /// vertices take their border's).
     pub fn texture(&self, scene: &mut Scene, hf: &Heightfield, name: &str) -> Result<(), String> {
         vertex_weights(scene, hf, &self.snow, self.cover.as_deref());
-        let png = self.albedo_png.get_or_init(|| self.albedo.encode_png().map_err(|e| e.to_string())).clone()?;
+        let [w, h] = self.report.map_px;
+        let png = self.albedo_png.get_or_init(|| encode_rgba8_png(&self.albedo_rgba8, w, h)).clone()?;
         let texture = Texture { name: format!("{name}_base_color"), png };
         let t = match scene.textures.iter().position(|t| t.name == texture.name) {
             Some(t) => {
