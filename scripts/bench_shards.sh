@@ -75,6 +75,7 @@ for preset in "${presets[@]}"; do
       "$(peak_mb "$out.merge.time")" "$(bytes_mb "$out/.shards")" "$(bytes_mb "$merged")" "$same"
     rm -rf "$out"
   done
+  rm -rf "$whole"
 done
 echo "N: shards at the same time on this machine ($(nproc) cores); N seq: one after another (slowest = the longest shard);"
 echo "a unit is the terrain stage or one plant species (docs/sharding.md)"

@@ -8,6 +8,7 @@
 use std::fmt;
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// A regular grid of heights in metres. Sample (i, j) — column i, row j — lies at
 /// x = i·cell_size_m, z = j·cell_size_m, y = `heights[j * width + i]`.
@@ -22,7 +23,68 @@ pub struct Heightfield {
     /// The heights as the map's encoding defines them, where 32-bit floats cannot hold them exactly
     /// (Terrain-RGB's decimetres, a gray map's scale): `None` when `heights` are the exact values.
     /// Terrain error is measured against these, so a bound holds for the map, not for its rounding.
-    pub exact: Option<std::sync::Arc<[f64]>>,
+    pub exact: Option<ExactHeights>,
+}
+
+/// A map's exact heights ([`Heightfield::exact`]).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ExactHeights {
+    /// One f64 per sample.
+    Values(Arc<[f64]>),
+    /// One integer code per sample (a pixel's value) and the encoding's map from codes to metres,
+    /// applied on every read: 4 bytes a sample instead of 8 (an 8193² gray map keeps 268 MB, not
+    /// 537 MB, beside its f32 heights).
+    Codes { codes: Arc<[u32]>, map: CodeMap },
+    /// Codes of a small range (gray: at most 3 × 65535 + 1) and every code's height, computed once
+    /// by its [`CodeMap`]: a read is a look-up, not the map's two divisions.
+    Table { codes: Arc<[u32]>, heights: Arc<[f64]> },
+}
+
+impl ExactHeights {
+    /// The heights of `codes` by `map`: a table when the codes' range is small.
+    pub fn coded(codes: Vec<u32>, map: CodeMap) -> ExactHeights {
+        let top = codes.iter().copied().max().unwrap_or(0);
+        if matches!(map, CodeMap::Gray { .. }) && top < 1 << 18 {
+            let heights = (0..=top).map(|c| map.metres(c)).collect();
+            ExactHeights::Table { codes: codes.into(), heights }
+        } else {
+            ExactHeights::Codes { codes: codes.into(), map }
+        }
+    }
+
+    #[inline]
+    pub fn at(&self, k: usize) -> f64 {
+        match self {
+            ExactHeights::Values(v) => v[k],
+            ExactHeights::Codes { codes, map } => map.metres(codes[k]),
+            ExactHeights::Table { codes, heights } => heights[codes[k] as usize],
+        }
+    }
+}
+
+/// How an integer-coded encoding turns a pixel's code into metres: the f64 operations its decoder
+/// defines, in their order, so a height computed again is bit-identical to the decoded one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CodeMap {
+    /// `offset + (code / divisor) / vmax · scale`: gray (divisor 1: the pixel's value; 3: the sum
+    /// of R, G and B of gray stored as RGB), and raw 16-bit maps.
+    Gray { offset: f64, scale: f64, vmax: f64, divisor: f64 },
+    /// Mapbox Terrain-RGB, code = R·65536 + G·256 + B: `code · 0.1 − 10000`.
+    TerrainRgb,
+    /// Mapzen Terrarium, code = R·65536 + G·256 + B: `R·256 + G + B/256 − 32768`, which is
+    /// `code / 256 − 32768` exactly (every partial sum is an exact dyadic number).
+    Terrarium,
+}
+
+impl CodeMap {
+    #[inline]
+    pub fn metres(&self, code: u32) -> f64 {
+        match *self {
+            CodeMap::Gray { offset, scale, vmax, divisor } => offset + code as f64 / divisor / vmax * scale,
+            CodeMap::TerrainRgb => code as f64 * 0.1 - 10000.0,
+            CodeMap::Terrarium => code as f64 / 256.0 - 32768.0,
+        }
+    }
 }
 
 impl Heightfield {
@@ -36,7 +98,17 @@ impl Heightfield {
     /// of them is not exactly a 32-bit float.
     pub fn from_f64(width: usize, height: usize, heights: &[f64], cell_size_m: f64) -> Heightfield {
         let narrow: Vec<f32> = heights.iter().map(|&h| h as f32).collect();
-        let exact = narrow.iter().zip(heights).any(|(&n, &h)| n as f64 != h).then(|| heights.into());
+        let exact =
+            narrow.iter().zip(heights).any(|(&n, &h)| n as f64 != h).then(|| ExactHeights::Values(heights.into()));
+        Heightfield { width, height, heights: narrow, cell_size_m, exact }
+    }
+
+    /// Builds a heightfield from integer codes and their map to metres, keeping the codes as
+    /// [`Heightfield::exact`] when any height is not exactly a 32-bit float.
+    pub fn from_codes(width: usize, height: usize, codes: Vec<u32>, map: CodeMap, cell_size_m: f64) -> Heightfield {
+        let narrow: Vec<f32> = codes.iter().map(|&c| map.metres(c) as f32).collect();
+        let inexact = codes.iter().zip(&narrow).any(|(&c, &n)| n as f64 != map.metres(c));
+        let exact = inexact.then(|| ExactHeights::coded(codes, map));
         Heightfield { width, height, heights: narrow, cell_size_m, exact }
     }
 
@@ -45,7 +117,7 @@ impl Heightfield {
     #[inline]
     pub fn reference(&self, k: usize) -> f64 {
         match &self.exact {
-            Some(e) => e[k],
+            Some(e) => e.at(k),
             None => self.heights[k] as f64,
         }
     }
@@ -53,7 +125,7 @@ impl Heightfield {
     /// Largest |stored − reference| height over all samples (0 when the heights are exact).
     pub fn rounding_m(&self) -> f64 {
         match &self.exact {
-            Some(e) => e.iter().zip(&self.heights).fold(0.0f64, |m, (&x, &h)| m.max((x - h as f64).abs())),
+            Some(e) => self.heights.iter().enumerate().fold(0.0f64, |m, (k, &h)| m.max((e.at(k) - h as f64).abs())),
             None => 0.0,
         }
     }
@@ -481,11 +553,10 @@ fn decode_r16(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
             format!("--size {width}x{height} needs {expected} bytes of little-endian 16-bit samples, but the file has {}; check --size (`size` in a preset) and the byte order", bytes.len()),
         ));
     }
-    let (scale, offset) = (opts.height_scale_m, opts.height_offset_m);
-    let heights: Vec<f64> =
-        bytes.chunks_exact(2).map(|c| offset + u16::from_le_bytes([c[0], c[1]]) as f64 / 65535.0 * scale).collect();
+    let map = CodeMap::Gray { offset: opts.height_offset_m, scale: opts.height_scale_m, vmax: 65535.0, divisor: 1.0 };
+    let codes: Vec<u32> = bytes.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]]) as u32).collect();
     Ok(Decoded {
-        heightfield: Heightfield::from_f64(width, height, &heights, 1.0),
+        heightfield: Heightfield::from_codes(width, height, codes, map, 1.0),
         encoding: Encoding::R16,
         voids_filled: 0,
     })
@@ -526,7 +597,12 @@ fn decode_image(
     let img = reader.decode().map_err(|e| image_error(path, e))?;
     let (w, h) = (width as usize, height as usize);
     use image::DynamicImage as D;
-    let gray_scale = |v: f64, vmax: f64| opts.height_offset_m + v / vmax * opts.height_scale_m;
+    let gray = |vmax: f64, divisor: f64| CodeMap::Gray {
+        offset: opts.height_offset_m,
+        scale: opts.height_scale_m,
+        vmax,
+        divisor,
+    };
     let channels_differ =
         |rgb: &dyn Fn(usize) -> [u32; 3]| (0..w * h).map(rgb).position(|p| p[0] != p[1] || p[1] != p[2]);
     // RGB(A) 8-bit and 16-bit pixels as u32 triples; None for gray images
@@ -538,14 +614,14 @@ fn decode_image(
         D::ImageRgb16(_) | D::ImageRgba16(_) => Some(img.to_rgb16()),
         _ => None,
     };
-    let (encoding, heights) = match (&img, encoding) {
+    let (encoding, codes, map): (Encoding, Vec<u32>, CodeMap) = match (&img, encoding) {
         (D::ImageLuma8(_) | D::ImageLumaA8(_), Encoding::Auto | Encoding::Gray) => {
             let g = img.to_luma8();
-            (Encoding::Gray, g.as_raw().iter().map(|&v| gray_scale(v as f64, 255.0)).collect())
+            (Encoding::Gray, g.as_raw().iter().map(|&v| v as u32).collect(), gray(255.0, 1.0))
         }
         (D::ImageLuma16(_) | D::ImageLumaA16(_), Encoding::Auto | Encoding::Gray) => {
             let g = img.to_luma16();
-            (Encoding::Gray, g.as_raw().iter().map(|&v| gray_scale(v as f64, 65535.0)).collect())
+            (Encoding::Gray, g.as_raw().iter().map(|&v| v as u32).collect(), gray(65535.0, 1.0))
         }
         (D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageLuma16(_) | D::ImageLumaA16(_), e) => {
             return Err(HeightfieldError::format(
@@ -579,9 +655,10 @@ fn decode_image(
                 (0..w * h)
                     .map(|k| {
                         let p = px(k);
-                        gray_scale((p[0] + p[1] + p[2]) as f64 / 3.0, vmax)
+                        p[0] + p[1] + p[2]
                     })
                     .collect(),
+                gray(vmax, 3.0),
             )
         }
         (_, Encoding::TerrainRgb | Encoding::Terrarium) => {
@@ -592,12 +669,9 @@ fn decode_image(
                 ));
             };
             let raw = rgb.as_raw();
-            let decode_px: fn(f64, f64, f64) -> f64 = if encoding == Encoding::TerrainRgb {
-                |r, g, b| (r * 65536.0 + g * 256.0 + b) * 0.1 - 10000.0
-            } else {
-                |r, g, b| r * 256.0 + g + b / 256.0 - 32768.0
-            };
-            (encoding, raw.chunks_exact(3).map(|c| decode_px(c[0] as f64, c[1] as f64, c[2] as f64)).collect())
+            let map = if encoding == Encoding::TerrainRgb { CodeMap::TerrainRgb } else { CodeMap::Terrarium };
+            let codes = raw.chunks_exact(3).map(|c| (c[0] as u32) << 16 | (c[1] as u32) << 8 | c[2] as u32).collect();
+            (encoding, codes, map)
         }
         (_, e) => {
             return Err(HeightfieldError::format(
@@ -606,8 +680,7 @@ fn decode_image(
             ));
         }
     };
-    let heights: Vec<f64> = heights;
-    Ok(Decoded { heightfield: Heightfield::from_f64(w, h, &heights, 1.0), encoding, voids_filled: 0 })
+    Ok(Decoded { heightfield: Heightfield::from_codes(w, h, codes, map, 1.0), encoding, voids_filled: 0 })
 }
 
 /// 32-bit float single-channel TIFF in metres. Returns Ok(None) for TIFFs of other sample types,
@@ -653,4 +726,52 @@ fn decode_float_tiff(
         encoding: Encoding::Float,
         voids_filled: 0,
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The coded heights are the decoders' former f64 formulas, bit for bit, for every code of
+    /// 8/16-bit gray (and gray stored as RGB), and for Terrain-RGB and Terrarium over their range.
+    #[test]
+    fn coded_heights_equal_the_encodings_formulas_bit_for_bit() {
+        let (offset, scale) = (-12.5, 6553.5);
+        let gray = |v: f64, vmax: f64| offset + v / vmax * scale;
+        for (vmax, divisor, top) in
+            [(255.0, 1.0, 255u32), (65535.0, 1.0, 65535), (65535.0, 3.0, 3 * 65535), (255.0, 3.0, 765)]
+        {
+            let map = CodeMap::Gray { offset, scale, vmax, divisor };
+            let codes: Vec<u32> = (0..=top).collect();
+            let exact = ExactHeights::coded(codes.clone(), map);
+            assert!(matches!(exact, ExactHeights::Table { .. }));
+            for &c in &codes {
+                let v = if divisor == 1.0 { c as f64 } else { c as f64 / 3.0 };
+                assert_eq!(
+                    exact.at(c as usize).to_bits(),
+                    gray(v, vmax).to_bits(),
+                    "gray code {c} of {vmax}/{divisor}"
+                );
+                assert_eq!(map.metres(c).to_bits(), gray(v, vmax).to_bits());
+            }
+        }
+        for k in 0..200_000u64 {
+            let code = (crate::random::mix64(k) & 0xff_ffff) as u32;
+            let (r, g, b) = ((code >> 16) as f64, ((code >> 8) & 255) as f64, (code & 255) as f64);
+            let mapbox = (r * 65536.0 + g * 256.0 + b) * 0.1 - 10000.0;
+            let mapzen = r * 256.0 + g + b / 256.0 - 32768.0;
+            assert_eq!(CodeMap::TerrainRgb.metres(code).to_bits(), mapbox.to_bits(), "Terrain-RGB {code:#x}");
+            assert_eq!(CodeMap::Terrarium.metres(code).to_bits(), mapzen.to_bits(), "Terrarium {code:#x}");
+        }
+    }
+
+    #[test]
+    fn a_coded_map_keeps_codes_only_when_f32_cannot_hold_its_heights() {
+        let whole = CodeMap::Gray { offset: 0.0, scale: 255.0, vmax: 255.0, divisor: 1.0 };
+        assert!(Heightfield::from_codes(2, 2, vec![0, 1, 2, 255], whole, 1.0).exact.is_none());
+        let tenths = Heightfield::from_codes(2, 1, vec![1, 3], CodeMap::TerrainRgb, 1.0);
+        assert_eq!(tenths.reference(1), 3.0 * 0.1 - 10000.0);
+        assert!(matches!(tenths.exact, Some(ExactHeights::Codes { .. })));
+        assert!(tenths.rounding_m() > 0.0);
+    }
 }

@@ -9,7 +9,6 @@
 //! not mounted, the figures are `None` and reports leave them out.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::Arc;
 use std::time::Duration;
 
 /// How often a measured piece of work's resident set is read.
@@ -33,27 +32,36 @@ pub fn peak_rss_bytes() -> Option<u64> {
 }
 
 /// Runs `work` while a thread samples the resident set; the largest sample (with the sets at the
-/// start and at the end), or `None` where the platform does not tell.
+/// start and at the end), or `None` where the platform does not tell. The sampler stops when
+/// `work` returns or unwinds.
 pub fn measure<T>(work: impl FnOnce() -> T) -> (T, Option<u64>) {
     let Some(start) = rss_bytes() else { return (work(), None) };
-    let peak = Arc::new(AtomicU64::new(start));
-    let stop = Arc::new(AtomicBool::new(false));
-    let sampler = {
-        let (peak, stop) = (Arc::clone(&peak), Arc::clone(&stop));
-        std::thread::Builder::new().name("verdant-memory".into()).spawn(move || {
+    let peak = AtomicU64::new(start);
+    let stop = AtomicBool::new(false);
+    /// Sets the flag when dropped, also while unwinding (the scope then joins the sampler).
+    struct Stop<'a>(&'a AtomicBool);
+    impl Drop for Stop<'_> {
+        fn drop(&mut self) {
+            self.0.store(true, Ordering::Relaxed);
+        }
+    }
+    let out = std::thread::scope(|scope| {
+        let sampler = std::thread::Builder::new().name("verdant-memory".into()).spawn_scoped(scope, || {
             while !stop.load(Ordering::Relaxed) {
                 if let Some(now) = rss_bytes() {
                     peak.fetch_max(now, Ordering::Relaxed);
                 }
                 std::thread::sleep(SAMPLE_INTERVAL);
             }
-        })
-    };
-    let out = work();
-    stop.store(true, Ordering::Relaxed);
-    if let Ok(handle) = sampler {
-        let _ = handle.join();
-    }
+        });
+        let _stop = Stop(&stop);
+        let out = work();
+        drop(_stop);
+        if let Ok(handle) = sampler {
+            let _ = handle.join();
+        }
+        out
+    });
     if let Some(end) = rss_bytes() {
         peak.fetch_max(end, Ordering::Relaxed);
     }
@@ -87,5 +95,20 @@ mod tests {
         });
         let peak = peak.expect("a peak");
         assert!(peak >= size as u64, "peak {peak} B while {size} B were resident");
+    }
+
+    #[test]
+    fn the_sampler_stops_when_the_work_panics() {
+        let caught = std::panic::catch_unwind(|| measure(|| panic!("stage failed")));
+        assert!(caught.is_err());
+        // the scope joined the sampler: no thread of that name is left running
+        let threads = std::fs::read_dir("/proc/self/task").map(|d| d.count()).unwrap_or(0);
+        let named = std::fs::read_dir("/proc/self/task")
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter(|t| std::fs::read_to_string(t.path().join("comm")).is_ok_and(|c| c.trim() == "verdant-memory"))
+            .count();
+        assert_eq!(named, 0, "a sampler is still running ({threads} threads)");
     }
 }

@@ -570,7 +570,8 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[Stri
         s += &format!("| {part} | {:.2} |\n", *b as f64 / 1e6);
     }
     s += "\n## Timing\n\nPeak memory: the process's resident set at its largest during the stage, sampled every \
-          2 ms (what it still holds of earlier stages included).\n\n| stage | cached | seconds | peak memory (MiB) |\n|---|---|---|---|\n";
+          2 ms (what it still holds of earlier stages included, and with `--jobs` above 1 the other scenes \
+          built at the same time).\n\n| stage | cached | seconds | peak memory (MiB) |\n|---|---|---|---|\n";
     for r in runs {
         let cost = r.cost();
         let peak = cost.peak_bytes.map_or("—".to_string(), |b| format!("{:.0}", crate::memory::mib(b)));
