@@ -1016,6 +1016,36 @@ mod tests {
         assert!(json.contains(GENERATOR));
     }
 
+    /// The container streamed to a file ([`Glb::write`], as `export::write_scene` does) is the one
+    /// [`to_glb_with`] returns, for JSON chunks of every length mod 4 and for a scene with no
+    /// binary data (no BIN chunk): the 12-byte header's length, both chunk headers and paddings.
+    #[test]
+    fn the_streamed_glb_is_the_in_memory_one_for_every_padding() {
+        let mut lengths_mod_4 = std::collections::BTreeSet::new();
+        let mut scenes: Vec<Scene> = (0..12)
+            .map(|k| {
+                let mut s = triangle_scene(2);
+                s.name = "x".repeat(k);
+                s
+            })
+            .collect();
+        scenes.push(Scene { name: "empty".into(), ..Scene::default() });
+        let dir = tempfile::tempdir().unwrap();
+        for (k, scene) in scenes.iter().enumerate() {
+            let in_memory = to_glb(scene).unwrap();
+            let glb = to_glb_parts(scene, &WriteOptions::default()).unwrap();
+            lengths_mod_4.insert(glb.json.len() % 4);
+            assert_eq!(glb.byte_len(), in_memory.len());
+            let path = dir.path().join(format!("s{k}.glb"));
+            crate::export::write_scene_with(scene, &path, &WriteOptions::default()).unwrap();
+            assert_eq!(std::fs::read(&path).unwrap(), in_memory, "scene {k}");
+            assert_eq!(glb.bin.is_empty(), k == 12);
+        }
+        assert_eq!(lengths_mod_4.len(), 4, "JSON lengths mod 4 covered: {lengths_mod_4:?}");
+        // nothing but the written files is left in the folder (no staged temporaries)
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), scenes.len());
+    }
+
     #[test]
     fn uri_encoding() {
         assert_eq!(uri_encode("my tile #1.bin"), "my%20tile%20%231.bin");

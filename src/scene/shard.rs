@@ -314,6 +314,20 @@ mod tests {
         assert!(dir.path().join(&mine).exists() && dir.path().join(other).exists(), "others are left");
     }
 
+    /// Records written before shards reported their peak memory still read (the field is
+    /// optional), and a record with it round-trips.
+    #[test]
+    fn a_record_reads_with_and_without_its_peak_memory() {
+        let old = r#"{"built_by": "verdant 0.1.0 x86_64-linux", "scene": "w", "shard": 1, "of": 2,
+            "units": [{"name": "terrain", "entries": ["terrain-ab"]}], "built": []}"#;
+        let record: ShardRecord = serde_json::from_str(old).unwrap();
+        assert_eq!(record.peak_memory_mib, None);
+        assert!(!serde_json::to_string(&record).unwrap().contains("peak_memory_mib"));
+        let with = ShardRecord { peak_memory_mib: Some(723.5), ..record };
+        let back: ShardRecord = serde_json::from_str(&serde_json::to_string(&with).unwrap()).unwrap();
+        assert_eq!(back, with);
+    }
+
     #[test]
     fn a_shard_is_index_over_count() {
         assert_eq!("0/1".parse::<Shard>(), Ok(Shard { index: 0, count: 1 }));
