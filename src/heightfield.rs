@@ -106,8 +106,16 @@ impl Heightfield {
     /// Builds a heightfield from integer codes and their map to metres, keeping the codes as
     /// [`Heightfield::exact`] when any height is not exactly a 32-bit float.
     pub fn from_codes(width: usize, height: usize, codes: Vec<u32>, map: CodeMap, cell_size_m: f64) -> Heightfield {
-        let narrow: Vec<f32> = codes.iter().map(|&c| map.metres(c) as f32).collect();
-        let inexact = codes.iter().zip(&narrow).any(|(&c, &n)| n as f64 != map.metres(c));
+        // each code's height computed once: narrowed, and compared with its narrowing
+        let mut inexact = false;
+        let narrow: Vec<f32> = codes
+            .iter()
+            .map(|&c| {
+                let exact = map.metres(c);
+                inexact |= exact as f32 as f64 != exact;
+                exact as f32
+            })
+            .collect();
         let exact = inexact.then(|| ExactHeights::coded(codes, map));
         Heightfield { width, height, heights: narrow, cell_size_m, exact }
     }
