@@ -210,7 +210,10 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// fewer distances measured in the report). 15: the chain maps the table's `variant` column to
 /// its meshes (`pick`; the files are unchanged). 16: a tree's LoD1 is its rebuild with half the
 /// radial segments, simplified only when that saves nothing (edge collapse flattened the twigs).
-pub const PLANTS_ALGORITHM_VERSION: u32 = 17;
+/// 17: reports carry `stored_error_m` (compact outputs). 18: the fast analyzer's budget of 6 M triangles per measured
+/// distance (a chain over it is measured from fewer azimuths; trees within it, the presets' among
+/// them, are unchanged); reports carry `analysis_views`.
+pub const PLANTS_ALGORITHM_VERSION: u32 = 18;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).

@@ -3,12 +3,14 @@
 
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use super::cards::ModelFrame;
 use super::types::{
     AtlasCell, Progress, SpeedErrorRow, TreeLod, TreeLodError, TreeLodFigures, TreeLodOptions, SEARCH_FAR_RADII,
     SEARCH_NEAR_RADII,
 };
-use crate::bake::views::{switch_search_chain, Candidate, Renderable, SwitchSearch};
+use crate::bake::views::{switch_search_chain, Candidate, LodImageOptions, Renderable, SwitchSearch};
 use crate::mesh::{Mesh, Primitive};
 use crate::plants::hausdorff::{hausdorff, HausdorffError, TriangleBvh};
 use crate::random::mix64;
@@ -20,6 +22,9 @@ pub(super) struct Measured {
     pub seconds: f64,
     pub seconds_hausdorff: f64,
     pub seconds_image: f64,
+    /// Views per measured distance, and why fewer than the options ask ([`views_within_budget`]).
+    pub views: usize,
+    pub reduced: Option<String>,
 }
 
 /// Measures every level of `levels` against `reference`; switch distances never decrease along
@@ -35,8 +40,9 @@ pub(super) fn measure_levels(
 ) -> Result<Measured, TreeLodError> {
     let started = Instant::now();
     let grid = TriangleBvh::new(reference.mesh);
-    let mut lods = Vec::with_capacity(levels.len());
-    for lod in levels {
+    // every level at once (each measure is its own; nested parallelism inside the Hausdorff
+    // batches): the levels' figures do not depend on the order
+    let lods = levels.par_iter().map(|lod| {
         let mesh = &lod.scene.meshes[0];
         let store = options.compact.write_options();
         let bytes = crate::export::gltf::to_glb_with(&lod.scene, &store).map_err(|e| TreeLodError::Texture(e.0))?.len();
@@ -71,11 +77,13 @@ pub(super) fn measure_levels(
             screen_coverage: 1.0,
             measured: Vec::new(),
         };
-        lods.push(f);
-    }
+        Ok(f)
+    });
+    let mut lods = lods.collect::<Result<Vec<TreeLodFigures>, TreeLodError>>()?;
     let seconds_hausdorff = started.elapsed().as_secs_f64();
+    let (mut views, mut reduced) = (0, None);
     if options.analyze {
-        image_errors(&mut lods, levels, reference, frame, impostor_cells, options, progress);
+        (views, reduced) = image_errors(&mut lods, levels, reference, frame, impostor_cells, options, progress);
     }
     for n in 1..lods.len() {
         if lods[n].switch_distance_m < lods[n - 1].switch_distance_m {
@@ -99,12 +107,42 @@ pub(super) fn measure_levels(
             triangle_ratio: l.triangles as f64 / lod0_triangles,
         })
         .collect();
-    Ok(Measured { lods, table, seconds, seconds_hausdorff, seconds_image: seconds - seconds_hausdorff })
+    Ok(Measured { lods, table, seconds, seconds_hausdorff, seconds_image: seconds - seconds_hausdorff, views, reduced })
+}
+
+/// The azimuths of `image` halved (while even, never below 2) until a measured distance draws at
+/// most `budget` triangles, `per_view` being what one view draws (LoD0 and every level); with why,
+/// when they were. The elevations stay: they see what azimuths cannot (from above, the crown).
+pub(super) fn views_within_budget(
+    image: &LodImageOptions,
+    per_view: u64,
+    budget: Option<u64>,
+) -> (LodImageOptions, Option<String>) {
+    let elevations = image.elevations_deg.len().max(1) as u64;
+    let Some(budget) = budget else {
+        return (image.clone(), None);
+    };
+    let drawn = |azimuths: u32| per_view.saturating_mul(azimuths.max(1) as u64 * elevations);
+    let mut azimuths = image.azimuths;
+    while azimuths > 2 && azimuths % 2 == 0 && drawn(azimuths) > budget {
+        azimuths /= 2;
+    }
+    if azimuths == image.azimuths {
+        return (image.clone(), None);
+    }
+    let why = format!(
+        "{} azimuths × {elevations} elevations instead of {} × {elevations}: LoD0 and the levels draw {per_view} \
+         triangles a view, over the fast analyzer's budget of {budget} a distance (`--analysis exhaustive` \
+         measures every view)",
+        azimuths, image.azimuths
+    );
+    (LodImageOptions { azimuths, ..image.clone() }, Some(why))
 }
 
 /// The image figures of every level after LoD0: the error at each measured distance and the
 /// switch distance from which it stays within the policy's pixel budget. All levels are searched
-/// together ([`switch_search_chain`]): a distance several levels test renders LoD0 once.
+/// together ([`switch_search_chain`]): a distance several levels test renders LoD0 once. Returns
+/// the views per distance and why fewer than the options ask, when they were.
 fn image_errors(
     figures: &mut [TreeLodFigures],
     levels: &[TreeLod],
@@ -113,11 +151,18 @@ fn image_errors(
     impostor_cells: &[AtlasCell],
     options: &TreeLodOptions,
     progress: Progress,
-) {
+) -> (usize, Option<String>) {
     let measured: Vec<usize> = (0..levels.len()).filter(|&n| levels[n].level > 0).collect();
     if measured.is_empty() {
-        return;
+        return (0, None);
     }
+    let triangles = |m: &Mesh| m.primitives.iter().map(|p| p.indices.len() as u64 / 3).sum::<u64>();
+    let per_view = triangles(reference.mesh) + measured.iter().map(|&n| levels[n].triangles() as u64).sum::<u64>();
+    let (image, reduced) = views_within_budget(&options.image, per_view, options.image_budget_triangles);
+    if let Some(why) = &reduced {
+        progress(&format!("image analysis from {why}"));
+    }
+    let views = image.azimuths.max(1) as usize * image.elevations_deg.len().max(1);
     let names: Vec<String> = measured.iter().map(|&n| format!("LoD{} ({})", levels[n].level, levels[n].kind)).collect();
     progress(&format!("measuring {} against LoD0", names.join(", ")));
     // the impostor's cards, each facing the azimuth it is baked from (engines show view k around
@@ -152,7 +197,7 @@ fn image_errors(
         bisections: options.bisections,
         guided: options.guided_search,
     };
-    let results = switch_search_chain(reference, &candidates, &view, &options.image, &range);
+    let results = switch_search_chain(reference, &candidates, &view, &image, &range);
     for (&n, (rows, switch_m, never)) in measured.iter().zip(results) {
         let f = &mut figures[n];
         if let Some(near) = rows.first() {
@@ -168,5 +213,34 @@ fn image_errors(
         f.switch_distance_m = switch_m;
         f.never_passes = never;
         f.screen_coverage = options.policy.coverage_at_centre_distance(frame.radius, switch_m);
+    }
+    (views, reduced)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::views_within_budget;
+    use crate::bake::views::LodImageOptions;
+
+    fn fast() -> LodImageOptions {
+        crate::plants::tree_lod::AnalysisDetail::Fast.image()
+    }
+
+    #[test]
+    fn azimuths_halve_until_a_distance_fits_the_budget_never_below_two() {
+        // 24 views of 100 triangles: 2,400 a distance
+        for (budget, azimuths) in [(2_400, 8), (2_399, 4), (1_200, 4), (1_199, 2), (600, 2), (1, 2)] {
+            let (image, why) = views_within_budget(&fast(), 100, Some(budget));
+            assert_eq!(image.azimuths, azimuths, "budget {budget}");
+            assert_eq!(image.elevations_deg, fast().elevations_deg);
+            assert_eq!(why.is_some(), azimuths != 8, "budget {budget}");
+        }
+        let (image, why) = views_within_budget(&fast(), u64::MAX, None);
+        assert_eq!((image, why), (fast(), None));
+        // an odd count is not halved (views stay evenly spaced from 0°)
+        let odd = LodImageOptions { azimuths: 5, ..fast() };
+        assert_eq!(views_within_budget(&odd, 100, Some(1)).0.azimuths, 5);
+        // no overflow at absurd sizes
+        assert_eq!(views_within_budget(&fast(), u64::MAX, Some(1)).0.azimuths, 2);
     }
 }

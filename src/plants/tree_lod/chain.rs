@@ -312,6 +312,8 @@ fn build_chain(input: ChainInput, options: &TreeLodOptions) -> Result<TreeLods, 
         seconds_hausdorff: measured.seconds_hausdorff,
         seconds_image: measured.seconds_image,
         raster_fragments: atlas.fragments,
+        analysis_views: measured.views,
+        analysis_reduced: measured.reduced.clone(),
     };
     Ok(TreeLods {
         name,

@@ -96,6 +96,11 @@ pub struct TreeLodOptions {
     /// Narrow each switch's bracket by interpolation rather than bisection
     /// ([`crate::bake::views::SwitchSearch::guided`]).
     pub guided_search: bool,
+    /// The most triangles the image analyzer draws at one measured distance (LoD0 and every
+    /// level measured there, over all views): above it the azimuths are halved until it fits
+    /// (never below 2), so the analyzer's time at the triangle cap stays a few seconds. None:
+    /// every view whatever the size. See [`AnalysisDetail::image_budget_triangles`].
+    pub image_budget_triangles: Option<u64>,
     /// The LoD policy switch distances are found for (`[lod]`: pixel budget and screen).
     pub policy: LodView,
     /// How the chain's glb files store vertex data; the quantization is folded into each level's
@@ -160,7 +165,22 @@ impl AnalysisDetail {
     pub fn guided_search(self) -> bool {
         self == AnalysisDetail::Fast
     }
+
+    /// Fast: [`FAST_IMAGE_BUDGET_TRIANGLES`]; exhaustive: no budget (every view).
+    pub fn image_budget_triangles(self) -> Option<u64> {
+        match self {
+            AnalysisDetail::Fast => Some(FAST_IMAGE_BUDGET_TRIANGLES),
+            AnalysisDetail::Exhaustive => None,
+        }
+    }
 }
+
+/// The fast analyzer's triangles per measured distance: 6 M keeps all 24 views for every tree of
+/// ../shared/data (the largest, abop-bush, draws 4.7 M: 120k + 62k + 12k over 24 views) and for
+/// LoD0s up to about 150k triangles; a tree at the 300k default cap (262k: 10.8 M) is measured from
+/// 4 azimuths × 3 elevations, its image analysis 4.5 → 2.0 s (scripts/bench_trees.sh compares it
+/// with the exhaustive measure).
+pub const FAST_IMAGE_BUDGET_TRIANGLES: u64 = 6_000_000;
 
 /// The farthest distance a switch search measures, in bounding radii (a tree ~3 px tall).
 pub const SEARCH_FAR_RADII: f64 = 1024.0;
@@ -178,6 +198,7 @@ impl Default for TreeLodOptions {
             bisections: AnalysisDetail::Fast.bisections(),
             search_start_radii: AnalysisDetail::Fast.search_start_radii(),
             guided_search: AnalysisDetail::Fast.guided_search(),
+            image_budget_triangles: AnalysisDetail::Fast.image_budget_triangles(),
             policy: LodView::default(),
             compact: crate::export::quantize::Compact::None,
         }
@@ -192,6 +213,7 @@ impl TreeLodOptions {
             bisections: detail.bisections(),
             search_start_radii: detail.search_start_radii(),
             guided_search: detail.guided_search(),
+            image_budget_triangles: detail.image_budget_triangles(),
             ..self
         }
     }
@@ -295,7 +317,8 @@ pub struct TreeLodFigures {
     /// LoD0's quantization (a surface point moves at most as far as its triangle's corners).
     #[serde(default)]
     pub stored_error_m: f64,
-    /// Worst over 8 azimuths × 3 elevations at the nearest measured distance and at the switch.
+    /// Worst over the analyzer's views ([`TreeLodReport::analysis_views`]) at the nearest measured
+    /// distance and at the switch.
     pub near_distance_m: f64,
     pub near_iou: f64,
     pub near_color_rmse: f64,
@@ -363,6 +386,14 @@ pub struct TreeLodReport {
     #[serde(default)]
     pub seconds_image: f64,
     pub raster_fragments: u64,
+    /// Views the image analyzer measured each distance from: azimuths × elevations, fewer than
+    /// its options ask when the chain is over [`TreeLodOptions::image_budget_triangles`] (0
+    /// without analysis, and in reports from before this field).
+    #[serde(default)]
+    pub analysis_views: usize,
+    /// Why fewer views were measured than the options ask, when they were.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub analysis_reduced: Option<String>,
 }
 
 /// Everything one tree's chain writes.
