@@ -19,7 +19,7 @@
 # is 2^(1/8) = 1.09).
 # Also issue 21's figure: the default chain at the default triangle cap (a 262k-triangle bush, as a
 # tree and as an OBJ model), where the fast analyzer measures fewer views (its 6 M triangles per
-# distance budget). Target: under 5 s.
+# distance budget). Target: under 5 s. These runs take no extra arguments (they measure the defaults).
 #
 # Uses ../shared/data/lsystems relative to the repo root (override with VERDANT_LSYSTEMS_DIR).
 # Arguments go to every `verdant tree` run, e.g. `--radial-segments 12`.

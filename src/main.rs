@@ -138,9 +138,10 @@ struct MeshArgs {
     /// Skip the image analyzer (no switch distances: MSFT_lod coverages are 0); for timing.
     #[arg(long)]
     no_analysis: bool,
-    /// How thoroughly the analyzer measures: `fast` (24 views up to 96 px, switches within 9 %)
-    /// or `exhaustive` (80 views up to 256 px at 4×4 samples, within 2 %; tens of times the work),
-    /// what the fast figures are checked against in scripts/bench_trees.sh.
+    /// How thoroughly the analyzer measures: `fast` (24 views up to 96 px, switches within 9 %;
+    /// 12 views for a chain drawing over 6 M triangles a distance) or `exhaustive` (80 views up to
+    /// 256 px at 4×4 samples, within 2 %; tens of times the work), what the fast figures are
+    /// checked against in scripts/bench_trees.sh.
     #[arg(long, value_enum, value_name = "DETAIL", default_value_t = AnalysisArg::Fast)]
     analysis: AnalysisArg,
     /// glb/gltf: store vertex data compactly (KHR_mesh_quantization): positions as 16-bit
@@ -236,9 +237,10 @@ struct TreeArgs {
     /// Skip the image analyzer (no switch distances: MSFT_lod coverages are 0); for timing.
     #[arg(long)]
     no_analysis: bool,
-    /// How thoroughly the analyzer measures: `fast` (24 views up to 96 px, switches within 9 %)
-    /// or `exhaustive` (80 views up to 256 px at 4×4 samples, within 2 %; tens of times the work),
-    /// what the fast figures are checked against in scripts/bench_trees.sh.
+    /// How thoroughly the analyzer measures: `fast` (24 views up to 96 px, switches within 9 %;
+    /// 12 views for a chain drawing over 6 M triangles a distance) or `exhaustive` (80 views up to
+    /// 256 px at 4×4 samples, within 2 %; tens of times the work), what the fast figures are
+    /// checked against in scripts/bench_trees.sh.
     #[arg(long, value_enum, value_name = "DETAIL", default_value_t = AnalysisArg::Fast)]
     analysis: AnalysisArg,
     /// Leaves as glTF POINTS (one per leaf at its centre, NORMAL, COLOR_0 and _LEAF_SIZE =

@@ -636,7 +636,7 @@ fn plant_lods(sp: &PlantReport, view: &crate::lod::LodView) -> Vec<PlantLodManif
 }
 
 const CHAIN_NOTE: &str = "The chain's speed/error table: geometric error = one-sided Hausdorff distance LoD_k → LoD0 (sampled); \
-     image error from 8 azimuths × 3 elevations; switch distance = where the silhouette error stays within the `[lod]` pixel budget (see the view section).";
+     image error from 8 azimuths × 3 elevations (4 × 3 for a chain over the analyzer's budget: its report's `analysis_views`); switch distance = where the silhouette error stays within the `[lod]` pixel budget (see the view section).";
 const CHAIN_HEADER: &str = "| model | level | kind | triangles | bytes | Hausdorff max (m) | IoU at switch | switch distance (m) | screen coverage |\n\
                             |---|---|---|---|---|---|---|---|---|\n";
 

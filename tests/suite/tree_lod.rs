@@ -49,22 +49,26 @@ fn the_fast_analyzer_measures_fewer_azimuths_over_its_budget_and_says_so() {
     let all = bush(3, &small_atlas());
     assert_eq!(all.report.analysis_views, 24);
     assert_eq!(all.report.analysis_reduced, None);
-    // a budget it is over: azimuths halved 8 → 4 → 2 (never fewer), the elevations kept
+    // a budget it is over: 4 azimuths instead of 8 (never fewer), the elevations kept
     let tight = bush(3, &TreeLodOptions { image_budget_triangles: Some(1), ..small_atlas() });
-    assert_eq!(tight.report.analysis_views, 2 * 3);
+    assert_eq!(tight.report.analysis_views, 4 * 3);
     let why = tight.report.analysis_reduced.as_deref().expect("the report says why");
     assert!(
-        why.contains("2 azimuths × 3 elevations instead of 8 × 3") && why.contains("--analysis exhaustive"),
+        why.contains("4 azimuths × 3 elevations instead of 8 × 3") && why.contains("--analysis exhaustive"),
         "{why}"
     );
-    // still a whole measure: every level after LoD0 measured, switches in order
+    // the views measured are the fewer ones (the worst over 12 views is not the worst over 24 at
+    // every distance), and still a whole measure: every level after LoD0, switches in order
+    let rows = |t: &TreeLods| t.report.lods.iter().map(|l| l.measured.clone()).collect::<Vec<_>>();
+    assert_ne!(rows(&tight), rows(&all), "the analyzer measured other views than the report says");
     for w in tight.report.lods.windows(2) {
         assert!(!w[1].measured.is_empty() && w[1].switch_distance_m >= w[0].switch_distance_m);
     }
-    // a budget that fits 4 azimuths stops there; no budget measures every view
-    let per_view = |t: &TreeLods| t.report.lods.iter().map(|l| l.triangles as u64).sum::<u64>();
-    let four = bush(3, &TreeLodOptions { image_budget_triangles: Some(per_view(&all) * 12), ..small_atlas() });
-    assert_eq!(four.report.analysis_views, 12);
+    // the budget counts LoD0 and every measured level: exactly 24 views of them fit, one less does not
+    let per_view: u64 = all.report.lods.iter().map(|l| l.triangles as u64).sum();
+    let at = |budget| bush(3, &TreeLodOptions { image_budget_triangles: Some(budget), ..small_atlas() });
+    assert_eq!(at(per_view * 24).report.analysis_views, 24);
+    assert_eq!(at(per_view * 24 - 1).report.analysis_views, 12);
     let none = bush(3, &TreeLodOptions { image_budget_triangles: None, ..small_atlas() });
     assert_eq!((none.report.analysis_views, none.report.analysis_reduced.as_deref()), (24, None));
     assert_eq!(bytes_of(&none), bytes_of(&all), "within the budget nothing changes");

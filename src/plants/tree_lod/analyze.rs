@@ -110,9 +110,15 @@ pub(super) fn measure_levels(
     Ok(Measured { lods, table, seconds, seconds_hausdorff, seconds_image: seconds - seconds_hausdorff, views, reduced })
 }
 
-/// The azimuths of `image` halved (while even, never below 2) until a measured distance draws at
-/// most `budget` triangles, `per_view` being what one view draws (LoD0 and every level); with why,
-/// when they were. The elevations stay: they see what azimuths cannot (from above, the crown).
+/// The fewest azimuths a budget leaves: 4 × 3 views is the coarsest measure compared with the
+/// exhaustive one (docs/lsystems.md); below it the budget no longer bounds the time, the triangle
+/// cap does (a chain at the cap draws at most ~2.1 × 300k triangles a view: 7.6 M a distance).
+pub(super) const MIN_BUDGET_AZIMUTHS: u32 = 4;
+
+/// The azimuths of `image` halved (while even, never below [`MIN_BUDGET_AZIMUTHS`]) until a
+/// measured distance draws at most `budget` triangles, `per_view` being what one view draws (LoD0
+/// and every level); with why, when they were. The elevations stay: they see what azimuths cannot
+/// (from above, the crown).
 pub(super) fn views_within_budget(
     image: &LodImageOptions,
     per_view: u64,
@@ -124,7 +130,7 @@ pub(super) fn views_within_budget(
     };
     let drawn = |azimuths: u32| per_view.saturating_mul(azimuths.max(1) as u64 * elevations);
     let mut azimuths = image.azimuths;
-    while azimuths > 2 && azimuths % 2 == 0 && drawn(azimuths) > budget {
+    while azimuths / 2 >= MIN_BUDGET_AZIMUTHS && azimuths % 2 == 0 && drawn(azimuths) > budget {
         azimuths /= 2;
     }
     if azimuths == image.azimuths {
@@ -156,8 +162,8 @@ fn image_errors(
     if measured.is_empty() {
         return (0, None);
     }
-    let triangles = |m: &Mesh| m.primitives.iter().map(|p| p.indices.len() as u64 / 3).sum::<u64>();
-    let per_view = triangles(reference.mesh) + measured.iter().map(|&n| levels[n].triangles() as u64).sum::<u64>();
+    let per_view =
+        reference.mesh.triangle_count() as u64 + measured.iter().map(|&n| levels[n].triangles() as u64).sum::<u64>();
     let (image, reduced) = views_within_budget(&options.image, per_view, options.image_budget_triangles);
     if let Some(why) = &reduced {
         progress(&format!("image analysis from {why}"));
@@ -228,8 +234,8 @@ mod tests {
 
     #[test]
     fn azimuths_halve_until_a_distance_fits_the_budget_never_below_two() {
-        // 24 views of 100 triangles: 2,400 a distance
-        for (budget, azimuths) in [(2_400, 8), (2_399, 4), (1_200, 4), (1_199, 2), (600, 2), (1, 2)] {
+        // 24 views of 100 triangles: 2,400 a distance; never fewer than 4 azimuths
+        for (budget, azimuths) in [(2_400, 8), (2_399, 4), (1_200, 4), (1_199, 4), (1, 4)] {
             let (image, why) = views_within_budget(&fast(), 100, Some(budget));
             assert_eq!(image.azimuths, azimuths, "budget {budget}");
             assert_eq!(image.elevations_deg, fast().elevations_deg);
@@ -237,10 +243,18 @@ mod tests {
         }
         let (image, why) = views_within_budget(&fast(), u64::MAX, None);
         assert_eq!((image, why), (fast(), None));
-        // an odd count is not halved (views stay evenly spaced from 0°)
+        // an odd count is not halved (views stay evenly spaced from 0°); 16 halves twice
         let odd = LodImageOptions { azimuths: 5, ..fast() };
         assert_eq!(views_within_budget(&odd, 100, Some(1)).0.azimuths, 5);
+        let sixteen = LodImageOptions { azimuths: 16, ..fast() };
+        assert_eq!(views_within_budget(&sixteen, 100, Some(1)).0.azimuths, 4);
         // no overflow at absurd sizes
-        assert_eq!(views_within_budget(&fast(), u64::MAX, Some(1)).0.azimuths, 2);
+        assert_eq!(views_within_budget(&fast(), u64::MAX, Some(1)).0.azimuths, 4);
+        // the exhaustive measure has no budget; fast has it back
+        let exhaustive = crate::plants::tree_lod::TreeLodOptions::default()
+            .with_analysis(crate::plants::tree_lod::AnalysisDetail::Exhaustive);
+        assert_eq!(exhaustive.image_budget_triangles, None);
+        let fast_again = exhaustive.with_analysis(crate::plants::tree_lod::AnalysisDetail::Fast);
+        assert_eq!(fast_again.image_budget_triangles, Some(super::super::FAST_IMAGE_BUDGET_TRIANGLES));
     }
 }

@@ -97,9 +97,10 @@ pub struct TreeLodOptions {
     /// ([`crate::bake::views::SwitchSearch::guided`]).
     pub guided_search: bool,
     /// The most triangles the image analyzer draws at one measured distance (LoD0 and every
-    /// level measured there, over all views): above it the azimuths are halved until it fits
-    /// (never below 2), so the analyzer's time at the triangle cap stays a few seconds. None:
-    /// every view whatever the size. See [`AnalysisDetail::image_budget_triangles`].
+    /// level measured there, over all views): above it the azimuths are halved until it fits,
+    /// never below 4 (8 × 3 views → 4 × 3), so the analyzer's time at the triangle cap stays a
+    /// few seconds. None: every view whatever the size. See
+    /// [`AnalysisDetail::image_budget_triangles`].
     pub image_budget_triangles: Option<u64>,
     /// The LoD policy switch distances are found for (`[lod]`: pixel budget and screen).
     pub policy: LodView,
@@ -176,10 +177,11 @@ impl AnalysisDetail {
 }
 
 /// The fast analyzer's triangles per measured distance: 6 M keeps all 24 views for every tree of
-/// ../shared/data (the largest, abop-bush, draws 4.7 M: 120k + 62k + 12k over 24 views) and for
-/// LoD0s up to about 150k triangles; a tree at the 300k default cap (262k: 10.8 M) is measured from
-/// 4 azimuths × 3 elevations, its image analysis 4.5 → 2.0 s (scripts/bench_trees.sh compares it
-/// with the exhaustive measure).
+/// ../shared/data (the largest, abop-bush, draws 4.7 M: 120k + 62k + 12k over 24 views); a chain
+/// drawing more than 250k triangles a view (LoD0 and its levels: from about 120k–150k LoD0
+/// triangles, by how much LoD1 and the cards keep) is measured from 4 azimuths × 3 elevations. The
+/// 262k-triangle bush at the 300k default cap (452k a view): image analysis 4.5 → 2.0 s
+/// (scripts/bench_trees.sh compares it with the exhaustive measure).
 pub const FAST_IMAGE_BUDGET_TRIANGLES: u64 = 6_000_000;
 
 /// The farthest distance a switch search measures, in bounding radii (a tree ~3 px tall).
