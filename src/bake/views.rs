@@ -415,22 +415,30 @@ pub fn switch_search_chain(
             j_far -= 1;
         }
         loop {
-            let passing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].fail.is_none()).collect();
+            let mut passing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].fail.is_none()).collect();
             let failing: Vec<usize> = (0..searches.len()).filter(|&i| searches[i].pass.is_none()).collect();
             if range.guided {
-                // the walking levels go straight to where the first of them is predicted to cross
-                // the bound (its error close to 1/d: the first point predicted to pass), rather than
-                // halving towards it; they share every point they measure, as when halving
+                // the walking levels go straight to where they are predicted to cross the bound
+                // (the error close to 1/d: the first point predicted to pass), rather than halving
+                // towards it; levels whose predictions meet share the point
                 let predicted = |(j, e): (i64, f64)| {
                     let k = j as f64 + steps as f64 * (e / view.max_error_px).log2();
                     k.is_finite().then(|| k.ceil() as i64)
                 };
-                // inwards: all passed at the same point; the farthest predicted crossing first
-                let jp = passing.first().and_then(|&i| searches[i].pass).map(|p| p.0);
-                if let (Some(jp), Some(k)) =
-                    (jp, passing.iter().filter_map(|&i| searches[i].pass.and_then(predicted)).max())
-                {
-                    inward = k.clamp(j_near.min(jp - 1), jp - 1);
+                // inwards: each walking level's next point is its predicted crossing, nearer than
+                // its nearest pass; the farthest of them is measured, by the levels whose next point
+                // it is. A level predicted to cross nearer waits for its own point: measured here it
+                // would draw itself where its error is a fraction of the bound (a LoD1 at 0.05 px
+                // followed the impostor's walk out at 100 radii), which tells nothing the prediction
+                // from its last pass does not. A level without a prediction (no error at all) walks
+                // with every point.
+                let next = |i: usize| {
+                    let (jp, e) = searches[i].pass?;
+                    predicted((jp, e)).map(|k| k.clamp(j_near.min(jp - 1), jp - 1))
+                };
+                if let Some(k) = passing.iter().filter_map(|&i| next(i)).max() {
+                    inward = k;
+                    passing.retain(|&i| next(i).is_none_or(|n| n >= k));
                 }
                 // outwards: all failed at the same point; the nearest predicted crossing first
                 let jf = failing.first().and_then(|&i| searches[i].fail).map(|f| f.0);

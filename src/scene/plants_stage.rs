@@ -212,8 +212,10 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// radial segments, simplified only when that saves nothing (edge collapse flattened the twigs).
 /// 17: reports carry `stored_error_m` (compact outputs). 18: the fast analyzer's budget of 6 M triangles per measured
 /// distance (a chain over it is measured from fewer azimuths; trees within it, the presets' among
-/// them, are unchanged); reports carry `analysis_views`.
-pub const PLANTS_ALGORITHM_VERSION: u32 = 18;
+/// them, are unchanged); reports carry `analysis_views`. 19: a level walking inwards is measured at
+/// its own predicted crossings only (the same switches and files on ../shared/data and the
+/// presets; fewer rows in the reports).
+pub const PLANTS_ALGORITHM_VERSION: u32 = 19;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).

@@ -654,6 +654,19 @@ fn a_search_started_midway_and_guided_finds_the_switches_the_full_search_finds()
         distinct(&found),
         distinct(&full)
     );
+    // guided, a level walks inwards to its own predicted crossings, not to another level's: a
+    // near-copy of the reference (a fraction of a pixel off until close) and a crude level (its
+    // switch far away) started where both pass: each level's rows, switch and flag are those of its
+    // search alone, bit for bit; the near-copy is not measured at the crude level's points
+    let near_copy = mesh(vec![sphere(0.549, [0.0, 0.5, 0.0], 24, 48)]);
+    let crude = mesh(vec![sphere(0.4, [0.0, 0.5, 0.0], 5, 8)]);
+    let pair = [&near_copy, &crude].map(|m| Renderable { mesh: m, materials: &mats, textures: &[] });
+    let from_far = SwitchSearch { start_m: 640.0, ..quick };
+    let both = switch_search_chain(&r, &pair.map(Candidate::Mesh), &view, &opts, &from_far);
+    for (level, got) in pair.iter().zip(&both) {
+        assert_eq!(&switch_search(&r, level, &view, &opts, &from_far), got);
+    }
+    assert!(both[0].1 < both[1].1, "the near-copy switches in nearer: {} {}", both[0].1, both[1].1);
     // a level failing at the start is followed outwards: started at 10 m, the coarse level's
     // switch is still found (the far end bounds it)
     let outward = SwitchSearch { start_m: 10.0, ..quick };
