@@ -756,7 +756,7 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
         .collect();
     for (ni, node) in scene.nodes.iter().enumerate() {
         let mut ext = Map::new();
-        let instances = placed[ni].as_ref().or(node.instances.as_ref());
+        let instances = placed[ni].as_ref().or(node.instances.as_deref());
         if let Some(inst) = instances.filter(|i| !i.is_empty()) {
             let key = instances_hash(inst);
             if let Some((_, attributes)) = written_instances.get(&key).and_then(|v| v.iter().find(|(i, _)| *i == inst))

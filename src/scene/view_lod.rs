@@ -72,11 +72,11 @@ pub(super) fn lod_scene(
         let mut children = Vec::with_capacity(groups.len());
         for ((tile, variant), rows) in groups {
             let levels = &s.chain.variants[variant];
-            let instances = Instances {
+            let instances = std::sync::Arc::new(Instances {
                 translations: rows.iter().map(|r| r.position.map(|x| x as f32)).collect(),
                 rotations: rows.iter().map(|r| r.rotation).collect(),
                 scales: rows.iter().map(|r| r.scale).collect(),
-            };
+            });
             // the tile's sphere: around its instances' centres, each instance within its height
             let centres: Vec<[f64; 3]> = rows.iter().map(|r| instance_centre(r, s.chain.centre_y_m)).collect();
             let (lo, hi) = bounds(&centres);

@@ -443,7 +443,7 @@ pub fn run_view(
             for (v, inst) in groups {
                 let l0 = &chain.variants[v][0];
                 let mi = full.mesh_named(&l0.file, &l0.mesh)?;
-                full.scene.nodes.push(Node { mesh: Some(mi), instances: Some(inst), ..Node::default() });
+                full.scene.nodes.push(Node { mesh: Some(mi), instances: Some(inst.into()), ..Node::default() });
                 children.push(full.scene.nodes.len() - 1);
             }
         }
@@ -570,7 +570,7 @@ pub fn run_view(
                     asm.scene.nodes.push(Node {
                         name: format!("{}_{}", s.rules.name, asm.scene.meshes[mi].name),
                         mesh: Some(mi),
-                        instances: Some(inst),
+                        instances: Some(inst.into()),
                         extras: Some(extras),
                         ..Node::default()
                     });

@@ -122,7 +122,7 @@ pub fn snowfall_scene(name: &str, ps: &[Particle], atlas: &FlakeAtlas, alpha_cut
         scene.nodes.push(Node {
             name: format!("snowfall_cell{cell}"),
             mesh: Some(scene.meshes.len() - 1),
-            instances: Some(instances),
+            instances: Some(instances.into()),
             extras: Some(serde_json::json!({ "cell": cell, "kind": atlas.cells[cell].kind.name() })),
             ..Node::default()
         });

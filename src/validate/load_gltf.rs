@@ -340,7 +340,7 @@ pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
             ..Node::default()
         };
         if let Some(ext) = node.extension_value(EXT_INSTANCING) {
-            out.instances = Some(read_instances(ext, &doc, &buffers, &loc, &mut issues));
+            out.instances = Some(read_instances(ext, &doc, &buffers, &loc, &mut issues).into());
             if node.mesh().is_none() {
                 issues.push(issue(Severity::Error, &loc, format!("{EXT_INSTANCING} on a node without a mesh")));
             }
@@ -780,6 +780,7 @@ fn bake_on_grid(scene: &mut Scene, m: usize, grid: &PositionGrid) {
                     ts.push(t0);
                     ss.push(s0);
                 }
+                let inst = std::sync::Arc::make_mut(inst);
                 (inst.translations, inst.scales) = (ts, ss);
             }
             _ => (node.translation, node.scale) = unplace(node.rotation, node.translation, node.scale),

@@ -171,7 +171,7 @@ fn instanced_chains_share_their_grid_and_place_every_instance() {
     scene.nodes.push(Node {
         name: "chain".into(),
         mesh: Some(0),
-        instances: Some(instances.clone()),
+        instances: Some(instances.clone().into()),
         lods: vec![1],
         lod_screen_coverage: vec![0.2, 0.0],
         ..Node::default()
@@ -179,7 +179,7 @@ fn instanced_chains_share_their_grid_and_place_every_instance() {
     scene.nodes.push(Node {
         name: "coarse".into(),
         mesh: Some(1),
-        instances: Some(instances.clone()),
+        instances: Some(instances.clone().into()),
         ..Node::default()
     });
     scene.roots.push(0);
@@ -436,11 +436,11 @@ fn dequantized_reads_give_meshes_nodes_and_instances_back() {
         mesh: Some(1),
         translation: [3.0, 1.0, -2.0],
         rotation: [0.0, 0.38268343, 0.0, 0.9238795],
-        instances: Some(Instances {
+        instances: Some(std::sync::Arc::new(Instances {
             translations: vec![[10.0, 0.0, 5.0], [-4.0, 2.0, 1.0]],
             rotations: vec![[0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 0.0]],
             scales: vec![[1.0; 3], [0.5, 2.0, 0.5]],
-        }),
+        })),
         ..Node::default()
     });
     scene.roots = vec![0, 1];

@@ -112,11 +112,11 @@ fn sample_scene() -> Scene {
         Node {
             name: "forest".into(),
             mesh: Some(0),
-            instances: Some(Instances {
+            instances: Some(std::sync::Arc::new(Instances {
                 translations: vec![[0.0, 0.0, 0.0], [3.0, 0.0, 1.0], [-2.5, 0.1, 4.0]],
                 rotations: vec![[0.0, 0.0, 0.0, 1.0], [0.0, h, 0.0, h], [0.0, 1.0, 0.0, 0.0]],
                 scales: vec![[1.0; 3], [0.8; 3], [1.2, 1.1, 1.2]],
-            }),
+            })),
             ..Node::default()
         },
         Node {
