@@ -332,8 +332,14 @@ pub(super) fn bake_atlas(
         }
     }
     let (materials, images) = (reference.materials, reference.textures);
-    let baked: Vec<Result<Baked, RasterError>> =
-        jobs.par_iter().map(|(cell, card, mesh)| bake(card, cell.inner_px(), mesh, materials, images)).collect();
+    // one task per cell: the eight impostor views draw the whole tree and come first, and rayon's
+    // default split would leave them in one sequential piece for one thread (the bake then did not
+    // scale with threads at all)
+    let baked: Vec<Result<Baked, RasterError>> = jobs
+        .par_iter()
+        .with_max_len(1)
+        .map(|(cell, card, mesh)| bake(card, cell.inner_px(), mesh, materials, images))
+        .collect();
     let mut normal_atlas = Image { width: px, height: px, pixels: vec![FLAT_NORMAL; (px as usize) * (px as usize)] };
     let mut atlas = Image { width: px, height: px, pixels: vec![[0.0; 4]; (px as usize) * (px as usize)] };
     let mut fragments = 0;
