@@ -120,6 +120,13 @@ pub struct LodImageOptions {
     pub cutoff: f32,
 }
 
+impl LodImageOptions {
+    /// Views per distance: azimuths × elevations.
+    pub fn views(&self) -> usize {
+        self.azimuths.max(1) as usize * self.elevations_deg.len().max(1)
+    }
+}
+
 impl Default for LodImageOptions {
     fn default() -> Self {
         LodImageOptions {
@@ -212,7 +219,7 @@ pub fn lod_image_error_with(
     }
     let mut distances: Vec<f64> = distances_m.iter().copied().filter(|d| d.is_finite() && *d > 0.0).collect();
     distances.sort_by(f64::total_cmp);
-    let views = view_count(opts);
+    let views = opts.views();
     let sphere = Sphere { centre, radius_m };
     let only = [Candidate::Mesh(*candidate)];
     // distances in parallel too (each measures its views in parallel), rows kept in order
@@ -591,11 +598,6 @@ fn bounding_sphere(reference: &Mesh, candidates: &[&Mesh]) -> Sphere {
     Sphere { centre, radius_m }
 }
 
-/// Views per distance: azimuths × elevations.
-fn view_count(opts: &LodImageOptions) -> usize {
-    opts.azimuths.max(1) as usize * opts.elevations_deg.len().max(1)
-}
-
 /// The errors of each of `candidates` at one distance over every view (in parallel over views;
 /// the reference is rendered once per view for all of them). One row per candidate, in order.
 fn measure_distance(
@@ -608,7 +610,7 @@ fn measure_distance(
 ) -> Vec<DistanceError> {
     let azimuths = opts.azimuths.max(1) as usize;
     let elevations = if opts.elevations_deg.is_empty() { vec![0.0] } else { opts.elevations_deg.clone() };
-    let views = view_count(opts);
+    let views = opts.views();
     let per_view: Vec<Vec<(ImageError, [u32; 2], f64)>> = (0..views)
         .into_par_iter()
         .map(|v| {

@@ -168,7 +168,7 @@ fn image_errors(
     if let Some(why) = &reduced {
         progress(&format!("image analysis from {why}"));
     }
-    let views = image.azimuths.max(1) as usize * image.elevations_deg.len().max(1);
+    let views = image.views();
     let names: Vec<String> = measured.iter().map(|&n| format!("LoD{} ({})", levels[n].level, levels[n].kind)).collect();
     progress(&format!("measuring {} against LoD0", names.join(", ")));
     // the impostor's cards, each facing the azimuth it is baked from (engines show view k around
