@@ -99,10 +99,11 @@ pub fn to_glb_with(scene: &Scene, opts: &WriteOptions) -> Result<Vec<u8>, SceneP
 /// [`to_glb_with`] as its two chunks, for writing straight to a file ([`Glb::write`]) without
 /// the whole container in memory beside them; the glTF tree is dropped once serialised.
 pub fn to_glb_parts(scene: &Scene, opts: &WriteOptions) -> Result<Glb, SceneProblem> {
-    let (root, bin) = build(scene, None, opts)?;
+    let (root, bin, levels) = build(scene, None, opts)?;
     let json = json_bytes(&root, false, opts)?;
     drop(root);
-    let glb = Glb { json, bin };
+    let uris = level_uri_offsets(&json, levels)?;
+    let glb = Glb { json, uris, bin };
     u32::try_from(glb.byte_len()).map_err(|_| {
         SceneProblem(format!(
             "the GLB would be {} bytes, over the format's 4 GiB limit; split the scene",
@@ -113,29 +114,88 @@ pub fn to_glb_parts(scene: &Scene, opts: &WriteOptions) -> Result<Glb, SceneProb
 }
 
 /// A GLB's JSON and BIN chunks (unpadded), at most 4 GiB together ([`to_glb_parts`] checks).
+///
+/// The MSFT_lod level buffers' `data:` URIs are not in `json` yet: each is kept as its raw bytes
+/// with the offset its base64 goes to, and encoded as the file is written. A world's level buffers
+/// run to a hundred megabytes; as base64 strings in the glTF tree and again in its serialised text
+/// they were the largest things a scene write held (about 300 MB on presets/worlds/highlands.toml).
 pub struct Glb {
     json: Vec<u8>,
+    /// (offset in `json`, raw bytes): the base64 of the bytes is the URI's payload, inserted there.
+    uris: Vec<(usize, Vec<u8>)>,
     bin: Vec<u8>,
 }
 
+/// The `uri` of a level buffer until its payload is written: a `data:` URI with nothing after the
+/// comma ([`Glb`]).
+const LEVEL_URI: &str = "data:application/octet-stream;base64,";
+
+/// The length of the base64 of `n` bytes (padded).
+fn base64_len(n: usize) -> usize {
+    n.div_ceil(3) * 4
+}
+
+/// Where each level buffer's payload goes in the serialised JSON: just after the comma of the
+/// k-th `"uri":"data:application/octet-stream;base64,"` followed by its closing quote. The key
+/// and its quotes appear unescaped only as the JSON's own structure (a name holding that text is
+/// escaped as `\"uri\":\"…`), so the matches are the buffers' `uri` members, in buffer order.
+fn level_uri_offsets(json: &[u8], levels: Vec<Vec<u8>>) -> Result<Vec<(usize, Vec<u8>)>, SceneProblem> {
+    if levels.is_empty() {
+        return Ok(Vec::new());
+    }
+    let pattern = format!("\"uri\":\"{LEVEL_URI}\"");
+    let pattern = pattern.as_bytes();
+    let offsets: Vec<usize> = json
+        .windows(pattern.len())
+        .enumerate()
+        .filter(|(_, w)| *w == pattern)
+        .map(|(at, _)| at + pattern.len() - 1)
+        .collect();
+    if offsets.len() != levels.len() {
+        return Err(SceneProblem(format!(
+            "internal: {} level buffers but {} empty data: URIs in the glTF JSON",
+            levels.len(),
+            offsets.len()
+        )));
+    }
+    Ok(offsets.into_iter().zip(levels).collect())
+}
+
 impl Glb {
+    /// The JSON chunk's length with the level buffers' base64 in it (unpadded).
+    fn json_len(&self) -> usize {
+        self.json.len() + self.uris.iter().map(|(_, data)| base64_len(data.len())).sum::<usize>()
+    }
+
     /// The container's length in bytes (header, chunks and their padding).
     pub fn byte_len(&self) -> usize {
         let bin = if self.bin.is_empty() { 0 } else { 8 + self.bin.len().next_multiple_of(4) };
-        12 + 8 + self.json.len().next_multiple_of(4) + bin
+        12 + 8 + self.json_len().next_multiple_of(4) + bin
     }
 
     /// Writes the container: header, JSON chunk padded with spaces, BIN chunk (when there is data)
     /// padded with zeros (glTF 2.0 §4.4).
     pub fn write(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
-        let (json_len, bin_len) = (self.json.len().next_multiple_of(4), self.bin.len().next_multiple_of(4));
+        let (json_len, bin_len) = (self.json_len().next_multiple_of(4), self.bin.len().next_multiple_of(4));
         w.write_all(b"glTF")?;
         w.write_all(&2u32.to_le_bytes())?;
         w.write_all(&(self.byte_len() as u32).to_le_bytes())?;
         w.write_all(&(json_len as u32).to_le_bytes())?;
         w.write_all(b"JSON")?;
-        w.write_all(&self.json)?;
-        w.write_all(&b"   "[..json_len - self.json.len()])?;
+        let mut from = 0;
+        let mut text = String::new();
+        for (at, data) in &self.uris {
+            w.write_all(&self.json[from..*at])?;
+            // in pieces of 3 × 64 KiB: whole groups of three bytes, so the pieces' base64 joins up
+            for piece in data.chunks(3 << 16) {
+                text.clear();
+                push_base64(&mut text, piece);
+                w.write_all(text.as_bytes())?;
+            }
+            from = *at;
+        }
+        w.write_all(&self.json[from..])?;
+        w.write_all(&b"   "[..json_len - self.json_len()])?;
         if !self.bin.is_empty() {
             w.write_all(&(bin_len as u32).to_le_bytes())?;
             w.write_all(b"BIN\0")?;
@@ -155,7 +215,8 @@ pub fn to_gltf(scene: &Scene, bin_name: &str) -> Result<(Vec<u8>, Vec<u8>), Scen
 
 /// [`to_gltf`] with storage options.
 pub fn to_gltf_with(scene: &Scene, bin_name: &str, opts: &WriteOptions) -> Result<(Vec<u8>, Vec<u8>), SceneProblem> {
-    let (root, bin) = build(scene, Some(&uri_encode(bin_name)), opts)?;
+    // (a .gltf keeps one .bin: no level buffers)
+    let (root, bin, _) = build(scene, Some(&uri_encode(bin_name)), opts)?;
     let mut json = json_bytes(&root, true, opts)?;
     json.push(b'\n');
     Ok((json, bin))
@@ -553,7 +614,15 @@ fn opt_name(name: &str) -> Option<String> {
 /// Builds the glTF document and its binary buffer (`bin_uri`: None for GLB).
 // `..Default::default()` on the node extension: gltf-json adds a field with KHR_lights_punctual.
 #[allow(clippy::needless_update)]
-fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(json::Root, Vec<u8>), SceneProblem> {
+/// The glTF tree, the data of its first buffer (the GLB chunk or the .bin) and, for a GLB that
+/// streams MSFT_lod levels, each further buffer's data (its `uri` is [`LEVEL_URI`] with the payload
+/// left out; [`Glb`] writes it).
+#[allow(clippy::type_complexity)]
+fn build(
+    scene: &Scene,
+    bin_uri: Option<&str>,
+    opts: &WriteOptions,
+) -> Result<(json::Root, Vec<u8>, Vec<Vec<u8>>), SceneProblem> {
     use json::accessor::{ComponentType, Type};
     check_scene(scene)?;
     let (compacted, _) = compact(scene);
@@ -890,10 +959,11 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
         root.buffer_views = bin.views;
         root.extensions_used = extensions_used.into_iter().map(str::to_string).collect();
         root.extensions_required = extensions_required.into_iter().map(str::to_string).collect();
-        return Ok((root, chunk));
+        return Ok((root, chunk, Vec::new()));
     }
     // buffers: group 0 is the GLB chunk (or the .bin), the other non-empty groups data: URIs
     let mut chunk = Vec::new();
+    let mut levels = Vec::new();
     let mut buffer_of = vec![0u32; bin.groups.len()];
     for (g, mut data) in bin.groups.into_iter().enumerate() {
         data.resize(data.len().next_multiple_of(4), 0);
@@ -901,13 +971,8 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
             continue;
         }
         buffer_of[g] = root.buffers.len() as u32;
-        let uri = if g == 0 {
-            bin_uri.map(str::to_string)
-        } else {
-            let mut uri = String::from("data:application/octet-stream;base64,");
-            push_base64(&mut uri, &data);
-            Some(uri)
-        };
+        // a level's payload is written with the file ([`Glb`])
+        let uri = if g == 0 { bin_uri.map(str::to_string) } else { Some(LEVEL_URI.to_string()) };
         root.buffers.push(json::Buffer {
             byte_length: USize64::from(data.len()),
             name: (g > 0).then(|| format!("MSFT_lod level {g} from the coarsest")),
@@ -917,6 +982,8 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
         });
         if g == 0 {
             chunk = data;
+        } else {
+            levels.push(data);
         }
     }
     for v in &mut bin.views {
@@ -925,7 +992,7 @@ fn build(scene: &Scene, bin_uri: Option<&str>, opts: &WriteOptions) -> Result<(j
     root.buffer_views = bin.views;
     root.extensions_used = extensions_used.into_iter().map(str::to_string).collect();
     root.extensions_required = extensions_required.into_iter().map(str::to_string).collect();
-    Ok((root, chunk))
+    Ok((root, chunk, levels))
 }
 
 /// A hash of every instance transform's bits (equal instances hash equal; candidates are then
@@ -961,7 +1028,7 @@ mod tests {
     }
 
     fn index_component(scene: &Scene) -> json::accessor::ComponentType {
-        let (root, _) = build(scene, None, &WriteOptions::default()).unwrap();
+        let (root, _, _) = build(scene, None, &WriteOptions::default()).unwrap();
         let acc = root.meshes[0].primitives[0].indices.unwrap();
         match root.accessors[acc.value()].component_type {
             Valid(t) => t.0,
@@ -1044,6 +1111,74 @@ mod tests {
         assert_eq!(lengths_mod_4.len(), 4, "JSON lengths mod 4 covered: {lengths_mod_4:?}");
         // nothing but the written files is left in the folder (no staged temporaries)
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), scenes.len());
+    }
+
+    /// The level buffers' base64, written piece by piece as the file is ([`Glb::write`]), is the
+    /// payload the data: URI must hold: a chain whose levels have every length mod 3 and run over
+    /// several pieces reads back as written, names holding the URI's own text included (they are
+    /// escaped in the JSON and never taken for a buffer's `uri`), and the header's length is the
+    /// file's.
+    #[test]
+    fn level_buffers_stream_their_base64_into_the_json_chunk() {
+        let pattern = format!("\"uri\":\"{LEVEL_URI}\"");
+        let level = |n: usize, y: f32| {
+            let positions: Vec<[f32; 3]> = (0..n).map(|i| [i as f32, y, (i % 5) as f32]).collect();
+            let indices: Vec<u32> = (0..n as u32 - 2).flat_map(|i| [i, i + 1, i + 2]).collect();
+            Primitive { positions, indices, ..Primitive::default() }
+        };
+        // vertices 3 × 12 bytes apart: the buffers' lengths (positions and indices, 4-aligned)
+        // differ mod 3; the finest runs over three 192 KiB pieces
+        for (k, sizes) in [[3usize, 4, 5], [40_000, 17_001, 5]].iter().enumerate() {
+            let meshes: Vec<Mesh> = sizes
+                .iter()
+                .enumerate()
+                .map(|(l, &n)| Mesh {
+                    name: format!("{pattern} lod{l}"),
+                    primitives: vec![level(n, l as f32)],
+                    extras: None,
+                })
+                .collect();
+            let scene = Scene {
+                name: pattern.clone(),
+                meshes,
+                nodes: vec![
+                    crate::mesh::Node {
+                        name: pattern.clone(),
+                        mesh: Some(0),
+                        lods: vec![1, 2],
+                        lod_screen_coverage: vec![0.5, 0.2, 0.05],
+                        ..crate::mesh::Node::default()
+                    },
+                    crate::mesh::Node { name: "l1".into(), mesh: Some(1), ..crate::mesh::Node::default() },
+                    crate::mesh::Node { name: "l2".into(), mesh: Some(2), ..crate::mesh::Node::default() },
+                ],
+                roots: vec![0],
+                ..Scene::default()
+            };
+            let glb = to_glb_parts(&scene, &WriteOptions::default()).unwrap();
+            assert_eq!(glb.uris.len(), 2, "two finer levels in URIs");
+            let lengths: std::collections::BTreeSet<usize> = glb.uris.iter().map(|(_, d)| d.len() % 3).collect();
+            assert!(k == 0 || lengths.len() == 2, "{lengths:?}");
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("chain.glb");
+            crate::export::write_scene_with(&scene, &path, &WriteOptions::default()).unwrap();
+            let bytes = std::fs::read(&path).unwrap();
+            assert_eq!(bytes.len(), glb.byte_len());
+            assert_eq!(to_glb(&scene).unwrap(), bytes);
+            let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+            let doc: Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+            for (b, (_, data)) in doc["buffers"].as_array().unwrap()[1..].iter().zip(&glb.uris) {
+                let uri = b["uri"].as_str().unwrap();
+                assert_eq!(uri, format!("{LEVEL_URI}{}", crate::export::streaming::base64(data)));
+            }
+            let back = crate::validate::read_scene(&path).unwrap();
+            assert_eq!(back.name, scene.name);
+            for m in &scene.meshes {
+                let got = back.meshes.iter().find(|b| b.name == m.name).expect("every level reads back");
+                assert_eq!(got.primitives[0].positions, m.primitives[0].positions);
+                assert_eq!(got.primitives[0].indices, m.primitives[0].indices);
+            }
+        }
     }
 
     #[test]
