@@ -304,6 +304,10 @@ fn build_into(
         let tables: Vec<(String, PathBuf)> =
             ran.report.species.iter().map(|s| (s.name.clone(), s.csv.clone())).collect();
         runs.push(StageRun::Scatter { cost: ran.cost, report: ran.report, cached: ran.cached });
+        // positions as stored (f32), so a preview drawn after a cached scatter is the same; taken
+        // before the view stage, which then does not hold the instances beside its own (76 MB of
+        // 1.2 M grass instances on presets/worlds/highlands.toml)
+        let layers = ran.artifact.map(|placed| placed.iter().map(preview_layer).collect());
         if wants(Stage::View) {
             let plants_key = plants.as_ref().map_or("", |(_, k)| k.as_str());
             let job = ViewJob {
@@ -318,8 +322,6 @@ fn build_into(
             drawn = Some((view.report.clone(), view.key));
             runs.push(StageRun::View { cost: view.cost, report: view.report, cached: view.cached });
         }
-        // positions as stored (f32), so a preview drawn after a cached scatter is the same
-        let layers = ran.artifact.map(|placed| placed.iter().map(preview_layer).collect());
         placed = (layers, tables, Some(ran.key));
     }
 

@@ -53,7 +53,12 @@ pub(super) fn lod_scene(
         let radius = mesh_bounds(m).map_or(0.0, |(lo, hi)| 0.5 * distance(lo, hi));
         let mut nodes = Vec::with_capacity(files.len());
         for (k, (file, _)) in files.iter().enumerate() {
-            let mi = asm.mesh(file, c)?;
+            // (each chunk of a level file is appended here once, and the file not read again)
+            let mi = if terrain.chunked && !terrain.levels.is_empty() {
+                asm.mesh_moved(file, c)?
+            } else {
+                asm.mesh(file, c)?
+            };
             asm.scene.nodes.push(Node { name: format!("{}_LOD{k}", m.name), mesh: Some(mi), ..Node::default() });
             nodes.push(asm.scene.nodes.len() - 1);
         }
