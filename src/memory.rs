@@ -68,6 +68,18 @@ pub fn measure<T>(work: impl FnOnce() -> T) -> (T, Option<u64>) {
     (out, Some(peak.load(Ordering::Relaxed)))
 }
 
+/// Hands memory the allocator holds free back to the system (glibc keeps what a large stage freed
+/// in its arenas, so the next stage's resident set, and a build's reported peaks, would still count
+/// it: the world preset's preview stage sat at 0.9 GB of which half was the view stage's freed
+/// heap). A no-op where the allocator is not glibc's.
+pub fn release_freed() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only walks glibc's own arenas; it takes no pointers of ours
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
 /// Bytes as MiB with one decimal (for reports).
 pub fn mib(bytes: u64) -> f64 {
     (bytes as f64 / 1048576.0 * 10.0).round() / 10.0

@@ -83,6 +83,8 @@ impl StageRunner<'_> {
     /// stores what it wrote.
     pub fn run<J: StageJob>(&mut self, job: &J) -> Result<Ran<J::Report, J::Artifact>, SceneBuildError> {
         let (ran, peak) = crate::memory::measure(|| self.run_unmeasured(job));
+        // what the stage freed goes back to the system before the next one starts
+        crate::memory::release_freed();
         ran.map(|ran| Ran { cost: Cost { peak_bytes: peak, ..ran.cost }, ..ran })
     }
 
