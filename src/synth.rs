@@ -130,8 +130,10 @@ fn fade(t: f64) -> f64 {
     t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
 }
 
-/// Gradient noise at (x, y) in lattice units, roughly in [−1, 1]; zero at lattice points.
-#[inline]
+/// Gradient noise at (x, y) in lattice units, roughly in [−1, 1]; zero at lattice points. Maps
+/// evaluate it a row at a time ([`RowNoise`], the same arithmetic); this per-sample form is the
+/// reference the tests hold that to.
+#[cfg(test)]
 fn gradient_noise(octave_seed: u64, x: f64, y: f64) -> f64 {
     let (xf, yf) = (x.floor(), y.floor());
     let (ix, iy) = (xf as i64, yf as i64);
@@ -160,6 +162,86 @@ fn octave_params(seed: u64, octave: u32) -> (u64, f64, f64) {
     (s, ox, oy)
 }
 
+/// One octave of a noise map: (seed, offset x, offset y, frequency, amplitude).
+type Octave = (u64, f64, f64, f64, f64);
+
+/// The octaves' noise values of one sample summed as `kind` sums them.
+#[inline]
+fn combine(kind: NoiseKind, octaves: &[Octave], values: &[f64]) -> f64 {
+    match kind {
+        NoiseKind::Fbm => octaves.iter().zip(values).map(|(&(.., a), &n)| a * n).sum(),
+        NoiseKind::Ridged => {
+            // Musgrave's ridged multifractal: signal = (1 − |n|)², weighted by the previous octave
+            let mut sum = 0.0;
+            let mut weight = 1.0f64;
+            for (&(.., a), &n) in octaves.iter().zip(values) {
+                let r = 1.0 - n.abs();
+                let signal = r * r * weight;
+                weight = (signal * 2.0).clamp(0.0, 1.0);
+                sum += signal * a;
+            }
+            sum
+        }
+    }
+}
+
+/// [`gradient_noise`] along one row of a map, octave by octave: what depends on the row alone (its
+/// lattice row, the fade across it) is worked out once, and a lattice cell's four corner gradients
+/// (four hashes) once per cell rather than once per sample (the widest octaves span thousands of
+/// samples a cell). The arithmetic per sample is [`gradient_noise`]'s, operation for operation, so
+/// the values are the same bits (a test compares them).
+struct RowNoise<'a> {
+    octaves: &'a [Octave],
+    /// Per octave: fy, fade(fy), the lattice row, and the cell whose corners `corners` holds.
+    rows: Vec<(f64, f64, i64)>,
+    cells: Vec<Option<i64>>,
+    /// Per octave: gradients at (ix, iy), (ix + 1, iy), (ix, iy + 1), (ix + 1, iy + 1).
+    corners: Vec<[(f64, f64); 4]>,
+}
+
+impl<'a> RowNoise<'a> {
+    fn new(octaves: &'a [Octave], j: usize) -> RowNoise<'a> {
+        let rows = octaves
+            .iter()
+            .map(|&(_, _, oy, f, _)| {
+                let y = j as f64 * f + oy;
+                let yf = y.floor();
+                let fy = y - yf;
+                (fy, fade(fy), yf as i64)
+            })
+            .collect();
+        RowNoise { octaves, rows, cells: vec![None; octaves.len()], corners: vec![[(0.0, 0.0); 4]; octaves.len()] }
+    }
+
+    /// Octave `o`'s [`gradient_noise`] at sample `i` of the row.
+    #[inline]
+    fn at(&mut self, o: usize, i: usize) -> f64 {
+        let (s, ox, _, f, _) = self.octaves[o];
+        let (fy, v, iy) = self.rows[o];
+        let x = i as f64 * f + ox;
+        let xf = x.floor();
+        let ix = xf as i64;
+        let fx = x - xf;
+        if self.cells[o] != Some(ix) {
+            let g = |cx: i64, cy: i64| {
+                GRADIENTS[(mix64(s ^ mix64((cx as u64) << 32 ^ (cy as u64 & 0xFFFF_FFFF))) >> 61) as usize]
+            };
+            self.corners[o] = [g(ix, iy), g(ix + 1, iy), g(ix, iy + 1), g(ix + 1, iy + 1)];
+            self.cells[o] = Some(ix);
+        }
+        let [g00, g10, g01, g11] = self.corners[o];
+        let dot = |(gx, gy): (f64, f64), dx: f64, dy: f64| gx * dx + gy * dy;
+        let n00 = dot(g00, fx, fy);
+        let n10 = dot(g10, fx - 1.0, fy);
+        let n01 = dot(g01, fx, fy - 1.0);
+        let n11 = dot(g11, fx - 1.0, fy - 1.0);
+        let u = fade(fx);
+        let a = n00 + u * (n10 - n00);
+        let b = n01 + u * (n11 - n01);
+        (a + v * (b - a)) * std::f64::consts::SQRT_2
+    }
+}
+
 /// A `size` × `size` fractal map, heights in metres normalised to [0, `relief_m`]. The widest
 /// octave spans half the map; each next one has twice the frequency (lacunarity 2) and half the
 /// amplitude (gain 0.5), up to [`NOISE_OCTAVES`]. Rows are computed in parallel, each sample from
@@ -179,34 +261,18 @@ pub fn noise_map(kind: NoiseKind, size: usize, cell_size_m: f64, relief_m: f64, 
         frequency *= LACUNARITY;
         amplitude *= GAIN;
     }
-    let sample = |i: usize, j: usize| -> f64 {
-        let (x, y) = (i as f64, j as f64);
-        match kind {
-            NoiseKind::Fbm => {
-                octaves.iter().map(|&(s, ox, oy, f, a)| a * gradient_noise(s, x * f + ox, y * f + oy)).sum()
-            }
-            NoiseKind::Ridged => {
-                // Musgrave's ridged multifractal: signal = (1 − |n|)², weighted by the previous octave
-                let mut sum = 0.0;
-                let mut weight = 1.0f64;
-                for &(s, ox, oy, f, a) in &octaves {
-                    let r = 1.0 - gradient_noise(s, x * f + ox, y * f + oy).abs();
-                    let signal = r * r * weight;
-                    weight = (signal * 2.0).clamp(0.0, 1.0);
-                    sum += signal * a;
-                }
-                sum
-            }
-        }
-    };
     // The raw f64 samples are kept as pairs of 32-bit words in the buffer that then becomes the
     // f32 heights, in place: 8 bytes a sample at most, instead of the raw map (8) beside the
     // heights (4).
     let n = side * side;
     let mut words = vec![0u32; 2 * n];
     words.par_chunks_mut(2 * side).enumerate().for_each(|(j, row)| {
+        let mut noise = RowNoise::new(&octaves, j);
+        let mut values = Vec::with_capacity(octaves.len());
         for (i, pair) in row.chunks_exact_mut(2).enumerate() {
-            let bits = sample(i, j).to_bits();
+            values.clear();
+            values.extend((0..octaves.len()).map(|o| noise.at(o, i)));
+            let bits = combine(kind, &octaves, &values).to_bits();
             pair[0] = bits as u32;
             pair[1] = (bits >> 32) as u32;
         }
@@ -281,6 +347,51 @@ mod tests {
             let hi = a.heights.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
             assert!(a.heights.iter().all(|h| h.is_finite()));
             assert!(lo == 0.0 && (hi - 400.0).abs() < 1e-3, "{kind:?}: {lo}..{hi}");
+        }
+    }
+
+    /// The row-wise evaluation ([`RowNoise`], [`combine`]) gives the bits the per-sample noise
+    /// gives ([`gradient_noise`] at every octave, summed as the kinds sum), on rows and columns
+    /// far apart and across many lattice cells of every octave.
+    #[test]
+    fn row_noise_is_the_per_sample_noise_bit_for_bit() {
+        let side = 8193usize;
+        let base_wavelength = (side - 1) as f64 / 2.0;
+        let (mut frequency, mut amplitude) = (1.0 / base_wavelength, 1.0);
+        let mut octaves = Vec::new();
+        for o in 0..NOISE_OCTAVES {
+            if o > 0 && frequency > 0.5 {
+                break;
+            }
+            let (s, ox, oy) = octave_params(77, o);
+            octaves.push((s, ox, oy, frequency, amplitude));
+            frequency *= LACUNARITY;
+            amplitude *= GAIN;
+        }
+        assert_eq!(octaves.len(), NOISE_OCTAVES as usize, "every octave fits an 8193² map");
+        for j in [0usize, 1, 4095, 8191, 8192] {
+            let mut noise = RowNoise::new(&octaves, j);
+            for i in (0..side).step_by(7).chain([side - 1]) {
+                let values: Vec<f64> = (0..octaves.len()).map(|o| noise.at(o, i)).collect();
+                let (x, y) = (i as f64, j as f64);
+                let reference: Vec<f64> =
+                    octaves.iter().map(|&(s, ox, oy, f, _)| gradient_noise(s, x * f + ox, y * f + oy)).collect();
+                assert_eq!(
+                    values.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                    reference.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                    "({i}, {j})"
+                );
+                let fbm: f64 = octaves.iter().zip(&reference).map(|(&(.., a), &n)| a * n).sum();
+                assert_eq!(combine(NoiseKind::Fbm, &octaves, &values).to_bits(), fbm.to_bits());
+                let (mut ridged, mut weight) = (0.0f64, 1.0f64);
+                for (&(.., a), &n) in octaves.iter().zip(&reference) {
+                    let r = 1.0 - n.abs();
+                    let signal = r * r * weight;
+                    weight = (signal * 2.0).clamp(0.0, 1.0);
+                    ridged += signal * a;
+                }
+                assert_eq!(combine(NoiseKind::Ridged, &octaves, &values).to_bits(), ridged.to_bits());
+            }
         }
     }
 
