@@ -106,7 +106,7 @@ echo "ratio: verdant --quantize / gltfpack -vp 16 and verdant --compress / gltfp
 # Species: LoD chains of `verdant tree` and `verdant mesh`, each level's file and the MSFT_lod chain
 # file. gltfpack runs on verdant's f32 files with -kn (keep every level's node: it does not know
 # MSFT_lod and would drop the coarser levels otherwise) and -vp 16; it drops custom attributes
-# (verdant's _WIND and _WIND_BRANCH, 32 bytes a vertex, application data every engine script reads),
+# (verdant's _WIND and _WIND_BRANCH, application data every engine script reads: 8 bytes a vertex in compact files, normalized bytes of their ranges (docs/wind.md)),
 # so sizes are compared both as written and without those bytes ("w/o _attrs"). Errors: the largest
 # distance from a stored vertex to the nearest f32 vertex, world space, the same measure for both
 # (scripts/compact_stats.py; a compressed file is measured by its uncompressed twin, meshopt being

@@ -531,6 +531,13 @@ def values(x):
 stated = max(values(json.load(open(report))))
 ok = 0 < stated < 1e-2 and got["position_error_m"] <= stated * (1 + 1e-6) + 1e-7
 print(f"{'ok' if ok else 'FAIL'}  {q.split('/')[-1]}: vertices within {got['position_error_m']:.7f} m of the f32 file's, the report states {stated:.7f} m")
+# wind data (docs/wind.md): bytes of value / range, each component within half a step of the f32 file's
+for name, err in got["custom_error"].items():
+    r = got["custom_range"].get(name)
+    wind_ok = r is not None and all(e <= x / 510 * (1 + 1e-6) for e, x in zip(err, r))
+    if name.startswith("_WIND") or r is not None:
+        print(f"{'ok' if wind_ok else 'FAIL'}  {q.split('/')[-1]}: {name} within {err} of the f32 file's (half steps {[x / 510 for x in r] if r else 'none: stored as floats'})")
+        ok = ok and wind_ok
 sys.exit(0 if ok else 1)
 PYEOF
         then pass; else fail "${name}_quantize$level.glb: vertices further from the f32 file than the report states"; fi

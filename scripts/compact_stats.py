@@ -9,7 +9,10 @@ such as verdant's wind, which gltfpack drops), triangles, vertices and, with --r
 largest distance (metres, world space) from any vertex of FILE to the nearest vertex of the
 reference: the position error quantization added, measured the same way for any writer whatever
 its vertex order (both files must hold the same meshes; a compressed file cannot be read here,
-measure its uncompressed twin: meshopt compression is lossless).
+measure its uncompressed twin: meshopt compression is lossless). With --reference it also gives,
+per custom attribute both files hold on the same vertices (verdant's files keep their vertex
+order), the largest difference per component as an engine reads it: normalized integers times
+the range the primitive's extras note (`verdant_attribute_ranges`, docs/wind.md), and that range.
 
 World space: every node of every glTF scene (a LoD chain's coarser levels are in the second one)
 with its parents' transforms; an instanced node (EXT_mesh_gpu_instancing) by its first instance.
@@ -144,6 +147,33 @@ def stats(path):
             "vertices": vertices, "extensions": doc.get("extensionsUsed", [])}, doc, buffers
 
 
+def custom_values(doc, buffers, prim, name):
+    """A custom attribute as an engine reads it: normalized integers times their noted range."""
+    v = accessor(doc, buffers, prim["attributes"][name])
+    r = prim.get("extras", {}).get("verdant_attribute_ranges", {}).get(name)
+    return (v * np.asarray(r, dtype=np.float64) if r is not None else v), r
+
+
+def custom_error(doc, buffers, rdoc, rbuf):
+    """Per attribute name: the largest |value - reference| per component over the primitives both
+    files hold in the same order with the same vertex count, and the range noted for it (or None)."""
+    err, ranges = {}, {}
+    for m, rm in zip(doc.get("meshes", []), rdoc.get("meshes", [])):
+        for p, rp in zip(m["primitives"], rm["primitives"]):
+            for name in p["attributes"]:
+                if not name.startswith("_") or name not in rp["attributes"]:
+                    continue
+                v, r = custom_values(doc, buffers, p, name)
+                w, _ = custom_values(rdoc, rbuf, rp, name)
+                if v.shape != w.shape:
+                    continue
+                e = np.abs(v - w).max(axis=0) if len(v) else np.zeros(v.shape[1])
+                err[name] = np.maximum(err.get(name, e), e).tolist()
+                if r is not None:
+                    ranges[name] = r
+    return err, ranges
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("file")
@@ -158,6 +188,7 @@ def main():
         pts = world_points(doc, buffers)
         d, _ = cKDTree(ref).query(pts)
         s["position_error_m"] = float(d.max()) if len(d) else 0.0
+        s["custom_error"], s["custom_range"] = custom_error(doc, buffers, rdoc, rbuf)
     if a.json:
         print(json.dumps(s))
     else:

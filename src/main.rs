@@ -147,8 +147,8 @@ struct MeshArgs {
     /// glb/gltf: store vertex data compactly (KHR_mesh_quantization): positions as 16-bit
     /// integers on a grid per mesh (its largest side over 65,535; one grid for a LoD chain),
     /// normals and tangents 8-bit, texture coordinates 16-bit (outside 0..1 through the material's
-    /// KHR_texture_transform). The quantization is folded into each level's reported error
-    /// (`stored_error_m`).
+    /// KHR_texture_transform), wind data as normalized bytes of their ranges (docs/wind.md). The
+    /// quantization is folded into each level's reported error (`stored_error_m`).
     #[arg(long)]
     quantize: bool,
     /// glb/gltf: --quantize, then compress vertex, index and instance data with meshoptimizer's
@@ -250,8 +250,8 @@ struct TreeArgs {
     /// glb/gltf: store vertex data compactly (KHR_mesh_quantization): positions as 16-bit
     /// integers on a grid per mesh (its largest side over 65,535; one grid for a LoD chain),
     /// normals and tangents 8-bit, texture coordinates 16-bit (outside 0..1 through the material's
-    /// KHR_texture_transform). The quantization is folded into each level's reported error
-    /// (`stored_error_m`).
+    /// KHR_texture_transform), wind data as normalized bytes of their ranges (docs/wind.md). The
+    /// quantization is folded into each level's reported error (`stored_error_m`).
     #[arg(long)]
     quantize: bool,
     /// glb/gltf: --quantize, then compress vertex, index and instance data with meshoptimizer's

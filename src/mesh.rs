@@ -53,6 +53,11 @@ pub struct CustomAttribute {
     /// are already multiples of 1/255, so the file holds exactly these values (the glTF reader gives
     /// shaders the same floats).
     pub unit_bytes: bool,
+    /// The upper ends of the components' documented ranges (the lower ends are 0), for data whose
+    /// precision an engine does not need in full (wind, docs/wind.md): a compact file (`--quantize`, `--compress`) stores
+    /// such an attribute as normalized unsigned bytes of `value / range` and the range in the
+    /// primitive's extras ([`crate::export::gltf::ATTRIBUTE_RANGES_KEY`]); an f32 file as floats.
+    pub range: Option<[f32; 4]>,
 }
 
 /// A named mesh made of one or more primitives.
@@ -434,6 +439,7 @@ mod tests {
             name: "_ID".into(),
             values: positions.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect(),
             unit_bytes: false,
+            range: None,
         }];
         let mut p = Primitive { positions, custom, indices: vec![0, 3, 2, 2, 3, 4], ..Primitive::default() };
         p.optimize_for_gpu().unwrap();

@@ -52,6 +52,10 @@ pub const KHR_TEXTURE_TRANSFORM: &str = "KHR_texture_transform";
 /// origin + step·q in the mesh's own frame): the node's transform carries the grid too, but a
 /// reader that places the mesh itself needs the mesh's own coordinates.
 pub const GRID_EXTRAS_KEY: &str = "verdant_quantization_grid";
+/// Primitive extras of a compact file: `{ "_NAME": [r0, r1, r2, r3] }` for each custom attribute
+/// stored as normalized unsigned bytes of value / range (`CustomAttribute::range`, e.g. wind); a
+/// reader multiplies the normalized value by the range to get the value back.
+pub const ATTRIBUTE_RANGES_KEY: &str = "verdant_attribute_ranges";
 
 /// How vertex data is stored.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -568,6 +572,27 @@ fn unit_byte_accessor(root: &mut json::Root, bin: &mut Bin, values: &[[f32; 4]])
     root.push(a)
 }
 
+/// The range `c` is stored over as normalized bytes: in a compact file, when it has one and every
+/// value lies within it (anything else keeps its floats).
+fn stored_range(c: &crate::mesh::CustomAttribute, compact: bool) -> Option<[f32; 4]> {
+    let range = c.range.filter(|_| compact && !c.unit_bytes)?;
+    let fits = range.iter().all(|r| r.is_finite() && *r > 0.0)
+        && c.values.iter().all(|v| v.iter().zip(&range).all(|(x, r)| (0.0..=r * (1.0 + 1e-6)).contains(x)));
+    fits.then_some(range)
+}
+
+/// Normalized unsigned bytes of value / range, each rounded to the nearest of 256 steps (at most
+/// range / 510 off).
+fn ranged_byte_accessor(
+    root: &mut json::Root,
+    bin: &mut Bin,
+    values: &[[f32; 4]],
+    range: [f32; 4],
+) -> Index<json::Accessor> {
+    let scaled: Vec<[f32; 4]> = values.iter().map(|v| std::array::from_fn(|k| v[k] / range[k])).collect();
+    unit_byte_accessor(root, bin, &scaled)
+}
+
 /// A float accessor over its own new bufferView.
 fn float_accessor<const N: usize>(
     root: &mut json::Root,
@@ -699,9 +724,13 @@ fn build(
                 let a = float_accessor(&mut root, &mut bin, &p.colors, Some(ARRAY_BUFFER));
                 attributes.insert(Valid(json::mesh::Semantic::Colors(0)), a);
             }
+            let mut ranges = Map::new();
             for c in &p.custom {
                 let a = if c.unit_bytes {
                     unit_byte_accessor(&mut root, &mut bin, &c.values)
+                } else if let Some(range) = stored_range(c, opts.quantization.is_on()) {
+                    ranges.insert(c.name.clone(), Value::Array(range.iter().map(|&r| exact(r)).collect()));
+                    ranged_byte_accessor(&mut root, &mut bin, &c.values, range)
                 } else {
                     float_accessor(&mut root, &mut bin, &c.values, Some(ARRAY_BUFFER))
                 };
@@ -728,10 +757,17 @@ fn build(
                 PrimitiveMode::Triangles => json::mesh::Mode::Triangles,
                 PrimitiveMode::Points => json::mesh::Mode::Points,
             };
+            let extras = if ranges.is_empty() {
+                None
+            } else {
+                let mut extras = Map::new();
+                extras.insert(ATTRIBUTE_RANGES_KEY.into(), Value::Object(ranges));
+                Some(raw_json(&Value::Object(extras))?)
+            };
             primitives.push(json::mesh::Primitive {
                 attributes,
                 extensions: None,
-                extras: None,
+                extras,
                 indices,
                 material: p.material.map(|m| Index::new(m as u32)),
                 mode: Valid(mode),

@@ -25,7 +25,7 @@ use crate::random::Stream;
 
 pub use crate::plants::wind::WIND_ATTRIBUTE;
 /// Largest blade sway frequency a preset may ask for (Hz).
-pub const WIND_MAX_FREQUENCY_HZ: f32 = 4.0;
+pub const WIND_MAX_FREQUENCY_HZ: f32 = crate::plants::wind::MAX_FREQUENCY_HZ;
 /// Limits that keep one clump a reasonable asset (and the generator's memory bounded).
 pub const MAX_BLADES_PER_CLUMP: usize = 4096;
 pub const MAX_SEGMENTS: usize = 32;
@@ -375,7 +375,12 @@ fn push_wind(p: &mut Primitive, blade: &Blade, height_fraction: f32) {
 fn wind_primitive(material: usize) -> Primitive {
     Primitive {
         material: Some(material),
-        custom: vec![CustomAttribute { name: WIND_ATTRIBUTE.into(), values: Vec::new(), unit_bytes: false }],
+        custom: vec![CustomAttribute {
+            name: WIND_ATTRIBUTE.into(),
+            values: Vec::new(),
+            unit_bytes: false,
+            range: Some(crate::plants::wind::WIND_RANGE),
+        }],
         ..Primitive::default()
     }
 }

@@ -220,6 +220,7 @@ impl TreeMesh {
                     name: c.name.clone(),
                     values: c.values[..cut(c.values.len())].to_vec(),
                     unit_bytes: c.unit_bytes,
+                    range: c.range,
                 })
                 .collect();
             // every field is set, but Primitive literals end in `..Primitive::default()` (fields get added)
@@ -938,7 +939,12 @@ fn assemble(
         let base_color = material_color(system, color);
         if points {
             prim.colors = vec![base_color; prim.positions.len()];
-            prim.custom = vec![CustomAttribute { name: LEAF_SIZE_ATTRIBUTE.into(), values: sizes, unit_bytes: false }];
+            prim.custom = vec![CustomAttribute {
+                name: LEAF_SIZE_ATTRIBUTE.into(),
+                values: sizes,
+                unit_bytes: false,
+                range: None,
+            }];
         }
         let span = top - ground;
         let sway = prim
@@ -954,8 +960,18 @@ fn assemble(
                 [w, limb_phase, flutter, flutter_phase]
             })
             .collect();
-        prim.custom.push(CustomAttribute { name: WIND_ATTRIBUTE.into(), values: sway, unit_bytes: false });
-        prim.custom.push(CustomAttribute { name: WIND_BRANCH_ATTRIBUTE.into(), values: branch, unit_bytes: false });
+        prim.custom.push(CustomAttribute {
+            name: WIND_ATTRIBUTE.into(),
+            values: sway,
+            unit_bytes: false,
+            range: Some(wind::WIND_RANGE),
+        });
+        prim.custom.push(CustomAttribute {
+            name: WIND_BRANCH_ATTRIBUTE.into(),
+            values: branch,
+            unit_bytes: false,
+            range: Some(wind::WIND_BRANCH_RANGE),
+        });
         let (name, material) = match kind {
             Kind::Bark => {
                 let texture = *bark_texture.get_or_insert_with(|| {

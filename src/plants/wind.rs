@@ -30,6 +30,23 @@ use crate::random::mix64;
 pub const WIND_ATTRIBUTE: &str = "_WIND";
 /// Branch bending and leaf flutter on L-system trees.
 pub const WIND_BRANCH_ATTRIBUTE: &str = "_WIND_BRANCH";
+/// Largest sway frequency any plant carries (Hz): grass blades up to a preset's
+/// `wind_frequency`, trees up to 3 Hz, flowers 1.4 Hz.
+pub const MAX_FREQUENCY_HZ: f32 = 4.0;
+/// What each `_WIND` component ranges over (from 0): weight, phase (radians), frequency (Hz),
+/// stiffness. Compact files store `_WIND` as normalized bytes of value / range (`CustomAttribute::range`).
+pub const WIND_RANGE: [f32; 4] = [1.0, std::f32::consts::TAU, MAX_FREQUENCY_HZ, 1.0];
+/// What each `_WIND_BRANCH` component ranges over (from 0): weight, phase, weight, phase.
+pub const WIND_BRANCH_RANGE: [f32; 4] = [1.0, std::f32::consts::TAU, 1.0, std::f32::consts::TAU];
+/// The documented ranges of a wind attribute by its name (None for any other attribute): what a
+/// reader of an f32 file, which notes no range, gives `CustomAttribute::range`.
+pub fn documented_range(name: &str) -> Option<[f32; 4]> {
+    match name {
+        WIND_ATTRIBUTE => Some(WIND_RANGE),
+        WIND_BRANCH_ATTRIBUTE => Some(WIND_BRANCH_RANGE),
+        _ => None,
+    }
+}
 /// Flowers: the sway frequency (Hz) and stiffness of a flower stem.
 pub const FLOWER_SWAY_HZ: f32 = 1.4;
 pub const FLOWER_STIFFNESS: f32 = 0.3;
@@ -75,7 +92,7 @@ pub fn height_wind(
             [w, phase, frequency_hz, stiffness]
         })
         .collect();
-    CustomAttribute { name: WIND_ATTRIBUTE.into(), values, unit_bytes: false }
+    CustomAttribute { name: WIND_ATTRIBUTE.into(), values, unit_bytes: false, range: Some(WIND_RANGE) }
 }
 
 /// The attribute named `name` among `custom`, if any.

@@ -214,8 +214,9 @@ pub fn has_plants(preset: &Preset) -> bool {
 /// distance (a chain over it is measured from fewer azimuths; trees within it, the presets' among
 /// them, are unchanged); reports carry `analysis_views`. 19: a level walking inwards is measured at
 /// its own predicted crossings only (the same switches and files on ../shared/data and the
-/// presets; fewer rows in the reports).
-pub const PLANTS_ALGORITHM_VERSION: u32 = 19;
+/// presets; fewer rows in the reports). 20: compact species files store `_WIND` / `_WIND_BRANCH` as
+/// normalized bytes of their ranges (f32 files unchanged).
+pub const PLANTS_ALGORITHM_VERSION: u32 = 20;
 
 /// Cache key: every generated look (settings, seeds) and the bytes of its input files (a user
 /// blade texture, an L-system).

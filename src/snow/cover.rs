@@ -207,7 +207,7 @@ pub fn apply_cover(terrain: &mut Scene, s: &CoverSettings) -> Result<(), SnowErr
                 })
                 .collect();
             p.custom.retain(|c| c.name != SNOW_ATTRIBUTE);
-            p.custom.push(CustomAttribute { name: SNOW_ATTRIBUTE.into(), values, unit_bytes: false });
+            p.custom.push(CustomAttribute { name: SNOW_ATTRIBUTE.into(), values, unit_bytes: false, range: None });
         }
     }
     Ok(())

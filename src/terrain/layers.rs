@@ -217,12 +217,17 @@ fn vertex_weights(scene: &mut Scene, hf: &Heightfield, snow: &SnowRule, cover: O
         let names = [LAYER_WEIGHTS_ATTRIBUTE, LAYER_WEIGHTS_1_ATTRIBUTE, SURFACE_ATTRIBUTE];
         p.custom.retain(|c| !names.contains(&c.name.as_str()));
         let values = per_vertex.iter().map(|v| v.0).collect();
-        p.custom.push(CustomAttribute { name: LAYER_WEIGHTS_ATTRIBUTE.into(), values, unit_bytes: true });
+        p.custom.push(CustomAttribute { name: LAYER_WEIGHTS_ATTRIBUTE.into(), values, unit_bytes: true, range: None });
         if cover.is_some() {
             let values = per_vertex.iter().map(|v| v.1).collect();
-            p.custom.push(CustomAttribute { name: LAYER_WEIGHTS_1_ATTRIBUTE.into(), values, unit_bytes: true });
+            p.custom.push(CustomAttribute {
+                name: LAYER_WEIGHTS_1_ATTRIBUTE.into(),
+                values,
+                unit_bytes: true,
+                range: None,
+            });
             let values = per_vertex.iter().map(|v| v.2).collect();
-            p.custom.push(CustomAttribute { name: SURFACE_ATTRIBUTE.into(), values, unit_bytes: false });
+            p.custom.push(CustomAttribute { name: SURFACE_ATTRIBUTE.into(), values, unit_bytes: false, range: None });
         }
     }
 }

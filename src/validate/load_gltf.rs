@@ -11,7 +11,8 @@ use super::meshopt::meshopt_buffers;
 use super::options::{Loaded, ValidateError};
 use super::report::{issue, Issue, Severity};
 use crate::export::gltf::{
-    EXT_INSTANCING, EXT_LOD, EXT_MESHOPT, GRID_EXTRAS_KEY, KHR_QUANTIZATION, KHR_TEXTURE_TRANSFORM, LOD_COVERAGE_KEY,
+    ATTRIBUTE_RANGES_KEY, EXT_INSTANCING, EXT_LOD, EXT_MESHOPT, GRID_EXTRAS_KEY, KHR_QUANTIZATION,
+    KHR_TEXTURE_TRANSFORM, LOD_COVERAGE_KEY,
 };
 use crate::export::grid::PositionGrid;
 use crate::mesh::{AlphaMode, Bounds, Instances, Material, Mesh, Node, Primitive, PrimitiveMode, Scene, Texture};
@@ -392,6 +393,35 @@ pub(super) fn load_gltf(path: &Path) -> Result<Loaded, ValidateError> {
     Ok(Loaded { scene, issues, declared_bounds, quantized, grids })
 }
 
+/// The ranges a compact file notes for attributes stored as normalized integers of value / range
+/// ([`ATTRIBUTE_RANGES_KEY`] in the primitive's extras): each four positive finite numbers.
+fn attribute_ranges(prim: &gltf::Primitive, loc: &str, issues: &mut Vec<Issue>) -> Vec<(String, [f32; 4])> {
+    let Some(raw) = prim.extras() else { return Vec::new() };
+    let Ok(Value::Object(extras)) = serde_json::from_str::<Value>(raw.get()) else { return Vec::new() };
+    let Some(ranges) = extras.get(ATTRIBUTE_RANGES_KEY) else { return Vec::new() };
+    let Value::Object(ranges) = ranges else {
+        issues.push(issue(Severity::Error, loc, format!("extras {ATTRIBUTE_RANGES_KEY} is not an object")));
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for (name, r) in ranges {
+        let four = r
+            .as_array()
+            .filter(|a| a.len() == 4)
+            .and_then(|a| a.iter().map(|x| x.as_f64().map(|x| x as f32)).collect::<Option<Vec<f32>>>())
+            .filter(|a| a.iter().all(|x| x.is_finite() && *x > 0.0));
+        match four {
+            Some(a) => out.push((name.clone(), [a[0], a[1], a[2], a[3]])),
+            None => issues.push(issue(
+                Severity::Error,
+                loc,
+                format!("extras {ATTRIBUTE_RANGES_KEY}.{name} is not four positive finite numbers: {r}"),
+            )),
+        }
+    }
+    out
+}
+
 /// A grid noted in a mesh's extras ([`GRID_EXTRAS_KEY`]): finite origin, positive finite steps.
 fn grid_of(v: &Value) -> Option<PositionGrid> {
     let three = |key: &str| -> Option<[f32; 3]> {
@@ -626,13 +656,26 @@ fn read_primitive(
     if let Some((d, v)) = read(issues, "COLOR_0", prim.get(&Semantic::Colors(0)), &[3, 4]) {
         p.colors = v.chunks_exact(d).map(|c| [c[0], c[1], c[2], if d == 4 { c[3] } else { 1.0 }]).collect();
     }
+    let ranges = attribute_ranges(prim, loc, issues);
     for (sem, acc) in prim.attributes() {
         if let Semantic::Extras(name) = sem {
             let name = format!("_{name}");
-            let unit_bytes = acc.normalized() && acc.data_type() == gltf::accessor::DataType::U8;
+            let noted = ranges.iter().find(|(n, _)| *n == name).map(|(_, r)| *r);
+            let normalized = acc.normalized() && acc.data_type() != gltf::accessor::DataType::F32;
+            if noted.is_some() && !normalized {
+                issues.push(issue(
+                    Severity::Error,
+                    loc,
+                    format!("{name} has a range in the primitive's extras but is not a normalized integer attribute"),
+                ));
+            }
+            let unit_bytes = noted.is_none() && normalized && acc.data_type() == gltf::accessor::DataType::U8;
+            // floats are the values; a file that notes no range has the attribute's documented one
+            let range = noted.or_else(|| crate::plants::wind::documented_range(&name));
             if let Some((_, v)) = read(issues, &name, Some(acc), &[4]) {
-                let values = v.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
-                p.custom.push(crate::mesh::CustomAttribute { name, values, unit_bytes });
+                let r = noted.unwrap_or([1.0; 4]);
+                let values = v.chunks_exact(4).map(|c| std::array::from_fn(|k| c[k] * r[k])).collect();
+                p.custom.push(crate::mesh::CustomAttribute { name, values, unit_bytes, range });
             }
         }
     }

@@ -82,6 +82,7 @@ fn compact_tree_chains_validate_read_back_within_the_reported_quantization_and_c
     assert_eq!(q.tree.validation_errors, 0);
     assert_eq!(c.tree.validation_errors, 0);
     let (fv, qv, cv) = (&f.variants[0], &q.variants[0], &c.variants[0]);
+    let mut wind_values = 0;
     assert_eq!(fv.lods.len(), qv.lods.len());
     let mut files: Vec<String> = (0..fv.lods.len()).map(|n| format!("_LOD{n}")).collect();
     files.push(String::new());
@@ -119,9 +120,37 @@ fn compact_tree_chains_validate_read_back_within_the_reported_quantization_and_c
                     let dot = nf[0] * nq[0] + nf[1] * nq[1] + nf[2] * nq[2];
                     assert!(dot > 0.9998, "normal {nf:?} read back as {nq:?}"); // 8 bits: ≤ 1.2°
                 }
+                // wind data: bytes of value / range, each within half a step of the f32 file's
+                assert_eq!(p.custom.len(), r.custom.len(), "{suffix}");
+                for (cf, cq) in p.custom.iter().zip(&r.custom) {
+                    assert_eq!(cf.name, cq.name);
+                    // (an f32 file notes no range: it stores the floats, read with their documented range)
+                    assert_eq!(cf.range, cq.range);
+                    let range = cq.range.unwrap_or_else(|| panic!("{suffix}: {} has no range", cq.name));
+                    let expected = if cq.name == "_WIND" {
+                        verdant::plants::wind::WIND_RANGE
+                    } else {
+                        verdant::plants::wind::WIND_BRANCH_RANGE
+                    };
+                    assert_eq!(range, expected, "{suffix}: {}", cq.name);
+                    for (a, b) in cf.values.iter().zip(&cq.values) {
+                        for k in 0..4 {
+                            let step = range[k] / 255.0;
+                            assert!(
+                                (a[k] - b[k]).abs() <= 0.5 * step * (1.0 + 1e-4),
+                                "{}: {a:?} read back as {b:?}",
+                                cf.name
+                            );
+                            // on a step, exactly as an engine reads it (k / 255 × range)
+                            assert_eq!(b[k], (b[k] / step).round() / 255.0 * range[k], "{}", cf.name);
+                        }
+                    }
+                    wind_values += cf.values.len();
+                }
             }
         }
     }
+    assert!(wind_values > 1000, "{wind_values}");
     // the error as stored: the sampled Hausdorff distance plus the level's and LoD0's quantization
     let q0 = qv.lods[0].quantization_m;
     for (l, row) in qv.lods.iter().zip(&qv.table) {
@@ -466,5 +495,99 @@ fn dequantized_reads_give_meshes_nodes_and_instances_back() {
                 assert!(close(x.translations[k], y.translations[k]) && close(x.scales[k], y.scales[k]), "{x:?}\n{y:?}");
             }
         }
+    }
+}
+
+/// Wind data in a compact file: normalized bytes of value / range with the range in the
+/// primitive's extras, what an engine reads; floats where a value lies outside its range or the
+/// file is f32; reading a compact file back and writing it again gives the same bytes.
+#[test]
+fn compact_files_store_wind_as_bytes_of_its_range() {
+    use verdant::export::gltf::ATTRIBUTE_RANGES_KEY;
+    use verdant::mesh::CustomAttribute;
+    use verdant::plants::wind::{WIND_ATTRIBUTE, WIND_BRANCH_ATTRIBUTE, WIND_BRANCH_RANGE, WIND_RANGE};
+    let tri = |wind: Vec<[f32; 4]>, branch: Vec<[f32; 4]>| Primitive {
+        positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 2.0, 0.0]],
+        indices: vec![0, 1, 2],
+        custom: vec![
+            CustomAttribute { name: WIND_ATTRIBUTE.into(), values: wind, unit_bytes: false, range: Some(WIND_RANGE) },
+            CustomAttribute {
+                name: WIND_BRANCH_ATTRIBUTE.into(),
+                values: branch,
+                unit_bytes: false,
+                range: Some(WIND_BRANCH_RANGE),
+            },
+        ],
+        ..Primitive::default()
+    };
+    let tau = std::f32::consts::TAU;
+    let wind = vec![[0.0, 0.1, 0.4, 0.0], [0.25, 3.0, 1.6, 0.5], [1.0, tau, 4.0, 1.0]];
+    // a branch phase past its range (not a verdant value, but any data): kept as floats
+    let branch = vec![[0.0, 0.0, 0.0, 1.0], [0.5, 7.0, 0.2, 2.0], [1.0, 1.0, 1.0, tau]];
+    let mut scene = Scene::default();
+    scene.meshes.push(Mesh { name: "plant".into(), primitives: vec![tri(wind.clone(), branch.clone())], extras: None });
+    scene.nodes.push(Node { name: "plant".into(), mesh: Some(0), ..Node::default() });
+    scene.roots.push(0);
+    let dir = tempfile::tempdir().unwrap();
+    let doc_of = |path: &Path| -> serde_json::Value {
+        let bytes = std::fs::read(path).unwrap();
+        let n = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        serde_json::from_slice(&bytes[20..20 + n]).unwrap()
+    };
+    for compact in [Compact::None, Compact::Quantize, Compact::Compress] {
+        let path = dir.path().join(format!("{compact:?}.glb"));
+        let bytes = to_glb_with(&scene, &compact.write_options()).unwrap();
+        std::fs::write(&path, &bytes).unwrap();
+        let v = validate_file(&path, &Default::default()).unwrap();
+        assert_eq!(v.errors(), 0, "{compact:?}: {v}");
+        let doc = doc_of(&path);
+        let prim = &doc["meshes"][0]["primitives"][0];
+        let acc = |name: &str| doc["accessors"][prim["attributes"][name].as_u64().unwrap() as usize].clone();
+        let back = read_scene(&path).unwrap();
+        let custom = &back.meshes[0].primitives[0].custom;
+        let (w, b) = (&custom[0], &custom[1]);
+        assert_eq!((w.name.as_str(), b.name.as_str()), (WIND_ATTRIBUTE, WIND_BRANCH_ATTRIBUTE));
+        // the branch data lie outside their range: floats, as written
+        assert_eq!(acc("_WIND_BRANCH")["componentType"], 5126, "{compact:?}");
+        assert_eq!(b.values, branch);
+        if compact == Compact::None {
+            assert_eq!(acc("_WIND")["componentType"], 5126);
+            assert!(prim.get("extras").is_none());
+            assert_eq!(w.values, wind);
+            continue;
+        }
+        assert_eq!(acc("_WIND")["componentType"], 5121, "{compact:?}: unsigned bytes");
+        assert_eq!(acc("_WIND")["normalized"], true);
+        let noted: Vec<f32> = prim["extras"][ATTRIBUTE_RANGES_KEY]["_WIND"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap() as f32)
+            .collect();
+        assert_eq!(noted, WIND_RANGE.to_vec());
+        assert!(prim["extras"][ATTRIBUTE_RANGES_KEY].get("_WIND_BRANCH").is_none());
+        assert_eq!(w.range, Some(WIND_RANGE));
+        for (a, r) in wind.iter().zip(&w.values) {
+            for k in 0..4 {
+                assert!((a[k] - r[k]).abs() <= WIND_RANGE[k] / 510.0 * (1.0 + 1e-4), "{a:?} read back as {r:?}");
+            }
+        }
+        // the ends of each range are exact
+        assert_eq!(w.values[2], wind[2]);
+        assert_eq!(w.values[0][0], 0.0);
+        // a range that is not four positive numbers is an error naming it, not values scaled by 0
+        let noted = format!("\"{ATTRIBUTE_RANGES_KEY}\":{{\"_WIND\":[1.0,");
+        let json_end = 20 + u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        let at = bytes[..json_end].windows(noted.len()).position(|w| w == noted.as_bytes()).expect("the range noted");
+        let mut bad = bytes.clone();
+        bad[at + noted.len() - 4] = b'0';
+        let bad_path = dir.path().join("bad.glb");
+        std::fs::write(&bad_path, &bad).unwrap();
+        let v = validate_file(&bad_path, &Default::default()).unwrap();
+        assert!(v.errors() > 0 && format!("{v}").contains("not four positive finite numbers"), "{v}");
+        // read back, written again and read: the same values (the same bytes)
+        let again = dir.path().join("again.glb");
+        std::fs::write(&again, to_glb_with(&back, &compact.write_options()).unwrap()).unwrap();
+        assert_eq!(read_scene(&again).unwrap().meshes[0].primitives[0].custom, *custom, "{compact:?}");
     }
 }

@@ -42,6 +42,7 @@ fn sample_scene() -> Scene {
                     [0.2, 0.2, 0.2, 0.4],
                 ],
                 unit_bytes: true,
+                range: None,
             },
             CustomAttribute {
                 name: "_WIND".into(),
@@ -52,6 +53,8 @@ fn sample_scene() -> Scene {
                     [1.0, 0.75, 2.0, 0.3],
                 ],
                 unit_bytes: false,
+                // (what a reader gives `_WIND`: its documented ranges, docs/wind.md)
+                range: Some(verdant::plants::wind::WIND_RANGE),
             },
         ],
         indices: vec![0, 1, 2, 0, 2, 3],

@@ -108,7 +108,12 @@ pub(super) fn appended(mut a: Primitive, b: &Primitive) -> Primitive {
         a.custom = b
             .custom
             .iter()
-            .map(|c| CustomAttribute { name: c.name.clone(), values: Vec::new(), unit_bytes: c.unit_bytes })
+            .map(|c| CustomAttribute {
+                name: c.name.clone(),
+                values: Vec::new(),
+                unit_bytes: c.unit_bytes,
+                range: c.range,
+            })
             .collect();
     }
     a.custom.retain(|c| b.custom.iter().any(|d| d.name == c.name));
@@ -156,6 +161,7 @@ impl CardWind {
                 name: WIND_BRANCH_ATTRIBUTE.into(),
                 values: vec![[weight, phase, 0.0, 0.0]; card.positions.len()],
                 unit_bytes: false,
+                range: Some(wind::WIND_BRANCH_RANGE),
             });
         }
         card

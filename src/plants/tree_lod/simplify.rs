@@ -44,6 +44,7 @@ pub(super) fn subset(p: &Primitive, keep: impl Fn(usize) -> bool) -> Primitive {
                             name: c.name.clone(),
                             values: Vec::new(),
                             unit_bytes: c.unit_bytes,
+                            range: c.range,
                         });
                     }
                     if let Some(v) = c.values.get(i) {
