@@ -564,33 +564,29 @@ fn accessor(
 /// A VEC4 vertex attribute of values in 0..1 as normalized unsigned bytes over its own new
 /// bufferView (4 bytes a vertex, aligned as glTF asks); values are rounded to the nearest k/255.
 fn unit_byte_accessor(root: &mut json::Root, bin: &mut Bin, values: &[[f32; 4]]) -> Index<json::Accessor> {
-    let bytes: Vec<u8> = values.iter().flat_map(|v| v.map(|x| (x.clamp(0.0, 1.0) * 255.0).round() as u8)).collect();
+    byte_accessor(root, bin, values.iter().flat_map(|v| v.map(|x| super::quantize::range_byte(x, 1.0))).collect())
+}
+
+/// A normalized unsigned byte VEC4 accessor over `bytes` (four a vertex) in its own bufferView.
+fn byte_accessor(root: &mut json::Root, bin: &mut Bin, bytes: Vec<u8>) -> Index<json::Accessor> {
+    let count = bytes.len() / 4;
     let view = bin.push_view(&bytes, Some(ARRAY_BUFFER));
-    bin.codecs[view.value()] = Some(Codec::Attributes { stride: 4, count: values.len() });
-    let mut a = accessor(view, values.len(), json::accessor::ComponentType::U8, json::accessor::Type::Vec4);
+    bin.codecs[view.value()] = Some(Codec::Attributes { stride: 4, count });
+    let mut a = accessor(view, count, json::accessor::ComponentType::U8, json::accessor::Type::Vec4);
     a.normalized = true;
     root.push(a)
 }
 
-/// The range `c` is stored over as normalized bytes: in a compact file, when it has one and every
-/// value lies within it (anything else keeps its floats).
-fn stored_range(c: &crate::mesh::CustomAttribute, compact: bool) -> Option<[f32; 4]> {
-    let range = c.range.filter(|_| compact && !c.unit_bytes)?;
-    let fits = range.iter().all(|r| r.is_finite() && *r > 0.0)
-        && c.values.iter().all(|v| v.iter().zip(&range).all(|(x, r)| (0.0..=r * (1.0 + 1e-6)).contains(x)));
-    fits.then_some(range)
-}
-
-/// Normalized unsigned bytes of value / range, each rounded to the nearest of 256 steps (at most
-/// range / 510 off).
+/// Normalized unsigned bytes of value / range ([`super::quantize::range_byte`]).
 fn ranged_byte_accessor(
     root: &mut json::Root,
     bin: &mut Bin,
     values: &[[f32; 4]],
     range: [f32; 4],
 ) -> Index<json::Accessor> {
-    let scaled: Vec<[f32; 4]> = values.iter().map(|v| std::array::from_fn(|k| v[k] / range[k])).collect();
-    unit_byte_accessor(root, bin, &scaled)
+    let bytes =
+        values.iter().flat_map(|v| std::array::from_fn::<u8, 4, _>(|k| super::quantize::range_byte(v[k], range[k])));
+    byte_accessor(root, bin, bytes.collect())
 }
 
 /// A float accessor over its own new bufferView.
@@ -728,7 +724,7 @@ fn build(
             for c in &p.custom {
                 let a = if c.unit_bytes {
                     unit_byte_accessor(&mut root, &mut bin, &c.values)
-                } else if let Some(range) = stored_range(c, opts.quantization.is_on()) {
+                } else if let Some(range) = super::quantize::attribute_range(c, &opts.quantization) {
                     ranges.insert(c.name.clone(), Value::Array(range.iter().map(|&r| exact(r)).collect()));
                     ranged_byte_accessor(&mut root, &mut bin, &c.values, range)
                 } else {

@@ -17,7 +17,7 @@
 //! which the material's textures put back through KHR_texture_transform (offset and scale).
 
 use super::grid::PositionGrid;
-use crate::mesh::{Instances, Scene};
+use crate::mesh::{CustomAttribute, Instances, Scene};
 
 /// How positions are stored.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -260,6 +260,43 @@ pub fn place(rotation: [f32; 4], translation: [f32; 3], scale: [f32; 3], grid: &
     let r = glam::Quat::from_array(rotation).mul_vec3(glam::Vec3::from_array(so));
     let t = [translation[0] + r.x, translation[1] + r.y, translation[2] + r.z];
     (t, [0, 1, 2].map(|a| scale[a] * grid.step[a]))
+}
+
+/// The range a custom attribute is stored over as normalized unsigned bytes of value / range: in
+/// a compact file (`q` on), when it has one (`CustomAttribute::range`, wind) and every value lies
+/// within it; None (floats as they are) otherwise.
+pub fn attribute_range(c: &CustomAttribute, q: &Quantization) -> Option<[f32; 4]> {
+    let range = c.range.filter(|_| q.is_on() && !c.unit_bytes)?;
+    let fits = range.iter().all(|r| r.is_finite() && *r > 0.0)
+        && c.values.iter().all(|v| v.iter().zip(&range).all(|(x, r)| (0.0..=r * (1.0 + 1e-6)).contains(x)));
+    fits.then_some(range)
+}
+
+/// The byte `x` is stored as over `0..=range` (the nearest of 256 steps).
+pub fn range_byte(x: f32, range: f32) -> u8 {
+    ((x / range).clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// What a reader gets back for `x` stored over `range`: the byte, normalized, times the range.
+pub fn range_value(x: f32, range: f32) -> f32 {
+    range_byte(x, range) as f32 / 255.0 * range
+}
+
+/// Per custom attribute stored as bytes of its range under `q` (the wind of a compact file): the
+/// largest difference per component between the values as built and as a reader gets them (at most
+/// half a step, range / 510). Empty for f32 files.
+pub fn attribute_error(scene: &Scene, q: &Quantization) -> std::collections::BTreeMap<String, [f32; 4]> {
+    let mut worst = std::collections::BTreeMap::new();
+    for c in scene.meshes.iter().flat_map(|m| &m.primitives).flat_map(|p| &p.custom) {
+        let Some(range) = attribute_range(c, q) else { continue };
+        let e: &mut [f32; 4] = worst.entry(c.name.clone()).or_default();
+        for v in &c.values {
+            for k in 0..4 {
+                e[k] = e[k].max((range_value(v[k], range[k]) - v[k]).abs());
+            }
+        }
+    }
+    worst
 }
 
 /// The largest distance (metres, in the mesh's own frame) any vertex of `scene` moves when stored

@@ -151,6 +151,17 @@ fn compact_tree_chains_validate_read_back_within_the_reported_quantization_and_c
         }
     }
     assert!(wind_values > 1000, "{wind_values}");
+    // the report states what storing the wind as bytes cost each level: within half a step, and
+    // none for f32 files
+    for l in &qv.lods {
+        let wind = &l.attribute_error["_WIND"];
+        for k in 0..4 {
+            assert!(wind[k] <= verdant::plants::wind::WIND_RANGE[k] / 510.0 * (1.0 + 1e-4), "LOD{}: {wind:?}", l.level);
+        }
+        // (a billboard's corners weigh 0 and 1: on steps)
+        assert!(wind[0] > 0.0 || l.level > 0, "LOD0: its bend weights cannot all be on steps");
+    }
+    assert!(fv.lods.iter().all(|l| l.attribute_error.is_empty()));
     // the error as stored: the sampled Hausdorff distance plus the level's and LoD0's quantization
     let q0 = qv.lods[0].quantization_m;
     for (l, row) in qv.lods.iter().zip(&qv.table) {

@@ -47,6 +47,7 @@ pub(super) fn measure_levels(
         let store = options.compact.write_options();
         let bytes = crate::export::gltf::to_glb_with(&lod.scene, &store).map_err(|e| TreeLodError::Texture(e.0))?.len();
         let quantization_m = crate::export::quantize::position_error(&lod.scene, &store.quantization);
+        let attribute_error = crate::export::quantize::attribute_error(&lod.scene, &store.quantization);
         let geometric_error = match (&grid, lod.level) {
             (Some(grid), n) if n > 0 => hausdorff(
                 mesh,
@@ -67,6 +68,7 @@ pub(super) fn measure_levels(
             stored_error_m: geometric_error.max_m,
             geometric_error,
             quantization_m,
+            attribute_error,
             near_distance_m: 0.0,
             near_iou: 1.0,
             near_color_rmse: 0.0,

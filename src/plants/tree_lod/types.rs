@@ -315,6 +315,11 @@ pub struct TreeLodFigures {
     /// `--compress`; 0 for f32), in the level's file and in the chain's, whichever is more.
     #[serde(default)]
     pub quantization_m: f64,
+    /// Per attribute stored as bytes of its range (the wind in `--quantize`/`--compress` files,
+    /// docs/wind.md): the largest difference per component between the values built and those a
+    /// reader gets from the level's file (at most half a step). Empty for f32 files.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub attribute_error: std::collections::BTreeMap<String, [f32; 4]>,
     /// The geometric error of the level as stored: `geometric_error.max_m` plus this level's and
     /// LoD0's quantization (a surface point moves at most as far as its triangle's corners).
     #[serde(default)]
