@@ -661,19 +661,35 @@ fn read_primitive(
         if let Semantic::Extras(name) = sem {
             let name = format!("_{name}");
             let noted = ranges.iter().find(|(n, _)| *n == name).map(|(_, r)| *r);
-            let normalized = acc.normalized() && acc.data_type() != gltf::accessor::DataType::F32;
-            if noted.is_some() && !normalized {
+            use gltf::accessor::DataType;
+            // ranges start at 0: unsigned normalized integers only
+            let unsigned = acc.normalized() && matches!(acc.data_type(), DataType::U8 | DataType::U16);
+            let documented = crate::plants::wind::documented_range(&name);
+            if noted.is_some() && !unsigned {
                 issues.push(issue(
                     Severity::Error,
                     loc,
-                    format!("{name} has a range in the primitive's extras but is not a normalized integer attribute"),
+                    format!(
+                        "{name} has a range in the primitive's extras ({ATTRIBUTE_RANGES_KEY}) but is not a normalized \
+                         unsigned byte or short attribute"
+                    ),
+                ));
+            } else if noted.is_none() && acc.normalized() && documented.is_some() {
+                issues.push(issue(
+                    Severity::Warning,
+                    loc,
+                    format!(
+                        "{name} is stored as normalized integers but the primitive's extras note no range \
+                         ({ATTRIBUTE_RANGES_KEY}): read as 0..1, not in its units (docs/wind.md); was the file \
+                         re-exported by a tool that drops extras?"
+                    ),
                 ));
             }
-            let unit_bytes = noted.is_none() && normalized && acc.data_type() == gltf::accessor::DataType::U8;
+            let unit_bytes = noted.is_none() && acc.normalized() && acc.data_type() == DataType::U8;
             // floats are the values; a file that notes no range has the attribute's documented one
-            let range = noted.or_else(|| crate::plants::wind::documented_range(&name));
+            let range = if unit_bytes { None } else { noted.or(documented) };
             if let Some((_, v)) = read(issues, &name, Some(acc), &[4]) {
-                let r = noted.unwrap_or([1.0; 4]);
+                let r = noted.filter(|_| unsigned).unwrap_or([1.0; 4]);
                 let values = v.chunks_exact(4).map(|c| std::array::from_fn(|k| c[k] * r[k])).collect();
                 p.custom.push(crate::mesh::CustomAttribute { name, values, unit_bytes, range });
             }

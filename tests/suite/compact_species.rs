@@ -360,6 +360,8 @@ fn compact_scenes_store_species_and_scene_files_within_the_reported_quantization
             let (fq, ff) = (world(&read_scene(&pq).unwrap()), world(&read_scene(&pf).unwrap()));
             let moved = max_distance(&ff, &fq);
             assert!(moved <= q * (1.0 + 1e-6) + 1e-7, "{file}: {moved} > {q}");
+            assert_wind_stored(&pq, true);
+            assert_wind_stored(&pf, false);
         }
     }
     // the tree chain's levels fold it in
@@ -372,11 +374,13 @@ fn compact_scenes_store_species_and_scene_files_within_the_reported_quantization
         );
         assert!(qm > 0.0 && s >= g + qm, "{l}");
     }
-    // the scene files: valid, the same triangles drawn
+    // the scene files: valid, the wind as bytes, the same triangles drawn
     for n in ["q", "c"] {
         for f in ["scene.glb", "scene_lod.glb"] {
             let v = validate_file(&d.join(format!("o/{n}/{f}")), &Default::default()).unwrap();
             assert_eq!(v.errors(), 0, "{n}/{f}: {v}");
+            assert_wind_stored(&d.join(format!("o/{n}/{f}")), true);
+            assert_wind_stored(&d.join(format!("o/f/{f}")), false);
         }
         let (a, b) = (&rf["stages"]["view"]["views"][0], &report(n)["stages"]["view"]["views"][0]);
         assert_eq!(a["triangles"], b["triangles"]);
@@ -596,9 +600,41 @@ fn compact_files_store_wind_as_bytes_of_its_range() {
         std::fs::write(&bad_path, &bad).unwrap();
         let v = validate_file(&bad_path, &Default::default()).unwrap();
         assert!(v.errors() > 0 && format!("{v}").contains("not four positive finite numbers"), "{v}");
+        // ranges lost (a tool that drops extras, here a renamed key): a warning, not silent 0..1 phases
+        let mut lost = bytes.clone();
+        lost[at + ATTRIBUTE_RANGES_KEY.len()] = b'z';
+        std::fs::write(&bad_path, &lost).unwrap();
+        let v = validate_file(&bad_path, &Default::default()).unwrap();
+        assert!(v.warnings() > 0 && format!("{v}").contains("note no range"), "{v}");
         // read back, written again and read: the same values (the same bytes)
         let again = dir.path().join("again.glb");
         std::fs::write(&again, to_glb_with(&back, &compact.write_options()).unwrap()).unwrap();
         assert_eq!(read_scene(&again).unwrap().meshes[0].primitives[0].custom, *custom, "{compact:?}");
     }
+}
+
+/// Every `_WIND*` accessor of the GLB at `path` is normalized unsigned bytes with its ranges noted
+/// in the primitive's extras (`compact`), or floats with none; and there is wind in the file.
+fn assert_wind_stored(path: &Path, compact: bool) {
+    let bytes = std::fs::read(path).unwrap();
+    let n = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + n]).unwrap();
+    let mut wind = 0;
+    for prim in doc["meshes"].as_array().into_iter().flatten().flat_map(|m| m["primitives"].as_array().unwrap()) {
+        for (name, a) in prim["attributes"].as_object().unwrap().iter().filter(|(k, _)| k.starts_with("_WIND")) {
+            let acc = &doc["accessors"][a.as_u64().unwrap() as usize];
+            let noted = &prim["extras"][verdant::export::gltf::ATTRIBUTE_RANGES_KEY][name];
+            if compact {
+                assert_eq!((acc["componentType"].as_u64(), &acc["normalized"]), (Some(5121), &serde_json::json!(true)));
+                assert_eq!(noted.as_array().map(|a| a.len()), Some(4), "{}: {name}", path.display());
+            } else {
+                assert_eq!(acc["componentType"].as_u64(), Some(5126), "{}: {name}", path.display());
+                assert!(noted.is_null());
+            }
+            wind += 1;
+        }
+    }
+    // (a model that does not sway has none: the boulder's files)
+    let model = path.file_name().unwrap().to_string_lossy().contains("boulder");
+    assert!(wind > 0 || model, "{}: no wind", path.display());
 }
