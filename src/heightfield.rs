@@ -590,6 +590,21 @@ fn decode_image(
     if encoding == Encoding::Float {
         return Err(HeightfieldError::format(path, "--encoding float needs a 32-bit float TIFF; this file is not one (for 8/16-bit images use gray, terrain-rgb or terrarium: --encoding, or `encoding` in a preset)"));
     }
+    if bytes.starts_with(PNG_SIGNATURE) {
+        if let Some(decoded) = decode_png_rows(path, bytes, encoding, opts)? {
+            return Ok(decoded);
+        }
+    }
+    decode_whole_image(path, bytes, encoding, opts)
+}
+
+/// Any 8/16-bit image the `image` crate reads, decoded whole, then turned into height codes.
+fn decode_whole_image(
+    path: &Path,
+    bytes: &[u8],
+    encoding: Encoding,
+    opts: &DecodeOptions,
+) -> Result<Decoded, HeightfieldError> {
     let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| image_error(path, e))?;
     if reader.format().is_none() {
         return Err(HeightfieldError::Image {
@@ -691,6 +706,105 @@ fn decode_image(
     Ok(Decoded { heightfield: Heightfield::from_codes(w, h, codes, map, 1.0), encoding, voids_filled: 0 })
 }
 
+const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
+
+/// A PNG decoded a row at a time straight into height codes: no image buffer and no converted copy
+/// beside the codes (for an 8193² map 0.13–0.2 GB each that `decode_image` holds at once). The
+/// same `png` decoder and transformations as the `image` crate's (EXPAND: palettes to RGB(A),
+/// gray under 8 bits to 8), so the same codes, the same errors (tested against it). Ok(None) for
+/// an interlaced PNG, whose rows arrive in passes: `decode_image` reads it whole.
+fn decode_png_rows(
+    path: &Path,
+    bytes: &[u8],
+    encoding: Encoding,
+    opts: &DecodeOptions,
+) -> Result<Option<Decoded>, HeightfieldError> {
+    let mut decoder = png::Decoder::new_with_limits(Cursor::new(bytes), png::Limits { bytes: usize::MAX });
+    decoder.set_transformations(png::Transformations::EXPAND);
+    let mut reader = decoder.read_info().map_err(|e| image_error(path, e))?;
+    if reader.info().interlaced {
+        return Ok(None);
+    }
+    let (w, h) = (reader.info().width as usize, reader.info().height as usize);
+    check_size(path, w, h, opts)?;
+    let (color, depth) = reader.output_color_type();
+    let sixteen = depth == png::BitDepth::Sixteen;
+    if !matches!(depth, png::BitDepth::Eight | png::BitDepth::Sixteen) {
+        return Ok(None); // (EXPAND leaves none: the image crate's refusal, whatever it says)
+    }
+    let (channels, gray_image) = match color {
+        png::ColorType::Grayscale => (1, true),
+        png::ColorType::GrayscaleAlpha => (2, true),
+        png::ColorType::Rgb => (3, false),
+        png::ColorType::Rgba => (4, false),
+        png::ColorType::Indexed => return Ok(None),
+    };
+    let vmax = if sixteen { 65535.0 } else { 255.0 };
+    let asked = encoding;
+    let gray = |divisor: f64| CodeMap::Gray { offset: opts.height_offset_m, scale: opts.height_scale_m, vmax, divisor };
+    let (encoding, map) = match (gray_image, encoding) {
+        (true, Encoding::Auto | Encoding::Gray) => (Encoding::Gray, gray(1.0)),
+        (true, e) => {
+            return Err(HeightfieldError::format(
+                path,
+                format!("--encoding {e} needs an RGB image, but this one is grayscale; use --encoding gray (or auto; `encoding = \"gray\"` in a preset)"),
+            ));
+        }
+        (false, Encoding::Auto | Encoding::Gray) => (Encoding::Gray, gray(3.0)),
+        (false, Encoding::TerrainRgb | Encoding::Terrarium) if !sixteen => {
+            (encoding, if encoding == Encoding::TerrainRgb { CodeMap::TerrainRgb } else { CodeMap::Terrarium })
+        }
+        (false, Encoding::TerrainRgb | Encoding::Terrarium) => {
+            return Err(HeightfieldError::format(
+                path,
+                format!("--encoding {encoding} (`encoding` in a preset) needs an 8-bit RGB or RGBA image"),
+            ));
+        }
+        _ => return Ok(None),
+    };
+    let mut codes = Vec::with_capacity(w * h);
+    let mut row_index = 0;
+    while let Some(row) = reader.next_row().map_err(|e| image_error(path, e))? {
+        let data = row.data();
+        let value = |k: usize| -> u32 {
+            if sixteen {
+                u16::from_be_bytes([data[2 * k], data[2 * k + 1]]) as u32
+            } else {
+                data[k] as u32
+            }
+        };
+        for i in 0..w {
+            let at = i * channels;
+            let code = if gray_image {
+                value(at)
+            } else {
+                let p = [value(at), value(at + 1), value(at + 2)];
+                match map {
+                    CodeMap::TerrainRgb | CodeMap::Terrarium => p[0] << 16 | p[1] << 8 | p[2],
+                    _ => {
+                        if asked == Encoding::Auto && (p[0] != p[1] || p[1] != p[2]) {
+                            return Err(HeightfieldError::format(
+                                path,
+                                format!(
+                                    "an RGB image whose channels differ (pixel column {i}, row {row_index} is R={} G={} B={}) is not a gray heightmap; choose how to read it: --encoding terrain-rgb (Mapbox), --encoding terrarium (Mapzen), or --encoding gray (uses the mean of R, G, B); `encoding` in a preset",
+                                    p[0], p[1], p[2]
+                                ),
+                            ));
+                        }
+                        p[0] + p[1] + p[2]
+                    }
+                }
+            };
+            codes.push(code);
+        }
+        row_index += 1;
+    }
+    if codes.len() != w * h {
+        return Err(image_error(path, format!("the image data end after {row_index} of {h} rows")));
+    }
+    Ok(Some(Decoded { heightfield: Heightfield::from_codes(w, h, codes, map, 1.0), encoding, voids_filled: 0 }))
+}
+
 /// 32-bit float single-channel TIFF in metres. Returns Ok(None) for TIFFs of other sample types,
 /// which the `image` crate then decodes.
 fn decode_float_tiff(
@@ -781,5 +895,139 @@ mod tests {
         assert_eq!(tenths.reference(1), 3.0 * 0.1 - 10000.0);
         assert!(matches!(tenths.exact, Some(ExactHeights::Codes { .. })));
         assert!(tenths.rounding_m() > 0.0);
+    }
+
+    /// A PNG of `w`×`h` with `color`/`depth` from the byte stream `bytes` (palette and tRNS given).
+    fn png_file(
+        w: u32,
+        h: u32,
+        color: png::ColorType,
+        depth: png::BitDepth,
+        data: &[u8],
+        palette: Option<Vec<u8>>,
+        trns: Option<Vec<u8>>,
+    ) -> Vec<u8> {
+        let mut out = Vec::new();
+        {
+            let mut e = png::Encoder::new(&mut out, w, h);
+            e.set_color(color);
+            e.set_depth(depth);
+            if let Some(p) = palette {
+                e.set_palette(p);
+            }
+            if let Some(t) = trns {
+                e.set_trns(t);
+            }
+            let mut writer = e.write_header().unwrap();
+            writer.write_image_data(data).unwrap();
+        }
+        out
+    }
+
+    /// Row-wise PNG decoding gives what decoding the whole image with the `image` crate gives, for
+    /// every PNG colour type and bit depth, every encoding, gray stored as RGB (equal channels)
+    /// and not: the same heights, exact references and encoding, or the same error.
+    #[test]
+    fn png_rows_decode_as_the_whole_image_does() {
+        use png::{BitDepth as B, ColorType as C};
+        let (w, h) = (13u32, 7u32);
+        let mut state = 0x1234_5678_u64;
+        let mut next = move || {
+            state = crate::random::mix64(state);
+            state
+        };
+        let mut cases = 0;
+        for (color, depth) in [
+            (C::Grayscale, B::One),
+            (C::Grayscale, B::Two),
+            (C::Grayscale, B::Four),
+            (C::Grayscale, B::Eight),
+            (C::Grayscale, B::Sixteen),
+            (C::GrayscaleAlpha, B::Eight),
+            (C::GrayscaleAlpha, B::Sixteen),
+            (C::Rgb, B::Eight),
+            (C::Rgb, B::Sixteen),
+            (C::Rgba, B::Eight),
+            (C::Rgba, B::Sixteen),
+            (C::Indexed, B::Eight),
+            (C::Indexed, B::Four),
+        ] {
+            let channels = match color {
+                C::Grayscale | C::Indexed => 1,
+                C::GrayscaleAlpha => 2,
+                C::Rgb => 3,
+                C::Rgba => 4,
+            };
+            let bits = depth as usize;
+            let row_bytes = (w as usize * channels * bits).div_ceil(8);
+            for equal_channels in [true, false] {
+                for trns in [false, true] {
+                    if trns && !matches!(color, C::Grayscale | C::Rgb | C::Indexed) {
+                        continue;
+                    }
+                    let mut data = vec![0u8; row_bytes * h as usize];
+                    for b in &mut data {
+                        *b = next() as u8;
+                    }
+                    if equal_channels && matches!(color, C::Rgb | C::Rgba) {
+                        let px = channels * bits / 8;
+                        let comp = bits / 8;
+                        for pixel in data.chunks_exact_mut(px) {
+                            let (r, rest) = pixel.split_at_mut(comp);
+                            rest[..comp].copy_from_slice(r);
+                            rest[comp..2 * comp].copy_from_slice(r);
+                        }
+                    }
+                    let palette = (color == C::Indexed).then(|| (0..256 * 3).map(|k| (k * 7 % 251) as u8).collect());
+                    let trns_chunk = trns.then(|| match color {
+                        C::Indexed => vec![0, 128, 255],
+                        C::Grayscale => vec![0, 1],
+                        _ => vec![0, 1, 0, 2, 0, 3],
+                    });
+                    let file = png_file(w, h, color, depth, &data, palette, trns_chunk);
+                    for encoding in [Encoding::Auto, Encoding::Gray, Encoding::TerrainRgb, Encoding::Terrarium] {
+                        let opts = DecodeOptions {
+                            encoding,
+                            height_scale_m: 812.5,
+                            height_offset_m: -3.25,
+                            ..Default::default()
+                        };
+                        let path = Path::new("map.png");
+                        let rows = decode_png_rows(path, &file, encoding, &opts);
+                        let whole = decode_whole_image(path, &file, encoding, &opts);
+                        let what = format!("{color:?} {depth:?} {encoding:?} equal={equal_channels} trns={trns}");
+                        match (rows, whole) {
+                            (Ok(Some(a)), Ok(b)) => {
+                                let (x, y) = (&a.heightfield, &b.heightfield);
+                                assert_eq!((x.width, x.height, a.encoding), (y.width, y.height, b.encoding), "{what}");
+                                assert_eq!(x.heights, y.heights, "{what}");
+                                for k in 0..x.heights.len() {
+                                    assert_eq!(
+                                        x.reference(k).to_bits(),
+                                        y.reference(k).to_bits(),
+                                        "{what}: sample {k}"
+                                    );
+                                }
+                                cases += 1;
+                            }
+                            (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string(), "{what}"),
+                            (Ok(None), _) => panic!("{what}: a non-interlaced PNG left to the whole-image path"),
+                            (a, b) => {
+                                panic!("{what}: rows {:?}, whole {:?}", a.map(|d| d.is_some()), b.map(|d| d.encoding))
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(cases > 40, "{cases} cases decoded");
+        // (the png encoder writes no interlaced files: those take the whole-image path untested here)
+        // a truncated file is an error naming it
+        let data: Vec<u8> = (0..w * h).map(|k| (k * 5) as u8).collect();
+        let opts = DecodeOptions::default();
+        let file = png_file(w, h, C::Grayscale, B::Eight, &data, None, None);
+        let cut = &file[..file.len() - 20];
+        let e = decode_image(Path::new("cut.png"), cut, Encoding::Auto, &opts).unwrap_err().to_string();
+        assert!(e.contains("cut.png"), "{e}");
     }
 }
