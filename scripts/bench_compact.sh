@@ -112,7 +112,7 @@ echo "ratio: verdant --quantize / gltfpack -vp 16 and verdant --compress / gltfp
 # (scripts/compact_stats.py; a compressed file is measured by its uncompressed twin, meshopt being
 # lossless). Images (the atlases, PNG) are the same bytes in both and counted in the totals.
 echo
-printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12s\n' case file writer bytes "w/o _attrs" images ratio "ratio w/o" "error m"
+printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12s  %s\n' case file writer bytes "w/o _attrs" images ratio "ratio w/o" "error m" "wind error / step"
 species=(
   "broadleaf|tree builtin:broadleaf"
   "conifer-type-tree|tree $DATA/lsystems/lparser-v4/conifer-type-tree.ls --height 12"
@@ -120,6 +120,20 @@ species=(
   "boulder|mesh presets/models/boulder.obj"
 )
 field() { "$PY" -c "import json,sys; print(json.loads(sys.argv[1])[sys.argv[2]])" "$1" "$2"; }
+# the wind's largest error as a share of its step (range / 255), from compact_stats.py --reference:
+# at most 0.5 for bytes of their ranges, 0 for floats, "dropped" when the file has no wind
+wind_error() {
+  "$PY" -c "
+import json, sys
+s = json.loads(sys.argv[1])
+e = {k: v for k, v in s.get('custom_error', {}).items() if k.startswith('_WIND')}
+if not e:
+    print('dropped' if sys.argv[2] == 'yes' else '-')
+else:
+    r = s.get('custom_range', {})
+    print(f\"{max(x / (g / 255) if k in r else 0.0 for k, v in e.items() for x, g in zip(v, r.get(k, [1] * 4))):.3f}\")
+" "$1" "$2"
+}
 # compare CASE FILE DIR SUFFIX QLABEL CLABEL: rows for DIR/{q,c,gp,gpc}SUFFIX.glb against DIR/fSUFFIX.glb
 # (a compressed file's error is its uncompressed twin's: meshopt is lossless)
 compare() {
@@ -142,7 +156,9 @@ compare() {
       ratio=$(awk -v a="$bytes" -v b="$pb" 'BEGIN { printf "%.3f", a / b }')
       ratio2=$(awk -v a="$bytes" -v c="$custom" -v b="$pb" 'BEGIN { printf "%.3f", (a - c) / b }')
     fi
-    printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12.7f\n' "$name" "$label" "$label_w" "$bytes" $((bytes - custom)) "$images" "$ratio" "$ratio2" "$e"
+    local has_wind=no
+    if [ "$(field "${err[q]}" custom_error)" != "{}" ]; then has_wind=yes; fi
+    printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12.7f  %s\n' "$name" "$label" "$label_w" "$bytes" $((bytes - custom)) "$images" "$ratio" "$ratio2" "$e" "$(wind_error "${err[$w]}" "$has_wind")"
   done
 }
 for c in "${species[@]}"; do
@@ -168,7 +184,7 @@ echo "ratio: verdant / gltfpack in bytes as written; 'ratio w/o': verdant withou
 # mesh of a file on one grid over the whole scene (1 km here: 1.6 cm steps for grass blades too);
 # verdant gives each species family its own and the terrain's chunks one, so its error is smaller.
 echo
-printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12s\n' case file writer bytes "w/o _attrs" images ratio "ratio w/o" "error m"
+printf '%-22s %-9s %-24s %10s %10s %10s %8s %8s %12s  %s\n' case file writer bytes "w/o _attrs" images ratio "ratio w/o" "error m" "wind error / step"
 for c in none quantize compress; do
   sed -e "s/^name = \"meadow\"/name = \"meadow_$c\"/" -e "s/^formats = \\[\"glb\"\\]/formats = [\"glb\"]\ncompact = \"$c\"/" \
     -e "s|^lsystem = \"lsystems/|lsystem = \"$PWD/presets/lsystems/|" presets/meadow.toml > "$TMP/meadow_$c.toml"
