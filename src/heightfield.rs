@@ -626,80 +626,82 @@ fn decode_whole_image(
         vmax,
         divisor,
     };
-    let channels_differ =
-        |rgb: &dyn Fn(usize) -> [u32; 3]| (0..w * h).map(rgb).position(|p| p[0] != p[1] || p[1] != p[2]);
-    // RGB(A) 8-bit and 16-bit pixels as u32 triples; None for gray images
-    let rgb8 = match &img {
-        D::ImageRgb8(_) | D::ImageRgba8(_) => Some(img.to_rgb8()),
+    // the samples (one a pixel for gray, three for RGB), moved out of the image where it holds
+    // them so (a converted copy only for images with alpha), dropped before the heights are made
+    enum Samples {
+        Eight(Vec<u8>),
+        Sixteen(Vec<u16>),
+    }
+    let color = img.color();
+    let gray_image = matches!(img, D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageLuma16(_) | D::ImageLumaA16(_));
+    let samples = match img {
+        D::ImageLuma8(b) => Some(Samples::Eight(b.into_raw())),
+        D::ImageLuma16(b) => Some(Samples::Sixteen(b.into_raw())),
+        D::ImageRgb8(b) => Some(Samples::Eight(b.into_raw())),
+        D::ImageRgb16(b) => Some(Samples::Sixteen(b.into_raw())),
+        i @ D::ImageLumaA8(_) => Some(Samples::Eight(i.into_luma8().into_raw())),
+        i @ D::ImageLumaA16(_) => Some(Samples::Sixteen(i.into_luma16().into_raw())),
+        i @ D::ImageRgba8(_) => Some(Samples::Eight(i.into_rgb8().into_raw())),
+        i @ D::ImageRgba16(_) => Some(Samples::Sixteen(i.into_rgb16().into_raw())),
         _ => None,
     };
-    let rgb16 = match &img {
-        D::ImageRgb16(_) | D::ImageRgba16(_) => Some(img.to_rgb16()),
-        _ => None,
-    };
-    let (encoding, codes, map): (Encoding, Vec<u32>, CodeMap) = match (&img, encoding) {
-        (D::ImageLuma8(_) | D::ImageLumaA8(_), Encoding::Auto | Encoding::Gray) => {
-            let g = img.to_luma8();
-            (Encoding::Gray, g.as_raw().iter().map(|&v| v as u32).collect(), gray(255.0, 1.0))
-        }
-        (D::ImageLuma16(_) | D::ImageLumaA16(_), Encoding::Auto | Encoding::Gray) => {
-            let g = img.to_luma16();
-            (Encoding::Gray, g.as_raw().iter().map(|&v| v as u32).collect(), gray(65535.0, 1.0))
-        }
-        (D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageLuma16(_) | D::ImageLumaA16(_), e) => {
-            return Err(HeightfieldError::format(
-                path,
-                format!("--encoding {e} needs an RGB image, but this one is grayscale; use --encoding gray (or auto; `encoding = \"gray\"` in a preset)"),
-            ));
-        }
-        (_, Encoding::Auto | Encoding::Gray) if rgb8.is_some() || rgb16.is_some() => {
-            let (vmax, px): (f64, Box<dyn Fn(usize) -> [u32; 3]>) = if let Some(rgb) = &rgb8 {
-                let raw = rgb.as_raw();
-                (255.0, Box::new(move |k| [raw[3 * k] as u32, raw[3 * k + 1] as u32, raw[3 * k + 2] as u32]))
-            } else {
-                let raw = rgb16.as_ref().map(|r| r.as_raw().as_slice()).unwrap_or(&[]);
-                (65535.0, Box::new(move |k| [raw[3 * k] as u32, raw[3 * k + 1] as u32, raw[3 * k + 2] as u32]))
+    if gray_image && !matches!(encoding, Encoding::Auto | Encoding::Gray) {
+        return Err(HeightfieldError::format(
+            path,
+            format!("--encoding {encoding} needs an RGB image, but this one is grayscale; use --encoding gray (or auto; `encoding = \"gray\"` in a preset)"),
+        ));
+    }
+    let eight_bit_rgb = matches!(samples, Some(Samples::Eight(_))) && !gray_image;
+    let (encoding, codes, map): (Encoding, Vec<u32>, CodeMap) = match (samples, encoding) {
+        (Some(samples), Encoding::Auto | Encoding::Gray) => {
+            let (vmax, value): (f64, Box<dyn Fn(usize) -> u32>) = match &samples {
+                Samples::Eight(v) => (255.0, Box::new(|k| v[k] as u32)),
+                Samples::Sixteen(v) => (65535.0, Box::new(|k| v[k] as u32)),
             };
-            if encoding == Encoding::Auto {
-                if let Some(k) = channels_differ(&*px) {
-                    let p = px(k);
-                    return Err(HeightfieldError::format(
-                        path,
-                        format!(
-                            "an RGB image whose channels differ (pixel column {}, row {} is R={} G={} B={}) is not a gray heightmap; choose how to read it: --encoding terrain-rgb (Mapbox), --encoding terrarium (Mapzen), or --encoding gray (uses the mean of R, G, B); `encoding` in a preset",
-                            k % w, k / w, p[0], p[1], p[2]
-                        ),
-                    ));
+            if gray_image {
+                (Encoding::Gray, (0..w * h).map(value).collect(), gray(vmax, 1.0))
+            } else {
+                let px = |k: usize| [value(3 * k), value(3 * k + 1), value(3 * k + 2)];
+                if encoding == Encoding::Auto {
+                    if let Some(k) = (0..w * h).position(|k| {
+                        let p = px(k);
+                        p[0] != p[1] || p[1] != p[2]
+                    }) {
+                        let p = px(k);
+                        return Err(HeightfieldError::format(
+                            path,
+                            format!(
+                                "an RGB image whose channels differ (pixel column {}, row {} is R={} G={} B={}) is not a gray heightmap; choose how to read it: --encoding terrain-rgb (Mapbox), --encoding terrarium (Mapzen), or --encoding gray (uses the mean of R, G, B); `encoding` in a preset",
+                                k % w, k / w, p[0], p[1], p[2]
+                            ),
+                        ));
+                    }
                 }
-            }
-            // gray stored as RGB: the mean of the channels (equal to each channel when R = G = B)
-            (
-                Encoding::Gray,
-                (0..w * h)
+                // gray stored as RGB: the mean of the channels (equal to each channel when R = G = B)
+                let codes = (0..w * h)
                     .map(|k| {
                         let p = px(k);
                         p[0] + p[1] + p[2]
                     })
-                    .collect(),
-                gray(vmax, 3.0),
-            )
+                    .collect();
+                (Encoding::Gray, codes, gray(vmax, 3.0))
+            }
         }
-        (_, Encoding::TerrainRgb | Encoding::Terrarium) => {
-            let Some(rgb) = &rgb8 else {
-                return Err(HeightfieldError::format(
-                    path,
-                    format!("--encoding {encoding} (`encoding` in a preset) needs an 8-bit RGB or RGBA image"),
-                ));
-            };
-            let raw = rgb.as_raw();
+        (Some(Samples::Eight(raw)), Encoding::TerrainRgb | Encoding::Terrarium) if eight_bit_rgb => {
             let map = if encoding == Encoding::TerrainRgb { CodeMap::TerrainRgb } else { CodeMap::Terrarium };
             let codes = raw.chunks_exact(3).map(|c| (c[0] as u32) << 16 | (c[1] as u32) << 8 | c[2] as u32).collect();
             (encoding, codes, map)
         }
+        (_, Encoding::TerrainRgb | Encoding::Terrarium) => {
+            return Err(HeightfieldError::format(
+                path,
+                format!("--encoding {encoding} (`encoding` in a preset) needs an 8-bit RGB or RGBA image"),
+            ));
+        }
         (_, e) => {
             return Err(HeightfieldError::format(
                 path,
-                format!("unsupported pixel format {:?} for --encoding {e} (`encoding` in a preset); use an 8/16-bit gray or RGB PNG/TIFF, or a 32-bit float TIFF", img.color()),
+                format!("unsupported pixel format {color:?} for --encoding {e} (`encoding` in a preset); use an 8/16-bit gray or RGB PNG/TIFF, or a 32-bit float TIFF"),
             ));
         }
     };

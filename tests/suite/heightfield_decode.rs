@@ -304,3 +304,61 @@ fn shared_gazebo_maps() {
     }
     assert_eq!(load(&bowl, &opts(Encoding::Gray)).unwrap().heightfield.width, 129);
 }
+
+/// A TIFF (decoded whole, its samples moved out of the image) reads as the same image saved as a
+/// PNG (decoded a row at a time): every 8/16-bit gray and RGB pixel type, with and without alpha,
+/// gray stored as RGB or not, every encoding; the same heights and exact references, or the same
+/// error.
+#[test]
+fn tiff_and_png_of_one_image_decode_alike() {
+    use image::DynamicImage as D;
+    let (w, h) = (11u32, 6u32);
+    let v = |i: u32, j: u32, c: u32| ((i * 37 + j * 101 + c * 53) * 2654435761u32 >> 7) as u16;
+    let mut decoded = 0;
+    for equal in [true, false] {
+        let c = |k: u32| if equal { 0 } else { k };
+        let images = [
+            D::ImageLuma8(ImageBuffer::from_fn(w, h, |i, j| Luma([v(i, j, 0) as u8]))),
+            D::ImageLumaA8(ImageBuffer::from_fn(w, h, |i, j| image::LumaA([v(i, j, 0) as u8, 200]))),
+            D::ImageLuma16(ImageBuffer::from_fn(w, h, |i, j| Luma([v(i, j, 0)]))),
+            D::ImageLumaA16(ImageBuffer::from_fn(w, h, |i, j| image::LumaA([v(i, j, 0), 9000]))),
+            D::ImageRgb8(ImageBuffer::from_fn(w, h, |i, j| Rgb([0, 1, 2].map(|k| v(i, j, c(k)) as u8)))),
+            D::ImageRgba8(ImageBuffer::from_fn(w, h, |i, j| {
+                let p = [0, 1, 2].map(|k| v(i, j, c(k)) as u8);
+                Rgba([p[0], p[1], p[2], 255])
+            })),
+            D::ImageRgb16(ImageBuffer::from_fn(w, h, |i, j| Rgb([0, 1, 2].map(|k| v(i, j, c(k)))))),
+            D::ImageRgba16(ImageBuffer::from_fn(w, h, |i, j| {
+                let p = [0, 1, 2].map(|k| v(i, j, c(k)));
+                Rgba([p[0], p[1], p[2], 65535])
+            })),
+        ];
+        for img in images {
+            let encode = |format| {
+                let mut out = std::io::Cursor::new(Vec::new());
+                img.write_to(&mut out, format).ok().map(|_| out.into_inner())
+            };
+            let (Some(tiff), Some(png)) = (encode(image::ImageFormat::Tiff), encode(image::ImageFormat::Png)) else {
+                continue; // (a pixel type one of the encoders does not write)
+            };
+            for encoding in [Encoding::Auto, Encoding::Gray, Encoding::TerrainRgb, Encoding::Terrarium] {
+                let o = DecodeOptions { height_scale_m: 812.5, height_offset_m: -3.25, ..opts(encoding) };
+                let what = format!("{:?} equal={equal} {encoding:?}", img.color());
+                match (decode(Path::new("map"), &tiff, &o), decode(Path::new("map"), &png, &o)) {
+                    (Ok(a), Ok(b)) => {
+                        let (x, y) = (&a.heightfield, &b.heightfield);
+                        assert_eq!(a.encoding, b.encoding, "{what}");
+                        assert_eq!(x.heights, y.heights, "{what}");
+                        for k in 0..x.heights.len() {
+                            assert_eq!(x.reference(k).to_bits(), y.reference(k).to_bits(), "{what}");
+                        }
+                        decoded += 1;
+                    }
+                    (Err(a), Err(b)) => assert_eq!(err_text(a), err_text(b), "{what}"),
+                    (a, b) => panic!("{what}: tiff {:?}, png {:?}", a.map(|d| d.encoding), b.map(|d| d.encoding)),
+                }
+            }
+        }
+    }
+    assert!(decoded >= 16, "{decoded}");
+}
