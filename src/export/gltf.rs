@@ -564,29 +564,26 @@ fn accessor(
 /// A VEC4 vertex attribute of values in 0..1 as normalized unsigned bytes over its own new
 /// bufferView (4 bytes a vertex, aligned as glTF asks); values are rounded to the nearest k/255.
 fn unit_byte_accessor(root: &mut json::Root, bin: &mut Bin, values: &[[f32; 4]]) -> Index<json::Accessor> {
-    byte_accessor(root, bin, values.iter().flat_map(|v| v.map(|x| super::quantize::range_byte(x, 1.0))).collect())
+    ranged_byte_accessor(root, bin, values, [1.0; 4])
 }
 
-/// A normalized unsigned byte VEC4 accessor over `bytes` (four a vertex) in its own bufferView.
-fn byte_accessor(root: &mut json::Root, bin: &mut Bin, bytes: Vec<u8>) -> Index<json::Accessor> {
-    let count = bytes.len() / 4;
-    let view = bin.push_view(&bytes, Some(ARRAY_BUFFER));
-    bin.codecs[view.value()] = Some(Codec::Attributes { stride: 4, count });
-    let mut a = accessor(view, count, json::accessor::ComponentType::U8, json::accessor::Type::Vec4);
-    a.normalized = true;
-    root.push(a)
-}
-
-/// Normalized unsigned bytes of value / range ([`super::quantize::range_byte`]).
+/// Normalized unsigned bytes of value / range ([`super::quantize::range_byte`]) over their own
+/// new bufferView.
 fn ranged_byte_accessor(
     root: &mut json::Root,
     bin: &mut Bin,
     values: &[[f32; 4]],
     range: [f32; 4],
 ) -> Index<json::Accessor> {
-    let bytes =
-        values.iter().flat_map(|v| std::array::from_fn::<u8, 4, _>(|k| super::quantize::range_byte(v[k], range[k])));
-    byte_accessor(root, bin, bytes.collect())
+    let bytes: Vec<u8> = values
+        .iter()
+        .flat_map(|v| std::array::from_fn::<u8, 4, _>(|k| super::quantize::range_byte(v[k], range[k])))
+        .collect();
+    let view = bin.push_view(&bytes, Some(ARRAY_BUFFER));
+    bin.codecs[view.value()] = Some(Codec::Attributes { stride: 4, count: values.len() });
+    let mut a = accessor(view, values.len(), json::accessor::ComponentType::U8, json::accessor::Type::Vec4);
+    a.normalized = true;
+    root.push(a)
 }
 
 /// A float accessor over its own new bufferView.
