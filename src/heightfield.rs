@@ -130,6 +130,31 @@ impl Heightfield {
         }
     }
 
+    /// Rows `j0..=j1` of the map as a map of their own (heights and reference heights alike):
+    /// a band's window, sample (i, j) of which is the map's (i, j0 + j). `None` when the rows are
+    /// not within the map.
+    pub fn rows(&self, j0: usize, j1: usize) -> Option<Heightfield> {
+        if j0 > j1 || j1 >= self.height {
+            return None;
+        }
+        let range = j0 * self.width..(j1 + 1) * self.width;
+        let slice = |codes: &Arc<[u32]>| -> Arc<[u32]> { codes[range.clone()].into() };
+        let exact = self.exact.as_ref().map(|e| match e {
+            ExactHeights::Values(v) => ExactHeights::Values(v[range.clone()].into()),
+            ExactHeights::Codes { codes, map } => ExactHeights::Codes { codes: slice(codes), map: *map },
+            ExactHeights::Table { codes, heights } => {
+                ExactHeights::Table { codes: slice(codes), heights: heights.clone() }
+            }
+        });
+        Some(Heightfield {
+            width: self.width,
+            height: j1 - j0 + 1,
+            heights: self.heights[range.clone()].to_vec(),
+            cell_size_m: self.cell_size_m,
+            exact,
+        })
+    }
+
     /// Largest |stored − reference| height over all samples (0 when the heights are exact).
     pub fn rounding_m(&self) -> f64 {
         match &self.exact {

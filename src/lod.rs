@@ -184,6 +184,19 @@ pub fn terrain_lod_chain(
     max_vertices: usize,
     view: &LodView,
 ) -> Result<Vec<LodLevel>, LodError> {
+    terrain_lod_chain_in_bands(hf, max_errors_m, max_triangles, max_vertices, 0, view)
+}
+
+/// [`terrain_lod_chain`] with every level meshed in bands of `band_cells` rows
+/// ([`TinOptions::band_cells`]).
+pub fn terrain_lod_chain_in_bands(
+    hf: &Heightfield,
+    max_errors_m: &[f64],
+    max_triangles: Option<usize>,
+    max_vertices: usize,
+    band_cells: u32,
+    view: &LodView,
+) -> Result<Vec<LodLevel>, LodError> {
     check_max_errors(max_errors_m)?;
     view.check()?;
     let built: Vec<Result<LodLevel, LodError>> = max_errors_m
@@ -191,7 +204,7 @@ pub fn terrain_lod_chain(
         .enumerate()
         .map(|(level, &max_error_m)| {
             let start = Instant::now();
-            let r = tin(hf, &TinOptions { max_error_m, max_triangles, max_vertices })
+            let r = tin(hf, &TinOptions { max_error_m, max_triangles, max_vertices, band_cells })
                 .map_err(|error| LodError::Terrain { level, error })?;
             let stats = measure(hf, &r.mesh);
             Ok(LodLevel {

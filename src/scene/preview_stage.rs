@@ -28,8 +28,9 @@ fn fail(stage: Stage) -> impl Fn(String) -> StageError {
 /// puts them (plants 11), 6: and with small views sampled more finely (plants 12). 7: the terrain
 /// lit through its normal maps (terrain 6). 8: its snow layer from the scene's snow cover (terrain 7).
 /// 9: its soil layer where the species leave the ground bare (terrain 8). 10: impostors facing the
-/// eye and trees' rebuilt LoD1 (view 11). 11: the terrain meshed in regions (terrain 9).
-pub const PREVIEW_ALGORITHM_VERSION: u32 = 11;
+/// eye and trees' rebuilt LoD1 (view 11). 11: the terrain meshed in regions (terrain 9). 12: the
+/// chunked terrain meshed in bands (terrain 10).
+pub const PREVIEW_ALGORITHM_VERSION: u32 = 12;
 
 /// What the preview stage produced.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

@@ -93,8 +93,8 @@ impl ScatterStageReport {
 /// [`crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION`]). 2: scene.glb holds no unused mesh; 3: its terrain is textured; 4:
 /// its plants carry wind in `_WIND`, not COLOR_0; 5: a tree without an L-system instances a
 /// built-in tree; 6: flower cards lit by a normal atlas (with TANGENT); 7: scene.glb moved to the
-/// view stage (tables only); 8: a `variant` column; 9: density weight maps (placements/density_<k>.png). 10: placed on the terrain meshed in regions (terrain 9).
-pub const SCATTER_ALGORITHM_VERSION: u32 = 10;
+/// view stage (tables only); 8: a `variant` column; 9: density weight maps (placements/density_<k>.png). 10: placed on the terrain meshed in regions (terrain 9). 11: on the chunked terrain meshed in bands (terrain 10).
+pub const SCATTER_ALGORITHM_VERSION: u32 = 11;
 
 /// Cache key: the terrain's key, the species and scatter settings, the scene seed, the maps' bytes.
 pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageError> {

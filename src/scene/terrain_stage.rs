@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::export;
 use crate::heightfield::{self, Heightfield};
-use crate::lod::terrain_lod_chain;
+use crate::lod::terrain_lod_chain_in_bands;
 use crate::mesh::{Bounds, Scene};
 use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::error::{SceneBuildError, StageError};
@@ -110,7 +110,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// scene with species, the soil layer (terrain_layers_1.png, `_LAYER_WEIGHTS_1`) and `_SURFACE`
 /// from what grows (scene/ground_cover.rs). 9: maps over 480 samples a side are meshed as
 /// regions of about 320 cells in parallel, joined along seams fixed first (terrain/regions.rs).
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 9;
+/// 10: a chunked map is meshed in bands of whole chunks (at least 320 rows), each from its own rows
+/// alone (terrain/regions.rs `mesh_band`): the unit a shard will build.
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 10;
 
 /// The stage in a scene build.
 pub struct TerrainJob<'a> {
@@ -319,6 +321,7 @@ pub fn run_terrain_memo(
     };
     let from_memo = remembered.is_some();
 
+    let band_cells = crate::terrain::regions::band_cells_for_chunk(t.chunk);
     // The LoD chain meshes its levels in parallel; when one of them is the main mesh's bound,
     // the main mesh is taken from the chain instead of being computed twice.
     let t1 = Instant::now();
@@ -326,7 +329,7 @@ pub fn run_terrain_memo(
         Some(m) => (m.chain, Some(m.main)),
         None if t.lods.is_empty() => (Vec::new(), None),
         None => (
-            terrain_lod_chain(&hf, &t.lods, t.max_triangles, t.max_vertices, &preset.lod)
+            terrain_lod_chain_in_bands(&hf, &t.lods, t.max_triangles, t.max_vertices, band_cells, &preset.lod)
                 .map_err(|e| input(e.to_string()))?,
             None,
         ),
@@ -352,6 +355,7 @@ pub fn run_terrain_memo(
         max_error_m: t.max_error_m,
         max_triangles: t.max_triangles,
         max_vertices: t.max_vertices,
+        band_cells,
     };
     // the same path as `verdant terrain`: mesh (or the shared level), measure as stored, build
     let meshed =

@@ -197,8 +197,12 @@ pub fn mesh_samples(
             Ok((grid(hf, settings.grid_step)?, false))
         }
         MeshMode::Tin => {
-            let opts =
-                TinOptions { max_error_m, max_triangles: settings.max_triangles, max_vertices: settings.max_vertices };
+            let opts = TinOptions {
+                max_error_m,
+                max_triangles: settings.max_triangles,
+                max_vertices: settings.max_vertices,
+                band_cells: settings.band_cells,
+            };
             let r = tin_stored(hf, &opts, storage)?;
             Ok((r.mesh, r.hit_triangle_limit))
         }
@@ -264,6 +268,8 @@ pub struct MeshSettings {
     pub max_error_m: f64,
     pub max_triangles: Option<usize>,
     pub max_vertices: usize,
+    /// Rows of cells in each band the map is meshed in ([`TinOptions::band_cells`]; 0: one band).
+    pub band_cells: u32,
 }
 
 /// A terrain meshed, measured as stored and built into its textured scene.
@@ -372,6 +378,7 @@ impl TerrainJob {
             max_error_m: self.max_error_m,
             max_triangles: self.max_triangles,
             max_vertices: self.max_vertices,
+            band_cells: crate::terrain::regions::band_cells_for_chunk(self.build.chunk_samples),
         }
     }
 }

@@ -9,6 +9,11 @@
 //! triangle rounds over the bound), the sample joins the seam and both regions are meshed again,
 //! until no region adds one: the result is watertight by construction, not by luck.
 //!
+//! A chunked map is first cut into bands of whole chunks ([`band_cells_for_chunk`]): each band is
+//! meshed from its own rows alone ([`mesh_band`]), its edges inside the map fixed as seams that
+//! never take a sample, so a band can be built apart (by a shard, from a window of the map) and
+//! the bands joined into the same mesh.
+//!
 //! The cost against one greedy pass over the whole map: the seam vertices the 1-D pass adds (a few
 //! hundred per seam where the map is rough; `benches/terrain.rs` prints the triangle counts against
 //! the peer's).
@@ -103,17 +108,29 @@ fn simplify_seam(hf: &Heightfield, storage: &Storage, seam: Seam, max_error_m: f
 }
 
 /// Meshes `hf` region by region in parallel (one region when the map is small) and joins the
-/// regions; returns the mesh and its largest error (as [`mesh_region`] measures it).
+/// regions; returns the mesh and its largest error (as [`mesh_region`] measures it). With
+/// `opts.band_cells` the map is meshed band by band ([`band_lines`], [`mesh_band`]).
 pub(crate) fn mesh_by_regions(
     hf: &Heightfield,
     opts: &TinOptions,
     storage: &Storage,
 ) -> Result<(SampleMesh, f64), TerrainError> {
-    mesh_by_regions_with(hf, opts, storage, true).map(|(mesh, error, _)| (mesh, error))
+    let lines = band_lines(hf.height, opts.band_cells, storage);
+    if lines.len() > 2 {
+        let bands: Vec<Result<(SampleMesh, f64), TerrainError>> = lines
+            .par_windows(2)
+            .map(|w| mesh_band(hf, opts, storage, [w[0], w[1]], [w[0] > 0, w[1] < lines[lines.len() - 1]]))
+            .collect();
+        let bands = bands.into_iter().collect::<Result<Vec<_>, _>>()?;
+        return Ok(join_bands(bands, &lines));
+    }
+    let (xs, ys) = layout(hf);
+    mesh_rects(hf, opts, storage, &xs, &ys, [false, false], true).map(|(mesh, error, _)| (mesh, error))
 }
 
-/// [`mesh_by_regions`], also returning how many rounds of meshing the seams took; without
-/// `simplify_seams` the seams start empty (a test of the rounds that reconcile them).
+/// The whole map meshed as [`mesh_by_regions`] does, also returning how many rounds of meshing the
+/// seams took; without `simplify_seams` the seams start empty (a test of the rounds).
+#[cfg(test)]
 fn mesh_by_regions_with(
     hf: &Heightfield,
     opts: &TinOptions,
@@ -121,9 +138,90 @@ fn mesh_by_regions_with(
     simplify_seams: bool,
 ) -> Result<(SampleMesh, f64, usize), TerrainError> {
     let (xs, ys) = layout(hf);
+    mesh_rects(hf, opts, storage, &xs, &ys, [false, false], simplify_seams)
+}
+
+/// Rows of cells in a band of a map cut into chunks of `chunk` cells: the fewest whole chunks
+/// reaching [`REGION_CELLS`] (a band's edges are chunk lines, so each chunk's triangles come from
+/// one band), 0 (one band) without chunks.
+pub fn band_cells_for_chunk(chunk: Option<usize>) -> u32 {
+    match chunk {
+        Some(c) if c > 0 => (c as u64 * (REGION_CELLS as u64).div_ceil(c as u64)).min(u32::MAX as u64) as u32,
+        _ => 0,
+    }
+}
+
+/// The rows a map of `height` samples is cut into bands at, for bands of `band_cells` cells
+/// (first 0, last `height − 1`; the last band may be shorter): `[0, height − 1]` (one band) when
+/// `band_cells` is 0 or not less than the map's cells, or when the file's x and z are not exactly
+/// i·cell and j·cell (see [`mesh_band`] for why a band's edges then cannot be fixed).
+pub(crate) fn band_lines(height: usize, band_cells: u32, storage: &Storage) -> Vec<u32> {
+    let cells = height.saturating_sub(1) as u32;
+    if band_cells == 0 || band_cells >= cells || !storage.xz_exact() {
+        return vec![0, cells];
+    }
+    let mut lines: Vec<u32> = (0..cells).step_by(band_cells as usize).collect();
+    lines.push(cells);
+    lines
+}
+
+/// The rows `rows[0]..=rows[1]` of `hf` meshed on their own, as a band of the map: cut into
+/// regions like a map of that many rows (the columns as the whole map's), the band's bottom and
+/// top edges, where `fixed` says a neighbouring band lies beyond them, fixed as seams simplified
+/// in one dimension from their own samples alone, which the neighbouring band computes alike.
+/// `hf` may be the band's rows alone (a window of the map: `rows` is then `[0, hf.height − 1]`). Returns the band's mesh (samples in `hf`'s coordinates) and
+/// its largest error.
+///
+/// The band depends on its rows alone: no sample is ever inserted on a fixed edge. With x and z
+/// stored exactly ([`band_lines`] asks for it), a sample on a hull edge is measured by the
+/// triangle's plane at an exact integer weight of 0 for the far corner, which is the 1-D
+/// interpolation along the edge up to rounding (the seam's margin covers it), both for the f32
+/// heights and as stored; the 1-D pass kept every sample over the bound there. (Should a region
+/// still insert one, the band fails with an internal error rather than leave a crack.)
+pub(crate) fn mesh_band(
+    hf: &Heightfield,
+    opts: &TinOptions,
+    storage: &Storage,
+    rows: [u32; 2],
+    fixed: [bool; 2],
+) -> Result<(SampleMesh, f64), TerrainError> {
+    let (xs, _) = layout(hf);
+    let ys: Vec<u32> = cuts((rows[1] - rows[0]) as usize + 1).into_iter().map(|j| j + rows[0]).collect();
+    mesh_rects(hf, opts, storage, &xs, &ys, fixed, true).map(|(mesh, error, _)| (mesh, error))
+}
+
+/// Joins band meshes (in band order, cut at `lines`): each vertex on a band line once.
+pub(crate) fn join_bands(bands: Vec<(SampleMesh, f64)>, lines: &[u32]) -> (SampleMesh, f64) {
+    let meshes = bands
+        .into_iter()
+        .map(|(m, e)| RegionMesh {
+            vertices: m.vertices,
+            triangles: m.triangles,
+            max_error_m: e,
+            hit_triangle_limit: false,
+            inserted_inside: 0,
+        })
+        .collect();
+    join(meshes, &[0, u32::MAX], lines)
+}
+
+/// Meshes the rectangles between the cut lines `xs` × `ys` of `hf` in parallel and joins them; also
+/// returns how many rounds of meshing the seams took. `fixed` says whether the bottom (`ys[0]`) and
+/// top (`ys[last]`) edges are seams with rectangles outside (a band's edges inside the map): they
+/// are simplified like any seam but never take a sample. Without `simplify_seams` the seams start
+/// empty (a test of the rounds that reconcile them).
+fn mesh_rects(
+    hf: &Heightfield,
+    opts: &TinOptions,
+    storage: &Storage,
+    xs: &[u32],
+    ys: &[u32],
+    fixed: [bool; 2],
+    simplify_seams: bool,
+) -> Result<(SampleMesh, f64, usize), TerrainError> {
     let (nx, ny) = (xs.len() - 1, ys.len() - 1);
     let rect = |rx: usize, ry: usize| Rect { i0: xs[rx], j0: ys[ry], i1: xs[rx + 1], j1: ys[ry + 1] };
-    if nx * ny == 1 {
+    if nx * ny == 1 && fixed == [false, false] {
         let r = mesh_region(hf, opts, storage, rect(0, 0), &[], None)?;
         return Ok((SampleMesh { vertices: r.vertices, triangles: r.triangles }, r.max_error_m, 1));
     }
@@ -137,14 +235,15 @@ fn mesh_by_regions_with(
         if rx + 1 < nx {
             s.push(Seam { vertical: true, at: r.i1, from: r.j0, to: r.j1 });
         }
-        if ry > 0 {
+        if ry > 0 || fixed[0] {
             s.push(Seam { vertical: false, at: r.j0, from: r.i0, to: r.i1 });
         }
-        if ry + 1 < ny {
+        if ry + 1 < ny || fixed[1] {
             s.push(Seam { vertical: false, at: r.j1, from: r.i0, to: r.i1 });
         }
         s
     };
+    let is_fixed = |s: &Seam| !s.vertical && ((fixed[0] && s.at == ys[0]) || (fixed[1] && s.at == ys[ny]));
     let regions: Vec<(usize, usize)> = (0..ny).flat_map(|ry| (0..nx).map(move |rx| (rx, ry))).collect();
     let all_seams: Vec<Seam> = {
         let mut v: Vec<Seam> = regions.iter().flat_map(|&(rx, ry)| seams_of(rx, ry)).collect();
@@ -171,14 +270,14 @@ fn mesh_by_regions_with(
         rounds += 1;
         // the vertices the joined mesh will hold for sure: every region corner and seam sample once,
         // and what the regions not meshed again inserted off the cut lines
-        let fixed = (nx + 1) * (ny + 1)
+        let certain = (nx + 1) * (ny + 1)
             + seam_samples.values().map(Vec::len).sum::<usize>()
             + (0..regions.len())
                 .filter(|&k| !dirty[k])
                 .filter_map(|k| meshes[k].as_ref())
                 .map(|m| m.inserted_inside)
                 .sum::<usize>();
-        let count = AtomicUsize::new(fixed);
+        let count = AtomicUsize::new(certain);
         let shared = SharedBudget { count: &count, limit: opts.max_vertices, cuts: (inner_x, inner_y) };
         let built: Vec<(usize, Result<RegionMesh, TerrainError>)> = todo
             .par_iter()
@@ -205,6 +304,10 @@ fn mesh_by_regions_with(
                 let added: Vec<u32> = on_seam.filter(|t| seam_samples[&s].binary_search(t).is_err()).collect();
                 if added.is_empty() {
                     continue;
+                }
+                if is_fixed(&s) {
+                    let [i, j] = s.sample(added[0]);
+                    return Err(TerrainError::Internal { i: i as usize, j: j as usize });
                 }
                 let list = seam_samples.get_mut(&s).expect("every seam has its samples");
                 list.extend(added);
@@ -347,5 +450,68 @@ mod tests {
         // with the 1-D pass one round is the rule
         let (_, _, rounds) = mesh_by_regions_with(&hf, &opts, &storage, true).unwrap();
         assert_eq!(rounds, 1);
+    }
+
+    /// Every band of `hf` meshed from a window of its rows alone, shifted into the map and joined.
+    fn from_windows(hf: &Heightfield, opts: &TinOptions) -> (SampleMesh, f64) {
+        let lines = band_lines(hf.height, opts.band_cells, &Storage::f32(hf));
+        let last = lines[lines.len() - 1];
+        let bands = lines
+            .windows(2)
+            .map(|w| {
+                let window = hf.rows(w[0] as usize, w[1] as usize).unwrap();
+                let rows = [0, w[1] - w[0]];
+                let (mut mesh, error) =
+                    mesh_band(&window, opts, &Storage::f32(&window), rows, [w[0] > 0, w[1] < last]).unwrap();
+                for v in &mut mesh.vertices {
+                    v[1] += w[0];
+                }
+                (mesh, error)
+            })
+            .collect();
+        join_bands(bands, &lines)
+    }
+
+    #[test]
+    fn chunked_maps_are_cut_into_bands_of_whole_chunks_reaching_320_rows() {
+        let storage = Storage::f32(&crate::synth::fractal(4, 4, 1.0, 1.0, 0.5, 1));
+        assert_eq!(band_cells_for_chunk(None), 0);
+        assert_eq!(band_cells_for_chunk(Some(512)), 512);
+        assert_eq!(band_cells_for_chunk(Some(128)), 384);
+        assert_eq!(band_cells_for_chunk(Some(64)), 320);
+        assert_eq!(band_lines(8193, 512, &storage), (0..=16).map(|k| k * 512).collect::<Vec<_>>());
+        assert_eq!(band_lines(1100, 384, &storage), vec![0, 384, 768, 1099], "the last band is shorter");
+        assert_eq!(band_lines(385, 384, &storage), vec![0, 384], "a map of one band's rows is one band");
+        assert_eq!(band_lines(1100, 0, &storage), vec![0, 1099]);
+        // x and z not exactly i·cell, j·cell (0.3 m cells): the bands' edges could take a sample
+        let inexact = Storage::f32(&crate::synth::fractal(1100, 4, 0.3, 1.0, 0.5, 1));
+        assert!(!inexact.xz_exact());
+        assert_eq!(band_lines(1100, 384, &inexact), vec![0, 1099], "inexact positions: one band");
+    }
+
+    #[test]
+    fn a_band_meshed_from_its_own_rows_is_the_maps_band_and_the_bands_join_without_a_crack() {
+        // bands of 384 and 320 rows, rough and smooth maps, f32 heights and decimetre heights
+        // (Terrain-RGB-like, measured against their exact values as stored)
+        for (w, h, band, bound, relief) in
+            [(700, 1300, 384, 0.5f64, 300.0), (900, 1100, 320, 2.0, 600.0), (500, 1025, 512, 0.0, 40.0)]
+        {
+            let rough = crate::synth::fractal(w, h, 1.0, relief, 0.6, 7 + w as u64);
+            let tenths: Vec<f64> = rough.heights.iter().map(|&z| (z as f64 * 10.0).round() / 10.0 + 0.05).collect();
+            // (a bound of 0 is finer than f32 holds decimetres: the tenths map is meshed within 0.1 m)
+            for (hf, bound) in [(rough.clone(), bound), (Heightfield::from_f64(w, h, &tenths, 1.0), bound.max(0.1))] {
+                let opts = TinOptions { max_error_m: bound, band_cells: band, ..TinOptions::default() };
+                let whole = tin(&hf, &opts).unwrap();
+                assert!(band_lines(h, band, &Storage::f32(&hf)).len() > 2, "{w}×{h} is cut into bands");
+                check_mesh(&hf, &whole.mesh);
+                let stats = measure(&hf, &whole.mesh);
+                assert!(stats.max_error_m <= bound, "{w}×{h} at {bound}: {} over the bound", stats.max_error_m);
+                let (windows, error) = from_windows(&hf, &opts);
+                assert_eq!(windows, whole.mesh, "{w}×{h}, bands of {band}: a band's rows alone mesh it otherwise");
+                assert_eq!(error, whole.max_error_m);
+                let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| tin(&hf, &opts));
+                assert_eq!(one.unwrap(), whole, "{w}×{h}: the bands depend on the thread count");
+            }
+        }
     }
 }

@@ -37,11 +37,14 @@ pub struct TinOptions {
     /// stop with an error when the mesh reaches it with the error still over the bound
     /// ([`crate::terrain::budget`]).
     pub max_vertices: usize,
+    /// Mesh the map in bands of this many rows of cells, each from its own rows alone (0: the map
+    /// as one band); see [`super::regions::mesh_band`]. Ignored with a triangle limit.
+    pub band_cells: u32,
 }
 
 impl Default for TinOptions {
     fn default() -> Self {
-        TinOptions { max_error_m: 1.0, max_triangles: None, max_vertices: DEFAULT_MAX_VERTICES }
+        TinOptions { max_error_m: 1.0, max_triangles: None, max_vertices: DEFAULT_MAX_VERTICES, band_cells: 0 }
     }
 }
 
