@@ -379,6 +379,26 @@ pub fn load(path: &Path, opts: &DecodeOptions) -> Result<Decoded, HeightfieldErr
 }
 
 /// Decodes heightmap `bytes`; `path` names the source in messages and decides `auto` by extension.
+/// The map's width and height in samples as [`decode`] would find them, from the file's header
+/// (or length) alone, without decoding its samples; `None` when that cannot tell (a file that
+/// does not decode: [`decode`] names what is wrong).
+pub fn dimensions(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Option<(usize, usize)> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let square = |n: usize| {
+        let side = (n as f64).sqrt().round() as usize;
+        (side * side == n && bytes.len().is_multiple_of(2)).then_some((side, side))
+    };
+    match (opts.encoding, ext.as_str()) {
+        (Encoding::Hgt, _) | (Encoding::Auto, "hgt") => square(bytes.len() / 2),
+        (Encoding::R16, _) | (Encoding::Auto, "r16" | "raw") => opts.size.or_else(|| square(bytes.len() / 2)),
+        _ => {
+            let reader = image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().ok()?;
+            let (w, h) = reader.into_dimensions().ok()?;
+            Some((w as usize, h as usize))
+        }
+    }
+}
+
 pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded, HeightfieldError> {
     if bytes.is_empty() {
         return Err(HeightfieldError::Empty { path: path.to_owned() });
@@ -392,11 +412,45 @@ pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
         },
         e => e,
     };
-    let mut decoded = match encoding {
+    let decoded = match encoding {
         Encoding::Hgt => decode_hgt(path, bytes, opts)?,
         Encoding::R16 => decode_r16(path, bytes, opts)?,
         _ => decode_image(path, bytes, encoding, opts)?,
     };
+    finish_decoded(path, decoded, opts, &|j| j)
+}
+
+/// Rows of a PNG heightmap alone: the rows `keep` accepts, in order, as one map (`rows[k]` is the
+/// file's row of its row k), decoded by the same row loop as [`decode`] (the same heights), the
+/// others read and dropped. `None` when the file is not a PNG this loop reads (decode it whole).
+pub fn decode_kept_rows(
+    path: &Path,
+    bytes: &[u8],
+    opts: &DecodeOptions,
+    keep: &dyn Fn(usize) -> bool,
+) -> Result<Option<(Decoded, Vec<usize>)>, HeightfieldError> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let whole_only = matches!(opts.encoding, Encoding::Hgt | Encoding::R16 | Encoding::Float)
+        || (opts.encoding == Encoding::Auto && matches!(ext.as_str(), "hgt" | "r16" | "raw"));
+    if bytes.is_empty() || whole_only || !bytes.starts_with(PNG_SIGNATURE) {
+        return Ok(None);
+    }
+    let mut kept = Vec::new();
+    let Some(decoded) = decode_png_rows(path, bytes, opts.encoding, opts, Some((keep, &mut kept)))? else {
+        return Ok(None);
+    };
+    let decoded = finish_decoded(path, decoded, opts, &|j| kept.get(j).copied().unwrap_or(j))?;
+    Ok(Some((decoded, kept)))
+}
+
+/// What [`decode`] checks and sets on every decoded map (`row_of` names a row of the map as the
+/// file's, for the errors).
+fn finish_decoded(
+    path: &Path,
+    mut decoded: Decoded,
+    opts: &DecodeOptions,
+    row_of: &dyn Fn(usize) -> usize,
+) -> Result<Decoded, HeightfieldError> {
     decoded.heightfield.cell_size_m = opts.cell_size_m;
     let (w, h) = (decoded.heightfield.width, decoded.heightfield.height);
     check_extent(w, h, opts.cell_size_m)
@@ -429,7 +483,7 @@ pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
         };
         return Err(HeightfieldError::format(
             path,
-            format!("sample (column {}, row {}) {what}; {remedy}", k % w, k / w),
+            format!("sample (column {}, row {}) {what}; {remedy}", k % w, row_of(k / w)),
         ));
     }
     Ok(decoded)
@@ -616,7 +670,7 @@ fn decode_image(
         return Err(HeightfieldError::format(path, "--encoding float needs a 32-bit float TIFF; this file is not one (for 8/16-bit images use gray, terrain-rgb or terrarium: --encoding, or `encoding` in a preset)"));
     }
     if bytes.starts_with(PNG_SIGNATURE) {
-        if let Some(decoded) = decode_png_rows(path, bytes, encoding, opts)? {
+        if let Some(decoded) = decode_png_rows(path, bytes, encoding, opts, None)? {
             return Ok(decoded);
         }
     }
@@ -740,11 +794,15 @@ const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
 /// same `png` decoder and transformations as the `image` crate's (EXPAND: palettes to RGB(A),
 /// gray under 8 bits to 8), so the same codes, the same errors (tested against it). Ok(None) for
 /// an interlaced PNG, whose rows arrive in passes: `decode_image` reads it whole.
+/// Kept rows: which rows to keep, and the list of those kept (file rows, in order).
+type KeepRows<'a> = (&'a dyn Fn(usize) -> bool, &'a mut Vec<usize>);
+
 fn decode_png_rows(
     path: &Path,
     bytes: &[u8],
     encoding: Encoding,
     opts: &DecodeOptions,
+    mut keep: Option<KeepRows<'_>>,
 ) -> Result<Option<Decoded>, HeightfieldError> {
     let mut decoder = png::Decoder::new_with_limits(Cursor::new(bytes), png::Limits { bytes: usize::MAX });
     decoder.set_transformations(png::Transformations::EXPAND);
@@ -789,10 +847,19 @@ fn decode_png_rows(
         }
         _ => return Ok(None),
     };
-    let mut codes = Vec::with_capacity(w * h);
+    let kept_rows = keep.as_ref().map_or(h, |(k, _)| (0..h).filter(|&j| k(j)).count());
+    let mut codes = Vec::with_capacity(w * kept_rows);
     let mut row_index = 0;
     while let Some(row) = reader.next_row().map_err(|e| image_error(path, e))? {
         let data = row.data();
+        let kept = match keep.as_mut() {
+            Some((k, list)) if k(row_index) => {
+                list.push(row_index);
+                true
+            }
+            Some(_) => false,
+            None => true,
+        };
         let value = |k: usize| -> u32 {
             if sixteen {
                 u16::from_be_bytes([data[2 * k], data[2 * k + 1]]) as u32
@@ -822,14 +889,17 @@ fn decode_png_rows(
                     }
                 }
             };
-            codes.push(code);
+            if kept {
+                codes.push(code);
+            }
         }
         row_index += 1;
     }
-    if codes.len() != w * h {
+    if row_index != h || codes.len() != w * kept_rows {
         return Err(image_error(path, format!("the image data end after {row_index} of {h} rows")));
     }
-    Ok(Some(Decoded { heightfield: Heightfield::from_codes(w, h, codes, map, 1.0), encoding, voids_filled: 0 }))
+    let heightfield = Heightfield::from_codes(w, kept_rows, codes, map, 1.0);
+    Ok(Some(Decoded { heightfield, encoding, voids_filled: 0 }))
 }
 
 /// 32-bit float single-channel TIFF in metres. Returns Ok(None) for TIFFs of other sample types,
@@ -951,6 +1021,47 @@ mod tests {
         out
     }
 
+    /// The rows of a PNG kept alone are the whole map's rows: 16-bit gray (scaled: exact
+    /// references) and Terrain-RGB, two bands sharing their edge row; a file that is not a PNG
+    /// is left to the whole decoder; a bad sample's row is named as the file's.
+    #[test]
+    fn kept_rows_of_a_png_are_the_maps_rows() {
+        use png::{BitDepth as B, ColorType as C};
+        let (w, h) = (37u32, 50u32);
+        let gray: Vec<u8> = (0..w * h).map(|k| ((k * 2749 + 7) % 65536) as u16).flat_map(|v| v.to_be_bytes()).collect();
+        let rgb: Vec<u8> = (0..w * h).flat_map(|k| [1, (k % 251) as u8, (k * 7 % 256) as u8]).collect();
+        let cases = [
+            (png_file(w, h, C::Grayscale, B::Sixteen, &gray, None, None), Encoding::Gray, 6553.5),
+            (png_file(w, h, C::Rgb, B::Eight, &rgb, None, None), Encoding::TerrainRgb, 100.0),
+        ];
+        for (file, encoding, height_scale_m) in cases {
+            let opts = DecodeOptions { encoding, height_scale_m, cell_size_m: 2.0, ..DecodeOptions::default() };
+            let path = Path::new("map.png");
+            let whole = decode(path, &file, &opts).unwrap().heightfield;
+            let keep = |j: usize| (3..=17).contains(&j) || (17..=31).contains(&j) || j == 49;
+            let (kept, rows) = decode_kept_rows(path, &file, &opts, &keep).unwrap().unwrap();
+            assert_eq!(rows, (3..=31).chain([49]).collect::<Vec<_>>());
+            let kept = kept.heightfield;
+            assert_eq!((kept.width, kept.height, kept.cell_size_m), (37, 30, 2.0));
+            for (k, &j) in rows.iter().enumerate() {
+                for i in 0..w as usize {
+                    let (a, b) = (k * w as usize + i, j * w as usize + i);
+                    assert_eq!(kept.heights[a].to_bits(), whole.heights[b].to_bits(), "{encoding:?} ({i}, {j})");
+                    assert_eq!(kept.reference(a).to_bits(), whole.reference(b).to_bits(), "{encoding:?} ({i}, {j})");
+                }
+            }
+            assert_eq!(kept.exact.is_some(), whole.exact.is_some());
+        }
+        let opts = DecodeOptions::default();
+        assert!(decode_kept_rows(Path::new("map.hgt"), &[0u8; 8], &opts, &|_| true).unwrap().is_none());
+        assert!(decode_kept_rows(Path::new("map.tif"), b"II*\0rest", &opts, &|_| true).unwrap().is_none());
+        // heights out of range everywhere: the first kept row, the file's row 40, is named
+        let bad = DecodeOptions { encoding: Encoding::Gray, height_scale_m: 1e13, ..DecodeOptions::default() };
+        let file = png_file(w, h, C::Grayscale, B::Sixteen, &gray, None, None);
+        let err = decode_kept_rows(Path::new("map.png"), &file, &bad, &|j| j >= 40).unwrap_err().to_string();
+        assert!(err.contains("row 40)"), "{err}");
+    }
+
     /// Row-wise PNG decoding gives what decoding the whole image with the `image` crate gives, for
     /// every PNG colour type and bit depth, every encoding, gray stored as RGB (equal channels)
     /// and not: the same heights, exact references and encoding, or the same error.
@@ -1020,7 +1131,7 @@ mod tests {
                             ..Default::default()
                         };
                         let path = Path::new("map.png");
-                        let rows = decode_png_rows(path, &file, encoding, &opts);
+                        let rows = decode_png_rows(path, &file, encoding, &opts, None);
                         let whole = decode_whole_image(path, &file, encoding, &opts);
                         let what = format!("{color:?} {depth:?} {encoding:?} equal={equal_channels} trns={trns}");
                         match (rows, whole) {

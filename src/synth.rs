@@ -248,35 +248,23 @@ impl<'a> RowNoise<'a> {
 /// its own coordinates only, so the map is byte-identical for a seed at any thread count.
 pub fn noise_map(kind: NoiseKind, size: usize, cell_size_m: f64, relief_m: f64, seed: u64) -> Heightfield {
     let side = size.max(1);
-    let base_wavelength = ((side - 1) as f64 / 2.0).max(1.0);
-    // octave table: (seed, offset x, offset y, frequency, amplitude)
-    let mut octaves = Vec::new();
-    let (mut frequency, mut amplitude) = (1.0 / base_wavelength, 1.0);
-    for o in 0..NOISE_OCTAVES {
-        if o > 0 && frequency > 0.5 {
-            break;
-        }
-        let (s, ox, oy) = octave_params(seed, o);
-        octaves.push((s, ox, oy, frequency, amplitude));
-        frequency *= LACUNARITY;
-        amplitude *= GAIN;
-    }
+    let octaves = octave_table(side, seed);
     // The raw f64 samples are kept as pairs of 32-bit words in the buffer that then becomes the
     // f32 heights, in place: 8 bytes a sample at most, instead of the raw map (8) beside the
     // heights (4).
     let n = side * side;
     let mut words = vec![0u32; 2 * n];
-    words.par_chunks_mut(2 * side).enumerate().for_each(|(j, row)| {
-        let mut noise = RowNoise::new(&octaves, j);
-        let mut values = Vec::with_capacity(octaves.len());
-        for (i, pair) in row.chunks_exact_mut(2).enumerate() {
-            values.clear();
-            values.extend((0..octaves.len()).map(|o| noise.at(o, i)));
-            let bits = combine(kind, &octaves, &values).to_bits();
-            pair[0] = bits as u32;
-            pair[1] = (bits >> 32) as u32;
-        }
-    });
+    words.par_chunks_mut(2 * side).enumerate().for_each_init(
+        || vec![0.0f64; side],
+        |raw, (j, row)| {
+            raw_row(kind, &octaves, j, raw);
+            for (pair, v) in row.chunks_exact_mut(2).zip(raw.iter()) {
+                let bits = v.to_bits();
+                pair[0] = bits as u32;
+                pair[1] = (bits >> 32) as u32;
+            }
+        },
+    );
     let raw = |words: &[u32], k: usize| f64::from_bits(words[2 * k] as u64 | (words[2 * k + 1] as u64) << 32);
     let lo = (0..n).map(|k| raw(&words, k)).fold(f64::INFINITY, f64::min);
     let hi = (0..n).map(|k| raw(&words, k)).fold(f64::NEG_INFINITY, f64::max);
@@ -292,6 +280,93 @@ pub fn noise_map(kind: NoiseKind, size: usize, cell_size_m: f64, relief_m: f64, 
     // (u32 → f32 of the same size: the standard library collects this in the same allocation)
     let heights: Vec<f32> = words.into_iter().map(f32::from_bits).collect();
     Heightfield { width: side, height: side, heights, cell_size_m, exact: None }
+}
+
+/// The octaves of a `side`-sample map: (seed, offset x, offset y, frequency, amplitude).
+fn octave_table(side: usize, seed: u64) -> Vec<Octave> {
+    let base_wavelength = ((side - 1) as f64 / 2.0).max(1.0);
+    let mut octaves = Vec::new();
+    let (mut frequency, mut amplitude) = (1.0 / base_wavelength, 1.0);
+    for o in 0..NOISE_OCTAVES {
+        if o > 0 && frequency > 0.5 {
+            break;
+        }
+        let (s, ox, oy) = octave_params(seed, o);
+        octaves.push((s, ox, oy, frequency, amplitude));
+        frequency *= LACUNARITY;
+        amplitude *= GAIN;
+    }
+    octaves
+}
+
+/// Row `j`'s raw values (before the map is scaled to its relief) into `out` (one per sample).
+fn raw_row(kind: NoiseKind, octaves: &[Octave], j: usize, out: &mut [f64]) {
+    let mut noise = RowNoise::new(octaves, j);
+    let mut values = Vec::with_capacity(octaves.len());
+    for (i, v) in out.iter_mut().enumerate() {
+        values.clear();
+        values.extend((0..octaves.len()).map(|o| noise.at(o, i)));
+        *v = combine(kind, octaves, &values);
+    }
+}
+
+/// Rows `rows[0]..=rows[1]` of [`noise_map`]'s map, the same heights bit for bit, holding only
+/// those rows: the map's range, which scales every height, is found by a pass over every row that
+/// keeps nothing (so this takes about as long as the whole map, in the memory of its rows).
+/// `None` when the rows are not within the map.
+pub fn noise_map_rows(
+    kind: NoiseKind,
+    size: usize,
+    cell_size_m: f64,
+    relief_m: f64,
+    seed: u64,
+    rows: [usize; 2],
+) -> Option<Heightfield> {
+    noise_rows(kind, size, cell_size_m, relief_m, seed, noise_range(kind, size, seed), rows)
+}
+
+/// The smallest and largest raw value of [`noise_map`]'s map (what scales it to its relief), by a
+/// pass over every row that keeps nothing.
+pub fn noise_range(kind: NoiseKind, size: usize, seed: u64) -> (f64, f64) {
+    let side = size.max(1);
+    let octaves = octave_table(side, seed);
+    (0..side)
+        .into_par_iter()
+        .map_init(
+            || vec![0.0f64; side],
+            |row, j| {
+                raw_row(kind, &octaves, j, row);
+                row.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)))
+            },
+        )
+        .reduce(|| (f64::INFINITY, f64::NEG_INFINITY), |a, b| (a.0.min(b.0), a.1.max(b.1)))
+}
+
+/// Rows `rows[0]..=rows[1]` of [`noise_map`]'s map given its raw `range` ([`noise_range`]).
+pub fn noise_rows(
+    kind: NoiseKind,
+    size: usize,
+    cell_size_m: f64,
+    relief_m: f64,
+    seed: u64,
+    (lo, hi): (f64, f64),
+    rows: [usize; 2],
+) -> Option<Heightfield> {
+    let side = size.max(1);
+    if rows[0] > rows[1] || rows[1] >= side {
+        return None;
+    }
+    let octaves = octave_table(side, seed);
+    let scale = if hi > lo { relief_m / (hi - lo) } else { 0.0 };
+    let mut heights = vec![0.0f32; (rows[1] - rows[0] + 1) * side];
+    heights.par_chunks_mut(side).enumerate().for_each(|(k, out)| {
+        let mut row = vec![0.0f64; side];
+        raw_row(kind, &octaves, rows[0] + k, &mut row);
+        for (h, &v) in out.iter_mut().zip(&row) {
+            *h = (((v - lo) * scale) as f32).clamp(0.0, relief_m as f32);
+        }
+    });
+    Some(Heightfield { width: side, height: rows[1] - rows[0] + 1, heights, cell_size_m, exact: None })
 }
 
 /// Fractional Brownian motion of gradient noise: a `size` × `size` map in [0, `relief_m`] metres.
@@ -311,6 +386,25 @@ pub fn demo() -> Heightfield {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn rows_of_a_noise_map_made_alone_are_the_maps_rows_bit_for_bit() {
+        for kind in [NoiseKind::Fbm, NoiseKind::Ridged] {
+            let whole = noise_map(kind, 301, 2.0, 250.0, 17);
+            for rows in [[0, 0], [0, 40], [120, 255], [299, 300], [300, 300]] {
+                let part = noise_map_rows(kind, 301, 2.0, 250.0, 17, rows).unwrap();
+                let expected = whole.rows(rows[0], rows[1]).unwrap();
+                assert_eq!(part.heights.len(), expected.heights.len());
+                assert!(
+                    part.heights.iter().zip(&expected.heights).all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{kind:?} rows {rows:?}"
+                );
+                assert_eq!(part, expected);
+            }
+            assert!(noise_map_rows(kind, 301, 2.0, 250.0, 17, [10, 301]).is_none());
+            assert!(noise_map_rows(kind, 301, 2.0, 250.0, 17, [11, 10]).is_none());
+        }
+    }
     use super::*;
 
     #[test]
