@@ -197,8 +197,7 @@ pub fn terrain_lod_chain_in_bands(
     band_cells: u32,
     view: &LodView,
 ) -> Result<Vec<LodLevel>, LodError> {
-    check_max_errors(max_errors_m)?;
-    view.check()?;
+    check_chain(max_errors_m, view)?;
     let built: Vec<Result<LodLevel, LodError>> = max_errors_m
         .par_iter()
         .enumerate()
@@ -219,12 +218,24 @@ pub fn terrain_lod_chain_in_bands(
         })
         .collect();
     let mut levels = built.into_iter().collect::<Result<Vec<_>, _>>()?;
+    assign_switch_distances(&mut levels, view);
+    Ok(levels)
+}
+
+/// What a chain of `max_errors_m` (finest first) under `view` must be, checked before meshing it.
+pub fn check_chain(max_errors_m: &[f64], view: &LodView) -> Result<(), LodError> {
+    check_max_errors(max_errors_m)?;
+    view.check()
+}
+
+/// Each level's switch distance from its measured error (level 0 from 0 m), never nearer than the
+/// previous level's (the module docs give the convention).
+pub fn assign_switch_distances(levels: &mut [LodLevel], view: &LodView) {
     let mut previous = 0.0f64;
     for l in levels.iter_mut().skip(1) {
         l.switch_distance_m = view.switch_distance(l.stats.max_error_m).max(previous);
         previous = l.switch_distance_m;
     }
-    Ok(levels)
 }
 
 /// Screen coverage as Babylon.js computes it for MSFT_lod (`Mesh.getLOD` with screen coverage):

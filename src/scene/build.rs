@@ -269,7 +269,7 @@ fn build_into(
         let job = TerrainJob { preset, terrain: t, memo: Some(memo) };
         let ran = runner.run(&job)?;
         // the terrain's meshes, kept apart from its files: `cache prune` keeps them with the scene
-        runner.used.entries.extend(job.memo_entry());
+        runner.used.entries.extend(job.memo_entries());
         terrain = Some(TerrainHandoff::new(dir, &ran.report.files, ran.key, ran.artifact));
         terrain_lods = ran.report.lods.clone();
         runs.push(StageRun::Terrain { cost: ran.cost, report: ran.report, cached: ran.cached });

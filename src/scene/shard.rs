@@ -1,8 +1,10 @@
 //! Sharded builds: a scene's independent units of work built by N processes (on one machine or
 //! many), then merged into the scene a single build makes, byte for byte.
 //!
-//! A unit is work whose result is a cache entry: the terrain stage (its files and its meshes), and
-//! each species the plants stage makes. Unit k of a preset (in the order [`units`] lists them) is
+//! A unit is work whose result is a cache entry: each band of a chunked terrain (its meshes at every
+//! level and their figures, `terrain/bands.rs`; the terrain stage then runs in the merge), or the
+//! terrain stage of one meshed whole (its files and its meshes), and each species the plants stage
+//! makes. Unit k of a preset (in the order [`units`] lists them) is
 //! built by shard k mod N: `verdant build PRESET --shard i/N --out DIR` builds shard i's units into
 //! `DIR/.cache/` and writes `DIR/<scene>.shard.json` (which units, which entries). `verdant merge
 //! PRESET --shards DIR... --out OUT` checks that the N shards of the same preset are all there,
@@ -11,8 +13,8 @@
 //! makes, whatever N and whichever shard finished first. The stages that read every unit (snow,
 //! scatter, view, preview) and the manifest run in the merge.
 //!
-//! Not split yet (issue 18): the terrain meshed region by region (`terrain/regions.rs` meshes
-//! regions apart already) and the placements tile by tile.
+//! Not split yet (issue 18): the terrain's chunks, textures and files by band, and the placements
+//! tile by tile (docs/sharding.md, "Limits").
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -24,7 +26,9 @@ use crate::scene::cache::{process_alive, temp_owner, Cache};
 use crate::scene::error::SceneBuildError;
 use crate::scene::pipeline::{CacheUse, StageJob, StageRunner};
 use crate::scene::plants_stage::{self, SpeciesMemo, SPECIES_MEMO_STAGE};
-use crate::scene::terrain_stage::{MeshMemo, TerrainJob};
+use crate::scene::terrain_stage::{
+    band_key, band_piece, planned_bands, BandPlan, BandRows, MeshMemo, TerrainJob, BAND_STAGE,
+};
 use crate::scene::Preset;
 
 /// Shard `index` of `count` (`--shard i/N`, 0 ≤ i < N).
@@ -78,23 +82,46 @@ pub struct ShardRecord {
     pub peak_memory_mib: Option<f64>,
 }
 
-/// The units of `preset`, in order: the terrain stage (when the preset has a terrain), then every
-/// species the plants stage makes, in preset order.
+/// The units of `preset`, in order: the terrain (the stage, or each of its bands when it is meshed
+/// in bands: the terrain stage then runs in the merge), then every species the plants stage makes,
+/// in preset order.
 pub fn units(preset: &Preset, out: &Path) -> Result<Vec<Unit>, SceneBuildError> {
+    Ok(planned(preset, out)?.into_iter().map(|(unit, _)| unit).collect())
+}
+
+/// What a unit is to build.
+enum Work<'a> {
+    Terrain(&'a crate::scene::TerrainSettings),
+    Band(&'a crate::scene::TerrainSettings, usize, std::rc::Rc<BandPlan>),
+    Species(&'a crate::scene::SpeciesSettings),
+}
+
+fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>)>, SceneBuildError> {
     let cache = Cache::new(out);
     let mut units = Vec::new();
     if let Some(t) = &preset.terrain {
-        let job = TerrainJob { preset, terrain: t, memo: Some(MeshMemo { cache: &cache, force: false }) };
-        let mut entries = vec![Cache::entry_name("terrain", &job.key()?)];
-        entries.extend(job.memo_entry());
-        units.push(Unit { name: "terrain".into(), entries });
+        match planned_bands(t)? {
+            Some(plan) => {
+                let plan = std::rc::Rc::new(plan);
+                for k in 0..plan.band_count() {
+                    let rows = plan.rows(k);
+                    let entries = vec![Cache::entry_name(BAND_STAGE, &band_key(preset, t, rows)?)];
+                    let name = format!("terrain band {k} (rows {}-{})", rows[0], rows[1]);
+                    units.push((Unit { name, entries }, Work::Band(t, k, plan.clone())));
+                }
+            }
+            None => {
+                let job = TerrainJob { preset, terrain: t, memo: Some(MeshMemo { cache: &cache, force: false }) };
+                let mut entries = vec![Cache::entry_name("terrain", &job.key()?)];
+                entries.extend(job.memo_entries());
+                units.push((Unit { name: "terrain".into(), entries }, Work::Terrain(t)));
+            }
+        }
     }
     for s in preset.species.iter().filter(|s| plants_stage::makes(s)) {
         let key = plants_stage::species_key(preset, s)?;
-        units.push(Unit {
-            name: format!("species {}", s.rules.name),
-            entries: vec![Cache::entry_name(SPECIES_MEMO_STAGE, &key)],
-        });
+        let entries = vec![Cache::entry_name(SPECIES_MEMO_STAGE, &key)];
+        units.push((Unit { name: format!("species {}", s.rules.name), entries }, Work::Species(s)));
     }
     Ok(units)
 }
@@ -126,25 +153,42 @@ pub fn build_shard(
     };
     fs::create_dir_all(out).map_err(io(out))?;
     let cache = Cache::new(out);
-    let all = units(preset, out)?;
-    let mine: Vec<usize> = (0..all.len()).filter(|k| k % shard.count == shard.index).collect();
+    let planned = planned(preset, out)?;
+    let mine: Vec<usize> = (0..planned.len()).filter(|k| k % shard.count == shard.index).collect();
     remove_stale_shard_folders(out, name);
     let tmp = out.join(format!(".{name}.shard-{}", std::process::id()));
     let _ = fs::remove_dir_all(&tmp);
     fs::create_dir_all(&tmp).map_err(io(&tmp))?;
+    let all: Vec<Unit> = planned.iter().map(|(u, _)| u.clone()).collect();
     let result = (|| -> Result<(), SceneBuildError> {
         let mut runner = StageRunner { cache: &cache, force, dir: &tmp, used: CacheUse::default(), progress: say };
-        let species: Vec<_> = preset.species.iter().filter(|s| plants_stage::makes(s)).collect();
-        let first_species = usize::from(preset.terrain.is_some());
+        // each band's rows of the map, made as it is built
+        let mut band_rows: Option<BandRows> = None;
         for &k in &mine {
-            say(&format!("shard {}/{}: {}", shard.index, shard.count, all[k].name));
-            if k < first_species {
-                let t = preset.terrain.as_ref().expect("unit 0 is the terrain when there is one");
-                let memo = Some(MeshMemo { cache: &cache, force });
-                runner.run(&TerrainJob { preset, terrain: t, memo })?;
-            } else {
-                let s = species[k - first_species];
-                plants_stage::species_unit(preset, s, &tmp, Some(SpeciesMemo { cache: &cache, force }))?;
+            let (unit, work) = &planned[k];
+            say(&format!("shard {}/{}: {}", shard.index, shard.count, unit.name));
+            match work {
+                Work::Terrain(t) => {
+                    let memo = Some(MeshMemo { cache: &cache, force });
+                    runner.run(&TerrainJob { preset, terrain: t, memo })?;
+                }
+                Work::Band(t, b, plan) => {
+                    let source = band_rows.get_or_insert_with(|| {
+                        // the rows of every band of this shard, read together
+                        let wanted = mine
+                            .iter()
+                            .filter_map(|&k| match &planned[k].1 {
+                                Work::Band(_, b, plan) => Some(plan.rows(*b)),
+                                _ => None,
+                            })
+                            .collect();
+                        BandRows::new(t, wanted)
+                    });
+                    band_piece(preset, t, &mut |rows| source.rows(rows), plan, *b, Some((&cache, force)))?;
+                }
+                Work::Species(s) => {
+                    plants_stage::species_unit(preset, s, &tmp, Some(SpeciesMemo { cache: &cache, force }))?;
+                }
             }
         }
         Ok(())

@@ -190,6 +190,250 @@ impl Meshes {
     }
 }
 
+/// The cache stage name of a band's meshes (terrain/bands.rs): a shard's terrain unit.
+pub const BAND_STAGE: &str = "terrain-band";
+
+/// A terrain meshed in bands built apart ([`crate::terrain::bands`]): the band lines, and the
+/// bounds every band is meshed at (the LoD levels', then the main mesh's when it is none of them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BandPlan {
+    pub lines: Vec<u32>,
+    pub bounds: Vec<f64>,
+}
+
+impl BandPlan {
+    pub fn band_count(&self) -> usize {
+        self.lines.len() - 1
+    }
+
+    /// Band `k`'s rows.
+    pub fn rows(&self, k: usize) -> [u32; 2] {
+        [self.lines[k], self.lines[k + 1]]
+    }
+
+    /// Whether band `k` has a band below and above it.
+    fn fixed(&self, k: usize) -> [bool; 2] {
+        [k > 0, k + 2 < self.lines.len()]
+    }
+}
+
+/// How a `width` × `height` terrain with settings `t` is meshed in bands: `None` when it is meshed
+/// whole (no chunks, a grid, a triangle limit, one band's rows, or x and z not exact in f32: see
+/// [`crate::terrain::regions::band_lines`]).
+pub fn band_plan(t: &TerrainSettings, width: usize, height: usize) -> Option<BandPlan> {
+    if t.mode != MeshMode::Tin || t.max_triangles.is_some() {
+        return None;
+    }
+    let cell = match &t.source {
+        TerrainSource::Heightmap { decode, .. } => decode.cell_size_m,
+        TerrainSource::Fbm { cell_size_m, .. } => *cell_size_m,
+    };
+    let exact = Storage::f32_xz_exact(width, height, cell);
+    let lines =
+        crate::terrain::regions::band_lines(height, crate::terrain::regions::band_cells_for_chunk(t.chunk), exact);
+    if lines.len() <= 2 {
+        return None;
+    }
+    let mut bounds = t.lods.clone();
+    if !bounds.contains(&t.max_error_m) {
+        bounds.push(t.max_error_m);
+    }
+    Some(BandPlan { lines, bounds })
+}
+
+/// [`band_plan`] from the settings alone: a procedural map's size, a heightmap's from its header
+/// (a heightmap that cannot tell is decoded; one that does not decode fails the terrain stage).
+pub fn planned_bands(t: &TerrainSettings) -> Result<Option<BandPlan>, StageError> {
+    let (w, h) = match &t.source {
+        TerrainSource::Heightmap { path, decode } => {
+            let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+                .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))?;
+            match heightfield::dimensions(path, &bytes, decode) {
+                Some(size) => size,
+                None => {
+                    let (hf, _, _) = terrain_heights(t)?;
+                    (hf.width, hf.height)
+                }
+            }
+        }
+        TerrainSource::Fbm { size, .. } => (*size, *size),
+    };
+    Ok(band_plan(t, w, h))
+}
+
+/// Cache key of band `rows` of a terrain: what meshing reads ([`mesh_key`]) and the rows.
+pub fn band_key(preset: &Preset, t: &TerrainSettings, rows: [u32; 2]) -> Result<String, StageError> {
+    let mut k = KeyBuilder::new(BAND_STAGE, TERRAIN_ALGORITHM_VERSION);
+    k.add(mesh_key(preset, t)?.as_bytes());
+    k.add(&rows[0].to_le_bytes());
+    k.add(&rows[1].to_le_bytes());
+    Ok(k.finish())
+}
+
+/// The rows of a terrain's map the bands a shard builds need, made one band at a time: a
+/// procedural map's rows alone (its range found once, by a pass that keeps nothing); a PNG
+/// heightmap's rows of those bands alone, read in one pass over the file; any other heightmap
+/// decoded whole once.
+pub struct BandRows<'a> {
+    t: &'a TerrainSettings,
+    /// The rows of every band wanted.
+    wanted: Vec<[u32; 2]>,
+    range: Option<(f64, f64)>,
+    /// The map's rows held, and which file row each is (every row when decoded whole).
+    held: Option<(Heightfield, Vec<usize>)>,
+}
+
+impl<'a> BandRows<'a> {
+    /// For the bands of rows `wanted`.
+    pub fn new(t: &'a TerrainSettings, wanted: Vec<[u32; 2]>) -> BandRows<'a> {
+        BandRows { t, wanted, range: None, held: None }
+    }
+
+    fn hold(&mut self) -> Result<(), StageError> {
+        let TerrainSource::Heightmap { path, decode } = &self.t.source else { return Ok(()) };
+        if self.held.is_some() {
+            return Ok(());
+        }
+        let input = bad_input(Stage::Terrain);
+        let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+            .map_err(|e| input(e.to_string()))?;
+        let wanted = &self.wanted;
+        let keep = |j: usize| wanted.iter().any(|r| (r[0] as usize..=r[1] as usize).contains(&j));
+        self.held = Some(
+            match heightfield::decode_kept_rows(path, &bytes, decode, &keep).map_err(|e| input(e.to_string()))? {
+                Some((d, rows)) => (d.heightfield, rows),
+                None => {
+                    let hf = heightfield::decode(path, &bytes, decode).map_err(|e| input(e.to_string()))?.heightfield;
+                    let rows = (0..hf.height).collect();
+                    (hf, rows)
+                }
+            },
+        );
+        Ok(())
+    }
+
+    /// Rows `rows[0]..=rows[1]` of the map.
+    pub fn rows(&mut self, rows: [u32; 2]) -> Result<Heightfield, StageError> {
+        let f = fail(Stage::Terrain);
+        let outside = || f(format!("rows {}-{} are not within the terrain's map", rows[0], rows[1]));
+        let span = [rows[0] as usize, rows[1] as usize];
+        match self.t.source {
+            TerrainSource::Fbm { size, seed, relief_m, cell_size_m, noise } => {
+                let range = *self.range.get_or_insert_with(|| crate::synth::noise_range(noise, size, seed));
+                crate::synth::noise_rows(noise, size, cell_size_m, relief_m, seed, range, span).ok_or_else(outside)
+            }
+            TerrainSource::Heightmap { .. } => {
+                self.hold()?;
+                let (hf, held) = self.held.as_ref().ok_or_else(outside)?;
+                // the band's rows are consecutive among those held (every row of a wanted band is)
+                let first = held.binary_search(&span[0]).map_err(|_| outside())?;
+                let last = first + (span[1] - span[0]);
+                if held.get(last) != Some(&span[1]) {
+                    return Err(outside());
+                }
+                hf.rows(first, last).ok_or_else(outside)
+            }
+        }
+    }
+}
+
+/// Band `k` of `plan`: from `cache` when it holds it (unless `force`), else meshed and measured
+/// from its rows (`rows` gives them: [`BandRows`], or the rows of a map at hand) and stored there.
+pub fn band_piece(
+    preset: &Preset,
+    t: &TerrainSettings,
+    rows_of: &mut dyn FnMut([u32; 2]) -> Result<Heightfield, StageError>,
+    plan: &BandPlan,
+    k: usize,
+    cache: Option<(&crate::scene::cache::Cache, bool)>,
+) -> Result<crate::terrain::bands::BandPiece, StageError> {
+    use crate::terrain::bands::{build_band_window, BandPiece};
+    let rows = plan.rows(k);
+    let key = cache.map(|_| band_key(preset, t, rows)).transpose()?;
+    if let (Some((c, false)), Some(key)) = (cache, &key) {
+        let kept = c
+            .lookup(BAND_STAGE, key)
+            .and_then(|(_, entry)| BandPiece::from_bytes(&crate::scene::cache::Cache::read_blob(&entry).ok()?));
+        if let Some(piece) = kept.filter(|p| p.rows == rows && p.levels.len() == plan.bounds.len()) {
+            return Ok(piece);
+        }
+    }
+    let window = rows_of(rows)?;
+    let piece = build_band_window(&window, rows[0], &plan.bounds, t.max_vertices, plan.fixed(k)).map_err(|error| {
+        let e = crate::terrain::job::JobError::Terrain { source_label: source_label(t), error };
+        StageError::of(Stage::Terrain.name(), &e, e.to_string())
+    })?;
+    if let (Some((c, _)), Some(key)) = (cache, &key) {
+        // (a store that fails only costs meshing the band again, or a shard that says so)
+        let json = format!("{{\"rows\":[{},{}]}}", rows[0], rows[1]);
+        let _ = c.store_blob(BAND_STAGE, key, &json, &piece.to_bytes());
+    }
+    Ok(piece)
+}
+
+/// The terrain's LoD chain (switch distances assigned) and main mesh from its bands' pieces.
+fn banded_meshes(
+    preset: &Preset,
+    t: &TerrainSettings,
+    hf: &Heightfield,
+    plan: &BandPlan,
+    memo: Option<MeshMemo<'_>>,
+) -> Result<
+    (Vec<crate::lod::LodLevel>, (crate::terrain::sample_mesh::SampleMesh, bool, crate::terrain::error::ErrorStats)),
+    StageError,
+> {
+    use crate::terrain::tin::{check_tin_input, TinOptions};
+    let input = bad_input(Stage::Terrain);
+    if !t.lods.is_empty() {
+        crate::lod::check_chain(&t.lods, &preset.lod).map_err(|e| input(e.to_string()))?;
+    }
+    let storage = Storage::f32(hf);
+    let opts =
+        |max_error_m: f64| TinOptions { max_error_m, max_triangles: None, max_vertices: t.max_vertices, band_cells: 0 };
+    // a level's error as the chain names it, the main mesh's as `verdant terrain` does
+    let level_error = |k: usize, error: crate::terrain::TerrainError| -> StageError {
+        if k < t.lods.len() {
+            input(crate::lod::LodError::Terrain { level: k, error }.to_string())
+        } else {
+            let e = crate::terrain::job::JobError::Terrain { source_label: source_label(t), error };
+            StageError::of(Stage::Terrain.name(), &e, e.to_string())
+        }
+    };
+    for (k, &bound) in plan.bounds.iter().enumerate() {
+        check_tin_input(hf, &opts(bound)).map_err(|e| level_error(k, e))?;
+    }
+    let start = Instant::now();
+    let cache = memo.map(|m| (m.cache, m.force));
+    let mut rows_of = |rows: [u32; 2]| {
+        hf.rows(rows[0] as usize, rows[1] as usize)
+            .ok_or_else(|| fail(Stage::Terrain)(format!("rows {}-{} are not within the map", rows[0], rows[1])))
+    };
+    let pieces = (0..plan.band_count())
+        .map(|k| band_piece(preset, t, &mut rows_of, plan, k, cache))
+        .collect::<Result<Vec<_>, _>>()?;
+    let share = start.elapsed().as_secs_f64() / plan.bounds.len() as f64;
+    let mut levels = Vec::with_capacity(plan.bounds.len());
+    for (k, &bound) in plan.bounds.iter().enumerate() {
+        let start = Instant::now();
+        let (r, stats) =
+            crate::terrain::bands::assemble(hf, &storage, &pieces, k, &opts(bound)).map_err(|e| level_error(k, e))?;
+        levels.push(crate::lod::LodLevel {
+            level: k,
+            max_error_requested_m: bound,
+            mesh: r.mesh,
+            stats,
+            switch_distance_m: 0.0,
+            hit_triangle_limit: false,
+            seconds: share + start.elapsed().as_secs_f64(),
+        });
+    }
+    let main_level = plan.bounds.iter().position(|&b| b == t.max_error_m).unwrap_or(0);
+    let main = (levels[main_level].mesh.clone(), false, levels[main_level].stats);
+    levels.truncate(t.lods.len());
+    crate::lod::assign_switch_distances(&mut levels, &preset.lod);
+    Ok((levels, main))
+}
+
 /// Key of the terrain's meshes: what meshing reads (not the formats, snow or species).
 pub fn mesh_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageError> {
     let mut k = KeyBuilder::new(MESH_MEMO_STAGE, TERRAIN_ALGORITHM_VERSION);
@@ -206,11 +450,24 @@ pub fn mesh_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageErr
 }
 
 impl TerrainJob<'_> {
-    /// The memo's entry name (what `verdant cache prune` keeps for this scene), when it has one.
-    pub fn memo_entry(&self) -> Option<String> {
-        self.memo?;
-        let key = mesh_key(self.preset, self.terrain).ok()?;
-        Some(crate::scene::cache::Cache::entry_name(MESH_MEMO_STAGE, &key))
+    /// The entries the terrain's meshes are kept in apart from its files (what `verdant cache
+    /// prune` keeps for this scene): its bands' pieces when it is meshed in bands, else the memo.
+    pub fn memo_entries(&self) -> Vec<String> {
+        use crate::scene::cache::Cache;
+        if self.memo.is_none() {
+            return Vec::new();
+        }
+        let (t, preset) = (self.terrain, self.preset);
+        match planned_bands(t) {
+            Ok(Some(plan)) => (0..plan.band_count())
+                .filter_map(|k| band_key(preset, t, plan.rows(k)).ok())
+                .map(|key| Cache::entry_name(BAND_STAGE, &key))
+                .collect(),
+            Ok(None) => {
+                mesh_key(preset, t).ok().map(|key| Cache::entry_name(MESH_MEMO_STAGE, &key)).into_iter().collect()
+            }
+            Err(_) => Vec::new(),
+        }
     }
 }
 
@@ -309,8 +566,11 @@ pub fn run_terrain_memo(
     let (hf, voids_filled, input_sha256) = terrain_heights(t)?;
     let decode_s = t0.elapsed().as_secs_f64();
 
+    // a chunked map's bands, each kept in the cache as a piece of its own (a shard's unit)
+    let plan = band_plan(t, hf.width, hf.height);
     // the meshes as an earlier build of the same terrain made them (an entry that does not read
     // back is meshed again and replaced)
+    let (band_memo, memo) = if plan.is_some() { (memo, None) } else { (None, memo) };
     let memo_key = memo.map(|_| mesh_key(preset, t)).transpose()?;
     let remembered: Option<Meshes> = match (memo, &memo_key) {
         (Some(m), Some(key)) if !m.force => m.cache.lookup(MESH_MEMO_STAGE, key).and_then(|(json, entry)| {
@@ -325,10 +585,14 @@ pub fn run_terrain_memo(
     // The LoD chain meshes its levels in parallel; when one of them is the main mesh's bound,
     // the main mesh is taken from the chain instead of being computed twice.
     let t1 = Instant::now();
-    let (mut chain, remembered_main) = match remembered {
-        Some(m) => (m.chain, Some(m.main)),
-        None if t.lods.is_empty() => (Vec::new(), None),
-        None => (
+    let (mut chain, remembered_main) = match (remembered, &plan) {
+        (_, Some(plan)) => {
+            let (chain, main) = banded_meshes(preset, t, &hf, plan, band_memo)?;
+            (chain, Some(main))
+        }
+        (Some(m), None) => (m.chain, Some(m.main)),
+        (None, None) if t.lods.is_empty() => (Vec::new(), None),
+        (None, None) => (
             terrain_lod_chain_in_bands(&hf, &t.lods, t.max_triangles, t.max_vertices, band_cells, &preset.lod)
                 .map_err(|e| input(e.to_string()))?,
             None,

@@ -235,23 +235,35 @@ fn measure_surface_in_bands(hf: &Heightfield, mesh: &SampleMesh, surface: Surfac
         // Reduce per row in parallel, then rows in order, so the RMS sum is the same at any thread
         // count.
         rows.par_extend((j_lo..=j_hi).into_par_iter().map(|j| {
-            let (mut sum_sq, mut covered, mut max, mut worst) = (0.0f64, 0usize, -1.0f64, 0usize);
-            for i in 0..w {
-                let v = slots[(j - j_lo) * w + i].load(Ordering::Relaxed);
-                if v == 0 {
-                    continue;
-                }
-                let err = f64::from_bits(v - 1);
-                covered += 1;
-                sum_sq += err * err;
-                if err > max {
-                    max = err;
-                    worst = j * w + i;
-                }
-            }
-            (sum_sq, covered, max, worst)
+            row_figures(slots[(j - j_lo) * w..(j - j_lo + 1) * w].iter().map(|s| s.load(Ordering::Relaxed)), j, w)
         }));
     }
+    reduce_rows(rows, w)
+}
+
+/// One row's figures from its samples' slots (0: not covered, else the error's bits + 1): the sum
+/// of squared errors, the samples covered, the largest error and its sample index (first on ties).
+type RowFigures = (f64, usize, f64, usize);
+
+fn row_figures(slots: impl Iterator<Item = u64>, j: usize, w: usize) -> RowFigures {
+    let (mut sum_sq, mut covered, mut max, mut worst) = (0.0f64, 0usize, -1.0f64, 0usize);
+    for (i, v) in slots.enumerate() {
+        if v == 0 {
+            continue;
+        }
+        let err = f64::from_bits(v - 1);
+        covered += 1;
+        sum_sq += err * err;
+        if err > max {
+            max = err;
+            worst = j * w + i;
+        }
+    }
+    (sum_sq, covered, max, worst)
+}
+
+/// The map's figures from every row's, rows in order.
+fn reduce_rows(rows: impl IntoIterator<Item = RowFigures>, w: usize) -> ErrorStats {
     let (mut sum_sq, mut covered, mut max, mut worst) = (0.0f64, 0usize, -1.0f64, 0usize);
     for (s, c, m, k) in rows {
         sum_sq += s;
@@ -262,7 +274,7 @@ fn measure_surface_in_bands(hf: &Heightfield, mesh: &SampleMesh, surface: Surfac
         }
     }
     if covered == 0 {
-        return empty;
+        return ErrorStats { max_error_m: 0.0, rms_error_m: 0.0, worst_sample: [0, 0], samples_covered: 0 };
     }
     ErrorStats {
         max_error_m: max,
@@ -270,6 +282,67 @@ fn measure_surface_in_bands(hf: &Heightfield, mesh: &SampleMesh, surface: Surfac
         worst_sample: [(worst % w) as u32, (worst / w) as u32],
         samples_covered: covered,
     }
+}
+
+/// What [`measure`] finds in rows `rows[0]..=rows[1]` of a map from the triangles of those rows
+/// alone (a band's mesh, [`crate::terrain::regions::mesh_band`]): the figures of every row
+/// strictly inside, and the slots of the two edge rows, which the neighbouring bands' triangles
+/// also reach (the samples there take the largest error of either side: [`combine_rows`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RowsMeasure {
+    pub rows: [u32; 2],
+    /// Rows `rows[0] + 1 .. rows[1]`: (sum of squares, samples covered, largest error, its sample).
+    pub inner: Vec<(f64, usize, f64, usize)>,
+    /// The slots of rows `rows[0]` and `rows[1]` (0: not covered, else the error's bits + 1).
+    pub edges: [Vec<u64>; 2],
+}
+
+/// Measures `mesh` (as written: f32 positions) in rows `rows` of `hf` ([`RowsMeasure`]).
+pub fn measure_rows(hf: &Heightfield, mesh: &SampleMesh, rows: [u32; 2]) -> RowsMeasure {
+    let storage = Storage::f32(hf);
+    let (w, h) = (hf.width, hf.height);
+    let (j_lo, j_hi) = (rows[0] as usize, (rows[1] as usize).min(h.saturating_sub(1)));
+    let slots: Vec<AtomicU64> = (0..(j_hi + 1 - j_lo) * w).map(|_| AtomicU64::new(0)).collect();
+    mesh.triangles.par_chunks(TRIANGLES_PER_TASK).for_each(|chunk| {
+        for tri in chunk {
+            let Some(corners) = triangle_corners(mesh, tri, w, h) else { continue };
+            if corners[2][1] < j_lo as i64 || corners[0][1] > j_hi as i64 {
+                continue;
+            }
+            scan_triangle(hf, corners, Surface::Stored(&storage), &slots, j_lo as i64, j_hi as i64);
+        }
+    });
+    let row = |j: usize| -> Vec<u64> {
+        slots[(j - j_lo) * w..(j - j_lo + 1) * w].iter().map(|s| s.load(Ordering::Relaxed)).collect()
+    };
+    let inner = (j_lo + 1..j_hi)
+        .into_par_iter()
+        .map(|j| row_figures(slots[(j - j_lo) * w..(j - j_lo + 1) * w].iter().map(|s| s.load(Ordering::Relaxed)), j, w))
+        .collect();
+    RowsMeasure { rows: [j_lo as u32, j_hi as u32], inner, edges: [row(j_lo), row(j_hi)] }
+}
+
+/// The figures of a whole map of width `w` from its bands' [`RowsMeasure`]s (in row order, each
+/// band's first row the previous band's last): equal to [`measure`] of the joined mesh, bit for
+/// bit (every row reduced alike, rows in order).
+pub fn combine_rows(bands: &[RowsMeasure], w: usize) -> ErrorStats {
+    let mut rows: Vec<RowFigures> = Vec::new();
+    let mut carried: Option<Vec<u64>> = None;
+    for b in bands {
+        let bottom: Vec<u64> = match carried.take() {
+            Some(top) => top.iter().zip(&b.edges[0]).map(|(&x, &y)| x.max(y)).collect(),
+            None => b.edges[0].clone(),
+        };
+        rows.push(row_figures(bottom.into_iter(), b.rows[0] as usize, w));
+        rows.extend(b.inner.iter().copied());
+        if b.rows[1] > b.rows[0] {
+            carried = Some(b.edges[1].clone());
+        }
+    }
+    if let (Some(top), Some(last)) = (carried, bands.last()) {
+        rows.push(row_figures(top.into_iter(), last.rows[1] as usize, w));
+    }
+    reduce_rows(rows, w)
 }
 
 /// The triangle's corners as (i, j) in ascending sample index order, or `None` if it cannot cover

@@ -2,6 +2,7 @@
 //! engine-ready meshes (normals, UVs, chunks, skirts, base), coloured by material layers and lit
 //! through a normal map baked against each mesh.
 
+pub mod bands;
 pub mod budget;
 pub mod build;
 pub mod chunks;
@@ -11,7 +12,7 @@ pub mod job;
 pub mod layers;
 pub mod normal_map;
 pub mod plane;
-pub(crate) mod regions;
+pub mod regions;
 pub mod sample_mesh;
 pub mod solid;
 pub mod stored;

@@ -115,7 +115,7 @@ pub(crate) fn mesh_by_regions(
     opts: &TinOptions,
     storage: &Storage,
 ) -> Result<(SampleMesh, f64), TerrainError> {
-    let lines = band_lines(hf.height, opts.band_cells, storage);
+    let lines = band_lines(hf.height, opts.band_cells, storage.xz_exact());
     if lines.len() > 2 {
         let bands: Vec<Result<(SampleMesh, f64), TerrainError>> = lines
             .par_windows(2)
@@ -155,9 +155,9 @@ pub fn band_cells_for_chunk(chunk: Option<usize>) -> u32 {
 /// (first 0, last `height − 1`; the last band may be shorter): `[0, height − 1]` (one band) when
 /// `band_cells` is 0 or not less than the map's cells, or when the file's x and z are not exactly
 /// i·cell and j·cell (see [`mesh_band`] for why a band's edges then cannot be fixed).
-pub(crate) fn band_lines(height: usize, band_cells: u32, storage: &Storage) -> Vec<u32> {
+pub fn band_lines(height: usize, band_cells: u32, xz_exact: bool) -> Vec<u32> {
     let cells = height.saturating_sub(1) as u32;
-    if band_cells == 0 || band_cells >= cells || !storage.xz_exact() {
+    if band_cells == 0 || band_cells >= cells || !xz_exact {
         return vec![0, cells];
     }
     let mut lines: Vec<u32> = (0..cells).step_by(band_cells as usize).collect();
@@ -178,7 +178,7 @@ pub(crate) fn band_lines(height: usize, band_cells: u32, storage: &Storage) -> V
 /// interpolation along the edge up to rounding (the seam's margin covers it), both for the f32
 /// heights and as stored; the 1-D pass kept every sample over the bound there. (Should a region
 /// still insert one, the band fails with an internal error rather than leave a crack.)
-pub(crate) fn mesh_band(
+pub fn mesh_band(
     hf: &Heightfield,
     opts: &TinOptions,
     storage: &Storage,
@@ -191,7 +191,7 @@ pub(crate) fn mesh_band(
 }
 
 /// Joins band meshes (in band order, cut at `lines`): each vertex on a band line once.
-pub(crate) fn join_bands(bands: Vec<(SampleMesh, f64)>, lines: &[u32]) -> (SampleMesh, f64) {
+pub fn join_bands(bands: Vec<(SampleMesh, f64)>, lines: &[u32]) -> (SampleMesh, f64) {
     let meshes = bands
         .into_iter()
         .map(|(m, e)| RegionMesh {
@@ -454,7 +454,7 @@ mod tests {
 
     /// Every band of `hf` meshed from a window of its rows alone, shifted into the map and joined.
     fn from_windows(hf: &Heightfield, opts: &TinOptions) -> (SampleMesh, f64) {
-        let lines = band_lines(hf.height, opts.band_cells, &Storage::f32(hf));
+        let lines = band_lines(hf.height, opts.band_cells, Storage::f32(hf).xz_exact());
         let last = lines[lines.len() - 1];
         let bands = lines
             .windows(2)
@@ -474,19 +474,18 @@ mod tests {
 
     #[test]
     fn chunked_maps_are_cut_into_bands_of_whole_chunks_reaching_320_rows() {
-        let storage = Storage::f32(&crate::synth::fractal(4, 4, 1.0, 1.0, 0.5, 1));
         assert_eq!(band_cells_for_chunk(None), 0);
         assert_eq!(band_cells_for_chunk(Some(512)), 512);
         assert_eq!(band_cells_for_chunk(Some(128)), 384);
         assert_eq!(band_cells_for_chunk(Some(64)), 320);
-        assert_eq!(band_lines(8193, 512, &storage), (0..=16).map(|k| k * 512).collect::<Vec<_>>());
-        assert_eq!(band_lines(1100, 384, &storage), vec![0, 384, 768, 1099], "the last band is shorter");
-        assert_eq!(band_lines(385, 384, &storage), vec![0, 384], "a map of one band's rows is one band");
-        assert_eq!(band_lines(1100, 0, &storage), vec![0, 1099]);
+        assert_eq!(band_lines(8193, 512, true), (0..=16).map(|k| k * 512).collect::<Vec<_>>());
+        assert_eq!(band_lines(1100, 384, true), vec![0, 384, 768, 1099], "the last band is shorter");
+        assert_eq!(band_lines(385, 384, true), vec![0, 384], "a map of one band's rows is one band");
+        assert_eq!(band_lines(1100, 0, true), vec![0, 1099]);
         // x and z not exactly i·cell, j·cell (0.3 m cells): the bands' edges could take a sample
         let inexact = Storage::f32(&crate::synth::fractal(1100, 4, 0.3, 1.0, 0.5, 1));
         assert!(!inexact.xz_exact());
-        assert_eq!(band_lines(1100, 384, &inexact), vec![0, 1099], "inexact positions: one band");
+        assert_eq!(band_lines(1100, 384, inexact.xz_exact()), vec![0, 1099], "inexact positions: one band");
     }
 
     #[test]
@@ -502,7 +501,7 @@ mod tests {
             for (hf, bound) in [(rough.clone(), bound), (Heightfield::from_f64(w, h, &tenths, 1.0), bound.max(0.1))] {
                 let opts = TinOptions { max_error_m: bound, band_cells: band, ..TinOptions::default() };
                 let whole = tin(&hf, &opts).unwrap();
-                assert!(band_lines(h, band, &Storage::f32(&hf)).len() > 2, "{w}×{h} is cut into bands");
+                assert!(band_lines(h, band, Storage::f32(&hf).xz_exact()).len() > 2, "{w}×{h} is cut into bands");
                 check_mesh(&hf, &whole.mesh);
                 let stats = measure(&hf, &whole.mesh);
                 assert!(stats.max_error_m <= bound, "{w}×{h} at {bound}: {} over the bound", stats.max_error_m);

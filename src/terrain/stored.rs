@@ -118,6 +118,12 @@ impl Storage {
         self.xz_exact
     }
 
+    /// [`Storage::xz_exact`] of [`Storage::f32`] for a `width` × `height` map of `cell_size_m`
+    /// cells, from its size alone.
+    pub fn f32_xz_exact(width: usize, height: usize, cell_size_m: f64) -> bool {
+        (0..width.max(height)).all(|i| (i as f64 * cell_size_m) as f32 as f64 == i as f64 * cell_size_m)
+    }
+
     /// Stored height of the triangle `c` (corners as (i, j) in ascending sample index order, `hc`
     /// their stored heights) at sample `p`'s nominal place: the one formula the mesher's re-check
     /// and the analyzer share. With exact x and z it is [`plane_height`] itself.

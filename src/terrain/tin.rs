@@ -947,10 +947,7 @@ pub fn tin(hf: &Heightfield, opts: &TinOptions) -> Result<TinResult, TerrainErro
 /// at any thread count. With a triangle limit the whole map is one region (the limit picks the
 /// worst samples of the whole map).
 pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Result<TinResult, TerrainError> {
-    check_input(hf, opts)?;
-    let over_budget =
-        |over| TerrainError::OverBudget { limit: opts.max_vertices, over, max_error_m: opts.max_error_m, grid: false };
-    budget::check_tin(hf, opts.max_error_m, opts.max_vertices).map_err(over_budget)?;
+    check_tin_input(hf, opts)?;
     let (mesh, max_error_m, hit_triangle_limit) = if opts.max_triangles.is_some() {
         let whole = Rect { i0: 0, j0: 0, i1: (hf.width - 1) as u32, j1: (hf.height - 1) as u32 };
         let r = mesh_region(hf, opts, storage, whole, &[], None)?;
@@ -959,6 +956,33 @@ pub fn tin_stored(hf: &Heightfield, opts: &TinOptions, storage: &Storage) -> Res
         let (mesh, max_error_m) = super::regions::mesh_by_regions(hf, opts, storage)?;
         (mesh, max_error_m, false)
     };
+    finish_tin(hf, opts, storage, mesh, max_error_m, hit_triangle_limit)
+}
+
+/// Checks before meshing `hf` as [`tin_stored`] does: the map and options, and the vertex budget
+/// the map is predicted to need.
+pub(crate) fn check_tin_input(hf: &Heightfield, opts: &TinOptions) -> Result<(), TerrainError> {
+    check_input(hf, opts)?;
+    budget::check_tin(hf, opts.max_error_m, opts.max_vertices).map_err(|over| TerrainError::OverBudget {
+        limit: opts.max_vertices,
+        over,
+        max_error_m: opts.max_error_m,
+        grid: false,
+    })
+}
+
+/// The checks after meshing that [`tin_stored`] makes of the joined mesh (`max_error_m` as the
+/// mesher found it): the vertex budget, and a bound finer than the storage holds.
+pub(crate) fn finish_tin(
+    hf: &Heightfield,
+    opts: &TinOptions,
+    storage: &Storage,
+    mesh: SampleMesh,
+    max_error_m: f64,
+    hit_triangle_limit: bool,
+) -> Result<TinResult, TerrainError> {
+    let over_budget =
+        |over| TerrainError::OverBudget { limit: opts.max_vertices, over, max_error_m: opts.max_error_m, grid: false };
     if mesh.vertices.len() > opts.max_vertices {
         return Err(over_budget(OverBudget::Exceeded));
     }

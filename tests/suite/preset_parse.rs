@@ -73,7 +73,11 @@ fn the_world_preset_is_world_sized_with_grass_and_trees() {
     let out = tempfile::tempdir().unwrap();
     let units = verdant::scene::shard::units(&p, out.path()).unwrap();
     let names: Vec<&str> = units.iter().map(|u| u.name.as_str()).collect();
-    assert_eq!(names, ["terrain", "species pine", "species grass"]);
+    // the terrain's 16 bands of 512 rows (its 512-sample chunks), then the species
+    let bands: Vec<String> =
+        (0..16).map(|k| format!("terrain band {k} (rows {}-{})", 512 * k, 512 * (k + 1))).collect();
+    assert_eq!(names[..16], bands.iter().map(String::as_str).collect::<Vec<_>>()[..]);
+    assert_eq!(names[16..], ["species pine", "species grass"]);
 }
 
 #[test]

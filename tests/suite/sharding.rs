@@ -222,3 +222,83 @@ fn the_slurm_and_kubernetes_recipes_build_the_shards_and_merge_as_their_schedule
     sh(&lines[1], None);
     assert_same_tree(&cwd.join("single/world"), &cwd.join("k8s/out/world"));
 }
+
+/// A chunked map of three bands (1025 rows in bands of 384: 0-384, 384-768, 768-1024) and one
+/// species: four units, the terrain's bands first. `source` is the map's line of `[terrain]`.
+fn banded_preset(source: &str, max_error: f64) -> String {
+    format!(
+        "[scene]\nname = \"world\"\nseed = 9\nformats = [\"glb\"]\n\n[terrain]\n{source}\n\
+         cell_size = 1.0\nmax_error = {max_error}\nchunk = 128\nskirt = 2.0\nlods = [0.5, 2.0]\n\n\
+         [scatter]\ntile = 128.0\n\n\
+         [[species]]\nname = \"rock\"\nkind = \"mesh\"\nplacement = \"poisson\"\nmax_density = 0.002\nmin_spacing = 6.0\n\
+         obj = \"rock.obj\"\n"
+    )
+}
+
+#[test]
+fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
+    // a procedural map, its main mesh one of the LoD levels (0.5 m); a 16-bit PNG heightmap (each
+    // shard reads its bands' rows alone), the main mesh a bound of its own (1 m) that every band
+    // meshes besides the levels
+    let procedural = "procedural = { kind = \"ridged\", size = 1025, seed = 4, relief = 120.0 }";
+    let png = "heightmap = \"map.png\"\nheight_scale = 300.0";
+    for (source, max_error) in [(procedural, 0.5), (png, 1.0)] {
+        let dir = tempfile::tempdir().unwrap();
+        let cwd = dir.path();
+        write(cwd, "rock.obj", ROCK_OBJ);
+        let map = image::ImageBuffer::from_fn(301, 1025, |i, j| {
+            let (x, z) = (i as f64 / 40.0, j as f64 / 55.0);
+            image::Luma([(32768.0 + 12000.0 * (x.sin() * z.cos()) + 9000.0 * ((x * 2.7 + z * 1.3).sin())) as u16])
+        });
+        map.save(cwd.join("map.png")).unwrap();
+        write(cwd, "world.toml", &banded_preset(source, max_error));
+        ok(&verdant_in(cwd, &["-q", "build", "world.toml", "--out", "single"]));
+        let bands_in = |out: &Path| {
+            fs::read_dir(out.join(".cache"))
+                .map(|d| {
+                    d.filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().starts_with("terrain-band-")).count()
+                })
+                .unwrap_or(0)
+        };
+        assert_eq!(bands_in(&cwd.join("single")), 3, "a single build keeps its three bands as pieces");
+        for n in [2usize, 4] {
+            let mut shards = run_shards(cwd, &format!("shards{n}"), n);
+            let mut built = Vec::new();
+            for s in &shards {
+                let record = read_json(&cwd.join(s).join("world.shard.json"));
+                let names: Vec<String> = record["units"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|u| u["name"].as_str().unwrap().to_string())
+                    .collect();
+                assert_eq!(
+                    names,
+                    [
+                        "terrain band 0 (rows 0-384)",
+                        "terrain band 1 (rows 384-768)",
+                        "terrain band 2 (rows 768-1024)",
+                        "species rock"
+                    ],
+                    "the units: the terrain's bands, then the species"
+                );
+                for k in record["built"].as_array().unwrap() {
+                    built.push(names[k.as_u64().unwrap() as usize].clone());
+                }
+                // a shard holds the pieces of its own bands, no other terrain entry
+                let terrain_entries = fs::read_dir(cwd.join(s).join(".cache"))
+                    .unwrap()
+                    .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                    .filter(|e| e.starts_with("terrain"))
+                    .collect::<Vec<_>>();
+                assert!(terrain_entries.iter().all(|e| e.starts_with("terrain-band-")), "{terrain_entries:?}");
+            }
+            built.sort();
+            assert_eq!(built.len(), 4, "every unit built once: {built:?}");
+            shards.reverse();
+            let out = format!("merged{n}");
+            ok(&merge(cwd, &shards, &out));
+            assert_same_tree(&cwd.join("single/world"), &cwd.join(&out).join("world"));
+        }
+    }
+}

@@ -1,0 +1,296 @@
+//! A chunked terrain's bands as pieces built apart (a shard's terrain unit, docs/sharding.md):
+//! each band of whole chunks ([`crate::terrain::regions::band_lines`]) meshed at every bound of
+//! the terrain (its LoD levels and its main mesh) from its own rows, and measured there. The
+//! pieces of all bands, put together ([`assemble`]), are the meshes and figures meshing the whole
+//! map gives, bit for bit: the same meshes as [`crate::terrain::tin::tin`] (which meshes a banded
+//! map band by band as well) and the figures [`crate::terrain::error::measure`] finds on them.
+
+use rayon::prelude::*;
+
+use crate::heightfield::Heightfield;
+use crate::terrain::error::{combine_rows, measure_rows, ErrorStats, RowsMeasure, TerrainError};
+use crate::terrain::regions::{join_bands, mesh_band};
+use crate::terrain::sample_mesh::SampleMesh;
+use crate::terrain::stored::Storage;
+use crate::terrain::tin::{finish_tin, TinOptions, TinResult};
+
+/// One bound's mesh of a band (samples in the map's coordinates), the largest error its mesher
+/// found, and what the analyzer measured in the band's rows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BandLevel {
+    pub mesh: SampleMesh,
+    pub mesher_error_m: f64,
+    pub measure: RowsMeasure,
+}
+
+/// A band's meshes at every bound, in the order the bounds were given.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BandPiece {
+    pub rows: [u32; 2],
+    pub levels: Vec<BandLevel>,
+}
+
+/// Meshes rows `rows` of `hf` (a band; `fixed` as [`mesh_band`] takes it) at every bound of
+/// `bounds` and measures each mesh there. `storage` is `Storage::f32(hf)`.
+pub fn build_band(
+    hf: &Heightfield,
+    storage: &Storage,
+    bounds: &[f64],
+    max_vertices: usize,
+    rows: [u32; 2],
+    fixed: [bool; 2],
+) -> Result<BandPiece, TerrainError> {
+    let levels: Vec<Result<BandLevel, TerrainError>> = bounds
+        .par_iter()
+        .map(|&max_error_m| {
+            let opts = TinOptions { max_error_m, max_triangles: None, max_vertices, band_cells: 0 };
+            let (mesh, mesher_error_m) = mesh_band(hf, &opts, storage, rows, fixed)?;
+            let measure = measure_rows(hf, &mesh, rows);
+            Ok(BandLevel { mesh, mesher_error_m, measure })
+        })
+        .collect();
+    Ok(BandPiece { rows, levels: levels.into_iter().collect::<Result<_, _>>()? })
+}
+
+/// [`build_band`] from the band's rows alone: `window` is rows `row0 ..= row0 + window.height − 1`
+/// of the map (the band); the piece is in the map's coordinates, the same as built from the whole
+/// map.
+pub fn build_band_window(
+    window: &Heightfield,
+    row0: u32,
+    bounds: &[f64],
+    max_vertices: usize,
+    fixed: [bool; 2],
+) -> Result<BandPiece, TerrainError> {
+    let storage = Storage::f32(window);
+    let last = (window.height - 1) as u32;
+    let mut piece = build_band(window, &storage, bounds, max_vertices, [0, last], fixed)?;
+    let w = window.width;
+    piece.rows = [row0, row0 + last];
+    for l in &mut piece.levels {
+        for v in &mut l.mesh.vertices {
+            v[1] += row0;
+        }
+        l.measure.rows = piece.rows;
+        for r in &mut l.measure.inner {
+            r.3 += row0 as usize * w;
+        }
+    }
+    Ok(piece)
+}
+
+/// The whole map's mesh and figures at bound `k` of the pieces (every band's, in order), with the
+/// checks [`crate::terrain::tin::tin_stored`] makes of a joined mesh.
+pub fn assemble(
+    hf: &Heightfield,
+    storage: &Storage,
+    pieces: &[BandPiece],
+    k: usize,
+    opts: &TinOptions,
+) -> Result<(TinResult, ErrorStats), TerrainError> {
+    let mut lines: Vec<u32> = pieces.iter().map(|p| p.rows[0]).collect();
+    lines.extend(pieces.last().map(|p| p.rows[1]));
+    let bands = pieces.iter().map(|p| (p.levels[k].mesh.clone(), p.levels[k].mesher_error_m)).collect();
+    let (mesh, max_error_m) = join_bands(bands, &lines);
+    let measures: Vec<RowsMeasure> = pieces.iter().map(|p| p.levels[k].measure.clone()).collect();
+    let stats = combine_rows(&measures, hf.width);
+    Ok((finish_tin(hf, opts, storage, mesh, max_error_m, false)?, stats))
+}
+
+/// Little-endian words, as a piece is kept in the cache.
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn u64(&mut self, v: u64) {
+        self.0.extend(v.to_le_bytes());
+    }
+    fn f64(&mut self, v: f64) {
+        self.u64(v.to_bits());
+    }
+    fn u32s(&mut self, v: impl ExactSizeIterator<Item = u32>) {
+        self.u64(v.len() as u64);
+        for x in v {
+            self.0.extend(x.to_le_bytes());
+        }
+    }
+    fn u64s(&mut self, v: &[u64]) {
+        self.u64(v.len() as u64);
+        for &x in v {
+            self.u64(x);
+        }
+    }
+}
+
+struct Reader<'a>(&'a [u8]);
+
+impl Reader<'_> {
+    fn take(&mut self, n: usize) -> Option<&[u8]> {
+        if self.0.len() < n {
+            return None;
+        }
+        let (head, rest) = self.0.split_at(n);
+        self.0 = rest;
+        Some(head)
+    }
+    fn u64(&mut self) -> Option<u64> {
+        Some(u64::from_le_bytes(self.take(8)?.try_into().ok()?))
+    }
+    fn f64(&mut self) -> Option<f64> {
+        self.u64().map(f64::from_bits)
+    }
+    fn len(&mut self, unit: usize) -> Option<usize> {
+        let n = usize::try_from(self.u64()?).ok()?;
+        // never more than the bytes left can hold
+        (n.checked_mul(unit)? <= self.0.len()).then_some(n)
+    }
+    fn u32s(&mut self) -> Option<Vec<u32>> {
+        let n = self.len(4)?;
+        Some(self.take(4 * n)?.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+    }
+    fn u64s(&mut self) -> Option<Vec<u64>> {
+        let n = self.len(8)?;
+        (0..n).map(|_| self.u64()).collect()
+    }
+}
+
+const MAGIC: u64 = u64::from_le_bytes(*b"vbandv01");
+
+impl BandPiece {
+    /// The piece as bytes (every number exactly: f64 by its bits).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut w = Writer(Vec::new());
+        w.u64(MAGIC);
+        w.u64(self.rows[0] as u64);
+        w.u64(self.rows[1] as u64);
+        w.u64(self.levels.len() as u64);
+        for l in &self.levels {
+            w.u32s(l.mesh.vertices.iter().flatten().copied().collect::<Vec<_>>().into_iter());
+            w.u32s(l.mesh.triangles.iter().flatten().copied().collect::<Vec<_>>().into_iter());
+            w.f64(l.mesher_error_m);
+            let m = &l.measure;
+            w.u64(m.rows[0] as u64);
+            w.u64(m.rows[1] as u64);
+            w.u64(m.inner.len() as u64);
+            for &(sum_sq, covered, max, worst) in &m.inner {
+                w.f64(sum_sq);
+                w.u64(covered as u64);
+                w.f64(max);
+                w.u64(worst as u64);
+            }
+            w.u64s(&m.edges[0]);
+            w.u64s(&m.edges[1]);
+        }
+        w.0
+    }
+
+    /// A piece back from [`BandPiece::to_bytes`]; `None` for bytes that are not one (a damaged
+    /// cache entry is built again).
+    pub fn from_bytes(bytes: &[u8]) -> Option<BandPiece> {
+        let mut r = Reader(bytes);
+        if r.u64()? != MAGIC {
+            return None;
+        }
+        let row = |r: &mut Reader| u32::try_from(r.u64()?).ok();
+        let rows = [row(&mut r)?, row(&mut r)?];
+        let count = r.len(1)?;
+        let mut levels = Vec::with_capacity(count);
+        for _ in 0..count {
+            let v = r.u32s()?;
+            let t = r.u32s()?;
+            if v.len() % 2 != 0 || t.len() % 3 != 0 {
+                return None;
+            }
+            let mesh = SampleMesh {
+                vertices: v.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+                triangles: t.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            };
+            let mesher_error_m = r.f64()?;
+            let measure_rows = [row(&mut r)?, row(&mut r)?];
+            let n = r.len(32)?;
+            let mut inner = Vec::with_capacity(n);
+            for _ in 0..n {
+                inner.push((r.f64()?, r.u64()? as usize, r.f64()?, r.u64()? as usize));
+            }
+            let edges = [r.u64s()?, r.u64s()?];
+            levels.push(BandLevel { mesh, mesher_error_m, measure: RowsMeasure { rows: measure_rows, inner, edges } });
+        }
+        r.0.is_empty().then_some(BandPiece { rows, levels })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::terrain::error::measure;
+    use crate::terrain::regions::band_lines;
+    use crate::terrain::tin::tin;
+
+    #[test]
+    fn pieces_built_apart_put_together_are_the_whole_maps_meshes_and_figures_bit_for_bit() {
+        // 3 bands of 384 rows (the last shorter), three bounds; f32 and decimetre heights
+        let rough = crate::synth::fractal(600, 1100, 1.0, 300.0, 0.6, 41);
+        let tenths: Vec<f64> = rough.heights.iter().map(|&z| (z as f64 * 10.0).round() / 10.0).collect();
+        for hf in [rough.clone(), Heightfield::from_f64(600, 1100, &tenths, 1.0)] {
+            let storage = Storage::f32(&hf);
+            let lines = band_lines(hf.height, 384, storage.xz_exact());
+            assert_eq!(lines, vec![0, 384, 768, 1099]);
+            let bounds = [0.5, 2.0, 8.0];
+            let last = lines[lines.len() - 1];
+            let pieces: Vec<BandPiece> = lines
+                .windows(2)
+                .map(|w| {
+                    let piece =
+                        build_band(&hf, &storage, &bounds, usize::MAX, [w[0], w[1]], [w[0] > 0, w[1] < last]).unwrap();
+                    // kept as bytes and read back, as a shard hands it over
+                    let back = BandPiece::from_bytes(&piece.to_bytes()).unwrap();
+                    assert_eq!(back, piece);
+                    back
+                })
+                .collect();
+            for (k, &bound) in bounds.iter().enumerate() {
+                let opts =
+                    TinOptions { max_error_m: bound, band_cells: 384, max_vertices: usize::MAX, ..Default::default() };
+                let (result, stats) = assemble(&hf, &storage, &pieces, k, &opts).unwrap();
+                let whole = tin(&hf, &opts).unwrap();
+                assert_eq!(result, whole, "bound {bound}: the pieces' mesh is not the map's");
+                let measured = measure(&hf, &whole.mesh);
+                assert_eq!(stats, measured, "bound {bound}: the pieces' figures are not the analyzer's");
+                assert_eq!(stats.rms_error_m.to_bits(), measured.rms_error_m.to_bits());
+                assert_eq!(stats.samples_covered, hf.width * hf.height);
+            }
+        }
+    }
+
+    #[test]
+    fn a_band_built_from_its_rows_alone_is_the_band_built_from_the_whole_map() {
+        let rough = crate::synth::fractal(500, 1000, 1.0, 200.0, 0.6, 8);
+        let tenths: Vec<f64> = rough.heights.iter().map(|&z| (z as f64 * 10.0).round() / 10.0).collect();
+        for hf in [rough.clone(), Heightfield::from_f64(500, 1000, &tenths, 1.0)] {
+            let storage = Storage::f32(&hf);
+            for (rows, fixed) in [([0, 384], [false, true]), ([384, 768], [true, true]), ([768, 999], [true, false])] {
+                let whole = build_band(&hf, &storage, &[0.5, 3.0], usize::MAX, rows, fixed).unwrap();
+                let window = hf.rows(rows[0] as usize, rows[1] as usize).unwrap();
+                let alone = build_band_window(&window, rows[0], &[0.5, 3.0], usize::MAX, fixed).unwrap();
+                assert_eq!(alone, whole, "rows {rows:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn bytes_that_are_not_a_piece_are_refused_not_misread() {
+        let hf = crate::synth::fractal(300, 700, 1.0, 100.0, 0.5, 3);
+        let storage = Storage::f32(&hf);
+        let piece = build_band(&hf, &storage, &[1.0], usize::MAX, [0, 384], [false, true]).unwrap();
+        let bytes = piece.to_bytes();
+        assert!(BandPiece::from_bytes(&bytes[..bytes.len() - 1]).is_none(), "a cut piece");
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(BandPiece::from_bytes(&longer).is_none(), "trailing bytes");
+        let mut wrong = bytes.clone();
+        wrong[0] ^= 1;
+        assert!(BandPiece::from_bytes(&wrong).is_none(), "another format");
+        let mut huge = bytes;
+        huge[32..40].copy_from_slice(&u64::MAX.to_le_bytes());
+        assert!(BandPiece::from_bytes(&huge).is_none(), "a length past the end");
+    }
+}
