@@ -17,7 +17,7 @@ use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
 use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed, TerrainFigures};
-use crate::terrain::layers::{bake_layers_with, SnowRule};
+use crate::terrain::layers::SnowRule;
 use crate::terrain::normal_map::{bake_normal_map, NormalMapReport};
 use crate::terrain::stored::Storage;
 
@@ -622,9 +622,20 @@ pub fn run_terrain_memo(
         band_cells,
     };
     // the same path as `verdant terrain`: mesh (or the shared level), measure as stored, build
-    let meshed =
-        mesh_and_build(&hf, &settings, &Storage::f32(&hf), &build_opts("terrain".into()), &source_label(t), ready)
-            .map_err(|e| StageError::of(Stage::Terrain.name(), &e, e.to_string()))?;
+    // what grows on it: the soil layer and every vertex's `_SURFACE`, from the species' rules on
+    // this surface (the densities the scatter stage's density maps hold)
+    let map_px = [crate::terrain::layers::map_px(hf.width), crate::terrain::layers::map_px(hf.height)];
+    let cover = |scene: &Scene| crate::scene::ground_cover::cover(preset, scene, map_px);
+    let meshed = mesh_and_build(
+        &hf,
+        &settings,
+        &Storage::f32(&hf),
+        &build_opts("terrain".into()),
+        &source_label(t),
+        ready,
+        Some(&cover),
+    )
+    .map_err(|e| StageError::of(Stage::Terrain.name(), &e, e.to_string()))?;
     if let (Some(m), Some(key), false) = (memo, &memo_key, from_memo) {
         // kept for the next build of this terrain (a store that fails only costs a re-mesh then)
         let mut meshes =
@@ -638,7 +649,7 @@ pub fn run_terrain_memo(
             .ok_or_else(|| f("the terrain's meshes did not read back from their own arrays".into()))?
             .chain;
     }
-    let mut figures = meshed.figures(&hf, &settings, voids_filled);
+    let figures = meshed.figures(&hf, &settings, voids_filled);
     // The chain level the main mesh is (the same mesh, built with the same options but its name):
     // its files are the main scene's under the level's names, written from the main scene itself
     // rather than built, textured and baked a second time beside it.
@@ -647,19 +658,8 @@ pub fn run_terrain_memo(
         .find(|l| t.mode == MeshMode::Tin && l.max_error_requested_m == t.max_error_m && l.mesh == meshed.mesh)
         .map(|l| l.level);
     // (a shared level's meshing and measuring time is counted under `lods`)
-    let [mesh_s, mut analyze_s, build_s] = meshed.seconds;
-    let Meshed { mut scene, mut layers, .. } = meshed;
-    // what grows on it: the soil layer and every vertex's `_SURFACE`, from the species' rules on
-    // this surface (the densities the scatter stage's density maps hold)
-    let t1 = Instant::now();
-    if let Some(cover) = crate::scene::ground_cover::cover(preset, &scene, layers.report.map_px) {
-        layers = bake_layers_with(&hf, &snow, Some(std::sync::Arc::new(cover)));
-        layers
-            .texture(&mut scene, &hf, "terrain")
-            .map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
-        figures.layers = layers.report.clone();
-    }
-    analyze_s += t1.elapsed().as_secs_f64();
+    let [mesh_s, analyze_s, build_s] = meshed.seconds;
+    let Meshed { mut scene, layers, .. } = meshed;
     let textured = |mut scene: Scene, name: &str| -> Result<(Scene, NormalMapReport), StageError> {
         layers
             .texture(&mut scene, &hf, "terrain")

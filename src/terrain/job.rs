@@ -15,11 +15,12 @@ use crate::mesh::{Bounds, Scene};
 use crate::terrain::build::{build_scene, BuildError, BuildOptions};
 use crate::terrain::error::{exact_max_error, measure_stored, ErrorStats, TerrainError};
 use crate::terrain::grid::grid;
-use crate::terrain::layers::{bake_layers, LayerReport, TerrainLayers};
+use crate::terrain::layers::{bake_layers_with, LayerReport, TerrainLayers};
 use crate::terrain::normal_map::{bake_normal_map, NormalMapReport};
 use crate::terrain::sample_mesh::SampleMesh;
 use crate::terrain::stored::Storage;
 use crate::terrain::tin::{tin_stored, TinOptions};
+use crate::terrain::vegetation::VegetationCover;
 
 /// Where the heights come from.
 #[derive(Debug, Clone, PartialEq)]
@@ -293,7 +294,8 @@ pub struct Meshed {
 /// `ready`, a mesh already made at the same settings with its stats, e.g. a LoD level), measures it
 /// as `storage` stores it, refuses a TIN over its bound as written (the analyzer has the last
 /// word), builds the scene (`build`: chunks, skirts, base, name), textures it with the layers and bakes
-/// its normal map against it.
+/// its normal map against it. `cover` gives what grows on the built scene, when anything does
+/// (the soil layer and `_SURFACE`: [`bake_layers_with`]).
 pub fn mesh_and_build(
     hf: &Heightfield,
     settings: &MeshSettings,
@@ -301,6 +303,7 @@ pub fn mesh_and_build(
     build: &BuildOptions,
     label: &str,
     ready: Option<(SampleMesh, bool, ErrorStats)>,
+    cover: Option<&dyn Fn(&Scene) -> Option<VegetationCover>>,
 ) -> Result<Meshed, JobError> {
     let (mut t_mesh, mut t_analyze) = (0.0, 0.0);
     let (mesh, hit_limit, stats) = match ready {
@@ -328,7 +331,8 @@ pub fn mesh_and_build(
     }
     let t = Instant::now();
     let mut scene = build_scene(hf, &mesh, build)?;
-    let layers = bake_layers(hf, &build.snow);
+    let cover = cover.and_then(|f| f(&scene)).map(std::sync::Arc::new);
+    let layers = bake_layers_with(hf, &build.snow, cover);
     layers.texture(&mut scene, hf, &build.name).map_err(JobError::Texture)?;
     let normal_map = bake_normal_map(hf, &mut scene, &build.name, layers.report.map_px).map_err(JobError::Texture)?;
     let t_build = t.elapsed().as_secs_f64();
@@ -404,7 +408,7 @@ pub fn run_reporting(
 
     let (grid, storage) = storage_for(job, hf)?;
     let settings = job.mesh_settings();
-    let meshed = mesh_and_build(hf, &settings, &storage, &job.build, &job.source.label(), None)?;
+    let meshed = mesh_and_build(hf, &settings, &storage, &job.build, &job.source.label(), None, None)?;
     let figures = meshed.figures(hf, &settings, decoded.voids_filled);
     let ([t_mesh, t_analyze, t_build], scene) = (meshed.seconds, meshed.scene);
 
