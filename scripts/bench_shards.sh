@@ -78,4 +78,4 @@ for preset in "${presets[@]}"; do
   rm -rf "$whole"
 done
 echo "N: shards at the same time on this machine ($(nproc) cores); N seq: one after another (slowest = the longest shard);"
-echo "a unit is the terrain stage or one plant species (docs/sharding.md)"
+echo "a unit is a band of a chunked terrain (its meshes), the terrain stage of an unchunked one, or one plant species (docs/sharding.md)"
