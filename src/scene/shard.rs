@@ -27,7 +27,7 @@ use crate::scene::error::SceneBuildError;
 use crate::scene::pipeline::{CacheUse, StageJob, StageRunner};
 use crate::scene::plants_stage::{self, SpeciesMemo, SPECIES_MEMO_STAGE};
 use crate::scene::terrain_stage::{
-    band_key, band_piece, planned_bands, BandPlan, BandRows, MeshMemo, TerrainJob, BAND_STAGE,
+    band_key, band_piece, mesh_key, planned_bands, BandPlan, BandRows, MeshMemo, TerrainJob, BAND_STAGE,
 };
 use crate::scene::Preset;
 
@@ -92,7 +92,8 @@ pub fn units(preset: &Preset, out: &Path) -> Result<Vec<Unit>, SceneBuildError> 
 /// What a unit is to build.
 enum Work<'a> {
     Terrain(&'a crate::scene::TerrainSettings),
-    Band(&'a crate::scene::TerrainSettings, usize, std::rc::Rc<BandPlan>),
+    /// The terrain, the band, the plan, the terrain's mesh key.
+    Band(&'a crate::scene::TerrainSettings, usize, std::rc::Rc<BandPlan>, std::rc::Rc<String>),
     Species(&'a crate::scene::SpeciesSettings),
 }
 
@@ -103,11 +104,12 @@ fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>)>, 
         match planned_bands(t)? {
             Some(plan) => {
                 let plan = std::rc::Rc::new(plan);
+                let key = std::rc::Rc::new(mesh_key(preset, t)?);
                 for k in 0..plan.band_count() {
                     let rows = plan.rows(k);
-                    let entries = vec![Cache::entry_name(BAND_STAGE, &band_key(preset, t, rows)?)];
+                    let entries = vec![Cache::entry_name(BAND_STAGE, &band_key(&key, rows))];
                     let name = format!("terrain band {k} (rows {}-{})", rows[0], rows[1]);
-                    units.push((Unit { name, entries }, Work::Band(t, k, plan.clone())));
+                    units.push((Unit { name, entries }, Work::Band(t, k, plan.clone(), key.clone())));
                 }
             }
             None => {
@@ -172,19 +174,19 @@ pub fn build_shard(
                     let memo = Some(MeshMemo { cache: &cache, force });
                     runner.run(&TerrainJob { preset, terrain: t, memo })?;
                 }
-                Work::Band(t, b, plan) => {
+                Work::Band(t, b, plan, key) => {
                     let source = band_rows.get_or_insert_with(|| {
                         // the rows of every band of this shard, read together
                         let wanted = mine
                             .iter()
                             .filter_map(|&k| match &planned[k].1 {
-                                Work::Band(_, b, plan) => Some(plan.rows(*b)),
+                                Work::Band(_, b, plan, _) => Some(plan.rows(*b)),
                                 _ => None,
                             })
                             .collect();
                         BandRows::new(t, wanted)
                     });
-                    band_piece(preset, t, &mut |rows| source.rows(rows), plan, *b, Some((&cache, force)))?;
+                    band_piece(key, t, &mut |rows| source.rows(rows), plan, *b, Some((&cache, force)))?;
                 }
                 Work::Species(s) => {
                     plants_stage::species_unit(preset, s, &tmp, Some(SpeciesMemo { cache: &cache, force }))?;

@@ -261,13 +261,14 @@ pub fn planned_bands(t: &TerrainSettings) -> Result<Option<BandPlan>, StageError
     Ok(band_plan(t, w, h))
 }
 
-/// Cache key of band `rows` of a terrain: what meshing reads ([`mesh_key`]) and the rows.
-pub fn band_key(preset: &Preset, t: &TerrainSettings, rows: [u32; 2]) -> Result<String, StageError> {
+/// Cache key of band `rows` of a terrain whose meshes' key is `mesh_key` ([`mesh_key`]: what
+/// meshing reads, the heightmap's bytes among it, hashed once for all the bands).
+pub fn band_key(mesh_key: &str, rows: [u32; 2]) -> String {
     let mut k = KeyBuilder::new(BAND_STAGE, TERRAIN_ALGORITHM_VERSION);
-    k.add(mesh_key(preset, t)?.as_bytes());
+    k.add(mesh_key.as_bytes());
     k.add(&rows[0].to_le_bytes());
     k.add(&rows[1].to_le_bytes());
-    Ok(k.finish())
+    k.finish()
 }
 
 /// The rows of a terrain's map the bands a shard builds need, made one band at a time: a
@@ -339,8 +340,9 @@ impl<'a> BandRows<'a> {
 
 /// Band `k` of `plan`: from `cache` when it holds it (unless `force`), else meshed and measured
 /// from its rows (`rows` gives them: [`BandRows`], or the rows of a map at hand) and stored there.
+/// `mesh_key` is the terrain's [`mesh_key`].
 pub fn band_piece(
-    preset: &Preset,
+    mesh_key: &str,
     t: &TerrainSettings,
     rows_of: &mut dyn FnMut([u32; 2]) -> Result<Heightfield, StageError>,
     plan: &BandPlan,
@@ -349,7 +351,7 @@ pub fn band_piece(
 ) -> Result<crate::terrain::bands::BandPiece, StageError> {
     use crate::terrain::bands::{build_band_window, BandPiece};
     let rows = plan.rows(k);
-    let key = cache.map(|_| band_key(preset, t, rows)).transpose()?;
+    let key = cache.map(|_| band_key(mesh_key, rows));
     if let (Some((c, false)), Some(key)) = (cache, &key) {
         let kept = c
             .lookup(BAND_STAGE, key)
@@ -408,8 +410,9 @@ fn banded_meshes(
         hf.rows(rows[0] as usize, rows[1] as usize)
             .ok_or_else(|| fail(Stage::Terrain)(format!("rows {}-{} are not within the map", rows[0], rows[1])))
     };
+    let key = mesh_key(preset, t)?;
     let pieces = (0..plan.band_count())
-        .map(|k| band_piece(preset, t, &mut rows_of, plan, k, cache))
+        .map(|k| band_piece(&key, t, &mut rows_of, plan, k, cache))
         .collect::<Result<Vec<_>, _>>()?;
     let share = start.elapsed().as_secs_f64() / plan.bounds.len() as f64;
     let mut levels = Vec::with_capacity(plan.bounds.len());
@@ -459,10 +462,12 @@ impl TerrainJob<'_> {
         }
         let (t, preset) = (self.terrain, self.preset);
         match planned_bands(t) {
-            Ok(Some(plan)) => (0..plan.band_count())
-                .filter_map(|k| band_key(preset, t, plan.rows(k)).ok())
-                .map(|key| Cache::entry_name(BAND_STAGE, &key))
-                .collect(),
+            Ok(Some(plan)) => match mesh_key(preset, t) {
+                Ok(key) => (0..plan.band_count())
+                    .map(|k| Cache::entry_name(BAND_STAGE, &band_key(&key, plan.rows(k))))
+                    .collect(),
+                Err(_) => Vec::new(),
+            },
             Ok(None) => {
                 mesh_key(preset, t).ok().map(|key| Cache::entry_name(MESH_MEMO_STAGE, &key)).into_iter().collect()
             }
