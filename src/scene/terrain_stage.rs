@@ -111,8 +111,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// from what grows (scene/ground_cover.rs). 9: maps over 480 samples a side are meshed as
 /// regions of about 320 cells in parallel, joined along seams fixed first (terrain/regions.rs).
 /// 10: a chunked map is meshed in bands of whole chunks (at least 320 rows), each from its own rows
-/// alone (terrain/regions.rs `mesh_band`): the unit a shard will build.
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 10;
+/// alone (terrain/regions.rs `mesh_band`): the unit a shard will build. 11: the normal maps baked
+/// by bands of texel rows in parallel (the same texels; their mean errors summed band by band).
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 11;
 
 /// The stage in a scene build.
 pub struct TerrainJob<'a> {

@@ -13,6 +13,7 @@
 //! normal and the normal an engine shades with, without the map (the interpolated vertex normal)
 //! and with it (the texel as written, 8 bits a channel, through the same frame).
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::heightfield::Heightfield;
@@ -80,6 +81,21 @@ fn from_byte(b: u8) -> f64 {
     b as f64 / 255.0 * 2.0 - 1.0
 }
 
+/// Texel rows baked together (a band of the map; the bands run in parallel).
+const TEXEL_ROWS_PER_BAND: usize = 64;
+
+/// First texel index along axis `c` (of `n` texels) whose centre can lie in the triangle `uv`.
+fn texel_lo(uv: &[[f64; 2]; 3], c: usize, n: u32) -> usize {
+    let m = uv.iter().map(|q| q[c]).fold(f64::INFINITY, f64::min);
+    ((m * n as f64 - 0.5).floor().max(0.0) as usize).min(n as usize)
+}
+
+/// One past the last texel index along axis `c` whose centre can lie in the triangle `uv`.
+fn texel_hi(uv: &[[f64; 2]; 3], c: usize, n: u32) -> usize {
+    let m = uv.iter().map(|q| q[c]).fold(f64::NEG_INFINITY, f64::max);
+    ((m * n as f64 - 0.5).ceil().max(0.0) as usize + 1).min(n as usize)
+}
+
 /// Bakes the normal map of the terrain `scene` (built from `hf`) at `map_px` texels and puts it
 /// on the scene: TANGENT on every primitive of a material named `terrain`, the map (PNG, data not
 /// colour) as those materials' normal texture, named `{name}_normal`. Texel (x, y) is the point at
@@ -101,13 +117,17 @@ pub fn bake_normal_map(
     }
     let [w, h] = map_px;
     let (wu, hu) = (w as usize, h as usize);
-    // (0, 0, 1) until a surface triangle covers the texel
-    let mut texels = vec![[128u8, 128, 255, 255]; wu * hu];
-    let mut covered = vec![false; wu * hu];
-    let (mut sum_without, mut max_without) = (0.0f64, 0.0f64);
-    let (mut sum_with, mut max_with) = (0.0f64, 0.0f64);
-    let mut count = 0usize;
     let span = |n: usize| (n.max(2) - 1) as f64;
+    // The surface's top faces (skirt walls have no extent in uv, the base faces down), in scene
+    // order, with their uv rows.
+    struct Face {
+        uv: [[f64; 2]; 3],
+        area: f64,
+        normals: [[f32; 3]; 3],
+        tangents: [[f32; 4]; 3],
+        rows: (usize, usize),
+    }
+    let mut faces: Vec<Face> = Vec::new();
     for p in scene.meshes.iter().flat_map(|m| &m.primitives).filter(|p| uses_map(p)) {
         for tri in p.indices.chunks_exact(3) {
             let v = [tri[0] as usize, tri[1] as usize, tri[2] as usize];
@@ -115,7 +135,6 @@ pub fn bake_normal_map(
                 continue;
             }
             let pos = v.map(|k| p.positions[k].map(|c| c as f64));
-            // top faces only: skirt walls have no extent in uv, the base faces down
             let e1 = [0, 1, 2].map(|k| pos[1][k] - pos[0][k]);
             let e2 = [0, 1, 2].map(|k| pos[2][k] - pos[0][k]);
             if cross(e1, e2)[1] <= 0.0 {
@@ -126,48 +145,73 @@ pub fn bake_normal_map(
             if area.abs() < 1e-18 {
                 continue;
             }
-            let normals = v.map(|k| p.normals[k]);
-            let tangents = v.map(|k| p.tangents[k]);
-            // texel centres inside the triangle's uv box
-            let lo = |c: usize, n: u32| {
-                let m = uv.iter().map(|q| q[c]).fold(f64::INFINITY, f64::min);
-                ((m * n as f64 - 0.5).floor().max(0.0) as usize).min(n as usize)
-            };
-            let hi = |c: usize, n: u32| {
-                let m = uv.iter().map(|q| q[c]).fold(f64::NEG_INFINITY, f64::max);
-                ((m * n as f64 - 0.5).ceil().max(0.0) as usize + 1).min(n as usize)
-            };
-            for y in lo(1, h)..hi(1, h) {
-                let tv = (y as f64 + 0.5) / h as f64;
-                for x in lo(0, w)..hi(0, w) {
-                    let tu = (x as f64 + 0.5) / w as f64;
-                    let b1 = ((tu - uv[0][0]) * (uv[2][1] - uv[0][1]) - (uv[2][0] - uv[0][0]) * (tv - uv[0][1])) / area;
-                    let b2 = ((uv[1][0] - uv[0][0]) * (tv - uv[0][1]) - (tu - uv[0][0]) * (uv[1][1] - uv[0][1])) / area;
-                    let bary = [1.0 - b1 - b2, b1, b2];
-                    if bary.iter().any(|&b| b < -1e-9) {
-                        continue;
+            let rows = (texel_lo(&uv, 1, h), texel_hi(&uv, 1, h));
+            faces.push(Face { uv, area, normals: v.map(|k| p.normals[k]), tangents: v.map(|k| p.tangents[k]), rows });
+        }
+    }
+    // Bands of texel rows baked in parallel, each by every face reaching it in scene order: a
+    // texel takes the first face covering its centre, as one pass over the faces would give it;
+    // the figures are summed per band, bands in order (the same at any thread count).
+    let band = TEXEL_ROWS_PER_BAND.min(hu.max(1));
+    let bands: Vec<(Vec<[u8; 4]>, [f64; 4], usize)> = (0..hu.div_ceil(band))
+        .into_par_iter()
+        .map(|b| {
+            let (y0, y1) = (b * band, ((b + 1) * band).min(hu));
+            // (0, 0, 1) until a surface triangle covers the texel
+            let mut texels = vec![[128u8, 128, 255, 255]; (y1 - y0) * wu];
+            let mut covered = vec![false; (y1 - y0) * wu];
+            let (mut sum_without, mut max_without, mut sum_with, mut max_with) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+            let mut count = 0usize;
+            for f in faces.iter().filter(|f| f.rows.0 < y1 && f.rows.1 > y0) {
+                let uv = &f.uv;
+                for y in f.rows.0.max(y0)..f.rows.1.min(y1) {
+                    let tv = (y as f64 + 0.5) / h as f64;
+                    for x in texel_lo(uv, 0, w)..texel_hi(uv, 0, w) {
+                        let tu = (x as f64 + 0.5) / w as f64;
+                        let b1 = ((tu - uv[0][0]) * (uv[2][1] - uv[0][1]) - (uv[2][0] - uv[0][0]) * (tv - uv[0][1]))
+                            / f.area;
+                        let b2 = ((uv[1][0] - uv[0][0]) * (tv - uv[0][1]) - (tu - uv[0][0]) * (uv[1][1] - uv[0][1]))
+                            / f.area;
+                        let bary = [1.0 - b1 - b2, b1, b2];
+                        if bary.iter().any(|&b| b < -1e-9) {
+                            continue;
+                        }
+                        let k = (y - y0) * wu + x;
+                        if covered[k] {
+                            continue;
+                        }
+                        covered[k] = true;
+                        let (t, b, n) = frame(f.normals, f.tangents, bary);
+                        let field = hf.normal_bilinear(tu * span(hf.width), tv * span(hf.height));
+                        let local = [dot(field, t), dot(field, b), dot(field, n)];
+                        let bytes = [to_byte(local[0]), to_byte(local[1]), to_byte(local[2]), 255];
+                        texels[k] = bytes;
+                        let decoded = [0, 1, 2].map(|c| {
+                            from_byte(bytes[0]) * t[c] + from_byte(bytes[1]) * b[c] + from_byte(bytes[2]) * n[c]
+                        });
+                        let (without, with) = (angle_deg(n, field), angle_deg(decoded, field));
+                        sum_without += without;
+                        max_without = max_without.max(without);
+                        sum_with += with;
+                        max_with = max_with.max(with);
+                        count += 1;
                     }
-                    let k = y * wu + x;
-                    if covered[k] {
-                        continue;
-                    }
-                    covered[k] = true;
-                    let (t, b, n) = frame(normals, tangents, bary);
-                    let field = hf.normal_bilinear(tu * span(hf.width), tv * span(hf.height));
-                    let local = [dot(field, t), dot(field, b), dot(field, n)];
-                    let bytes = [to_byte(local[0]), to_byte(local[1]), to_byte(local[2]), 255];
-                    texels[k] = bytes;
-                    let decoded = [0, 1, 2]
-                        .map(|c| from_byte(bytes[0]) * t[c] + from_byte(bytes[1]) * b[c] + from_byte(bytes[2]) * n[c]);
-                    let (without, with) = (angle_deg(n, field), angle_deg(decoded, field));
-                    sum_without += without;
-                    max_without = max_without.max(without);
-                    sum_with += with;
-                    max_with = max_with.max(with);
-                    count += 1;
                 }
             }
-        }
+            (texels, [sum_without, max_without, sum_with, max_with], count)
+        })
+        .collect();
+    let (mut sum_without, mut max_without) = (0.0f64, 0.0f64);
+    let (mut sum_with, mut max_with) = (0.0f64, 0.0f64);
+    let mut count = 0usize;
+    let mut texels: Vec<[u8; 4]> = Vec::with_capacity(wu * hu);
+    for (band_texels, [s0, m0, s1, m1], c) in bands {
+        texels.extend(band_texels);
+        sum_without += s0;
+        max_without = max_without.max(m0);
+        sum_with += s1;
+        max_with = max_with.max(m1);
+        count += c;
     }
     let png = crate::bake::raster::png::encode_rgba8_png(&texels.concat(), w, h)?;
     scene.textures.push(Texture { name: format!("{name}_normal"), png });
