@@ -65,6 +65,19 @@ impl ReadError {
 /// the message: "a preset", "an L-system", …).
 pub fn read_limited(path: &Path, limit: u64, what: &'static str) -> Result<Vec<u8>, ReadError> {
     let io = |source| ReadError::Io { path: path.to_path_buf(), source };
+    let (file, len) = open_limited(path, limit, what)?;
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(limit + 1).read_to_end(&mut bytes).map_err(io)?;
+    if bytes.len() as u64 > limit {
+        return Err(ReadError::TooLarge { path: path.to_path_buf(), size: bytes.len() as u64, limit, what });
+    }
+    Ok(bytes)
+}
+
+/// `path` opened for reading, with its length: the checks of [`read_limited`] (a regular file of
+/// at most `limit` bytes) without reading it, for readers that take only part of a file.
+pub fn open_limited(path: &Path, limit: u64, what: &'static str) -> Result<(std::fs::File, u64), ReadError> {
+    let io = |source| ReadError::Io { path: path.to_path_buf(), source };
     let meta = std::fs::metadata(path).map_err(io)?;
     if meta.is_dir() {
         return Err(ReadError::NotAFile { path: path.to_path_buf(), problem: "is a folder, not a file" });
@@ -79,12 +92,7 @@ pub fn read_limited(path: &Path, limit: u64, what: &'static str) -> Result<Vec<u
         return Err(ReadError::TooLarge { path: path.to_path_buf(), size: meta.len(), limit, what });
     }
     let file = std::fs::File::open(path).map_err(io)?;
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
-    file.take(limit + 1).read_to_end(&mut bytes).map_err(io)?;
-    if bytes.len() as u64 > limit {
-        return Err(ReadError::TooLarge { path: path.to_path_buf(), size: bytes.len() as u64, limit, what });
-    }
-    Ok(bytes)
+    Ok((file, meta.len()))
 }
 
 /// A relative URI or file name from inside a file (glTF buffer/image URI, MTL `map_Kd`, OBJ

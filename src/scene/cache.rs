@@ -24,6 +24,31 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     hex(&Sha256::digest(bytes))
 }
 
+/// [`sha256_hex`] of the file at `path` (at most `limit` bytes, as [`crate::input::read_limited`]
+/// checks), read in pieces: the file is never held whole.
+pub fn sha256_hex_of_file(path: &Path, limit: u64, what: &'static str) -> Result<String, crate::input::ReadError> {
+    use std::io::Read;
+    let (file, _) = crate::input::open_limited(path, limit, what)?;
+    let mut hasher = Sha256::new();
+    let mut buffer = vec![0u8; 1 << 20];
+    let mut read = 0u64;
+    let mut file = file.take(limit + 1);
+    loop {
+        let n = file
+            .read(&mut buffer)
+            .map_err(|source| crate::input::ReadError::Io { path: path.to_path_buf(), source })?;
+        if n == 0 {
+            break;
+        }
+        read += n as u64;
+        hasher.update(&buffer[..n]);
+    }
+    if read > limit {
+        return Err(crate::input::ReadError::TooLarge { path: path.to_path_buf(), size: read, limit, what });
+    }
+    Ok(hex(&hasher.finalize()))
+}
+
 fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }

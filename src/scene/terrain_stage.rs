@@ -246,17 +246,13 @@ pub fn band_plan(t: &TerrainSettings, width: usize, height: usize) -> Option<Ban
 /// (a heightmap that cannot tell is decoded; one that does not decode fails the terrain stage).
 pub fn planned_bands(t: &TerrainSettings) -> Result<Option<BandPlan>, StageError> {
     let (w, h) = match &t.source {
-        TerrainSource::Heightmap { path, decode } => {
-            let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
-                .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))?;
-            match heightfield::dimensions(path, &bytes, decode) {
-                Some(size) => size,
-                None => {
-                    let (hf, _, _) = terrain_heights(t)?;
-                    (hf.width, hf.height)
-                }
+        TerrainSource::Heightmap { path, decode } => match heightfield::dimensions_of_file(path, decode) {
+            Some(size) => size,
+            None => {
+                let (hf, _, _) = terrain_heights(t)?;
+                (hf.width, hf.height)
             }
-        }
+        },
         TerrainSource::Fbm { size, .. } => (*size, *size),
     };
     Ok(band_plan(t, w, h))
@@ -273,9 +269,10 @@ pub fn band_key(mesh_key: &str, rows: [u32; 2]) -> String {
 }
 
 /// The rows of a terrain's map the bands a shard builds need, made one band at a time: a
-/// procedural map's rows alone (its range found once, by a pass that keeps nothing); a PNG
-/// heightmap's rows of those bands alone, read in one pass over the file; any other heightmap
-/// decoded whole once.
+/// procedural map's rows alone (its range found once, by a pass that keeps nothing); a
+/// heightmap's rows of those bands alone, read from the file by [`heightfield::read_kept_rows`]
+/// (PNG rows, TIFF strips or tiles, raw and `.hgt` byte ranges), or the map decoded whole once
+/// where that reader cannot window it.
 pub struct BandRows<'a> {
     t: &'a TerrainSettings,
     /// The rows of every band wanted.
@@ -297,20 +294,16 @@ impl<'a> BandRows<'a> {
             return Ok(());
         }
         let input = bad_input(Stage::Terrain);
-        let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
-            .map_err(|e| input(e.to_string()))?;
         let wanted = &self.wanted;
         let keep = |j: usize| wanted.iter().any(|r| (r[0] as usize..=r[1] as usize).contains(&j));
-        self.held = Some(
-            match heightfield::decode_kept_rows(path, &bytes, decode, &keep).map_err(|e| input(e.to_string()))? {
-                Some((d, rows)) => (d.heightfield, rows),
-                None => {
-                    let hf = heightfield::decode(path, &bytes, decode).map_err(|e| input(e.to_string()))?.heightfield;
-                    let rows = (0..hf.height).collect();
-                    (hf, rows)
-                }
-            },
-        );
+        self.held = Some(match heightfield::read_kept_rows(path, decode, &keep).map_err(|e| input(e.to_string()))? {
+            Some((d, rows)) => (d.heightfield, rows),
+            None => {
+                let hf = heightfield::load(path, decode).map_err(|e| input(e.to_string()))?.heightfield;
+                let rows = (0..hf.height).collect();
+                (hf, rows)
+            }
+        });
         Ok(())
     }
 
@@ -446,9 +439,9 @@ pub fn mesh_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageErr
         k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
     }
     if let TerrainSource::Heightmap { path, .. } = &t.source {
-        let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+        let hash = crate::scene::cache::sha256_hex_of_file(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
             .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))?;
-        k.add(sha256_hex(&bytes).as_bytes());
+        k.add(hash.as_bytes());
     }
     Ok(k.finish())
 }
@@ -513,9 +506,9 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
         crate::scene::ground_cover::add_key(&mut k, preset);
     }
     if let TerrainSource::Heightmap { path, .. } = &t.source {
-        let bytes = crate::input::read_limited(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+        let hash = crate::scene::cache::sha256_hex_of_file(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
             .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))?;
-        k.add(sha256_hex(&bytes).as_bytes());
+        k.add(hash.as_bytes());
     }
     Ok(k.finish())
 }

@@ -241,16 +241,31 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
     // shard reads its bands' rows alone), the main mesh a bound of its own (1 m) that every band
     // meshes besides the levels
     let procedural = "procedural = { kind = \"ridged\", size = 1025, seed = 4, relief = 120.0 }";
+    // (a float TIFF read strip by strip, a raw 16-bit file by byte ranges: split in 2 only)
     let png = "heightmap = \"map.png\"\nheight_scale = 300.0";
-    for (source, max_error) in [(procedural, 0.5), (png, 1.0)] {
+    let tiff = "heightmap = \"map.tif\"";
+    let raw = "heightmap = \"map.r16\"\nsize = [301, 1025]\nheight_scale = 300.0";
+    for (source, max_error, splits) in
+        [(procedural, 0.5, &[2usize, 4][..]), (png, 1.0, &[2, 4]), (tiff, 1.0, &[2]), (raw, 1.0, &[2])]
+    {
         let dir = tempfile::tempdir().unwrap();
         let cwd = dir.path();
         write(cwd, "rock.obj", ROCK_OBJ);
-        let map = image::ImageBuffer::from_fn(301, 1025, |i, j| {
+        let value = |i: u32, j: u32| {
             let (x, z) = (i as f64 / 40.0, j as f64 / 55.0);
-            image::Luma([(32768.0 + 12000.0 * (x.sin() * z.cos()) + 9000.0 * ((x * 2.7 + z * 1.3).sin())) as u16])
-        });
-        map.save(cwd.join("map.png")).unwrap();
+            (32768.0 + 12000.0 * (x.sin() * z.cos()) + 9000.0 * ((x * 2.7 + z * 1.3).sin())) as u16
+        };
+        image::ImageBuffer::from_fn(301, 1025, |i, j| image::Luma([value(i, j)])).save(cwd.join("map.png")).unwrap();
+        let metres: Vec<f32> = (0..1025).flat_map(|j| (0..301).map(move |i| value(i, j) as f32 / 218.45)).collect();
+        let mut tif = std::io::Cursor::new(Vec::new());
+        tiff::encoder::TiffEncoder::new(&mut tif)
+            .unwrap()
+            .write_image::<tiff::encoder::colortype::Gray32Float>(301, 1025, &metres)
+            .unwrap();
+        fs::write(cwd.join("map.tif"), tif.into_inner()).unwrap();
+        let raw_bytes: Vec<u8> =
+            (0..1025).flat_map(|j| (0..301).flat_map(move |i| value(i, j).to_le_bytes())).collect();
+        fs::write(cwd.join("map.r16"), raw_bytes).unwrap();
         write(cwd, "world.toml", &banded_preset(source, max_error));
         ok(&verdant_in(cwd, &["-q", "build", "world.toml", "--out", "single"]));
         let bands_in = |out: &Path| {
@@ -261,7 +276,7 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
                 .unwrap_or(0)
         };
         assert_eq!(bands_in(&cwd.join("single")), 3, "a single build keeps its three bands as pieces");
-        for n in [2usize, 4] {
+        for &n in splits {
             let mut shards = run_shards(cwd, &format!("shards{n}"), n);
             let mut built = Vec::new();
             for s in &shards {

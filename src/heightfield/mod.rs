@@ -10,6 +10,9 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+mod window;
+pub use window::{dimensions_of_file, kept_rows_from, read_kept_rows, KeptRows};
+
 /// A regular grid of heights in metres. Sample (i, j) — column i, row j — lies at
 /// x = i·cell_size_m, z = j·cell_size_m, y = `heights[j * width + i]`.
 #[derive(Debug, Clone, PartialEq)]
@@ -379,26 +382,6 @@ pub fn load(path: &Path, opts: &DecodeOptions) -> Result<Decoded, HeightfieldErr
 }
 
 /// Decodes heightmap `bytes`; `path` names the source in messages and decides `auto` by extension.
-/// The map's width and height in samples as [`decode`] would find them, from the file's header
-/// (or length) alone, without decoding its samples; `None` when that cannot tell (a file that
-/// does not decode: [`decode`] names what is wrong).
-pub fn dimensions(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Option<(usize, usize)> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let square = |n: usize| {
-        let side = (n as f64).sqrt().round() as usize;
-        (side * side == n && bytes.len().is_multiple_of(2)).then_some((side, side))
-    };
-    match (opts.encoding, ext.as_str()) {
-        (Encoding::Hgt, _) | (Encoding::Auto, "hgt") => square(bytes.len() / 2),
-        (Encoding::R16, _) | (Encoding::Auto, "r16" | "raw") => opts.size.or_else(|| square(bytes.len() / 2)),
-        _ => {
-            let reader = image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().ok()?;
-            let (w, h) = reader.into_dimensions().ok()?;
-            Some((w as usize, h as usize))
-        }
-    }
-}
-
 pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded, HeightfieldError> {
     if bytes.is_empty() {
         return Err(HeightfieldError::Empty { path: path.to_owned() });
@@ -418,29 +401,6 @@ pub fn decode(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Decoded
         _ => decode_image(path, bytes, encoding, opts)?,
     };
     finish_decoded(path, decoded, opts, &|j| j)
-}
-
-/// Rows of a PNG heightmap alone: the rows `keep` accepts, in order, as one map (`rows[k]` is the
-/// file's row of its row k), decoded by the same row loop as [`decode`] (the same heights), the
-/// others read and dropped. `None` when the file is not a PNG this loop reads (decode it whole).
-pub fn decode_kept_rows(
-    path: &Path,
-    bytes: &[u8],
-    opts: &DecodeOptions,
-    keep: &dyn Fn(usize) -> bool,
-) -> Result<Option<(Decoded, Vec<usize>)>, HeightfieldError> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let whole_only = matches!(opts.encoding, Encoding::Hgt | Encoding::R16 | Encoding::Float)
-        || (opts.encoding == Encoding::Auto && matches!(ext.as_str(), "hgt" | "r16" | "raw"));
-    if bytes.is_empty() || whole_only || !bytes.starts_with(PNG_SIGNATURE) {
-        return Ok(None);
-    }
-    let mut kept = Vec::new();
-    let Some(decoded) = decode_png_rows(path, bytes, opts.encoding, opts, Some((keep, &mut kept)))? else {
-        return Ok(None);
-    };
-    let decoded = finish_decoded(path, decoded, opts, &|j| kept.get(j).copied().unwrap_or(j))?;
-    Ok(Some((decoded, kept)))
 }
 
 /// What [`decode`] checks and sets on every decoded map (`row_of` names a row of the map as the
@@ -670,7 +630,7 @@ fn decode_image(
         return Err(HeightfieldError::format(path, "--encoding float needs a 32-bit float TIFF; this file is not one (for 8/16-bit images use gray, terrain-rgb or terrarium: --encoding, or `encoding` in a preset)"));
     }
     if bytes.starts_with(PNG_SIGNATURE) {
-        if let Some(decoded) = decode_png_rows(path, bytes, encoding, opts, None)? {
+        if let Some(decoded) = decode_png_rows(path, Cursor::new(bytes), encoding, opts, None)? {
             return Ok(decoded);
         }
     }
@@ -797,14 +757,14 @@ const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
 /// Kept rows: which rows to keep, and the list of those kept (file rows, in order).
 type KeepRows<'a> = (&'a dyn Fn(usize) -> bool, &'a mut Vec<usize>);
 
-fn decode_png_rows(
+fn decode_png_rows<R: std::io::BufRead + std::io::Seek>(
     path: &Path,
-    bytes: &[u8],
+    source: R,
     encoding: Encoding,
     opts: &DecodeOptions,
     mut keep: Option<KeepRows<'_>>,
 ) -> Result<Option<Decoded>, HeightfieldError> {
-    let mut decoder = png::Decoder::new_with_limits(Cursor::new(bytes), png::Limits { bytes: usize::MAX });
+    let mut decoder = png::Decoder::new_with_limits(source, png::Limits { bytes: usize::MAX });
     decoder.set_transformations(png::Transformations::EXPAND);
     let mut reader = decoder.read_info().map_err(|e| image_error(path, e))?;
     if reader.info().interlaced {
@@ -995,7 +955,7 @@ mod tests {
     }
 
     /// A PNG of `w`×`h` with `color`/`depth` from the byte stream `bytes` (palette and tRNS given).
-    fn png_file(
+    pub(super) fn png_file(
         w: u32,
         h: u32,
         color: png::ColorType,
@@ -1019,47 +979,6 @@ mod tests {
             writer.write_image_data(data).unwrap();
         }
         out
-    }
-
-    /// The rows of a PNG kept alone are the whole map's rows: 16-bit gray (scaled: exact
-    /// references) and Terrain-RGB, two bands sharing their edge row; a file that is not a PNG
-    /// is left to the whole decoder; a bad sample's row is named as the file's.
-    #[test]
-    fn kept_rows_of_a_png_are_the_maps_rows() {
-        use png::{BitDepth as B, ColorType as C};
-        let (w, h) = (37u32, 50u32);
-        let gray: Vec<u8> = (0..w * h).map(|k| ((k * 2749 + 7) % 65536) as u16).flat_map(|v| v.to_be_bytes()).collect();
-        let rgb: Vec<u8> = (0..w * h).flat_map(|k| [1, (k % 251) as u8, (k * 7 % 256) as u8]).collect();
-        let cases = [
-            (png_file(w, h, C::Grayscale, B::Sixteen, &gray, None, None), Encoding::Gray, 6553.5),
-            (png_file(w, h, C::Rgb, B::Eight, &rgb, None, None), Encoding::TerrainRgb, 100.0),
-        ];
-        for (file, encoding, height_scale_m) in cases {
-            let opts = DecodeOptions { encoding, height_scale_m, cell_size_m: 2.0, ..DecodeOptions::default() };
-            let path = Path::new("map.png");
-            let whole = decode(path, &file, &opts).unwrap().heightfield;
-            let keep = |j: usize| (3..=17).contains(&j) || (17..=31).contains(&j) || j == 49;
-            let (kept, rows) = decode_kept_rows(path, &file, &opts, &keep).unwrap().unwrap();
-            assert_eq!(rows, (3..=31).chain([49]).collect::<Vec<_>>());
-            let kept = kept.heightfield;
-            assert_eq!((kept.width, kept.height, kept.cell_size_m), (37, 30, 2.0));
-            for (k, &j) in rows.iter().enumerate() {
-                for i in 0..w as usize {
-                    let (a, b) = (k * w as usize + i, j * w as usize + i);
-                    assert_eq!(kept.heights[a].to_bits(), whole.heights[b].to_bits(), "{encoding:?} ({i}, {j})");
-                    assert_eq!(kept.reference(a).to_bits(), whole.reference(b).to_bits(), "{encoding:?} ({i}, {j})");
-                }
-            }
-            assert_eq!(kept.exact.is_some(), whole.exact.is_some());
-        }
-        let opts = DecodeOptions::default();
-        assert!(decode_kept_rows(Path::new("map.hgt"), &[0u8; 8], &opts, &|_| true).unwrap().is_none());
-        assert!(decode_kept_rows(Path::new("map.tif"), b"II*\0rest", &opts, &|_| true).unwrap().is_none());
-        // heights out of range everywhere: the first kept row, the file's row 40, is named
-        let bad = DecodeOptions { encoding: Encoding::Gray, height_scale_m: 1e13, ..DecodeOptions::default() };
-        let file = png_file(w, h, C::Grayscale, B::Sixteen, &gray, None, None);
-        let err = decode_kept_rows(Path::new("map.png"), &file, &bad, &|j| j >= 40).unwrap_err().to_string();
-        assert!(err.contains("row 40)"), "{err}");
     }
 
     /// Row-wise PNG decoding gives what decoding the whole image with the `image` crate gives, for
@@ -1131,7 +1050,7 @@ mod tests {
                             ..Default::default()
                         };
                         let path = Path::new("map.png");
-                        let rows = decode_png_rows(path, &file, encoding, &opts, None);
+                        let rows = decode_png_rows(path, Cursor::new(&file), encoding, &opts, None);
                         let whole = decode_whole_image(path, &file, encoding, &opts);
                         let what = format!("{color:?} {depth:?} {encoding:?} equal={equal_channels} trns={trns}");
                         match (rows, whole) {
