@@ -77,7 +77,7 @@ pub struct RuleCounts {
 }
 
 impl RuleCounts {
-    pub(crate) fn add(&mut self, o: &RuleCounts) {
+    pub fn add(&mut self, o: &RuleCounts) {
         self.candidates += o.candidates;
         self.density += o.density;
         self.mask += o.mask;
@@ -119,6 +119,8 @@ pub enum ScatterError {
     Extent { extent: [f64; 4] },
     #[error("tile size {tile_m} m gives {tiles} tiles over the extent (limit {limit}); use a larger [scatter] tile_m")]
     Tiles { tile_m: f64, tiles: u64, limit: u64 },
+    #[error("tile rows {}..{} are not rows of the tiling (0..{tiles_z}); place a non-empty range of its rows", rows[0], rows[1])]
+    Rows { rows: [u32; 2], tiles_z: u32 },
 }
 
 /// Always the input's: a map that does not read, settings or limits the species exceeds.

@@ -58,6 +58,9 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
         .collect();
     let tile_bound: Vec<usize> = (0..tiling.count())
         .map(|t| {
+            if !rules.places_row(t as u32 / tiling.tiles_x) {
+                return 0;
+            }
             let (ci0, ci1, cj0, cj1) = tile_cells(t);
             (((ci1 - ci0 + 1) * (cj1 - cj0 + 1)) as f64 * tile_keep[t].clamp(0.0, 1.0)).ceil() as usize
         })
@@ -71,7 +74,8 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
             let mut counts = RuleCounts::default();
             // the triangle of the last candidate: the next one, a cell away, is most often in it
             let mut hint = u32::MAX;
-            if tile_keep[t] <= 0.0 {
+            // (a tile outside the rows placed: another run's; every candidate is its own tile's)
+            if tile_keep[t] <= 0.0 || !rules.places_row(t as u32 / tiling.tiles_x) {
                 return counts;
             }
             let (ci0, ci1, cj0, cj1) = tile_cells(t);

@@ -83,9 +83,40 @@ pub fn scatter_species_snow(
     scene_seed: u64,
     snow: Option<rules::SnowThinning<'_>>,
 ) -> Result<Scatter, ScatterError> {
+    scatter_species_in_rows(surface, extent, species, density, mask, earlier, tile_m, scene_seed, snow, None)
+}
+
+/// [`scatter_species_snow`] for the tile rows `rows = [first, end)` alone (`None`: all of them):
+/// the whole run's instances in those rows, in the whole run's order, and its rule counts of the
+/// candidates there — so runs over rows that partition the tiling give, joined in row order, the
+/// whole run's instances, and summed, its counts. Poisson blocks of the block rows beside those
+/// placed are filled again by each run that needs them (the colour phases' reach; see
+/// `poisson.rs`). Exclusions see only the `earlier` instances given: pass every earlier instance
+/// within the exclusion radius of the rows (those of their rows widened by the radius). The
+/// estimate and its fail-fast are the whole extent's; `max_instances` is checked on this run's
+/// count (a join checks the sum).
+#[allow(clippy::too_many_arguments)]
+pub fn scatter_species_in_rows(
+    surface: &SurfaceIndex,
+    extent: [f64; 4],
+    species: &SpeciesRules,
+    density: Option<&DensityMap>,
+    mask: Option<&DensityMap>,
+    earlier: &[(&str, &[Instance])],
+    tile_m: f64,
+    scene_seed: u64,
+    snow: Option<rules::SnowThinning<'_>>,
+    rows: Option<[u32; 2]>,
+) -> Result<Scatter, ScatterError> {
     let tiling = Tiling::new(extent, tile_m)?;
+    if let Some([first, end]) = rows {
+        if first >= end || end > tiling.tiles_z {
+            return Err(ScatterError::Rows { rows: [first, end], tiles_z: tiling.tiles_z });
+        }
+    }
     let mut ctx = rules::Rules::new(surface, tiling, species, density, mask, earlier, scene_seed)?;
     ctx.snow = snow;
+    ctx.rows = rows;
     let area = (extent[2] - extent[0]) * (extent[3] - extent[1]);
     // fail fast: estimate from the density/mask/rules integral before allocating anything
     let estimate = rules::estimate(&ctx, 128) * ctx.effective_max_density * area;

@@ -52,9 +52,28 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     let blocks = Blocks { extent: tiling.extent, block_m, nbx, nbz, r };
     let key = mix64(rules.key ^ 0x0070_6f69_7373_6f6e); // "poisson"
     let bounds = super::common::height_bounds(s);
+    // Tile rows placed alone (`rules.rows`): the block rows holding them (and one more each side,
+    // whose points may round into them) are thinned, and one block row more each side is filled.
+    // That is the whole run's points in every thinned block: a block of an even row (phases 0, 1)
+    // reads only blocks of its own row (the rows beside it hold phases 2 and 3, filled after it),
+    // a block of an odd row (phases 2, 3) reads its own row and the two even rows beside it, which
+    // read only themselves. (Tested: without the extra rows the joined runs differ.)
+    const HALO: usize = 1;
+    let per_block = (block_m / tiling.tile_m).round().max(1.0) as usize;
+    let thinned = match rules.rows {
+        None => 0..=nbz - 1,
+        Some([first, end]) if first < end => {
+            let (lo, hi) = (first as usize / per_block, (end as usize - 1) / per_block);
+            lo.saturating_sub(1)..=(hi + 1).min(nbz - 1)
+        }
+        Some(_) => return Ok((Vec::new(), RuleCounts::default())),
+    };
+    let filled = thinned.start().saturating_sub(HALO)..=(thinned.end() + HALO).min(nbz - 1);
     let mut finished: Vec<Vec<[f64; 2]>> = vec![Vec::new(); nbx * nbz];
     for phase in 0..4 {
-        let ids: Vec<usize> = (0..nbx * nbz).filter(|&b| (b % nbx) % 2 + 2 * ((b / nbx) % 2) == phase).collect();
+        let ids: Vec<usize> = (0..nbx * nbz)
+            .filter(|&b| (b % nbx) % 2 + 2 * ((b / nbx) % 2) == phase && filled.contains(&(b / nbx)))
+            .collect();
         let done: Vec<(usize, Vec<[f64; 2]>)> = ids
             .par_iter()
             .map(|&b| {
@@ -79,9 +98,15 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
             let mut counts = RuleCounts::default();
             let mut hint = u32::MAX;
             let mut out = Vec::new();
+            if !thinned.contains(&(b / nbx)) {
+                return (out, counts);
+            }
             for (k, p) in pts.iter().enumerate() {
                 let h = mix64(bkey.wrapping_add(k as u64));
                 let tile = tiling.tile_of(p[0], p[1]);
+                if !rules.places_row(tile / tiling.tiles_x) {
+                    continue;
+                }
                 if let Some(inst) =
                     rules.place(p[0], p[1], super::common::unit(h), mix64(h), tile, &mut counts, &mut hint)
                 {

@@ -35,6 +35,10 @@ pub struct Rules<'a> {
     cos_slope: [f64; 2],
     /// Snow thinning (grass and flowers under a `[snow]` cover); `None` places as without snow.
     pub snow: Option<SnowThinning<'a>>,
+    /// The tile rows `[first, end)` this run places (`None`: every row): the whole run's instances
+    /// in those rows, in its order, and its rule counts of the candidates there (see
+    /// [`crate::scatter::scatter_species_in_rows`]).
+    pub rows: Option<[u32; 2]>,
 }
 
 /// Drops a candidate that passed the terrain rules with probability `strength × weight_at(x, z)`
@@ -160,7 +164,14 @@ impl<'a> Rules<'a> {
             align: if species.align_to_normal.is_finite() { species.align_to_normal.clamp(0.0, 1.0) } else { 0.0 },
             cos_slope: cos_range(species.slope_deg),
             snow: None,
+            rows: None,
         })
+    }
+
+    /// Whether tile row `tz` is one this run places ([`Rules::rows`]).
+    #[inline]
+    pub fn places_row(&self, tz: u32) -> bool {
+        self.rows.is_none_or(|[first, end]| tz >= first && tz < end)
     }
 
     /// Map coordinates (u, v) of a point.

@@ -561,3 +561,139 @@ fn jittered_refuses_a_spacing_it_cannot_keep() {
     let e = scatter_species(&t.surface, t.extent, &sp, None, None, &[], 16.0, 1).unwrap_err().to_string();
     assert!(e.contains("min_spacing") && e.contains("poisson"), "{e}");
 }
+
+/// The whole run of `sp` joined from runs over the tile rows of `cuts` (`0 = c0 < c1 < … = rows`),
+/// each given the `earlier` instances of its rows widened by `margin` rows (exclusions read those
+/// alone): instances in row order, counts summed.
+#[allow(clippy::too_many_arguments)]
+fn joined_rows(
+    t: &Terrain,
+    sp: &SpeciesRules,
+    earlier: &[(&str, &[Instance])],
+    tile_m: f64,
+    tiles_x: u32,
+    cuts: &[u32],
+    margin: u32,
+) -> (Vec<Instance>, verdant::scatter::RuleCounts) {
+    let (mut all, mut counts) = (Vec::new(), verdant::scatter::RuleCounts::default());
+    for w in cuts.windows(2) {
+        let near = |i: &&Instance| {
+            let row = i.tile / tiles_x;
+            row + margin >= w[0] && row < w[1] + margin
+        };
+        let kept: Vec<Vec<Instance>> = earlier.iter().map(|(_, v)| v.iter().filter(near).copied().collect()).collect();
+        let given: Vec<(&str, &[Instance])> = earlier.iter().zip(&kept).map(|((n, _), v)| (*n, v.as_slice())).collect();
+        let run = verdant::scatter::scatter_species_in_rows(
+            &t.surface,
+            t.extent,
+            sp,
+            None,
+            None,
+            &given,
+            tile_m,
+            7,
+            None,
+            Some([w[0], w[1]]),
+        )
+        .unwrap();
+        assert!(run.instances.iter().all(|i| (w[0]..w[1]).contains(&(i.tile / tiles_x))), "only its rows");
+        all.extend(run.instances);
+        counts.add(&run.counts);
+    }
+    (all, counts)
+}
+
+/// Tile rows placed alone (a shard's rows): runs over rows that partition the tiling, joined in
+/// row order, are the whole run — every instance bit for bit and in order, the rule counts summed —
+/// for Poisson blocks of one tile and of three (the colour phases reaching across the runs'
+/// borders: the block rows beside a run's are filled again), jittered placement, and species
+/// excluded by an earlier one (given only its instances of their rows widened by the radius).
+#[test]
+fn tile_rows_placed_alone_join_to_the_whole_run() {
+    let t = terrain(257, 60.0, 0.5);
+    let tile_m = 16.0; // 16 × 16 tiles
+    let mut small = species("small", Placement::Poisson);
+    small.min_spacing_m = 2.0;
+    let mut wide = species("wide", Placement::Poisson);
+    wide.min_spacing_m = 40.0; // blocks of 3 tiles
+    let mut jittered = species("jittered", Placement::Jittered);
+    jittered.max_density = 0.5;
+    jittered.exclusions = vec![Exclusion { species: "small".into(), radius_m: 1.5 }];
+    let mut near = species("near", Placement::Poisson);
+    near.min_spacing_m = 1.5;
+    near.max_density = 0.2;
+    near.exclusions = vec![Exclusion { species: "small".into(), radius_m: 1.0 }];
+    let whole = |sp: &SpeciesRules, earlier: &[(&str, &[Instance])]| {
+        scatter_species_detailed(&t.surface, t.extent, sp, None, None, earlier, tile_m, 7).unwrap()
+    };
+    let small_all = whole(&small, &[]);
+    assert!(small_all.instances.len() > 1000);
+    let earlier: [(&str, &[Instance]); 1] = [("small", &small_all.instances)];
+    let partitions: Vec<Vec<u32>> =
+        vec![vec![0, 1, 16], vec![0, 5, 6, 11, 16], vec![0, 8, 9, 10, 16], (0..=16).collect()];
+    for (sp, earlier, margin) in
+        [(&small, &[][..], 0), (&wide, &[][..], 0), (&jittered, &earlier[..], 1), (&near, &earlier[..], 1)]
+    {
+        let all = whole(sp, earlier);
+        assert!(!all.instances.is_empty(), "{}", sp.name);
+        for cuts in &partitions {
+            let (joined, counts) = joined_rows(&t, sp, earlier, tile_m, 16, cuts, margin);
+            assert!(
+                joined == all.instances,
+                "{} over rows {cuts:?}: {} instances, whole {}",
+                sp.name,
+                joined.len(),
+                all.instances.len()
+            );
+            assert_eq!(counts, all.counts, "{} over rows {cuts:?}", sp.name);
+        }
+    }
+    // rows that are not the tiling's
+    for rows in [[3, 3], [5, 2], [0, 17]] {
+        let err = verdant::scatter::scatter_species_in_rows(
+            &t.surface,
+            t.extent,
+            &small,
+            None,
+            None,
+            &[],
+            tile_m,
+            7,
+            None,
+            Some(rows),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("tile rows") && err.contains("0..16"), "{err}");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+    /// The same for random tile sizes, spacings (blocks of one to several tiles, partial last
+    /// rows) and cuts.
+    #[test]
+    fn tile_rows_of_any_cut_join_to_the_whole_run(
+        tile_m in prop::sample::select(vec![7.0, 10.5, 16.0, 23.0]),
+        spacing in 0.9f64..30.0,
+        poisson in any::<bool>(),
+        cut_seeds in prop::collection::vec(any::<u32>(), 1..5),
+    ) {
+        let t = terrain(129, 40.0, 0.5);
+        let mut sp = species("p", if poisson { Placement::Poisson } else { Placement::Jittered });
+        if poisson {
+            sp.min_spacing_m = spacing;
+        } else {
+            sp.max_density = 1.0 / spacing;
+        }
+        let rows = (128.0 / tile_m as f64).ceil() as u32;
+        let mut cuts: Vec<u32> = cut_seeds.iter().map(|s| s % rows).filter(|&c| c > 0).collect();
+        cuts.extend([0, rows]);
+        cuts.sort_unstable();
+        cuts.dedup();
+        let all = scatter_species_detailed(&t.surface, t.extent, &sp, None, None, &[], tile_m, 7).unwrap();
+        let (joined, counts) = joined_rows(&t, &sp, &[], tile_m, rows, &cuts, 0);
+        prop_assert!(joined == all.instances, "cuts {:?}: {} vs {}", cuts, joined.len(), all.instances.len());
+        prop_assert_eq!(counts, all.counts);
+    }
+}
