@@ -11,6 +11,10 @@
 //! Each case runs in its own process (its own peak RSS) and prints a digest of its placements and
 //! rule counts, which must not change unless a commit says why.
 //!
+//! Then each case placed by tile rows alone (`scatter_species_in_rows`, a shard's rows) in 2, 4
+//! and 8 runs: the work a split adds and the slowest run, and whether the joined runs are the
+//! whole run.
+//!
 //! Plain `main`, no harness: `cargo bench --bench scatter` or `scripts/bench_scatter.sh`.
 //! `VERDANT_BENCH_RUNS` sets the runs per case (best kept, default 3); `--no-scipy` skips the peer.
 
@@ -19,7 +23,9 @@ use std::process::Command;
 use std::time::Instant;
 
 use verdant::export::table::{placements_csv, write_placements_csv};
-use verdant::scatter::{analyze, scatter_species_detailed, DensityMap, Instance, SurfaceIndex, POISSON_PACKING};
+use verdant::scatter::{
+    analyze, scatter_species_detailed, scatter_species_in_rows, DensityMap, Instance, SurfaceIndex, POISSON_PACKING,
+};
 use verdant::scatter::{Placement, SpeciesRules};
 use verdant::terrain::tin::{tin, TinOptions};
 
@@ -366,6 +372,8 @@ fn main() {
         println!("analyzer, {l}");
     }
 
+    rows_table(&surface, extent, &density, &cases);
+
     // the outside peer: scipy's Bridson on the same area and radius, unthinned (density 1)
     if no_scipy {
         return;
@@ -423,5 +431,56 @@ fn main() {
         }
         Ok(o) => println!("scipy peer failed: {}", String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("")),
         Err(e) => println!("scipy peer skipped: {e}"),
+    }
+}
+
+/// Placing tile rows alone (a shard's rows, `scatter_species_in_rows`): each case split into N
+/// runs over consecutive tile rows, run one after another; the sum of their best wall times
+/// against the whole run's (the work a split adds: Poisson runs fill the block rows beside
+/// theirs again and thin one more each side) and the slowest run's (the wall time of N machines),
+/// and whether the joined runs are the whole run's instances and counts.
+fn rows_table(surface: &SurfaceIndex, extent: [f64; 4], density: &DensityMap, cases: &[(&str, SpeciesRules)]) {
+    let rows = ((extent[3] - extent[1]) / TILE_M).ceil() as u32;
+    let best = |f: &dyn Fn() -> verdant::scatter::Scatter| {
+        let mut out = None;
+        let mut best = f64::INFINITY;
+        for _ in 0..runs() {
+            let t = Instant::now();
+            let s = f();
+            best = best.min(t.elapsed().as_secs_f64());
+            out = Some(s);
+        }
+        (out.expect("a run"), best)
+    };
+    println!();
+    println!("tile rows placed alone ({rows} rows of {TILE_M} m): N runs over consecutive rows, one after another, best of {} runs each", runs());
+    println!("| case | N | whole s | sum of runs s | sum / whole | slowest run s | whole / slowest | identical |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---|");
+    for (name, sp) in cases {
+        let (whole, whole_s) = best(&|| {
+            scatter_species_detailed(surface, extent, sp, Some(density), None, &[], TILE_M, 1).expect("scatter")
+        });
+        for n in [2u32, 4, 8] {
+            let (mut joined, mut counts) = (Vec::new(), verdant::scatter::RuleCounts::default());
+            let (mut sum, mut slowest) = (0.0f64, 0.0f64);
+            for k in 0..n {
+                let range = [k * rows / n, (k + 1) * rows / n];
+                let (run, s) = best(&|| {
+                    scatter_species_in_rows(surface, extent, sp, Some(density), None, &[], TILE_M, 1, None, Some(range))
+                        .expect("scatter rows")
+                });
+                sum += s;
+                slowest = slowest.max(s);
+                joined.extend(run.instances);
+                counts.add(&run.counts);
+            }
+            let same = joined == whole.instances && counts == whole.counts;
+            println!(
+                "| {name} | {n} | {whole_s:.3} | {sum:.3} | {:.2} | {slowest:.3} | {:.2} | {} |",
+                sum / whole_s,
+                whole_s / slowest,
+                if same { "yes" } else { "NO" }
+            );
+        }
     }
 }

@@ -458,7 +458,9 @@ mod tests {
         let floats: Vec<u8> =
             (0..w * h).flat_map(|k| (((k * 7919) % 4001) as f32 * 0.37 - 500.0).to_le_bytes()).collect();
         let rgba: Vec<u8> = (0..w * h).flat_map(|k| [1, (k % 251) as u8, (k * 7 % 256) as u8, 255]).collect();
-        let cases: Vec<(u16, u16, u16, u16, Vec<u8>, Encoding, f64)> = vec![
+        // (samples a pixel, bits, sample format, photometric, samples, encoding, height scale)
+        type Case = (u16, u16, u16, u16, Vec<u8>, Encoding, f64);
+        let cases: Vec<Case> = vec![
             (1, 32, 3, 1, floats, Encoding::Auto, 1.0),
             (1, 8, 1, 1, samples(w * h, 1, &mut next), Encoding::Auto, 100.0),
             (1, 16, 1, 1, samples(w * h, 2, &mut next), Encoding::Gray, 6553.5),

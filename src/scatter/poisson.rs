@@ -52,19 +52,24 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
     let blocks = Blocks { extent: tiling.extent, block_m, nbx, nbz, r };
     let key = mix64(rules.key ^ 0x0070_6f69_7373_6f6e); // "poisson"
     let bounds = super::common::height_bounds(s);
-    // Tile rows placed alone (`rules.rows`): the block rows holding them (and one more each side,
-    // whose points may round into them) are thinned, and one block row more each side is filled.
-    // That is the whole run's points in every thinned block: a block of an even row (phases 0, 1)
-    // reads only blocks of its own row (the rows beside it hold phases 2 and 3, filled after it),
-    // a block of an odd row (phases 2, 3) reads its own row and the two even rows beside it, which
-    // read only themselves. (Tested: without the extra rows the joined runs differ.)
+    // Tile rows placed alone (`rules.rows`): the block rows holding them are thinned (and a block
+    // row beside them too where one of its points could round into them: the tile row of the
+    // last z before the block row, or of its first z, tells, tile rows being monotonic in z), and
+    // one block row more each side is filled. That is the whole run's points in every thinned
+    // block: a block of an even row (phases 0, 1) reads only blocks of its own row (the rows
+    // beside it hold phases 2 and 3, filled after it), a block of an odd row (phases 2, 3) reads
+    // its own row and the two even rows beside it, which read only themselves. (Tested: without
+    // the extra rows the joined runs differ.)
     const HALO: usize = 1;
     let per_block = (block_m / tiling.tile_m).round().max(1.0) as usize;
     let thinned = match rules.rows {
         None => 0..=nbz - 1,
         Some([first, end]) if first < end => {
-            let (lo, hi) = (first as usize / per_block, (end as usize - 1) / per_block);
-            lo.saturating_sub(1)..=(hi + 1).min(nbz - 1)
+            let (lo, hi) = (first as usize / per_block, ((end as usize - 1) / per_block).min(nbz - 1));
+            let row_of = |z: f64| tiling.tile_xz(x0, z).1;
+            let below = lo > 0 && row_of(blocks.rect(lo * nbx)[1].next_down()) >= first;
+            let above = hi + 1 < nbz && row_of(blocks.rect((hi + 1) * nbx)[1]) < end;
+            lo - below as usize..=hi + above as usize
         }
         Some(_) => return Ok((Vec::new(), RuleCounts::default())),
     };

@@ -14,7 +14,8 @@
 //! scatter, view, preview) and the manifest run in the merge.
 //!
 //! Not split yet (issue 18): the terrain's chunks, textures and files by band, and the placements
-//! tile by tile (docs/sharding.md, "Limits").
+//! by tile rows (`scatter::scatter_species_in_rows` places rows alone; what a unit of them needs
+//! is in docs/sharding.md, "Limits").
 
 use std::fs;
 use std::path::{Path, PathBuf};

@@ -671,28 +671,34 @@ fn tile_rows_placed_alone_join_to_the_whole_run() {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(12))]
     /// The same for random tile sizes, spacings (blocks of one to several tiles, partial last
-    /// rows) and cuts.
+    /// rows), extents whose tile and block borders are not exact in binary (starting at 0.61 m)
+    /// and cuts.
     #[test]
     fn tile_rows_of_any_cut_join_to_the_whole_run(
-        tile_m in prop::sample::select(vec![7.0, 10.5, 16.0, 23.0]),
+        tile_m in prop::sample::select(vec![7.0, 10.5, 16.0, 23.0, 0.7 * 13.0]),
         spacing in 0.9f64..30.0,
         poisson in any::<bool>(),
+        offset in any::<bool>(),
         cut_seeds in prop::collection::vec(any::<u32>(), 1..5),
     ) {
-        let t = terrain(129, 40.0, 0.5);
+        let mut t = terrain(129, 40.0, 0.5);
+        if offset {
+            t.extent = [0.37, 0.61, 128.0, 128.0];
+        }
         let mut sp = species("p", if poisson { Placement::Poisson } else { Placement::Jittered });
         if poisson {
             sp.min_spacing_m = spacing;
         } else {
             sp.max_density = 1.0 / spacing;
         }
-        let rows = (128.0 / tile_m as f64).ceil() as u32;
+        let rows = ((t.extent[3] - t.extent[1]) / tile_m).ceil() as u32;
         let mut cuts: Vec<u32> = cut_seeds.iter().map(|s| s % rows).filter(|&c| c > 0).collect();
         cuts.extend([0, rows]);
         cuts.sort_unstable();
         cuts.dedup();
         let all = scatter_species_detailed(&t.surface, t.extent, &sp, None, None, &[], tile_m, 7).unwrap();
-        let (joined, counts) = joined_rows(&t, &sp, &[], tile_m, rows, &cuts, 0);
+        let tiles_x = ((t.extent[2] - t.extent[0]) / tile_m).ceil() as u32;
+        let (joined, counts) = joined_rows(&t, &sp, &[], tile_m, tiles_x, &cuts, 0);
         prop_assert!(joined == all.instances, "cuts {:?}: {} vs {}", cuts, joined.len(), all.instances.len());
         prop_assert_eq!(counts, all.counts);
     }
