@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 mod window;
-pub use window::{dimensions_of_file, kept_rows_from, read_kept_rows, KeptRows};
+pub use window::{dimensions_of_file, kept_rows_from, read_kept_rows, reads_by_range, KeptRows};
 
 /// A regular grid of heights in metres. Sample (i, j) — column i, row j — lies at
 /// x = i·cell_size_m, z = j·cell_size_m, y = `heights[j * width + i]`.

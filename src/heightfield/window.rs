@@ -33,6 +33,15 @@ pub fn read_kept_rows(
     kept_rows_from(path, BufReader::new(file), len, opts, keep)
 }
 
+/// Whether [`read_kept_rows`] reads the file at `path` by ranges (a TIFF's strips or tiles, raw and
+/// `.hgt` byte ranges: each call costs about its rows) rather than in one pass over the whole file
+/// (a PNG, whose rows are inflated in order: read every wanted row in one call).
+pub fn reads_by_range(path: &Path) -> bool {
+    let mut magic = [0u8; 8];
+    let read = std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic));
+    read.is_ok() && magic != PNG_SIGNATURE
+}
+
 /// [`read_kept_rows`] from `source`, the `len` bytes of the file `path` names.
 pub fn kept_rows_from<R: BufRead + Seek>(
     path: &Path,

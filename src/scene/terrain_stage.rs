@@ -269,10 +269,10 @@ pub fn band_key(mesh_key: &str, rows: [u32; 2]) -> String {
 }
 
 /// The rows of a terrain's map the bands a shard builds need, made one band at a time: a
-/// procedural map's rows alone (its range found once, by a pass that keeps nothing); a
-/// heightmap's rows of those bands alone, read from the file by [`heightfield::read_kept_rows`]
-/// (PNG rows, TIFF strips or tiles, raw and `.hgt` byte ranges), or the map decoded whole once
-/// where that reader cannot window it.
+/// procedural map's rows alone (its range found once, by a pass that keeps nothing); a TIFF, raw
+/// or `.hgt` heightmap's band rows read alone as each band asks ([`heightfield::read_kept_rows`]:
+/// strips or tiles, byte ranges); a PNG's rows of all those bands read in one pass over the file
+/// and held; the map decoded whole once where the reader cannot window it.
 pub struct BandRows<'a> {
     t: &'a TerrainSettings,
     /// The rows of every band wanted.
@@ -317,7 +317,21 @@ impl<'a> BandRows<'a> {
                 let range = *self.range.get_or_insert_with(|| crate::synth::noise_range(noise, size, seed));
                 crate::synth::noise_rows(noise, size, cell_size_m, relief_m, seed, range, span).ok_or_else(outside)
             }
-            TerrainSource::Heightmap { .. } => {
+            TerrainSource::Heightmap { ref path, ref decode } => {
+                // a file read by ranges: this band's rows alone, so a shard holds one band's rows
+                // at a time (a PNG's wanted rows are read in one pass and held; a map a window
+                // cannot give is decoded whole once)
+                if self.held.is_none() && heightfield::reads_by_range(path) {
+                    let keep = |j: usize| (span[0]..=span[1]).contains(&j);
+                    let window = heightfield::read_kept_rows(path, decode, &keep)
+                        .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))?;
+                    if let Some((d, kept)) = window {
+                        if kept.first() != Some(&span[0]) || kept.len() != span[1] - span[0] + 1 {
+                            return Err(outside());
+                        }
+                        return Ok(d.heightfield);
+                    }
+                }
                 self.hold()?;
                 let (hf, held) = self.held.as_ref().ok_or_else(outside)?;
                 // the band's rows are consecutive among those held (every row of a wanted band is)
