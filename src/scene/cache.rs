@@ -29,24 +29,30 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 pub fn sha256_hex_of_file(path: &Path, limit: u64, what: &'static str) -> Result<String, crate::input::ReadError> {
     use std::io::Read;
     let (file, _) = crate::input::open_limited(path, limit, what)?;
-    let mut hasher = Sha256::new();
-    let mut buffer = vec![0u8; 1 << 20];
-    let mut read = 0u64;
-    let mut file = file.take(limit + 1);
-    loop {
-        let n = file
-            .read(&mut buffer)
-            .map_err(|source| crate::input::ReadError::Io { path: path.to_path_buf(), source })?;
-        if n == 0 {
-            break;
-        }
-        read += n as u64;
-        hasher.update(&buffer[..n]);
-    }
+    let (read, hash) = sha256_hex_of_reader(file.take(limit + 1))
+        .map_err(|source| crate::input::ReadError::Io { path: path.to_path_buf(), source })?;
     if read > limit {
         return Err(crate::input::ReadError::TooLarge { path: path.to_path_buf(), size: read, limit, what });
     }
-    Ok(hex(&hasher.finalize()))
+    Ok(hash)
+}
+
+/// The bytes read from `reader` to its end and their [`sha256_hex`], in 1 MiB pieces.
+fn sha256_hex_of_reader(mut reader: impl io::Read) -> io::Result<(u64, String)> {
+    let mut hasher = Sha256::new();
+    let mut buffer = vec![0u8; 1 << 20];
+    let mut read = 0u64;
+    loop {
+        let n = match reader.read(&mut buffer) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        read += n as u64;
+        hasher.update(&buffer[..n]);
+    }
+    Ok((read, hex(&hasher.finalize())))
 }
 
 fn hex(bytes: &[u8]) -> String {
@@ -309,13 +315,23 @@ impl Cache {
         let result = (|| {
             fs::create_dir_all(&tmp)?;
             for rel in files {
-                let bytes = fs::read(scene_dir.join(rel))?;
-                let dst = tmp.join(rel);
+                let (src, dst) = (scene_dir.join(rel), tmp.join(rel));
                 if let Some(parent) = dst.parent() {
                     fs::create_dir_all(parent)?;
                 }
-                fs::write(dst, &bytes)?;
-                hashes.insert(rel_key(rel), (bytes.len() as u64, sha256_hex(&bytes)));
+                // a hard link, as [`Cache::restore`] makes the other way (every writer replaces
+                // files by rename, so no build writes through it into the entry): a scene's
+                // outputs are not read into memory and written again (scene.glb reaches hundreds
+                // of MB); a copy where links are not possible (another file system)
+                let len = match fs::hard_link(&src, &dst) {
+                    Ok(()) => fs::metadata(&dst)?.len(),
+                    Err(_) => fs::copy(&src, &dst)?,
+                };
+                let (hashed, hash) = sha256_hex_of_reader(fs::File::open(&dst)?)?;
+                if hashed != len {
+                    return Err(io::Error::other(format!("{} changed while it was stored", src.display())));
+                }
+                hashes.insert(rel_key(rel), (len, hash));
             }
             let table = serde_json::to_string(&hashes).map_err(io::Error::other)?;
             fs::write(tmp.join("files.json"), table)?;
