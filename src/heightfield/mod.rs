@@ -620,7 +620,7 @@ fn decode_image(
     encoding: Encoding,
     opts: &DecodeOptions,
 ) -> Result<Decoded, HeightfieldError> {
-    let is_tiff = bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*");
+    let is_tiff = is_tiff(bytes);
     if is_tiff {
         if let Some(decoded) = decode_float_tiff(path, bytes, encoding, opts)? {
             return Ok(decoded);
@@ -644,17 +644,25 @@ fn decode_whole_image(
     encoding: Encoding,
     opts: &DecodeOptions,
 ) -> Result<Decoded, HeightfieldError> {
-    let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| image_error(path, e))?;
-    if reader.format().is_none() {
+    // (the `image` crate's guess knows TIFF's signatures but not BigTIFF's, which its TIFF decoder reads)
+    let reader = || -> Result<image::ImageReader<Cursor<&[u8]>>, HeightfieldError> {
+        let mut reader =
+            image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| image_error(path, e))?;
+        if reader.format().is_none() && is_tiff(bytes) {
+            reader.set_format(image::ImageFormat::Tiff);
+        }
+        Ok(reader)
+    };
+    let header = reader()?;
+    if header.format().is_none() {
         return Err(HeightfieldError::Image {
             path: path.to_owned(),
             message: "the content is not a recognised image format (PNG or TIFF expected)".into(),
         });
     }
-    let (width, height) = reader.into_dimensions().map_err(|e| image_error(path, e))?;
+    let (width, height) = header.into_dimensions().map_err(|e| image_error(path, e))?;
     check_size(path, width as usize, height as usize, opts)?;
-    let mut reader =
-        image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| image_error(path, e))?;
+    let mut reader = reader()?;
     reader.no_limits(); // the size was checked against our own limit above
     let img = reader.decode().map_err(|e| image_error(path, e))?;
     let (w, h) = (width as usize, height as usize);
@@ -748,6 +756,11 @@ fn decode_whole_image(
 }
 
 const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
+
+/// Whether `bytes` begin as a TIFF or a BigTIFF (either byte order) does.
+fn is_tiff(bytes: &[u8]) -> bool {
+    [b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"].iter().any(|m| bytes.starts_with(*m))
+}
 
 /// A PNG decoded a row at a time straight into height codes: no image buffer and no converted copy
 /// beside the codes (for an 8193² map 0.13–0.2 GB each that `decode_image` holds at once). The

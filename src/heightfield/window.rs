@@ -14,8 +14,8 @@ use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 
 use super::{
-    check_size, decode_png_rows, finish_decoded, heightfield, image_error, CodeMap, DecodeOptions, Decoded, Encoding,
-    Heightfield, HeightfieldError, PNG_SIGNATURE,
+    check_size, decode_png_rows, finish_decoded, heightfield, image_error, is_tiff, CodeMap, DecodeOptions, Decoded,
+    Encoding, Heightfield, HeightfieldError, PNG_SIGNATURE,
 };
 
 /// Kept rows as one map (`rows[k]` is the file's row of the map's row k), or `None`: decode whole.
@@ -69,7 +69,7 @@ pub fn kept_rows_from<R: BufRead + Seek>(
             if n == 8 && magic == PNG_SIGNATURE && encoding != Encoding::Float {
                 let mut kept = Vec::new();
                 decode_png_rows(path, source, encoding, opts, Some((keep, &mut kept)))?.map(|d| (d, kept))
-            } else if magic.starts_with(b"II*\0") || magic.starts_with(b"MM\0*") {
+            } else if is_tiff(&magic) {
                 tiff_rows(path, source, encoding, opts, keep)?
             } else {
                 None
@@ -268,7 +268,7 @@ pub fn dimensions_of_file(path: &Path, opts: &DecodeOptions) -> Option<(usize, u
             let mut magic = [0u8; 4];
             file.read_exact(&mut magic).ok()?;
             file.seek(SeekFrom::Start(0)).ok()?;
-            if &magic == b"II*\0" || &magic == b"MM\0*" {
+            if is_tiff(&magic) {
                 // (the `image` crate does not open a float TIFF, whose size the `tiff` crate reads)
                 let (w, h) = tiff::decoder::Decoder::new(file).ok()?.dimensions().ok()?;
                 return Some((w as usize, h as usize));
@@ -496,6 +496,18 @@ mod tests {
             .unwrap();
         let opts = DecodeOptions { encoding: Encoding::Gray, height_scale_m: 6553.5, ..DecodeOptions::default() };
         assert_rows_of_whole("map.tiff", file.get_ref(), &opts);
+        // BigTIFFs (64-bit offsets, as GDAL writes maps past 4 GB): float metres, 16-bit gray
+        let metres: Vec<f32> = values.iter().map(|&v| v as f32 * 0.25 - 900.0).collect();
+        let mut file = Cursor::new(Vec::new());
+        TiffEncoder::new_big(&mut file)
+            .unwrap()
+            .write_image::<colortype::Gray32Float>(w as u32, h as u32, &metres)
+            .unwrap();
+        assert!(file.get_ref().starts_with(b"II+\0"));
+        assert_rows_of_whole("map.tif", file.get_ref(), &DecodeOptions::default());
+        let mut file = Cursor::new(Vec::new());
+        TiffEncoder::new_big(&mut file).unwrap().write_image::<colortype::Gray16>(w as u32, h as u32, &values).unwrap();
+        assert_rows_of_whole("map.tif", file.get_ref(), &opts);
     }
 
     /// Where the whole decoder must see the file: an RGB TIFF read as `auto` (each pixel checked
