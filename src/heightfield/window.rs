@@ -4,9 +4,11 @@
 //! `.hgt` files by byte range — decoded to the heights [`decode`](super::decode) gives those rows,
 //! bit for bit (tested against it for every format).
 //!
-//! Where a window cannot give the whole decode's heights, or the file is one the whole decoder
-//! would refuse, the readers answer `None` and the caller decodes the map whole (which names
-//! what is wrong): an `.hgt` whose kept rows hold a void (a void is filled from the nearest valid
+//! A window checks what a whole decode checks of the map (its size, its extent at the cell size)
+//! and of the rows it reads (heights finite and within limits); a bad sample in rows it does not
+//! read is the whole decode's to find (the merge's, in a sharded build). Where a window cannot
+//! give the whole decode's heights, or the file is one the whole decoder would refuse, the readers
+//! answer `None` and the caller decodes the map whole (which names what is wrong): an `.hgt` whose kept rows hold a void (a void is filled from the nearest valid
 //! samples, wherever they lie), an RGB TIFF read as `auto` (every pixel must be checked for gray),
 //! planar or exotic TIFF sample layouts, interlaced or palette PNGs.
 
@@ -14,8 +16,8 @@ use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 
 use super::{
-    check_size, decode_png_rows, finish_decoded, heightfield, image_error, is_tiff, CodeMap, DecodeOptions, Decoded,
-    Encoding, Heightfield, HeightfieldError, PNG_SIGNATURE,
+    check_extent, check_size, decode_png_rows, finish_decoded, heightfield, image_error, is_tiff, CodeMap,
+    DecodeOptions, Decoded, Encoding, Heightfield, HeightfieldError, PNG_SIGNATURE,
 };
 
 /// Kept rows as one map (`rows[k]` is the file's row of the map's row k), or `None`: decode whole.
@@ -60,23 +62,36 @@ pub fn kept_rows_from<R: BufRead + Seek>(
         (e, _) => e,
     };
     let io = |source| HeightfieldError::Io { path: path.to_owned(), source };
-    let rows = match encoding {
-        Encoding::Hgt | Encoding::R16 => sixteen_bit_rows(path, &mut source, len, encoding, opts, keep).map_err(io)?,
+    // the kept rows, and the file's height in rows (its whole extent is checked as a whole decode
+    // checks it)
+    let (rows, file_height) = match encoding {
+        Encoding::Hgt | Encoding::R16 => {
+            let rows = sixteen_bit_rows(path, &mut source, len, encoding, opts, keep).map_err(io)?;
+            let height = rows.as_ref().map_or(0, |(d, _)| (len / 2) as usize / d.heightfield.width.max(1));
+            (rows, height)
+        }
         _ => {
-            let mut magic = [0u8; 8];
-            let n = source.read(&mut magic).map_err(io)?;
-            source.seek(SeekFrom::Start(0)).map_err(io)?;
-            if n == 8 && magic == PNG_SIGNATURE && encoding != Encoding::Float {
+            // the signature, and a PNG's height (IHDR, always the first chunk, bytes 16..24)
+            let head = source.fill_buf().map_err(io)?;
+            let png_height = (head.len() >= 24 && head.starts_with(PNG_SIGNATURE) && &head[12..16] == b"IHDR")
+                .then(|| u32::from_be_bytes([head[20], head[21], head[22], head[23]]) as usize);
+            let tiff = is_tiff(head);
+            if let (Some(height), true) = (png_height, encoding != Encoding::Float) {
                 let mut kept = Vec::new();
-                decode_png_rows(path, source, encoding, opts, Some((keep, &mut kept)))?.map(|d| (d, kept))
-            } else if is_tiff(&magic) {
-                tiff_rows(path, source, encoding, opts, keep)?
+                (decode_png_rows(path, source, encoding, opts, Some((keep, &mut kept)))?.map(|d| (d, kept)), height)
+            } else if tiff {
+                match tiff_rows(path, source, encoding, opts, keep)? {
+                    Some((decoded, rows, height)) => (Some((decoded, rows)), height),
+                    None => (None, 0),
+                }
             } else {
-                None
+                (None, 0)
             }
         }
     };
     let Some((decoded, rows)) = rows else { return Ok(None) };
+    check_extent(decoded.heightfield.width, file_height, opts.cell_size_m)
+        .map_err(|message| HeightfieldError::Options { path: path.to_owned(), message })?;
     let decoded = finish_decoded(path, decoded, opts, &|j| rows.get(j).copied().unwrap_or(j))?;
     Ok(Some((decoded, rows)))
 }
@@ -143,13 +158,14 @@ fn tiff_rows<R: Read + Seek>(
     encoding: Encoding,
     opts: &DecodeOptions,
     keep: &dyn Fn(usize) -> bool,
-) -> Result<KeptRows, HeightfieldError> {
+) -> Result<Option<(Decoded, Vec<usize>, usize)>, HeightfieldError> {
     use tiff::decoder::{Decoder, DecodingResult, Limits};
     use tiff::tags::Tag;
     use tiff::ColorType as C;
     let Ok(mut dec) = Decoder::new(source) else { return Ok(None) };
     let (Ok((w, h)), Ok(color)) = (dec.dimensions(), dec.colortype()) else { return Ok(None) };
-    let format = dec.find_tag_unsigned_vec::<u16>(Tag::SampleFormat).ok().flatten().and_then(|v| v.first().copied());
+    // (read as the whole decoder reads it: one value; a list, e.g. one per RGB sample, is none)
+    let format = dec.find_tag(Tag::SampleFormat).ok().flatten().and_then(|v| v.into_u16().ok());
     let planar = dec.find_tag_unsigned::<u16>(Tag::PlanarConfiguration).ok().flatten().unwrap_or(1);
     if planar != 1 {
         return Ok(None);
@@ -246,7 +262,7 @@ fn tiff_rows<R: Read + Seek>(
         Some(map) => Heightfield::from_codes(w, rows.len(), codes, map, 1.0),
         None => heightfield(w, rows.len(), heights),
     };
-    Ok(Some((Decoded { heightfield, encoding, voids_filled: 0 }, rows)))
+    Ok(Some((Decoded { heightfield, encoding, voids_filled: 0 }, rows, h)))
 }
 
 /// The map's width and height in samples as [`decode`](super::decode) would find them, from the
@@ -585,5 +601,32 @@ mod tests {
         assert_eq!(whole.voids_filled, 1);
         assert!(kept("N44E033.hgt", &hgt, &DecodeOptions::default(), &|j| j == 35).is_none());
         assert_rows_of_whole("N44E033.hgt", &hgt, &DecodeOptions::default());
+    }
+
+    /// A map wider across than a terrain may span (its whole height at this cell size) is refused
+    /// by a window of a few rows too, with the whole decoder's message: raw, PNG and TIFF.
+    #[test]
+    fn a_window_checks_the_whole_maps_extent() {
+        let (w, h) = (4usize, 1000usize);
+        let raw: Vec<u8> = (0..w * h).flat_map(|k| (k as u16).to_le_bytes()).collect();
+        let png = png_file(
+            w as u32,
+            h as u32,
+            png::ColorType::Grayscale,
+            png::BitDepth::Eight,
+            &vec![7u8; w * h],
+            None,
+            None,
+        );
+        let tif = tiff_file(w, h, 1, 8, 1, 1, &vec![7u8; w * h], 16, None);
+        for (path, file) in [("map.r16", &raw), ("map.png", &png), ("map.tif", &tif)] {
+            let opts = DecodeOptions { size: Some((w, h)), cell_size_m: 5.0e4, ..DecodeOptions::default() };
+            let whole = decode(Path::new(path), file, &opts).unwrap_err().to_string();
+            let window = kept_rows_from(Path::new(path), Cursor::new(file), file.len() as u64, &opts, &|j| j < 3)
+                .unwrap_err()
+                .to_string();
+            assert_eq!(window, whole, "{path}");
+            assert!(window.contains("4×1000"), "{window}");
+        }
     }
 }

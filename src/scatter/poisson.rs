@@ -128,10 +128,10 @@ pub fn scatter(rules: &Rules) -> Result<(Vec<Instance>, RuleCounts), ScatterErro
         counts.add(&c);
         instances.extend_from_slice(&v);
     }
-    // a block of several tiles: group by tile, keeping generation order (stable sort)
-    if block_m > tiling.tile_m {
-        instances.sort_by_key(|i| i.tile);
-    }
+    // group by tile, keeping generation order (a stable sort): a block of several tiles holds
+    // several, and a point on a border may round into the next tile row; a block of one tile is
+    // its tile's in order already (the sort then only checks it)
+    instances.sort_by_key(|i| i.tile);
     Ok((instances, counts))
 }
 

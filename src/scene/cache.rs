@@ -37,6 +37,24 @@ pub fn sha256_hex_of_file(path: &Path, limit: u64, what: &'static str) -> Result
     Ok(hash)
 }
 
+/// `src` hard-linked at `dst`, or copied there where a link is not possible (another file
+/// system); the bytes at `dst`. A file already named `dst` is unlinked first, never written
+/// through (it may be a link to `src` or into another entry: a copy onto it would truncate both).
+fn link_or_copy(src: &Path, dst: &Path) -> io::Result<u64> {
+    if fs::symlink_metadata(dst).is_ok() {
+        fs::remove_file(dst)?;
+    }
+    match fs::hard_link(src, dst) {
+        Ok(()) => Ok(fs::metadata(dst)?.len()),
+        Err(_) => {
+            // (`create_new`: a copy never truncates a file that is there, least of all `src`)
+            let mut from = fs::File::open(src)?;
+            let mut to = fs::OpenOptions::new().write(true).create_new(true).open(dst)?;
+            io::copy(&mut from, &mut to)
+        }
+    }
+}
+
 /// The bytes read from `reader` to its end and their [`sha256_hex`], in 1 MiB pieces.
 fn sha256_hex_of_reader(mut reader: impl io::Read) -> io::Result<(u64, String)> {
     let mut hasher = Sha256::new();
@@ -315,6 +333,10 @@ impl Cache {
         let result = (|| {
             fs::create_dir_all(&tmp)?;
             for rel in files {
+                // a file named twice is stored once (a copy onto its own link would empty it)
+                if hashes.contains_key(&rel_key(rel)) {
+                    continue;
+                }
                 let (src, dst) = (scene_dir.join(rel), tmp.join(rel));
                 if let Some(parent) = dst.parent() {
                     fs::create_dir_all(parent)?;
@@ -323,10 +345,7 @@ impl Cache {
                 // files by rename, so no build writes through it into the entry): a scene's
                 // outputs are not read into memory and written again (scene.glb reaches hundreds
                 // of MB); a copy where links are not possible (another file system)
-                let len = match fs::hard_link(&src, &dst) {
-                    Ok(()) => fs::metadata(&dst)?.len(),
-                    Err(_) => fs::copy(&src, &dst)?,
-                };
+                let len = link_or_copy(&src, &dst)?;
                 let (hashed, hash) = sha256_hex_of_reader(fs::File::open(&dst)?)?;
                 if hashed != len {
                     return Err(io::Error::other(format!("{} changed while it was stored", src.display())));
@@ -366,6 +385,9 @@ impl Cache {
             let key = rel_key(rel);
             let recorded =
                 table.get(&key).ok_or_else(|| io::Error::other(format!("{key} is not recorded in the entry")))?;
+            if hashes.contains_key(&key) {
+                continue; // named twice: restored once
+            }
             let dst = scene_dir.join(rel);
             if let Some(parent) = dst.parent() {
                 fs::create_dir_all(parent)?;
@@ -373,11 +395,7 @@ impl Cache {
             // a hard link costs nothing whatever the size (placement tables reach hundreds of MB);
             // copy where links are not possible (another file system). Every writer replaces
             // files by rename, so rebuilding never writes through a link into the cache.
-            let src = entry.join(rel);
-            let copied = match fs::hard_link(&src, &dst) {
-                Ok(()) => fs::metadata(&dst)?.len(),
-                Err(_) => fs::copy(&src, &dst)?,
-            };
+            let copied = link_or_copy(&entry.join(rel), &dst)?;
             if copied != recorded.0 {
                 return Err(io::Error::other(format!("{key} has {copied} bytes, the entry recorded {}", recorded.0)));
             }
@@ -423,6 +441,32 @@ mod tests {
         let other = dir.path().join("other");
         Cache::restore(&entry, &other, &files).unwrap();
         assert_eq!(fs::read(other.join("terrain/a.glb")).unwrap(), b"glb");
+    }
+
+    /// Files are stored and restored by link: a file named twice (two species writing one
+    /// name) is stored once, whole, and neither it nor the scene's file is emptied; a restore
+    /// onto a name already there replaces the name, not the bytes behind it.
+    #[test]
+    fn a_file_named_twice_or_restored_over_a_name_keeps_its_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = dir.path().join("scene");
+        fs::create_dir_all(scene.join("atlases")).unwrap();
+        fs::write(scene.join("atlases/g_blade.png"), b"blade bytes").unwrap();
+        let cache = Cache::new(dir.path());
+        let files = vec![PathBuf::from("atlases/g_blade.png"), PathBuf::from("atlases/g_blade.png")];
+        cache.store("plants", "k", &scene, &files, "{}").unwrap();
+        assert_eq!(fs::read(scene.join("atlases/g_blade.png")).unwrap(), b"blade bytes");
+        let (_, entry) = cache.lookup("plants", "k").unwrap();
+        assert_eq!(fs::read(entry.join("atlases/g_blade.png")).unwrap(), b"blade bytes");
+        // restored over a name that is a link to another file: that file keeps its bytes
+        let other = dir.path().join("other");
+        fs::create_dir_all(other.join("atlases")).unwrap();
+        fs::write(dir.path().join("elsewhere.png"), b"someone else's").unwrap();
+        fs::hard_link(dir.path().join("elsewhere.png"), other.join("atlases/g_blade.png")).unwrap();
+        let hashes = Cache::restore(&entry, &other, &files).unwrap();
+        assert_eq!(hashes["atlases/g_blade.png"], (11, sha256_hex(b"blade bytes")));
+        assert_eq!(fs::read(other.join("atlases/g_blade.png")).unwrap(), b"blade bytes");
+        assert_eq!(fs::read(dir.path().join("elsewhere.png")).unwrap(), b"someone else's");
     }
 
     #[test]
