@@ -23,9 +23,9 @@ mod view;
 pub(crate) use error::Inputs;
 pub use error::PresetError;
 pub use keys::{
-    check_scene_name, check_species_name, DEFAULT_MAX_INSTANCES, DEFAULT_TILE_M, DEFAULT_TREE_SPACING_M,
-    EXCLUSION_KEYS, MAX_MAX_INSTANCES, MAX_NAME_CHARS, PROCEDURAL_KEYS, PROCEDURAL_SIZES, SCATTER_KEYS, SCENE_KEYS,
-    SECTIONS, SPECIES_KEYS, TERRAIN_KEYS,
+    check_scene_name, check_species_name, file_name_clash, DEFAULT_MAX_INSTANCES, DEFAULT_TILE_M,
+    DEFAULT_TREE_SPACING_M, EXCLUSION_KEYS, MAX_MAX_INSTANCES, MAX_NAME_CHARS, PROCEDURAL_KEYS, PROCEDURAL_SIZES,
+    SCATTER_KEYS, SCENE_KEYS, SECTIONS, SPECIES_KEYS, TERRAIN_KEYS,
 };
 pub use plants::{FLOWER_KEYS, GRASS_KEYS, MESH_KEYS, TREE_KEYS};
 pub use snow::{default_snow_seed, SNOW_KEYS};
@@ -484,6 +484,28 @@ fn parse(text: &str, path: &Path, inputs: Inputs) -> Result<Preset, PresetError>
                     format!("species `{}` is declared twice; the first is at line {}{case}", s.rules.name, lines[i]),
                     "give each [[species]] its own name",
                 ));
+            }
+            // one species' name followed by a word its files add: the two write one file
+            for (e, line) in species.iter().zip(&lines) {
+                let (first, then) = (&e.rules.name, &s.rules.name);
+                let clash = file_name_clash(first, then)
+                    .map(|w| (first, then, w))
+                    .or_else(|| file_name_clash(then, first).map(|w| (then, first, w)));
+                if let Some((shorter, longer, word)) = clash {
+                    return Err(ctx.at(
+                        &name_span,
+                        format!(
+                            "species `{then}` and species `{first}` (line {line}) can write the same files: \
+                             `{shorter}`'s files are named `{shorter}_{word}…` too (a species' files add \
+                             `_LOD<n>`, `_v<n>`, `_far`, `_blade`, `_density`, `_normal` or `_mip<n>` to its \
+                             name), so one would overwrite the other's"
+                        ),
+                        format!(
+                            "rename `{longer}` so that it is not `{shorter}` followed by `_{word}`, e.g. `{}`",
+                            format!("{}-{}", &longer[..shorter.len()], &longer[shorter.len() + 1..])
+                        ),
+                    ));
+                }
             }
             lines.push(line_column(text, name_span.start).0);
             species.push(s);

@@ -874,3 +874,42 @@ fn stage_outputs_match_their_pinned_algorithm_versions() {
         );
     }
 }
+
+/// Every file the plants stage writes for a species is named its name, or its name followed by
+/// `_` and a word the preset refuses as the end of another species' name
+/// (`preset::file_name_clash`): so no two species a preset accepts write one file. A new kind of
+/// file named otherwise fails here until the preset's check knows its word.
+#[test]
+fn every_species_file_is_named_by_its_species_and_a_refused_word() {
+    use verdant::scene::plants_stage::run_plants;
+    use verdant::scene::preset::file_name_clash;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "m.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n");
+    write(
+        d,
+        "p.toml",
+        "[scene]\nname = \"names\"\n\n[terrain]\nprocedural = { kind = \"fbm\", size = 33, relief = 5.0 }\n\n\
+         [[species]]\nname = \"t\"\nkind = \"tree\"\nlsystem = \"builtin:bush\"\n\
+         tree = { variants = 2, height = 3.0, atlas_size = 256, analysis = false }\nmax_density = 0.01\n\
+         [[species]]\nname = \"g\"\nkind = \"grass\"\nmax_density = 0.1\n\
+         [[species]]\nname = \"f\"\nkind = \"flower\"\nmax_density = 0.1\n\
+         [[species]]\nname = \"m\"\nkind = \"mesh\"\nobj = \"m.obj\"\nmax_density = 0.1\n",
+    );
+    let preset = load_preset(&d.join("p.toml")).unwrap();
+    let out = d.join("out");
+    let report = run_plants(&preset, &out).unwrap();
+    assert_eq!(report.species.len(), 4);
+    for s in &report.species {
+        assert!(!s.files.is_empty(), "{}", s.name);
+        for f in &s.files {
+            assert!(out.join(f).is_file(), "{}", f.display());
+            let stem = f.file_stem().unwrap().to_str().unwrap();
+            assert!(stem == s.name || file_name_clash(&s.name, stem).is_some(), "{} writes {}", s.name, f.display());
+        }
+    }
+    // and so none writes another's
+    let all: Vec<_> = report.species.iter().flat_map(|s| &s.files).collect();
+    let distinct: std::collections::BTreeSet<_> = all.iter().collect();
+    assert_eq!(distinct.len(), all.len());
+}

@@ -87,6 +87,31 @@ pub fn check_species_name(name: &str) -> Result<(), String> {
     check_safe_name("species", "file", name)
 }
 
+/// The words a species' file names add to its name after `_` (`species/<name>_LOD<n>.glb`,
+/// `<name>_v<k>…` variants, `<name>_far.glb`, `atlases/<name>_blade.png`, `_density`, `_normal`,
+/// `_mip<k>` atlas levels).
+const FILE_SUFFIX_WORDS: [&str; 7] = ["lod#", "v#", "far", "blade", "density", "normal", "mip#"];
+
+/// When species `longer` is named `shorter` followed by `_` and one of the words the plants stage
+/// adds to `shorter`'s file names (compared ignoring case, as file systems may), the word: the two
+/// species can write the same file (a grass `g` writes `atlases/g_blade.png`, and so does a
+/// species named `g_blade`), one overwriting the other's.
+pub fn file_name_clash<'a>(shorter: &str, longer: &'a str) -> Option<&'a str> {
+    if !longer.get(..shorter.len())?.eq_ignore_ascii_case(shorter) {
+        return None;
+    }
+    let word = longer[shorter.len()..].strip_prefix('_')?;
+    let word = word.split('_').next().unwrap_or(word);
+    let lower = word.to_ascii_lowercase();
+    let fits = FILE_SUFFIX_WORDS.iter().any(|w| match w.strip_suffix('#') {
+        Some(prefix) => lower
+            .strip_prefix(prefix)
+            .is_some_and(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit())),
+        None => lower == *w,
+    });
+    fits.then_some(word)
+}
+
 pub(super) fn check_safe_name(what: &str, used_as: &str, name: &str) -> Result<(), String> {
     if name.is_empty() {
         return Err(format!("the {what} name is empty"));
