@@ -1,6 +1,13 @@
 //! Height on the exported terrain mesh: point location in a uniform grid of buckets over x/z (each
-//! bucket lists the triangles whose bounding box overlaps it), then exact barycentric interpolation
-//! in the containing triangle (the grass thesis, formula 3.2), all in f64.
+//! bucket lists the triangles whose reach, their bounding box widened by a hair, overlaps it), then
+//! exact barycentric interpolation in the containing triangle (the grass thesis, formula 3.2), all
+//! in f64.
+//!
+//! Which triangle a point is given depends on the triangles and their order only, never on the
+//! bucket grid: the candidates are exactly the triangles whose reach holds the point (every one of
+//! them is in its bucket, whatever the grid), taken in the mesh's order. So an index over the
+//! triangles near some rows of a map (in the whole mesh's order) answers every point of those rows
+//! as the whole map's index does, bit for bit: what places a shard's rows of instances alone.
 
 use crate::math::{cross3, sub3};
 
@@ -26,6 +33,8 @@ pub struct SurfaceIndex {
     start: Vec<u32>,
     items: Vec<u32>,
     bounds: [f64; 4],
+    /// Union of the triangles' reaches: no point outside has a candidate.
+    reach: [f64; 4],
 }
 
 /// Relative tolerance of the inside test: a point this far outside a triangle (as a fraction of
@@ -34,6 +43,11 @@ const EDGE_TOLERANCE: f64 = 1e-12;
 
 /// Relative margin inside a hinted triangle (see [`SurfaceIndex::height_at_near`]).
 const HINT_MARGIN: f64 = 1e-9;
+
+/// How far a triangle's reach extends its bounding box, relative to the box's size plus its
+/// largest coordinate: far beyond [`EDGE_TOLERANCE`] (a point that close to a triangle's edge lies
+/// within 10⁻¹² of its size of the box) and f64 rounding at such coordinates (10⁻¹⁶).
+const REACH: f64 = 1e-9;
 
 impl SurfaceIndex {
     /// Index over one primitive's triangles (world-space positions, triangle list). Triangles whose
@@ -65,10 +79,17 @@ impl SurfaceIndex {
                 tris.push(Tri { p: [fa, fb, fc], n: [n[0] / len, n[1] / len, n[2] / len] });
             }
         }
-        SurfaceIndex::build(tris)
+        SurfaceIndex::build(tris, 1.0)
     }
 
-    fn build(tris: Vec<Tri>) -> SurfaceIndex {
+    /// [`Self::from_parts`] with buckets `scale` times the usual size: the same answers (tests).
+    #[cfg(test)]
+    fn from_parts_scaled(parts: &[(&[[f32; 3]], &[u32])], scale: f64) -> SurfaceIndex {
+        let s = SurfaceIndex::from_parts(parts);
+        SurfaceIndex::build(s.tris, scale)
+    }
+
+    fn build(tris: Vec<Tri>, scale: f64) -> SurfaceIndex {
         let mut bounds = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
         for t in &tris {
             for p in &t.corners() {
@@ -88,11 +109,17 @@ impl SurfaceIndex {
                 start: vec![0],
                 items: Vec::new(),
                 bounds: [0.0; 4],
+                reach: [0.0; 4],
             };
+        }
+        let mut reach = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for t in &tris {
+            let r = t.reach();
+            reach = [reach[0].min(r[0]), reach[1].min(r[1]), reach[2].max(r[2]), reach[3].max(r[3])];
         }
         // about one triangle per bucket on average: a query then tests a handful of triangles
         let (w, h) = ((bounds[2] - bounds[0]).max(1e-9), (bounds[3] - bounds[1]).max(1e-9));
-        let mut cell = (w * h / tris.len() as f64).sqrt() * 1.5;
+        let mut cell = (w * h / tris.len() as f64).sqrt() * 1.5 * scale;
         if cell <= 0.0 || !cell.is_finite() {
             cell = w.max(h);
         }
@@ -104,15 +131,11 @@ impl SurfaceIndex {
         let dims = [((w / cell).ceil() as usize).max(1), ((h / cell).ceil() as usize).max(1)];
         let origin = [bounds[0], bounds[1]];
         let inv_cell = 1.0 / cell;
+        // a triangle is in every bucket its reach overlaps: `locate` maps a point to its bucket by
+        // the same monotonic formula, so a point in a reach is in one of the triangle's buckets
         let cell_range = |t: &Tri| {
-            let (mut x0, mut z0, mut x1, mut z1) = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
-            for p in &t.corners() {
-                x0 = x0.min(p[0]);
-                x1 = x1.max(p[0]);
-                z0 = z0.min(p[2]);
-                z1 = z1.max(p[2]);
-            }
-            let c = |v: f64, o: f64, n: usize| (((v - o) * inv_cell).floor().max(0.0) as usize).min(n - 1);
+            let [x0, z0, x1, z1] = t.reach();
+            let c = |v: f64, o: f64, n: usize| bucket_of(v, o, inv_cell, n);
             (c(x0, origin[0], dims[0]), c(z0, origin[1], dims[1]), c(x1, origin[0], dims[0]), c(z1, origin[1], dims[1]))
         };
         // fill bucket counts
@@ -141,7 +164,7 @@ impl SurfaceIndex {
                 }
             }
         }
-        SurfaceIndex { tris, origin, cell, inv_cell, dims, start, items, bounds }
+        SurfaceIndex { tris, origin, cell, inv_cell, dims, start, items, bounds, reach }
     }
 
     /// Number of indexed (upward-facing) triangles.
@@ -193,27 +216,32 @@ impl SurfaceIndex {
         Some((interpolate(tri, bary(tri, x, z)), tri.n))
     }
 
-    /// Index of a triangle containing (x, z): the first one that contains it exactly, else the
-    /// best within [`EDGE_TOLERANCE`] (a point on an edge, up to rounding).
+    /// Index of a triangle containing (x, z): of the triangles whose reach holds it, in order, the
+    /// first that contains it exactly, else the best within [`EDGE_TOLERANCE`] (a point on an
+    /// edge, up to rounding). The bucket only narrows the search (module docs).
     #[inline]
     fn locate(&self, x: f64, z: f64) -> Option<usize> {
         if self.tris.is_empty() {
             return None;
         }
-        let fi = (x - self.origin[0]) * self.inv_cell;
-        let fj = (z - self.origin[1]) * self.inv_cell;
-        // a point a rounding error outside the bounds still looks in the border bucket
-        if !(fi > -1e-9 && fj > -1e-9 && fi < self.dims[0] as f64 + 1e-9 && fj < self.dims[1] as f64 + 1e-9) {
+        let r = &self.reach;
+        // (false for NaN)
+        if !(x >= r[0] && z >= r[1] && x <= r[2] && z <= r[3]) {
             return None;
         }
-        let i = (fi.max(0.0) as usize).min(self.dims[0] - 1);
-        let j = (fj.max(0.0) as usize).min(self.dims[1] - 1);
+        let i = bucket_of(x, self.origin[0], self.inv_cell, self.dims[0]);
+        let j = bucket_of(z, self.origin[1], self.inv_cell, self.dims[1]);
         let b = j * self.dims[0] + i;
         let (s, e) = (self.start[b] as usize, self.start[b + 1] as usize);
         let mut best = None;
         let mut best_score = -EDGE_TOLERANCE;
         for &t in &self.items[s..e] {
-            let (w0, w1, w2, d) = bary(&self.tris[t as usize], x, z);
+            let tri = &self.tris[t as usize];
+            let [x0, z0, x1, z1] = tri.reach();
+            if !(x >= x0 && z >= z0 && x <= x1 && z <= z1) {
+                continue;
+            }
+            let (w0, w1, w2, d) = bary(tri, x, z);
             // all weights share the sign of d when inside; normalised (d > 0) inside means ≥ 0
             let least = w0.min(w1).min(w2);
             if least >= 0.0 {
@@ -238,10 +266,28 @@ fn widen(v: [f32; 3]) -> [f64; 3] {
     [v[0] as f64, v[1] as f64, v[2] as f64]
 }
 
+/// Bucket of coordinate `v` on an axis from `origin` in buckets of `1 / inv_cell` (n of them):
+/// monotonic in `v`, clamped to the grid.
+#[inline]
+fn bucket_of(v: f64, origin: f64, inv_cell: f64, n: usize) -> usize {
+    (((v - origin) * inv_cell).floor().max(0.0) as usize).min(n - 1)
+}
+
 impl Tri {
     #[inline]
     fn corners(&self) -> [[f64; 3]; 3] {
         self.p.map(widen)
+    }
+
+    /// The triangle's reach: its x/z bounding box [x0, z0, x1, z1] widened by [`REACH`] of its
+    /// size plus its largest coordinate (a function of the corners alone).
+    #[inline]
+    fn reach(&self) -> [f64; 4] {
+        let [a, b, c] = self.corners();
+        let (x0, x1) = (a[0].min(b[0]).min(c[0]), a[0].max(b[0]).max(c[0]));
+        let (z0, z1) = (a[2].min(b[2]).min(c[2]), a[2].max(b[2]).max(c[2]));
+        let m = REACH * ((x1 - x0) + (z1 - z0) + x0.abs().max(x1.abs()).max(z0.abs()).max(z1.abs()));
+        [x0 - m, z0 - m, x1 + m, z1 + m]
     }
 }
 
@@ -339,6 +385,87 @@ mod tests {
                 s.height_at(x, z).map(|(y, n)| (y.to_bits(), n.map(f64::to_bits))),
                 "({x}, {z})"
             );
+        }
+    }
+
+    use proptest::prelude::*;
+
+    type Answer = Option<(u64, [u64; 3])>;
+
+    fn answer(s: &SurfaceIndex, x: f64, z: f64) -> Answer {
+        s.height_at(x, z).map(|(y, n)| (y.to_bits(), n.map(f64::to_bits)))
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+        /// A point's triangle depends on the mesh and its order alone: indexes of a TIN with
+        /// buckets of any size, and an index of only the triangles near some rows (in the mesh's
+        /// order), answer every point (of those rows) bit for bit alike: random points, points on
+        /// vertices, on edges (shared ones are ties) and just outside the map.
+        #[test]
+        fn answers_do_not_depend_on_the_buckets_or_on_triangles_far_away(
+            size in proptest::sample::select(vec![9usize, 17, 33, 65]),
+            cell in proptest::sample::select(vec![0.5f64, 1.0, 2.0, 30.0, 0.3]),
+            relief in 1.0f64..400.0,
+            error in 0.0f64..0.2,
+            seed in 0u64..1000,
+            rows in (0usize..64, 1usize..64),
+            scale in proptest::sample::select(vec![0.05f64, 0.3, 2.0, 9.0]),
+        ) {
+            let hf = crate::synth::fbm(size, cell, relief, seed);
+            let opts = crate::terrain::tin::TinOptions { max_error_m: error * relief, ..Default::default() };
+            let mesh = crate::terrain::tin::tin(&hf, &opts).unwrap().mesh;
+            let positions: Vec<[f32; 3]> =
+                mesh.vertices.iter().map(|v| hf.position(v[0] as usize, v[1] as usize)).collect();
+            let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
+            let whole = SurfaceIndex::from_parts(&[(&positions, &indices)]);
+            let other = SurfaceIndex::from_parts_scaled(&[(&positions, &indices)], scale);
+            prop_assert_ne!(whole.dims, other.dims);
+            // the rows [r0, r1] and the triangles within a cell of them, in order
+            let r0 = rows.0 % (size - 1);
+            let r1 = (r0 + rows.1).min(size - 1);
+            let (z0, z1) = ((r0 as f64 * cell) as f32 as f64, (r1 as f64 * cell) as f32 as f64);
+            let near: Vec<u32> = mesh
+                .triangles
+                .iter()
+                .filter(|t| {
+                    let zs = t.map(|v| positions[v as usize][2] as f64);
+                    zs.iter().any(|&z| z <= z1 + cell) && zs.iter().any(|&z| z >= z0 - cell)
+                })
+                .flatten()
+                .copied()
+                .collect();
+            let part = SurfaceIndex::from_parts_scaled(&[(&positions, &near)], scale.recip());
+            let extent = (size - 1) as f64 * cell;
+            let mut h = seed ^ 0x5eed;
+            let mut next = || {
+                h = crate::random::mix64(h);
+                (h >> 11) as f64 / (1u64 << 53) as f64
+            };
+            for k in 0..600 {
+                let (x, z) = match k % 4 {
+                    // anywhere, a little beyond the map too
+                    0 => (next() * extent * 1.02 - 0.01 * extent, next() * extent * 1.02 - 0.01 * extent),
+                    // a vertex
+                    1 => {
+                        let p = positions[(next() * positions.len() as f64) as usize];
+                        (p[0] as f64, p[2] as f64)
+                    }
+                    // a point of an edge (a shared one is a tie)
+                    _ => {
+                        let t = mesh.triangles[(next() * mesh.triangles.len() as f64) as usize];
+                        let e = (next() * 3.0) as usize;
+                        let (a, b) = (positions[t[e] as usize], positions[t[(e + 1) % 3] as usize]);
+                        let f = if k % 4 == 2 { 0.5 } else { next() };
+                        (a[0] as f64 + f * (b[0] as f64 - a[0] as f64), a[2] as f64 + f * (b[2] as f64 - a[2] as f64))
+                    }
+                };
+                let expected = answer(&whole, x, z);
+                prop_assert_eq!(answer(&other, x, z), expected, "({}, {}) with buckets {} times", x, z, scale);
+                if z >= z0 && z <= z1 {
+                    prop_assert_eq!(answer(&part, x, z), expected, "({}, {}) by the rows' triangles", x, z);
+                }
+            }
         }
     }
 
