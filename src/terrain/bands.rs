@@ -276,6 +276,59 @@ mod tests {
         }
     }
 
+    /// A band's chunks built from its rows and its piece alone are the chunks of the scene built
+    /// from the whole map and the joined mesh: positions, skirts and triangle order bit for bit
+    /// (what places instances on a shard's bands); a piece of other rows is refused.
+    #[test]
+    fn a_bands_chunk_surfaces_from_its_rows_are_the_whole_scenes_chunks() {
+        use crate::terrain::build::{band_chunk_surfaces, build_scene, BuildError, BuildOptions};
+        let hf = crate::synth::fractal(300, 1000, 1.5, 200.0, 0.6, 12);
+        let storage = Storage::f32(&hf);
+        let lines = band_lines(hf.height, 384, storage.xz_exact());
+        let last = lines[lines.len() - 1];
+        for (pitch, skirt) in [(128usize, Some(3.0)), (128, None), (192, Some(1.0))] {
+            let band_cells = crate::terrain::regions::band_cells_for_chunk(Some(pitch));
+            let lines = band_lines(hf.height, band_cells, true);
+            let mut from_bands = Vec::new();
+            let pieces: Vec<BandPiece> = lines
+                .windows(2)
+                .map(|w| {
+                    let window = hf.rows(w[0] as usize, w[1] as usize).unwrap();
+                    let piece = build_band_window(&window, w[0], &[0.8], usize::MAX, [w[0] > 0, w[1] < last]).unwrap();
+                    let chunks =
+                        band_chunk_surfaces(&window, w[0] as usize, hf.height, &piece.levels[0].mesh, pitch, skirt)
+                            .unwrap();
+                    from_bands.extend(chunks);
+                    piece
+                })
+                .collect();
+            let opts = TinOptions { max_error_m: 0.8, band_cells, max_vertices: usize::MAX, ..Default::default() };
+            let (joined, _) = assemble(&hf, &storage, &pieces, 0, &opts).unwrap();
+            let scene = build_scene(
+                &hf,
+                &joined.mesh,
+                &BuildOptions { chunk_samples: Some(pitch), skirt_depth_m: skirt, ..BuildOptions::default() },
+            )
+            .unwrap();
+            let chunks: Vec<_> = scene.meshes.iter().filter(|m| m.name.contains("_chunk_")).collect();
+            assert_eq!(chunks.len(), from_bands.len(), "pitch {pitch}");
+            assert!(lines.len() > 2, "several bands");
+            for (whole, ([ci, cj], band)) in chunks.iter().zip(&from_bands) {
+                assert_eq!(whole.name, format!("terrain_chunk_{ci}_{cj}"));
+                let p = &whole.primitives[0];
+                assert_eq!(p.indices, band.indices, "{}", whole.name);
+                let bits = |v: &[[f32; 3]]| v.iter().map(|p| p.map(f32::to_bits)).collect::<Vec<_>>();
+                assert_eq!(bits(&p.positions), bits(&band.positions), "{}", whole.name);
+                assert!(band.normals.is_empty() && band.uvs.is_empty());
+            }
+        }
+        // a band's mesh handed rows it was not built from
+        let window = hf.rows(0, 384).unwrap();
+        let piece = build_band_window(&window, 0, &[0.8], usize::MAX, [false, true]).unwrap();
+        let e = band_chunk_surfaces(&hf.rows(384, 600).unwrap(), 384, hf.height, &piece.levels[0].mesh, 128, None);
+        assert!(matches!(e, Err(BuildError::BandMismatch(_))), "{e:?}");
+    }
+
     #[test]
     fn bytes_that_are_not_a_piece_are_refused_not_misread() {
         let hf = crate::synth::fractal(300, 700, 1.0, 100.0, 0.5, 3);

@@ -96,6 +96,10 @@ pub enum BuildError {
     BorderNotOnRectangle { from: [u32; 2], to: [u32; 2] },
     #[error("a mesh would need {0} vertices, more than 32-bit indices hold; pass --chunk (`chunk` in a preset) to split the terrain")]
     TooManyVertices(usize),
+    #[error(
+        "a band's mesh does not fit its rows: {0}; the band piece is damaged or of another map, rebuild it (`--force`)"
+    )]
+    BandMismatch(String),
 }
 
 /// Builds the scene for `mesh`, a triangulation of `hf`'s samples (see the module docs for layout).
@@ -321,12 +325,101 @@ fn check_mesh(hf: &Heightfield, mesh: &SampleMesh) -> Result<(Vec<[u32; 3]>, Edg
     Ok((triangles, edges))
 }
 
+/// The chunks' surface primitives of a band of a chunked terrain, built from the band's rows alone:
+/// `window` holds rows `row0 ..` of a map of `map_height` rows, `band` is the band's mesh (its
+/// samples in the map's coordinates, as [`crate::terrain::bands::BandPiece`] keeps them), `pitch`
+/// and `skirt_depth_m` the scene's chunk size and skirt. Each is the chunk's primitive of
+/// [`build_scene`] of the whole map and its joined mesh — the same positions, skirt and triangle
+/// order, bit for bit — without the attributes that read rows beyond the band (normals, UVs): what
+/// locating points on the terrain reads ([`crate::scatter::SurfaceIndex`]), for a shard holding
+/// some bands. Chunks in `(ci, cj)` order, as the scene's meshes.
+pub fn band_chunk_surfaces(
+    window: &Heightfield,
+    row0: usize,
+    map_height: usize,
+    band: &SampleMesh,
+    pitch: usize,
+    skirt_depth_m: Option<f64>,
+) -> Result<Vec<([usize; 2], Primitive)>, BuildError> {
+    check_options(&BuildOptions { chunk_samples: Some(pitch), skirt_depth_m, ..BuildOptions::default() })?;
+    check_heightfield(window)?;
+    let rows = row0..row0 + window.height;
+    if window.width == 0 || window.height == 0 || row0 + window.height > map_height {
+        return Err(BuildError::BandMismatch(format!(
+            "a band of rows {row0}..{} of a map of {map_height} rows",
+            rows.end
+        )));
+    }
+    for (k, v) in band.vertices.iter().enumerate() {
+        if v[0] as usize >= window.width || !rows.contains(&(v[1] as usize)) {
+            return Err(BuildError::BandMismatch(format!(
+                "vertex {k} at sample ({}, {}) is outside the band's {} × rows {row0}..{}",
+                v[0], v[1], window.width, rows.end
+            )));
+        }
+    }
+    if let Some(t) = band.triangles.iter().position(|t| t.iter().any(|&v| v as usize >= band.vertices.len())) {
+        return Err(BuildError::BandMismatch(format!("triangle {t} names a vertex the band does not have")));
+    }
+    let source = Window { hf: window, row0 };
+    let grid = ChunkGrid::new(window.width, map_height, pitch);
+    let parts = grid.partition(&band.vertices, &band.triangles);
+    let mut slots = vec![u32::MAX; band.vertices.len()];
+    let mut out = Vec::new();
+    for cj in 0..grid.ny {
+        for ci in 0..grid.nx {
+            let part = &parts[cj * grid.nx + ci];
+            if part.is_empty() {
+                continue;
+            }
+            let prim = surface(&source, band, &band.triangles, part, skirt_depth_m, &mut slots)?;
+            let mut mesh = finish(String::new(), vec![prim])?;
+            out.push(([ci, cj], mesh.primitives.remove(0)));
+        }
+    }
+    Ok(out)
+}
+
+/// Where a surface primitive takes its samples' attributes from.
+trait Samples {
+    fn position(&self, i: usize, j: usize) -> [f32; 3];
+    /// The vertex normal and UV, when the source has them.
+    fn normal_uv(&self, i: usize, j: usize) -> Option<([f32; 3], [f32; 2])>;
+}
+
+impl Samples for Heightfield {
+    fn position(&self, i: usize, j: usize) -> [f32; 3] {
+        Heightfield::position(self, i, j)
+    }
+
+    fn normal_uv(&self, i: usize, j: usize) -> Option<([f32; 3], [f32; 2])> {
+        Some((vertex_normal(self, i, j), self.planar_uv(i, j)))
+    }
+}
+
+/// Some rows of a map (`hf` is rows `row0 ..` of it): positions alone, the same as the map's.
+struct Window<'a> {
+    hf: &'a Heightfield,
+    row0: usize,
+}
+
+impl Samples for Window<'_> {
+    fn position(&self, i: usize, j: usize) -> [f32; 3] {
+        let [x, y, _] = self.hf.position(i, j - self.row0);
+        [x, y, (j as f64 * self.hf.cell_size_m) as f32]
+    }
+
+    fn normal_uv(&self, _: usize, _: usize) -> Option<([f32; 3], [f32; 2])> {
+        None
+    }
+}
+
 /// The surface primitive of the triangles `subset`: each used sample once (in order of first use,
-/// so the output is deterministic) with its exact position, heightfield normal and planar UV, plus
-/// a skirt under the subset's boundary when asked for. `slots` must be all `u32::MAX` on entry and
-/// is left that way.
+/// so the output is deterministic) with its exact position, heightfield normal and planar UV (when
+/// `hf` has them), plus a skirt under the subset's boundary when asked for. `slots` must be all
+/// `u32::MAX` on entry and is left that way.
 fn surface(
-    hf: &Heightfield,
+    hf: &impl Samples,
     mesh: &SampleMesh,
     triangles: &[[u32; 3]],
     subset: &[usize],
@@ -344,8 +437,10 @@ fn surface(
                 used.push(v);
                 let [i, j] = mesh.vertices[v as usize].map(|c| c as usize);
                 prim.positions.push(hf.position(i, j));
-                prim.normals.push(vertex_normal(hf, i, j));
-                prim.uvs.push(hf.planar_uv(i, j));
+                if let Some((normal, uv)) = hf.normal_uv(i, j) {
+                    prim.normals.push(normal);
+                    prim.uvs.push(uv);
+                }
             }
             prim.indices.push(*slot);
         }
