@@ -93,8 +93,10 @@ pub fn scatter_species_snow(
 /// placed are filled again by each run that needs them (the colour phases' reach; see
 /// `poisson.rs`). Exclusions see only the `earlier` instances given: pass every earlier instance
 /// within the exclusion radius of the rows (those of their rows widened by the radius). The
-/// estimate and its fail-fast are the whole extent's; `max_instances` is checked on this run's
-/// count (a join checks the sum).
+/// surface is read only at z within [`rows_reach`] of the rows, so it may hold the triangles there
+/// alone. A run of rows makes no estimate (it would read the whole surface: `estimate` is NaN);
+/// the join makes it ([`estimate_species`]) and checks `max_instances` on the sum (a run checks
+/// its own count, which is never more).
 #[allow(clippy::too_many_arguments)]
 pub fn scatter_species_in_rows(
     surface: &SurfaceIndex,
@@ -117,16 +119,11 @@ pub fn scatter_species_in_rows(
     let mut ctx = rules::Rules::new(surface, tiling, species, density, mask, earlier, scene_seed)?;
     ctx.snow = snow;
     ctx.rows = rows;
-    let area = (extent[2] - extent[0]) * (extent[3] - extent[1]);
     // fail fast: estimate from the density/mask/rules integral before allocating anything
-    let estimate = rules::estimate(&ctx, 128) * ctx.effective_max_density * area;
-    if estimate > species.max_instances as f64 * 1.02 + 8.0 {
-        return Err(ScatterError::TooManyEstimated {
-            species: species.name.clone(),
-            estimate,
-            limit: species.max_instances,
-        });
-    }
+    let estimate = match rows {
+        None => checked_estimate(&ctx, species, extent)?,
+        Some(_) => f64::NAN,
+    };
     let (instances, counts) = match species.placement {
         Placement::Jittered => jitter::scatter(&ctx)?,
         Placement::Poisson => poisson::scatter(&ctx)?,
@@ -139,4 +136,51 @@ pub fn scatter_species_in_rows(
         });
     }
     Ok(Scatter { instances, counts, estimate })
+}
+
+/// The estimated count of a species over the whole extent (what [`scatter_species_snow`] fails
+/// fast on: an error when it is over `max_instances`), for a join of runs over rows.
+#[allow(clippy::too_many_arguments)]
+pub fn estimate_species(
+    surface: &SurfaceIndex,
+    extent: [f64; 4],
+    species: &SpeciesRules,
+    density: Option<&DensityMap>,
+    mask: Option<&DensityMap>,
+    tile_m: f64,
+    scene_seed: u64,
+    snow: Option<rules::SnowThinning<'_>>,
+) -> Result<f64, ScatterError> {
+    let tiling = Tiling::new(extent, tile_m)?;
+    let mut ctx = rules::Rules::without_exclusions(surface, tiling, species, density, mask, scene_seed)?;
+    ctx.snow = snow;
+    checked_estimate(&ctx, species, extent)
+}
+
+fn checked_estimate(ctx: &rules::Rules<'_>, species: &SpeciesRules, extent: [f64; 4]) -> Result<f64, ScatterError> {
+    let area = (extent[2] - extent[0]) * (extent[3] - extent[1]);
+    let estimate = rules::estimate(ctx, 128) * ctx.effective_max_density * area;
+    if estimate > species.max_instances as f64 * 1.02 + 8.0 {
+        return Err(ScatterError::TooManyEstimated {
+            species: species.name.clone(),
+            estimate,
+            limit: species.max_instances,
+        });
+    }
+    Ok(estimate)
+}
+
+/// The z range `[z0, z1]` of the surface a run over tile rows `rows = [first, end)` reads
+/// ([`scatter_species_in_rows`]): the rows' span, a hair wider for points that round across a
+/// tile border.
+pub fn rows_reach(extent: [f64; 4], tile_m: f64, rows: [u32; 2]) -> Result<[f64; 2], ScatterError> {
+    let tiling = Tiling::new(extent, tile_m)?;
+    let [first, end] = rows;
+    if first >= end || end > tiling.tiles_z {
+        return Err(ScatterError::Rows { rows, tiles_z: tiling.tiles_z });
+    }
+    let lo = tiling.rect(0, first)[1];
+    let hi = tiling.rect(0, end - 1)[3];
+    let hair = 1e-9 * (extent[3] - extent[1] + extent[1].abs().max(extent[3].abs()));
+    Ok([if first == 0 { extent[1] } else { lo - hair }, if end == tiling.tiles_z { extent[3] } else { hi + hair }])
 }

@@ -9,6 +9,9 @@
 //! triangles near some rows of a map (in the whole mesh's order) answers every point of those rows
 //! as the whole map's index does, bit for bit: what places a shard's rows of instances alone.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
 use crate::math::{cross3, sub3};
 
 /// One upward-facing triangle: corners as the mesh stores them (f32, widened to f64 exactly where
@@ -35,6 +38,9 @@ pub struct SurfaceIndex {
     bounds: [f64; 4],
     /// Union of the triangles' reaches: no point outside has a candidate.
     reach: [f64; 4],
+    /// For an index of some rows' triangles ([`Self::covering`]): the z range it answers as the
+    /// whole map's index does, and whether a query fell outside it.
+    cover: Option<([f64; 2], Arc<AtomicBool>)>,
 }
 
 /// Relative tolerance of the inside test: a point this far outside a triangle (as a fraction of
@@ -110,6 +116,7 @@ impl SurfaceIndex {
                 items: Vec::new(),
                 bounds: [0.0; 4],
                 reach: [0.0; 4],
+                cover: None,
             };
         }
         let mut reach = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
@@ -164,7 +171,22 @@ impl SurfaceIndex {
                 }
             }
         }
-        SurfaceIndex { tris, origin, cell, inv_cell, dims, start, items, bounds, reach }
+        SurfaceIndex { tris, origin, cell, inv_cell, dims, start, items, bounds, reach, cover: None }
+    }
+
+    /// [`Self::from_parts`] of the triangles near the rows of z in `z` (every triangle within a
+    /// sample spacing of them, in the whole mesh's order), which it answers as the whole mesh's
+    /// index does; a query outside is answered from the triangles it has and marked
+    /// ([`Self::strayed`]), so a caller can refuse what it placed then.
+    pub fn covering(parts: &[(&[[f32; 3]], &[u32])], z: [f64; 2]) -> SurfaceIndex {
+        let mut s = SurfaceIndex::from_parts(parts);
+        s.cover = Some((z, Arc::new(AtomicBool::new(false))));
+        s
+    }
+
+    /// Whether a query fell outside the z range of an index of some rows ([`Self::covering`]).
+    pub fn strayed(&self) -> bool {
+        self.cover.as_ref().is_some_and(|(_, flag)| flag.load(Ordering::Relaxed))
     }
 
     /// Number of indexed (upward-facing) triangles.
@@ -204,6 +226,11 @@ impl SurfaceIndex {
     /// contain the point, so the answer is the one `height_at` gives.
     #[inline]
     pub fn height_at_near(&self, x: f64, z: f64, hint: &mut u32) -> Option<(f64, [f64; 3])> {
+        if let Some(([z0, z1], flag)) = &self.cover {
+            if !(z >= *z0 && z <= *z1) {
+                flag.store(true, Ordering::Relaxed);
+            }
+        }
         if let Some(tri) = self.tris.get(*hint as usize) {
             let w = bary(tri, x, z);
             if w.0.min(w.1).min(w.2) > HINT_MARGIN * w.3 {
@@ -218,7 +245,8 @@ impl SurfaceIndex {
 
     /// Index of a triangle containing (x, z): of the triangles whose reach holds it, in order, the
     /// first that contains it exactly, else the best within [`EDGE_TOLERANCE`] (a point on an
-    /// edge, up to rounding). The bucket only narrows the search (module docs).
+    /// edge, up to rounding). The bucket only narrows the search (module docs): every triangle
+    /// whose reach holds the point is in it.
     #[inline]
     fn locate(&self, x: f64, z: f64) -> Option<usize> {
         if self.tris.is_empty() {
@@ -237,18 +265,16 @@ impl SurfaceIndex {
         let mut best_score = -EDGE_TOLERANCE;
         for &t in &self.items[s..e] {
             let tri = &self.tris[t as usize];
-            let [x0, z0, x1, z1] = tri.reach();
-            if !(x >= x0 && z >= z0 && x <= x1 && z <= z1) {
-                continue;
-            }
             let (w0, w1, w2, d) = bary(tri, x, z);
             // all weights share the sign of d when inside; normalised (d > 0) inside means ≥ 0
             let least = w0.min(w1).min(w2);
             if least >= 0.0 {
                 return Some(t as usize);
             }
-            // the relative distance (a division) only for the few within the tolerance
-            if least >= -EDGE_TOLERANCE * d {
+            // the relative distance (a division) only for the few within the tolerance, and only
+            // of a triangle whose reach holds the point (one that contains it exactly does: its
+            // weights round by 10⁻¹⁶ of its size, far inside the reach)
+            if least >= -EDGE_TOLERANCE * d && tri.reaches(x, z) {
                 let m = least / d;
                 if m >= best_score {
                     best_score = m;
@@ -288,6 +314,12 @@ impl Tri {
         let (z0, z1) = (a[2].min(b[2]).min(c[2]), a[2].max(b[2]).max(c[2]));
         let m = REACH * ((x1 - x0) + (z1 - z0) + x0.abs().max(x1.abs()).max(z0.abs()).max(z1.abs()));
         [x0 - m, z0 - m, x1 + m, z1 + m]
+    }
+
+    #[inline]
+    fn reaches(&self, x: f64, z: f64) -> bool {
+        let [x0, z0, x1, z1] = self.reach();
+        x >= x0 && z >= z0 && x <= x1 && z <= z1
     }
 }
 
