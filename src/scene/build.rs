@@ -300,7 +300,13 @@ fn build_into(
     let mut placed: (Option<Vec<PreviewLayer>>, Vec<(String, PathBuf)>, Option<String>) = (None, Vec::new(), None);
     let mut drawn: Option<(ViewStageReport, String)> = None;
     if let (true, Some(terrain), false) = (wants(Stage::Scatter), &terrain, preset.species.is_empty()) {
-        let ran = runner.run(&ScatterJob { preset, terrain, cover: cover_ref })?;
+        let ran = runner.run(&ScatterJob {
+            preset,
+            terrain,
+            cover: cover_ref,
+            // a merge's placements made by rows in the shards (any build whose cache holds them)
+            rows: (!settings.force).then_some(&cache),
+        })?;
         let tables: Vec<(String, PathBuf)> =
             ran.report.species.iter().map(|s| (s.name.clone(), s.csv.clone())).collect();
         runs.push(StageRun::Scatter { cost: ran.cost, report: ran.report, cached: ran.cached });

@@ -11,6 +11,7 @@ pub mod ground_cover;
 pub mod impostor;
 pub mod manifest;
 pub mod pipeline;
+pub mod placement_rows;
 pub mod plants_stage;
 pub mod preview;
 pub mod preview_stage;

@@ -239,6 +239,19 @@ pub fn run_scatter_with_snow(
     scene_dir: &Path,
     snow_mask: Option<&crate::snow::CoverMask>,
 ) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
+    run_scatter_joined(preset, terrain, scene_dir, snow_mask, None)
+}
+
+/// [`run_scatter_with_snow`], taking the placements of the species `joined` holds from there (a
+/// merge's units placed by rows, joined: [`crate::scene::placement_rows::joined`]) instead of
+/// placing them; their estimate and `max_instances` are checked as a run checks them.
+pub fn run_scatter_joined(
+    preset: &Preset,
+    terrain: &Scene,
+    scene_dir: &Path,
+    snow_mask: Option<&crate::snow::CoverMask>,
+    mut joined: Option<Vec<Option<crate::scene::placement_rows::RowsPlacement>>>,
+) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
     let t0 = Instant::now();
     let surface = surface_of(terrain);
     let extent = surface.bounds();
@@ -261,18 +274,44 @@ pub fn run_scatter_with_snow(
             }
             _ => None,
         };
-        let mut result = scatter_species_snow(
-            &surface,
-            extent,
-            &species.rules,
-            density.as_ref(),
-            mask.as_ref(),
-            &earlier,
-            preset.scatter.tile_m,
-            preset.scene.seed,
-            thinning,
-        )
-        .map_err(|e| bad_input(e.to_string()))?;
+        let from_rows = joined.as_mut().and_then(|j| j.get_mut(index)).and_then(Option::take);
+        let mut result = match from_rows {
+            Some(rows) => {
+                let r = &species.rules;
+                let estimate = crate::scatter::estimate_species(
+                    &surface,
+                    extent,
+                    r,
+                    density.as_ref(),
+                    mask.as_ref(),
+                    preset.scatter.tile_m,
+                    preset.scene.seed,
+                    thinning,
+                )
+                .map_err(|e| bad_input(e.to_string()))?;
+                if rows.instances.len() > r.max_instances {
+                    let e = crate::scatter::ScatterError::TooMany {
+                        species: r.name.clone(),
+                        count: rows.instances.len(),
+                        limit: r.max_instances,
+                    };
+                    return Err(bad_input(e.to_string()));
+                }
+                crate::scatter::Scatter { instances: rows.instances, counts: rows.counts, estimate }
+            }
+            None => scatter_species_snow(
+                &surface,
+                extent,
+                &species.rules,
+                density.as_ref(),
+                mask.as_ref(),
+                &earlier,
+                preset.scatter.tile_m,
+                preset.scene.seed,
+                thinning,
+            )
+            .map_err(|e| bad_input(e.to_string()))?,
+        };
         // its density over the terrain, on the weight map's texels (exclusions aside)
         let (bytes, density_weight) = species_density(
             &surface,
@@ -384,6 +423,9 @@ pub struct ScatterJob<'a> {
     pub terrain: &'a TerrainHandoff,
     /// The snow cover that thins the placements, and the snow stage's key.
     pub cover: Option<(&'a crate::snow::CoverMask, &'a str)>,
+    /// Where a merge finds the placements its shards made by rows (`None`: every species is
+    /// placed whole, as in any other build).
+    pub rows: Option<&'a crate::scene::cache::Cache>,
 }
 
 impl StageJob for ScatterJob<'_> {
@@ -407,6 +449,10 @@ impl StageJob for ScatterJob<'_> {
 
     fn run(&self, dir: &Path) -> Result<(ScatterStageReport, Vec<Placed>), SceneBuildError> {
         let cover = self.cover.map(|(m, _)| m);
-        Ok(run_scatter_with_snow(self.preset, self.terrain.scene()?, dir, cover)?)
+        let joined = match (self.rows, &self.preset.terrain) {
+            (Some(cache), Some(t)) => crate::scene::placement_rows::joined_for(self.preset, t, cache)?,
+            _ => None,
+        };
+        Ok(run_scatter_joined(self.preset, self.terrain.scene()?, dir, cover, joined)?)
     }
 }

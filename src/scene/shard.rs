@@ -26,6 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::scene::cache::{process_alive, temp_owner, Cache};
 use crate::scene::error::SceneBuildError;
 use crate::scene::pipeline::{CacheUse, StageJob, StageRunner};
+use crate::scene::placement_rows;
 use crate::scene::plants_stage::{self, SpeciesMemo, SPECIES_MEMO_STAGE};
 use crate::scene::terrain_stage::{
     band_key, band_piece, mesh_key, planned_bands, BandPlan, BandRows, MeshMemo, TerrainJob, BAND_STAGE,
@@ -87,7 +88,7 @@ pub struct ShardRecord {
 /// in bands: the terrain stage then runs in the merge), then every species the plants stage makes,
 /// in preset order.
 pub fn units(preset: &Preset, out: &Path) -> Result<Vec<Unit>, SceneBuildError> {
-    Ok(planned(preset, out)?.into_iter().map(|(unit, _)| unit).collect())
+    Ok(planned(preset, out)?.into_iter().map(|(unit, _, _)| unit).collect())
 }
 
 /// What a unit is to build.
@@ -96,9 +97,20 @@ enum Work<'a> {
     /// The terrain, the band, the plan, the terrain's mesh key.
     Band(&'a crate::scene::TerrainSettings, usize, std::rc::Rc<BandPlan>, std::rc::Rc<String>),
     Species(&'a crate::scene::SpeciesSettings),
+    /// The terrain, the placement unit, the band plan, the rows plan, the terrain's mesh key.
+    Placements(
+        &'a crate::scene::TerrainSettings,
+        usize,
+        std::rc::Rc<BandPlan>,
+        std::rc::Rc<crate::scene::placement_rows::RowsPlan>,
+        std::rc::Rc<String>,
+    ),
 }
 
-fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>)>, SceneBuildError> {
+/// The units of `preset` in order, what each builds, and its slot: unit of slot k belongs to shard
+/// k mod N (its position, but a placement unit's is its band's: the bands it stands on are mostly
+/// that shard's own).
+fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>, usize)>, SceneBuildError> {
     let cache = Cache::new(out);
     let mut units = Vec::new();
     if let Some(t) = &preset.terrain {
@@ -110,23 +122,57 @@ fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>)>, 
                     let rows = plan.rows(k);
                     let entries = vec![Cache::entry_name(BAND_STAGE, &band_key(&key, rows))];
                     let name = format!("terrain band {k} (rows {}-{})", rows[0], rows[1]);
-                    units.push((Unit { name, entries }, Work::Band(t, k, plan.clone(), key.clone())));
+                    units.push((Unit { name, entries }, Work::Band(t, k, plan.clone(), key.clone()), k));
+                }
+                // the placements of the tile rows starting in each band, in that band's shard
+                if let Some(rows) = placement_rows::rows_plan(preset, t, &plan) {
+                    let rows = std::rc::Rc::new(rows);
+                    for (g, r) in rows.groups.iter().enumerate().filter(|(_, r)| r[0] < r[1]) {
+                        let entries = vec![Cache::entry_name(
+                            placement_rows::ROWS_STAGE,
+                            &placement_rows::rows_key(preset, t, &key, *r)?,
+                        )];
+                        let name = format!("placements of tile rows {}-{} (band {g})", r[0], r[1]);
+                        let work = Work::Placements(t, g, plan.clone(), rows.clone(), key.clone());
+                        units.push((Unit { name, entries }, work, g));
+                    }
                 }
             }
             None => {
                 let job = TerrainJob { preset, terrain: t, memo: Some(MeshMemo { cache: &cache, force: false }) };
                 let mut entries = vec![Cache::entry_name("terrain", &job.key()?)];
                 entries.extend(job.memo_entries());
-                units.push((Unit { name: "terrain".into(), entries }, Work::Terrain(t)));
+                units.push((Unit { name: "terrain".into(), entries }, Work::Terrain(t), 0));
             }
         }
     }
     for s in preset.species.iter().filter(|s| plants_stage::makes(s)) {
         let key = plants_stage::species_key(preset, s)?;
         let entries = vec![Cache::entry_name(SPECIES_MEMO_STAGE, &key)];
-        units.push((Unit { name: format!("species {}", s.rules.name), entries }, Work::Species(s)));
+        let slot = units.len();
+        units.push((Unit { name: format!("species {}", s.rules.name), entries }, Work::Species(s), slot));
     }
     Ok(units)
+}
+
+/// The rows of the map the units `mine` of `planned` read: their bands', and the bands their
+/// placements stand on.
+fn wanted_rows(preset: &Preset, planned: &[(Unit, Work<'_>, usize)], mine: &[usize]) -> Vec<[u32; 2]> {
+    let mut bands: Vec<[u32; 2]> = Vec::new();
+    for &k in mine {
+        match &planned[k].1 {
+            Work::Band(_, b, plan, _) => bands.push(plan.rows(*b)),
+            Work::Placements(_, g, plan, rows, _) => {
+                if let Ok((_, _, reached)) = placement_rows::reach(preset, plan, rows, *g) {
+                    bands.extend(reached.into_iter().map(|b| plan.rows(b)));
+                }
+            }
+            _ => {}
+        }
+    }
+    bands.sort_unstable();
+    bands.dedup();
+    bands
 }
 
 /// What [`ShardRecord::built_by`] says of this binary.
@@ -157,18 +203,18 @@ pub fn build_shard(
     fs::create_dir_all(out).map_err(io(out))?;
     let cache = Cache::new(out);
     let planned = planned(preset, out)?;
-    let mine: Vec<usize> = (0..planned.len()).filter(|k| k % shard.count == shard.index).collect();
+    let mine: Vec<usize> = (0..planned.len()).filter(|&k| planned[k].2 % shard.count == shard.index).collect();
     remove_stale_shard_folders(out, name);
     let tmp = out.join(format!(".{name}.shard-{}", std::process::id()));
     let _ = fs::remove_dir_all(&tmp);
     fs::create_dir_all(&tmp).map_err(io(&tmp))?;
-    let all: Vec<Unit> = planned.iter().map(|(u, _)| u.clone()).collect();
+    let all: Vec<Unit> = planned.iter().map(|(u, _, _)| u.clone()).collect();
     let result = (|| -> Result<(), SceneBuildError> {
         let mut runner = StageRunner { cache: &cache, force, dir: &tmp, used: CacheUse::default(), progress: say };
         // each band's rows of the map, made as it is built
         let mut band_rows: Option<BandRows> = None;
         for &k in &mine {
-            let (unit, work) = &planned[k];
+            let (unit, work, _) = &planned[k];
             say(&format!("shard {}/{}: {}", shard.index, shard.count, unit.name));
             match work {
                 Work::Terrain(t) => {
@@ -178,16 +224,15 @@ pub fn build_shard(
                 Work::Band(t, b, plan, key) => {
                     let source = band_rows.get_or_insert_with(|| {
                         // the rows of every band of this shard, read together
-                        let wanted = mine
-                            .iter()
-                            .filter_map(|&k| match &planned[k].1 {
-                                Work::Band(_, b, plan, _) => Some(plan.rows(*b)),
-                                _ => None,
-                            })
-                            .collect();
-                        BandRows::new(t, wanted)
+                        BandRows::new(t, wanted_rows(preset, &planned, &mine))
                     });
                     band_piece(key, t, &mut |rows| source.rows(rows), plan, *b, Some((&cache, force)))?;
+                }
+                Work::Placements(t, g, bands, rows, key) => {
+                    let source =
+                        band_rows.get_or_insert_with(|| BandRows::new(t, wanted_rows(preset, &planned, &mine)));
+                    let mut rows_of = |r: [u32; 2]| source.rows(r);
+                    placement_rows::rows_unit(preset, t, key, bands, rows, *g, &mut rows_of, &cache, force)?;
                 }
                 Work::Species(s) => {
                     plants_stage::species_unit(preset, s, &tmp, Some(SpeciesMemo { cache: &cache, force }))?;
@@ -317,9 +362,10 @@ pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usi
         )));
     }
     // the units of this preset, as this merge sees it: each must be in its shard's record
-    let expected = units(preset, out)?;
-    for (k, unit) in expected.iter().enumerate() {
-        let shard = k % count;
+    let expected: Vec<(Unit, usize)> =
+        planned(preset, out)?.into_iter().map(|(unit, _, slot)| (unit, slot % count)).collect();
+    for (unit, shard) in &expected {
+        let shard = *shard;
         let (path, record) = records.iter().find(|(_, r)| r.shard == shard).expect("every shard is present");
         let built = record.built.iter().any(|&b| record.units.get(b) == Some(unit));
         if !built {
@@ -332,8 +378,8 @@ pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usi
     }
     let cache = Cache::new(out);
     let mut brought = 0;
-    for (k, unit) in expected.iter().enumerate() {
-        let dir = &shard_dirs[records.iter().position(|(_, r)| r.shard == k % count).expect("present")];
+    for (unit, shard) in &expected {
+        let dir = &shard_dirs[records.iter().position(|(_, r)| r.shard == *shard).expect("present")];
         for entry in &unit.entries {
             let src = Cache::new(dir).root.join(entry);
             let fresh =

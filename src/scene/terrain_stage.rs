@@ -200,11 +200,19 @@ pub const BAND_STAGE: &str = "terrain-band";
 pub struct BandPlan {
     pub lines: Vec<u32>,
     pub bounds: Vec<f64>,
+    /// The map's width in samples and its cell size in metres.
+    pub width: usize,
+    pub cell_m: f64,
 }
 
 impl BandPlan {
     pub fn band_count(&self) -> usize {
         self.lines.len() - 1
+    }
+
+    /// The map's height in samples.
+    pub fn height(&self) -> usize {
+        self.lines[self.lines.len() - 1] as usize + 1
     }
 
     /// Band `k`'s rows.
@@ -239,7 +247,7 @@ pub fn band_plan(t: &TerrainSettings, width: usize, height: usize) -> Option<Ban
     if !bounds.contains(&t.max_error_m) {
         bounds.push(t.max_error_m);
     }
-    Some(BandPlan { lines, bounds })
+    Some(BandPlan { lines, bounds, width, cell_m: cell })
 }
 
 /// [`band_plan`] from the settings alone: a procedural map's size, a heightmap's from its header

@@ -223,15 +223,19 @@ fn the_slurm_and_kubernetes_recipes_build_the_shards_and_merge_as_their_schedule
     assert_same_tree(&cwd.join("single/world"), &cwd.join("k8s/out/world"));
 }
 
-/// A chunked map of three bands (1025 rows in bands of 384: 0-384, 384-768, 768-1024) and one
-/// species: four units, the terrain's bands first. `source` is the map's line of `[terrain]`.
+/// A chunked map of three bands (1025 rows in bands of 384: 0-384, 384-768, 768-1024) and two
+/// species, grass kept 3 m from rocks: eight units, the terrain's bands, the placements of the
+/// tile rows starting in each (rows of 128 m: 0-3, 3-6, 6-8), then the species. `source` is the
+/// map's line of `[terrain]`.
 fn banded_preset(source: &str, max_error: f64) -> String {
     format!(
         "[scene]\nname = \"world\"\nseed = 9\nformats = [\"glb\"]\n\n[terrain]\n{source}\n\
          cell_size = 1.0\nmax_error = {max_error}\nchunk = 128\nskirt = 2.0\nlods = [0.5, 2.0]\n\n\
          [scatter]\ntile = 128.0\n\n\
          [[species]]\nname = \"rock\"\nkind = \"mesh\"\nplacement = \"poisson\"\nmax_density = 0.002\nmin_spacing = 6.0\n\
-         obj = \"rock.obj\"\n"
+         obj = \"rock.obj\"\n\n\
+         [[species]]\nname = \"grass\"\nkind = \"grass\"\nplacement = \"jittered\"\nmax_density = 0.04\n\
+         exclusion = {{ species = \"rock\", radius = 3.0 }}\n"
     )
 }
 
@@ -293,9 +297,13 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
                         "terrain band 0 (rows 0-384)",
                         "terrain band 1 (rows 384-768)",
                         "terrain band 2 (rows 768-1024)",
-                        "species rock"
+                        "placements of tile rows 0-3 (band 0)",
+                        "placements of tile rows 3-6 (band 1)",
+                        "placements of tile rows 6-8 (band 2)",
+                        "species rock",
+                        "species grass"
                     ],
-                    "the units: the terrain's bands, then the species"
+                    "the units: the terrain's bands, their placements, then the species"
                 );
                 for k in record["built"].as_array().unwrap() {
                     built.push(names[k.as_u64().unwrap() as usize].clone());
@@ -309,11 +317,37 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
                 assert!(terrain_entries.iter().all(|e| e.starts_with("terrain-band-")), "{terrain_entries:?}");
             }
             built.sort();
-            assert_eq!(built.len(), 4, "every unit built once: {built:?}");
+            assert_eq!(built.len(), 8, "every unit built once: {built:?}");
             shards.reverse();
             let out = format!("merged{n}");
             ok(&merge(cwd, &shards, &out));
             assert_same_tree(&cwd.join("single/world"), &cwd.join(&out).join("world"));
+            if n == 2 && source == procedural {
+                // the merge takes the placements from the units: one unit's first rock turned
+                // (in copies of the shards) turns it in the merged table
+                let mut tampered = 0;
+                for (k, s) in shards.iter().enumerate() {
+                    let copy = cwd.join(format!("tampered/{k}"));
+                    copy_dir(&cwd.join(s), &copy);
+                    for e in fs::read_dir(copy.join(".cache")).unwrap() {
+                        let e = e.unwrap().path();
+                        if e.file_name().unwrap().to_string_lossy().starts_with("placements-rows-") && tampered == 0 {
+                            let mut blob = fs::read(e.join("blob.bin")).unwrap();
+                            blob[52..56].copy_from_slice(&123.0f32.to_le_bytes());
+                            fs::write(e.join("blob.bin"), blob).unwrap();
+                            tampered += 1;
+                        }
+                    }
+                }
+                assert_eq!(tampered, 1);
+                let copies: Vec<PathBuf> = (0..n).map(|k| PathBuf::from(format!("tampered/{k}"))).collect();
+                ok(&merge(cwd, &copies, "tampered_merge"));
+                let table = |out: &str| fs::read_to_string(cwd.join(out).join("world/placements/rock.csv")).unwrap();
+                assert_ne!(table("tampered_merge"), table("single"), "the merge placed the rows itself");
+                let turned =
+                    table("tampered_merge").lines().filter(|l| l.contains(",123,") || l.contains(",123.")).count();
+                assert!(turned >= 1, "{}", table("tampered_merge"));
+            }
         }
     }
 }
