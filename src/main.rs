@@ -679,6 +679,7 @@ fn build(a: BuildArgs, quiet: bool) -> i32 {
         force: a.force,
         compare_full_detail: a.compare_full_detail,
         shard: a.shard,
+        merging: false,
     };
     let progress = scene_build::ProgressView::new(quiet);
     let outcomes =

@@ -39,6 +39,9 @@ pub struct BuildSettings {
     pub compare_full_detail: bool,
     /// Build only this shard's units into `out_dir`'s cache (`--shard i/N`; [`crate::scene::shard`]).
     pub shard: Option<Shard>,
+    /// A merge's build: the scatter stage takes the placements the shards made by rows from the
+    /// cache ([`crate::scene::placement_rows`]; set by [`merge_batch`]).
+    pub merging: bool,
 }
 
 impl Default for BuildSettings {
@@ -49,6 +52,7 @@ impl Default for BuildSettings {
             force: false,
             compare_full_detail: false,
             shard: None,
+            merging: false,
         }
     }
 }
@@ -304,8 +308,8 @@ fn build_into(
             preset,
             terrain,
             cover: cover_ref,
-            // a merge's placements made by rows in the shards (any build whose cache holds them)
-            rows: (!settings.force).then_some(&cache),
+            // a merge's placements, made by rows in the shards
+            rows: (settings.merging && !settings.force).then_some(&cache),
         })?;
         let tables: Vec<(String, PathBuf)> =
             ran.report.species.iter().map(|s| (s.name.clone(), s.csv.clone())).collect();
@@ -505,7 +509,7 @@ pub fn merge_batch(
             }
         }
     }
-    let settings = BuildSettings { shard: None, force: false, ..settings.clone() };
+    let settings = BuildSettings { shard: None, force: false, merging: true, ..settings.clone() };
     let sources: Vec<PresetSource> = ready.iter().map(|(_, s)| s.clone()).collect();
     let built = build_batch(&sources, &settings, jobs, progress);
     let mut all: Vec<(usize, SceneOutcome)> = ready.into_iter().map(|(k, _)| k).zip(built).collect();

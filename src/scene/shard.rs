@@ -3,9 +3,10 @@
 //!
 //! A unit is work whose result is a cache entry: each band of a chunked terrain (its meshes at every
 //! level and their figures, `terrain/bands.rs`; the terrain stage then runs in the merge), or the
-//! terrain stage of one meshed whole (its files and its meshes), and each species the plants stage
-//! makes. Unit k of a preset (in the order [`units`] lists them) is
-//! built by shard k mod N: `verdant build PRESET --shard i/N --out DIR` builds shard i's units into
+//! terrain stage of one meshed whole (its files and its meshes), the placements of the tile rows
+//! starting in each band (`placement_rows.rs`), and each species the plants stage makes. Unit k of
+//! a preset (in the order [`units`] lists them) is built by shard k mod N (a band's placements by
+//! its band's shard): `verdant build PRESET --shard i/N --out DIR` builds shard i's units into
 //! `DIR/.cache/` and writes `DIR/<scene>.shard.json` (which units, which entries). `verdant merge
 //! PRESET --shards DIR... --out OUT` checks that the N shards of the same preset are all there,
 //! brings their entries into `OUT/.cache/` and builds the scene there: every unit is served from
@@ -13,9 +14,8 @@
 //! makes, whatever N and whichever shard finished first. The stages that read every unit (snow,
 //! scatter, view, preview) and the manifest run in the merge.
 //!
-//! Not split yet (issue 18): the terrain's chunks, textures and files by band, and the placements
-//! by tile rows (`scatter::scatter_species_in_rows` places rows alone; what a unit of them needs
-//! is in docs/sharding.md, "Limits").
+//! Not split yet (issue 18): the terrain's chunks, textures and files by band, the placements of
+//! species under a snow cover, the scene files by tile (docs/sharding.md, "Limits").
 
 use std::fs;
 use std::path::{Path, PathBuf};

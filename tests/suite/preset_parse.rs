@@ -73,11 +73,15 @@ fn the_world_preset_is_world_sized_with_grass_and_trees() {
     let out = tempfile::tempdir().unwrap();
     let units = verdant::scene::shard::units(&p, out.path()).unwrap();
     let names: Vec<&str> = units.iter().map(|u| u.name.as_str()).collect();
-    // the terrain's 16 bands of 512 rows (its 512-sample chunks), then the species
+    // the terrain's 16 bands of 512 rows (its 512-sample chunks), the placements of the two tile
+    // rows of 256 m starting in each, then the species
     let bands: Vec<String> =
         (0..16).map(|k| format!("terrain band {k} (rows {}-{})", 512 * k, 512 * (k + 1))).collect();
     assert_eq!(names[..16], bands.iter().map(String::as_str).collect::<Vec<_>>()[..]);
-    assert_eq!(names[16..], ["species pine", "species grass"]);
+    let placements: Vec<String> =
+        (0..16).map(|k| format!("placements of tile rows {}-{} (band {k})", 2 * k, 2 * k + 2)).collect();
+    assert_eq!(names[16..32], placements.iter().map(String::as_str).collect::<Vec<_>>()[..]);
+    assert_eq!(names[32..], ["species pine", "species grass"]);
 }
 
 #[test]

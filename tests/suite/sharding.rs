@@ -351,3 +351,27 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
         }
     }
 }
+
+/// `max_instances` is the whole species' limit: rows placed in shards under it each, whose sum is
+/// over it, fail the merge with the message one build gives (the shards themselves pass).
+#[test]
+fn a_species_over_its_limit_only_when_its_rows_are_joined_fails_the_merge_as_one_build_fails() {
+    let dir = tempfile::tempdir().unwrap();
+    let cwd = dir.path();
+    write(cwd, "rock.obj", ROCK_OBJ);
+    let procedural = "procedural = { kind = \"ridged\", size = 1025, seed = 4, relief = 120.0 }";
+    // about 40,000 grass clumps over the map, some 15,000 in each band's rows
+    let preset = banded_preset(procedural, 0.5).replace("radius = 3.0 }", "radius = 3.0 }\nmax_instances = 20000");
+    assert!(preset.contains("max_instances = 20000"));
+    write(cwd, "world.toml", &preset);
+    let single = verdant_in(cwd, &["-q", "build", "world.toml", "--out", "single"]);
+    assert!(!single.status.success());
+    let shards = run_shards(cwd, "limit", 3);
+    let merged = merge(cwd, &shards, "merged");
+    assert!(!merged.status.success());
+    let error = |o: &std::process::Output| {
+        String::from_utf8_lossy(&o.stderr).lines().find(|l| l.contains("grass")).unwrap_or_default().to_string()
+    };
+    assert!(error(&single).contains("max_instances"), "{}", text(&single));
+    assert_eq!(error(&merged), error(&single), "{}", text(&merged));
+}
