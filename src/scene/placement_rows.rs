@@ -15,8 +15,9 @@ use crate::plants::SpeciesKind;
 use crate::scatter::{Instance, RuleCounts, SurfaceIndex, Tiling};
 use crate::scene::cache::{Cache, KeyBuilder};
 use crate::scene::error::StageError;
-use crate::scene::terrain_stage::{band_piece, BandPlan};
+use crate::scene::terrain_stage::{kept_band, BandPlan};
 use crate::scene::{Format, Preset, TerrainSettings};
+use crate::terrain::bands::build_band_window;
 
 /// Cache entries of placement units: `placements-rows-<key>`.
 pub const ROWS_STAGE: &str = "placements-rows";
@@ -87,11 +88,19 @@ pub fn rows_plan(preset: &Preset, t: &TerrainSettings, bands: &BandPlan) -> Opti
     Some(RowsPlan { groups, placed, extent })
 }
 
-/// Key of unit `g`: the terrain's meshes (`mesh_key`), what the chunks' surfaces are built with,
-/// the scatter settings, seed, every species and the maps they read, and the unit's rows.
-pub fn rows_key(preset: &Preset, t: &TerrainSettings, mesh_key: &str, rows: [u32; 2]) -> Result<String, StageError> {
+/// Key of the unit of tile rows `rows`: the terrain's meshes (`mesh_key`), what the chunks'
+/// surfaces are built with, the scatter settings, seed, every species and the maps they read,
+/// which species the units place, and the rows.
+pub fn rows_key(
+    preset: &Preset,
+    t: &TerrainSettings,
+    mesh_key: &str,
+    plan: &RowsPlan,
+    rows: [u32; 2],
+) -> Result<String, StageError> {
     let mut k = KeyBuilder::new(ROWS_STAGE, ROWS_VERSION);
     k.add(crate::scene::scatter_stage::scatter_key(preset, mesh_key)?.as_bytes());
+    k.add(&plan.placed.iter().map(|&p| p as u8).collect::<Vec<u8>>());
     k.add(&t.chunk.unwrap_or(0).to_le_bytes());
     k.add(&t.skirt_m.unwrap_or(-1.0).to_le_bytes());
     k.add(&t.max_error_m.to_le_bytes());
@@ -176,8 +185,8 @@ pub fn reach(
 }
 
 /// Places unit `g` of `plan`: every species it places, in its rows (`None` for the others).
-/// The bands its rows reach come from `cache` when there (else meshed from `rows_of` and stored,
-/// as a band unit does); `mesh_key` is the terrain's.
+/// The main meshes of the bands its rows reach come from `cache` when it holds their pieces, else
+/// are meshed from `rows_of` (that level alone, not kept); `mesh_key` is the terrain's.
 #[allow(clippy::too_many_arguments)]
 pub fn place_rows(
     preset: &Preset,
@@ -196,17 +205,28 @@ pub fn place_rows(
     let mut prims = Vec::new();
     for k in reached {
         let [a, b] = bands.rows(k);
-        let piece = band_piece(mesh_key, t, rows_of, bands, k, cache)?;
         let window = rows_of([a, b])?;
-        let chunks = crate::terrain::build::band_chunk_surfaces(
-            &window,
-            a as usize,
-            bands.height(),
-            &piece.levels[main].mesh,
-            pitch,
-            t.skirt_m,
-        )
-        .map_err(|e| fail(format!("the terrain's chunks of rows {a}-{b}: {e}")))?;
+        // the band's main mesh: its piece when the cache holds it (this shard's own bands), else
+        // that level meshed alone (the same mesh: a band meshes each bound on its own)
+        let kept = cache.filter(|(_, force)| !force).and_then(|(c, _)| kept_band(mesh_key, bands, k, c));
+        let mesh = match kept {
+            Some(mut piece) => piece.levels.swap_remove(main).mesh,
+            None => {
+                let bound = [bands.bounds[main]];
+                let mut piece =
+                    build_band_window(&window, a, &bound, t.max_vertices, bands.fixed(k)).map_err(|error| {
+                        let e = crate::terrain::job::JobError::Terrain {
+                            source_label: crate::scene::terrain_stage::source_label(t),
+                            error,
+                        };
+                        StageError::of(crate::scene::pipeline::Stage::Terrain.name(), &e, e.to_string())
+                    })?;
+                piece.levels.swap_remove(0).mesh
+            }
+        };
+        let chunks =
+            crate::terrain::build::band_chunk_surfaces(&window, a as usize, bands.height(), &mesh, pitch, t.skirt_m)
+                .map_err(|e| fail(format!("the terrain's chunks of rows {a}-{b}: {e}")))?;
         prims.extend(chunks.into_iter().map(|(_, p)| p));
     }
     let parts: Vec<(&[[f32; 3]], &[u32])> = prims.iter().map(|p| (&p.positions[..], &p.indices[..])).collect();
@@ -336,7 +356,7 @@ pub fn rows_unit(
     cache: &Cache,
     force: bool,
 ) -> Result<Vec<Option<RowsPlacement>>, StageError> {
-    let key = rows_key(preset, t, mesh_key, plan.groups[g])?;
+    let key = rows_key(preset, t, mesh_key, plan, plan.groups[g])?;
     if !force {
         if let Some(kept) = kept_unit(preset, plan, cache, &key) {
             return Ok(kept);
@@ -370,7 +390,7 @@ pub fn joined(
         .map(|&p| p.then(|| RowsPlacement { instances: Vec::new(), counts: RuleCounts::default() }))
         .collect();
     for &rows in plan.groups.iter().filter(|r| r[0] < r[1]) {
-        let key = rows_key(preset, t, mesh_key, rows)?;
+        let key = rows_key(preset, t, mesh_key, plan, rows)?;
         let Some(unit) = kept_unit(preset, plan, cache, &key) else { return Ok(None) };
         for (o, u) in out.iter_mut().zip(unit) {
             if let (Some(o), Some(u)) = (o.as_mut(), u) {

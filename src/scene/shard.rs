@@ -5,8 +5,8 @@
 //! level and their figures, `terrain/bands.rs`; the terrain stage then runs in the merge), or the
 //! terrain stage of one meshed whole (its files and its meshes), the placements of the tile rows
 //! starting in each band (`placement_rows.rs`), and each species the plants stage makes. Unit k of
-//! a preset (in the order [`units`] lists them) is built by shard k mod N (a band's placements by
-//! its band's shard): `verdant build PRESET --shard i/N --out DIR` builds shard i's units into
+//! a preset (in the order [`units`] lists them) is built by shard k mod N, but bands and their
+//! placements go in runs of neighbours (band k of B to shard ⌊k·N/B⌋): `verdant build PRESET --shard i/N --out DIR` builds shard i's units into
 //! `DIR/.cache/` and writes `DIR/<scene>.shard.json` (which units, which entries). `verdant merge
 //! PRESET --shards DIR... --out OUT` checks that the N shards of the same preset are all there,
 //! brings their entries into `OUT/.cache/` and builds the scene there: every unit is served from
@@ -107,10 +107,26 @@ enum Work<'a> {
     ),
 }
 
-/// The units of `preset` in order, what each builds, and its slot: unit of slot k belongs to shard
-/// k mod N (its position, but a placement unit's is its band's: the bands it stands on are mostly
-/// that shard's own).
-fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>, usize)>, SceneBuildError> {
+/// Which shard of N builds a unit: a terrain band and the placements of its rows go by band, the
+/// bands in N runs of neighbours (band k of B to shard ⌊k·N/B⌋: placements stand on their own band
+/// and its neighbours, mostly the same shard's), every other unit by its position k to k mod N.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Slot {
+    Band { k: usize, of: usize },
+    At(usize),
+}
+
+impl Slot {
+    fn shard(self, count: usize) -> usize {
+        match self {
+            Slot::Band { k, of } => k * count / of.max(1),
+            Slot::At(k) => k % count,
+        }
+    }
+}
+
+/// The units of `preset` in order, what each builds, and which shard builds it.
+fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>, Slot)>, SceneBuildError> {
     let cache = Cache::new(out);
     let mut units = Vec::new();
     if let Some(t) = &preset.terrain {
@@ -122,7 +138,8 @@ fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>, us
                     let rows = plan.rows(k);
                     let entries = vec![Cache::entry_name(BAND_STAGE, &band_key(&key, rows))];
                     let name = format!("terrain band {k} (rows {}-{})", rows[0], rows[1]);
-                    units.push((Unit { name, entries }, Work::Band(t, k, plan.clone(), key.clone()), k));
+                    let slot = Slot::Band { k, of: plan.band_count() };
+                    units.push((Unit { name, entries }, Work::Band(t, k, plan.clone(), key.clone()), slot));
                 }
                 // the placements of the tile rows starting in each band, in that band's shard
                 if let Some(rows) = placement_rows::rows_plan(preset, t, &plan) {
@@ -130,11 +147,11 @@ fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>, us
                     for (g, r) in rows.groups.iter().enumerate().filter(|(_, r)| r[0] < r[1]) {
                         let entries = vec![Cache::entry_name(
                             placement_rows::ROWS_STAGE,
-                            &placement_rows::rows_key(preset, t, &key, *r)?,
+                            &placement_rows::rows_key(preset, t, &key, &rows, *r)?,
                         )];
                         let name = format!("placements of tile rows {}-{} (band {g})", r[0], r[1]);
                         let work = Work::Placements(t, g, plan.clone(), rows.clone(), key.clone());
-                        units.push((Unit { name, entries }, work, g));
+                        units.push((Unit { name, entries }, work, Slot::Band { k: g, of: plan.band_count() }));
                     }
                 }
             }
@@ -142,14 +159,14 @@ fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>, us
                 let job = TerrainJob { preset, terrain: t, memo: Some(MeshMemo { cache: &cache, force: false }) };
                 let mut entries = vec![Cache::entry_name("terrain", &job.key()?)];
                 entries.extend(job.memo_entries());
-                units.push((Unit { name: "terrain".into(), entries }, Work::Terrain(t), 0));
+                units.push((Unit { name: "terrain".into(), entries }, Work::Terrain(t), Slot::At(0)));
             }
         }
     }
     for s in preset.species.iter().filter(|s| plants_stage::makes(s)) {
         let key = plants_stage::species_key(preset, s)?;
         let entries = vec![Cache::entry_name(SPECIES_MEMO_STAGE, &key)];
-        let slot = units.len();
+        let slot = Slot::At(units.len());
         units.push((Unit { name: format!("species {}", s.rules.name), entries }, Work::Species(s), slot));
     }
     Ok(units)
@@ -157,7 +174,7 @@ fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>, us
 
 /// The rows of the map the units `mine` of `planned` read: their bands', and the bands their
 /// placements stand on.
-fn wanted_rows(preset: &Preset, planned: &[(Unit, Work<'_>, usize)], mine: &[usize]) -> Vec<[u32; 2]> {
+fn wanted_rows(preset: &Preset, planned: &[(Unit, Work<'_>, Slot)], mine: &[usize]) -> Vec<[u32; 2]> {
     let mut bands: Vec<[u32; 2]> = Vec::new();
     for &k in mine {
         match &planned[k].1 {
@@ -203,7 +220,7 @@ pub fn build_shard(
     fs::create_dir_all(out).map_err(io(out))?;
     let cache = Cache::new(out);
     let planned = planned(preset, out)?;
-    let mine: Vec<usize> = (0..planned.len()).filter(|&k| planned[k].2 % shard.count == shard.index).collect();
+    let mine: Vec<usize> = (0..planned.len()).filter(|&k| planned[k].2.shard(shard.count) == shard.index).collect();
     remove_stale_shard_folders(out, name);
     let tmp = out.join(format!(".{name}.shard-{}", std::process::id()));
     let _ = fs::remove_dir_all(&tmp);
@@ -363,7 +380,7 @@ pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usi
     }
     // the units of this preset, as this merge sees it: each must be in its shard's record
     let expected: Vec<(Unit, usize)> =
-        planned(preset, out)?.into_iter().map(|(unit, _, slot)| (unit, slot % count)).collect();
+        planned(preset, out)?.into_iter().map(|(unit, _, slot)| (unit, slot.shard(count))).collect();
     for (unit, shard) in &expected {
         let shard = *shard;
         let (path, record) = records.iter().find(|(_, r)| r.shard == shard).expect("every shard is present");

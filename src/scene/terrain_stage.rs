@@ -221,7 +221,7 @@ impl BandPlan {
     }
 
     /// Whether band `k` has a band below and above it.
-    fn fixed(&self, k: usize) -> [bool; 2] {
+    pub fn fixed(&self, k: usize) -> [bool; 2] {
         [k > 0, k + 2 < self.lines.len()]
     }
 }
@@ -365,14 +365,11 @@ pub fn band_piece(
     k: usize,
     cache: Option<(&crate::scene::cache::Cache, bool)>,
 ) -> Result<crate::terrain::bands::BandPiece, StageError> {
-    use crate::terrain::bands::{build_band_window, BandPiece};
+    use crate::terrain::bands::build_band_window;
     let rows = plan.rows(k);
     let key = cache.map(|_| band_key(mesh_key, rows));
-    if let (Some((c, false)), Some(key)) = (cache, &key) {
-        let kept = c
-            .lookup(BAND_STAGE, key)
-            .and_then(|(_, entry)| BandPiece::from_bytes(&crate::scene::cache::Cache::read_blob(&entry).ok()?));
-        if let Some(piece) = kept.filter(|p| p.rows == rows && p.levels.len() == plan.bounds.len()) {
+    if let Some((c, false)) = cache {
+        if let Some(piece) = kept_band(mesh_key, plan, k, c) {
             return Ok(piece);
         }
     }
@@ -387,6 +384,19 @@ pub fn band_piece(
         let _ = c.store_blob(BAND_STAGE, key, &json, &piece.to_bytes());
     }
     Ok(piece)
+}
+
+/// Band `k` of `plan` as `cache` holds it (`None` when it does not, or not whole).
+pub fn kept_band(
+    mesh_key: &str,
+    plan: &BandPlan,
+    k: usize,
+    cache: &crate::scene::cache::Cache,
+) -> Option<crate::terrain::bands::BandPiece> {
+    let rows = plan.rows(k);
+    let (_, entry) = cache.lookup(BAND_STAGE, &band_key(mesh_key, rows))?;
+    let piece = crate::terrain::bands::BandPiece::from_bytes(&crate::scene::cache::Cache::read_blob(&entry).ok()?)?;
+    (piece.rows == rows && piece.levels.len() == plan.bounds.len()).then_some(piece)
 }
 
 /// The terrain's LoD chain (switch distances assigned) and main mesh from its bands' pieces.
@@ -543,7 +553,7 @@ pub fn snow_rule(preset: &Preset) -> SnowRule {
 }
 
 /// How errors name the terrain's heights: the heightmap's path, or the procedural kind.
-fn source_label(t: &TerrainSettings) -> String {
+pub(crate) fn source_label(t: &TerrainSettings) -> String {
     match &t.source {
         TerrainSource::Heightmap { path, .. } => path.display().to_string(),
         _ => "the procedural terrain".into(),
