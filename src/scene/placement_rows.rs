@@ -11,6 +11,7 @@
 //! `max_instances` on the join, and runs the analyzer, density maps and tables as a build does.
 
 use crate::heightfield::Heightfield;
+use crate::mesh::Primitive;
 use crate::plants::SpeciesKind;
 use crate::scatter::{Instance, RuleCounts, SurfaceIndex, Tiling};
 use crate::scene::cache::{Cache, KeyBuilder};
@@ -184,51 +185,60 @@ pub fn reach(
     Ok((need, [z0, z1], reached))
 }
 
-/// Places unit `g` of `plan`: every species it places, in its rows (`None` for the others).
-/// The main meshes of the bands its rows reach come from `cache` when it holds their pieces, else
-/// are meshed from `rows_of` (that level alone, not kept); `mesh_key` is the terrain's.
-#[allow(clippy::too_many_arguments)]
-pub fn place_rows(
-    preset: &Preset,
+/// The chunks' surfaces of band `k` of `bands` (positions and triangles: what a surface index
+/// reads), built from `window` (the band's rows) and the band's main mesh: its piece's when
+/// `cache` holds it, else that level meshed alone (the same mesh: a band meshes each bound on its
+/// own; not kept).
+pub fn band_surfaces(
     t: &TerrainSettings,
     mesh_key: &str,
     bands: &BandPlan,
+    k: usize,
+    window: &Heightfield,
+    cache: Option<&Cache>,
+) -> Result<Vec<Primitive>, StageError> {
+    let [a, b] = bands.rows(k);
+    let main = bands.bounds.iter().position(|&b| b == t.max_error_m).unwrap_or(0);
+    let pitch = t.chunk.ok_or_else(|| fail("placements by rows need a chunked terrain".into()))?;
+    let mesh = match cache.and_then(|c| kept_band(mesh_key, bands, k, c)) {
+        Some(mut piece) => piece.levels.swap_remove(main).mesh,
+        None => {
+            let bound = [bands.bounds[main]];
+            let mut piece = build_band_window(window, a, &bound, t.max_vertices, bands.fixed(k)).map_err(|error| {
+                let e = crate::terrain::job::JobError::Terrain {
+                    source_label: crate::scene::terrain_stage::source_label(t),
+                    error,
+                };
+                StageError::of(crate::scene::pipeline::Stage::Terrain.name(), &e, e.to_string())
+            })?;
+            piece.levels.swap_remove(0).mesh
+        }
+    };
+    let chunks =
+        crate::terrain::build::band_chunk_surfaces(window, a as usize, bands.height(), &mesh, pitch, t.skirt_m)
+            .map_err(|e| fail(format!("the terrain's chunks of rows {a}-{b}: {e}")))?;
+    Ok(chunks.into_iter().map(|(_, p)| p).collect())
+}
+
+/// A band's chunk surfaces, by band ([`band_surfaces`]; kept by the caller between units).
+pub type SurfacesOf<'a> = dyn FnMut(usize) -> Result<std::rc::Rc<Vec<Primitive>>, StageError> + 'a;
+
+/// Places unit `g` of `plan`: every species it places, in its rows (`None` for the others), on
+/// the chunks `surfaces` gives of the bands its rows reach ([`reach`]).
+pub fn place_rows(
+    preset: &Preset,
+    bands: &BandPlan,
     plan: &RowsPlan,
     g: usize,
-    rows_of: &mut dyn FnMut([u32; 2]) -> Result<Heightfield, StageError>,
-    cache: Option<(&Cache, bool)>,
+    surfaces: &mut SurfacesOf<'_>,
 ) -> Result<Vec<Option<RowsPlacement>>, StageError> {
     let rows = plan.groups[g];
     let (need, [z0, z1], reached) = reach(preset, bands, plan, g)?;
-    let main = bands.bounds.iter().position(|&b| b == t.max_error_m).unwrap_or(0);
-    let pitch = t.chunk.ok_or_else(|| fail("placements by rows need a chunked terrain".into()))?;
-    let mut prims = Vec::new();
+    let mut held = Vec::with_capacity(reached.len());
     for k in reached {
-        let [a, b] = bands.rows(k);
-        let window = rows_of([a, b])?;
-        // the band's main mesh: its piece when the cache holds it (this shard's own bands), else
-        // that level meshed alone (the same mesh: a band meshes each bound on its own)
-        let kept = cache.filter(|(_, force)| !force).and_then(|(c, _)| kept_band(mesh_key, bands, k, c));
-        let mesh = match kept {
-            Some(mut piece) => piece.levels.swap_remove(main).mesh,
-            None => {
-                let bound = [bands.bounds[main]];
-                let mut piece =
-                    build_band_window(&window, a, &bound, t.max_vertices, bands.fixed(k)).map_err(|error| {
-                        let e = crate::terrain::job::JobError::Terrain {
-                            source_label: crate::scene::terrain_stage::source_label(t),
-                            error,
-                        };
-                        StageError::of(crate::scene::pipeline::Stage::Terrain.name(), &e, e.to_string())
-                    })?;
-                piece.levels.swap_remove(0).mesh
-            }
-        };
-        let chunks =
-            crate::terrain::build::band_chunk_surfaces(&window, a as usize, bands.height(), &mesh, pitch, t.skirt_m)
-                .map_err(|e| fail(format!("the terrain's chunks of rows {a}-{b}: {e}")))?;
-        prims.extend(chunks.into_iter().map(|(_, p)| p));
+        held.push(surfaces(k)?);
     }
+    let prims: Vec<&Primitive> = held.iter().flat_map(|h| h.iter()).collect();
     let parts: Vec<(&[[f32; 3]], &[u32])> = prims.iter().map(|p| (&p.positions[..], &p.indices[..])).collect();
     let surface = SurfaceIndex::covering(&parts, [z0, z1]);
     let vegetation = crate::scene::ground_cover::vegetation_map(preset, "scatter")?;
@@ -343,7 +353,8 @@ pub fn from_bytes(preset: &Preset, plan: &RowsPlan, json: &str, blob: &[u8]) -> 
 
 const INSTANCE_BYTES: usize = 64;
 
-/// Unit `g` from `cache` when it holds it (unless `force`), else placed and stored there.
+/// Unit `g` from `cache` when it holds it (unless `force`), else placed ([`place_rows`]) and
+/// stored there.
 #[allow(clippy::too_many_arguments)]
 pub fn rows_unit(
     preset: &Preset,
@@ -352,7 +363,7 @@ pub fn rows_unit(
     bands: &BandPlan,
     plan: &RowsPlan,
     g: usize,
-    rows_of: &mut dyn FnMut([u32; 2]) -> Result<Heightfield, StageError>,
+    surfaces: &mut SurfacesOf<'_>,
     cache: &Cache,
     force: bool,
 ) -> Result<Vec<Option<RowsPlacement>>, StageError> {
@@ -362,7 +373,7 @@ pub fn rows_unit(
             return Ok(kept);
         }
     }
-    let placements = place_rows(preset, t, mesh_key, bands, plan, g, rows_of, Some((cache, force)))?;
+    let placements = place_rows(preset, bands, plan, g, surfaces)?;
     let (json, blob) = to_bytes(preset, &placements);
     // (a store that fails only costs placing the rows again, or a shard that says so)
     let _ = cache.store_blob(ROWS_STAGE, &key, &json, &blob);

@@ -230,6 +230,11 @@ pub fn build_shard(
         let mut runner = StageRunner { cache: &cache, force, dir: &tmp, used: CacheUse::default(), progress: say };
         // each band's rows of the map, made as it is built
         let mut band_rows: Option<BandRows> = None;
+        // the chunk surfaces of the bands placements stand on, made once: from the rows in hand
+        // when this shard builds the band, else when a placement unit first reaches it
+        let mut surfaces: std::collections::HashMap<usize, std::rc::Rc<Vec<crate::mesh::Primitive>>> =
+            std::collections::HashMap::new();
+        let places = mine.iter().any(|&k| matches!(planned[k].1, Work::Placements(..)));
         for &k in &mine {
             let (unit, work, _) = &planned[k];
             say(&format!("shard {}/{}: {}", shard.index, shard.count, unit.name));
@@ -243,13 +248,29 @@ pub fn build_shard(
                         // the rows of every band of this shard, read together
                         BandRows::new(t, wanted_rows(preset, &planned, &mine))
                     });
-                    band_piece(key, t, &mut |rows| source.rows(rows), plan, *b, Some((&cache, force)))?;
+                    if places {
+                        // the band's rows read once for its meshes and its chunks' surfaces
+                        let window = source.rows(plan.rows(*b))?;
+                        band_piece(key, t, &mut |_| Ok(window.clone()), plan, *b, Some((&cache, force)))?;
+                        let made = placement_rows::band_surfaces(t, key, plan, *b, &window, Some(&cache))?;
+                        surfaces.insert(*b, std::rc::Rc::new(made));
+                    } else {
+                        band_piece(key, t, &mut |rows| source.rows(rows), plan, *b, Some((&cache, force)))?;
+                    }
                 }
                 Work::Placements(t, g, bands, rows, key) => {
                     let source =
                         band_rows.get_or_insert_with(|| BandRows::new(t, wanted_rows(preset, &planned, &mine)));
-                    let mut rows_of = |r: [u32; 2]| source.rows(r);
-                    placement_rows::rows_unit(preset, t, key, bands, rows, *g, &mut rows_of, &cache, force)?;
+                    let mut surfaces_of = |k: usize| {
+                        if let Some(made) = surfaces.get(&k) {
+                            return Ok(made.clone());
+                        }
+                        let window = source.rows(bands.rows(k))?;
+                        let made = std::rc::Rc::new(placement_rows::band_surfaces(t, key, bands, k, &window, None)?);
+                        surfaces.insert(k, made.clone());
+                        Ok(made)
+                    };
+                    placement_rows::rows_unit(preset, t, key, bands, rows, *g, &mut surfaces_of, &cache, force)?;
                 }
                 Work::Species(s) => {
                     plants_stage::species_unit(preset, s, &tmp, Some(SpeciesMemo { cache: &cache, force }))?;
