@@ -94,9 +94,10 @@ pub fn scatter_species_snow(
 /// `poisson.rs`). Exclusions see only the `earlier` instances given: pass every earlier instance
 /// within the exclusion radius of the rows (those of their rows widened by the radius). The
 /// surface is read only at z within [`rows_reach`] of the rows, so it may hold the triangles there
-/// alone. A run of rows fails fast on the estimate of its rows alone (`estimate` is NaN: the whole
-/// one would read the whole surface); the join makes the whole one ([`estimate_species`]) and
-/// checks `max_instances` on the sum (a run checks its own count, which is never more).
+/// alone. A run of rows fails fast on the whole estimate's part in its rows (never more than the
+/// whole; `estimate` is NaN: the whole one would read the whole surface); the join makes the whole
+/// one ([`estimate_species`]) and checks `max_instances` on the sum (a run checks its own count,
+/// which is never more).
 #[allow(clippy::too_many_arguments)]
 pub fn scatter_species_in_rows(
     surface: &SurfaceIndex,
@@ -119,13 +120,20 @@ pub fn scatter_species_in_rows(
     let mut ctx = rules::Rules::new(surface, tiling, species, density, mask, earlier, scene_seed)?;
     ctx.snow = snow;
     ctx.rows = rows;
-    // fail fast: estimate from the density/mask/rules integral before allocating anything (over
-    // the rows alone for a run of rows, which then says nothing of the whole)
+    // fail fast: estimate from the density/mask/rules integral before allocating anything (a run
+    // of rows: the whole estimate's part in its rows, never more than the whole)
     let estimate = match rows {
         None => checked_estimate(&ctx, species, extent)?,
-        Some([first, end]) => {
-            let region = [extent[0], tiling.rect(0, first)[1], extent[2], tiling.rect(0, end - 1)[3]];
-            checked_estimate_over(&ctx, species, region)?;
+        Some(rows) => {
+            let area = (extent[2] - extent[0]) * (extent[3] - extent[1]);
+            let part = rules::estimate_in_rows(&ctx, 128, rows) * ctx.effective_max_density * area;
+            if part > species.max_instances as f64 * 1.02 + 8.0 {
+                return Err(ScatterError::TooManyEstimated {
+                    species: species.name.clone(),
+                    estimate: part,
+                    limit: species.max_instances,
+                });
+            }
             f64::NAN
         }
     };
@@ -163,18 +171,8 @@ pub fn estimate_species(
 }
 
 fn checked_estimate(ctx: &rules::Rules<'_>, species: &SpeciesRules, extent: [f64; 4]) -> Result<f64, ScatterError> {
-    checked_estimate_over(ctx, species, extent)
-}
-
-/// The estimated count over `region` (the extent: [`rules::estimate`]), an error when it is over
-/// `max_instances`.
-fn checked_estimate_over(
-    ctx: &rules::Rules<'_>,
-    species: &SpeciesRules,
-    region: [f64; 4],
-) -> Result<f64, ScatterError> {
-    let area = (region[2] - region[0]) * (region[3] - region[1]);
-    let estimate = rules::estimate_region(ctx, region, 128) * ctx.effective_max_density * area;
+    let area = (extent[2] - extent[0]) * (extent[3] - extent[1]);
+    let estimate = rules::estimate(ctx, 128) * ctx.effective_max_density * area;
     if estimate > species.max_instances as f64 * 1.02 + 8.0 {
         return Err(ScatterError::TooManyEstimated {
             species: species.name.clone(),

@@ -44,6 +44,9 @@ pub struct RowsPlan {
     pub placed: Vec<bool>,
     /// The scatter extent: the terrain surface's bounds, as the whole mesh's f32 positions give.
     pub extent: [f64; 4],
+    /// What every unit's key holds but its rows ([`rows_key`]): hashed once, since it reads
+    /// every map and look input.
+    key: String,
 }
 
 /// The extent of a `width` × `height` map of `cell` m as the terrain's f32 positions span it.
@@ -52,12 +55,18 @@ fn extent_of(width: usize, height: usize, cell: f64) -> [f64; 4] {
     [0.0, 0.0, far(width), far(height)]
 }
 
-/// The units of `preset`'s placements on a terrain meshed in bands by `bands`; `None` when no
-/// species can be placed in units, or the scatter stage reads the terrain from an OBJ file (which
-/// does not read back as written: [`crate::scene::pipeline::TerrainHandoff`]).
-pub fn rows_plan(preset: &Preset, t: &TerrainSettings, bands: &BandPlan) -> Option<RowsPlan> {
+/// The units of `preset`'s placements on a terrain meshed in bands by `bands` (`mesh_key`: the
+/// terrain's [`crate::scene::terrain_stage::mesh_key`]); `None` when no species can be placed in
+/// units, or the terrain writes no glTF file (the scatter stage then reads it back from its OBJ,
+/// which does not read back as written: [`crate::scene::pipeline::TerrainHandoff`]).
+pub fn rows_plan(
+    preset: &Preset,
+    t: &TerrainSettings,
+    bands: &BandPlan,
+    mesh_key: &str,
+) -> Result<Option<RowsPlan>, StageError> {
     if t.chunk.is_none() || !preset.scene.formats.iter().any(|f| matches!(f, Format::Glb | Format::Gltf)) {
-        return None;
+        return Ok(None);
     }
     let snow_thins = preset.snow.as_ref().is_some_and(|s| s.thin_plants > 0.0);
     let mut placed: Vec<bool> = Vec::with_capacity(preset.species.len());
@@ -70,10 +79,10 @@ pub fn rows_plan(preset: &Preset, t: &TerrainSettings, bands: &BandPlan) -> Opti
         placed.push(!thinned && !needs_outside);
     }
     if !placed.iter().any(|&p| p) {
-        return None;
+        return Ok(None);
     }
     let extent = extent_of(bands.width, bands.height(), bands.cell_m);
-    let tiling = Tiling::new(extent, preset.scatter.tile_m).ok()?;
+    let Ok(tiling) = Tiling::new(extent, preset.scatter.tile_m) else { return Ok(None) };
     // the first tile row starting at or after each band's first row
     let starts: Vec<u32> = (0..bands.band_count())
         .map(|k| {
@@ -86,28 +95,24 @@ pub fn rows_plan(preset: &Preset, t: &TerrainSettings, bands: &BandPlan) -> Opti
         let end = starts.get(k + 1).copied().unwrap_or(tiling.tiles_z);
         groups.push([starts[k], end]);
     }
-    Some(RowsPlan { groups, placed, extent })
-}
-
-/// Key of the unit of tile rows `rows`: the terrain's meshes (`mesh_key`), what the chunks'
-/// surfaces are built with, the scatter settings, seed, every species and the maps they read,
-/// which species the units place, and the rows.
-pub fn rows_key(
-    preset: &Preset,
-    t: &TerrainSettings,
-    mesh_key: &str,
-    plan: &RowsPlan,
-    rows: [u32; 2],
-) -> Result<String, StageError> {
+    // the terrain's meshes, what the chunks' surfaces are built with, the scatter settings, seed,
+    // every species and the maps they read, which species the units place
     let mut k = KeyBuilder::new(ROWS_STAGE, ROWS_VERSION);
     k.add(crate::scene::scatter_stage::scatter_key(preset, mesh_key)?.as_bytes());
-    k.add(&plan.placed.iter().map(|&p| p as u8).collect::<Vec<u8>>());
+    k.add(&placed.iter().map(|&p| p as u8).collect::<Vec<u8>>());
     k.add(&t.chunk.unwrap_or(0).to_le_bytes());
     k.add(&t.skirt_m.unwrap_or(-1.0).to_le_bytes());
     k.add(&t.max_error_m.to_le_bytes());
+    Ok(Some(RowsPlan { groups, placed, extent, key: k.finish() }))
+}
+
+/// Key of the unit of tile rows `rows` of `plan`.
+pub fn rows_key(plan: &RowsPlan, rows: [u32; 2]) -> String {
+    let mut k = KeyBuilder::new(ROWS_STAGE, ROWS_VERSION);
+    k.add(plan.key.as_bytes());
     k.add(&rows[0].to_le_bytes());
     k.add(&rows[1].to_le_bytes());
-    Ok(k.finish())
+    k.finish()
 }
 
 /// One species' placements in a unit's rows.
@@ -358,8 +363,6 @@ const INSTANCE_BYTES: usize = 64;
 #[allow(clippy::too_many_arguments)]
 pub fn rows_unit(
     preset: &Preset,
-    t: &TerrainSettings,
-    mesh_key: &str,
     bands: &BandPlan,
     plan: &RowsPlan,
     g: usize,
@@ -367,7 +370,7 @@ pub fn rows_unit(
     cache: &Cache,
     force: bool,
 ) -> Result<Vec<Option<RowsPlacement>>, StageError> {
-    let key = rows_key(preset, t, mesh_key, plan, plan.groups[g])?;
+    let key = rows_key(plan, plan.groups[g]);
     if !force {
         if let Some(kept) = kept_unit(preset, plan, cache, &key) {
             return Ok(kept);
@@ -390,8 +393,6 @@ fn kept_unit(preset: &Preset, plan: &RowsPlan, cache: &Cache, key: &str) -> Opti
 /// whole).
 pub fn joined(
     preset: &Preset,
-    t: &TerrainSettings,
-    mesh_key: &str,
     plan: &RowsPlan,
     cache: &Cache,
 ) -> Result<Option<Vec<Option<RowsPlacement>>>, StageError> {
@@ -401,7 +402,7 @@ pub fn joined(
         .map(|&p| p.then(|| RowsPlacement { instances: Vec::new(), counts: RuleCounts::default() }))
         .collect();
     for &rows in plan.groups.iter().filter(|r| r[0] < r[1]) {
-        let key = rows_key(preset, t, mesh_key, plan, rows)?;
+        let key = rows_key(plan, rows);
         let Some(unit) = kept_unit(preset, plan, cache, &key) else { return Ok(None) };
         for (o, u) in out.iter_mut().zip(unit) {
             if let (Some(o), Some(u)) = (o.as_mut(), u) {
@@ -421,7 +422,7 @@ pub fn joined_for(
     cache: &Cache,
 ) -> Result<Option<Vec<Option<RowsPlacement>>>, StageError> {
     let Some(bands) = crate::scene::terrain_stage::planned_bands(t)? else { return Ok(None) };
-    let Some(plan) = rows_plan(preset, t, &bands) else { return Ok(None) };
     let key = crate::scene::terrain_stage::mesh_key(preset, t)?;
-    joined(preset, t, &key, &plan, cache)
+    let Some(plan) = rows_plan(preset, t, &bands, &key)? else { return Ok(None) };
+    joined(preset, &plan, cache)
 }

@@ -485,23 +485,23 @@ fn parse(text: &str, path: &Path, inputs: Inputs) -> Result<Preset, PresetError>
                     "give each [[species]] its own name",
                 ));
             }
-            // one species' name followed by a word its files add: the two write one file
+            // one species' name followed by what another's file names add: the two write one file
             for (e, line) in species.iter().zip(&lines) {
                 let (first, then) = (&e.rules.name, &s.rules.name);
                 let clash = file_name_clash(first, then)
-                    .map(|w| (first, then, w))
-                    .or_else(|| file_name_clash(then, first).map(|w| (then, first, w)));
-                if let Some((shorter, longer, word)) = clash {
+                    .map(|f| (first, then, f))
+                    .or_else(|| file_name_clash(then, first).map(|f| (then, first, f)));
+                if let Some((shorter, longer, file)) = clash {
                     return Err(ctx.at(
                         &name_span,
                         format!(
-                            "species `{then}` and species `{first}` (line {line}) can write the same files: \
-                             `{shorter}`'s files are named `{shorter}_{word}…` too (a species' files add \
-                             `_LOD<n>`, `_v<n>`, `_far`, `_blade`, `_density`, `_normal` or `_mip<n>` to its \
-                             name), so one would overwrite the other's"
+                            "species `{then}` and species `{first}` (line {line}) can write the same file: \
+                             both can name one `{file}` (a species' files add `_LOD<n>`, `_v<n>`, `_far`, \
+                             `_blade`, `_density`, `_normal` or `_mip<n>` to its name), so one would \
+                             overwrite the other's"
                         ),
                         format!(
-                            "rename `{longer}` so that it is not `{shorter}` followed by `_{word}`, e.g. `{}`",
+                            "rename `{longer}` so that it is not `{shorter}` followed by such an ending, e.g. `{}`",
                             format!("{}-{}", &longer[..shorter.len()], &longer[shorter.len() + 1..])
                         ),
                     ));

@@ -142,13 +142,11 @@ fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>, Sl
                     units.push((Unit { name, entries }, Work::Band(t, k, plan.clone(), key.clone()), slot));
                 }
                 // the placements of the tile rows starting in each band, in that band's shard
-                if let Some(rows) = placement_rows::rows_plan(preset, t, &plan) {
+                if let Some(rows) = placement_rows::rows_plan(preset, t, &plan, &key)? {
                     let rows = std::rc::Rc::new(rows);
                     for (g, r) in rows.groups.iter().enumerate().filter(|(_, r)| r[0] < r[1]) {
-                        let entries = vec![Cache::entry_name(
-                            placement_rows::ROWS_STAGE,
-                            &placement_rows::rows_key(preset, t, &key, &rows, *r)?,
-                        )];
+                        let entries =
+                            vec![Cache::entry_name(placement_rows::ROWS_STAGE, &placement_rows::rows_key(&rows, *r))];
                         let name = format!("placements of tile rows {}-{} (band {g})", r[0], r[1]);
                         let work = Work::Placements(t, g, plan.clone(), rows.clone(), key.clone());
                         units.push((Unit { name, entries }, work, Slot::Band { k: g, of: plan.band_count() }));
@@ -270,7 +268,7 @@ pub fn build_shard(
                         surfaces.insert(k, made.clone());
                         Ok(made)
                     };
-                    placement_rows::rows_unit(preset, t, key, bands, rows, *g, &mut surfaces_of, &cache, force)?;
+                    placement_rows::rows_unit(preset, bands, rows, *g, &mut surfaces_of, &cache, force)?;
                 }
                 Work::Species(s) => {
                     plants_stage::species_unit(preset, s, &tmp, Some(SpeciesMemo { cache: &cache, force }))?;

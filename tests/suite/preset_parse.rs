@@ -776,9 +776,9 @@ fn duplicate_species_names_are_refused() {
     assert!(e.starts_with("p.toml:10:8: species `Oak` is declared twice; the first is at line 6 as `oak`"), "{e}");
 }
 
-/// A species named another's name followed by a word that species' files add (grass `g` writes
-/// `atlases/g_blade.png`, as a species `g_blade` would) is refused at its name, either way round and
-/// ignoring case; names that only look alike are not.
+/// A species named another's name followed by what that species' file names add (grass `g`
+/// writes `atlases/g_blade.png`, as a species `g_blade` would) is refused at its name, either way
+/// round and ignoring case; names that only look alike are not.
 #[test]
 fn species_whose_files_would_share_names_are_refused() {
     let species = |a: &str, ka: &str, b: &str, kb: &str| {
@@ -790,27 +790,30 @@ fn species_whose_files_would_share_names_are_refused() {
     let e = species_error(&species("g", "grass", "g_blade", "tree"));
     assert_eq!(
         e,
-        "p.toml:10:8: species `g_blade` and species `g` (line 6) can write the same files: `g`'s files are named \
-         `g_blade…` too (a species' files add `_LOD<n>`, `_v<n>`, `_far`, `_blade`, `_density`, `_normal` or \
+        "p.toml:10:8: species `g_blade` and species `g` (line 6) can write the same file: both can name one \
+         `g_blade` (a species' files add `_LOD<n>`, `_v<n>`, `_far`, `_blade`, `_density`, `_normal` or \
          `_mip<n>` to its name), so one would overwrite the other's; rename `g_blade` so that it is not `g` \
-         followed by `_blade`, e.g. `g-blade`"
+         followed by such an ending, e.g. `g-blade`"
     );
-    // the longer name first, other words, other case
-    for (a, b, word) in [
-        ("Oak_LOD0", "oak", "LOD0"),
-        ("oak", "oak_v2", "v2"),
-        ("oak", "OAK_V12_lod1", "V12"),
-        ("oak", "oak_far", "far"),
-        ("oak", "oak_density", "density"),
-        ("oak", "oak_normal", "normal"),
-        ("oak", "oak_mip3", "mip3"),
-        ("red_oak", "red_oak_lod2", "lod2"),
+    // the longer name first, other endings, other case
+    for (a, b, file) in [
+        ("Oak_LOD0", "oak", "Oak_LOD0"),
+        ("oak", "oak_v2", "oak_v2"),
+        ("oak", "OAK_V12_lod1", "OAK_V12_lod1"),
+        ("oak", "oak_far", "oak_far"),
+        ("oak", "oak_density", "oak_density"),
+        ("oak", "oak_normal", "oak_normal"),
+        ("oak", "oak_mip3", "oak_mip3"),
+        ("oak", "oak_blade_mip2", "oak_blade_mip2"),
+        ("red_oak", "red_oak_lod2", "red_oak_lod2"),
+        // variant 1 of a tree `g`
+        ("g", "g_v1", "g_v1"),
     ] {
         let e = species_error(&species(a, "tree", b, "grass"));
         assert!(e.starts_with("p.toml:10:8: species `"), "{e}");
-        assert!(e.contains(&format!("_{word}…` too")), "{a} / {b}: {e}");
+        assert!(e.contains(&format!("both can name one `{file}`")), "{a} / {b}: {e}");
     }
-    // alike, but no file of either can be the other's
+    // alike, but no file of either can be named as one of the other's
     for (a, b) in [
         ("oak", "oak_old"),
         ("oak", "oak_lodge"),
@@ -818,6 +821,9 @@ fn species_whose_files_would_share_names_are_refused() {
         ("oak", "oak-far"),
         ("oak", "oakv2"),
         ("oak_far", "oak_fa"),
+        ("oak", "oak_far_side"),
+        ("pine", "pine_normal_slope"),
+        ("pine", "pine_v2b"),
     ] {
         let text = with_species(&species(a, "tree", b, "grass"));
         assert!(parse_preset(&text, Path::new("p.toml")).is_ok(), "{a} / {b}");

@@ -87,29 +87,59 @@ pub fn check_species_name(name: &str) -> Result<(), String> {
     check_safe_name("species", "file", name)
 }
 
-/// The words a species' file names add to its name after `_` (`species/<name>_LOD<n>.glb`,
-/// `<name>_v<k>…` variants, `<name>_far.glb`, `atlases/<name>_blade.png`, `_density`, `_normal`,
-/// `_mip<k>` atlas levels).
-const FILE_SUFFIX_WORDS: [&str; 7] = ["lod#", "v#", "far", "blade", "density", "normal", "mip#"];
+/// What the plants stage adds to a species' name in its files' names (before the extension;
+/// `#` is a number): its chain and levels (`species/<name>.glb`, `<name>_LOD<n>.glb`), a tree's
+/// variants (`<name>_v<k>…`), a grass' far card (`_far`), its atlases and their mip levels
+/// (`atlases/<name>.png`, `_mip<k>`, `_blade`, `_blade_mip<k>`, `_density`, `_normal`).
+const FILE_ENDINGS: [&str; 12] = [
+    "",
+    "_LOD#",
+    "_v#",
+    "_v#_LOD#",
+    "_v#_mip#",
+    "_v#_normal",
+    "_far",
+    "_blade",
+    "_blade_mip#",
+    "_density",
+    "_normal",
+    "_mip#",
+];
 
-/// When species `longer` is named `shorter` followed by `_` and one of the words the plants stage
-/// adds to `shorter`'s file names (compared ignoring case, as file systems may), the word: the two
-/// species can write the same file (a grass `g` writes `atlases/g_blade.png`, and so does a
-/// species named `g_blade`), one overwriting the other's.
-pub fn file_name_clash<'a>(shorter: &str, longer: &'a str) -> Option<&'a str> {
+/// Whether `text` is `pattern` (`#`: one or more digits), ignoring ASCII case.
+fn fits(text: &[u8], pattern: &[u8]) -> bool {
+    match pattern.split_first() {
+        None => text.is_empty(),
+        Some((b'#', rest)) => {
+            let digits = text.iter().take_while(|c| c.is_ascii_digit()).count();
+            (1..=digits).any(|n| fits(&text[n..], rest))
+        }
+        Some((p, rest)) => text.first().is_some_and(|c| c.eq_ignore_ascii_case(p)) && fits(&text[1..], rest),
+    }
+}
+
+/// When species `shorter` and `longer` can write a file of the same name (compared ignoring case,
+/// as file systems may), the name shared, without its extension: `longer` is `shorter`, `_` and
+/// more, and some file of `longer`'s is named as one of `shorter`'s (a grass `g` writes
+/// `atlases/g_blade.png`, and so does a species named `g_blade`; a tree `x` writes
+/// `species/x_LOD0.glb`, as a species `x_LOD0` does). Kinds aside: a name that clashes with a
+/// file some kind writes is refused.
+pub fn file_name_clash(shorter: &str, longer: &str) -> Option<String> {
     if !longer.get(..shorter.len())?.eq_ignore_ascii_case(shorter) {
         return None;
     }
-    let word = longer[shorter.len()..].strip_prefix('_')?;
-    let word = word.split('_').next().unwrap_or(word);
-    let lower = word.to_ascii_lowercase();
-    let fits = FILE_SUFFIX_WORDS.iter().any(|w| match w.strip_suffix('#') {
-        Some(prefix) => lower
-            .strip_prefix(prefix)
-            .is_some_and(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit())),
-        None => lower == *w,
-    });
-    fits.then_some(word)
+    let rest = &longer[shorter.len()..];
+    if !rest.starts_with('_') {
+        return None;
+    }
+    for theirs in FILE_ENDINGS {
+        // one file of `longer`'s (any number will do: both sides take any)
+        let file = format!("{rest}{}", theirs.replace('#', "1"));
+        if FILE_ENDINGS[1..].iter().any(|ours| fits(file.as_bytes(), ours.as_bytes())) {
+            return Some(format!("{longer}{}", theirs.replace('#', "1")));
+        }
+    }
+    None
 }
 
 pub(super) fn check_safe_name(what: &str, used_as: &str, name: &str) -> Result<(), String> {
