@@ -375,3 +375,45 @@ fn a_species_over_its_limit_only_when_its_rows_are_joined_fails_the_merge_as_one
     assert!(error(&single).contains("max_instances"), "{}", text(&single));
     assert_eq!(error(&merged), error(&single), "{}", text(&merged));
 }
+
+/// Grass thinned by a snow cover is placed in the merge (the cover reads the whole terrain), and so
+/// is a species kept clear of it; the rocks before them are placed by rows in the shards. The
+/// merged scene is one build's.
+#[test]
+fn species_under_a_snow_cover_are_placed_in_the_merge_and_the_rest_by_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let cwd = dir.path();
+    write(cwd, "rock.obj", ROCK_OBJ);
+    let procedural = "procedural = { kind = \"ridged\", size = 1025, seed = 4, relief = 120.0 }";
+    let preset = format!(
+        "{}\n[[species]]\nname = \"pebble\"\nkind = \"mesh\"\nplacement = \"poisson\"\nmax_density = 0.002\n\
+         min_spacing = 6.0\nobj = \"rock.obj\"\nexclusion = {{ species = \"grass\", radius = 1.0 }}\n\n\
+         [snow]\natlas_cells = [2, 2]\ncell_px = 32\nnear_count = 50\nfar_count = 0\nsnow_line = 40.0\n\
+         snow_line_noise = 5.0\nnoise_scale = 80.0\ntransition = 10.0\nmask_px = 128\nthin_plants = 0.8\n",
+        banded_preset(procedural, 0.5)
+    );
+    write(cwd, "world.toml", &preset);
+    ok(&verdant_in(cwd, &["-q", "build", "world.toml", "--out", "single"]));
+    let mut shards = run_shards(cwd, "shards", 2);
+    for s in &shards {
+        let record = read_json(&cwd.join(s).join("world.shard.json"));
+        let names: Vec<&str> =
+            record["units"].as_array().unwrap().iter().map(|u| u["name"].as_str().unwrap()).collect();
+        assert_eq!(names.len(), 9, "3 bands, their 3 placements, 3 species: {names:?}");
+        // the placement units hold the rocks alone
+        for e in fs::read_dir(cwd.join(s).join(".cache")).unwrap() {
+            let e = e.unwrap().path();
+            if e.file_name().unwrap().to_string_lossy().starts_with("placements-rows-") {
+                let held = read_json(&e.join("stage.json"));
+                let species: Vec<&str> =
+                    held["species"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
+                assert_eq!(species, ["rock"]);
+            }
+        }
+    }
+    shards.reverse();
+    ok(&merge(cwd, &shards, "merged"));
+    assert_same_tree(&cwd.join("single/world"), &cwd.join("merged/world"));
+    let snow = read_json(&cwd.join("single/world/placements/grass.json"));
+    assert!(snow["rules"]["snow"].as_u64().unwrap() > 0, "the snow thins the grass: {snow}");
+}
