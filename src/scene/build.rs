@@ -304,12 +304,13 @@ fn build_into(
     let mut placed: (Option<Vec<PreviewLayer>>, Vec<(String, PathBuf)>, Option<String>) = (None, Vec::new(), None);
     let mut drawn: Option<(ViewStageReport, String)> = None;
     if let (true, Some(terrain), false) = (wants(Stage::Scatter), &terrain, preset.species.is_empty()) {
+        // a merge's placements, made by rows in the shards
+        let joined = || crate::scene::placement_rows::joined_for(preset, &cache);
         let ran = runner.run(&ScatterJob {
             preset,
             terrain,
             cover: cover_ref,
-            // a merge's placements, made by rows in the shards
-            rows: (settings.merging && !settings.force).then_some(&cache),
+            joined: (settings.merging && !settings.force).then_some(&joined as &dyn Fn() -> _),
         })?;
         let tables: Vec<(String, PathBuf)> =
             ran.report.species.iter().map(|s| (s.name.clone(), s.csv.clone())).collect();

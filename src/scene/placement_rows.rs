@@ -16,6 +16,7 @@ use crate::plants::SpeciesKind;
 use crate::scatter::{Instance, RuleCounts, SurfaceIndex, Tiling};
 use crate::scene::cache::{Cache, KeyBuilder};
 use crate::scene::error::StageError;
+use crate::scene::scatter_stage::Joined;
 use crate::scene::terrain_stage::{kept_band, BandPlan};
 use crate::scene::{Format, Preset, TerrainSettings};
 use crate::terrain::bands::build_band_window;
@@ -416,13 +417,10 @@ pub fn joined(
 
 /// [`joined`] for a preset's terrain: its band plan and rows plan worked out, `None` where it has
 /// none.
-pub fn joined_for(
-    preset: &Preset,
-    t: &TerrainSettings,
-    cache: &Cache,
-) -> Result<Option<Vec<Option<RowsPlacement>>>, StageError> {
+pub fn joined_for(preset: &Preset, cache: &Cache) -> Result<Option<Joined>, StageError> {
+    let Some(t) = &preset.terrain else { return Ok(None) };
     let Some(bands) = crate::scene::terrain_stage::planned_bands(t)? else { return Ok(None) };
     let key = crate::scene::terrain_stage::mesh_key(preset, t)?;
     let Some(plan) = rows_plan(preset, t, &bands, &key)? else { return Ok(None) };
-    joined(preset, &plan, cache)
+    Ok(joined(preset, &plan, cache)?.map(|all| all.into_iter().map(|p| p.map(|p| (p.instances, p.counts))).collect()))
 }

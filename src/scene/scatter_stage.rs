@@ -242,15 +242,19 @@ pub fn run_scatter_with_snow(
     run_scatter_joined(preset, terrain, scene_dir, snow_mask, None)
 }
 
+/// Placements made elsewhere, by species in preset order (`None`: placed here): each one's
+/// instances and rule counts.
+pub type Joined = Vec<Option<(Vec<Instance>, RuleCounts)>>;
+
 /// [`run_scatter_with_snow`], taking the placements of the species `joined` holds from there (a
-/// merge's units placed by rows, joined: [`crate::scene::placement_rows::joined`]) instead of
-/// placing them; their estimate and `max_instances` are checked as a run checks them.
+/// merge's units placed by rows, joined in row order) instead of placing them; their estimate and
+/// `max_instances` are checked as a run checks them.
 pub fn run_scatter_joined(
     preset: &Preset,
     terrain: &Scene,
     scene_dir: &Path,
     snow_mask: Option<&crate::snow::CoverMask>,
-    mut joined: Option<Vec<Option<crate::scene::placement_rows::RowsPlacement>>>,
+    mut joined: Option<Joined>,
 ) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
     let t0 = Instant::now();
     let surface = surface_of(terrain);
@@ -276,7 +280,7 @@ pub fn run_scatter_joined(
         };
         let from_rows = joined.as_mut().and_then(|j| j.get_mut(index)).and_then(Option::take);
         let mut result = match from_rows {
-            Some(rows) => {
+            Some((instances, counts)) => {
                 let r = &species.rules;
                 let estimate = crate::scatter::estimate_species(
                     &surface,
@@ -289,15 +293,15 @@ pub fn run_scatter_joined(
                     thinning,
                 )
                 .map_err(|e| bad_input(e.to_string()))?;
-                if rows.instances.len() > r.max_instances {
+                if instances.len() > r.max_instances {
                     let e = crate::scatter::ScatterError::TooMany {
                         species: r.name.clone(),
-                        count: rows.instances.len(),
+                        count: instances.len(),
                         limit: r.max_instances,
                     };
                     return Err(bad_input(e.to_string()));
                 }
-                crate::scatter::Scatter { instances: rows.instances, counts: rows.counts, estimate }
+                crate::scatter::Scatter { instances, counts, estimate }
             }
             None => scatter_species_snow(
                 &surface,
@@ -423,9 +427,9 @@ pub struct ScatterJob<'a> {
     pub terrain: &'a TerrainHandoff,
     /// The snow cover that thins the placements, and the snow stage's key.
     pub cover: Option<(&'a crate::snow::CoverMask, &'a str)>,
-    /// Where a merge finds the placements its shards made by rows (`None`: every species is
-    /// placed whole, as in any other build).
-    pub rows: Option<&'a crate::scene::cache::Cache>,
+    /// The placements made elsewhere, asked for when the stage runs (a merge's, made by rows in
+    /// its shards); `None`, or a call giving `None`: every species is placed here.
+    pub joined: Option<&'a dyn Fn() -> Result<Option<Joined>, StageError>>,
 }
 
 impl StageJob for ScatterJob<'_> {
@@ -449,10 +453,7 @@ impl StageJob for ScatterJob<'_> {
 
     fn run(&self, dir: &Path) -> Result<(ScatterStageReport, Vec<Placed>), SceneBuildError> {
         let cover = self.cover.map(|(m, _)| m);
-        let joined = match (self.rows, &self.preset.terrain) {
-            (Some(cache), Some(t)) => crate::scene::placement_rows::joined_for(self.preset, t, cache)?,
-            _ => None,
-        };
+        let joined = self.joined.map(|f| f()).transpose()?.flatten();
         Ok(run_scatter_joined(self.preset, self.terrain.scene()?, dir, cover, joined)?)
     }
 }
