@@ -10,10 +10,20 @@ use std::path::PathBuf;
 use crate::mesh::Scene;
 use crate::plants::SpeciesKind;
 use crate::scatter::density::DensityMap;
+use crate::scatter::SurfaceIndex;
 use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::error::StageError;
 use crate::scene::{PlantLook, Preset, SpeciesSettings, TreeLook};
 use crate::terrain::vegetation::{Ground, SpeciesCover, VegetationCover};
+
+/// The terrain surface of a terrain scene, where the rules are read and instances stand: every
+/// primitive of every mesh (skirts and base are vertical or face down; the surface index skips
+/// those triangles).
+pub fn surface_of(terrain: &Scene) -> SurfaceIndex {
+    let parts: Vec<(&[[f32; 3]], &[u32])> =
+        terrain.meshes.iter().flat_map(|m| m.primitives.iter().map(|p| (&p.positions[..], &p.indices[..]))).collect();
+    SurfaceIndex::from_parts(&parts)
+}
 
 /// A map the rules read, decoded; errors name the file and are the input's fault.
 fn load(path: &Option<PathBuf>, stage: &'static str) -> Result<Option<DensityMap>, StageError> {
@@ -87,7 +97,7 @@ pub fn cover(preset: &Preset, terrain: &Scene, size: [u32; 2]) -> Option<Vegetat
     if preset.species.is_empty() {
         return None;
     }
-    let surface = crate::scene::scatter_stage::surface_of(terrain);
+    let surface = surface_of(terrain);
     let extent = surface.bounds();
     let tiling = crate::scatter::Tiling::new(extent, preset.scatter.tile_m).ok()?;
     let vegetation = vegetation_map(preset, "terrain").ok()?;

@@ -119,14 +119,6 @@ pub fn scatter_key(preset: &Preset, terrain_key: &str) -> Result<String, StageEr
     Ok(k.finish())
 }
 
-/// The terrain surface of a terrain scene: every primitive of every mesh (skirts and base are
-/// vertical or face down; the surface index skips those triangles).
-pub fn surface_of(terrain: &Scene) -> SurfaceIndex {
-    let parts: Vec<(&[[f32; 3]], &[u32])> =
-        terrain.meshes.iter().flat_map(|m| m.primitives.iter().map(|p| (&p.positions[..], &p.indices[..]))).collect();
-    SurfaceIndex::from_parts(&parts)
-}
-
 /// The size of the terrain's weight map (its base-colour texture, which has the same texels), so
 /// the density maps share its texel grid; 512 on the long side when the terrain has none.
 fn layer_map_size(terrain: &Scene, extent: [f64; 4]) -> [u32; 2] {
@@ -257,7 +249,7 @@ pub fn run_scatter_joined(
     mut joined: Option<Joined>,
 ) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
     let t0 = Instant::now();
-    let surface = surface_of(terrain);
+    let surface = crate::scene::ground_cover::surface_of(terrain);
     let extent = surface.bounds();
     let mut placed: Vec<Placed> = Vec::new();
     let mut reports = Vec::new();
