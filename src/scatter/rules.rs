@@ -398,22 +398,19 @@ pub fn estimate(rules: &Rules, samples: usize) -> f64 {
 /// `[first, end)`: never more than the whole, so a run of rows refusing on it refuses only what
 /// the whole run refuses too; it reads the surface within those rows alone.
 pub fn estimate_in_rows(rules: &Rules, samples: usize, [first, end]: [u32; 2]) -> f64 {
-    let region = rules.tiling.extent;
-    let n = samples.max(1);
-    let (w, h) = (region[2] - region[0], region[3] - region[1]);
-    if !(w > 0.0 && h > 0.0) {
-        return 0.0;
-    }
-    let sum: f64 = (0..n)
-        .map(|j| region[1] + (j as f64 + 0.5) / n as f64 * h)
-        .filter(|&z| (first..end).contains(&rules.tiling.tile_xz(region[0], z).1))
-        .map(|z| (0..n).map(|i| rules.weight(region[0] + (i as f64 + 0.5) / n as f64 * w, z)).sum::<f64>())
-        .sum();
-    sum / (n * n) as f64
+    let x0 = rules.tiling.extent[0];
+    mean_weight(rules, rules.tiling.extent, samples, |z| (first..end).contains(&rules.tiling.tile_xz(x0, z).1))
 }
 
 /// Mean of density · mask · rules over a region by the midpoint rule on `samples`² points.
 pub fn estimate_region(rules: &Rules, region: [f64; 4], samples: usize) -> f64 {
+    mean_weight(rules, region, samples, |_| true)
+}
+
+/// Σ [`Rules::weight`] over the midpoints of a `samples`² grid on `region` whose z `row` keeps,
+/// over all `samples`² points: rows in parallel, summed in row order (the same float result at
+/// any thread count).
+fn mean_weight(rules: &Rules, region: [f64; 4], samples: usize, row: impl Fn(f64) -> bool + Sync) -> f64 {
     use rayon::prelude::*;
     let n = samples.max(1);
     let (w, h) = (region[2] - region[0], region[3] - region[1]);
@@ -424,11 +421,14 @@ pub fn estimate_region(rules: &Rules, region: [f64; 4], samples: usize) -> f64 {
         .into_par_iter()
         .map(|j| {
             let z = region[1] + (j as f64 + 0.5) / n as f64 * h;
+            if !row(z) {
+                return 0.0;
+            }
             (0..n).map(|i| rules.weight(region[0] + (i as f64 + 0.5) / n as f64 * w, z)).sum::<f64>()
         })
         .collect::<Vec<f64>>()
         .iter()
-        .sum(); // summed in row order: the same float result at any thread count
+        .sum();
     sum / (n * n) as f64
 }
 
