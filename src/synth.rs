@@ -131,7 +131,7 @@ fn fade(t: f64) -> f64 {
 }
 
 /// Gradient noise at (x, y) in lattice units, roughly in [−1, 1]; zero at lattice points. Maps
-/// evaluate it a row at a time ([`RowNoise`], the same arithmetic); this per-sample form is the
+/// evaluate it a row at a time ([`octave_row`], the same arithmetic); this per-sample form is the
 /// reference the tests hold that to.
 #[cfg(test)]
 fn gradient_noise(octave_seed: u64, x: f64, y: f64) -> f64 {
@@ -185,60 +185,63 @@ fn combine(kind: NoiseKind, octaves: &[Octave], values: &[f64]) -> f64 {
     }
 }
 
-/// [`gradient_noise`] along one row of a map, octave by octave: what depends on the row alone (its
-/// lattice row, the fade across it) is worked out once, and a lattice cell's four corner gradients
-/// (four hashes) once per cell rather than once per sample (the widest octaves span thousands of
-/// samples a cell). The arithmetic per sample is [`gradient_noise`]'s, operation for operation, so
-/// the values are the same bits (a test compares them).
-struct RowNoise<'a> {
-    octaves: &'a [Octave],
-    /// Per octave: fy, fade(fy), the lattice row, and the cell whose corners `corners` holds.
-    rows: Vec<(f64, f64, i64)>,
-    cells: Vec<Option<i64>>,
-    /// Per octave: gradients at (ix, iy), (ix + 1, iy), (ix, iy + 1), (ix + 1, iy + 1).
-    corners: Vec<[(f64, f64); 4]>,
+/// `x.floor()` for the lattice coordinates of a map (finite, within ±2⁶³): the same value, bit for
+/// bit, without the library call (a baseline x86-64 build has no floor instruction; the noise
+/// takes two per sample and octave otherwise).
+#[inline]
+fn floor_exact(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x {
+        t - 1.0
+    } else {
+        // (the truncation's sign: −0.0 stays −0.0)
+        t.copysign(x)
+    }
 }
 
-impl<'a> RowNoise<'a> {
-    fn new(octaves: &'a [Octave], j: usize) -> RowNoise<'a> {
-        let rows = octaves
-            .iter()
-            .map(|&(_, _, oy, f, _)| {
-                let y = j as f64 * f + oy;
-                let yf = y.floor();
-                let fy = y - yf;
-                (fy, fade(fy), yf as i64)
-            })
-            .collect();
-        RowNoise { octaves, rows, cells: vec![None; octaves.len()], corners: vec![[(0.0, 0.0); 4]; octaves.len()] }
-    }
-
-    /// Octave `o`'s [`gradient_noise`] at sample `i` of the row.
-    #[inline]
-    fn at(&mut self, o: usize, i: usize) -> f64 {
-        let (s, ox, _, f, _) = self.octaves[o];
-        let (fy, v, iy) = self.rows[o];
-        let x = i as f64 * f + ox;
-        let xf = x.floor();
+/// One octave's [`gradient_noise`] along row `j` of a map, into `out` (one value per sample). What
+/// depends on the row alone (its lattice row, the fade across it) is worked out once, and a
+/// lattice cell's four corner gradients (four hashes) once per cell: the samples of a cell are a
+/// run found from the cell's right edge, evaluated in a loop without branches. The arithmetic per
+/// sample is [`gradient_noise`]'s, operation for operation, so the values are the same bits (a
+/// test compares them).
+fn octave_row(&(s, ox, oy, f, _): &Octave, j: usize, out: &mut [f64]) {
+    let y = j as f64 * f + oy;
+    let yf = floor_exact(y);
+    let (fy, iy) = (y - yf, yf as i64);
+    let v = fade(fy);
+    let gradient =
+        |cx: i64, cy: i64| GRADIENTS[(mix64(s ^ mix64((cx as u64) << 32 ^ (cy as u64 & 0xFFFF_FFFF))) >> 61) as usize];
+    let x_of = |i: usize| i as f64 * f + ox;
+    let n = out.len();
+    let mut i = 0;
+    while i < n {
+        let xf = floor_exact(x_of(i));
         let ix = xf as i64;
-        let fx = x - xf;
-        if self.cells[o] != Some(ix) {
-            let g = |cx: i64, cy: i64| {
-                GRADIENTS[(mix64(s ^ mix64((cx as u64) << 32 ^ (cy as u64 & 0xFFFF_FFFF))) >> 61) as usize]
-            };
-            self.corners[o] = [g(ix, iy), g(ix + 1, iy), g(ix, iy + 1), g(ix + 1, iy + 1)];
-            self.cells[o] = Some(ix);
+        // the run: samples from i whose x is below the cell's right edge (x grows with i)
+        let next = xf + 1.0;
+        let mut end = ((next - ox) / f).max(0.0).min(n as f64) as usize;
+        while end < n && x_of(end) < next {
+            end += 1;
         }
-        let [g00, g10, g01, g11] = self.corners[o];
-        let dot = |(gx, gy): (f64, f64), dx: f64, dy: f64| gx * dx + gy * dy;
-        let n00 = dot(g00, fx, fy);
-        let n10 = dot(g10, fx - 1.0, fy);
-        let n01 = dot(g01, fx, fy - 1.0);
-        let n11 = dot(g11, fx - 1.0, fy - 1.0);
-        let u = fade(fx);
-        let a = n00 + u * (n10 - n00);
-        let b = n01 + u * (n11 - n01);
-        (a + v * (b - a)) * std::f64::consts::SQRT_2
+        while end > i + 1 && x_of(end - 1) >= next {
+            end -= 1;
+        }
+        let end = end.max(i + 1);
+        let [(g00x, g00y), (g10x, g10y), (g01x, g01y), (g11x, g11y)] =
+            [gradient(ix, iy), gradient(ix + 1, iy), gradient(ix, iy + 1), gradient(ix + 1, iy + 1)];
+        for (k, o) in out[i..end].iter_mut().enumerate() {
+            let fx = x_of(i + k) - xf;
+            let n00 = g00x * fx + g00y * fy;
+            let n10 = g10x * (fx - 1.0) + g10y * fy;
+            let n01 = g01x * fx + g01y * (fy - 1.0);
+            let n11 = g11x * (fx - 1.0) + g11y * (fy - 1.0);
+            let u = fade(fx);
+            let a = n00 + u * (n10 - n00);
+            let b = n01 + u * (n11 - n01);
+            *o = (a + v * (b - a)) * std::f64::consts::SQRT_2;
+        }
+        i = end;
     }
 }
 
@@ -255,9 +258,9 @@ pub fn noise_map(kind: NoiseKind, size: usize, cell_size_m: f64, relief_m: f64, 
     let n = side * side;
     let mut words = vec![0u32; 2 * n];
     words.par_chunks_mut(2 * side).enumerate().for_each_init(
-        || vec![0.0f64; side],
-        |raw, (j, row)| {
-            raw_row(kind, &octaves, j, raw);
+        || (vec![0.0f64; side], Vec::new()),
+        |(raw, scratch), (j, row)| {
+            raw_row(kind, &octaves, j, raw, scratch);
             for (pair, v) in row.chunks_exact_mut(2).zip(raw.iter()) {
                 let bits = v.to_bits();
                 pair[0] = bits as u32;
@@ -299,14 +302,21 @@ fn octave_table(side: usize, seed: u64) -> Vec<Octave> {
     octaves
 }
 
-/// Row `j`'s raw values (before the map is scaled to its relief) into `out` (one per sample).
-fn raw_row(kind: NoiseKind, octaves: &[Octave], j: usize, out: &mut [f64]) {
-    let mut noise = RowNoise::new(octaves, j);
-    let mut values = Vec::with_capacity(octaves.len());
+/// Row `j`'s raw values (before the map is scaled to its relief) into `out` (one per sample),
+/// each octave's row first ([`octave_row`], into `scratch`), then summed per sample.
+fn raw_row(kind: NoiseKind, octaves: &[Octave], j: usize, out: &mut [f64], scratch: &mut Vec<f64>) {
+    let side = out.len();
+    scratch.resize(octaves.len() * side, 0.0);
+    for (octave, row) in octaves.iter().zip(scratch.chunks_exact_mut(side.max(1))) {
+        octave_row(octave, j, row);
+    }
+    let mut values = [0.0f64; NOISE_OCTAVES as usize];
+    let values = &mut values[..octaves.len()];
     for (i, v) in out.iter_mut().enumerate() {
-        values.clear();
-        values.extend((0..octaves.len()).map(|o| noise.at(o, i)));
-        *v = combine(kind, octaves, &values);
+        for (o, value) in values.iter_mut().enumerate() {
+            *value = scratch[o * side + i];
+        }
+        *v = combine(kind, octaves, values);
     }
 }
 
@@ -333,9 +343,9 @@ pub fn noise_range(kind: NoiseKind, size: usize, seed: u64) -> (f64, f64) {
     (0..side)
         .into_par_iter()
         .map_init(
-            || vec![0.0f64; side],
-            |row, j| {
-                raw_row(kind, &octaves, j, row);
+            || (vec![0.0f64; side], Vec::new()),
+            |(row, scratch), j| {
+                raw_row(kind, &octaves, j, row, scratch);
                 row.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)))
             },
         )
@@ -359,13 +369,15 @@ pub fn noise_rows(
     let octaves = octave_table(side, seed);
     let scale = if hi > lo { relief_m / (hi - lo) } else { 0.0 };
     let mut heights = vec![0.0f32; (rows[1] - rows[0] + 1) * side];
-    heights.par_chunks_mut(side).enumerate().for_each(|(k, out)| {
-        let mut row = vec![0.0f64; side];
-        raw_row(kind, &octaves, rows[0] + k, &mut row);
-        for (h, &v) in out.iter_mut().zip(&row) {
-            *h = (((v - lo) * scale) as f32).clamp(0.0, relief_m as f32);
-        }
-    });
+    heights.par_chunks_mut(side).enumerate().for_each_init(
+        || (vec![0.0f64; side], Vec::new()),
+        |(row, scratch), (k, out)| {
+            raw_row(kind, &octaves, rows[0] + k, row, scratch);
+            for (h, &v) in out.iter_mut().zip(row.iter()) {
+                *h = (((v - lo) * scale) as f32).clamp(0.0, relief_m as f32);
+            }
+        },
+    );
     Some(Heightfield { width: side, height: rows[1] - rows[0] + 1, heights, cell_size_m, exact: None })
 }
 
@@ -444,48 +456,70 @@ mod tests {
         }
     }
 
-    /// The row-wise evaluation ([`RowNoise`], [`combine`]) gives the bits the per-sample noise
-    /// gives ([`gradient_noise`] at every octave, summed as the kinds sum), on rows and columns
-    /// far apart and across many lattice cells of every octave.
+    /// The row-wise evaluation ([`octave_row`], [`raw_row`]) gives the bits the per-sample noise
+    /// gives ([`gradient_noise`] at every octave, summed as the kinds sum), at every sample of rows
+    /// far apart, across every lattice cell of every octave, and on maps of odd sizes whose cells
+    /// end between samples.
     #[test]
     fn row_noise_is_the_per_sample_noise_bit_for_bit() {
-        let side = 8193usize;
-        let base_wavelength = (side - 1) as f64 / 2.0;
-        let (mut frequency, mut amplitude) = (1.0 / base_wavelength, 1.0);
-        let mut octaves = Vec::new();
-        for o in 0..NOISE_OCTAVES {
-            if o > 0 && frequency > 0.5 {
-                break;
+        for (side, seed, rows) in [
+            (8193usize, 77u64, vec![0usize, 1, 4095, 8191, 8192]),
+            (1001, 5, vec![0, 333, 1000]),
+            (37, 9, vec![0, 17, 36]),
+            (2, 1, vec![0, 1]),
+        ] {
+            let octaves = octave_table(side, seed);
+            if side == 8193 {
+                assert_eq!(octaves.len(), NOISE_OCTAVES as usize, "every octave fits an 8193² map");
             }
-            let (s, ox, oy) = octave_params(77, o);
-            octaves.push((s, ox, oy, frequency, amplitude));
-            frequency *= LACUNARITY;
-            amplitude *= GAIN;
-        }
-        assert_eq!(octaves.len(), NOISE_OCTAVES as usize, "every octave fits an 8193² map");
-        for j in [0usize, 1, 4095, 8191, 8192] {
-            let mut noise = RowNoise::new(&octaves, j);
-            for i in (0..side).step_by(7).chain([side - 1]) {
-                let values: Vec<f64> = (0..octaves.len()).map(|o| noise.at(o, i)).collect();
-                let (x, y) = (i as f64, j as f64);
-                let reference: Vec<f64> =
-                    octaves.iter().map(|&(s, ox, oy, f, _)| gradient_noise(s, x * f + ox, y * f + oy)).collect();
-                assert_eq!(
-                    values.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-                    reference.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-                    "({i}, {j})"
-                );
-                let fbm: f64 = octaves.iter().zip(&reference).map(|(&(.., a), &n)| a * n).sum();
-                assert_eq!(combine(NoiseKind::Fbm, &octaves, &values).to_bits(), fbm.to_bits());
-                let (mut ridged, mut weight) = (0.0f64, 1.0f64);
-                for (&(.., a), &n) in octaves.iter().zip(&reference) {
-                    let r = 1.0 - n.abs();
-                    let signal = r * r * weight;
-                    weight = (signal * 2.0).clamp(0.0, 1.0);
-                    ridged += signal * a;
+            let mut scratch = Vec::new();
+            for j in rows {
+                let mut fbm_row = vec![0.0f64; side];
+                let mut ridged_row = vec![0.0f64; side];
+                raw_row(NoiseKind::Fbm, &octaves, j, &mut fbm_row, &mut scratch);
+                raw_row(NoiseKind::Ridged, &octaves, j, &mut ridged_row, &mut scratch);
+                let mut by_octave = vec![vec![0.0f64; side]; octaves.len()];
+                for (octave, row) in octaves.iter().zip(&mut by_octave) {
+                    octave_row(octave, j, row);
                 }
-                assert_eq!(combine(NoiseKind::Ridged, &octaves, &values).to_bits(), ridged.to_bits());
+                for i in 0..side {
+                    let (x, y) = (i as f64, j as f64);
+                    let reference: Vec<f64> =
+                        octaves.iter().map(|&(s, ox, oy, f, _)| gradient_noise(s, x * f + ox, y * f + oy)).collect();
+                    let values: Vec<f64> = by_octave.iter().map(|row| row[i]).collect();
+                    assert_eq!(
+                        values.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                        reference.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                        "side {side}: ({i}, {j})"
+                    );
+                    let fbm: f64 = octaves.iter().zip(&reference).map(|(&(.., a), &n)| a * n).sum();
+                    assert_eq!(fbm_row[i].to_bits(), fbm.to_bits(), "side {side}: ({i}, {j})");
+                    let (mut ridged, mut weight) = (0.0f64, 1.0f64);
+                    for (&(.., a), &n) in octaves.iter().zip(&reference) {
+                        let r = 1.0 - n.abs();
+                        let signal = r * r * weight;
+                        weight = (signal * 2.0).clamp(0.0, 1.0);
+                        ridged += signal * a;
+                    }
+                    assert_eq!(ridged_row[i].to_bits(), ridged.to_bits(), "side {side}: ({i}, {j})");
+                }
             }
+        }
+    }
+
+    /// [`floor_exact`] is `floor` on the coordinates the noise takes, and on the awkward values
+    /// around them (integers, just below and above, negative zero, halves).
+    #[test]
+    fn floor_exact_is_floor() {
+        let mut xs = vec![0.0f64, -0.0, 0.5, -0.5, 1.0, -1.0, 1.0 - f64::EPSILON, 4096.0, 1e15 + 0.5, -1e15 - 0.5];
+        let mut state = 3u64;
+        for _ in 0..100_000 {
+            state = mix64(state);
+            let x = (state >> 11) as f64 / (1u64 << 53) as f64 * 20_000.0 - 10_000.0;
+            xs.extend([x, x.floor(), x.floor() - f64::EPSILON * x.abs(), x.next_up(), x.next_down()]);
+        }
+        for x in xs {
+            assert_eq!(floor_exact(x).to_bits(), x.floor().to_bits(), "{x:e}");
         }
     }
 
