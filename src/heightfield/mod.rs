@@ -10,7 +10,9 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+mod rows;
 mod window;
+pub use rows::MapRows;
 pub use window::{dimensions_of_file, kept_rows_from, read_kept_rows, reads_by_range, KeptRows};
 
 /// A regular grid of heights in metres. Sample (i, j) — column i, row j — lies at
@@ -191,30 +193,13 @@ impl Heightfield {
     /// wide has zero slope along that axis). Taken from the samples, not from any triangulation, so
     /// shading does not show the mesh. Panics if (i, j) is out of range, like [`Heightfield::at`].
     pub fn normal_at(&self, i: usize, j: usize) -> [f64; 3] {
-        // (lo, hi) neighbours along one axis, clamped to the map: central inside, one-sided at edges
-        let span = |k: usize, n: usize| (k.saturating_sub(1), (k + 1).min(n.saturating_sub(1)));
-        let (i0, i1) = span(i, self.width);
-        let (j0, j1) = span(j, self.height);
-        let slope = |a: f32, b: f32, steps: usize| {
-            if steps == 0 {
-                0.0
-            } else {
-                (b as f64 - a as f64) / (steps as f64 * self.cell_size_m)
-            }
-        };
-        let dhdx = slope(self.at(i0, j), self.at(i1, j), i1 - i0);
-        let dhdz = slope(self.at(i, j0), self.at(i, j1), j1 - j0);
-        let len = (dhdx * dhdx + 1.0 + dhdz * dhdz).sqrt();
-        [-dhdx / len, 1.0 / len, -dhdz / len]
+        MapRows::whole(self).normal_at(i, j)
     }
 
     /// The four samples around continuous sample coordinates (s, t) (clamped to the map) and the
     /// fractions between them: ((i0, j0), (i1, j1), (fs, ft)).
     fn bilinear_cell(&self, s: f64, t: f64) -> ((usize, usize), (usize, usize), (f64, f64)) {
-        let (i0, j0) = (s.floor().max(0.0) as usize, t.floor().max(0.0) as usize);
-        let (i0, j0) = (i0.min(self.width - 1), j0.min(self.height - 1));
-        let (i1, j1) = ((i0 + 1).min(self.width - 1), (j0 + 1).min(self.height - 1));
-        ((i0, j0), (i1, j1), ((s - i0 as f64).clamp(0.0, 1.0), (t - j0 as f64).clamp(0.0, 1.0)))
+        MapRows::whole(self).bilinear_cell(s, t)
     }
 
     /// The height bilinearly interpolated at continuous sample coordinates (s, t) (x = s·cell,
@@ -229,13 +214,7 @@ impl Heightfield {
     /// The unit normal at continuous sample coordinates (s, t): the four surrounding samples'
     /// [`Heightfield::normal_at`] bilinearly interpolated and normalised (straight up if they cancel).
     pub fn normal_bilinear(&self, s: f64, t: f64) -> [f64; 3] {
-        let ((i0, j0), (i1, j1), (fs, ft)) = self.bilinear_cell(s, t);
-        let (a, b, c, d) =
-            (self.normal_at(i0, j0), self.normal_at(i1, j0), self.normal_at(i0, j1), self.normal_at(i1, j1));
-        let n: [f64; 3] = std::array::from_fn(|k| {
-            (a[k] * (1.0 - fs) + b[k] * fs) * (1.0 - ft) + (c[k] * (1.0 - fs) + d[k] * fs) * ft
-        });
-        crate::math::normalize3(n).unwrap_or([0.0, 1.0, 0.0])
+        MapRows::whole(self).normal_bilinear(s, t)
     }
 }
 

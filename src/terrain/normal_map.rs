@@ -16,7 +16,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::heightfield::Heightfield;
+use crate::heightfield::{Heightfield, MapRows};
 use crate::mesh::{Primitive, Scene, Texture};
 
 /// What the normal map corrects, measured at every texel centre the terrain's surface covers.
@@ -96,42 +96,46 @@ fn texel_hi(uv: &[[f64; 2]; 3], c: usize, n: u32) -> usize {
     ((m * n as f64 - 0.5).ceil().max(0.0) as usize + 1).min(n as usize)
 }
 
-/// Bakes the normal map of the terrain `scene` (built from `hf`) at `map_px` texels and puts it
-/// on the scene: TANGENT on every primitive of a material named `terrain`, the map (PNG, data not
-/// colour) as those materials' normal texture, named `{name}_normal`. Texel (x, y) is the point at
-/// uv ((x + ½)/W, (y + ½)/H) of the surface (the top faces; skirts and the base, which the planar
-/// UVs map onto the border or the whole map again, do not write it). Returns what the map corrects.
-pub fn bake_normal_map(
-    hf: &Heightfield,
-    scene: &mut Scene,
-    name: &str,
-    map_px: [u32; 2],
-) -> Result<NormalMapReport, String> {
-    let terrain: Vec<bool> = scene.materials.iter().map(|m| m.name == "terrain").collect();
-    let uses_map = |p: &Primitive| p.material.is_some_and(|m| terrain.get(m).copied().unwrap_or(false));
-    for p in scene.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()).filter(|p| uses_map(p)) {
-        if p.normals.len() != p.positions.len() || p.uvs.len() != p.positions.len() {
-            return Err(format!("terrain mesh `{name}` has a primitive without normals or UVs"));
-        }
-        p.tangents = p.normals.iter().map(|&n| terrain_tangent(n)).collect();
-    }
-    let [w, h] = map_px;
-    let (wu, hu) = (w as usize, h as usize);
-    let span = |n: usize| (n.max(2) - 1) as f64;
-    // The surface's top faces (skirt walls have no extent in uv, the base faces down), in scene
-    // order, with their uv rows.
-    struct Face {
-        uv: [[f64; 2]; 3],
-        area: f64,
-        normals: [[f32; 3]; 3],
-        tangents: [[f32; 4]; 3],
-        rows: (usize, usize),
-    }
+/// One texel row's share of the figures: the angles summed in the order the row's texels were
+/// baked (faces in scene order), the largest, and the texels covered. A map's figures are its
+/// rows', summed row by row from the top, so rows baked apart (a band's unit) give the same.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RowFigures {
+    pub sum_without: f64,
+    pub max_without: f64,
+    pub sum_with: f64,
+    pub max_with: f64,
+    pub texels: u64,
+}
+
+/// Texel rows `first .. first + figures.len()` of a normal map `width` texels wide, baked: their
+/// texels (row-major) and each row's figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TexelRows {
+    pub first: usize,
+    pub width: usize,
+    pub texels: Vec<[u8; 4]>,
+    pub figures: Vec<RowFigures>,
+}
+
+/// A top face of the surface with its uv rows.
+struct Face {
+    uv: [[f64; 2]; 3],
+    area: f64,
+    normals: [[f32; 3]; 3],
+    tangents: [[f32; 4]; 3],
+    rows: (usize, usize),
+}
+
+/// The surface's top faces of `primitives` (in order; skirt walls have no extent in uv, the base
+/// faces down), with their uv rows in a map `h` texels high. Tangents are [`terrain_tangent`] of
+/// the vertex normals, as [`add_tangents`] writes them.
+fn surface_faces<'p>(primitives: impl Iterator<Item = &'p Primitive>, h: u32) -> Vec<Face> {
     let mut faces: Vec<Face> = Vec::new();
-    for p in scene.meshes.iter().flat_map(|m| &m.primitives).filter(|p| uses_map(p)) {
+    for p in primitives {
         for tri in p.indices.chunks_exact(3) {
             let v = [tri[0] as usize, tri[1] as usize, tri[2] as usize];
-            if v.iter().any(|&k| k >= p.positions.len()) {
+            if v.iter().any(|&k| k >= p.positions.len() || k >= p.normals.len() || k >= p.uvs.len()) {
                 continue;
             }
             let pos = v.map(|k| p.positions[k].map(|c| c as f64));
@@ -146,26 +150,60 @@ pub fn bake_normal_map(
                 continue;
             }
             let rows = (texel_lo(&uv, 1, h), texel_hi(&uv, 1, h));
-            faces.push(Face { uv, area, normals: v.map(|k| p.normals[k]), tangents: v.map(|k| p.tangents[k]), rows });
+            let normals = v.map(|k| p.normals[k]);
+            faces.push(Face { uv, area, normals, tangents: normals.map(terrain_tangent), rows });
         }
     }
+    faces
+}
+
+/// Texel rows `rows` of the normal map (`map_px` texels) of the surface `primitives` (the top
+/// faces of a terrain's chunks, in scene order, with normals and UVs), shading the height field's
+/// normals `field` ([`MapRows`]: every sample row those texels read must be held). Texel (x, y) is
+/// the point at uv ((x + ½)/W, (y + ½)/H) of the surface; it takes the first face covering its
+/// centre, and stays (0, 0, 1) where none does.
+pub fn bake_rows<'p>(
+    primitives: impl Iterator<Item = &'p Primitive>,
+    field: &MapRows,
+    map_px: [u32; 2],
+    rows: std::ops::Range<usize>,
+) -> TexelRows {
+    let [w, h] = map_px;
+    let (wu, hu) = (w as usize, h as usize);
+    let rows = rows.start.min(hu)..rows.end.min(hu);
+    let faces = surface_faces(primitives, h);
+    let span = |n: usize| (n.max(2) - 1) as f64;
+    let (sx, sy) = (span(field.hf.width), span(field.map_height));
     // Bands of texel rows baked in parallel, each by every face reaching it in scene order: a
     // texel takes the first face covering its centre, as one pass over the faces would give it;
-    // the figures are summed per band, bands in order (the same at any thread count).
-    let band = TEXEL_ROWS_PER_BAND.min(hu.max(1));
-    let bands: Vec<(Vec<[u8; 4]>, [f64; 4], usize)> = (0..hu.div_ceil(band))
+    // the figures are summed per row (the same at any thread count).
+    let band = TEXEL_ROWS_PER_BAND;
+    let bands = rows.len().div_ceil(band);
+    // each band's faces, in scene order (a face is listed in every band its rows reach)
+    let mut reaching: Vec<Vec<u32>> = vec![Vec::new(); bands];
+    for (k, f) in faces.iter().enumerate() {
+        let (lo, hi) = (f.rows.0.max(rows.start), f.rows.1.min(rows.end));
+        if lo < hi {
+            for list in &mut reaching[(lo - rows.start) / band..=(hi - 1 - rows.start) / band] {
+                list.push(k as u32);
+            }
+        }
+    }
+    let baked: Vec<(Vec<[u8; 4]>, Vec<RowFigures>)> = reaching
         .into_par_iter()
-        .map(|b| {
-            let (y0, y1) = (b * band, ((b + 1) * band).min(hu));
+        .enumerate()
+        .map(|(b, reaching)| {
+            let y0 = rows.start + b * band;
+            let y1 = (y0 + band).min(rows.end);
             // (0, 0, 1) until a surface triangle covers the texel
             let mut texels = vec![[128u8, 128, 255, 255]; (y1 - y0) * wu];
             let mut covered = vec![false; (y1 - y0) * wu];
-            let (mut sum_without, mut max_without, mut sum_with, mut max_with) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-            let mut count = 0usize;
-            for f in faces.iter().filter(|f| f.rows.0 < y1 && f.rows.1 > y0) {
+            let mut figures = vec![RowFigures::default(); y1 - y0];
+            for f in reaching.into_iter().map(|k| &faces[k as usize]) {
                 let uv = &f.uv;
                 for y in f.rows.0.max(y0)..f.rows.1.min(y1) {
                     let tv = (y as f64 + 0.5) / h as f64;
+                    let row = &mut figures[y - y0];
                     for x in texel_lo(uv, 0, w)..texel_hi(uv, 0, w) {
                         let tu = (x as f64 + 0.5) / w as f64;
                         let b1 = ((tu - uv[0][0]) * (uv[2][1] - uv[0][1]) - (uv[2][0] - uv[0][0]) * (tv - uv[0][1]))
@@ -182,7 +220,7 @@ pub fn bake_normal_map(
                         }
                         covered[k] = true;
                         let (t, b, n) = frame(f.normals, f.tangents, bary);
-                        let field = hf.normal_bilinear(tu * span(hf.width), tv * span(hf.height));
+                        let field = field.normal_bilinear(tu * sx, tv * sy);
                         let local = [dot(field, t), dot(field, b), dot(field, n)];
                         let bytes = [to_byte(local[0]), to_byte(local[1]), to_byte(local[2]), 255];
                         texels[k] = bytes;
@@ -190,39 +228,115 @@ pub fn bake_normal_map(
                             from_byte(bytes[0]) * t[c] + from_byte(bytes[1]) * b[c] + from_byte(bytes[2]) * n[c]
                         });
                         let (without, with) = (angle_deg(n, field), angle_deg(decoded, field));
-                        sum_without += without;
-                        max_without = max_without.max(without);
-                        sum_with += with;
-                        max_with = max_with.max(with);
-                        count += 1;
+                        row.sum_without += without;
+                        row.max_without = row.max_without.max(without);
+                        row.sum_with += with;
+                        row.max_with = row.max_with.max(with);
+                        row.texels += 1;
                     }
                 }
             }
-            (texels, [sum_without, max_without, sum_with, max_with], count)
+            (texels, figures)
         })
         .collect();
+    let mut out = TexelRows {
+        first: rows.start,
+        width: wu,
+        texels: Vec::with_capacity(rows.len() * wu),
+        figures: Vec::with_capacity(rows.len()),
+    };
+    for (texels, figures) in baked {
+        out.texels.extend(texels);
+        out.figures.extend(figures);
+    }
+    out
+}
+
+/// TANGENT ([`terrain_tangent`] of the normal) on every primitive of a material named `terrain`;
+/// which materials those are.
+fn add_tangents(scene: &mut Scene, name: &str) -> Result<Vec<bool>, String> {
+    let terrain: Vec<bool> = scene.materials.iter().map(|m| m.name == "terrain").collect();
+    let uses_map = |p: &Primitive| p.material.is_some_and(|m| terrain.get(m).copied().unwrap_or(false));
+    for p in scene.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()).filter(|p| uses_map(p)) {
+        if p.normals.len() != p.positions.len() || p.uvs.len() != p.positions.len() {
+            return Err(format!("terrain mesh `{name}` has a primitive without normals or UVs"));
+        }
+        p.tangents = p.normals.iter().map(|&n| terrain_tangent(n)).collect();
+    }
+    Ok(terrain)
+}
+
+/// Bakes the normal map of the terrain `scene` (built from `hf`) at `map_px` texels and puts it
+/// on the scene: TANGENT on every primitive of a material named `terrain`, the map (PNG, data not
+/// colour) as those materials' normal texture, named `{name}_normal`. Texel (x, y) is the point at
+/// uv ((x + ½)/W, (y + ½)/H) of the surface (the top faces; skirts and the base, which the planar
+/// UVs map onto the border or the whole map again, do not write it). Returns what the map corrects.
+pub fn bake_normal_map(
+    hf: &Heightfield,
+    scene: &mut Scene,
+    name: &str,
+    map_px: [u32; 2],
+) -> Result<NormalMapReport, String> {
+    let terrain = add_tangents(scene, name)?;
+    let uses_map = |p: &&Primitive| p.material.is_some_and(|m| terrain.get(m).copied().unwrap_or(false));
+    let primitives = scene.meshes.iter().flat_map(|m| &m.primitives).filter(uses_map);
+    let rows = bake_rows(primitives, &MapRows::whole(hf), map_px, 0..map_px[1] as usize);
+    attach(scene, name, map_px, &terrain, rows)
+}
+
+/// [`bake_normal_map`] with the map's texel rows baked already (every row, in order: bands' units
+/// put together).
+pub fn put_normal_map(
+    scene: &mut Scene,
+    name: &str,
+    map_px: [u32; 2],
+    rows: TexelRows,
+) -> Result<NormalMapReport, String> {
+    let terrain = add_tangents(scene, name)?;
+    attach(scene, name, map_px, &terrain, rows)
+}
+
+/// The map of `rows` as the normal texture of the `terrain` materials, and its figures.
+fn attach(
+    scene: &mut Scene,
+    name: &str,
+    map_px: [u32; 2],
+    terrain: &[bool],
+    rows: TexelRows,
+) -> Result<NormalMapReport, String> {
+    let [w, h] = map_px;
+    if rows.first != 0
+        || rows.width != w as usize
+        || rows.figures.len() != h as usize
+        || rows.texels.len() != (w * h) as usize
+    {
+        return Err(format!(
+            "the normal map of `{name}` has rows {}..{} of {} texels; {w} × {h} were wanted",
+            rows.first,
+            rows.first + rows.figures.len(),
+            rows.width
+        ));
+    }
     let (mut sum_without, mut max_without) = (0.0f64, 0.0f64);
     let (mut sum_with, mut max_with) = (0.0f64, 0.0f64);
-    let mut count = 0usize;
-    let mut texels: Vec<[u8; 4]> = Vec::with_capacity(wu * hu);
-    for (band_texels, [s0, m0, s1, m1], c) in bands {
-        texels.extend(band_texels);
-        sum_without += s0;
-        max_without = max_without.max(m0);
-        sum_with += s1;
-        max_with = max_with.max(m1);
-        count += c;
+    let mut count = 0u64;
+    for r in &rows.figures {
+        sum_without += r.sum_without;
+        max_without = max_without.max(r.max_without);
+        sum_with += r.sum_with;
+        max_with = max_with.max(r.max_with);
+        count += r.texels;
     }
-    let png = crate::bake::raster::png::encode_rgba8_png(&texels.concat(), w, h)?;
+    let png = crate::bake::raster::png::encode_rgba8_png(rows.texels.as_flattened(), w, h)?;
     scene.textures.push(Texture { name: format!("{name}_normal"), png });
     let index = scene.textures.len() - 1;
-    for (m, _) in scene.materials.iter_mut().zip(&terrain).filter(|(_, &t)| t) {
+    for (m, _) in scene.materials.iter_mut().zip(terrain).filter(|(_, &t)| t) {
         m.normal_texture = Some(index);
     }
     let mean = |s: f64| if count > 0 { s / count as f64 } else { 0.0 };
     Ok(NormalMapReport {
         map_px,
-        texels: count,
+        texels: count as usize,
         mean_error_without_deg: mean(sum_without),
         max_error_without_deg: max_without,
         mean_error_deg: mean(sum_with),
