@@ -278,10 +278,12 @@ mod tests {
 
     /// A band's chunks built from its rows and its piece alone are the chunks of the scene built
     /// from the whole map and the joined mesh: positions, skirts and triangle order bit for bit
-    /// (what places instances on a shard's bands); a piece of other rows is refused.
+    /// (what places instances on a shard's bands), and with the rows beyond its edges their normals
+    /// and UVs too; a piece of other rows is refused.
     #[test]
     fn a_bands_chunk_surfaces_from_its_rows_are_the_whole_scenes_chunks() {
-        use crate::terrain::build::{band_chunk_surfaces, build_scene, BuildError, BuildOptions};
+        use crate::heightfield::MapRows;
+        use crate::terrain::build::{band_chunk_surfaces, band_chunks, build_scene, BuildError, BuildOptions};
         let hf = crate::synth::fractal(300, 1000, 1.5, 200.0, 0.6, 12);
         let storage = Storage::f32(&hf);
         let lines = band_lines(hf.height, 384, storage.xz_exact());
@@ -290,6 +292,7 @@ mod tests {
             let band_cells = crate::terrain::regions::band_cells_for_chunk(Some(pitch));
             let lines = band_lines(hf.height, band_cells, true);
             let mut from_bands = Vec::new();
+            let mut shaded_bands = Vec::new();
             let pieces: Vec<BandPiece> = lines
                 .windows(2)
                 .map(|w| {
@@ -298,7 +301,23 @@ mod tests {
                     let chunks =
                         band_chunk_surfaces(&window, w[0] as usize, hf.height, &piece.levels[0].mesh, pitch, skirt)
                             .unwrap();
+                    // shaded: from the band's rows and the row beyond each inner edge
+                    let (r0, r1) = ((w[0] as usize).saturating_sub(1), (w[1] as usize + 1).min(hf.height - 1));
+                    let margin = hf.rows(r0, r1).unwrap();
+                    let rows = MapRows::new(&margin, r0, hf.height).unwrap();
+                    let shaded = band_chunks(&rows, &piece.levels[0].mesh, pitch, skirt, true).unwrap();
+                    assert_eq!(shaded.len(), chunks.len());
+                    for ((at, plain), (at_shaded, lit)) in chunks.iter().zip(&shaded) {
+                        assert_eq!((at, &plain.indices, &plain.positions), (at_shaded, &lit.indices, &lit.positions));
+                    }
+                    // without the rows beyond its edges, a band cannot be shaded
+                    if w[0] > 0 {
+                        let tight = MapRows::new(&window, w[0] as usize, hf.height).unwrap();
+                        let e = band_chunks(&tight, &piece.levels[0].mesh, pitch, skirt, true);
+                        assert!(matches!(e, Err(BuildError::BandMismatch(_))), "{e:?}");
+                    }
                     from_bands.extend(chunks);
+                    shaded_bands.extend(shaded);
                     piece
                 })
                 .collect();
@@ -320,6 +339,15 @@ mod tests {
                 let bits = |v: &[[f32; 3]]| v.iter().map(|p| p.map(f32::to_bits)).collect::<Vec<_>>();
                 assert_eq!(bits(&p.positions), bits(&band.positions), "{}", whole.name);
                 assert!(band.normals.is_empty() && band.uvs.is_empty());
+            }
+            for (whole, (_, band)) in chunks.iter().zip(&shaded_bands) {
+                let p = &whole.primitives[0];
+                let bits3 = |v: &[[f32; 3]]| v.iter().map(|p| p.map(f32::to_bits)).collect::<Vec<_>>();
+                let bits2 = |v: &[[f32; 2]]| v.iter().map(|p| p.map(f32::to_bits)).collect::<Vec<_>>();
+                assert_eq!(p.indices, band.indices, "{}", whole.name);
+                assert_eq!(bits3(&p.positions), bits3(&band.positions), "{}", whole.name);
+                assert_eq!(bits3(&p.normals), bits3(&band.normals), "{}", whole.name);
+                assert_eq!(bits2(&p.uvs), bits2(&band.uvs), "{}", whole.name);
             }
         }
         // a band's mesh handed rows it was not built from

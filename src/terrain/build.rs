@@ -18,7 +18,7 @@
 
 use serde_json::json;
 
-use crate::heightfield::Heightfield;
+use crate::heightfield::{Heightfield, MapRows};
 use crate::mesh::{AlphaMode, Material, Mesh, Node, Primitive, Scene};
 
 use super::chunks::{boundary_edges, ChunkGrid};
@@ -161,7 +161,12 @@ pub fn build_scene(hf: &Heightfield, mesh: &SampleMesh, opts: &BuildOptions) -> 
 /// Vertex normal of sample (i, j): the heightfield's normal, unit length in f32 (renormalised
 /// after narrowing, which can leave it a few ulps off).
 pub fn vertex_normal(hf: &Heightfield, i: usize, j: usize) -> [f32; 3] {
-    let n = hf.normal_at(i, j).map(|c| c as f32);
+    unit_f32(hf.normal_at(i, j))
+}
+
+/// A unit normal narrowed to f32 and renormalised.
+fn unit_f32(n: [f64; 3]) -> [f32; 3] {
+    let n = n.map(|c| c as f32);
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     n.map(|c| c / len)
 }
@@ -341,28 +346,47 @@ pub fn band_chunk_surfaces(
     pitch: usize,
     skirt_depth_m: Option<f64>,
 ) -> Result<Vec<([usize; 2], Primitive)>, BuildError> {
+    let rows = MapRows::new(window, row0, map_height).ok_or_else(|| {
+        BuildError::BandMismatch(format!("a band of rows {row0}..{} of a map of {map_height} rows", row0 + window.height))
+    })?;
+    band_chunks(&rows, band, pitch, skirt_depth_m, false)
+}
+
+/// A band's chunks as [`build_scene`] makes them, from the map's rows `rows` ([`MapRows`]) and the
+/// band's mesh: [`band_chunk_surfaces`], and with `shaded` also each vertex's normal and UV (the
+/// whole scene's bit for bit; `rows` must then hold the row beyond each edge of the band that is
+/// not the map's border, which the normals read).
+pub fn band_chunks(
+    rows: &MapRows,
+    band: &SampleMesh,
+    pitch: usize,
+    skirt_depth_m: Option<f64>,
+    shaded: bool,
+) -> Result<Vec<([usize; 2], Primitive)>, BuildError> {
     check_options(&BuildOptions { chunk_samples: Some(pitch), skirt_depth_m, ..BuildOptions::default() })?;
-    check_heightfield(window)?;
-    let rows = row0..row0 + window.height;
-    if window.width == 0 || window.height == 0 || row0 + window.height > map_height {
-        return Err(BuildError::BandMismatch(format!(
-            "a band of rows {row0}..{} of a map of {map_height} rows",
-            rows.end
-        )));
-    }
+    check_heightfield(rows.hf)?;
+    let held = rows.held();
+    let reads = |j: usize| {
+        let r = if shaded { rows.normal_reach(j) } else { j..=j };
+        held.contains(r.start()) && held.contains(r.end())
+    };
     for (k, v) in band.vertices.iter().enumerate() {
-        if v[0] as usize >= window.width || !rows.contains(&(v[1] as usize)) {
+        if v[0] as usize >= rows.hf.width || !reads(v[1] as usize) {
             return Err(BuildError::BandMismatch(format!(
-                "vertex {k} at sample ({}, {}) is outside the band's {} × rows {row0}..{}",
-                v[0], v[1], window.width, rows.end
+                "vertex {k} at sample ({}, {}) needs rows the band's {} × rows {}..={} do not hold",
+                v[0],
+                v[1],
+                rows.hf.width,
+                held.start(),
+                held.end()
             )));
         }
     }
     if let Some(t) = band.triangles.iter().position(|t| t.iter().any(|&v| v as usize >= band.vertices.len())) {
         return Err(BuildError::BandMismatch(format!("triangle {t} names a vertex the band does not have")));
     }
-    let source = Window { hf: window, row0 };
-    let grid = ChunkGrid::new(window.width, map_height, pitch);
+    let source = Window { rows, shaded };
+    let grid = ChunkGrid::new(rows.hf.width, rows.map_height, pitch);
     let parts = grid.partition(&band.vertices, &band.triangles);
     let mut slots = vec![u32::MAX; band.vertices.len()];
     let mut out = Vec::new();
@@ -397,20 +421,19 @@ impl Samples for Heightfield {
     }
 }
 
-/// Some rows of a map (`hf` is rows `row0 ..` of it): positions alone, the same as the map's.
+/// Some rows of a map: positions, and when `shaded` normals and UVs, the same as the map's.
 struct Window<'a> {
-    hf: &'a Heightfield,
-    row0: usize,
+    rows: &'a MapRows<'a>,
+    shaded: bool,
 }
 
 impl Samples for Window<'_> {
     fn position(&self, i: usize, j: usize) -> [f32; 3] {
-        let [x, y, _] = self.hf.position(i, j - self.row0);
-        [x, y, (j as f64 * self.hf.cell_size_m) as f32]
+        self.rows.position(i, j)
     }
 
-    fn normal_uv(&self, _: usize, _: usize) -> Option<([f32; 3], [f32; 2])> {
-        None
+    fn normal_uv(&self, i: usize, j: usize) -> Option<([f32; 3], [f32; 2])> {
+        self.shaded.then(|| (unit_f32(self.rows.normal_at(i, j)), self.rows.planar_uv(i, j)))
     }
 }
 
