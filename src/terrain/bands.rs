@@ -8,7 +8,10 @@
 use rayon::prelude::*;
 
 use crate::heightfield::Heightfield;
+use crate::heightfield::MapRows;
+use crate::terrain::build::{band_chunks, BuildError};
 use crate::terrain::error::{combine_rows, measure_rows, ErrorStats, RowsMeasure, TerrainError};
+use crate::terrain::normal_map::{bake_rows, RowFigures, TexelRows};
 use crate::terrain::regions::{join_bands, mesh_band};
 use crate::terrain::sample_mesh::SampleMesh;
 use crate::terrain::stored::Storage;
@@ -21,6 +24,19 @@ pub struct BandLevel {
     pub mesh: SampleMesh,
     pub mesher_error_m: f64,
     pub measure: RowsMeasure,
+    /// The normal map's texel rows this band bakes at this level ([`bake_band_normals`]), when
+    /// the terrain's normal maps are baked by band ([`band_texel_rows`]).
+    pub normals: Option<BandNormals>,
+}
+
+/// A band's rows of a level's normal map: texel rows `first .. first + figures.len()`, as PNG
+/// (the texels, `width` wide) and each row's figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BandNormals {
+    pub first: usize,
+    pub width: usize,
+    pub png: Vec<u8>,
+    pub figures: Vec<RowFigures>,
 }
 
 /// A band's meshes at every bound, in the order the bounds were given.
@@ -46,7 +62,7 @@ pub fn build_band(
             let opts = TinOptions { max_error_m, max_triangles: None, max_vertices, band_cells: 0 };
             let (mesh, mesher_error_m) = mesh_band(hf, &opts, storage, rows, fixed)?;
             let measure = measure_rows(hf, &mesh, rows);
-            Ok(BandLevel { mesh, mesher_error_m, measure })
+            Ok(BandLevel { mesh, mesher_error_m, measure, normals: None })
         })
         .collect();
     Ok(BandPiece { rows, levels: levels.into_iter().collect::<Result<_, _>>()? })
@@ -97,6 +113,92 @@ pub fn assemble(
     Ok((finish_tin(hf, opts, storage, mesh, max_error_m, false)?, stats))
 }
 
+/// How far (in v, the map's UV) a texel centre must lie from a band line to be a band's own.
+const LINE_CLEARANCE_V: f64 = 1e-6;
+
+/// The texel rows of each band of `lines` (a map of `map_height` sample rows) in a map
+/// `texels_high` texels high: those whose centres lie inside the band's rows, where only the
+/// band's faces can cover them (the faces of a band end on its lines). `None` when a texel
+/// centre lies on or within [`LINE_CLEARANCE_V`] of an inner line (either band's faces could
+/// cover it): such a terrain's normal maps are baked whole.
+pub fn band_texel_rows(lines: &[u32], map_height: usize, texels_high: u32) -> Option<Vec<std::ops::Range<usize>>> {
+    let h = texels_high as usize;
+    let span = (map_height.max(2) - 1) as f64;
+    let mut out = Vec::with_capacity(lines.len().saturating_sub(1));
+    let mut y = 0;
+    for (k, w) in lines.windows(2).enumerate() {
+        let start = y;
+        let inner = k + 2 < lines.len();
+        let line_v = w[1] as f64 / span;
+        while y < h {
+            let tv = (y as f64 + 0.5) / h as f64;
+            if inner {
+                if (tv - line_v).abs() <= LINE_CLEARANCE_V {
+                    return None;
+                }
+                if tv > line_v {
+                    break;
+                }
+            }
+            y += 1;
+        }
+        out.push(start..y);
+    }
+    Some(out)
+}
+
+/// The band's texel rows `texel_rows` of the normal map (`map_px`) of its chunks at one level:
+/// `mesh` (the band's mesh at that level) built into chunks as the scene builds them (`pitch`,
+/// `skirt_depth_m`; [`band_chunks`]) from `rows`, the band's rows and the row beyond each inner
+/// edge, and baked ([`bake_rows`]). The same texels and row figures as the whole map's bake, bit
+/// for bit, for the rows [`band_texel_rows`] gives the band.
+pub fn bake_band_normals(
+    rows: &MapRows,
+    mesh: &SampleMesh,
+    pitch: usize,
+    skirt_depth_m: Option<f64>,
+    map_px: [u32; 2],
+    texel_rows: std::ops::Range<usize>,
+) -> Result<BandNormals, BuildError> {
+    let chunks = band_chunks(rows, mesh, pitch, skirt_depth_m, true)?;
+    // (a band's texels are read by the rows beyond its edges at most: the chunks' check above)
+    let baked = bake_rows(chunks.iter().map(|(_, p)| p), rows, map_px, texel_rows);
+    let png =
+        crate::bake::raster::png::encode_rgba8_png(baked.texels.as_flattened(), map_px[0], baked.figures.len() as u32)
+            .map_err(|e| BuildError::BandMismatch(format!("cannot encode the band's normal map rows: {e}")))?;
+    Ok(BandNormals { first: baked.first, width: baked.width, png, figures: baked.figures })
+}
+
+/// A level's whole normal map from its bands' rows (every band's, in order).
+pub fn join_normals(parts: &[&BandNormals], map_px: [u32; 2]) -> Result<TexelRows, String> {
+    let [w, h] = map_px.map(|c| c as usize);
+    let mut out = TexelRows { first: 0, width: w, texels: Vec::with_capacity(w * h), figures: Vec::with_capacity(h) };
+    for part in parts {
+        if part.first != out.figures.len() || part.width != w {
+            return Err(format!(
+                "a band's normal map rows start at {} ({} wide) where row {} ({w} wide) was due",
+                part.first,
+                part.width,
+                out.figures.len()
+            ));
+        }
+        if !part.figures.is_empty() {
+            let img = image::load_from_memory_with_format(&part.png, image::ImageFormat::Png)
+                .map_err(|e| format!("a band's normal map rows do not decode: {e}"))?
+                .into_rgba8();
+            if img.width() as usize != w || img.height() as usize != part.figures.len() {
+                return Err(format!("a band's normal map rows are {}×{} texels", img.width(), img.height()));
+            }
+            out.texels.extend(img.into_raw().chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]));
+        }
+        out.figures.extend_from_slice(&part.figures);
+    }
+    if out.figures.len() != h {
+        return Err(format!("the bands' normal map rows end at {} of {h}", out.figures.len()));
+    }
+    Ok(out)
+}
+
 /// Little-endian words, as a piece is kept in the cache.
 struct Writer(Vec<u8>);
 
@@ -118,6 +220,10 @@ impl Writer {
         for &x in v {
             self.u64(x);
         }
+    }
+    fn bytes(&mut self, v: &[u8]) {
+        self.u64(v.len() as u64);
+        self.0.extend_from_slice(v);
     }
 }
 
@@ -151,9 +257,13 @@ impl Reader<'_> {
         let n = self.len(8)?;
         (0..n).map(|_| self.u64()).collect()
     }
+    fn bytes(&mut self) -> Option<Vec<u8>> {
+        let n = self.len(1)?;
+        Some(self.take(n)?.to_vec())
+    }
 }
 
-const MAGIC: u64 = u64::from_le_bytes(*b"vbandv01");
+const MAGIC: u64 = u64::from_le_bytes(*b"vbandv02");
 
 impl BandPiece {
     /// The piece as bytes (every number exactly: f64 by its bits).
@@ -179,6 +289,23 @@ impl BandPiece {
             }
             w.u64s(&m.edges[0]);
             w.u64s(&m.edges[1]);
+            match &l.normals {
+                None => w.u64(0),
+                Some(n) => {
+                    w.u64(1);
+                    w.u64(n.first as u64);
+                    w.u64(n.width as u64);
+                    w.u64(n.figures.len() as u64);
+                    for f in &n.figures {
+                        w.f64(f.sum_without);
+                        w.f64(f.max_without);
+                        w.f64(f.sum_with);
+                        w.f64(f.max_with);
+                        w.u64(f.texels);
+                    }
+                    w.bytes(&n.png);
+                }
+            }
         }
         w.0
     }
@@ -212,7 +339,28 @@ impl BandPiece {
                 inner.push((r.f64()?, r.u64()? as usize, r.f64()?, r.u64()? as usize));
             }
             let edges = [r.u64s()?, r.u64s()?];
-            levels.push(BandLevel { mesh, mesher_error_m, measure: RowsMeasure { rows: measure_rows, inner, edges } });
+            let normals = match r.u64()? {
+                0 => None,
+                1 => {
+                    let first = usize::try_from(r.u64()?).ok()?;
+                    let width = usize::try_from(r.u64()?).ok()?;
+                    let n = r.len(40)?;
+                    let mut figures = Vec::with_capacity(n);
+                    for _ in 0..n {
+                        figures.push(RowFigures {
+                            sum_without: r.f64()?,
+                            max_without: r.f64()?,
+                            sum_with: r.f64()?,
+                            max_with: r.f64()?,
+                            texels: r.u64()?,
+                        });
+                    }
+                    Some(BandNormals { first, width, png: r.bytes()?, figures })
+                }
+                _ => return None,
+            };
+            let measure = RowsMeasure { rows: measure_rows, inner, edges };
+            levels.push(BandLevel { mesh, mesher_error_m, measure, normals });
         }
         r.0.is_empty().then_some(BandPiece { rows, levels })
     }
@@ -355,6 +503,71 @@ mod tests {
         let piece = build_band_window(&window, 0, &[0.8], usize::MAX, [false, true]).unwrap();
         let e = band_chunk_surfaces(&hf.rows(384, 600).unwrap(), 384, hf.height, &piece.levels[0].mesh, 128, None);
         assert!(matches!(e, Err(BuildError::BandMismatch(_))), "{e:?}");
+    }
+
+    /// A level's normal map baked band by band — each band's chunks from its rows and the row
+    /// beyond each inner edge, its own texel rows — and joined is the whole scene's map: the same
+    /// PNG and the same figures, bit for bit; the rows survive the piece's bytes.
+    #[test]
+    fn normal_maps_baked_by_band_are_the_whole_scenes() {
+        use crate::terrain::build::{build_scene, BuildOptions};
+        use crate::terrain::normal_map::{bake_normal_map, put_normal_map};
+        let tall = crate::synth::fractal(300, 1000, 2.0, 180.0, 0.6, 5);
+        let storage = Storage::f32(&tall);
+        for (pitch, skirt, px) in [(128usize, Some(2.0), [256u32, 1024u32]), (192, None, [512, 512])] {
+            let band_cells = crate::terrain::regions::band_cells_for_chunk(Some(pitch));
+            let lines = band_lines(tall.height, band_cells, true);
+            assert!(lines.len() > 3, "several bands: {lines:?}");
+            let last = lines[lines.len() - 1];
+            let texel_rows = band_texel_rows(&lines, tall.height, px[1]).unwrap();
+            let pieces: Vec<BandPiece> = lines
+                .windows(2)
+                .zip(&texel_rows)
+                .map(|(w, texels)| {
+                    let (r0, r1) = ((w[0] as usize).saturating_sub(1), (w[1] as usize + 1).min(tall.height - 1));
+                    let margin = tall.rows(r0, r1).unwrap();
+                    let window = tall.rows(w[0] as usize, w[1] as usize).unwrap();
+                    let mut piece =
+                        build_band_window(&window, w[0], &[1.5], usize::MAX, [w[0] > 0, w[1] < last]).unwrap();
+                    let rows = MapRows::new(&margin, r0, tall.height).unwrap();
+                    let normals =
+                        bake_band_normals(&rows, &piece.levels[0].mesh, pitch, skirt, px, texels.clone()).unwrap();
+                    piece.levels[0].normals = Some(normals);
+                    BandPiece::from_bytes(&piece.to_bytes()).unwrap()
+                })
+                .collect();
+            let opts = TinOptions { max_error_m: 1.5, band_cells, max_vertices: usize::MAX, ..Default::default() };
+            let (joined, _) = assemble(&tall, &storage, &pieces, 0, &opts).unwrap();
+            let build = BuildOptions { chunk_samples: Some(pitch), skirt_depth_m: skirt, ..BuildOptions::default() };
+            let mut whole = build_scene(&tall, &joined.mesh, &build).unwrap();
+            let expected = bake_normal_map(&tall, &mut whole, "terrain", px).unwrap();
+            let parts: Vec<&BandNormals> = pieces.iter().map(|p| p.levels[0].normals.as_ref().unwrap()).collect();
+            let rows = join_normals(&parts, px).unwrap();
+            let mut banded = build_scene(&tall, &joined.mesh, &build).unwrap();
+            let got = put_normal_map(&mut banded, "terrain", px, rows).unwrap();
+            assert_eq!(got, expected, "pitch {pitch}");
+            assert_eq!(got.mean_error_deg.to_bits(), expected.mean_error_deg.to_bits());
+            assert!(expected.texels == (px[0] * px[1]) as usize && expected.max_error_without_deg > 1.0);
+            assert_eq!(banded, whole, "pitch {pitch}: the same scene, normal map and tangents included");
+            // a band missing is refused, not joined into a short map
+            assert!(join_normals(&parts[1..], px).is_err());
+        }
+    }
+
+    /// Texel rows go to the band their centres lie in; a centre on an inner line (or too near
+    /// it to tell whose face covers it) leaves the map to be baked whole.
+    #[test]
+    fn texel_rows_go_to_the_band_their_centres_lie_in() {
+        // 9 sample rows (v = j / 8), lines at rows 0, 4, 8: v = 0.5 between the two bands
+        assert_eq!(band_texel_rows(&[0, 4, 8], 9, 4), Some(vec![0..2, 2..4]));
+        assert_eq!(band_texel_rows(&[0, 4, 8], 9, 8), Some(vec![0..4, 4..8]));
+        assert_eq!(band_texel_rows(&[0, 4, 8], 9, 3), None, "texel 1's centre is at v = 0.5");
+        assert_eq!(band_texel_rows(&[0, 8], 9, 3), Some(vec![0..3]), "one band: every row");
+        // the world preset's map: 8193 rows in bands of 512, 8192 texels
+        let lines: Vec<u32> = (0..=16).map(|k| k * 512).collect();
+        let rows = band_texel_rows(&lines, 8193, 8192).unwrap();
+        assert_eq!(rows.len(), 16);
+        assert!(rows.iter().all(|r| r.len() == 512) && rows[15].end == 8192);
     }
 
     #[test]

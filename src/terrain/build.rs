@@ -347,7 +347,10 @@ pub fn band_chunk_surfaces(
     skirt_depth_m: Option<f64>,
 ) -> Result<Vec<([usize; 2], Primitive)>, BuildError> {
     let rows = MapRows::new(window, row0, map_height).ok_or_else(|| {
-        BuildError::BandMismatch(format!("a band of rows {row0}..{} of a map of {map_height} rows", row0 + window.height))
+        BuildError::BandMismatch(format!(
+            "a band of rows {row0}..{} of a map of {map_height} rows",
+            row0 + window.height
+        ))
     })?;
     band_chunks(&rows, band, pitch, skirt_depth_m, false)
 }
