@@ -176,7 +176,7 @@ fn wanted_rows(preset: &Preset, planned: &[(Unit, Work<'_>, Slot)], mine: &[usiz
     let mut bands: Vec<[u32; 2]> = Vec::new();
     for &k in mine {
         match &planned[k].1 {
-            Work::Band(_, b, plan, _) => bands.push(plan.rows(*b)),
+            Work::Band(_, b, plan, _) => bands.push(plan.read_rows(*b)),
             Work::Placements(_, g, plan, rows, _) => {
                 if let Ok((_, _, reached)) = placement_rows::reach(preset, plan, rows, *g) {
                     bands.extend(reached.into_iter().map(|b| plan.rows(b)));
@@ -248,8 +248,16 @@ pub fn build_shard(
                     });
                     if places {
                         // the band's rows read once for its meshes and its chunks' surfaces
-                        let window = source.rows(plan.rows(*b))?;
-                        band_piece(key, t, &mut |_| Ok(window.clone()), plan, *b, Some((&cache, force)))?;
+                        let read = plan.read_rows(*b);
+                        let margin = source.rows(read)?;
+                        band_piece(key, t, &mut |_| Ok(margin.clone()), plan, *b, Some((&cache, force)))?;
+                        let [a, z] = plan.rows(*b);
+                        let window = margin.rows((a - read[0]) as usize, (z - read[0]) as usize).ok_or_else(|| {
+                            crate::scene::error::StageError::Failed {
+                                stage: "terrain",
+                                message: format!("rows {a}-{z} are not within those read"),
+                            }
+                        })?;
                         let made = placement_rows::band_surfaces(t, key, plan, *b, &window, Some(&cache))?;
                         surfaces.insert(*b, std::rc::Rc::new(made));
                     } else {

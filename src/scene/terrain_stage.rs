@@ -18,7 +18,7 @@ use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
 use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed, TerrainFigures};
 use crate::terrain::layers::SnowRule;
-use crate::terrain::normal_map::{bake_normal_map, NormalMapReport};
+use crate::terrain::normal_map::{bake_normal_map, put_normal_map, NormalMapReport};
 use crate::terrain::stored::Storage;
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -224,6 +224,24 @@ impl BandPlan {
     pub fn fixed(&self, k: usize) -> [bool; 2] {
         [k > 0, k + 2 < self.lines.len()]
     }
+
+    /// Band `k`'s rows and the row beyond each of its inner edges: what its unit reads (the
+    /// chunks' vertex normals on a band line read the rows on both sides).
+    pub fn read_rows(&self, k: usize) -> [u32; 2] {
+        let [a, b] = self.rows(k);
+        [a.saturating_sub(1), (b + 1).min(self.height() as u32 - 1)]
+    }
+
+    /// The size of the terrain's texture maps (base colour, layer weights, normal maps).
+    pub fn map_px(&self) -> [u32; 2] {
+        [crate::terrain::layers::map_px(self.width), crate::terrain::layers::map_px(self.height())]
+    }
+
+    /// Each band's rows of the normal maps, which its unit bakes; `None` when a texel centre
+    /// lies on a band line and the maps are baked whole ([`crate::terrain::bands::band_texel_rows`]).
+    pub fn normal_rows(&self) -> Option<Vec<std::ops::Range<usize>>> {
+        crate::terrain::bands::band_texel_rows(&self.lines, self.height(), self.map_px()[1])
+    }
 }
 
 /// How a `width` × `height` terrain with settings `t` is meshed in bands: `None` when it is meshed
@@ -355,8 +373,9 @@ impl<'a> BandRows<'a> {
 }
 
 /// Band `k` of `plan`: from `cache` when it holds it (unless `force`), else meshed and measured
-/// from its rows (`rows` gives them: [`BandRows`], or the rows of a map at hand) and stored there.
-/// `mesh_key` is the terrain's [`mesh_key`].
+/// from its rows, its chunks' rows of every level's normal map baked (when the plan bakes them
+/// by band), and stored there. `rows` gives the map's rows ([`BandRows`], or the rows of a map at
+/// hand); it is asked for [`BandPlan::read_rows`]. `mesh_key` is the terrain's [`mesh_key`].
 pub fn band_piece(
     mesh_key: &str,
     t: &TerrainSettings,
@@ -365,7 +384,8 @@ pub fn band_piece(
     k: usize,
     cache: Option<(&crate::scene::cache::Cache, bool)>,
 ) -> Result<crate::terrain::bands::BandPiece, StageError> {
-    use crate::terrain::bands::build_band_window;
+    use crate::terrain::bands::{bake_band_normals, build_band_window};
+    let f = fail(Stage::Terrain);
     let rows = plan.rows(k);
     let key = cache.map(|_| band_key(mesh_key, rows));
     if let Some((c, false)) = cache {
@@ -373,11 +393,25 @@ pub fn band_piece(
             return Ok(piece);
         }
     }
-    let window = rows_of(rows)?;
-    let piece = build_band_window(&window, rows[0], &plan.bounds, t.max_vertices, plan.fixed(k)).map_err(|error| {
+    let read = plan.read_rows(k);
+    let margin = rows_of(read)?;
+    let outside = || f(format!("rows {}-{} are not within the map's rows read", rows[0], rows[1]));
+    let window = margin.rows((rows[0] - read[0]) as usize, (rows[1] - read[0]) as usize).ok_or_else(outside)?;
+    let terrain_error = |error| {
         let e = crate::terrain::job::JobError::Terrain { source_label: source_label(t), error };
         StageError::of(Stage::Terrain.name(), &e, e.to_string())
-    })?;
+    };
+    let mut piece =
+        build_band_window(&window, rows[0], &plan.bounds, t.max_vertices, plan.fixed(k)).map_err(terrain_error)?;
+    drop(window);
+    if let (Some(texel_rows), Some(pitch)) = (plan.normal_rows(), t.chunk) {
+        let map = crate::heightfield::MapRows::new(&margin, read[0] as usize, plan.height()).ok_or_else(outside)?;
+        for level in &mut piece.levels {
+            let normals = bake_band_normals(&map, &level.mesh, pitch, t.skirt_m, plan.map_px(), texel_rows[k].clone())
+                .map_err(|e| f(format!("band {k} (rows {}-{}): {e}", rows[0], rows[1])))?;
+            level.normals = Some(normals);
+        }
+    }
     if let (Some((c, _)), Some(key)) = (cache, &key) {
         // (a store that fails only costs meshing the band again, or a shard that says so)
         let json = format!("{{\"rows\":[{},{}]}}", rows[0], rows[1]);
@@ -396,10 +430,21 @@ pub fn kept_band(
     let rows = plan.rows(k);
     let (_, entry) = cache.lookup(BAND_STAGE, &band_key(mesh_key, rows))?;
     let piece = crate::terrain::bands::BandPiece::from_bytes(&crate::scene::cache::Cache::read_blob(&entry).ok()?)?;
-    (piece.rows == rows && piece.levels.len() == plan.bounds.len()).then_some(piece)
+    // (normal map rows where the plan bakes them by band, of the band's texel rows)
+    let texel_rows = plan.normal_rows().map(|r| r[k].clone());
+    let normals_fit = piece.levels.iter().all(|l| match (&l.normals, &texel_rows) {
+        (Some(n), Some(r)) => n.first == r.start && n.figures.len() == r.len(),
+        (None, None) => true,
+        _ => false,
+    });
+    (piece.rows == rows && piece.levels.len() == plan.bounds.len() && normals_fit).then_some(piece)
 }
 
-/// The terrain's LoD chain (switch distances assigned) and main mesh from its bands' pieces.
+/// Each bound's normal map rows, every band's in order (when the bands baked them).
+type BandedNormals = Option<Vec<Vec<crate::terrain::bands::BandNormals>>>;
+
+/// The terrain's LoD chain (switch distances assigned) and main mesh from its bands' pieces, and
+/// their normal map rows.
 fn banded_meshes(
     preset: &Preset,
     t: &TerrainSettings,
@@ -407,7 +452,11 @@ fn banded_meshes(
     plan: &BandPlan,
     memo: Option<MeshMemo<'_>>,
 ) -> Result<
-    (Vec<crate::lod::LodLevel>, (crate::terrain::sample_mesh::SampleMesh, bool, crate::terrain::error::ErrorStats)),
+    (
+        Vec<crate::lod::LodLevel>,
+        (crate::terrain::sample_mesh::SampleMesh, bool, crate::terrain::error::ErrorStats),
+        BandedNormals,
+    ),
     StageError,
 > {
     use crate::terrain::tin::{check_tin_input, TinOptions};
@@ -437,9 +486,13 @@ fn banded_meshes(
             .ok_or_else(|| fail(Stage::Terrain)(format!("rows {}-{} are not within the map", rows[0], rows[1])))
     };
     let key = mesh_key(preset, t)?;
-    let pieces = (0..plan.band_count())
+    let mut pieces = (0..plan.band_count())
         .map(|k| band_piece(&key, t, &mut rows_of, plan, k, cache))
         .collect::<Result<Vec<_>, _>>()?;
+    // each bound's normal map rows, taken from the pieces (every band's, or none)
+    let normals: BandedNormals = plan.normal_rows().map(|_| {
+        (0..plan.bounds.len()).map(|k| pieces.iter_mut().filter_map(|p| p.levels[k].normals.take()).collect()).collect()
+    });
     let share = start.elapsed().as_secs_f64() / plan.bounds.len() as f64;
     let mut levels = Vec::with_capacity(plan.bounds.len());
     for (k, &bound) in plan.bounds.iter().enumerate() {
@@ -460,7 +513,7 @@ fn banded_meshes(
     let main = (levels[main_level].mesh.clone(), false, levels[main_level].stats);
     levels.truncate(t.lods.len());
     crate::lod::assign_switch_distances(&mut levels, &preset.lod);
-    Ok((levels, main))
+    Ok((levels, main, normals))
 }
 
 /// Key of the terrain's meshes: what meshing reads (not the formats, snow or species).
@@ -616,18 +669,27 @@ pub fn run_terrain_memo(
     // The LoD chain meshes its levels in parallel; when one of them is the main mesh's bound,
     // the main mesh is taken from the chain instead of being computed twice.
     let t1 = Instant::now();
-    let (mut chain, remembered_main) = match (remembered, &plan) {
+    let (mut chain, remembered_main, mut band_normals) = match (remembered, &plan) {
         (_, Some(plan)) => {
-            let (chain, main) = banded_meshes(preset, t, &hf, plan, band_memo)?;
-            (chain, Some(main))
+            let (chain, main, normals) = banded_meshes(preset, t, &hf, plan, band_memo)?;
+            (chain, Some(main), normals)
         }
-        (Some(m), None) => (m.chain, Some(m.main)),
-        (None, None) if t.lods.is_empty() => (Vec::new(), None),
+        (Some(m), None) => (m.chain, Some(m.main), None),
+        (None, None) if t.lods.is_empty() => (Vec::new(), None, None),
         (None, None) => (
             terrain_lod_chain_in_bands(&hf, &t.lods, t.max_triangles, t.max_vertices, band_cells, &preset.lod)
                 .map_err(|e| input(e.to_string()))?,
             None,
+            None,
         ),
+    };
+    // bound k's normal map, put together from the bands' rows (taken: each is used once)
+    let mut normal_rows = |bound: f64| -> Result<Option<crate::terrain::normal_map::TexelRows>, StageError> {
+        let (Some(plan), Some(normals)) = (&plan, &mut band_normals) else { return Ok(None) };
+        let Some(k) = plan.bounds.iter().position(|&b| b == bound) else { return Ok(None) };
+        let parts = std::mem::take(&mut normals[k]);
+        let refs: Vec<&crate::terrain::bands::BandNormals> = parts.iter().collect();
+        crate::terrain::bands::join_normals(&refs, plan.map_px()).map(Some).map_err(|e| f(e))
     };
     let chain_s = t1.elapsed().as_secs_f64();
     let ready = remembered_main.or_else(|| {
@@ -665,6 +727,7 @@ pub fn run_terrain_memo(
         &source_label(t),
         ready,
         Some(&cover),
+        normal_rows(t.max_error_m)?,
     )
     .map_err(|e| StageError::of(Stage::Terrain.name(), &e, e.to_string()))?;
     if let (Some(m), Some(key), false) = (memo, &memo_key, from_memo) {
@@ -691,12 +754,18 @@ pub fn run_terrain_memo(
     // (a shared level's meshing and measuring time is counted under `lods`)
     let [mesh_s, analyze_s, build_s] = meshed.seconds;
     let Meshed { mut scene, layers, .. } = meshed;
-    let textured = |mut scene: Scene, name: &str| -> Result<(Scene, NormalMapReport), StageError> {
+    let textured = |mut scene: Scene,
+                    name: &str,
+                    rows: Option<crate::terrain::normal_map::TexelRows>|
+     -> Result<(Scene, NormalMapReport), StageError> {
         layers
             .texture(&mut scene, &hf, "terrain")
             .map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
-        let normal = bake_normal_map(&hf, &mut scene, name, layers.report.map_px)
-            .map_err(|e| f(format!("cannot bake the normal map of {name}: {e}")))?;
+        let normal = match rows {
+            Some(rows) => put_normal_map(&mut scene, name, layers.report.map_px, rows),
+            None => bake_normal_map(&hf, &mut scene, name, layers.report.map_px),
+        }
+        .map_err(|e| f(format!("cannot bake the normal map of {name}: {e}")))?;
         Ok((scene, normal))
     };
 
@@ -723,6 +792,7 @@ pub fn run_terrain_memo(
             let (lod_scene, normal_map) = textured(
                 build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| input(e.to_string()))?,
                 &stem,
+                normal_rows(level.max_error_requested_m)?,
             )?;
             (write_formats(preset, &lod_scene, scene_dir, &stem)?, normal_map)
         };

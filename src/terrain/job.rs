@@ -16,7 +16,7 @@ use crate::terrain::build::{build_scene, BuildError, BuildOptions};
 use crate::terrain::error::{exact_max_error, measure_stored, ErrorStats, TerrainError};
 use crate::terrain::grid::grid;
 use crate::terrain::layers::{bake_layers_with, LayerReport, TerrainLayers};
-use crate::terrain::normal_map::{bake_normal_map, NormalMapReport};
+use crate::terrain::normal_map::{bake_normal_map, put_normal_map, NormalMapReport};
 use crate::terrain::sample_mesh::SampleMesh;
 use crate::terrain::stored::Storage;
 use crate::terrain::tin::{tin_stored, TinOptions};
@@ -304,6 +304,7 @@ pub fn mesh_and_build(
     label: &str,
     ready: Option<(SampleMesh, bool, ErrorStats)>,
     cover: Option<&dyn Fn(&Scene) -> Option<VegetationCover>>,
+    normal_rows: Option<crate::terrain::normal_map::TexelRows>,
 ) -> Result<Meshed, JobError> {
     let (mut t_mesh, mut t_analyze) = (0.0, 0.0);
     let (mesh, hit_limit, stats) = match ready {
@@ -334,7 +335,12 @@ pub fn mesh_and_build(
     let cover = cover.and_then(|f| f(&scene)).map(std::sync::Arc::new);
     let layers = bake_layers_with(hf, &build.snow, cover);
     layers.texture(&mut scene, hf, &build.name).map_err(JobError::Texture)?;
-    let normal_map = bake_normal_map(hf, &mut scene, &build.name, layers.report.map_px).map_err(JobError::Texture)?;
+    // (the normal map's rows baked already when the terrain's bands baked them)
+    let normal_map = match normal_rows {
+        Some(rows) => put_normal_map(&mut scene, &build.name, layers.report.map_px, rows),
+        None => bake_normal_map(hf, &mut scene, &build.name, layers.report.map_px),
+    }
+    .map_err(JobError::Texture)?;
     let t_build = t.elapsed().as_secs_f64();
     let max_error_f64_m = exact_max_error(hf, &mesh, &stats, storage);
     Ok(Meshed {
@@ -408,7 +414,7 @@ pub fn run_reporting(
 
     let (grid, storage) = storage_for(job, hf)?;
     let settings = job.mesh_settings();
-    let meshed = mesh_and_build(hf, &settings, &storage, &job.build, &job.source.label(), None, None)?;
+    let meshed = mesh_and_build(hf, &settings, &storage, &job.build, &job.source.label(), None, None, None)?;
     let figures = meshed.figures(hf, &settings, decoded.voids_filled);
     let ([t_mesh, t_analyze, t_build], scene) = (meshed.seconds, meshed.scene);
 
