@@ -113,7 +113,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// 10: a chunked map is meshed in bands of whole chunks (at least 320 rows), each from its own rows
 /// alone (terrain/regions.rs `mesh_band`): the unit a shard will build. 11: the normal maps baked
 /// by bands of texel rows in parallel (the same texels; their mean errors summed band by band).
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 11;
+/// 12: a banded terrain's bands bake their rows of its normal maps (the same texels); the maps'
+/// figures summed per texel row, rows in order.
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 12;
 
 /// The stage in a scene build.
 pub struct TerrainJob<'a> {
