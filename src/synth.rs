@@ -109,6 +109,8 @@ pub enum NoiseKind {
 
 /// Octaves summed at most; finer ones than 2 samples per wavelength are skipped (they would only alias).
 pub const NOISE_OCTAVES: u32 = 8;
+/// The widest noise map (presets offer up to 8193 samples).
+pub const MAX_NOISE_SIDE: usize = i32::MAX as usize;
 const LACUNARITY: f64 = 2.0;
 const GAIN: f64 = 0.5;
 
@@ -165,26 +167,6 @@ fn octave_params(seed: u64, octave: u32) -> (u64, f64, f64) {
 /// One octave of a noise map: (seed, offset x, offset y, frequency, amplitude).
 type Octave = (u64, f64, f64, f64, f64);
 
-/// The octaves' noise values of one sample summed as `kind` sums them.
-#[inline]
-fn combine(kind: NoiseKind, octaves: &[Octave], values: &[f64]) -> f64 {
-    match kind {
-        NoiseKind::Fbm => octaves.iter().zip(values).map(|(&(.., a), &n)| a * n).sum(),
-        NoiseKind::Ridged => {
-            // Musgrave's ridged multifractal: signal = (1 − |n|)², weighted by the previous octave
-            let mut sum = 0.0;
-            let mut weight = 1.0f64;
-            for (&(.., a), &n) in octaves.iter().zip(values) {
-                let r = 1.0 - n.abs();
-                let signal = r * r * weight;
-                weight = (signal * 2.0).clamp(0.0, 1.0);
-                sum += signal * a;
-            }
-            sum
-        }
-    }
-}
-
 /// `x.floor()` for the lattice coordinates of a map (finite, within ±2⁶³): the same value, bit for
 /// bit, without the library call (a baseline x86-64 build has no floor instruction; the noise
 /// takes two per sample and octave otherwise).
@@ -230,8 +212,11 @@ fn octave_row(&(s, ox, oy, f, _): &Octave, j: usize, out: &mut [f64]) {
         let end = end.max(i + 1);
         let [(g00x, g00y), (g10x, g10y), (g01x, g01y), (g11x, g11y)] =
             [gradient(ix, iy), gradient(ix + 1, iy), gradient(ix, iy + 1), gradient(ix + 1, iy + 1)];
+        // (the sample index through i32, which converts to f64 in one instruction: the same value,
+        // [`MAX_NOISE_SIDE`] keeps it in range)
+        let base = i as i32;
         for (k, o) in out[i..end].iter_mut().enumerate() {
-            let fx = x_of(i + k) - xf;
+            let fx = ((base + k as i32) as f64 * f + ox) - xf;
             let n00 = g00x * fx + g00y * fy;
             let n10 = g10x * (fx - 1.0) + g10y * fy;
             let n01 = g01x * fx + g01y * (fy - 1.0);
@@ -302,21 +287,42 @@ fn octave_table(side: usize, seed: u64) -> Vec<Octave> {
     octaves
 }
 
-/// Row `j`'s raw values (before the map is scaled to its relief) into `out` (one per sample),
-/// each octave's row first ([`octave_row`], into `scratch`), then summed per sample.
+/// Row `j`'s raw values (before the map is scaled to its relief) into `out` (one per sample): each
+/// octave's row ([`octave_row`], into `scratch`) added into every sample's sum in turn: per
+/// sample, the sum over its octaves in order that the kind makes (a test holds it to the
+/// per-sample sums).
 fn raw_row(kind: NoiseKind, octaves: &[Octave], j: usize, out: &mut [f64], scratch: &mut Vec<f64>) {
     let side = out.len();
-    scratch.resize(octaves.len() * side, 0.0);
-    for (octave, row) in octaves.iter().zip(scratch.chunks_exact_mut(side.max(1))) {
-        octave_row(octave, j, row);
-    }
-    let mut values = [0.0f64; NOISE_OCTAVES as usize];
-    let values = &mut values[..octaves.len()];
-    for (i, v) in out.iter_mut().enumerate() {
-        for (o, value) in values.iter_mut().enumerate() {
-            *value = scratch[o * side + i];
+    assert!(side <= MAX_NOISE_SIDE, "a noise map is at most {MAX_NOISE_SIDE} samples wide");
+    // per sample: [sum, weight] (the ridged kind's weight from the previous octave)
+    scratch.resize(2 * side, 0.0);
+    let (noise, weights) = scratch.split_at_mut(side);
+    match kind {
+        NoiseKind::Fbm => {
+            // (what `Iterator::sum` starts from)
+            out.fill([0.0f64; 0].iter().sum());
+            for octave in octaves {
+                octave_row(octave, j, noise);
+                let a = octave.4;
+                for (sum, &n) in out.iter_mut().zip(noise.iter()) {
+                    *sum += a * n;
+                }
+            }
         }
-        *v = combine(kind, octaves, values);
+        NoiseKind::Ridged => {
+            out.fill(0.0);
+            weights.fill(1.0);
+            for octave in octaves {
+                octave_row(octave, j, noise);
+                let a = octave.4;
+                for ((sum, weight), &n) in out.iter_mut().zip(weights.iter_mut()).zip(noise.iter()) {
+                    let r = 1.0 - n.abs();
+                    let signal = r * r * *weight;
+                    *weight = (signal * 2.0).clamp(0.0, 1.0);
+                    *sum += signal * a;
+                }
+            }
+        }
     }
 }
 

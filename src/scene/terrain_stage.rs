@@ -409,8 +409,12 @@ pub fn band_piece(
     if let (Some(texel_rows), Some(pitch)) = (plan.normal_rows(), t.chunk) {
         let map = crate::heightfield::MapRows::new(&margin, read[0] as usize, plan.height()).ok_or_else(outside)?;
         for level in &mut piece.levels {
+            // (the scene's chunks: options the map cannot take are the input's fault, as there)
             let normals = bake_band_normals(&map, &level.mesh, pitch, t.skirt_m, plan.map_px(), texel_rows[k].clone())
-                .map_err(|e| f(format!("band {k} (rows {}-{}): {e}", rows[0], rows[1])))?;
+                .map_err(|e| {
+                    let e = crate::terrain::job::JobError::from(e);
+                    StageError::of(Stage::Terrain.name(), &e, format!("band {k} (rows {}-{}): {e}", rows[0], rows[1]))
+                })?;
             level.normals = Some(normals);
         }
     }
@@ -434,8 +438,11 @@ pub fn kept_band(
     let piece = crate::terrain::bands::BandPiece::from_bytes(&crate::scene::cache::Cache::read_blob(&entry).ok()?)?;
     // (normal map rows where the plan bakes them by band, of the band's texel rows)
     let texel_rows = plan.normal_rows().map(|r| r[k].clone());
+    let width = plan.map_px()[0] as usize;
     let normals_fit = piece.levels.iter().all(|l| match (&l.normals, &texel_rows) {
-        (Some(n), Some(r)) => n.first == r.start && n.figures.len() == r.len(),
+        (Some(n), Some(r)) => {
+            n.first == r.start && n.figures.len() == r.len() && n.width == width && n.png.is_empty() == r.is_empty()
+        }
         (None, None) => true,
         _ => false,
     });
@@ -685,12 +692,11 @@ pub fn run_terrain_memo(
             None,
         ),
     };
-    // bound k's normal map, put together from the bands' rows (taken: each is used once)
+    // bound k's normal map, put together from the bands' rows
     let mut normal_rows = |bound: f64| -> Result<Option<crate::terrain::normal_map::TexelRows>, StageError> {
         let (Some(plan), Some(normals)) = (&plan, &mut band_normals) else { return Ok(None) };
         let Some(k) = plan.bounds.iter().position(|&b| b == bound) else { return Ok(None) };
-        let parts = std::mem::take(&mut normals[k]);
-        let refs: Vec<&crate::terrain::bands::BandNormals> = parts.iter().collect();
+        let refs: Vec<&crate::terrain::bands::BandNormals> = normals[k].iter().collect();
         crate::terrain::bands::join_normals(&refs, plan.map_px()).map(Some).map_err(|e| f(e))
     };
     let chain_s = t1.elapsed().as_secs_f64();

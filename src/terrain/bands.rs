@@ -163,9 +163,13 @@ pub fn bake_band_normals(
     let chunks = band_chunks(rows, mesh, pitch, skirt_depth_m, true)?;
     // (a band's texels are read by the rows beyond its edges at most: the chunks' check above)
     let baked = bake_rows(chunks.iter().map(|(_, p)| p), rows, map_px, texel_rows);
-    let png =
+    // (a band may hold no texel centre: a short last band under a map's coarse texels)
+    let png = if baked.figures.is_empty() {
+        Vec::new()
+    } else {
         crate::bake::raster::png::encode_rgba8_png(baked.texels.as_flattened(), map_px[0], baked.figures.len() as u32)
-            .map_err(|e| BuildError::BandMismatch(format!("cannot encode the band's normal map rows: {e}")))?;
+            .map_err(BuildError::NormalRows)?
+    };
     Ok(BandNormals { first: baked.first, width: baked.width, png, figures: baked.figures })
 }
 
@@ -551,6 +555,18 @@ mod tests {
             assert_eq!(banded, whole, "pitch {pitch}: the same scene, normal map and tangents included");
             // a band missing is refused, not joined into a short map
             assert!(join_normals(&parts[1..], px).is_err());
+            // a band of no texel rows bakes and joins as nothing (no PNG of zero rows)
+            let last_band = lines.len() - 2;
+            let (r0, r1) = (lines[last_band] as usize - 1, tall.height - 1);
+            let margin = tall.rows(r0, r1).unwrap();
+            let rows = MapRows::new(&margin, r0, tall.height).unwrap();
+            let end = px[1] as usize;
+            let mesh = &pieces[last_band].levels[0].mesh;
+            let empty = bake_band_normals(&rows, mesh, pitch, skirt, px, end..end).unwrap();
+            assert!(empty.png.is_empty() && empty.figures.is_empty() && empty.first == end);
+            let mut with_empty = parts.clone();
+            with_empty.push(&empty);
+            assert_eq!(join_normals(&with_empty, px).unwrap().figures.len(), end);
         }
     }
 
@@ -563,6 +579,8 @@ mod tests {
         assert_eq!(band_texel_rows(&[0, 4, 8], 9, 8), Some(vec![0..4, 4..8]));
         assert_eq!(band_texel_rows(&[0, 4, 8], 9, 3), None, "texel 1's centre is at v = 0.5");
         assert_eq!(band_texel_rows(&[0, 8], 9, 3), Some(vec![0..3]), "one band: every row");
+        // a short last band under coarse texels holds no texel centre (v = 0.875 < 8/9)
+        assert_eq!(band_texel_rows(&[0, 4, 8, 9], 10, 4), Some(vec![0..2, 2..4, 4..4]));
         // the world preset's map: 8193 rows in bands of 512, 8192 texels
         let lines: Vec<u32> = (0..=16).map(|k| k * 512).collect();
         let rows = band_texel_rows(&lines, 8193, 8192).unwrap();

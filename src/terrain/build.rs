@@ -100,6 +100,8 @@ pub enum BuildError {
         "a band's mesh does not fit its rows: {0}; the band piece is damaged or of another map, rebuild it (`--force`)"
     )]
     BandMismatch(String),
+    #[error("cannot encode a band's rows of the normal map as PNG: {0}")]
+    NormalRows(String),
 }
 
 /// Builds the scene for `mesh`, a triangulation of `hf`'s samples (see the module docs for layout).
