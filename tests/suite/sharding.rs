@@ -417,3 +417,23 @@ fn species_under_a_snow_cover_are_placed_in_the_merge_and_the_rest_by_rows() {
     let snow = read_json(&cwd.join("single/world/placements/grass.json"));
     assert!(snow["rules"]["snow"].as_u64().unwrap() > 0, "the snow thins the grass: {snow}");
 }
+
+/// A skirt too shallow for the map's heights in f32 is the preset's fault in a band's unit (which
+/// builds the band's chunks for its normal maps) as in the terrain stage: exit code 2, the skirt
+/// named, in a whole build and in a shard alike.
+#[test]
+fn a_band_unit_refuses_a_skirt_the_map_cannot_hold_as_one_build_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let cwd = dir.path();
+    write(cwd, "rock.obj", ROCK_OBJ);
+    let source = "procedural = { kind = \"ridged\", size = 1025, seed = 4, relief = 600.0 }";
+    write(cwd, "world.toml", &banded_preset(source, 1.0).replace("skirt = 2.0", "skirt = 0.000001"));
+    for args in
+        [&["build", "world.toml", "--out", "single"][..], &["build", "world.toml", "--shard", "0/2", "--out", "s0"]]
+    {
+        let o = verdant_in(cwd, args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains("skirt depth of 0.000001 m cannot be represented"), "{args:?}: {err}");
+    }
+}
