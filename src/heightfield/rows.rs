@@ -95,19 +95,19 @@ impl<'a> MapRows<'a> {
         });
         crate::math::normalize3(n).unwrap_or([0.0, 1.0, 0.0])
     }
-
-    /// The sample rows [`MapRows::normal_bilinear`] reads at row coordinate t.
-    pub fn bilinear_reach(&self, t: f64) -> std::ops::RangeInclusive<usize> {
-        let h = self.map_height;
-        let j0 = (t.floor().max(0.0) as usize).min(h - 1);
-        let j1 = (j0 + 1).min(h - 1);
-        *self.normal_reach(j0).start()..=*self.normal_reach(j1).end()
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The sample rows [`MapRows::normal_bilinear`] reads at row coordinate t.
+    fn bilinear_reach(rows: &MapRows, t: f64) -> std::ops::RangeInclusive<usize> {
+        let h = rows.map_height;
+        let j0 = (t.floor().max(0.0) as usize).min(h - 1);
+        let j1 = (j0 + 1).min(h - 1);
+        *rows.normal_reach(j0).start()..=*rows.normal_reach(j1).end()
+    }
 
     /// Rows of a map give the whole map's normals, interpolations and UVs bit for bit wherever
     /// what they read is held, the map's border rows included.
@@ -130,7 +130,7 @@ mod tests {
             }
             for k in 0..400 {
                 let (s, t) = ((k * 37 % 401) as f64 * 0.1, j0 as f64 + (k % 97) as f64 * 0.137);
-                let reach = rows.bilinear_reach(t);
+                let reach = bilinear_reach(&rows, t);
                 if rows.held().contains(reach.start()) && rows.held().contains(reach.end()) {
                     assert_eq!(rows.normal_bilinear(s, t), hf.normal_bilinear(s, t), "({s}, {t})");
                     assert_eq!(whole.normal_bilinear(s, t), hf.normal_bilinear(s, t));

@@ -678,7 +678,7 @@ pub fn run_terrain_memo(
     // The LoD chain meshes its levels in parallel; when one of them is the main mesh's bound,
     // the main mesh is taken from the chain instead of being computed twice.
     let t1 = Instant::now();
-    let (mut chain, remembered_main, mut band_normals) = match (remembered, &plan) {
+    let (mut chain, remembered_main, band_normals) = match (remembered, &plan) {
         (_, Some(plan)) => {
             let (chain, main, normals) = banded_meshes(preset, t, &hf, plan, band_memo)?;
             (chain, Some(main), normals)
@@ -693,8 +693,8 @@ pub fn run_terrain_memo(
         ),
     };
     // bound k's normal map, put together from the bands' rows
-    let mut normal_rows = |bound: f64| -> Result<Option<crate::terrain::normal_map::TexelRows>, StageError> {
-        let (Some(plan), Some(normals)) = (&plan, &mut band_normals) else { return Ok(None) };
+    let normal_rows = |bound: f64| -> Result<Option<crate::terrain::normal_map::TexelRows>, StageError> {
+        let (Some(plan), Some(normals)) = (&plan, &band_normals) else { return Ok(None) };
         let Some(k) = plan.bounds.iter().position(|&b| b == bound) else { return Ok(None) };
         let refs: Vec<&crate::terrain::bands::BandNormals> = normals[k].iter().collect();
         crate::terrain::bands::join_normals(&refs, plan.map_px()).map(Some).map_err(|e| f(e))
