@@ -10,7 +10,7 @@ use super::common::{
     YAW_STEPS_PER_DEG,
 };
 use super::density::DensityMap;
-use super::surface::SurfaceIndex;
+use super::surface::{texel_centre, SurfaceIndex, TexelTriangles};
 
 /// Everything one species' candidates are judged by, resolved once.
 pub struct Rules<'a> {
@@ -283,7 +283,18 @@ impl<'a> Rules<'a> {
 
     /// Weight of a sample point in the estimate: density · mask · terrain rules · the share snow
     /// leaves (1 − strength · cover weight; no randomness).
-    fn weight(&self, x: f64, z: f64) -> f64 {
+    /// `hint` is the surface's point-location hint for a run of nearby points
+    /// ([`SurfaceIndex::height_at_near`]: the same answers; a row of a map locates each point from
+    /// the last one's triangle).
+    #[inline]
+    fn weight_near(&self, x: f64, z: f64, hint: &mut u32) -> f64 {
+        self.weight_on(x, z, || self.surface.height_at_near(x, z, hint))
+    }
+
+    /// [`Self::weight_near`] given how to ask the surface at (x, z) (height and normal; `None` off
+    /// the mesh), asked only where density and mask leave a weight.
+    #[inline]
+    fn weight_on(&self, x: f64, z: f64, surface: impl FnOnce() -> Option<(f64, [f64; 3])>) -> f64 {
         let d = self.density_at(x, z);
         if d <= 0.0 {
             return 0.0;
@@ -294,7 +305,7 @@ impl<'a> Rules<'a> {
                 return 0.0;
             }
         }
-        match self.surface.height_at(x, z) {
+        match surface() {
             Some((y, n)) if self.terrain_rule(y, n).is_none() => match &self.snow {
                 Some(snow) => d * (1.0 - snow.drop_share(x, z)).clamp(0.0, 1.0),
                 None => d,
@@ -378,18 +389,34 @@ fn orientation_half((ys, yw): (f64, f64), n: [f64; 3], align: f64) -> [f32; 4] {
 /// (x, y) lies at ((x + ½)/w, (y + ½)/h) of the extent, row 0 at its minimum z (the layout of the
 /// terrain's weight map). Row-major; the same values at any thread count.
 pub fn weight_map(rules: &Rules, w: u32, h: u32) -> Vec<f32> {
+    weight_map_located(rules, &rules.surface.locate_texels(rules.tiling.extent, w, h))
+}
+
+/// [`weight_map`] at the texels `texels` located on the rules' surface (one location for every
+/// species of a terrain, [`SurfaceIndex::locate_texels`]); located again if they were located over
+/// another extent.
+pub fn weight_map_located(rules: &Rules, texels: &TexelTriangles) -> Vec<f32> {
     use rayon::prelude::*;
     let [x0, z0, x1, z1] = rules.tiling.extent;
-    (0..h)
-        .into_par_iter()
-        .flat_map_iter(|y| {
-            let z = z0 + (y as f64 + 0.5) / h as f64 * (z1 - z0);
-            (0..w).map(move |x| rules.weight(x0 + (x as f64 + 0.5) / w as f64 * (x1 - x0), z).clamp(0.0, 1.0) as f32)
+    let [w, h] = texels.size;
+    if texels.extent != rules.tiling.extent || texels.tri.len() != w as usize * h as usize {
+        return weight_map(rules, w, h);
+    }
+    texels
+        .tri
+        .par_chunks(w.max(1) as usize)
+        .enumerate()
+        .flat_map_iter(|(j, row)| {
+            let z = texel_centre(z0, z1, j as u32, h);
+            row.iter().enumerate().map(move |(i, &t)| {
+                let x = texel_centre(x0, x1, i as u32, w);
+                rules.weight_on(x, z, || rules.surface.height_on(t, x, z)).clamp(0.0, 1.0) as f32
+            })
         })
         .collect()
 }
 
-/// Fraction-weighted mean of [`Rules::weight`] over the whole extent on `samples`² points.
+/// Fraction-weighted mean of [`Rules::weight_near`] over the whole extent on `samples`² points.
 pub fn estimate(rules: &Rules, samples: usize) -> f64 {
     estimate_region(rules, rules.tiling.extent, samples)
 }
@@ -407,7 +434,7 @@ pub fn estimate_region(rules: &Rules, region: [f64; 4], samples: usize) -> f64 {
     mean_weight(rules, region, samples, |_| true)
 }
 
-/// Σ [`Rules::weight`] over the midpoints of a `samples`² grid on `region` whose z `row` keeps,
+/// Σ [`Rules::weight_near`] over the midpoints of a `samples`² grid on `region` whose z `row` keeps,
 /// over all `samples`² points: rows in parallel, summed in row order (the same float result at
 /// any thread count).
 fn mean_weight(rules: &Rules, region: [f64; 4], samples: usize, row: impl Fn(f64) -> bool + Sync) -> f64 {
@@ -424,7 +451,8 @@ fn mean_weight(rules: &Rules, region: [f64; 4], samples: usize, row: impl Fn(f64
             if !row(z) {
                 return 0.0;
             }
-            (0..n).map(|i| rules.weight(region[0] + (i as f64 + 0.5) / n as f64 * w, z)).sum::<f64>()
+            let mut hint = u32::MAX;
+            (0..n).map(|i| rules.weight_near(region[0] + (i as f64 + 0.5) / n as f64 * w, z, &mut hint)).sum::<f64>()
         })
         .collect::<Vec<f64>>()
         .iter()

@@ -65,25 +65,31 @@ impl SurfaceIndex {
 
     /// Index over several primitives (e.g. the chunks of a chunked terrain, all in world space).
     pub fn from_parts(parts: &[(&[[f32; 3]], &[u32])]) -> SurfaceIndex {
+        use rayon::prelude::*;
         // reserved once (the skirts and base skipped below are few): grown by doubling, the array
         // and its copies took a third more at a world's size
         let mut tris = Vec::with_capacity(parts.iter().map(|(_, i)| i.len() / 3).sum());
         for (positions, indices) in parts {
-            for t in indices.chunks_exact(3) {
-                let get = |k: usize| positions.get(t[k] as usize).copied();
-                let (Some(fa), Some(fb), Some(fc)) = (get(0), get(1), get(2)) else { continue };
-                let (a, b, c) = (widen(fa), widen(fb), widen(fc));
-                if !(a.iter().chain(&b).chain(&c)).all(|v| v.is_finite()) {
-                    continue;
-                }
-                let n = cross3(sub3(b, a), sub3(c, a));
-                let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-                // upward-facing only: skirts are vertical (n.y = 0 exactly), the base faces down
-                if n[1] <= 1e-12 * len {
-                    continue;
-                }
-                tris.push(Tri { p: [fa, fb, fc], n: [n[0] / len, n[1] / len, n[2] / len] });
-            }
+            // triangles in parallel, kept in the mesh's order
+            let part: Vec<Tri> = indices
+                .par_chunks_exact(3)
+                .filter_map(|t| {
+                    let get = |k: usize| positions.get(t[k] as usize).copied();
+                    let (fa, fb, fc) = (get(0)?, get(1)?, get(2)?);
+                    let (a, b, c) = (widen(fa), widen(fb), widen(fc));
+                    if !(a.iter().chain(&b).chain(&c)).all(|v| v.is_finite()) {
+                        return None;
+                    }
+                    let n = cross3(sub3(b, a), sub3(c, a));
+                    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                    // upward-facing only: skirts are vertical (n.y = 0 exactly), the base faces down
+                    if n[1] <= 1e-12 * len {
+                        return None;
+                    }
+                    Some(Tri { p: [fa, fb, fc], n: [n[0] / len, n[1] / len, n[2] / len] })
+                })
+                .collect();
+            tris.extend(part);
         }
         SurfaceIndex::build(tris, 1.0)
     }
@@ -96,15 +102,20 @@ impl SurfaceIndex {
     }
 
     fn build(tris: Vec<Tri>, scale: f64) -> SurfaceIndex {
-        let mut bounds = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-        for t in &tris {
-            for p in &t.corners() {
-                bounds[0] = bounds[0].min(p[0]);
-                bounds[1] = bounds[1].min(p[2]);
-                bounds[2] = bounds[2].max(p[0]);
-                bounds[3] = bounds[3].max(p[2]);
-            }
-        }
+        use rayon::prelude::*;
+        // the corners' x/z box and the reaches' union, in parallel (min and max: the same at any
+        // split)
+        let unite = |a: [f64; 4], b: [f64; 4]| [a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])];
+        let none = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        let (bounds, reach) = tris
+            .par_iter()
+            .map(|t| {
+                let [a, b, c] = t.corners();
+                let x = [a[0].min(b[0]).min(c[0]), a[0].max(b[0]).max(c[0])];
+                let z = [a[2].min(b[2]).min(c[2]), a[2].max(b[2]).max(c[2])];
+                ([x[0], z[0], x[1], z[1]], t.reach())
+            })
+            .reduce(|| (none, none), |p, q| (unite(p.0, q.0), unite(p.1, q.1)));
         if tris.is_empty() {
             return SurfaceIndex {
                 tris,
@@ -118,11 +129,6 @@ impl SurfaceIndex {
                 reach: [0.0; 4],
                 cover: None,
             };
-        }
-        let mut reach = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-        for t in &tris {
-            let r = t.reach();
-            reach = [reach[0].min(r[0]), reach[1].min(r[1]), reach[2].max(r[2]), reach[3].max(r[3])];
         }
         // about one triangle per bucket on average: a query then tests a handful of triangles
         let (w, h) = ((bounds[2] - bounds[0]).max(1e-9), (bounds[3] - bounds[1]).max(1e-9));
@@ -145,10 +151,19 @@ impl SurfaceIndex {
             let c = |v: f64, o: f64, n: usize| bucket_of(v, o, inv_cell, n);
             (c(x0, origin[0], dims[0]), c(z0, origin[1], dims[1]), c(x1, origin[0], dims[0]), c(z1, origin[1], dims[1]))
         };
+        // each triangle's buckets, once
+        // (as u32: a bucket grid is at most ~4 per triangle + 1024, and triangles are u32-indexed)
+        let ranges: Vec<[u32; 4]> = tris
+            .par_iter()
+            .map(|t| {
+                let (i0, j0, i1, j1) = cell_range(t);
+                [i0, j0, i1, j1].map(|v| v as u32)
+            })
+            .collect();
         // fill bucket counts
         let mut start = vec![0u32; dims[0] * dims[1] + 1];
-        for t in &tris {
-            let (i0, j0, i1, j1) = cell_range(t);
+        for &[i0, j0, i1, j1] in &ranges {
+            let (i0, j0, i1, j1) = (i0 as usize, j0 as usize, i1 as usize, j1 as usize);
             for j in j0..=j1 {
                 for i in i0..=i1 {
                     start[j * dims[0] + i + 1] += 1;
@@ -161,8 +176,8 @@ impl SurfaceIndex {
         }
         let mut fill = start.clone();
         let mut items = vec![0u32; *start.last().unwrap_or(&0) as usize];
-        for (ti, t) in tris.iter().enumerate() {
-            let (i0, j0, i1, j1) = cell_range(t);
+        for (ti, &[i0, j0, i1, j1]) in ranges.iter().enumerate() {
+            let (i0, j0, i1, j1) = (i0 as usize, j0 as usize, i1 as usize, j1 as usize);
             for j in j0..=j1 {
                 for i in i0..=i1 {
                     let b = j * dims[0] + i;
@@ -243,6 +258,94 @@ impl SurfaceIndex {
         Some((interpolate(tri, bary(tri, x, z)), tri.n))
     }
 
+    /// The triangle [`Self::height_at`] answers each texel centre of a `w` × `h` grid over `extent`
+    /// with ([`texel_centre`]), found by rasterizing the triangles rather than by a lookup per texel:
+    /// a texel takes the first triangle in the mesh's order that contains its centre exactly (which
+    /// `locate` returns: such a triangle's reach holds the point, so it is among the candidates,
+    /// and they are tried in order), and a texel no triangle contains exactly is located as one
+    /// query (a point on an edge within rounding, or off the mesh). The same answers, bit for bit.
+    pub fn locate_texels(&self, extent: [f64; 4], w: u32, h: u32) -> TexelTriangles {
+        use rayon::prelude::*;
+        const ROWS: usize = 64;
+        let (wu, hu) = (w as usize, h as usize);
+        let mut tri = vec![u32::MAX; wu * hu];
+        let [x0, z0, x1, z1] = extent;
+        let spans = [x1 - x0, z1 - z0];
+        if wu > 0 && hu > 0 && spans.iter().all(|s| s.is_finite() && *s > 0.0) {
+            // texel index range whose centres may lie in [lo, hi]: widened by 10⁻⁶ of a texel,
+            // far beyond the rounding of a centre or of this formula (10⁻¹⁵ of the extent)
+            let range = |lo: f64, hi: f64, o: f64, span: f64, n: usize| -> Option<(usize, usize)> {
+                let a = ((lo - o) / span * n as f64 - 0.5 - 1e-6).ceil();
+                let b = ((hi - o) / span * n as f64 - 0.5 + 1e-6).floor();
+                if !(b >= 0.0 && a <= (n - 1) as f64 && a <= b) {
+                    return None;
+                }
+                Some((a.max(0.0) as usize, b.min((n - 1) as f64) as usize))
+            };
+            // each block of ROWS texel rows gets the triangles that may reach it, in order
+            let blocks = hu.div_ceil(ROWS);
+            let mut lists: Vec<Vec<u32>> = vec![Vec::new(); blocks];
+            let spans_of: Vec<Option<[usize; 4]>> = self
+                .tris
+                .par_iter()
+                .map(|t| {
+                    let [a, b, c] = t.corners();
+                    let (xa, xb) = (a[0].min(b[0]).min(c[0]), a[0].max(b[0]).max(c[0]));
+                    let (za, zb) = (a[2].min(b[2]).min(c[2]), a[2].max(b[2]).max(c[2]));
+                    let (i0, i1) = range(xa, xb, x0, spans[0], wu)?;
+                    let (j0, j1) = range(za, zb, z0, spans[1], hu)?;
+                    Some([i0, i1, j0, j1])
+                })
+                .collect();
+            for (k, s) in spans_of.iter().enumerate() {
+                if let Some([_, _, j0, j1]) = s {
+                    for list in &mut lists[j0 / ROWS..=j1 / ROWS] {
+                        list.push(k as u32);
+                    }
+                }
+            }
+            tri.par_chunks_mut(ROWS * wu).zip(lists.par_iter()).enumerate().for_each(|(b, (rows, list))| {
+                let first = b * ROWS;
+                let count = rows.len() / wu;
+                for &k in list {
+                    let Some([i0, i1, j0, j1]) = spans_of[k as usize] else { continue };
+                    let t = &self.tris[k as usize];
+                    for j in j0.max(first)..=j1.min(first + count - 1) {
+                        let z = texel_centre(z0, z1, j as u32, h);
+                        let row = &mut rows[(j - first) * wu..(j - first + 1) * wu];
+                        for (i, slot) in row.iter_mut().enumerate().take(i1 + 1).skip(i0) {
+                            if *slot != u32::MAX {
+                                continue;
+                            }
+                            let (w0, w1, w2, _) = bary(t, texel_centre(x0, x1, i as u32, w), z);
+                            if w0.min(w1).min(w2) >= 0.0 {
+                                *slot = k;
+                            }
+                        }
+                    }
+                }
+            });
+        }
+        // what no triangle holds exactly: one query each (few: centres on edges, off the mesh)
+        tri.par_chunks_mut(wu.max(1)).enumerate().for_each(|(j, row)| {
+            let z = texel_centre(z0, z1, j as u32, h);
+            for (i, slot) in row.iter_mut().enumerate() {
+                if *slot == u32::MAX {
+                    *slot = self.locate(texel_centre(x0, x1, i as u32, w), z).map_or(u32::MAX, |t| t as u32);
+                }
+            }
+        });
+        TexelTriangles { extent, size: [w, h], tri }
+    }
+
+    /// Height and unit normal at (x, z) on the triangle `texels` gave its texel, as
+    /// [`Self::height_at`] answers it there (`None` off the mesh).
+    #[inline]
+    pub fn height_on(&self, tri: u32, x: f64, z: f64) -> Option<(f64, [f64; 3])> {
+        let t = self.tris.get(tri as usize)?;
+        Some((interpolate(t, bary(t, x, z)), t.n))
+    }
+
     /// Index of a triangle containing (x, z): of the triangles whose reach holds it, in order, the
     /// first that contains it exactly, else the best within [`EDGE_TOLERANCE`] (a point on an
     /// edge, up to rounding). The bucket only narrows the search (module docs): every triangle
@@ -284,6 +387,23 @@ impl SurfaceIndex {
         }
         best
     }
+}
+
+/// Centre of texel `i` of `n` across [lo, hi]: lo + (i + ½)/n · (hi − lo), the one formula
+/// every map over a terrain's extent samples at.
+#[inline]
+pub fn texel_centre(lo: f64, hi: f64, i: u32, n: u32) -> f64 {
+    lo + (i as f64 + 0.5) / n as f64 * (hi - lo)
+}
+
+/// Which triangle of a [`SurfaceIndex`] holds each texel centre of a grid
+/// ([`SurfaceIndex::locate_texels`]): row-major, row 0 at the extent's minimum z, `u32::MAX` off
+/// the mesh.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TexelTriangles {
+    pub extent: [f64; 4],
+    pub size: [u32; 2],
+    pub tri: Vec<u32>,
 }
 
 /// A stored corner in f64 (exact: every f32 is an f64).
@@ -498,6 +618,76 @@ mod tests {
                     prop_assert_eq!(answer(&part, x, z), expected, "({}, {}) by the rows' triangles", x, z);
                 }
             }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(40))]
+        /// Rasterized texel location answers every texel centre as `height_at` does, bit for bit:
+        /// grids whose centres fall on the lattice's vertices and edges (`size − 1` texels over the
+        /// map, and multiples), random grids, grids reaching beyond the mesh, and overlapping
+        /// triangles (copies of some ahead of the mesh and behind it: the first in order wins).
+        #[test]
+        fn located_texels_are_the_lookups_answers(
+            size in proptest::sample::select(vec![9usize, 17, 33]),
+            cell in proptest::sample::select(vec![0.5f64, 1.0, 3.0, 0.3]),
+            relief in 1.0f64..300.0,
+            error in 0.0f64..0.2,
+            seed in 0u64..1000,
+            grid in proptest::sample::select(vec![(0u32, 0u32), (1, 1), (2, 1), (1, 2), (3, 5), (17, 4), (1, 40)]),
+            beyond in proptest::sample::select(vec![0.0f64, 0.0, 0.07, -0.2]),
+            overlap in proptest::bool::ANY,
+        ) {
+            let hf = crate::synth::fbm(size, cell, relief, seed);
+            let opts = crate::terrain::tin::TinOptions { max_error_m: error * relief, ..Default::default() };
+            let mesh = crate::terrain::tin::tin(&hf, &opts).unwrap().mesh;
+            let positions: Vec<[f32; 3]> =
+                mesh.vertices.iter().map(|v| hf.position(v[0] as usize, v[1] as usize)).collect();
+            let mut indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
+            if overlap {
+                // a few triangles again, ahead (they win) with their corners turned (the same
+                // winding, other roundings) and behind (they never win)
+                let some: Vec<u32> = mesh.triangles.iter().step_by(5).flatten().copied().collect();
+                let mut turned = some.clone();
+                turned.chunks_exact_mut(3).for_each(|t| t.rotate_left(1));
+                indices = [turned, indices, some].concat();
+            }
+            let s = SurfaceIndex::from_parts(&[(&positions, &indices)]);
+            let side = (size - 1) as f64 * cell;
+            let m = beyond * side;
+            let extent = [-m, -m * 0.5, side + m, side + m * 0.5];
+            // grid (0, 0): one texel per cell, centres on the cells' diagonals' midpoints
+            let (w, h) = match grid {
+                (0, 0) => ((size - 1) as u32, (size - 1) as u32),
+                (a, b) => (a * (size as u32 - 1) / 2 + 1, b * (size as u32 - 1) / 2 + 1),
+            };
+            let texels = s.locate_texels(extent, w, h);
+            prop_assert_eq!(texels.tri.len(), (w * h) as usize);
+            for j in 0..h {
+                let z = texel_centre(extent[1], extent[3], j, h);
+                for i in 0..w {
+                    let x = texel_centre(extent[0], extent[2], i, w);
+                    let t = texels.tri[(j * w + i) as usize];
+                    prop_assert_eq!(
+                        s.height_on(t, x, z).map(|(y, n)| (y.to_bits(), n.map(f64::to_bits))),
+                        answer(&s, x, z),
+                        "texel ({}, {}) of {}x{} at ({}, {})", i, j, w, h, x, z
+                    );
+                    prop_assert_eq!(Some(t).filter(|&t| t != u32::MAX).map(|t| t as usize), s.locate(x, z));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn located_texels_of_an_empty_grid_or_extent() {
+        let s = quad();
+        assert!(s.locate_texels([0.0, 0.0, 2.0, 2.0], 0, 3).tri.is_empty());
+        // a degenerate extent: every texel located one by one, on the line x = 1
+        let t = s.locate_texels([1.0, 0.0, 1.0, 2.0], 2, 2);
+        for (k, &tri) in t.tri.iter().enumerate() {
+            let z = texel_centre(0.0, 2.0, k as u32 / 2, 2);
+            assert_eq!(Some(tri as usize), s.locate(1.0, z));
         }
     }
 

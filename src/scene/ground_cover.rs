@@ -99,6 +99,8 @@ pub fn cover(preset: &Preset, terrain: &Scene, size: [u32; 2]) -> Option<Vegetat
     }
     let surface = surface_of(terrain);
     let extent = surface.bounds();
+    // which triangle holds each texel centre: one location for every species
+    let texels = surface.locate_texels(extent, size[0], size[1]);
     let tiling = crate::scatter::Tiling::new(extent, preset.scatter.tile_m).ok()?;
     let vegetation = vegetation_map(preset, "terrain").ok()?;
     let mut species = Vec::with_capacity(preset.species.len());
@@ -122,7 +124,7 @@ pub fn cover(preset: &Preset, terrain: &Scene, size: [u32; 2]) -> Option<Vegetat
             max_density: rules.effective_max_density,
             height_m: plant_height_m(s),
             footprint_m2: std::f64::consts::FRAC_PI_4 * footprint * footprint,
-            weights: crate::scatter::rules::weight_map(&rules, size[0], size[1]),
+            weights: crate::scatter::rules::weight_map_located(&rules, &texels),
         });
     }
     Some(VegetationCover { extent, size, species })

@@ -13,7 +13,7 @@ use crate::plants::palette;
 use crate::scatter::density::DensityMap;
 use crate::scatter::rules::SnowThinning;
 use crate::scatter::stats::{analyze, SpeciesStats};
-use crate::scatter::surface::SurfaceIndex;
+use crate::scatter::surface::{SurfaceIndex, TexelTriangles};
 use crate::scatter::{scatter_species_snow, Instance, RuleCounts};
 use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::error::{SceneBuildError, StageError};
@@ -149,14 +149,14 @@ const SPECIES_PER_DENSITY_MAP: usize = 4;
 #[allow(clippy::too_many_arguments)]
 fn species_density(
     surface: &SurfaceIndex,
-    extent: [f64; 4],
-    size: [u32; 2],
+    texels: &TexelTriangles,
     preset: &Preset,
     species: &SpeciesSettings,
     (density, mask): (Option<&DensityMap>, Option<&DensityMap>),
     thinning: Option<SnowThinning<'_>>,
     index: usize,
 ) -> Result<(Vec<u8>, DensityWeight), StageError> {
+    let extent = texels.extent;
     let tiling = crate::scatter::Tiling::new(extent, preset.scatter.tile_m).map_err(|e| bad_input(e.to_string()))?;
     let mut rules = crate::scatter::rules::Rules::without_exclusions(
         surface,
@@ -168,7 +168,7 @@ fn species_density(
     )
     .map_err(|e| bad_input(e.to_string()))?;
     rules.snow = thinning;
-    let bytes: Vec<u8> = crate::scatter::rules::weight_map(&rules, size[0], size[1])
+    let bytes: Vec<u8> = crate::scatter::rules::weight_map_located(&rules, texels)
         .into_iter()
         .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
         .collect();
@@ -254,6 +254,8 @@ pub fn run_scatter_joined(
     let mut placed: Vec<Placed> = Vec::new();
     let mut reports = Vec::new();
     let map_size = layer_map_size(terrain, extent);
+    // which triangle holds each texel centre of the density maps: one location for every species
+    let texels = std::sync::OnceLock::new();
     let mut weights: Vec<(String, Vec<u8>)> = Vec::new();
     let vegetation = crate::scene::ground_cover::vegetation_map(preset, "scatter")?;
     for (index, species) in preset.species.iter().enumerate() {
@@ -309,10 +311,10 @@ pub fn run_scatter_joined(
             .map_err(|e| bad_input(e.to_string()))?,
         };
         // its density over the terrain, on the weight map's texels (exclusions aside)
+        let texels = texels.get_or_init(|| surface.locate_texels(extent, map_size[0], map_size[1]));
         let (bytes, density_weight) = species_density(
             &surface,
-            extent,
-            map_size,
+            texels,
             preset,
             species,
             (density.as_ref(), mask.as_ref()),
