@@ -445,48 +445,93 @@ pub fn read_placements_csv(path: &Path) -> Result<Vec<PlacementRow>, String> {
     parse_placements_csv(&text)
 }
 
-/// [`read_placements_csv`] on the text of a table.
+/// [`read_placements_csv`] on the text of a table. Pieces of about [`PARSE_PIECE_BYTES`], cut
+/// after a line's end, are parsed in parallel and joined in order; an error is the first bad
+/// line's, as a parse from the top would name it.
 pub fn parse_placements_csv(text: &str) -> Result<Vec<PlacementRow>, String> {
-    let mut lines = text.lines();
-    let header = lines.next().unwrap_or("");
+    use rayon::prelude::*;
+    let header = text.lines().next().unwrap_or("");
+    let body = text.split_once('\n').map_or("", |(_, body)| body);
     if header.split(',').collect::<Vec<_>>() != PLACEMENT_COLUMNS {
         return Err(format!("line 1: the header is `{header}`, expected `{}`", PLACEMENT_COLUMNS.join(",")));
     }
-    let mut rows = Vec::new();
-    for (n, line) in lines.enumerate() {
-        if line.is_empty() {
-            continue;
-        }
-        let at = n + 2;
-        let f: Vec<&str> = line.split(',').collect();
-        if f.len() != PLACEMENT_COLUMNS.len() {
-            return Err(format!("line {at}: {} fields, expected {}", f.len(), PLACEMENT_COLUMNS.len()));
-        }
-        let num64 = |k: usize| {
-            f[k].parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| {
-                format!("line {at}, column `{}`: `{}` is not a finite number", PLACEMENT_COLUMNS[k], f[k])
-            })
-        };
-        // f32 columns parsed as f32: their shortest form rounds to the same f32 (via f64 it might not)
-        let num32 = |k: usize| {
-            f[k].parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| {
-                format!("line {at}, column `{}`: `{}` is not a finite number", PLACEMENT_COLUMNS[k], f[k])
-            })
-        };
-        rows.push(PlacementRow {
-            position: [num64(0)?, num64(1)?, num64(2)?],
-            rotation: [num32(3)?, num32(4)?, num32(5)?, num32(6)?],
-            scale: [num32(7)?, num32(8)?, num32(9)?],
-            yaw_deg: num32(10)?,
-            tile: f[11]
-                .parse::<u32>()
-                .map_err(|_| format!("line {at}, column `tile`: `{}` is not a tile number", f[11]))?,
-            variant: f[12]
-                .parse::<u32>()
-                .map_err(|_| format!("line {at}, column `variant`: `{}` is not a variant number", f[12]))?,
-        });
+    // pieces of whole lines: each ends after a '\n' (or at the end of the text)
+    let mut pieces = Vec::new();
+    let mut at = 0;
+    while at < body.len() {
+        let mut end = (at + PARSE_PIECE_BYTES).min(body.len());
+        end = body.as_bytes()[end..].iter().position(|&b| b == b'\n').map_or(body.len(), |k| end + k + 1);
+        pieces.push(&body[at..end]);
+        at = end;
     }
+    // every line's row in one array (no second copy of a world's rows): each piece fills its
+    // lines' part, then the rows of blank lines, if any, are closed up
+    let lines: Vec<usize> = pieces.par_iter().map(|p| p.lines().count()).collect();
+    let blank =
+        PlacementRow { position: [0.0; 3], rotation: [0.0; 4], scale: [0.0; 3], yaw_deg: 0.0, tile: 0, variant: 0 };
+    let mut rows = vec![blank; lines.iter().sum()];
+    let mut parts = Vec::with_capacity(pieces.len());
+    let mut rest = &mut rows[..];
+    for &n in &lines {
+        let (part, tail) = rest.split_at_mut(n);
+        parts.push(part);
+        rest = tail;
+    }
+    let filled: Vec<Result<usize, (usize, String)>> = pieces
+        .par_iter()
+        .zip(parts.into_par_iter())
+        .map(|(piece, part)| {
+            let mut k = 0;
+            for (n, line) in piece.lines().enumerate() {
+                if !line.is_empty() {
+                    part[k] = parse_placement_line(line).map_err(|e| (n, e))?;
+                    k += 1;
+                }
+            }
+            Ok(k)
+        })
+        .collect();
+    let (mut read, mut write) = (0, 0);
+    for (&n, result) in lines.iter().zip(filled) {
+        match result {
+            Ok(k) => {
+                if read != write {
+                    rows.copy_within(read..read + k, write);
+                }
+                write += k;
+            }
+            // line numbers count the header and every line before (blank ones too)
+            Err((at, e)) => return Err(format!("line {}{e}", read + at + 2)),
+        }
+        read += n;
+    }
+    rows.truncate(write);
     Ok(rows)
+}
+
+/// Bytes of table text one parallel task parses ([`parse_placements_csv`]).
+const PARSE_PIECE_BYTES: usize = 1 << 20;
+
+/// One row of a placement table; an error is what follows the line number ("line N" + it).
+fn parse_placement_line(line: &str) -> Result<PlacementRow, String> {
+    let f: Vec<&str> = line.split(',').collect();
+    if f.len() != PLACEMENT_COLUMNS.len() {
+        return Err(format!(": {} fields, expected {}", f.len(), PLACEMENT_COLUMNS.len()));
+    }
+    let bad = |k: usize| format!(", column `{}`: `{}` is not a finite number", PLACEMENT_COLUMNS[k], f[k]);
+    let num64 = |k: usize| f[k].parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| bad(k));
+    // f32 columns parsed as f32: their shortest form rounds to the same f32 (via f64 it might not)
+    let num32 = |k: usize| f[k].parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| bad(k));
+    Ok(PlacementRow {
+        position: [num64(0)?, num64(1)?, num64(2)?],
+        rotation: [num32(3)?, num32(4)?, num32(5)?, num32(6)?],
+        scale: [num32(7)?, num32(8)?, num32(9)?],
+        yaw_deg: num32(10)?,
+        tile: f[11].parse::<u32>().map_err(|_| format!(", column `tile`: `{}` is not a tile number", f[11]))?,
+        variant: f[12]
+            .parse::<u32>()
+            .map_err(|_| format!(", column `variant`: `{}` is not a variant number", f[12]))?,
+    })
 }
 
 /// The table as CSV bytes: a header line, then one line per row. Non-finite numbers are refused
@@ -638,6 +683,45 @@ mod tests {
             Some(m) => line.put_fixed::<UNIT_DIGITS>(v < 0.0, m),
             None => push_f32(line, v),
         })
+    }
+
+    /// A table of several parse pieces reads back as written, with CRLF ends and blank lines too;
+    /// an error names the first bad line (counting blank ones), wherever the pieces were cut.
+    #[test]
+    fn a_table_of_many_pieces_reads_back_in_order_and_names_the_first_bad_line() {
+        let rows: Vec<PlacementRow> = (0..30_000u32)
+            .map(|k| {
+                let t = k as f64 * 0.987_654_321;
+                PlacementRow {
+                    position: [t, -t / 3.0, 2e5 - t],
+                    rotation: [0.0, (t as f32).sin(), 0.0, (t as f32).cos()],
+                    scale: [0.5 + k as f32 * 1e-5; 3],
+                    yaw_deg: (k % 360) as f32 + 0.5,
+                    tile: k / 700,
+                    variant: k % 4,
+                }
+            })
+            .collect();
+        let csv = String::from_utf8(placements_csv(&rows).unwrap()).unwrap();
+        assert!(csv.len() > 2 * PARSE_PIECE_BYTES, "{} bytes: more than one piece", csv.len());
+        assert_eq!(parse_placements_csv(&csv).unwrap(), rows);
+        assert_eq!(parse_placements_csv(&csv.replace('\n', "\r\n")).unwrap(), rows);
+        let lines: Vec<&str> = csv.lines().collect();
+        let mut blank = lines.clone();
+        blank.insert(5, "");
+        blank.insert(20_000, "");
+        assert_eq!(parse_placements_csv(&blank.join("\n")).unwrap(), rows);
+        for bad in [[29_000usize, 29_500], [4, 28_000], [12_345, 12_346]] {
+            let mut l = blank.clone();
+            l[bad[0]] = "1,2,3";
+            l[bad[1]] = "x";
+            let e = parse_placements_csv(&l.join("\r\n")).unwrap_err();
+            assert_eq!(e, format!("line {}: 3 fields, expected 13", bad[0] + 1));
+        }
+        let mut l = lines.clone();
+        l[17_000] = &"1,2,3,0,0,0,1,1,1,1,0,oops,0";
+        let e = parse_placements_csv(&l.join("\n")).unwrap_err();
+        assert_eq!(e, "line 17001, column `tile`: `oops` is not a tile number");
     }
 
     #[test]
