@@ -719,7 +719,7 @@ mod tests {
             assert_eq!(e, format!("line {}: 3 fields, expected 13", bad[0] + 1));
         }
         let mut l = lines.clone();
-        l[17_000] = &"1,2,3,0,0,0,1,1,1,1,0,oops,0";
+        l[17_000] = "1,2,3,0,0,0,1,1,1,1,0,oops,0";
         let e = parse_placements_csv(&l.join("\n")).unwrap_err();
         assert_eq!(e, "line 17001, column `tile`: `oops` is not a tile number");
     }
