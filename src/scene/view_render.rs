@@ -74,15 +74,20 @@ pub fn render_view(scene: &Scene, camera: &Camera, width: u32, height: u32) -> R
     // normal maps hold data (glTF reads them as linear values), colour textures sRGB
     let is_data: Vec<bool> =
         (0..scene.textures.len()).map(|t| scene.materials.iter().any(|m| m.normal_texture == Some(t))).collect();
-    let textures: Vec<Image> = scene
-        .textures
-        .iter()
-        .zip(&is_data)
-        .map(|(t, &data)| {
-            if data { Image::from_png_data(&t.png) } else { Image::from_png(&t.png) }
-                .map_err(|e| format!("texture `{}`: {e}", t.name))
-        })
-        .collect::<Result<_, _>>()?;
+    // decoded in parallel (a world's terrain maps are 2048² each); the first bad one named
+    let textures: Vec<Result<Image, String>> = {
+        use rayon::prelude::*;
+        scene
+            .textures
+            .par_iter()
+            .zip(&is_data)
+            .map(|(t, &data)| {
+                if data { Image::from_png_data(&t.png) } else { Image::from_png(&t.png) }
+                    .map_err(|e| format!("texture `{}`: {e}", t.name))
+            })
+            .collect()
+    };
+    let textures: Vec<Image> = textures.into_iter().collect::<Result<_, _>>()?;
     let cam = raster_camera(camera, width, height);
     let RasterCamera::Perspective(view) = &cam else { unreachable!("raster_camera is a perspective") };
     let may_see = view.sphere_test().map_err(|e| e.to_string())?;
