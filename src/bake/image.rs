@@ -64,7 +64,15 @@ impl Image {
     /// Decodes PNG bytes that hold data, not colour (a glTF normalTexture): values as stored,
     /// 0..1, no sRGB decoding (the inverse of [`Image::encode_png_data`]).
     pub fn from_png_data(bytes: &[u8]) -> Result<Image, BakeError> {
-        let mut img = Image::decode_png(bytes, "the PNG data")?;
+        // an 8-bit channel k reads as what the colour decode and its undoing below give k: one
+        // table, the same values (a world's 2048² normal maps took a powf per channel)
+        let (mut img, sixteen) = Image::decode_png_as(bytes, "the PNG data", |k| {
+            let v = crate::color::linear_to_srgb(srgb_to_linear(k as f32 / 255.0));
+            (v * 255.0).round() / 255.0
+        })?;
+        if !sixteen {
+            return Ok(img);
+        }
         for p in &mut img.pixels {
             for c in p.iter_mut().take(3) {
                 *c = crate::color::linear_to_srgb(*c);
@@ -92,6 +100,12 @@ impl Image {
     }
 
     fn decode_png(bytes: &[u8], source_name: &str) -> Result<Image, BakeError> {
+        Image::decode_png_as(bytes, source_name, |k| srgb_to_linear(k as f32 / 255.0)).map(|(img, _)| img)
+    }
+
+    /// [`Image::decode_png`] with 8-bit colour channel k read as `eight(k)` (alpha as stored);
+    /// whether the image was 16-bit (its colour then decoded from sRGB, as `decode_png` does).
+    fn decode_png_as(bytes: &[u8], source_name: &str, eight: impl Fn(u8) -> f32) -> Result<(Image, bool), BakeError> {
         let png_err =
             |e: image::ImageError| BakeError::Png { source_name: source_name.to_string(), reason: e.to_string() };
         let decoder = image::codecs::png::PngDecoder::new(Cursor::new(bytes)).map_err(png_err)?;
@@ -111,13 +125,13 @@ impl Image {
                 .collect()
         } else {
             // 256 entries instead of a powf per channel.
-            let table: Vec<f32> = (0..256).map(|v| srgb_to_linear(v as f32 / 255.0)).collect();
+            let table: Vec<f32> = (0..=255u8).map(eight).collect();
             let raw = dynamic.into_rgba8();
             raw.pixels()
                 .map(|p| [table[p[0] as usize], table[p[1] as usize], table[p[2] as usize], p[3] as f32 / 255.0])
                 .collect()
         };
-        Ok(Image { width, height, pixels })
+        Ok((Image { width, height, pixels }, sixteen))
     }
 
     /// sRGB-encoded 8-bit RGBA, row-major from the top-left (alpha stays linear), rounded to nearest.
@@ -232,6 +246,34 @@ mod tests {
 
     use super::*;
     use crate::color::linear_to_srgb;
+
+    /// An 8-bit data PNG reads through its table as the colour decode and its undoing give every
+    /// value 0..=255, bit for bit; a 16-bit one as before.
+    #[test]
+    fn data_pngs_read_as_the_colour_decode_undone() {
+        let raw: Vec<u8> = (0..=255u8).flat_map(|k| [k, 255 - k, k.wrapping_mul(7), k]).collect();
+        let png = crate::bake::raster::png::encode_rgba8_png(&raw, 16, 16).unwrap();
+        let undone = |img: Image| -> Vec<[u32; 4]> {
+            img.pixels
+                .iter()
+                .map(|p| {
+                    let c = |v: f32| ((linear_to_srgb(v) * 255.0).round() / 255.0).to_bits();
+                    [c(p[0]), c(p[1]), c(p[2]), p[3].to_bits()]
+                })
+                .collect()
+        };
+        let bits = |img: Image| -> Vec<[u32; 4]> { img.pixels.iter().map(|p| p.map(f32::to_bits)).collect() };
+        assert_eq!(bits(Image::from_png_data(&png).unwrap()), undone(Image::from_png(&png).unwrap()));
+        let mut wide = Vec::new();
+        {
+            let mut enc = png::Encoder::new(&mut wide, 4, 1);
+            enc.set_color(png::ColorType::Rgba);
+            enc.set_depth(png::BitDepth::Sixteen);
+            let samples: Vec<u8> = (0..16u16).flat_map(|k| (k * 4099).to_be_bytes()).collect();
+            enc.write_header().unwrap().write_image_data(&samples).unwrap();
+        }
+        assert_eq!(bits(Image::from_png_data(&wide).unwrap()), undone(Image::from_png(&wide).unwrap()));
+    }
 
     fn checker() -> Image {
         // 2×2: red, green / blue, white at half alpha.
