@@ -230,6 +230,9 @@ fn octave_row(&(s, ox, oy, f, _): &Octave, j: usize, out: &mut [f64]) {
     }
 }
 
+/// Samples a parallel task of [`noise_map`]'s range and scaling takes.
+const NORMALISE_BLOCK: usize = 1 << 16;
+
 /// A `size` × `size` fractal map, heights in metres normalised to [0, `relief_m`]. The widest
 /// octave spans half the map; each next one has twice the frequency (lacunarity 2) and half the
 /// amplitude (gain 0.5), up to [`NOISE_OCTAVES`]. Rows are computed in parallel, each sample from
@@ -253,15 +256,33 @@ pub fn noise_map(kind: NoiseKind, size: usize, cell_size_m: f64, relief_m: f64, 
             }
         },
     );
-    let raw = |words: &[u32], k: usize| f64::from_bits(words[2 * k] as u64 | (words[2 * k + 1] as u64) << 32);
-    let lo = (0..n).map(|k| raw(&words, k)).fold(f64::INFINITY, f64::min);
-    let hi = (0..n).map(|k| raw(&words, k)).fold(f64::NEG_INFINITY, f64::max);
+    let pair = |p: &[u32]| f64::from_bits(p[0] as u64 | (p[1] as u64) << 32);
+    // the range in parallel (min and max: the same at any split; a zero taken as +0)
+    let none = (f64::INFINITY, f64::NEG_INFINITY);
+    let (lo, hi) = words
+        .par_chunks(2 * NORMALISE_BLOCK)
+        .map(|c| c.chunks_exact(2).map(pair).fold(none, |(lo, hi), v| (lo.min(v), hi.max(v))))
+        .reduce(|| none, |a, b| (a.0.min(b.0), a.1.max(b.1)));
+    let (lo, hi) = (lo + 0.0, hi + 0.0);
     let scale = if hi > lo { relief_m / (hi - lo) } else { 0.0 };
+    let height = |v: f64| ((((v - lo) * scale) as f32).clamp(0.0, relief_m as f32)).to_bits();
     // Height k goes to word k, which is read (as part of sample k / 2) before it is written: sample
-    // k lies in words 2k and 2k + 1, never before word k.
-    for k in 0..n {
-        let v = raw(&words, k);
-        words[k] = ((((v - lo) * scale) as f32).clamp(0.0, relief_m as f32)).to_bits();
+    // k lies in words 2k and 2k + 1, never before word k. The first block in order; then samples
+    // [a, 2a) in parallel, written to words [a, 2a) (samples before a, done) from words [2a, 4a)
+    // (not written until the samples from 2a on are).
+    let first = NORMALISE_BLOCK.min(n);
+    for k in 0..first {
+        words[k] = height(pair(&words[2 * k..2 * k + 2]));
+    }
+    let mut a = first;
+    while a < n {
+        let b = (2 * a).min(n);
+        let (written, read) = words.split_at_mut(2 * a);
+        written[a..b]
+            .par_chunks_mut(NORMALISE_BLOCK)
+            .zip(read[..2 * (b - a)].par_chunks(2 * NORMALISE_BLOCK))
+            .for_each(|(out, raw)| out.iter_mut().zip(raw.chunks_exact(2)).for_each(|(w, p)| *w = height(pair(p))));
+        a = b;
     }
     words.truncate(n);
     words.shrink_to_fit();
@@ -346,7 +367,7 @@ pub fn noise_map_rows(
 pub fn noise_range(kind: NoiseKind, size: usize, seed: u64) -> (f64, f64) {
     let side = size.max(1);
     let octaves = octave_table(side, seed);
-    (0..side)
+    let (lo, hi) = (0..side)
         .into_par_iter()
         .map_init(
             || (vec![0.0f64; side], Vec::new()),
@@ -355,7 +376,9 @@ pub fn noise_range(kind: NoiseKind, size: usize, seed: u64) -> (f64, f64) {
                 row.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)))
             },
         )
-        .reduce(|| (f64::INFINITY, f64::NEG_INFINITY), |a, b| (a.0.min(b.0), a.1.max(b.1)))
+        .reduce(|| (f64::INFINITY, f64::NEG_INFINITY), |a, b| (a.0.min(b.0), a.1.max(b.1)));
+    // (a zero taken as +0, whichever sign the split met first, as [`noise_map`] takes it)
+    (lo + 0.0, hi + 0.0)
 }
 
 /// Rows `rows[0]..=rows[1]` of [`noise_map`]'s map given its raw `range` ([`noise_range`]).
@@ -418,6 +441,11 @@ mod tests {
                     "{kind:?} rows {rows:?}"
                 );
                 assert_eq!(part, expected);
+            }
+            // a map scaled in several parallel waves (over 2 × 65536 samples)
+            let big = noise_map(kind, 401, 1.5, 90.0, 5);
+            for rows in [[0, 3], [163, 164], [326, 400]] {
+                assert_eq!(noise_map_rows(kind, 401, 1.5, 90.0, 5, rows).unwrap(), big.rows(rows[0], rows[1]).unwrap());
             }
             assert!(noise_map_rows(kind, 301, 2.0, 250.0, 17, [10, 301]).is_none());
             assert!(noise_map_rows(kind, 301, 2.0, 250.0, 17, [11, 10]).is_none());
