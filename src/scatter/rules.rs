@@ -282,16 +282,14 @@ impl<'a> Rules<'a> {
     }
 
     /// Weight of a sample point in the estimate: density · mask · terrain rules · the share snow
-    /// leaves (1 − strength · cover weight; no randomness).
-    /// `hint` is the surface's point-location hint for a run of nearby points
-    /// ([`SurfaceIndex::height_at_near`]: the same answers; a row of a map locates each point from
-    /// the last one's triangle).
+    /// leaves (1 − strength · cover weight; no randomness). The surface is asked without a hint:
+    /// a hint answers as `height_at` only where no upward triangles overlap.
     #[inline]
-    fn weight_near(&self, x: f64, z: f64, hint: &mut u32) -> f64 {
-        self.weight_on(x, z, || self.surface.height_at_near(x, z, hint))
+    fn weight(&self, x: f64, z: f64) -> f64 {
+        self.weight_on(x, z, || self.surface.height_at(x, z))
     }
 
-    /// [`Self::weight_near`] given how to ask the surface at (x, z) (height and normal; `None` off
+    /// [`Self::weight`] given how to ask the surface at (x, z) (height and normal; `None` off
     /// the mesh), asked only where density and mask leave a weight.
     #[inline]
     fn weight_on(&self, x: f64, z: f64, surface: impl FnOnce() -> Option<(f64, [f64; 3])>) -> f64 {
@@ -416,7 +414,7 @@ pub fn weight_map_located(rules: &Rules, texels: &TexelTriangles) -> Vec<f32> {
         .collect()
 }
 
-/// Fraction-weighted mean of [`Rules::weight_near`] over the whole extent on `samples`² points.
+/// Fraction-weighted mean of [`Rules::weight`] over the whole extent on `samples`² points.
 pub fn estimate(rules: &Rules, samples: usize) -> f64 {
     estimate_region(rules, rules.tiling.extent, samples)
 }
@@ -434,7 +432,7 @@ pub fn estimate_region(rules: &Rules, region: [f64; 4], samples: usize) -> f64 {
     mean_weight(rules, region, samples, |_| true)
 }
 
-/// Σ [`Rules::weight_near`] over the midpoints of a `samples`² grid on `region` whose z `row` keeps,
+/// Σ [`Rules::weight`] over the midpoints of a `samples`² grid on `region` whose z `row` keeps,
 /// over all `samples`² points: rows in parallel, summed in row order (the same float result at
 /// any thread count).
 fn mean_weight(rules: &Rules, region: [f64; 4], samples: usize, row: impl Fn(f64) -> bool + Sync) -> f64 {
@@ -451,8 +449,7 @@ fn mean_weight(rules: &Rules, region: [f64; 4], samples: usize, row: impl Fn(f64
             if !row(z) {
                 return 0.0;
             }
-            let mut hint = u32::MAX;
-            (0..n).map(|i| rules.weight_near(region[0] + (i as f64 + 0.5) / n as f64 * w, z, &mut hint)).sum::<f64>()
+            (0..n).map(|i| rules.weight(region[0] + (i as f64 + 0.5) / n as f64 * w, z)).sum::<f64>()
         })
         .collect::<Vec<f64>>()
         .iter()

@@ -116,6 +116,8 @@ impl SurfaceIndex {
                 ([x[0], z[0], x[1], z[1]], t.reach())
             })
             .reduce(|| (none, none), |p, q| (unite(p.0, q.0), unite(p.1, q.1)));
+        // (a zero taken as +0, whichever sign the split met first)
+        let (bounds, reach) = (bounds.map(|v| v + 0.0), reach.map(|v| v + 0.0));
         if tris.is_empty() {
             return SurfaceIndex {
                 tris,
@@ -285,7 +287,8 @@ impl SurfaceIndex {
             // each block of ROWS texel rows gets the triangles that may reach it, in order
             let blocks = hu.div_ceil(ROWS);
             let mut lists: Vec<Vec<u32>> = vec![Vec::new(); blocks];
-            let spans_of: Vec<Option<[usize; 4]>> = self
+            // (u32: texel indices of a grid of u32 sides; 20 bytes a triangle)
+            let spans_of: Vec<Option<[u32; 4]>> = self
                 .tris
                 .par_iter()
                 .map(|t| {
@@ -294,11 +297,11 @@ impl SurfaceIndex {
                     let (za, zb) = (a[2].min(b[2]).min(c[2]), a[2].max(b[2]).max(c[2]));
                     let (i0, i1) = range(xa, xb, x0, spans[0], wu)?;
                     let (j0, j1) = range(za, zb, z0, spans[1], hu)?;
-                    Some([i0, i1, j0, j1])
+                    Some([i0, i1, j0, j1].map(|v| v as u32))
                 })
                 .collect();
             for (k, s) in spans_of.iter().enumerate() {
-                if let Some([_, _, j0, j1]) = s {
+                if let Some([_, _, j0, j1]) = s.map(|s| s.map(|v| v as usize)) {
                     for list in &mut lists[j0 / ROWS..=j1 / ROWS] {
                         list.push(k as u32);
                     }
@@ -308,7 +311,7 @@ impl SurfaceIndex {
                 let first = b * ROWS;
                 let count = rows.len() / wu;
                 for &k in list {
-                    let Some([i0, i1, j0, j1]) = spans_of[k as usize] else { continue };
+                    let Some([i0, i1, j0, j1]) = spans_of[k as usize].map(|s| s.map(|v| v as usize)) else { continue };
                     let t = &self.tris[k as usize];
                     for j in j0.max(first)..=j1.min(first + count - 1) {
                         let z = texel_centre(z0, z1, j as u32, h);

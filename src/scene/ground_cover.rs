@@ -99,9 +99,9 @@ pub fn cover(preset: &Preset, terrain: &Scene, size: [u32; 2]) -> Option<Vegetat
     }
     let surface = surface_of(terrain);
     let extent = surface.bounds();
+    let tiling = crate::scatter::Tiling::new(extent, preset.scatter.tile_m).ok()?;
     // which triangle holds each texel centre: one location for every species
     let texels = surface.locate_texels(extent, size[0], size[1]);
-    let tiling = crate::scatter::Tiling::new(extent, preset.scatter.tile_m).ok()?;
     let vegetation = vegetation_map(preset, "terrain").ok()?;
     let mut species = Vec::with_capacity(preset.species.len());
     for s in &preset.species {
