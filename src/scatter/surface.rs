@@ -109,12 +109,7 @@ impl SurfaceIndex {
         let none = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
         let (bounds, reach) = tris
             .par_iter()
-            .map(|t| {
-                let [a, b, c] = t.corners();
-                let x = [a[0].min(b[0]).min(c[0]), a[0].max(b[0]).max(c[0])];
-                let z = [a[2].min(b[2]).min(c[2]), a[2].max(b[2]).max(c[2])];
-                ([x[0], z[0], x[1], z[1]], t.reach())
-            })
+            .map(|t| (t.xz_box(), t.reach()))
             .reduce(|| (none, none), |p, q| (unite(p.0, q.0), unite(p.1, q.1)));
         // (a zero taken as +0, whichever sign the split met first)
         let (bounds, reach) = (bounds.map(|v| v + 0.0), reach.map(|v| v + 0.0));
@@ -292,9 +287,7 @@ impl SurfaceIndex {
                 .tris
                 .par_iter()
                 .map(|t| {
-                    let [a, b, c] = t.corners();
-                    let (xa, xb) = (a[0].min(b[0]).min(c[0]), a[0].max(b[0]).max(c[0]));
-                    let (za, zb) = (a[2].min(b[2]).min(c[2]), a[2].max(b[2]).max(c[2]));
+                    let [xa, za, xb, zb] = t.xz_box();
                     let (i0, i1) = range(xa, xb, x0, spans[0], wu)?;
                     let (j0, j1) = range(za, zb, z0, spans[1], hu)?;
                     Some([i0, i1, j0, j1].map(|v| v as u32))
@@ -428,13 +421,18 @@ impl Tri {
         self.p.map(widen)
     }
 
+    /// The triangle's x/z bounding box [x0, z0, x1, z1].
+    #[inline]
+    fn xz_box(&self) -> [f64; 4] {
+        let [a, b, c] = self.corners();
+        [a[0].min(b[0]).min(c[0]), a[2].min(b[2]).min(c[2]), a[0].max(b[0]).max(c[0]), a[2].max(b[2]).max(c[2])]
+    }
+
     /// The triangle's reach: its x/z bounding box [x0, z0, x1, z1] widened by [`REACH`] of its
     /// size plus its largest coordinate (a function of the corners alone).
     #[inline]
     fn reach(&self) -> [f64; 4] {
-        let [a, b, c] = self.corners();
-        let (x0, x1) = (a[0].min(b[0]).min(c[0]), a[0].max(b[0]).max(c[0]));
-        let (z0, z1) = (a[2].min(b[2]).min(c[2]), a[2].max(b[2]).max(c[2]));
+        let [x0, z0, x1, z1] = self.xz_box();
         let m = REACH * ((x1 - x0) + (z1 - z0) + x0.abs().max(x1.abs()).max(z0.abs()).max(z1.abs()));
         [x0 - m, z0 - m, x1 + m, z1 + m]
     }

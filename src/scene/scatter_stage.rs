@@ -255,7 +255,7 @@ pub fn run_scatter_joined(
     let mut reports = Vec::new();
     let map_size = layer_map_size(terrain, extent);
     // which triangle holds each texel centre of the density maps: one location for every species
-    let texels = std::sync::OnceLock::new();
+    let texels = std::cell::OnceCell::new();
     let mut weights: Vec<(String, Vec<u8>)> = Vec::new();
     let vegetation = crate::scene::ground_cover::vegetation_map(preset, "scatter")?;
     for (index, species) in preset.species.iter().enumerate() {
