@@ -118,8 +118,20 @@ struct ViewManifest<'a> {
     /// scene_lod.glb: every terrain chunk and placement tile as an MSFT_lod chain.
     lod_scene: String,
     lod_scene_bytes: u64,
+    /// `[scene] tile`: the scene in tiles ([`crate::scene::view_tiles`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tiles: Option<TilesManifest>,
     views: &'a [crate::scene::view_stage::ViewReport],
     chains: std::collections::BTreeMap<&'a str, &'a crate::scene::plants_stage::SpeciesChain>,
+}
+
+#[derive(Serialize)]
+struct TilesManifest {
+    /// The index (scene_tiles.json), which lists every tile's file, square, box and contents.
+    index: String,
+    tile_m: f64,
+    tiles: usize,
+    bytes: u64,
 }
 
 #[derive(Serialize)]
@@ -329,6 +341,12 @@ pub fn write_manifest_and_report(
             bytes: v.scene_bytes,
             lod_scene: v.lod_scene_file.to_string_lossy().replace('\\', "/"),
             lod_scene_bytes: v.lod_scene_bytes,
+            tiles: v.tiles.as_ref().map(|t| TilesManifest {
+                index: t.index_file.to_string_lossy().replace('\\', "/"),
+                tile_m: t.index.tile_m,
+                tiles: t.index.tiles.len(),
+                bytes: t.bytes,
+            }),
             views: &v.views,
             chains: plants.map(|p| p.species.iter().map(|s| (s.name.as_str(), &s.chain)).collect()).unwrap_or_default(),
         }),
@@ -387,6 +405,9 @@ fn report_json(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[St
                 let mut v = serde_json::to_value(report).unwrap_or(Value::Null);
                 if let Some(o) = v.as_object_mut() {
                     o.remove("seconds");
+                    if let Some(t) = o.get_mut("tiles").and_then(Value::as_object_mut) {
+                        t.remove("seconds");
+                    }
                 }
                 ("view", v, *cached, *cost)
             }
@@ -815,6 +836,18 @@ fn view_section(v: &crate::scene::view_stage::ViewStageReport) -> String {
         v.scene_file.display(),
         v.scene_bytes as f64 / 1e6
     );
+    if let Some(t) = &v.tiles {
+        let largest = t.index.tiles.iter().map(|t| t.bytes).max().unwrap_or(0);
+        s += &format!(
+            "`{}` indexes the scene in {} tiles of {} m (`{}/`, {:.1} MB, the largest {:.1} MB): each a GLB of its own holding the terrain chunks centred in its square and the instances placed in it, as scene_lod.glb chains them, with the species' levels it uses and its part of the terrain's textures.\n\n",
+            t.index_file.display(),
+            t.index.tiles.len(),
+            t.index.tile_m,
+            crate::scene::view_tiles::TILES_DIR,
+            t.bytes as f64 / 1e6,
+            largest as f64 / 1e6
+        );
+    }
     s += "| view | eye (m) | looking along | fov | image | triangles | draw calls | full-detail triangles | full-detail draw calls | triangle ratio |\n|---|---|---|---|---|---|---|---|---|---|\n";
     for r in &v.views {
         let c = &r.camera;

@@ -23,6 +23,7 @@ mod view_lod;
 pub mod view_render;
 pub mod view_stage;
 mod view_store;
+pub mod view_tiles;
 
 use std::path::PathBuf;
 
@@ -67,6 +68,10 @@ pub struct SceneSettings {
     pub formats: Vec<Format>,
     /// How the species files, scene.glb and scene_lod.glb store vertex data (`compact`).
     pub compact: crate::export::quantize::Compact,
+    /// `tile`: the side (m) of the square scene tiles the view stage also writes the scene as
+    /// (`tiles/`, indexed by `scene_tiles.json`; [`view_tiles`]); `None`: no tiles.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tile_m: Option<f64>,
 }
 
 /// Where the terrain's heights come from.

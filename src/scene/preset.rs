@@ -96,7 +96,13 @@ pub fn parse_preset(text: &str, path: &Path) -> Result<Preset, PresetError> {
 pub fn demo_preset() -> Preset {
     Preset {
         path: None,
-        scene: SceneSettings { name: "demo".into(), seed: 0, formats: vec![Format::Glb], compact: Compact::None },
+        scene: SceneSettings {
+            name: "demo".into(),
+            seed: 0,
+            formats: vec![Format::Glb],
+            compact: Compact::None,
+            tile_m: None,
+        },
         terrain: Some(TerrainSettings {
             source: TerrainSource::Fbm {
                 size: 513,
@@ -394,7 +400,8 @@ fn parse(text: &str, path: &Path, inputs: Inputs) -> Result<Preset, PresetError>
     let Some((scene_span, scene_table)) = scene else {
         return Err(ctx.at(&(0..0), "the preset has no [scene] section", "add `[scene]` with `name = \"my-scene\"`"));
     };
-    let scene = parse_scene(&Table { ctx: &ctx, label: "[scene]".into(), span: scene_span, table: scene_table })?;
+    let (scene, tile) =
+        parse_scene(&Table { ctx: &ctx, label: "[scene]".into(), span: scene_span, table: scene_table })?;
     let terrain = match terrain {
         None => None,
         Some((span, table)) => {
@@ -402,6 +409,15 @@ fn parse(text: &str, path: &Path, inputs: Inputs) -> Result<Preset, PresetError>
             Some(parse_terrain(&t, scene.seed, inputs)?)
         }
     };
+    if let Some((_, span)) = &tile {
+        if terrain.as_ref().is_none_or(|t| t.chunk.is_none()) {
+            return Err(ctx.at(
+                span,
+                "scene tiles need a chunked terrain: a tile holds the terrain chunks whose centres lie in it",
+                "set `chunk` in [terrain] (e.g. `chunk = 512`), with `tile` a multiple of the chunks' side",
+            ));
+        }
+    }
     let scatter = match scatter {
         None => ScatterSettings::default(),
         Some((span, table)) => parse_scatter(&Table { ctx: &ctx, label: "[scatter]".into(), span, table }, inputs)?,
@@ -558,7 +574,8 @@ fn sections_list() -> String {
     SECTIONS.iter().map(|s| format!("`{}`", section_header(s))).collect::<Vec<_>>().join(", ")
 }
 
-fn parse_scene(t: &Table<'_, '_>) -> Result<SceneSettings, PresetError> {
+/// `[scene]`, and where its `tile` was set (checked against the terrain once that is read).
+fn parse_scene(t: &Table<'_, '_>) -> Result<(SceneSettings, Option<(f64, std::ops::Range<usize>)>), PresetError> {
     t.check_keys(SCENE_KEYS, &[("[terrain]", TERRAIN_KEYS), ("`procedural`", PROCEDURAL_KEYS)])?;
     let (name, name_span) =
         t.string("name", "name = \"alpine-valley\"")?.ok_or_else(|| t.missing("name", "name = \"my-scene\""))?;
@@ -602,7 +619,14 @@ fn parse_scene(t: &Table<'_, '_>) -> Result<SceneSettings, PresetError> {
             return Err(unknown_value(t, "compact", other, &["none", "quantize", "compress"], &span))
         }
     };
-    Ok(SceneSettings { name: name.to_string(), seed, formats, compact })
+    let tile = t.number("tile", "tile = 2048.0", |x| {
+        if x >= 1.0 && x <= 1.0e6 {
+            Ok(())
+        } else {
+            Err("must be between 1 and 1 000 000 m (the side of a scene tile)".into())
+        }
+    })?;
+    Ok((SceneSettings { name: name.to_string(), seed, formats, compact, tile_m: tile.as_ref().map(|(x, _)| *x) }, tile))
 }
 
 fn parse_scatter(t: &Table<'_, '_>, inputs: Inputs) -> Result<ScatterSettings, PresetError> {

@@ -19,32 +19,53 @@ use crate::scene::view::CullDistance;
 use crate::scene::view_stage::{instance_centre, mesh_bounds, shown, Assembler};
 
 /// One species as the LoD scene instances it.
+#[derive(Clone, Copy)]
 pub(super) struct LodSpecies<'a> {
     pub name: &'a str,
     pub chain: &'a SpeciesChain,
     pub rows: &'a [PlacementRow],
+    /// The rows this scene instances (indices into `rows`, ascending); `None`: every row.
+    pub picked: Option<&'a [u32]>,
     pub cull: CullDistance,
 }
 
 /// The terrain's chunks and level files (level 0 first, with their switch distances).
+#[derive(Clone, Copy)]
 pub(super) struct LodTerrain<'a> {
     pub main: &'a Scene,
     pub levels: &'a [(PathBuf, f64)],
     /// The level files hold the main mesh's chunks (same count, same order).
     pub chunked: bool,
     pub main_file: &'a Path,
+    /// The chunks this scene holds (indices into `main`'s meshes, ascending); `None`: every chunk.
+    pub picked: Option<&'a [usize]>,
+    /// Move the level files' chunks out of the files read instead of copying them (the last scene
+    /// assembled from them).
+    pub take: bool,
 }
 
-/// Builds `scene_lod.glb`'s scene in `asm` (which must start empty).
+/// Builds `scene_lod.glb`'s scene in `asm` (which must start empty), or a part of it (the picked
+/// chunks and rows: a scene tile, [`crate::scene::view_tiles`]); returns the terrain's meshes in
+/// it (every level of every chunk).
 pub(super) fn lod_scene(
     asm: &mut Assembler<'_>,
     terrain: &LodTerrain<'_>,
     species: &[LodSpecies<'_>],
     view: &LodView,
-) -> Result<(), StageError> {
+) -> Result<Vec<usize>, StageError> {
     // terrain: per chunk, its levels
     let mut chunks = Vec::new();
-    for (c, m) in terrain.main.meshes.iter().enumerate() {
+    let mut terrain_meshes = Vec::new();
+    let all: Vec<usize>;
+    let picked = match terrain.picked {
+        Some(p) => p,
+        None => {
+            all = (0..terrain.main.meshes.len()).collect();
+            &all
+        }
+    };
+    for &c in picked {
+        let m = &terrain.main.meshes[c];
         let files: Vec<(&Path, f64)> = if terrain.chunked && !terrain.levels.is_empty() {
             terrain.levels.iter().map(|(f, d)| (f.as_path(), *d)).collect()
         } else {
@@ -54,25 +75,36 @@ pub(super) fn lod_scene(
         let mut nodes = Vec::with_capacity(files.len());
         for (k, (file, _)) in files.iter().enumerate() {
             // (each chunk of a level file is appended here once, and the file not read again)
-            let mi = if terrain.chunked && !terrain.levels.is_empty() {
+            let mi = if terrain.take && terrain.chunked && !terrain.levels.is_empty() {
                 asm.mesh_moved(file, c)?
             } else {
                 asm.mesh(file, c)?
             };
             asm.scene.nodes.push(Node { name: format!("{}_LOD{k}", m.name), mesh: Some(mi), ..Node::default() });
             nodes.push(asm.scene.nodes.len() - 1);
+            terrain_meshes.push(mi);
         }
         let switches: Vec<f64> = files.iter().map(|(_, d)| *d).collect();
         chunks.push(chain_node(&mut asm.scene, &nodes, &coverages(radius, &switches, None, view)));
     }
-    asm.scene.nodes.push(Node { name: "terrain".into(), children: chunks, ..Node::default() });
-    asm.scene.roots.push(asm.scene.nodes.len() - 1);
+    // (a part leaves out what it has none of)
+    if terrain.picked.is_none() || !chunks.is_empty() {
+        asm.scene.nodes.push(Node { name: "terrain".into(), children: chunks, ..Node::default() });
+        asm.scene.roots.push(asm.scene.nodes.len() - 1);
+    }
 
     // plants: per tile and variant, its levels, each instancing the tile's rows
     for s in species {
         let mut groups: std::collections::BTreeMap<(u32, usize), Vec<&PlacementRow>> = Default::default();
-        for (n, row) in s.rows.iter().enumerate() {
+        let rows: Box<dyn Iterator<Item = (usize, &PlacementRow)>> = match s.picked {
+            Some(p) => Box::new(p.iter().map(|&n| (n as usize, &s.rows[n as usize]))),
+            None => Box::new(s.rows.iter().enumerate()),
+        };
+        for (n, row) in rows {
             groups.entry((row.tile, shown(s.name, s.chain, n, row)?)).or_default().push(row);
+        }
+        if s.picked.is_some() && groups.is_empty() {
+            continue;
         }
         let mut children = Vec::with_capacity(groups.len());
         for ((tile, variant), rows) in groups {
@@ -116,7 +148,7 @@ pub(super) fn lod_scene(
         asm.scene.nodes.push(Node { name: s.name.to_string(), children, ..Node::default() });
         asm.scene.roots.push(asm.scene.nodes.len() - 1);
     }
-    Ok(())
+    Ok(terrain_meshes)
 }
 
 /// MSFT_screencoverage of a chain whose level k switches in at `switches[k]` (nearest distance, m)

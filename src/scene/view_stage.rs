@@ -147,6 +147,9 @@ pub struct ViewStageReport {
     /// scene_lod.glb: every chunk and tile as an MSFT_lod chain ([`crate::scene::view_lod`]).
     pub lod_scene_file: PathBuf,
     pub lod_scene_bytes: u64,
+    /// `[scene] tile`: the scene in tiles and their index ([`crate::scene::view_tiles`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tiles: Option<crate::scene::view_tiles::SceneTilesReport>,
     /// The farthest any vertex of scene.glb and scene_lod.glb lies from the mesh built
     /// (`[scene] compact`: 16-bit positions; 0 for f32), in the mesh's own frame (an instance's
     /// scale multiplies it): what storing them here moved them plus what their species files
@@ -164,7 +167,9 @@ pub struct ViewStageReport {
 
 impl ViewStageReport {
     pub fn files(&self) -> Vec<PathBuf> {
-        vec![self.scene_file.clone(), self.lod_scene_file.clone()]
+        let mut files = vec![self.scene_file.clone(), self.lod_scene_file.clone()];
+        files.extend(self.tiles.iter().flat_map(|t| t.files()));
+        files
     }
 }
 
@@ -177,6 +182,9 @@ pub fn view_key(preset: &Preset, upstream: &[&str]) -> String {
     k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
     k.add(serde_json::to_string(&preset.views).unwrap_or_default().as_bytes());
     crate::scene::plants_stage::add_compact(&mut k, preset);
+    if let Some(t) = preset.scene.tile_m {
+        k.add(b"tile=").add(&t.to_le_bytes());
+    }
     for s in &preset.species {
         k.add(s.rules.name.as_bytes()).add(serde_json::to_string(&s.cull_distance_m).unwrap_or_default().as_bytes());
     }
@@ -333,6 +341,11 @@ impl<'a> Assembler<'a> {
             materials: BTreeMap::new(),
             impostor_views: BTreeMap::new(),
         }
+    }
+
+    /// An empty scene over files already read.
+    pub(super) fn with_files(dir: &'a Path, files: BTreeMap<PathBuf, Rc<Scene>>) -> Assembler<'a> {
+        Assembler { files, ..Assembler::new(dir) }
     }
 
     pub(super) fn mesh_named(&mut self, rel: &Path, name: &str) -> Result<usize, StageError> {
@@ -696,7 +709,7 @@ pub fn run_view(
     drop(scene);
 
     // scene_lod.glb: every chunk and tile with its whole chain, for viewers that switch themselves
-    let mut lod = Assembler { files: asm.files, ..Assembler::new(scene_dir) };
+    let mut lod = Assembler::with_files(scene_dir, asm.files);
     let species: Vec<LodSpecies> = preset
         .species
         .iter()
@@ -705,10 +718,27 @@ pub fn run_view(
             let chain = *chains.get(s.rules.name.as_str()).filter(|c| !c.variants.is_empty())?;
             let last = chain.variants.iter().filter_map(|v| v.last()).map(|l| l.switch_distance_m).fold(0.0, f64::max);
             let cull = cull_distance(s.cull_distance_m, chain.height_m, last, &preset.lod);
-            Some(LodSpecies { name: &s.rules.name, chain, rows, cull })
+            Some(LodSpecies { name: &s.rules.name, chain, rows, picked: None, cull })
         })
         .collect();
-    let lod_terrain = LodTerrain { main: &main, levels: &levels, chunked, main_file: terrain.main };
+    let lod_terrain =
+        LodTerrain { main: &main, levels: &levels, chunked, main_file: terrain.main, picked: None, take: true };
+    // `[scene] tile`: the same scene in tiles, before scene_lod.glb takes the level files' chunks
+    let tiles = match preset.scene.tile_m {
+        None => None,
+        Some(tile_m) => {
+            let job = crate::scene::view_tiles::TileJob {
+                dir: scene_dir,
+                terrain: &lod_terrain,
+                species: &species,
+                policy: &preset.lod,
+                store: &store,
+                tile_m,
+                scene_name: &preset.scene.name,
+            };
+            Some(crate::scene::view_tiles::write_tiles(&job, &mut lod.files)?)
+        }
+    };
     lod_scene(&mut lod, &lod_terrain, &species, &preset.lod)?;
     // what it was assembled from is not needed for the write (at a world's size, the read files,
     // the placement rows and the main terrain are as large as the scene)
@@ -735,6 +765,7 @@ pub fn run_view(
         scene_bytes,
         lod_scene_file,
         lod_scene_bytes,
+        tiles,
         quantization_m,
         terrain_quantization_m,
         views: reports,

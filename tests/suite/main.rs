@@ -19,6 +19,7 @@ mod preview_lod;
 mod scatter_build;
 mod scatter_cases;
 mod scene_build;
+mod scene_tiles;
 mod scene_view;
 mod sharding;
 mod snow;

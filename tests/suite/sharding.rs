@@ -229,7 +229,7 @@ fn the_slurm_and_kubernetes_recipes_build_the_shards_and_merge_as_their_schedule
 /// map's line of `[terrain]`.
 fn banded_preset(source: &str, max_error: f64) -> String {
     format!(
-        "[scene]\nname = \"world\"\nseed = 9\nformats = [\"glb\"]\n\n[terrain]\n{source}\n\
+        "[scene]\nname = \"world\"\nseed = 9\nformats = [\"glb\"]\ntile = 512.0\n\n[terrain]\n{source}\n\
          cell_size = 1.0\nmax_error = {max_error}\nchunk = 128\nskirt = 2.0\nlods = [0.5, 2.0]\n\n\
          [scatter]\ntile = 128.0\n\n\
          [[species]]\nname = \"rock\"\nkind = \"mesh\"\nplacement = \"poisson\"\nmax_density = 0.002\nmin_spacing = 6.0\n\

@@ -1,0 +1,381 @@
+//! Scene tiles (`[scene] tile = S`): the scene of scene_lod.glb cut into squares of S metres, each
+//! a self-contained GLB that any glTF loader opens alone (`tiles/tile_<i>_<j>.glb`), and
+//! `scene_tiles.json`, the index an engine streams them by (each tile's square, the box around
+//! everything in it, its file and bytes, its chunks and instances).
+//!
+//! A tile holds the terrain chunks whose centres lie in its square, each with its whole MSFT_lod
+//! chain, and the instances whose positions lie in it, grouped as scene_lod.glb groups them
+//! (placement tile × variant, one chain each, with the same screen coverages): the same nodes,
+//! meshes and instances, so a viewer showing every tile shows scene_lod.glb. The last row and
+//! column of tiles also hold anything beyond the grid (the terrain's far edge, x = (n − 1)·cell).
+//!
+//! What a tile repeats: the species' levels it instances (glTF cannot refer to a mesh in another
+//! file; this is what 3D Tiles does with EXT_mesh_gpu_instancing). What it does not: the terrain's
+//! textures (base colour and each level's normal map cover the whole map). A tile keeps the texel
+//! rectangle its chunks' texture coordinates reach, plus the texel each bilinear lookup reads
+//! beyond it, and its chunks' coordinates are mapped onto that rectangle: a texel centre of the
+//! whole map's texture is the same texel centre of the tile's, so a magnified lookup reads the same
+//! texels with the same weights (at the map's outer edge, where the whole texture wraps around, the
+//! tile's wraps onto its own far edge; mip levels are the engine's, made from the tile's texels).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+
+use serde::{Deserialize, Serialize};
+
+use crate::export::{self, gltf::WriteOptions};
+use crate::lod::LodView;
+use crate::mesh::Scene;
+use crate::scene::error::StageError;
+use crate::scene::view_lod::{lod_scene, LodSpecies, LodTerrain};
+use crate::scene::view_stage::{mesh_bounds, Assembler};
+
+/// The tiles' folder in the scene folder.
+pub const TILES_DIR: &str = "tiles";
+/// The index, in the scene folder.
+pub const INDEX_FILE: &str = "scene_tiles.json";
+/// `format` of the index.
+pub const INDEX_FORMAT: &str = "verdant-scene-tiles";
+/// `version` of the index (raised when a field changes meaning).
+pub const INDEX_VERSION: u32 = 1;
+/// At most this many tiles in the grid (256 × 256).
+pub const MAX_TILES: u64 = 65_536;
+
+/// One tile of the index.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct SceneTile {
+    /// The tile's GLB, relative to the scene folder.
+    pub file: PathBuf,
+    /// (i, j): the square x ∈ [i·S, (i+1)·S), z ∈ [j·S, (j+1)·S).
+    pub index: [u32; 2],
+    /// The square: [x0, z0, x1, z1] (m).
+    pub rect_m: [f64; 4],
+    /// The box around everything in the tile: every level of its chunks, and each instance's
+    /// position within its species' height times its largest scale (m).
+    pub bounds_min: [f64; 3],
+    pub bounds_max: [f64; 3],
+    pub bytes: u64,
+    pub terrain_chunks: usize,
+    /// Instances per species (species with none in the tile are left out).
+    pub instances: BTreeMap<String, usize>,
+    /// The texel rectangle of the terrain's textures the tile keeps, [x, y, width, height] in the
+    /// whole map's texels; `None`: the textures are whole (or the tile has none).
+    pub texture_texels: Option<[u32; 4]>,
+}
+
+/// `scene_tiles.json`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct SceneTileIndex {
+    pub format: String,
+    pub version: u32,
+    pub scene: String,
+    /// The tiles' side (m).
+    pub tile_m: f64,
+    /// Tiles along x and z (tiles with nothing in them are not written).
+    pub grid: [u32; 2],
+    /// The LoD policy the tiles' MSFT_screencoverage values were worked out for.
+    pub lod: LodView,
+    pub tiles: Vec<SceneTile>,
+}
+
+/// What the view stage reports of the tiles.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct SceneTilesReport {
+    pub index_file: PathBuf,
+    pub index: SceneTileIndex,
+    /// Bytes of every tile together.
+    pub bytes: u64,
+    pub seconds: f64,
+}
+
+impl SceneTilesReport {
+    pub fn files(&self) -> Vec<PathBuf> {
+        std::iter::once(self.index_file.clone()).chain(self.index.tiles.iter().map(|t| t.file.clone())).collect()
+    }
+}
+
+fn fail(message: String) -> StageError {
+    StageError::Failed { stage: "view", message }
+}
+
+/// The tile (i, j) of a point: its square's, clamped to the grid.
+pub fn tile_of(x: f64, z: f64, tile_m: f64, grid: [u32; 2]) -> [u32; 2] {
+    let one = |v: f64, n: u32| ((v / tile_m).floor().max(0.0) as u64).min(n as u64 - 1) as u32;
+    [one(x, grid[0]), one(z, grid[1])]
+}
+
+/// A decoded texture, for cropping it tile after tile.
+struct Decoded {
+    png: Vec<u8>,
+    image: image::DynamicImage,
+}
+
+/// The inputs of [`write_tiles`].
+pub(super) struct TileJob<'a> {
+    pub dir: &'a Path,
+    pub terrain: &'a LodTerrain<'a>,
+    pub species: &'a [LodSpecies<'a>],
+    pub policy: &'a LodView,
+    pub store: &'a WriteOptions,
+    pub tile_m: f64,
+    pub scene_name: &'a str,
+}
+
+/// Writes every tile and the index into `job.dir`, reading the files through `files` (the view
+/// stage's files read, handed back as they were).
+pub(super) fn write_tiles(
+    job: &TileJob<'_>,
+    files: &mut BTreeMap<PathBuf, Rc<Scene>>,
+) -> Result<SceneTilesReport, StageError> {
+    let t0 = std::time::Instant::now();
+    let s = job.tile_m;
+    // the grid: over the terrain's chunks
+    let chunk_box: Vec<Option<([f64; 3], [f64; 3])>> = job.terrain.main.meshes.iter().map(mesh_bounds).collect();
+    let (max_x, max_z) =
+        chunk_box.iter().flatten().fold((0.0f64, 0.0f64), |(x, z), (_, hi)| (x.max(hi[0]), z.max(hi[2])));
+    let cells = |v: f64| ((v / s).ceil() as u64).max(1);
+    let (nx, nz) = (cells(max_x), cells(max_z));
+    if nx.saturating_mul(nz) > MAX_TILES {
+        return Err(fail(format!(
+            "`[scene] tile = {s}` cuts the terrain ({max_x:.0} m × {max_z:.0} m) into {nx} × {nz} tiles, over the \
+             {MAX_TILES} a scene writes: set a larger `tile`"
+        )));
+    }
+    let grid = [nx as u32, nz as u32];
+    let count = (nx * nz) as usize;
+    let at = |x: f64, z: f64| {
+        let [i, j] = tile_of(x, z, s, grid);
+        j as usize * nx as usize + i as usize
+    };
+    // chunks and rows of each tile, ascending
+    let mut chunks: Vec<Vec<usize>> = vec![Vec::new(); count];
+    for (c, b) in chunk_box.iter().enumerate() {
+        if let Some((lo, hi)) = b {
+            chunks[at(0.5 * (lo[0] + hi[0]), 0.5 * (lo[2] + hi[2]))].push(c);
+        }
+    }
+    let rows: Vec<Vec<Vec<u32>>> = job
+        .species
+        .iter()
+        .map(|sp| {
+            let mut per = vec![Vec::new(); count];
+            for (n, r) in sp.rows.iter().enumerate() {
+                per[at(r.position[0] as f32 as f64, r.position[2] as f32 as f64)].push(n as u32);
+            }
+            per
+        })
+        .collect();
+
+    std::fs::create_dir_all(job.dir.join(TILES_DIR))
+        .map_err(|e| fail(format!("{}: {e}", job.dir.join(TILES_DIR).display())))?;
+    let mut decoded: Vec<Decoded> = Vec::new();
+    let mut tiles = Vec::new();
+    let mut total = 0u64;
+    for t in 0..count {
+        if chunks[t].is_empty() && rows.iter().all(|per| per[t].is_empty()) {
+            continue;
+        }
+        let (i, j) = ((t % nx as usize) as u32, (t / nx as usize) as u32);
+        let terrain = LodTerrain { picked: Some(&chunks[t]), take: false, ..*job.terrain };
+        let species: Vec<LodSpecies<'_>> =
+            job.species.iter().zip(&rows).map(|(sp, per)| LodSpecies { picked: Some(&per[t]), ..*sp }).collect();
+        let mut asm = Assembler::with_files(job.dir, std::mem::take(files));
+        let built = lod_scene(&mut asm, &terrain, &species, job.policy);
+        *files = std::mem::take(&mut asm.files);
+        let terrain_meshes = built?;
+        let mut scene = asm.scene;
+
+        // the box: the terrain's levels as stored, the instances within their height
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        let mut grow = |p: [f64; 3], r: f64| {
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a] - r);
+                hi[a] = hi[a].max(p[a] + r);
+            }
+        };
+        for &m in &terrain_meshes {
+            for p in scene.meshes[m].primitives.iter().flat_map(|p| &p.positions) {
+                grow(p.map(|v| v as f64), 0.0);
+            }
+        }
+        let mut instances = BTreeMap::new();
+        for sp in &species {
+            let picked = sp.picked.unwrap_or(&[]);
+            if picked.is_empty() {
+                continue;
+            }
+            instances.insert(sp.name.to_string(), picked.len());
+            for &n in picked {
+                let r = &sp.rows[n as usize];
+                let reach = sp.chain.height_m * r.scale.iter().fold(0.0f32, |m, &v| m.max(v.abs())) as f64;
+                grow(r.position.map(|v| v as f32 as f64), reach);
+            }
+        }
+
+        let texture_texels = crop_terrain_textures(&mut scene, &terrain_meshes, &mut decoded)?;
+        scene.name = format!("{} tile {i} {j}", job.scene_name);
+        let rect_m = [i as f64 * s, j as f64 * s, (i + 1) as f64 * s, (j + 1) as f64 * s];
+        scene.extras = Some(serde_json::json!({ "verdant_tile": { "index": [i, j], "rect_m": rect_m } }));
+        let file = PathBuf::from(TILES_DIR).join(format!("tile_{i}_{j}.glb"));
+        let path = job.dir.join(&file);
+        export::write_scene_with(&scene, &path, job.store).map_err(|e| fail(format!("{}: {e}", path.display())))?;
+        drop(scene);
+        let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+        total += bytes;
+        tiles.push(SceneTile {
+            file,
+            index: [i, j],
+            rect_m,
+            bounds_min: lo,
+            bounds_max: hi,
+            bytes,
+            terrain_chunks: chunks[t].len(),
+            instances,
+            texture_texels,
+        });
+    }
+    let index = SceneTileIndex {
+        format: INDEX_FORMAT.into(),
+        version: INDEX_VERSION,
+        scene: job.scene_name.to_string(),
+        tile_m: s,
+        grid,
+        lod: job.policy.clone(),
+        tiles,
+    };
+    let mut text = serde_json::to_vec_pretty(&index).map_err(|e| fail(e.to_string()))?;
+    text.push(b'\n');
+    let index_file = PathBuf::from(INDEX_FILE);
+    export::write_atomic(&job.dir.join(&index_file), &text)
+        .map_err(|e| fail(format!("{}: {e}", job.dir.join(&index_file).display())))?;
+    Ok(SceneTilesReport { index_file, index, bytes: total, seconds: t0.elapsed().as_secs_f64() })
+}
+
+/// The texel rectangle [x, y, width, height] of a `w` × `h` texture that bilinear lookups at
+/// texture coordinates within `[u0, u1] × [v0, v1]` read (clamped to the texture).
+pub fn texel_rect(u: [f64; 2], v: [f64; 2], w: u32, h: u32) -> [u32; 4] {
+    let span = |a: f64, b: f64, n: u32| {
+        let first = (a * n as f64 - 0.5).floor().clamp(0.0, (n - 1) as f64) as u32;
+        let last = ((b * n as f64 - 0.5).floor() + 1.0).clamp(0.0, (n - 1) as f64) as u32;
+        (first, last.max(first) - first + 1)
+    };
+    let (x, cw) = span(u[0], u[1], w);
+    let (y, ch) = span(v[0], v[1], h);
+    [x, y, cw, ch]
+}
+
+/// Crops the textures of the terrain's meshes (`terrain`, indices into `scene.meshes`) to the
+/// texels their coordinates reach and maps the coordinates onto the crop; the rectangle kept, or
+/// `None` when the textures stay whole (no coordinates, textures of different sizes, a texture
+/// another mesh also uses, or a rectangle that is the whole texture).
+fn crop_terrain_textures(
+    scene: &mut Scene,
+    terrain: &[usize],
+    decoded: &mut Vec<Decoded>,
+) -> Result<Option<[u32; 4]>, StageError> {
+    let terrain: BTreeSet<usize> = terrain.iter().copied().collect();
+    let textures_of = |scene: &Scene, m: usize| -> Vec<usize> {
+        scene.meshes[m]
+            .primitives
+            .iter()
+            .filter_map(|p| p.material)
+            .filter_map(|k| scene.materials.get(k))
+            .flat_map(|mat| mat.textures())
+            .collect()
+    };
+    let used: BTreeSet<usize> = terrain.iter().flat_map(|&m| textures_of(scene, m)).collect();
+    if used.is_empty() {
+        return Ok(None);
+    }
+    let shared = (0..scene.meshes.len())
+        .filter(|m| !terrain.contains(m))
+        .any(|m| textures_of(scene, m).iter().any(|t| used.contains(t)));
+    let (mut u, mut v) = ([f64::INFINITY, f64::NEG_INFINITY], [f64::INFINITY, f64::NEG_INFINITY]);
+    for p in terrain.iter().flat_map(|&m| &scene.meshes[m].primitives) {
+        for uv in &p.uvs {
+            u = [u[0].min(uv[0] as f64), u[1].max(uv[0] as f64)];
+            v = [v[0].min(uv[1] as f64), v[1].max(uv[1] as f64)];
+        }
+    }
+    if shared || !u[0].is_finite() || !v[0].is_finite() {
+        return Ok(None);
+    }
+    // decode what is not decoded yet (each texture of the terrain once for every tile)
+    let mut of = BTreeMap::new();
+    for &t in &used {
+        let png = &scene.textures[t].png;
+        let k = match decoded.iter().position(|d| d.png == *png) {
+            Some(k) => k,
+            None => {
+                let image = image::load_from_memory_with_format(png, image::ImageFormat::Png)
+                    .map_err(|e| fail(format!("the terrain's texture `{}`: {e}", scene.textures[t].name)))?;
+                decoded.push(Decoded { png: png.clone(), image });
+                decoded.len() - 1
+            }
+        };
+        of.insert(t, k);
+    }
+    let sizes: BTreeSet<(u32, u32)> =
+        of.values().map(|&k| (decoded[k].image.width(), decoded[k].image.height())).collect();
+    let [(w, h)] = sizes.into_iter().collect::<Vec<_>>()[..] else { return Ok(None) };
+    let rect = texel_rect(u, v, w, h);
+    if rect == [0, 0, w, h] {
+        return Ok(None);
+    }
+    let [x0, y0, cw, ch] = rect;
+    let crops: Vec<(usize, Result<Vec<u8>, String>)> = {
+        use rayon::prelude::*;
+        let work: Vec<(usize, &image::DynamicImage)> = of.iter().map(|(&t, &k)| (t, &decoded[k].image)).collect();
+        work.into_par_iter()
+            .map(|(t, image)| {
+                let mut bytes = Vec::new();
+                let r = image
+                    .crop_imm(x0, y0, cw, ch)
+                    .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
+                    .map(|_| bytes)
+                    .map_err(|e| e.to_string());
+                (t, r)
+            })
+            .collect()
+    };
+    for (t, r) in crops {
+        scene.textures[t].png =
+            r.map_err(|e| fail(format!("the terrain's texture `{}`: {e}", scene.textures[t].name)))?;
+    }
+    for &m in &terrain {
+        for p in &mut scene.meshes[m].primitives {
+            for uv in &mut p.uvs {
+                *uv = [
+                    ((uv[0] as f64 * w as f64 - x0 as f64) / cw as f64) as f32,
+                    ((uv[1] as f64 * h as f64 - y0 as f64) / ch as f64) as f32,
+                ];
+            }
+        }
+    }
+    Ok(Some(rect))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn points_fall_in_their_square_and_the_grid_holds_what_lies_beyond() {
+        let g = [4, 3];
+        assert_eq!(tile_of(0.0, 0.0, 100.0, g), [0, 0]);
+        assert_eq!(tile_of(99.999, 100.0, 100.0, g), [0, 1]);
+        assert_eq!(tile_of(400.0, 300.0, 100.0, g), [3, 2]);
+        assert_eq!(tile_of(-1.0, 1e9, 100.0, g), [0, 2]);
+    }
+
+    #[test]
+    fn the_texel_rectangle_holds_every_texel_a_lookup_reads() {
+        // 16 texels; coordinates 0.25..0.5 → texel centres 3.5..7.5 → texels 3..8
+        assert_eq!(texel_rect([0.25, 0.5], [0.0, 1.0], 16, 8), [3, 0, 6, 8]);
+        // on a texel centre exactly: the next texel too (weight 0, but read)
+        assert_eq!(texel_rect([4.5 / 16.0, 4.5 / 16.0], [0.5, 0.5], 16, 8), [4, 3, 2, 2]);
+        // clamped to the texture
+        assert_eq!(texel_rect([-0.1, 1.2], [0.99, 1.0], 16, 8), [0, 7, 16, 1]);
+    }
+}
