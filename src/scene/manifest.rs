@@ -115,8 +115,10 @@ fn sizes(files: &[FileEntry]) -> Sizes {
 struct ViewManifest<'a> {
     scene: String,
     bytes: u64,
-    /// scene_lod.glb: every terrain chunk and placement tile as an MSFT_lod chain.
-    lod_scene: String,
+    /// scene_lod.glb: every terrain chunk and placement tile as an MSFT_lod chain (none with
+    /// `lod_scene = false`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    lod_scene: Option<String>,
     lod_scene_bytes: u64,
     /// `[scene] tile`: the scene in tiles ([`crate::scene::view_tiles`]).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -339,7 +341,7 @@ pub fn write_manifest_and_report(
         view: view.map(|v| ViewManifest {
             scene: v.scene_file.to_string_lossy().replace('\\', "/"),
             bytes: v.scene_bytes,
-            lod_scene: v.lod_scene_file.to_string_lossy().replace('\\', "/"),
+            lod_scene: v.lod_scene_file.as_ref().map(|f| f.to_string_lossy().replace('\\', "/")),
             lod_scene_bytes: v.lod_scene_bytes,
             tiles: v.tiles.as_ref().map(|t| TilesManifest {
                 index: t.index_file.to_string_lossy().replace('\\', "/"),

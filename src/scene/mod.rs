@@ -72,6 +72,14 @@ pub struct SceneSettings {
     /// (`tiles/`, indexed by `scene_tiles.json`; [`view_tiles`]); `None`: no tiles.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tile_m: Option<f64>,
+    /// `lod_scene`: write scene_lod.glb (every chunk and instance in one file); `false` leaves it
+    /// out (a scene over the GLB's 4 GiB, written as tiles).
+    #[serde(skip_serializing_if = "is_true")]
+    pub lod_scene: bool,
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
 }
 
 /// Where the terrain's heights come from.

@@ -102,6 +102,7 @@ pub fn demo_preset() -> Preset {
             formats: vec![Format::Glb],
             compact: Compact::None,
             tile_m: None,
+            lod_scene: true,
         },
         terrain: Some(TerrainSettings {
             source: TerrainSource::Fbm {
@@ -626,7 +627,9 @@ fn parse_scene(t: &Table<'_, '_>) -> Result<(SceneSettings, Option<(f64, std::op
             Err("must be between 1 and 1 000 000 m (the side of a scene tile)".into())
         }
     })?;
-    Ok((SceneSettings { name: name.to_string(), seed, formats, compact, tile_m: tile.as_ref().map(|(x, _)| *x) }, tile))
+    let lod_scene = t.boolean("lod_scene", "lod_scene = false")?.unwrap_or(true);
+    let tile_m = tile.as_ref().map(|(x, _)| *x);
+    Ok((SceneSettings { name: name.to_string(), seed, formats, compact, tile_m, lod_scene }, tile))
 }
 
 fn parse_scatter(t: &Table<'_, '_>, inputs: Inputs) -> Result<ScatterSettings, PresetError> {

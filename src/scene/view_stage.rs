@@ -11,7 +11,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::rc::Rc;
+use std::sync::Arc;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
@@ -144,8 +144,10 @@ pub struct ViewStageReport {
     pub scene_file: PathBuf,
     /// Bytes of scene.glb.
     pub scene_bytes: u64,
-    /// scene_lod.glb: every chunk and tile as an MSFT_lod chain ([`crate::scene::view_lod`]).
-    pub lod_scene_file: PathBuf,
+    /// scene_lod.glb: every chunk and tile as an MSFT_lod chain ([`crate::scene::view_lod`]);
+    /// `None` with `[scene] lod_scene = false`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lod_scene_file: Option<PathBuf>,
     pub lod_scene_bytes: u64,
     /// `[scene] tile`: the scene in tiles and their index ([`crate::scene::view_tiles`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -167,7 +169,8 @@ pub struct ViewStageReport {
 
 impl ViewStageReport {
     pub fn files(&self) -> Vec<PathBuf> {
-        let mut files = vec![self.scene_file.clone(), self.lod_scene_file.clone()];
+        let mut files = vec![self.scene_file.clone()];
+        files.extend(self.lod_scene_file.clone());
         files.extend(self.tiles.iter().flat_map(|t| t.files()));
         files
     }
@@ -215,7 +218,7 @@ pub(super) fn shown(
 pub(super) struct Assembler<'a> {
     pub(super) dir: &'a Path,
     /// Shared, not copied: the main terrain file is also held by the stage while it assembles.
-    pub(super) files: BTreeMap<PathBuf, Rc<Scene>>,
+    pub(super) files: BTreeMap<PathBuf, Arc<Scene>>,
     pub(super) scene: Scene,
     /// (file, mesh index in it) → mesh index in `scene`.
     pub(super) meshes: BTreeMap<(PathBuf, usize), usize>,
@@ -232,11 +235,11 @@ impl<'a> Assembler<'a> {
     }
 
     /// [`Assembler::file`] as a shared handle (no copy of the scene).
-    pub(super) fn shared(&mut self, rel: &Path) -> Result<&Rc<Scene>, StageError> {
+    pub(super) fn shared(&mut self, rel: &Path) -> Result<&Arc<Scene>, StageError> {
         if !self.files.contains_key(rel) {
             let path = self.dir.join(rel);
             let s = read_scene_dequantized(&path).map_err(|e| fail(format!("{}: {e}", path.display())))?;
-            self.files.insert(rel.to_path_buf(), Rc::new(s));
+            self.files.insert(rel.to_path_buf(), Arc::new(s));
         }
         Ok(&self.files[rel])
     }
@@ -294,7 +297,7 @@ impl<'a> Assembler<'a> {
         }
         self.shared(rel)?;
         let file = self.files.get_mut(rel).expect("read above");
-        let taken = match Rc::get_mut(file).and_then(|s| s.meshes.get_mut(index)) {
+        let taken = match Arc::get_mut(file).and_then(|s| s.meshes.get_mut(index)) {
             Some(m) if take => {
                 let name = m.name.clone();
                 Some(std::mem::replace(m, Mesh { name, ..Mesh::default() }))
@@ -344,7 +347,7 @@ impl<'a> Assembler<'a> {
     }
 
     /// An empty scene over files already read.
-    pub(super) fn with_files(dir: &'a Path, files: BTreeMap<PathBuf, Rc<Scene>>) -> Assembler<'a> {
+    pub(super) fn with_files(dir: &'a Path, files: BTreeMap<PathBuf, Arc<Scene>>) -> Assembler<'a> {
         Assembler { files, ..Assembler::new(dir) }
     }
 
@@ -415,7 +418,7 @@ pub fn run_view(
 ) -> Result<ViewStageReport, StageError> {
     let t0 = Instant::now();
     let mut asm = Assembler::new(scene_dir);
-    let main = Rc::clone(asm.shared(terrain.main)?);
+    let main = Arc::clone(asm.shared(terrain.main)?);
     // the surface only places the cameras: dropped before anything is assembled (1.7 M triangles
     // index into ~230 MB)
     let cameras: Vec<Camera> = {
@@ -739,27 +742,39 @@ pub fn run_view(
             Some(crate::scene::view_tiles::write_tiles(&job, &mut lod.files)?)
         }
     };
-    lod_scene(&mut lod, &lod_terrain, &species, &preset.lod)?;
-    // what it was assembled from is not needed for the write (at a world's size, the read files,
-    // the placement rows and the main terrain are as large as the scene)
-    let Assembler { scene: mut lod_scene, files, .. } = lod;
-    drop(species);
-    drop(files);
-    drop(rows_of);
-    drop(main);
-    lod_scene.name = format!("{} (levels of detail)", preset.scene.name);
-    let lod_scene_file = PathBuf::from("scene_lod.glb");
-    export::write_scene_with(&lod_scene, &scene_dir.join(&lod_scene_file), &store).map_err(|e| fail(e.to_string()))?;
-    let quantization_m = quantization_m.max(crate::export::quantize::position_error_with(
-        &lod_scene,
-        &store.quantization,
-        &store.mesh_grids,
-    ));
+    let mut quantization_m = quantization_m.max(tiles.as_ref().map_or(0.0, |t| t.quantization_m));
+    let mut lod_scene_file = None;
+    let mut lod_scene_bytes = 0;
+    if preset.scene.lod_scene {
+        lod_scene(&mut lod, &lod_terrain, &species, &preset.lod)?;
+        // what it was assembled from is not needed for the write (at a world's size, the read files,
+        // the placement rows and the main terrain are as large as the scene)
+        let Assembler { scene: mut lod_scene, files, .. } = lod;
+        drop(species);
+        drop(files);
+        drop(rows_of);
+        drop(main);
+        lod_scene.name = format!("{} (levels of detail)", preset.scene.name);
+        let file = PathBuf::from("scene_lod.glb");
+        export::write_scene_with(&lod_scene, &scene_dir.join(&file), &store).map_err(|e| {
+            fail(format!(
+                "{}: {e} (a scene this large is written as tiles: set `tile` and `lod_scene = false` in [scene], \
+                 docs/scene.md)",
+                file.display()
+            ))
+        })?;
+        quantization_m = quantization_m.max(crate::export::quantize::position_error_with(
+            &lod_scene,
+            &store.quantization,
+            &store.mesh_grids,
+        ));
+        lod_scene_bytes = std::fs::metadata(scene_dir.join(&file)).map(|m| m.len()).unwrap_or(0);
+        lod_scene_file = Some(file);
+    }
     // the species meshes were read back from their compact files: they had already moved by up to
     // their species' figure before these files stored them again
     let species_m = plants.map_or(0.0, |p| p.species.iter().map(|s| s.quantization_m).fold(0.0, f64::max));
     let quantization_m = quantization_m + species_m;
-    let lod_scene_bytes = std::fs::metadata(scene_dir.join(&lod_scene_file)).map(|m| m.len()).unwrap_or(0);
     Ok(ViewStageReport {
         scene_file,
         scene_bytes,

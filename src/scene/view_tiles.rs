@@ -20,7 +20,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
-use std::rc::Rc;
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
@@ -86,6 +86,9 @@ pub struct SceneTilesReport {
     pub index: SceneTileIndex,
     /// Bytes of every tile together.
     pub bytes: u64,
+    /// The farthest any vertex of a tile lies from the mesh read (`[scene] compact`; 0 for f32).
+    #[serde(default)]
+    pub quantization_m: f64,
     pub seconds: f64,
 }
 
@@ -126,7 +129,7 @@ pub(super) struct TileJob<'a> {
 /// stage's files read, handed back as they were).
 pub(super) fn write_tiles(
     job: &TileJob<'_>,
-    files: &mut BTreeMap<PathBuf, Rc<Scene>>,
+    files: &mut BTreeMap<PathBuf, Arc<Scene>>,
 ) -> Result<SceneTilesReport, StageError> {
     let t0 = std::time::Instant::now();
     let s = job.tile_m;
@@ -169,71 +172,47 @@ pub(super) fn write_tiles(
 
     std::fs::create_dir_all(job.dir.join(TILES_DIR))
         .map_err(|e| fail(format!("{}: {e}", job.dir.join(TILES_DIR).display())))?;
-    let mut decoded: Vec<Decoded> = Vec::new();
-    let mut tiles = Vec::new();
-    let mut total = 0u64;
-    for t in 0..count {
-        if chunks[t].is_empty() && rows.iter().all(|per| per[t].is_empty()) {
-            continue;
+    // every file a tile reads, read here once: the tiles are then assembled in parallel from them
+    let mut asm = Assembler::with_files(job.dir, std::mem::take(files));
+    let read: Result<(), StageError> = (|| {
+        asm.shared(job.terrain.main_file)?;
+        for (f, _) in job.terrain.levels {
+            asm.shared(f)?;
         }
-        let (i, j) = ((t % nx as usize) as u32, (t / nx as usize) as u32);
-        let terrain = LodTerrain { picked: Some(&chunks[t]), take: false, ..*job.terrain };
-        let species: Vec<LodSpecies<'_>> =
-            job.species.iter().zip(&rows).map(|(sp, per)| LodSpecies { picked: Some(&per[t]), ..*sp }).collect();
-        let mut asm = Assembler::with_files(job.dir, std::mem::take(files));
-        let built = lod_scene(&mut asm, &terrain, &species, job.policy);
-        *files = std::mem::take(&mut asm.files);
-        let terrain_meshes = built?;
-        let mut scene = asm.scene;
-
-        // the box: the terrain's levels as stored, the instances within their height
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        let mut grow = |p: [f64; 3], r: f64| {
-            for a in 0..3 {
-                lo[a] = lo[a].min(p[a] - r);
-                hi[a] = hi[a].max(p[a] + r);
-            }
-        };
-        for &m in &terrain_meshes {
-            for p in scene.meshes[m].primitives.iter().flat_map(|p| &p.positions) {
-                grow(p.map(|v| v as f64), 0.0);
-            }
+        for l in job.species.iter().flat_map(|sp| sp.chain.variants.iter().flatten()) {
+            asm.shared(&l.file)?;
         }
-        let mut instances = BTreeMap::new();
-        for sp in &species {
-            let picked = sp.picked.unwrap_or(&[]);
-            if picked.is_empty() {
-                continue;
-            }
-            instances.insert(sp.name.to_string(), picked.len());
-            for &n in picked {
-                let r = &sp.rows[n as usize];
-                let reach = sp.chain.height_m * r.scale.iter().fold(0.0f32, |m, &v| m.max(v.abs())) as f64;
-                grow(r.position.map(|v| v as f32 as f64), reach);
-            }
-        }
-
-        let texture_texels = crop_terrain_textures(&mut scene, &terrain_meshes, &mut decoded)?;
-        scene.name = format!("{} tile {i} {j}", job.scene_name);
-        let rect_m = [i as f64 * s, j as f64 * s, (i + 1) as f64 * s, (j + 1) as f64 * s];
-        scene.extras = Some(serde_json::json!({ "verdant_tile": { "index": [i, j], "rect_m": rect_m } }));
-        let file = PathBuf::from(TILES_DIR).join(format!("tile_{i}_{j}.glb"));
-        let path = job.dir.join(&file);
-        export::write_scene_with(&scene, &path, job.store).map_err(|e| fail(format!("{}: {e}", path.display())))?;
-        drop(scene);
-        let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
-        total += bytes;
-        tiles.push(SceneTile {
-            file,
-            index: [i, j],
-            rect_m,
-            bounds_min: lo,
-            bounds_max: hi,
-            bytes,
-            terrain_chunks: chunks[t].len(),
-            instances,
-            texture_texels,
-        });
+        Ok(())
+    })();
+    *files = std::mem::take(&mut asm.files);
+    read?;
+    let decoded = decode_terrain_textures(files, job.terrain)?;
+    let order: Vec<usize> =
+        (0..count).filter(|&t| !chunks[t].is_empty() || rows.iter().any(|per| !per[t].is_empty())).collect();
+    let shared: &BTreeMap<PathBuf, Arc<Scene>> = files;
+    let written: Vec<Result<(SceneTile, f64), StageError>> = {
+        use rayon::prelude::*;
+        order
+            .par_iter()
+            .map(|&t| {
+                let (i, j) = ((t % nx as usize) as u32, (t / nx as usize) as u32);
+                let species: Vec<LodSpecies<'_>> = job
+                    .species
+                    .iter()
+                    .zip(&rows)
+                    .map(|(sp, per)| LodSpecies { picked: Some(&per[t]), ..*sp })
+                    .collect();
+                write_tile(job, shared, &decoded, [i, j], &chunks[t], &species)
+            })
+            .collect()
+    };
+    let mut tiles = Vec::with_capacity(written.len());
+    let (mut total, mut quantization_m) = (0u64, 0.0f64);
+    for w in written {
+        let (tile, q) = w?;
+        total += tile.bytes;
+        quantization_m = quantization_m.max(q);
+        tiles.push(tile);
     }
     let index = SceneTileIndex {
         format: INDEX_FORMAT.into(),
@@ -249,7 +228,98 @@ pub(super) fn write_tiles(
     let index_file = PathBuf::from(INDEX_FILE);
     export::write_atomic(&job.dir.join(&index_file), &text)
         .map_err(|e| fail(format!("{}: {e}", job.dir.join(&index_file).display())))?;
-    Ok(SceneTilesReport { index_file, index, bytes: total, seconds: t0.elapsed().as_secs_f64() })
+    Ok(SceneTilesReport { index_file, index, bytes: total, quantization_m, seconds: t0.elapsed().as_secs_f64() })
+}
+
+/// Writes tile `[i, j]` of `chunks` (its chunks) and `species` (each picking its rows); the tile
+/// and the farthest its vertices moved in storage.
+fn write_tile(
+    job: &TileJob<'_>,
+    files: &BTreeMap<PathBuf, Arc<Scene>>,
+    decoded: &[Decoded],
+    [i, j]: [u32; 2],
+    chunks: &[usize],
+    species: &[LodSpecies<'_>],
+) -> Result<(SceneTile, f64), StageError> {
+    let s = job.tile_m;
+    let terrain = LodTerrain { picked: Some(chunks), take: false, ..*job.terrain };
+    let mut asm = Assembler::with_files(job.dir, files.clone());
+    let terrain_meshes = lod_scene(&mut asm, &terrain, species, job.policy)?;
+    let mut scene = asm.scene;
+
+    // the box: the terrain's levels as stored, the instances within their height
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    let mut grow = |p: [f64; 3], r: f64| {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a] - r);
+            hi[a] = hi[a].max(p[a] + r);
+        }
+    };
+    for &m in &terrain_meshes {
+        for p in scene.meshes[m].primitives.iter().flat_map(|p| &p.positions) {
+            grow(p.map(|v| v as f64), 0.0);
+        }
+    }
+    let mut instances = BTreeMap::new();
+    for sp in species {
+        let picked = sp.picked.unwrap_or(&[]);
+        if picked.is_empty() {
+            continue;
+        }
+        instances.insert(sp.name.to_string(), picked.len());
+        for &n in picked {
+            let r = &sp.rows[n as usize];
+            let reach = sp.chain.height_m * r.scale.iter().fold(0.0f32, |m, &v| m.max(v.abs())) as f64;
+            grow(r.position.map(|v| v as f32 as f64), reach);
+        }
+    }
+
+    let texture_texels = crop_terrain_textures(&mut scene, &terrain_meshes, decoded)?;
+    scene.name = format!("{} tile {i} {j}", job.scene_name);
+    let rect_m = [i as f64 * s, j as f64 * s, (i + 1) as f64 * s, (j + 1) as f64 * s];
+    scene.extras = Some(serde_json::json!({ "verdant_tile": { "index": [i, j], "rect_m": rect_m } }));
+    let file = PathBuf::from(TILES_DIR).join(format!("tile_{i}_{j}.glb"));
+    let path = job.dir.join(&file);
+    export::write_scene_with(&scene, &path, job.store).map_err(|e| fail(format!("{}: {e}", path.display())))?;
+    let moved = crate::export::quantize::position_error_with(&scene, &job.store.quantization, &job.store.mesh_grids);
+    drop(scene);
+    let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+    let tile = SceneTile {
+        file,
+        index: [i, j],
+        rect_m,
+        bounds_min: lo,
+        bounds_max: hi,
+        bytes,
+        terrain_chunks: chunks.len(),
+        instances,
+        texture_texels,
+    };
+    Ok((tile, moved))
+}
+
+/// The textures of the terrain's files, decoded once for every tile (in parallel).
+fn decode_terrain_textures(
+    files: &BTreeMap<PathBuf, Arc<Scene>>,
+    terrain: &LodTerrain<'_>,
+) -> Result<Vec<Decoded>, StageError> {
+    use rayon::prelude::*;
+    let mut pngs: Vec<(&str, &Vec<u8>)> = Vec::new();
+    let sources = std::iter::once(terrain.main_file).chain(terrain.levels.iter().map(|(f, _)| f.as_path()));
+    for f in sources {
+        for t in files.get(f).into_iter().flat_map(|s| &s.textures) {
+            if !pngs.iter().any(|(_, p)| **p == t.png) {
+                pngs.push((&t.name, &t.png));
+            }
+        }
+    }
+    pngs.into_par_iter()
+        .map(|(name, png)| {
+            let image = image::load_from_memory_with_format(png, image::ImageFormat::Png)
+                .map_err(|e| fail(format!("the terrain's texture `{name}`: {e}")))?;
+            Ok(Decoded { png: png.clone(), image })
+        })
+        .collect()
 }
 
 /// The texel rectangle [x, y, width, height] of a `w` × `h` texture that bilinear lookups at
@@ -272,7 +342,7 @@ pub fn texel_rect(u: [f64; 2], v: [f64; 2], w: u32, h: u32) -> [u32; 4] {
 fn crop_terrain_textures(
     scene: &mut Scene,
     terrain: &[usize],
-    decoded: &mut Vec<Decoded>,
+    decoded: &[Decoded],
 ) -> Result<Option<[u32; 4]>, StageError> {
     let terrain: BTreeSet<usize> = terrain.iter().copied().collect();
     let textures_of = |scene: &Scene, m: usize| -> Vec<usize> {
@@ -301,20 +371,13 @@ fn crop_terrain_textures(
     if shared || !u[0].is_finite() || !v[0].is_finite() {
         return Ok(None);
     }
-    // decode what is not decoded yet (each texture of the terrain once for every tile)
+    // each texture as decoded from the terrain's files (a texture of another file stays whole)
     let mut of = BTreeMap::new();
     for &t in &used {
-        let png = &scene.textures[t].png;
-        let k = match decoded.iter().position(|d| d.png == *png) {
-            Some(k) => k,
-            None => {
-                let image = image::load_from_memory_with_format(png, image::ImageFormat::Png)
-                    .map_err(|e| fail(format!("the terrain's texture `{}`: {e}", scene.textures[t].name)))?;
-                decoded.push(Decoded { png: png.clone(), image });
-                decoded.len() - 1
-            }
+        match decoded.iter().position(|d| d.png == scene.textures[t].png) {
+            Some(k) => of.insert(t, k),
+            None => return Ok(None),
         };
-        of.insert(t, k);
     }
     let sizes: BTreeSet<(u32, u32)> =
         of.values().map(|&k| (decoded[k].image.width(), decoded[k].image.height())).collect();

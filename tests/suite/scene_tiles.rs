@@ -216,6 +216,37 @@ fn bad_tile_values_are_refused_with_their_line() {
 }
 
 #[test]
+fn tiles_are_the_same_bytes_at_any_thread_count_and_stand_without_scene_lod() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "rock.obj", ROCK_OBJ);
+    write(d, "p.toml", &preset("tile = 128.0"));
+    ok(&verdant_in(d, &["-q", "--threads", "1", "build", "p.toml", "--out", "one"]));
+    ok(&verdant_in(d, &["-q", "--threads", "3", "build", "p.toml", "--out", "three"]));
+    assert_same_tree(&d.join("one/tiled"), &d.join("three/tiled"));
+    assert_eq!(read_json(&d.join("one/tiled/scene_tiles.json"))["tiles"].as_array().unwrap().len(), 9);
+    // `lod_scene = false`: the tiles alone, the same bytes; no scene_lod.glb anywhere
+    write(d, "p.toml", &preset("tile = 128.0\nlod_scene = false"));
+    ok(&verdant_in(d, &["-q", "build", "p.toml", "--out", "alone"]));
+    let (with, alone) = (tree(&d.join("one/tiled")), tree(&d.join("alone/tiled")));
+    assert!(!alone.contains_key("scene_lod.glb") && with.contains_key("scene_lod.glb"));
+    for (rel, bytes) in with.iter().filter(|(rel, _)| rel.starts_with("tiles/") || *rel == "scene_tiles.json") {
+        assert!(alone.get(rel) == Some(bytes), "{rel} differs without scene_lod.glb");
+    }
+    let manifest = read_json(&d.join("alone/tiled/manifest.json"));
+    assert!(
+        manifest["view"].get("lod_scene").is_none() && manifest["view"]["tiles"]["tiles"] == 9,
+        "{}",
+        manifest["view"]["tiles"]
+    );
+    assert!(!std::fs::read_to_string(d.join("alone/tiled/manifest.json")).unwrap().contains("scene_lod.glb"));
+    // a boolean only
+    write(d, "p.toml", &preset("lod_scene = \"no\""));
+    let o = verdant_in(d, &["-q", "build", "p.toml", "--out", "bad"]);
+    assert!(!o.status.success() && text(&o).contains("p.toml:4") && text(&o).contains("a boolean"), "{}", text(&o));
+}
+
+#[test]
 fn no_tile_writes_no_tiles() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

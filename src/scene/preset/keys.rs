@@ -6,7 +6,7 @@
 pub const SECTIONS: &[&str] =
     &["scene", "terrain", "species", "scatter", "grass", "flower", "tree", "mesh", "snow", "lod", "view"];
 /// Keys of `[scene]`.
-pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats", "compact", "tile"];
+pub const SCENE_KEYS: &[&str] = &["name", "seed", "formats", "compact", "tile", "lod_scene"];
 /// Keys of `[terrain]`.
 pub const TERRAIN_KEYS: &[&str] = &[
     "heightmap",

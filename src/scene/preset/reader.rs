@@ -137,6 +137,16 @@ impl<'a, 'i> Table<'a, 'i> {
         }
     }
 
+    pub(super) fn boolean(&self, key: &str, example: &str) -> Result<Option<bool>, PresetError> {
+        match self.get(key) {
+            None => Ok(None),
+            Some((_, v)) => match v.get_ref() {
+                DeValue::Boolean(b) => Ok(Some(*b)),
+                _ => Err(self.wrong_type(key, v, "a boolean", example)),
+            },
+        }
+    }
+
     /// An integer in `range` (inclusive), as u64.
     pub(super) fn integer(
         &self,

@@ -94,16 +94,6 @@ fn two(
     Ok(Some([number_value(t, key, &items[0], example, &valid)?, number_value(t, key, &items[1], example, &valid)?]))
 }
 
-fn boolean(t: &Table<'_, '_>, key: &str, example: &str) -> Result<Option<bool>, PresetError> {
-    match t.get(key) {
-        None => Ok(None),
-        Some((_, v)) => match v.get_ref() {
-            DeValue::Boolean(b) => Ok(Some(*b)),
-            _ => Err(t.wrong_type(key, v, "a boolean", example)),
-        },
-    }
-}
-
 /// Reads `[snow]` over the defaults; `scene_seed` seeds it when it has no `seed`.
 pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSettings, PresetError> {
     t.check_keys(
@@ -245,7 +235,7 @@ pub(super) fn parse_snow(t: &Table<'_, '_>, scene_seed: u64) -> Result<SnowSetti
     if let Some((n, _)) = t.integer("mask_px", 16..=8192, "mask_px = 512")? {
         s.mask_px = n as u32;
     }
-    if let Some(b) = boolean(t, "layer", "layer = true")? {
+    if let Some(b) = t.boolean("layer", "layer = true")? {
         s.layer = b;
     }
     num(t, "layer_min_weight", "layer_min_weight = 0.5", in_range(0.0, 1.0, ""), |x| s.layer_min_weight = x as f32)?;
