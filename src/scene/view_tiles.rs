@@ -172,7 +172,7 @@ pub(super) fn write_tiles(
 
     std::fs::create_dir_all(job.dir.join(TILES_DIR))
         .map_err(|e| fail(format!("{}: {e}", job.dir.join(TILES_DIR).display())))?;
-    // every file a tile reads, read here once: the tiles are then assembled in parallel from them
+    // every file a tile reads, read here once
     let mut asm = Assembler::with_files(job.dir, std::mem::take(files));
     let read: Result<(), StageError> = (|| {
         asm.shared(job.terrain.main_file)?;
@@ -190,10 +190,12 @@ pub(super) fn write_tiles(
     let order: Vec<usize> =
         (0..count).filter(|&t| !chunks[t].is_empty() || rows.iter().any(|per| !per[t].is_empty())).collect();
     let shared: &BTreeMap<PathBuf, Arc<Scene>> = files;
+    // one tile after another: two at once took a world's view stage from 0.85 to 1.0 GB (each
+    // holds its meshes and its GLB's bytes) to save 0.7 s of 1.8; the textures are cropped and
+    // encoded in parallel
     let written: Vec<Result<(SceneTile, f64), StageError>> = {
-        use rayon::prelude::*;
         order
-            .par_iter()
+            .iter()
             .map(|&t| {
                 let (i, j) = ((t % nx as usize) as u32, (t / nx as usize) as u32);
                 let species: Vec<LodSpecies<'_>> = job
