@@ -413,6 +413,11 @@ PYEOF
     then pass; else fail "highlands: peak memory over $WORLD_PEAK_MIB MiB or not reported"; fi
     hl="$WORLD_OUT/merged/highlands"
     if "$BIN" validate --quiet "$hl/scene.glb" "$hl"/terrain/terrain.glb; then pass; else fail "verdant validate highlands"; fi
+    # its scene tiles ([scene] tile = 2048: 16 GLBs and scene_tiles.json): valid, the chunks and the
+    # tables' rows each in one tile; one tile kept for the engines (5f2)
+    if "$BIN" validate --quiet "$hl"/tiles/*.glb; then pass; else fail "verdant validate highlands' tiles"; fi
+    if "$PY" scripts/check_outputs.py --tiles "$hl"; then pass; else fail "check_outputs.py --tiles highlands"; fi
+    cp "$hl/tiles/tile_1_2.glb" "$OUT/world_tile_1_2.glb" || fail "highlands wrote no tiles/tile_1_2.glb"
   else
     fail "verdant merge highlands (see $OUT/world_merge.log)"
   fi
@@ -612,9 +617,20 @@ for dir in "$OUT"/build/*/; do
     # load in headless Babylon within 240 s.
     if [ "$(stat -c %s "$dir/scene_lod.glb")" -lt 50000000 ]; then babylon_lod_files+=("$dir/scene_lod.glb"); fi
   fi
+  # scene tiles ([scene] tile): every tile to three.js, the smallest to Babylon.js (under 50 MB)
+  if [ -d "$dir/tiles" ]; then
+    smallest=""
+    for tile in "$dir"/tiles/*.glb; do
+      lod_files+=("$tile")
+      if [ -z "$smallest" ] || [ "$(stat -c %s "$tile")" -lt "$(stat -c %s "$smallest")" ]; then smallest="$tile"; fi
+    done
+    if [ -n "$smallest" ] && [ "$(stat -c %s "$smallest")" -lt 50000000 ]; then babylon_lod_files+=("$smallest"); fi
+  fi
   levels=("$dir"/terrain/terrain_LOD[1-9]*.glb)
   if [ -f "$dir/terrain/terrain_LOD0.glb" ] && [ -f "${levels[0]}" ]; then lit_dirs+=("$dir"); fi
 done
+# a tile of the world preset (3d)
+if [ -f "$OUT/world_tile_1_2.glb" ]; then lod_files+=("$OUT/world_tile_1_2.glb"); fi
 (
   if ((${#scene_files[@]})); then
     for engine in three babylon; do
@@ -813,10 +829,10 @@ for f in "${FILES[@]}"; do
 done
 
 # ---------------------------------------------------------------------------------------------------------
-section "5f2. scene_lod.glb (each terrain chunk and placement tile an MSFT_lod chain) loads in three.js through three_msft_lod.js (levels drawn with exactly their triangles inside their coverage ranges, on a sample of 32 chains) and, under 50 MB, in Babylon.js with its defaults (levels in order, exactly the default scene's LoD0 triangles enabled at the end)"
+section "5f2. scene_lod.glb and every scene tile (each terrain chunk and placement tile an MSFT_lod chain) load in three.js through three_msft_lod.js (each chain shows one level; levels drawn with exactly their triangles inside their coverage ranges, on a sample of 32 chains) and, under 50 MB (a scene's smallest tile), in Babylon.js with its defaults (levels in order, exactly the default scene's LoD0 triangles enabled at the end)"
 if ((${#lod_files[@]})); then
-  engine_log "$OUT/check_babylon_scene_lod.log" "${#babylon_lod_files[@]}" "babylon: scene_lod.glb files"
-  engine_log "$OUT/check_three_scene_lod.log" "${#lod_files[@]}" "three: scene_lod.glb files"
+  engine_log "$OUT/check_babylon_scene_lod.log" "${#babylon_lod_files[@]}" "babylon: scene_lod.glb and tile files"
+  engine_log "$OUT/check_three_scene_lod.log" "${#lod_files[@]}" "three: scene_lod.glb and tile files"
 else
   fail "no scene_lod.glb to load"
 fi

@@ -5,6 +5,7 @@ JSON report the CLI wrote beside it; optionally check it is a closed solid and r
   check_outputs.py FILE --report REPORT.json [--watertight] [--thumb THUMB.png] [--summary-tsv T.tsv]
   check_outputs.py --scene DIR [--thumb THUMB.png] [--summary-tsv T.tsv]
   check_outputs.py --placements DIR   only the scatter check of a built scene (below)
+  check_outputs.py --tiles DIR        only the scene tiles' check of a built scene (below)
   check_outputs.py --self-test     check the checker on samples it makes itself (good and broken ones)
 
 --scene checks a folder written by `verdant build` (out/<scene>/) against its manifest.json instead:
@@ -21,6 +22,11 @@ tile order) and placements/<species>.json (count, per-tile counts and AABBs, min
 up to 20,000 instances per species ray-cast straight down onto scene.glb's terrain with trimesh
 (|y - hit| <= 1e-3 m for the f32 glb, 1e-4 m for the f64 CSV); Poisson species at least min_spacing
 apart over all instances, and every exclusion radius kept (scipy cKDTree, x/z).
+With scene tiles (`[scene] tile`: scene_tiles.json and tiles/, --tiles alone runs only that): every
+tile listed once with its bytes and square, nothing unlisted in tiles/, each terrain chunk in exactly
+one tile, each chain's instances inside its tile's box and square, the index's counts, and every
+species' instances over all tiles exactly its table's positions (as f32), read from the GLBs' own
+JSON and binary chunks.
 
 Loaders: trimesh (force='scene', process=False) for every format; for glTF also pygltflib with our own
 accessor decoding, because trimesh 5.x ignores EXT_mesh_gpu_instancing / MSFT_lod and does not decode
@@ -710,6 +716,11 @@ def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int, str
         sp = manifest["scatter"]["species"]
         placements = f"{len(sp)} species, {sum(s['count'] for s in sp)} instances"
 
+    if (scene_dir / "scene_tiles.json").is_file():
+        facts.extend(check_tiles(scene_dir, manifest))
+    elif (scene_dir / "tiles").exists():
+        raise CheckFailed("tiles/ exists but there is no scene_tiles.json")
+
     if manifest.get("snow"):
         facts.extend(check_snow(scene_dir, manifest, report))
     elif (scene_dir / "snow").exists():
@@ -723,6 +734,121 @@ def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int, str
         if stage.get("map"):
             facts.append("map: " + check_preview(scene_dir / stage["map"], None))
     return f"{manifest.get('scene')}: " + "; ".join(facts), tris, verts, placements
+
+
+def read_glb_chunks(path: Path) -> tuple[dict, bytes]:
+    """A GLB's JSON (parsed) and BIN chunk, read directly: pygltflib's typed parse of a scene tile's
+    JSON (tens of thousands of objects) took seconds a file."""
+    import struct
+
+    data = path.read_bytes()
+    magic, _, length = struct.unpack_from("<III", data, 0)
+    if magic != 0x46546C67 or length != len(data):
+        raise CheckFailed(f"{path.name} is no GLB of {len(data)} bytes")
+    json_len, json_type = struct.unpack_from("<II", data, 12)
+    if json_type != 0x4E4F534A:
+        raise CheckFailed(f"{path.name}: the first chunk is not JSON")
+    doc = json.loads(data[20:20 + json_len])
+    at = 20 + json_len
+    binary = b""
+    if at + 8 <= len(data):
+        bin_len, bin_type = struct.unpack_from("<II", data, at)
+        if bin_type == 0x004E4942:
+            binary = data[at + 8:at + 8 + bin_len]
+    return doc, binary
+
+
+def glb_float_vec3(doc: dict, binary: bytes, index: int, what: str) -> np.ndarray:
+    """FLOAT VEC3 accessor `index` of a GLB's BIN chunk as (count, 3) float64."""
+    acc = doc["accessors"][index]
+    view = doc["bufferViews"][acc["bufferView"]]
+    if acc["componentType"] != 5126 or acc["type"] != "VEC3" or "uri" in doc["buffers"][view["buffer"]]:
+        raise CheckFailed(f"{what}: accessor {index} is not FLOAT VEC3 in the GLB's binary chunk")
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    stride = view.get("byteStride", 12)
+    n = acc["count"]
+    if n and start + stride * (n - 1) + 12 > len(binary):
+        raise CheckFailed(f"{what}: accessor {index} reads past the binary chunk")
+    return np.ndarray((n, 3), dtype="<f4", buffer=binary, offset=start, strides=(stride, 4)).astype(np.float64)
+
+
+def check_tiles(scene_dir: Path, manifest: dict) -> list[str]:
+    """scene_tiles.json and tiles/ ([scene] tile): every tile listed with its bytes, each chunk of the
+    terrain in exactly one tile, each tile's instances (its chains' LoD0 nodes, EXT_mesh_gpu_instancing)
+    inside the tile's box and square, and every species' instances over all tiles exactly the rows of
+    its placement table (positions as f32). Returns facts."""
+    index = json.loads((scene_dir / "scene_tiles.json").read_text())
+    if index.get("format") != "verdant-scene-tiles" or index.get("version") != 1:
+        raise CheckFailed(f"scene_tiles.json: format {index.get('format')!r} version {index.get('version')!r}")
+    tile_m, (nx, nz) = index["tile_m"], index["grid"]
+    chunks_seen: dict[str, str] = {}
+    positions: dict[str, list[np.ndarray]] = {}
+    listed = set()
+    for t in index["tiles"]:
+        rel = t["file"]
+        if rel in listed:
+            raise CheckFailed(f"scene_tiles.json lists {rel} twice")
+        listed.add(rel)
+        path = scene_dir / rel
+        if path.stat().st_size != t["bytes"]:
+            raise CheckFailed(f"{rel} is {path.stat().st_size} bytes, the index says {t['bytes']}")
+        i, j = t["index"]
+        if t["rect_m"] != [i * tile_m, j * tile_m, (i + 1) * tile_m, (j + 1) * tile_m] or not (i < nx and j < nz):
+            raise CheckFailed(f"{rel}: square {t['rect_m']} is not tile ({i}, {j}) of {tile_m} m in a {nx} x {nz} grid")
+        doc, binary = read_glb_chunks(path)
+        nodes = doc["nodes"]
+        lo, hi = np.array(t["bounds_min"]), np.array(t["bounds_max"])
+        x0, z0, x1, z1 = t["rect_m"]
+        counts: dict[str, int] = {}
+        chunks = 0
+        for root in doc["scenes"][doc.get("scene", 0)]["nodes"]:
+            top = nodes[root]
+            for c in top.get("children", []):
+                node = nodes[c]
+                if top.get("name") == "terrain":
+                    chunks += 1
+                    if node["name"] in chunks_seen:
+                        raise CheckFailed(f"chunk {node['name']} is in {chunks_seen[node['name']]} and {rel}")
+                    chunks_seen[node["name"]] = rel
+                    continue
+                ext = node.get("extensions", {}).get("EXT_mesh_gpu_instancing")
+                if not ext:
+                    raise CheckFailed(f"{rel}: node {node.get('name')} of {top.get('name')} instances nothing")
+                xyz = glb_float_vec3(doc, binary, ext["attributes"]["TRANSLATION"], f"{rel} {node.get('name')}")
+                if np.any(xyz < lo - 1e-6) or np.any(xyz > hi + 1e-6):
+                    raise CheckFailed(f"{rel}: an instance of {node['name']} lies outside the tile's box")
+                x, z = xyz[:, 0], xyz[:, 2]
+                off = ((x < x0) & (i > 0)) | ((x >= x1) & (i < nx - 1)) | ((z < z0) & (j > 0)) | ((z >= z1) & (j < nz - 1))
+                if np.any(off):
+                    raise CheckFailed(f"{rel}: {int(off.sum())} instances of {node['name']} lie outside its square")
+                counts[top["name"]] = counts.get(top["name"], 0) + len(xyz)
+                positions.setdefault(top["name"], []).append(xyz)
+        if chunks != t["terrain_chunks"] or counts != t["instances"]:
+            raise CheckFailed(f"{rel}: {chunks} chunks and instances {counts}, the index says "
+                              f"{t['terrain_chunks']} and {t['instances']}")
+    on_disk = {p.relative_to(scene_dir).as_posix() for p in (scene_dir / "tiles").glob("*")}
+    if on_disk != listed:
+        raise CheckFailed(f"tiles/ holds {sorted(on_disk - listed)} unlisted, lacks {sorted(listed - on_disk)}")
+    terrain_files = [f for f in manifest["terrain"]["files"] if f.endswith(".glb")]
+    if terrain_files:
+        total = len(read_glb_chunks(scene_dir / terrain_files[0])[0]["meshes"])
+        if len(chunks_seen) != total:
+            raise CheckFailed(f"the tiles hold {len(chunks_seen)} chunks of the terrain's {total}")
+    for sp in manifest.get("scatter", {}).get("species", []):
+        name = sp["name"]
+        got = np.concatenate(positions.get(name, [np.zeros((0, 3))]))
+        if len(got) == 0 and sp["count"] > 0 and name not in (manifest.get("view") or {}).get("chains", {}):
+            continue  # a species without meshes: placement tables only
+        rows, _, _ = read_placements_csv(scene_dir / sp.get("table", f"placements/{name}.csv"))
+        want = rows[:, :3].astype(np.float32).astype(np.float64)
+        if len(got) != len(want):
+            raise CheckFailed(f"the tiles instance {len(got)} {name}, its table has {len(want)} rows")
+        key = lambda a: a[np.lexsort((a[:, 2], a[:, 1], a[:, 0]))]
+        if not np.array_equal(key(got), key(want)):
+            raise CheckFailed(f"the tiles' {name} instances are not its table's positions")
+    n = sum(sum(t["instances"].values()) for t in index["tiles"])
+    return [f"{len(index['tiles'])} tiles of {tile_m:g} m hold the {len(chunks_seen)} chunks once and the "
+            f"tables' {n} rows"]
 
 
 # ------------------------------------------------------------------------------------------- snow mode
@@ -1599,6 +1725,10 @@ def main() -> int:
         return scene_main(sys.argv[1:])
     if "--placements" in sys.argv[1:]:
         return placements_main(sys.argv[1:])
+    if sys.argv[1:2] == ["--tiles"] and len(sys.argv) == 3:
+        d = Path(sys.argv[2])
+        return run_and_report(d.name, lambda: ("; ".join(check_tiles(d, json.loads((d / "manifest.json").read_text()))), 0, 0),
+                              None, 2)
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("file", help="a .glb, .gltf or .obj written by verdant")
     parser.add_argument("--report", required=True, help="the JSON report written with --report")
