@@ -45,8 +45,9 @@ fn fail(message: String) -> StageError {
 /// (`<mesh>_view<k>`, scene/impostor.rs); trees' LoD1 rebuilt (plants 16); the image comparison
 /// resolves 4 × 4 samples per pixel. 12: the terrain meshed in regions (terrain 9). 13: compact
 /// scene files store the plants' wind as normalized bytes of its ranges (plants 20). 14: the
-/// chunked terrain meshed in bands (terrain 10).
-pub const VIEW_ALGORITHM_VERSION: u32 = 14;
+/// chunked terrain meshed in bands (terrain 10). 15: scene tiles (`[scene] tile`, alpine writes
+/// them).
+pub const VIEW_ALGORITHM_VERSION: u32 = 15;
 
 /// What one view draws.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

@@ -801,7 +801,7 @@ const PINNED: &[(&str, u32, &str)] = &[
     ("plants", 20, "314b79f5bdaa8936"),
     ("snow", 6, "fd411b374b62d06b"),
     ("scatter", 11, "620772a7e8e08c2e"),
-    ("view", 14, "59ffc21a7cb767f4"),
+    ("view", 15, "441d3878e2a5e1dc"),
     ("preview", 12, "020965f129af61a5"),
 ];
 
@@ -812,7 +812,7 @@ fn stage_of(rel: &str) -> Option<&'static str> {
         "species" | "atlases" => Some("plants"),
         "snow" => Some("snow"),
         "placements" => Some("scatter"),
-        "scene.glb" | "scene_lod.glb" => Some("view"),
+        "scene.glb" | "scene_lod.glb" | "scene_tiles.json" | "tiles" => Some("view"),
         "preview.png" | "map.png" => Some("preview"),
         _ => None,
     }
