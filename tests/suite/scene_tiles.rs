@@ -224,6 +224,10 @@ fn tiles_are_the_same_bytes_at_any_thread_count_and_stand_without_scene_lod() {
     ok(&verdant_in(d, &["-q", "--threads", "1", "build", "p.toml", "--out", "one"]));
     ok(&verdant_in(d, &["-q", "--threads", "3", "build", "p.toml", "--out", "three"]));
     assert_same_tree(&d.join("one/tiled"), &d.join("three/tiled"));
+    // rebuilt unchanged: the view stage served from the cache, tiles and index restored the same
+    ok(&verdant_in(d, &["-q", "build", "p.toml", "--out", "one"]));
+    assert!(timing_cached(&d.join("one/tiled"), "view"));
+    assert_same_tree(&d.join("one/tiled"), &d.join("three/tiled"));
     assert_eq!(read_json(&d.join("one/tiled/scene_tiles.json"))["tiles"].as_array().unwrap().len(), 9);
     // `lod_scene = false`: the tiles alone, the same bytes; no scene_lod.glb anywhere
     write(d, "p.toml", &preset("tile = 128.0\nlod_scene = false"));
