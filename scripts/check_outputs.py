@@ -785,6 +785,7 @@ def check_tiles(scene_dir: Path, manifest: dict) -> list[str]:
         raise CheckFailed(f"scene_tiles.json: format {index.get('format')!r} version {index.get('version')!r}")
     tile_m, (nx, nz) = index["tile_m"], index["grid"]
     chunks_seen: dict[str, str] = {}
+    chains_seen: dict[str, str] = {}
     compressed = False
     positions: dict[str, list[np.ndarray]] = {}
     listed = set()
@@ -818,6 +819,10 @@ def check_tiles(scene_dir: Path, manifest: dict) -> list[str]:
                 ext = node.get("extensions", {}).get("EXT_mesh_gpu_instancing")
                 if not ext:
                     raise CheckFailed(f"{rel}: node {node.get('name')} of {top.get('name')} instances nothing")
+                # a chain (placement tile x variant) whole in one tile, as in scene_lod.glb
+                if node["name"] in chains_seen:
+                    raise CheckFailed(f"chain {node['name']} is in {chains_seen[node['name']]} and {rel}")
+                chains_seen[node["name"]] = rel
                 acc = ext["attributes"]["TRANSLATION"]
                 # (a quantized mesh's instances carry its grid's offset: not the table's positions)
                 quantized = "KHR_mesh_quantization" in doc.get("extensionsUsed", [])
@@ -829,7 +834,9 @@ def check_tiles(scene_dir: Path, manifest: dict) -> list[str]:
                 if np.any(xyz < lo - 1e-6) or np.any(xyz > hi + 1e-6):
                     raise CheckFailed(f"{rel}: an instance of {node['name']} lies outside the tile's box")
                 x, z = xyz[:, 0], xyz[:, 2]
-                off = ((x < x0) & (i > 0)) | ((x >= x1) & (i < nx - 1)) | ((z < z0) & (j > 0)) | ((z >= z1) & (j < nz - 1))
+                e = 1e-3  # (an instance goes with its placement tile; f32 rounding on the border)
+                off = ((x < x0 - e) & (i > 0)) | ((x >= x1 + e) & (i < nx - 1)) | ((z < z0 - e) & (j > 0)) | \
+                      ((z >= z1 + e) & (j < nz - 1))
                 if np.any(off):
                     raise CheckFailed(f"{rel}: {int(off.sum())} instances of {node['name']} lie outside its square")
                 counts[top["name"]] = counts.get(top["name"], 0) + len(xyz)
@@ -845,6 +852,14 @@ def check_tiles(scene_dir: Path, manifest: dict) -> list[str]:
         total = len(read_glb_chunks(scene_dir / terrain_files[0])[0]["meshes"])
         if len(chunks_seen) != total:
             raise CheckFailed(f"the tiles hold {len(chunks_seen)} chunks of the terrain's {total}")
+    totals: dict[str, int] = {}
+    for t in index["tiles"]:
+        for name, n in t["instances"].items():
+            totals[name] = totals.get(name, 0) + n
+    for sp in manifest.get("scatter", {}).get("species", []):
+        meshed = sp["name"] in (manifest.get("view") or {}).get("chains", {})
+        if meshed and totals.get(sp["name"], 0) != sp["count"]:
+            raise CheckFailed(f"the tiles instance {totals.get(sp['name'], 0)} {sp['name']}, its table {sp['count']}")
     for sp in [] if compressed else manifest.get("scatter", {}).get("species", []):
         name = sp["name"]
         got = np.concatenate(positions.get(name, [np.zeros((0, 3))]))
@@ -859,8 +874,8 @@ def check_tiles(scene_dir: Path, manifest: dict) -> list[str]:
             raise CheckFailed(f"the tiles' {name} instances are not its table's positions")
     n = sum(sum(t["instances"].values()) for t in index["tiles"])
     if compressed:
-        return [f"{len(index['tiles'])} tiles of {tile_m:g} m hold the {len(chunks_seen)} chunks once and {n} "
-                "instances (compact files: counted, positions not compared)"]
+        return [f"{len(index['tiles'])} tiles of {tile_m:g} m hold the {len(chunks_seen)} chunks once and the "
+                f"tables' {n} rows (compact files: counted, positions not compared)"]
     return [f"{len(index['tiles'])} tiles of {tile_m:g} m hold the {len(chunks_seen)} chunks once and the "
             f"tables' {n} rows"]
 

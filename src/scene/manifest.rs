@@ -119,7 +119,8 @@ struct ViewManifest<'a> {
     /// `lod_scene = false`).
     #[serde(skip_serializing_if = "Option::is_none")]
     lod_scene: Option<String>,
-    lod_scene_bytes: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    lod_scene_bytes: Option<u64>,
     /// `[scene] tile`: the scene in tiles ([`crate::scene::view_tiles`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     tiles: Option<TilesManifest>,
@@ -342,7 +343,7 @@ pub fn write_manifest_and_report(
             scene: v.scene_file.to_string_lossy().replace('\\', "/"),
             bytes: v.scene_bytes,
             lod_scene: v.lod_scene_file.as_ref().map(|f| f.to_string_lossy().replace('\\', "/")),
-            lod_scene_bytes: v.lod_scene_bytes,
+            lod_scene_bytes: v.lod_scene_file.as_ref().map(|_| v.lod_scene_bytes),
             tiles: v.tiles.as_ref().map(|t| TilesManifest {
                 index: t.index_file.to_string_lossy().replace('\\', "/"),
                 tile_m: t.index.tile_m,
@@ -841,13 +842,14 @@ fn view_section(v: &crate::scene::view_stage::ViewStageReport) -> String {
     if let Some(t) = &v.tiles {
         let largest = t.index.tiles.iter().map(|t| t.bytes).max().unwrap_or(0);
         s += &format!(
-            "`{}` indexes the scene in {} tiles of {} m (`{}/`, {:.1} MB, the largest {:.1} MB): each a GLB of its own holding the terrain chunks centred in its square and the instances placed in it, as scene_lod.glb chains them, with the species' levels it uses and its part of the terrain's textures.\n\n",
+            "`{}` indexes the scene in {} tiles of {} m (`{}/`, {:.1} MB, the largest {:.1} MB): each a GLB of its own holding the terrain chunks centred in its square and the instances of the placement tiles in it, chained as in scene_lod.glb{}, with the species' levels it uses and its part of the terrain's textures.\n\n",
             t.index_file.display(),
             t.index.tiles.len(),
             t.index.tile_m,
             crate::scene::view_tiles::TILES_DIR,
             t.bytes as f64 / 1e6,
-            largest as f64 / 1e6
+            largest as f64 / 1e6,
+            if v.lod_scene_file.is_some() { "" } else { " (which `lod_scene = false` leaves out)" }
         );
     }
     s += "| view | eye (m) | looking along | fov | image | triangles | draw calls | full-detail triangles | full-detail draw calls | triangle ratio |\n|---|---|---|---|---|---|---|---|---|---|\n";

@@ -423,6 +423,25 @@ fn parse(text: &str, path: &Path, inputs: Inputs) -> Result<Preset, PresetError>
         None => ScatterSettings::default(),
         Some((span, table)) => parse_scatter(&Table { ctx: &ctx, label: "[scatter]".into(), span, table }, inputs)?,
     };
+    if let Some((tile_m, span)) = &tile {
+        // a scene tile holds whole placement tiles (each one chain per variant, as in scene_lod.glb)
+        let ratio = tile_m / scatter.tile_m;
+        if (ratio - ratio.round()).abs() > 1e-9 * ratio.max(1.0) || ratio.round() < 1.0 {
+            return Err(ctx.at(
+                span,
+                format!(
+                    "`tile = {tile_m}` is not a whole multiple of the placement tiles' {} m ([scatter] tile): a scene \
+                     tile holds whole placement tiles",
+                    scatter.tile_m
+                ),
+                format!(
+                    "set `tile` to a multiple of {} m (e.g. `tile = {}`)",
+                    scatter.tile_m,
+                    scatter.tile_m * ratio.round().max(1.0)
+                ),
+            ));
+        }
+    }
     let grass_defaults = match grass_section {
         None => GrassSettings::default(),
         Some((span, table)) => plants::apply_grass(
@@ -628,6 +647,13 @@ fn parse_scene(t: &Table<'_, '_>) -> Result<(SceneSettings, Option<(f64, std::op
         }
     })?;
     let lod_scene = t.boolean("lod_scene", "lod_scene = false")?.unwrap_or(true);
+    if let (false, None, Some((_, v))) = (lod_scene, &tile, t.get("lod_scene")) {
+        return Err(t.ctx.at(
+            &v.span(),
+            "`lod_scene = false` without `tile` leaves the scene with neither scene_lod.glb nor tiles",
+            "set `tile` in [scene] (e.g. `tile = 2048.0`), or remove `lod_scene = false`",
+        ));
+    }
     let tile_m = tile.as_ref().map(|(x, _)| *x);
     Ok((SceneSettings { name: name.to_string(), seed, formats, compact, tile_m, lod_scene }, tile))
 }

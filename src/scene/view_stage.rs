@@ -153,7 +153,7 @@ pub struct ViewStageReport {
     /// `[scene] tile`: the scene in tiles and their index ([`crate::scene::view_tiles`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tiles: Option<crate::scene::view_tiles::SceneTilesReport>,
-    /// The farthest any vertex of scene.glb and scene_lod.glb lies from the mesh built
+    /// The farthest any vertex of scene.glb, scene_lod.glb and the scene tiles lies from the mesh built
     /// (`[scene] compact`: 16-bit positions; 0 for f32), in the mesh's own frame (an instance's
     /// scale multiplies it): what storing them here moved them plus what their species files
     /// had (the view stage reads the species meshes back from those).
@@ -188,6 +188,9 @@ pub fn view_key(preset: &Preset, upstream: &[&str]) -> String {
     crate::scene::plants_stage::add_compact(&mut k, preset);
     if let Some(t) = preset.scene.tile_m {
         k.add(b"tile=").add(&t.to_le_bytes());
+    }
+    if !preset.scene.lod_scene {
+        k.add(b"lod_scene=false");
     }
     for s in &preset.species {
         k.add(s.rules.name.as_bytes()).add(serde_json::to_string(&s.cull_distance_m).unwrap_or_default().as_bytes());
@@ -422,7 +425,7 @@ pub fn run_view(
     let main = Arc::clone(asm.shared(terrain.main)?);
     // the surface only places the cameras: dropped before anything is assembled (1.7 M triangles
     // index into ~230 MB)
-    let cameras: Vec<Camera> = {
+    let (cameras, extent): (Vec<Camera>, [f64; 4]) = {
         let parts: Vec<(&[[f32; 3]], &[u32])> =
             main.meshes.iter().flat_map(|m| m.primitives.iter().map(|p| (&p.positions[..], &p.indices[..]))).collect();
         let surface = SurfaceIndex::from_parts(&parts);
@@ -433,7 +436,7 @@ pub fn run_view(
             .map(|v| v.resolve(extent, |x, z| surface.height_at(x, z).map(|(h, _)| h)))
             .collect::<Result<_, _>>()
             .map_err(fail)?;
-        cameras
+        (cameras, extent)
     };
 
     // terrain levels: per level, its file (same chunk layout as the main mesh) and switch distance
@@ -733,6 +736,9 @@ pub fn run_view(
         Some(tile_m) => {
             let job = crate::scene::view_tiles::TileJob {
                 dir: scene_dir,
+                // the scatter stage's tiling (over the same surface's bounds): a placement tile's
+                // rows go to the scene tile holding its centre, one chain in one tile
+                placement_tiles: crate::scatter::Tiling::new(extent, preset.scatter.tile_m).ok(),
                 terrain: &lod_terrain,
                 species: &species,
                 policy: &preset.lod,
@@ -758,11 +764,16 @@ pub fn run_view(
         lod_scene.name = format!("{} (levels of detail)", preset.scene.name);
         let file = PathBuf::from("scene_lod.glb");
         export::write_scene_with(&lod_scene, &scene_dir.join(&file), &store).map_err(|e| {
-            fail(format!(
-                "{}: {e} (a scene this large is written as tiles: set `tile` and `lod_scene = false` in [scene], \
-                 docs/scene.md)",
-                file.display()
-            ))
+            let e = e.to_string();
+            let remedy = match (e.contains("4 GiB"), preset.scene.tile_m) {
+                (false, _) => "",
+                (true, None) => {
+                    " (a scene this large is written as tiles: set `tile` and `lod_scene = false` in \
+                                [scene], docs/scene.md)"
+                }
+                (true, Some(_)) => " (the scene is written as tiles: set `lod_scene = false` in [scene])",
+            };
+            fail(format!("{}: {e}{remedy}", file.display()))
         })?;
         quantization_m = quantization_m.max(crate::export::quantize::position_error_with(
             &lod_scene,

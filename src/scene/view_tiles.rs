@@ -4,7 +4,8 @@
 //! everything in it, its file and bytes, its chunks and instances).
 //!
 //! A tile holds the terrain chunks whose centres lie in its square, each with its whole MSFT_lod
-//! chain, and the instances whose positions lie in it, grouped as scene_lod.glb groups them
+//! chain, and the instances of the placement tiles whose centres lie in it (`tile` is a multiple of
+//! `[scatter] tile`: the placement tiles in its square), grouped as scene_lod.glb groups them
 //! (placement tile × variant, one chain each, with the same screen coverages): the same nodes,
 //! meshes and instances, so a viewer showing every tile shows scene_lod.glb. The last row and
 //! column of tiles also hold anything beyond the grid (the terrain's far edge, x = (n − 1)·cell).
@@ -45,14 +46,15 @@ pub const MAX_TILES: u64 = 65_536;
 /// One tile of the index.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct SceneTile {
-    /// The tile's GLB, relative to the scene folder.
-    pub file: PathBuf,
+    /// The tile's GLB, relative to the scene folder (`/`-separated on every system).
+    pub file: String,
     /// (i, j): the square x ∈ [i·S, (i+1)·S), z ∈ [j·S, (j+1)·S).
     pub index: [u32; 2],
     /// The square: [x0, z0, x1, z1] (m).
     pub rect_m: [f64; 4],
     /// The box around everything in the tile: every level of its chunks, and each instance's
-    /// position within its species' height times its largest scale (m).
+    /// position within its species' reach (the farthest vertex of any of its levels from the
+    /// mesh's origin) times its largest scale (m).
     pub bounds_min: [f64; 3],
     pub bounds_max: [f64; 3],
     pub bytes: u64,
@@ -94,7 +96,9 @@ pub struct SceneTilesReport {
 
 impl SceneTilesReport {
     pub fn files(&self) -> Vec<PathBuf> {
-        std::iter::once(self.index_file.clone()).chain(self.index.tiles.iter().map(|t| t.file.clone())).collect()
+        std::iter::once(self.index_file.clone())
+            .chain(self.index.tiles.iter().map(|t| PathBuf::from(&t.file)))
+            .collect()
     }
 }
 
@@ -117,6 +121,8 @@ struct Decoded {
 /// The inputs of [`write_tiles`].
 pub(super) struct TileJob<'a> {
     pub dir: &'a Path,
+    /// The placement tiles the rows' `tile` numbers name (None: rows go by their own positions).
+    pub placement_tiles: Option<crate::scatter::Tiling>,
     pub terrain: &'a LodTerrain<'a>,
     pub species: &'a [LodSpecies<'a>],
     pub policy: &'a LodView,
@@ -141,8 +147,8 @@ pub(super) fn write_tiles(
     let (nx, nz) = (cells(max_x), cells(max_z));
     if nx.saturating_mul(nz) > MAX_TILES {
         return Err(fail(format!(
-            "`[scene] tile = {s}` cuts the terrain ({max_x:.0} m × {max_z:.0} m) into {nx} × {nz} tiles, over the \
-             {MAX_TILES} a scene writes: set a larger `tile`"
+            "the preset's `[scene] tile = {s}` cuts the terrain ({max_x:.0} m × {max_z:.0} m) into {nx} × {nz} \
+             tiles, over the {MAX_TILES} a scene writes: set a larger `tile`"
         )));
     }
     let grid = [nx as u32, nz as u32];
@@ -158,13 +164,22 @@ pub(super) fn write_tiles(
             chunks[at(0.5 * (lo[0] + hi[0]), 0.5 * (lo[2] + hi[2]))].push(c);
         }
     }
+    // a row goes where its placement tile's centre lies, so each chain (placement tile × variant)
+    // is in one scene tile whole, with scene_lod.glb's bounding sphere and coverages
+    let by_placement_tile = |r: &crate::export::table::PlacementRow| match job.placement_tiles {
+        Some(p) if r.tile < p.tiles_x.saturating_mul(p.tiles_z) => {
+            let [x0, z0, x1, z1] = p.rect(r.tile % p.tiles_x, r.tile / p.tiles_x);
+            at(0.5 * (x0 + x1), 0.5 * (z0 + z1))
+        }
+        _ => at(r.position[0] as f32 as f64, r.position[2] as f32 as f64),
+    };
     let rows: Vec<Vec<Vec<u32>>> = job
         .species
         .iter()
         .map(|sp| {
             let mut per = vec![Vec::new(); count];
             for (n, r) in sp.rows.iter().enumerate() {
-                per[at(r.position[0] as f32 as f64, r.position[2] as f32 as f64)].push(n as u32);
+                per[by_placement_tile(r)].push(n as u32);
             }
             per
         })
@@ -186,6 +201,17 @@ pub(super) fn write_tiles(
     })();
     *files = std::mem::take(&mut asm.files);
     read?;
+    // each species' reach: the farthest vertex of any of its levels from the mesh's origin
+    let reach: Vec<f64> = job
+        .species
+        .iter()
+        .map(|sp| {
+            let levels = sp.chain.variants.iter().flatten();
+            let meshes = levels.filter_map(|l| files.get(&l.file)?.meshes.iter().find(|m| m.name == l.mesh));
+            let points = meshes.flat_map(|m| m.primitives.iter().flat_map(|p| &p.positions));
+            points.map(|p| p.iter().map(|&v| (v as f64) * (v as f64)).sum::<f64>().sqrt()).fold(0.0, f64::max)
+        })
+        .collect();
     let decoded = decode_terrain_textures(files, job.terrain)?;
     let order: Vec<usize> =
         (0..count).filter(|&t| !chunks[t].is_empty() || rows.iter().any(|per| !per[t].is_empty())).collect();
@@ -204,7 +230,7 @@ pub(super) fn write_tiles(
                     .zip(&rows)
                     .map(|(sp, per)| LodSpecies { picked: Some(&per[t]), ..*sp })
                     .collect();
-                write_tile(job, shared, &decoded, [i, j], &chunks[t], &species)
+                write_tile(job, shared, &decoded, [i, j], &chunks[t], &species, &reach)
             })
             .collect()
     };
@@ -242,6 +268,7 @@ fn write_tile(
     [i, j]: [u32; 2],
     chunks: &[usize],
     species: &[LodSpecies<'_>],
+    reach: &[f64],
 ) -> Result<(SceneTile, f64), StageError> {
     let s = job.tile_m;
     let terrain = LodTerrain { picked: Some(chunks), take: false, ..*job.terrain };
@@ -263,7 +290,7 @@ fn write_tile(
         }
     }
     let mut instances = BTreeMap::new();
-    for sp in species {
+    for (sp, &reach) in species.iter().zip(reach) {
         let picked = sp.picked.unwrap_or(&[]);
         if picked.is_empty() {
             continue;
@@ -271,8 +298,10 @@ fn write_tile(
         instances.insert(sp.name.to_string(), picked.len());
         for &n in picked {
             let r = &sp.rows[n as usize];
-            let reach = sp.chain.height_m * r.scale.iter().fold(0.0f32, |m, &v| m.max(v.abs())) as f64;
-            grow(r.position.map(|v| v as f32 as f64), reach);
+            grow(
+                r.position.map(|v| v as f32 as f64),
+                reach * r.scale.iter().fold(0.0f32, |m, &v| m.max(v.abs())) as f64,
+            );
         }
     }
 
@@ -280,9 +309,13 @@ fn write_tile(
     scene.name = format!("{} tile {i} {j}", job.scene_name);
     let rect_m = [i as f64 * s, j as f64 * s, (i + 1) as f64 * s, (j + 1) as f64 * s];
     scene.extras = Some(serde_json::json!({ "verdant_tile": { "index": [i, j], "rect_m": rect_m } }));
-    let file = PathBuf::from(TILES_DIR).join(format!("tile_{i}_{j}.glb"));
+    let file = format!("{TILES_DIR}/tile_{i}_{j}.glb");
     let path = job.dir.join(&file);
-    export::write_scene_with(&scene, &path, job.store).map_err(|e| fail(format!("{}: {e}", path.display())))?;
+    export::write_scene_with(&scene, &path, job.store).map_err(|e| {
+        let e = e.to_string();
+        let remedy = if e.contains("4 GiB") { " (set a smaller `tile` in [scene])" } else { "" };
+        fail(format!("{}: {e}{remedy}", path.display()))
+    })?;
     let moved = crate::export::quantize::position_error_with(&scene, &job.store.quantization, &job.store.mesh_grids);
     drop(scene);
     let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
@@ -318,7 +351,7 @@ fn decode_terrain_textures(
     pngs.into_par_iter()
         .map(|(name, png)| {
             let image = image::load_from_memory_with_format(png, image::ImageFormat::Png)
-                .map_err(|e| fail(format!("the terrain's texture `{name}`: {e}")))?;
+                .map_err(|e| fail(format!("the terrain's texture `{name}`: {e} (rebuild with --force)")))?;
             Ok(Decoded { png: png.clone(), image })
         })
         .collect()

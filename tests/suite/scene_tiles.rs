@@ -27,6 +27,13 @@ const ROCK_OBJ: &str = "v -0.5 0 -0.5\nv 0.5 0 -0.5\nv 0.5 0 0.5\nv -0.5 0 0.5\n
                         v -0.5 1 -0.5\nv 0.5 1 -0.5\nv 0.5 1 0.5\nv -0.5 1 0.5\n\
                         f 1 2 3 4\nf 8 7 6 5\nf 1 5 6 2\nf 2 6 7 3\nf 3 7 8 4\nf 4 8 5 1\n";
 
+/// A temporary folder holding the rock species' OBJ.
+fn folder() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), "rock.obj", ROCK_OBJ);
+    dir
+}
+
 /// What a chain node of a LoD scene is, file-independently: per level, its node name, the mesh's
 /// name and geometry (positions, normals, indices of each primitive), its instances, and the
 /// chain's coverages.
@@ -60,15 +67,25 @@ fn chains(scene: &Scene) -> BTreeMap<String, Chain> {
     out
 }
 
+/// `v` turned by the unit quaternion `q` (x, y, z, w).
+fn rotate(q: [f32; 4], v: [f32; 3]) -> [f32; 3] {
+    let [x, y, z, w] = q;
+    let t = [2.0 * (y * v[2] - z * v[1]), 2.0 * (z * v[0] - x * v[2]), 2.0 * (x * v[1] - y * v[0])];
+    [
+        v[0] + w * t[0] + (y * t[2] - z * t[1]),
+        v[1] + w * t[1] + (z * t[0] - x * t[2]),
+        v[2] + w * t[2] + (x * t[1] - y * t[0]),
+    ]
+}
+
 fn decode(png: &[u8]) -> image::RgbaImage {
     image::load_from_memory(png).unwrap().to_rgba8()
 }
 
 #[test]
 fn tiles_hold_every_chain_of_the_lod_scene_once_with_the_same_texels() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = folder();
     let d = dir.path();
-    write(d, "rock.obj", ROCK_OBJ);
     write(d, "p.toml", &preset("tile = 256.0"));
     ok(&verdant_in(d, &["-q", "build", "p.toml", "--out", "o"]));
     let s = d.join("o/tiled");
@@ -111,7 +128,7 @@ fn tiles_hold_every_chain_of_the_lod_scene_once_with_the_same_texels() {
         let rect: Vec<f64> = t["rect_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
         let lo: Vec<f64> = t["bounds_min"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
         let hi: Vec<f64> = t["bounds_max"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        let inside = |p: [f32; 3]| (0..3).all(|a| p[a] as f64 >= lo[a] - 1e-9 && p[a] as f64 <= hi[a] + 1e-9);
+        let inside = |p: [f32; 3]| (0..3).all(|a| p[a] as f64 >= lo[a] - 1e-4 && p[a] as f64 <= hi[a] + 1e-4);
         let mut chunks = 0;
         for (name, chain) in chains(&tile) {
             let first = &chain.levels[0];
@@ -132,15 +149,31 @@ fn tiles_hold_every_chain_of_the_lod_scene_once_with_the_same_texels() {
                     "{name} centred outside its tile"
                 );
             } else {
-                for inst in chain.levels.iter().filter_map(|l| l.3.as_ref()) {
-                    for p in &inst.translations {
-                        assert!(inside(*p), "{name}: an instance outside the tile's box");
-                        let (x, z) = (p[0] as f64, p[2] as f64);
+                // every vertex of every level, placed by each instance, inside the tile's box; each
+                // instance in the tile's square (f32 rounding on its border)
+                for (level, inst) in chain.levels.iter().filter_map(|l| Some((l, l.3.as_ref()?))) {
+                    let n = inst.translations.len();
+                    assert!(inst.rotations.len() == n && inst.scales.len() == n, "{name}");
+                    for k in 0..n {
+                        let (t, q, s) = (inst.translations[k], inst.rotations[k], inst.scales[k]);
+                        for p in level.2.iter().flat_map(|p| &p.0) {
+                            let v = rotate(q, [p[0] * s[0], p[1] * s[1], p[2] * s[2]]);
+                            let w = [t[0] + v[0], t[1] + v[1], t[2] + v[2]];
+                            assert!(
+                                inside(w),
+                                "{name}: a vertex of an instance at {t:?} reaches {w:?}, outside {lo:?}..{hi:?}"
+                            );
+                        }
+                        let (x, z) = (t[0] as f64, t[2] as f64);
+                        let e = 1e-3;
                         assert!(
-                            (x >= rect[0] || rect[0] == 0.0) && (x < rect[2] || rect[2] >= 384.0),
+                            x >= rect[0] - e && (x < rect[2] + e || rect[2] >= 384.0),
                             "{name}: x {x} outside {rect:?}"
                         );
-                        assert!((z >= rect[1] || rect[1] == 0.0) && (z < rect[3] || rect[3] >= 384.0), "{name}: z {z}");
+                        assert!(
+                            z >= rect[1] - e && (z < rect[3] + e || rect[3] >= 384.0),
+                            "{name}: z {z} outside {rect:?}"
+                        );
                     }
                 }
                 let species = name.split('_').next().unwrap().to_string();
@@ -195,10 +228,15 @@ fn tiles_hold_every_chain_of_the_lod_scene_once_with_the_same_texels() {
 
 #[test]
 fn bad_tile_values_are_refused_with_their_line() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = folder();
     let d = dir.path();
-    write(d, "rock.obj", ROCK_OBJ);
-    for (tile, line, says) in [("tile = 0.0", 4, "between 1 and 1 000 000 m"), ("tile = \"big\"", 4, "tile")] {
+    for (tile, line, says) in [
+        ("tile = 0.0", 4, "between 1 and 1 000 000 m"),
+        ("tile = \"big\"", 4, "a number"),
+        // a scene tile holds whole placement tiles (32 m)
+        ("tile = 200.0", 4, "multiple of the placement tiles' 32 m"),
+        ("lod_scene = false", 4, "neither scene_lod.glb nor tiles"),
+    ] {
         write(d, "p.toml", &preset(tile));
         let o = verdant_in(d, &["-q", "build", "p.toml", "--out", "o"]);
         let t = text(&o);
@@ -217,9 +255,8 @@ fn bad_tile_values_are_refused_with_their_line() {
 
 #[test]
 fn tiles_are_the_same_bytes_at_any_thread_count_and_stand_without_scene_lod() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = folder();
     let d = dir.path();
-    write(d, "rock.obj", ROCK_OBJ);
     write(d, "p.toml", &preset("tile = 128.0"));
     ok(&verdant_in(d, &["-q", "--threads", "1", "build", "p.toml", "--out", "one"]));
     ok(&verdant_in(d, &["-q", "--threads", "3", "build", "p.toml", "--out", "three"]));
@@ -237,11 +274,20 @@ fn tiles_are_the_same_bytes_at_any_thread_count_and_stand_without_scene_lod() {
     for (rel, bytes) in with.iter().filter(|(rel, _)| rel.starts_with("tiles/") || *rel == "scene_tiles.json") {
         assert!(alone.get(rel) == Some(bytes), "{rel} differs without scene_lod.glb");
     }
+    // the flag changes what the view stage writes: turned either way in one folder, never served
+    // from the other's cache entry
+    ok(&verdant_in(d, &["-q", "build", "p.toml", "--out", "one"]));
+    assert!(!d.join("one/tiled/scene_lod.glb").exists(), "lod_scene = false, yet scene_lod.glb");
+    write(d, "p.toml", &preset("tile = 128.0"));
+    ok(&verdant_in(d, &["-q", "build", "p.toml", "--out", "one"]));
+    assert_same_tree(&d.join("one/tiled"), &d.join("three/tiled"));
     let manifest = read_json(&d.join("alone/tiled/manifest.json"));
     assert!(
-        manifest["view"].get("lod_scene").is_none() && manifest["view"]["tiles"]["tiles"] == 9,
+        manifest["view"].get("lod_scene").is_none()
+            && manifest["view"].get("lod_scene_bytes").is_none()
+            && manifest["view"]["tiles"]["tiles"] == 9,
         "{}",
-        manifest["view"]["tiles"]
+        manifest["view"]
     );
     assert!(!std::fs::read_to_string(d.join("alone/tiled/manifest.json")).unwrap().contains("scene_lod.glb"));
     // a boolean only
@@ -252,9 +298,8 @@ fn tiles_are_the_same_bytes_at_any_thread_count_and_stand_without_scene_lod() {
 
 #[test]
 fn no_tile_writes_no_tiles() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = folder();
     let d = dir.path();
-    write(d, "rock.obj", ROCK_OBJ);
     write(d, "p.toml", &preset(""));
     ok(&verdant_in(d, &["-q", "build", "p.toml", "--out", "o"]));
     assert!(!d.join("o/tiled/scene_tiles.json").exists() && !d.join("o/tiled/tiles").exists());
