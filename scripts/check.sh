@@ -417,6 +417,30 @@ PYEOF
     # tables' rows each in one tile; one tile kept for the engines (5f2)
     if "$BIN" validate --quiet "$hl"/tiles/*.glb; then pass; else fail "verdant validate highlands' tiles"; fi
     if "$PY" scripts/check_outputs.py --tiles "$hl"; then pass; else fail "check_outputs.py --tiles highlands"; fi
+    # the check itself must fail on a tampered index: a count one off; two tiles' files swapped (each
+    # tile's instances then outside the square listed)
+    for tamper in count swap; do
+      cp "$hl/scene_tiles.json" "$OUT/scene_tiles.good.json"
+      "$PY" - "$hl/scene_tiles.json" "$tamper" <<'PYEOF'
+import json, sys
+p, how = sys.argv[1], sys.argv[2]
+index = json.load(open(p))
+t = index["tiles"]
+if how == "count":
+    name = next(iter(t[0]["instances"]))
+    t[0]["instances"][name] += 1
+else:
+    for k in ("file", "bytes"):
+        t[0][k], t[5][k] = t[5][k], t[0][k]
+json.dump(index, open(p, "w"))
+PYEOF
+      if "$PY" scripts/check_outputs.py --tiles "$hl" > "$OUT/tiles_tampered_$tamper.log" 2>&1; then
+        fail "check_outputs.py --tiles passed a tampered index ($tamper)"
+      else
+        pass
+      fi
+      cp "$OUT/scene_tiles.good.json" "$hl/scene_tiles.json"
+    done
     cp "$hl/tiles/tile_1_2.glb" "$OUT/world_tile_1_2.glb" || fail "highlands wrote no tiles/tile_1_2.glb"
   else
     fail "verdant merge highlands (see $OUT/world_merge.log)"

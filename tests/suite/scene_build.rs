@@ -801,7 +801,7 @@ const PINNED: &[(&str, u32, &str)] = &[
     ("plants", 20, "314b79f5bdaa8936"),
     ("snow", 6, "fd411b374b62d06b"),
     ("scatter", 11, "620772a7e8e08c2e"),
-    ("view", 15, "441d3878e2a5e1dc"),
+    ("view", 16, "1a9d61bef7561534"),
     ("preview", 12, "020965f129af61a5"),
 ];
 
