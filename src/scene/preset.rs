@@ -640,7 +640,7 @@ fn parse_scene(t: &Table<'_, '_>) -> Result<(SceneSettings, Option<(f64, std::op
         }
     };
     let tile = t.number("tile", "tile = 2048.0", |x| {
-        if x >= 1.0 && x <= 1.0e6 {
+        if (1.0..=1.0e6).contains(&x) {
             Ok(())
         } else {
             Err("must be between 1 and 1 000 000 m (the side of a scene tile)".into())

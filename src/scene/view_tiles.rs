@@ -113,8 +113,9 @@ pub fn tile_of(x: f64, z: f64, tile_m: f64, grid: [u32; 2]) -> [u32; 2] {
 }
 
 /// A decoded texture, for cropping it tile after tile.
-struct Decoded {
-    png: Vec<u8>,
+struct Decoded<'a> {
+    /// The PNG as the terrain's file holds it (what a tile's copy of the texture is matched by).
+    png: &'a [u8],
     image: image::DynamicImage,
 }
 
@@ -213,31 +214,19 @@ pub(super) fn write_tiles(
         })
         .collect();
     let decoded = decode_terrain_textures(files, job.terrain)?;
-    let order: Vec<usize> =
-        (0..count).filter(|&t| !chunks[t].is_empty() || rows.iter().any(|per| !per[t].is_empty())).collect();
-    let shared: &BTreeMap<PathBuf, Arc<Scene>> = files;
     // one tile after another: two at once took a world's view stage from 0.85 to 1.0 GB (each
     // holds its meshes and its GLB's bytes) to save 0.7 s of 1.8; the textures are cropped and
     // encoded in parallel
-    let written: Vec<Result<(SceneTile, f64), StageError>> = {
-        order
-            .iter()
-            .map(|&t| {
-                let (i, j) = ((t % nx as usize) as u32, (t / nx as usize) as u32);
-                let species: Vec<LodSpecies<'_>> = job
-                    .species
-                    .iter()
-                    .zip(&rows)
-                    .map(|(sp, per)| LodSpecies { picked: Some(&per[t]), ..*sp })
-                    .collect();
-                write_tile(job, shared, &decoded, [i, j], &chunks[t], &species, &reach)
-            })
-            .collect()
-    };
-    let mut tiles = Vec::with_capacity(written.len());
+    let mut tiles = Vec::new();
     let (mut total, mut quantization_m) = (0u64, 0.0f64);
-    for w in written {
-        let (tile, q) = w?;
+    for t in 0..count {
+        if chunks[t].is_empty() && rows.iter().all(|per| per[t].is_empty()) {
+            continue;
+        }
+        let (i, j) = ((t % nx as usize) as u32, (t / nx as usize) as u32);
+        let species: Vec<LodSpecies<'_>> =
+            job.species.iter().zip(&rows).map(|(sp, per)| LodSpecies { picked: Some(&per[t]), ..*sp }).collect();
+        let (tile, q) = write_tile(job, files, &decoded, [i, j], &chunks[t], &species, &reach)?;
         total += tile.bytes;
         quantization_m = quantization_m.max(q);
         tiles.push(tile);
@@ -248,7 +237,7 @@ pub(super) fn write_tiles(
         scene: job.scene_name.to_string(),
         tile_m: s,
         grid,
-        lod: job.policy.clone(),
+        lod: *job.policy,
         tiles,
     };
     let mut text = serde_json::to_vec_pretty(&index).map_err(|e| fail(e.to_string()))?;
@@ -264,7 +253,7 @@ pub(super) fn write_tiles(
 fn write_tile(
     job: &TileJob<'_>,
     files: &BTreeMap<PathBuf, Arc<Scene>>,
-    decoded: &[Decoded],
+    decoded: &[Decoded<'_>],
     [i, j]: [u32; 2],
     chunks: &[usize],
     species: &[LodSpecies<'_>],
@@ -334,10 +323,10 @@ fn write_tile(
 }
 
 /// The textures of the terrain's files, decoded once for every tile (in parallel).
-fn decode_terrain_textures(
-    files: &BTreeMap<PathBuf, Arc<Scene>>,
+fn decode_terrain_textures<'f>(
+    files: &'f BTreeMap<PathBuf, Arc<Scene>>,
     terrain: &LodTerrain<'_>,
-) -> Result<Vec<Decoded>, StageError> {
+) -> Result<Vec<Decoded<'f>>, StageError> {
     use rayon::prelude::*;
     let mut pngs: Vec<(&str, &Vec<u8>)> = Vec::new();
     let sources = std::iter::once(terrain.main_file).chain(terrain.levels.iter().map(|(f, _)| f.as_path()));
@@ -352,7 +341,7 @@ fn decode_terrain_textures(
         .map(|(name, png)| {
             let image = image::load_from_memory_with_format(png, image::ImageFormat::Png)
                 .map_err(|e| fail(format!("the terrain's texture `{name}`: {e} (rebuild with --force)")))?;
-            Ok(Decoded { png: png.clone(), image })
+            Ok(Decoded { png, image })
         })
         .collect()
 }
@@ -377,7 +366,7 @@ pub fn texel_rect(u: [f64; 2], v: [f64; 2], w: u32, h: u32) -> [u32; 4] {
 fn crop_terrain_textures(
     scene: &mut Scene,
     terrain: &[usize],
-    decoded: &[Decoded],
+    decoded: &[Decoded<'_>],
 ) -> Result<Option<[u32; 4]>, StageError> {
     let terrain: BTreeSet<usize> = terrain.iter().copied().collect();
     let textures_of = |scene: &Scene, m: usize| -> Vec<usize> {
@@ -409,7 +398,7 @@ fn crop_terrain_textures(
     // each texture as decoded from the terrain's files (a texture of another file stays whole)
     let mut of = BTreeMap::new();
     for &t in &used {
-        match decoded.iter().position(|d| d.png == scene.textures[t].png) {
+        match decoded.iter().position(|d| *d.png == scene.textures[t].png[..]) {
             Some(k) => of.insert(t, k),
             None => return Ok(None),
         };

@@ -39,14 +39,16 @@ fn folder() -> tempfile::TempDir {
 /// chain's coverages.
 #[derive(Debug, PartialEq)]
 struct Chain {
-    levels: Vec<(String, String, Vec<(Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<u32>)>, Option<verdant::mesh::Instances>)>,
+    levels: Vec<Level>,
     coverage: Vec<f32>,
 }
 
-fn level(
-    scene: &Scene,
-    n: &Node,
-) -> (String, String, Vec<(Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<u32>)>, Option<verdant::mesh::Instances>) {
+/// A primitive's positions, normals and indices.
+type Geometry = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<u32>);
+/// A level: its node's name, its mesh's name and primitives, its instances.
+type Level = (String, String, Vec<Geometry>, Option<verdant::mesh::Instances>);
+
+fn level(scene: &Scene, n: &Node) -> Level {
     let m = &scene.meshes[n.mesh.unwrap()];
     let prims = m.primitives.iter().map(|p| (p.positions.clone(), p.normals.clone(), p.indices.clone())).collect();
     (n.name.clone(), m.name.clone(), prims, n.instances.as_deref().cloned())
