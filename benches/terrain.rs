@@ -122,12 +122,12 @@ fn run_case(input: &str, max_error_m: f64, which: &str) -> Result<(), String> {
         let c = cpu_seconds();
         mesh = match which {
             "verdant" => {
-                tin(&hf, &TinOptions { max_error_m, max_triangles: None, max_vertices: BENCH_MAX_VERTICES })
+                tin(&hf, &TinOptions { max_error_m, max_vertices: BENCH_MAX_VERTICES, ..TinOptions::default() })
                     .map_err(|e| e.to_string())?
                     .mesh
             }
             "spade" => {
-                tin_spade(&hf, &TinOptions { max_error_m, max_triangles: None, max_vertices: BENCH_MAX_VERTICES })
+                tin_spade(&hf, &TinOptions { max_error_m, max_vertices: BENCH_MAX_VERTICES, ..TinOptions::default() })
                     .map_err(|e| e.to_string())?
                     .mesh
             }

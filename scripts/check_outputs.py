@@ -706,6 +706,13 @@ def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int, str
                                       f"{want[0][1]:.3f}..{want[1][1]:.3f}")
         if terrain.get("lods"):
             facts.append(f"{len(terrain['lods'])} LoDs ok")
+        # chunked: every file's chunks fill their squares (what a view mixing levels relies on)
+        if (manifest.get("settings", {}).get("terrain") or {}).get("chunk") and terrain["cell_size_m"]:
+            files = list(terrain["files"]) + [f for lod in terrain.get("lods", []) for f in lod["files"]]
+            counts = [check_chunk_squares(scene_dir / f, terrain["cell_size_m"]) for f in files if f.endswith(".glb")]
+            counts = [n for n in counts if n is not None]
+            if counts:
+                facts.append(f"{sum(counts)} chunks in {len(counts)} files fill their squares")
         if thumb is not None and primary_geom is not None:
             coverage = render_thumbnail(primary_geom.merged(), primary_geom.bounds(), thumb)
             facts.append(f"thumb {thumb} ({coverage:.0%} covered)")
@@ -773,6 +780,64 @@ def glb_float_vec3(doc: dict, binary: bytes, index: int, what: str) -> np.ndarra
     if n and start + stride * (n - 1) + 12 > len(binary):
         raise CheckFailed(f"{what}: accessor {index} reads past the binary chunk")
     return np.ndarray((n, 3), dtype="<f4", buffer=binary, offset=start, strides=(stride, 4)).astype(np.float64)
+
+
+def glb_indices(doc: dict, binary: bytes, index: int, what: str) -> np.ndarray | None:
+    """Index accessor `index` of a GLB's BIN chunk as (n, 3) int64 triangles; None when its view is
+    meshopt-compressed."""
+    acc = doc["accessors"][index]
+    view = doc["bufferViews"][acc["bufferView"]]
+    if "EXT_meshopt_compression" in view.get("extensions", {}):
+        return None
+    dtype = {5121: "<u1", 5123: "<u2", 5125: "<u4"}.get(acc["componentType"])
+    if dtype is None or acc["type"] != "SCALAR" or acc["count"] % 3:
+        raise CheckFailed(f"{what}: accessor {index} is not an index list of triangles")
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    n = acc["count"]
+    if start + n * np.dtype(dtype).itemsize > len(binary):
+        raise CheckFailed(f"{what}: accessor {index} reads past the binary chunk")
+    return np.frombuffer(binary, dtype=dtype, count=n, offset=start).astype(np.int64).reshape(-1, 3)
+
+
+def check_chunk_squares(path: Path, cell_m: float) -> int | None:
+    """Each terrain chunk of a GLB (a node whose extras give its `sample_min`/`sample_max`) lies in
+    its square and its faces seen from above fill it exactly: chunks of different levels side by
+    side then leave no hole. Returns the chunks checked; None for a file whose positions are
+    quantized or compressed (not read here)."""
+    doc, binary = read_glb_chunks(path)
+    checked = 0
+    for node in doc.get("nodes", []):
+        extras = node.get("extras") or {}
+        if "sample_min" not in extras or node.get("mesh") is None:
+            continue
+        lo = np.array(extras["sample_min"], dtype=np.float64) * cell_m
+        hi = np.array(extras["sample_max"], dtype=np.float64) * cell_m
+        tol = 1e-6 * max(1.0, float(np.abs(hi).max()))
+        area = 0.0
+        for prim in doc["meshes"][node["mesh"]]["primitives"]:
+            attrs = prim["attributes"]
+            if doc["accessors"][attrs["POSITION"]]["componentType"] != 5126:
+                return None
+            pos = glb_float_vec3(doc, binary, attrs["POSITION"], f"{path.name} {node['name']}")
+            tris = glb_indices(doc, binary, prim["indices"], f"{path.name} {node['name']}")
+            if pos is None or tris is None:
+                return None
+            xz = pos[:, [0, 2]]
+            if len(xz) and (np.any(xz < lo - tol) or np.any(xz > hi + tol)):
+                k = int(np.argmax(np.maximum(lo - xz, xz - hi).max(axis=1)))
+                raise CheckFailed(f"{path.name}: chunk {node['name']} has a vertex at x, z = {xz[k].tolist()}, "
+                                  f"outside its square {lo.tolist()}..{hi.tolist()}")
+            a, b, c = xz[tris[:, 0]], xz[tris[:, 1]], xz[tris[:, 2]]
+            # glTF faces are counter-clockwise seen from outside: seen from above (+Y, looking down
+            # -Y onto x, z) a top face turns clockwise in (x, z), so its cross product is negative
+            cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+            area += float(-cross[cross < 0].sum()) / 2.0
+        square = float(np.prod(hi - lo))
+        if abs(area - square) > 1e-5 * square:
+            raise CheckFailed(f"{path.name}: chunk {node['name']}'s faces cover {area:.3f} m² of its "
+                              f"{square:.3f} m² square seen from above (a hole or an overlap)")
+        checked += 1
+    return checked
 
 
 def check_tiles(scene_dir: Path, manifest: dict) -> list[str]:

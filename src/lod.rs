@@ -187,14 +187,14 @@ pub fn terrain_lod_chain(
     terrain_lod_chain_in_bands(hf, max_errors_m, max_triangles, max_vertices, 0, view)
 }
 
-/// [`terrain_lod_chain`] with every level meshed in bands of `band_cells` rows
-/// ([`TinOptions::band_cells`]).
+/// [`terrain_lod_chain`] with every level cut along the lines of chunks of `chunk_cells` cells and
+/// meshed in bands of whole chunks ([`TinOptions::chunk_cells`]; 0: not chunked).
 pub fn terrain_lod_chain_in_bands(
     hf: &Heightfield,
     max_errors_m: &[f64],
     max_triangles: Option<usize>,
     max_vertices: usize,
-    band_cells: u32,
+    chunk_cells: u32,
     view: &LodView,
 ) -> Result<Vec<LodLevel>, LodError> {
     check_chain(max_errors_m, view)?;
@@ -203,7 +203,7 @@ pub fn terrain_lod_chain_in_bands(
         .enumerate()
         .map(|(level, &max_error_m)| {
             let start = Instant::now();
-            let r = tin(hf, &TinOptions { max_error_m, max_triangles, max_vertices, band_cells })
+            let r = tin(hf, &TinOptions { max_error_m, max_triangles, max_vertices, chunk_cells })
                 .map_err(|error| LodError::Terrain { level, error })?;
             let stats = measure(hf, &r.mesh);
             Ok(LodLevel {

@@ -210,13 +210,15 @@ pub fn band_surfaces(
         Some(mut piece) => piece.levels.swap_remove(main).mesh,
         None => {
             let bound = [bands.bounds[main]];
-            let mut piece = build_band_window(window, a, &bound, t.max_vertices, bands.fixed(k)).map_err(|error| {
-                let e = crate::terrain::job::JobError::Terrain {
-                    source_label: crate::scene::terrain_stage::source_label(t),
-                    error,
-                };
-                StageError::of(crate::scene::pipeline::Stage::Terrain.name(), &e, e.to_string())
-            })?;
+            let chunk_cells = crate::terrain::regions::chunk_cells(Some(pitch));
+            let mut piece =
+                build_band_window(window, a, &bound, t.max_vertices, chunk_cells, bands.fixed(k)).map_err(|error| {
+                    let e = crate::terrain::job::JobError::Terrain {
+                        source_label: crate::scene::terrain_stage::source_label(t),
+                        error,
+                    };
+                    StageError::of(crate::scene::pipeline::Stage::Terrain.name(), &e, e.to_string())
+                })?;
             piece.levels.swap_remove(0).mesh
         }
     };

@@ -19,6 +19,7 @@ use crate::terrain::build::{build_scene, BuildOptions};
 use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed, TerrainFigures};
 use crate::terrain::layers::SnowRule;
 use crate::terrain::normal_map::{bake_normal_map, put_normal_map, NormalMapReport};
+use crate::terrain::regions::chunk_cells;
 use crate::terrain::stored::Storage;
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -114,8 +115,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// alone (terrain/regions.rs `mesh_band`): the unit a shard will build. 11: the normal maps baked
 /// by bands of texel rows in parallel (the same texels; their mean errors summed band by band).
 /// 12: a banded terrain's bands bake their rows of its normal maps (the same texels); the maps'
-/// figures summed per texel row, rows in order.
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 12;
+/// figures summed per texel row, rows in order. 13: a chunked map is cut along every chunk line,
+/// so each level's chunks fill their squares exactly (no hole between chunks of different levels).
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 13;
 
 /// The stage in a scene build.
 pub struct TerrainJob<'a> {
@@ -404,7 +406,8 @@ pub fn band_piece(
         StageError::of(Stage::Terrain.name(), &e, e.to_string())
     };
     let mut piece =
-        build_band_window(&window, rows[0], &plan.bounds, t.max_vertices, plan.fixed(k)).map_err(terrain_error)?;
+        build_band_window(&window, rows[0], &plan.bounds, t.max_vertices, chunk_cells(t.chunk), plan.fixed(k))
+            .map_err(terrain_error)?;
     drop(window);
     if let (Some(texel_rows), Some(pitch)) = (plan.normal_rows(), t.chunk) {
         let map = crate::heightfield::MapRows::new(&margin, read[0] as usize, plan.height()).ok_or_else(outside)?;
@@ -474,8 +477,12 @@ fn banded_meshes(
         crate::lod::check_chain(&t.lods, &preset.lod).map_err(|e| input(e.to_string()))?;
     }
     let storage = Storage::f32(hf);
-    let opts =
-        |max_error_m: f64| TinOptions { max_error_m, max_triangles: None, max_vertices: t.max_vertices, band_cells: 0 };
+    let opts = |max_error_m: f64| TinOptions {
+        max_error_m,
+        max_triangles: None,
+        max_vertices: t.max_vertices,
+        chunk_cells: 0,
+    };
     // a level's error as the chain names it, the main mesh's as `verdant terrain` does
     let level_error = |k: usize, error: crate::terrain::TerrainError| -> StageError {
         if k < t.lods.len() {
@@ -674,7 +681,7 @@ pub fn run_terrain_memo(
     };
     let from_memo = remembered.is_some();
 
-    let band_cells = crate::terrain::regions::band_cells_for_chunk(t.chunk);
+    let chunk_cells = chunk_cells(t.chunk);
     // The LoD chain meshes its levels in parallel; when one of them is the main mesh's bound,
     // the main mesh is taken from the chain instead of being computed twice.
     let t1 = Instant::now();
@@ -686,7 +693,7 @@ pub fn run_terrain_memo(
         (Some(m), None) => (m.chain, Some(m.main), None),
         (None, None) if t.lods.is_empty() => (Vec::new(), None, None),
         (None, None) => (
-            terrain_lod_chain_in_bands(&hf, &t.lods, t.max_triangles, t.max_vertices, band_cells, &preset.lod)
+            terrain_lod_chain_in_bands(&hf, &t.lods, t.max_triangles, t.max_vertices, chunk_cells, &preset.lod)
                 .map_err(|e| input(e.to_string()))?,
             None,
             None,
@@ -720,7 +727,7 @@ pub fn run_terrain_memo(
         max_error_m: t.max_error_m,
         max_triangles: t.max_triangles,
         max_vertices: t.max_vertices,
-        band_cells,
+        chunk_cells,
     };
     // the same path as `verdant terrain`: mesh (or the shared level), measure as stored, build
     // what grows on it: the soil layer and every vertex's `_SURFACE`, from the species' rules on

@@ -46,20 +46,22 @@ pub struct BandPiece {
     pub levels: Vec<BandLevel>,
 }
 
-/// Meshes rows `rows` of `hf` (a band; `fixed` as [`mesh_band`] takes it) at every bound of
-/// `bounds` and measures each mesh there. `storage` is `Storage::f32(hf)`.
+/// Meshes rows `rows` of `hf` (a band; `fixed` as [`mesh_band`] takes it, cut along the lines of
+/// chunks of `chunk_cells` cells) at every bound of `bounds` and measures each mesh there.
+/// `storage` is `Storage::f32(hf)`.
 pub fn build_band(
     hf: &Heightfield,
     storage: &Storage,
     bounds: &[f64],
     max_vertices: usize,
+    chunk_cells: u32,
     rows: [u32; 2],
     fixed: [bool; 2],
 ) -> Result<BandPiece, TerrainError> {
     let levels: Vec<Result<BandLevel, TerrainError>> = bounds
         .par_iter()
         .map(|&max_error_m| {
-            let opts = TinOptions { max_error_m, max_triangles: None, max_vertices, band_cells: 0 };
+            let opts = TinOptions { max_error_m, max_triangles: None, max_vertices, chunk_cells };
             let (mesh, mesher_error_m) = mesh_band(hf, &opts, storage, rows, fixed)?;
             let measure = measure_rows(hf, &mesh, rows);
             Ok(BandLevel { mesh, mesher_error_m, measure, normals: None })
@@ -69,18 +71,19 @@ pub fn build_band(
 }
 
 /// [`build_band`] from the band's rows alone: `window` is rows `row0 ..= row0 + window.height − 1`
-/// of the map (the band); the piece is in the map's coordinates, the same as built from the whole
-/// map.
+/// of the map (the band; `row0` a chunk line); the piece is in the map's coordinates, the same as
+/// built from the whole map.
 pub fn build_band_window(
     window: &Heightfield,
     row0: u32,
     bounds: &[f64],
     max_vertices: usize,
+    chunk_cells: u32,
     fixed: [bool; 2],
 ) -> Result<BandPiece, TerrainError> {
     let storage = Storage::f32(window);
     let last = (window.height - 1) as u32;
-    let mut piece = build_band(window, &storage, bounds, max_vertices, [0, last], fixed)?;
+    let mut piece = build_band(window, &storage, bounds, max_vertices, chunk_cells, [0, last], fixed)?;
     let w = window.width;
     piece.rows = [row0, row0 + last];
     for l in &mut piece.levels {
@@ -392,7 +395,8 @@ mod tests {
                 .windows(2)
                 .map(|w| {
                     let piece =
-                        build_band(&hf, &storage, &bounds, usize::MAX, [w[0], w[1]], [w[0] > 0, w[1] < last]).unwrap();
+                        build_band(&hf, &storage, &bounds, usize::MAX, 128, [w[0], w[1]], [w[0] > 0, w[1] < last])
+                            .unwrap();
                     // kept as bytes and read back, as a shard hands it over
                     let back = BandPiece::from_bytes(&piece.to_bytes()).unwrap();
                     assert_eq!(back, piece);
@@ -401,7 +405,7 @@ mod tests {
                 .collect();
             for (k, &bound) in bounds.iter().enumerate() {
                 let opts =
-                    TinOptions { max_error_m: bound, band_cells: 384, max_vertices: usize::MAX, ..Default::default() };
+                    TinOptions { max_error_m: bound, chunk_cells: 128, max_vertices: usize::MAX, ..Default::default() };
                 let (result, stats) = assemble(&hf, &storage, &pieces, k, &opts).unwrap();
                 let whole = tin(&hf, &opts).unwrap();
                 assert_eq!(result, whole, "bound {bound}: the pieces' mesh is not the map's");
@@ -420,9 +424,9 @@ mod tests {
         for hf in [rough.clone(), Heightfield::from_f64(500, 1000, &tenths, 1.0)] {
             let storage = Storage::f32(&hf);
             for (rows, fixed) in [([0, 384], [false, true]), ([384, 768], [true, true]), ([768, 999], [true, false])] {
-                let whole = build_band(&hf, &storage, &[0.5, 3.0], usize::MAX, rows, fixed).unwrap();
+                let whole = build_band(&hf, &storage, &[0.5, 3.0], usize::MAX, 128, rows, fixed).unwrap();
                 let window = hf.rows(rows[0] as usize, rows[1] as usize).unwrap();
-                let alone = build_band_window(&window, rows[0], &[0.5, 3.0], usize::MAX, fixed).unwrap();
+                let alone = build_band_window(&window, rows[0], &[0.5, 3.0], usize::MAX, 128, fixed).unwrap();
                 assert_eq!(alone, whole, "rows {rows:?}");
             }
         }
@@ -449,7 +453,9 @@ mod tests {
                 .windows(2)
                 .map(|w| {
                     let window = hf.rows(w[0] as usize, w[1] as usize).unwrap();
-                    let piece = build_band_window(&window, w[0], &[0.8], usize::MAX, [w[0] > 0, w[1] < last]).unwrap();
+                    let piece =
+                        build_band_window(&window, w[0], &[0.8], usize::MAX, pitch as u32, [w[0] > 0, w[1] < last])
+                            .unwrap();
                     let chunks =
                         band_chunk_surfaces(&window, w[0] as usize, hf.height, &piece.levels[0].mesh, pitch, skirt)
                             .unwrap();
@@ -473,7 +479,8 @@ mod tests {
                     piece
                 })
                 .collect();
-            let opts = TinOptions { max_error_m: 0.8, band_cells, max_vertices: usize::MAX, ..Default::default() };
+            let chunk_cells = pitch as u32;
+            let opts = TinOptions { max_error_m: 0.8, chunk_cells, max_vertices: usize::MAX, ..Default::default() };
             let (joined, _) = assemble(&hf, &storage, &pieces, 0, &opts).unwrap();
             let scene = build_scene(
                 &hf,
@@ -504,7 +511,7 @@ mod tests {
         }
         // a band's mesh handed rows it was not built from
         let window = hf.rows(0, 384).unwrap();
-        let piece = build_band_window(&window, 0, &[0.8], usize::MAX, [false, true]).unwrap();
+        let piece = build_band_window(&window, 0, &[0.8], usize::MAX, 128, [false, true]).unwrap();
         let e = band_chunk_surfaces(&hf.rows(384, 600).unwrap(), 384, hf.height, &piece.levels[0].mesh, 128, None);
         assert!(matches!(e, Err(BuildError::BandMismatch(_))), "{e:?}");
     }
@@ -532,7 +539,8 @@ mod tests {
                     let margin = tall.rows(r0, r1).unwrap();
                     let window = tall.rows(w[0] as usize, w[1] as usize).unwrap();
                     let mut piece =
-                        build_band_window(&window, w[0], &[1.5], usize::MAX, [w[0] > 0, w[1] < last]).unwrap();
+                        build_band_window(&window, w[0], &[1.5], usize::MAX, pitch as u32, [w[0] > 0, w[1] < last])
+                            .unwrap();
                     let rows = MapRows::new(&margin, r0, tall.height).unwrap();
                     let normals =
                         bake_band_normals(&rows, &piece.levels[0].mesh, pitch, skirt, px, texels.clone()).unwrap();
@@ -540,7 +548,12 @@ mod tests {
                     BandPiece::from_bytes(&piece.to_bytes()).unwrap()
                 })
                 .collect();
-            let opts = TinOptions { max_error_m: 1.5, band_cells, max_vertices: usize::MAX, ..Default::default() };
+            let opts = TinOptions {
+                max_error_m: 1.5,
+                chunk_cells: pitch as u32,
+                max_vertices: usize::MAX,
+                ..Default::default()
+            };
             let (joined, _) = assemble(&tall, &storage, &pieces, 0, &opts).unwrap();
             let build = BuildOptions { chunk_samples: Some(pitch), skirt_depth_m: skirt, ..BuildOptions::default() };
             let mut whole = build_scene(&tall, &joined.mesh, &build).unwrap();
@@ -592,7 +605,7 @@ mod tests {
     fn bytes_that_are_not_a_piece_are_refused_not_misread() {
         let hf = crate::synth::fractal(300, 700, 1.0, 100.0, 0.5, 3);
         let storage = Storage::f32(&hf);
-        let piece = build_band(&hf, &storage, &[1.0], usize::MAX, [0, 384], [false, true]).unwrap();
+        let piece = build_band(&hf, &storage, &[1.0], usize::MAX, 128, [0, 384], [false, true]).unwrap();
         let bytes = piece.to_bytes();
         assert!(BandPiece::from_bytes(&bytes[..bytes.len() - 1]).is_none(), "a cut piece");
         let mut longer = bytes.clone();

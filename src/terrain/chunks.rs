@@ -38,10 +38,12 @@ impl Hasher for IdHasher {
 /// Square chunks of `pitch` cells over a `width` × `height` sample map.
 ///
 /// Chunk (ci, cj) spans samples [ci·pitch, min((ci+1)·pitch, width−1)] along i (and likewise along
-/// j): neighbouring chunks *share* their border column/row of samples. The TIN's triangles do not
-/// follow chunk lines, so a chunk is the set of triangles whose centroid lies in its rectangle; its
-/// triangles may reach past the rectangle, and both sides of a shared triangle edge reference the
-/// same samples, so the chunks meet without cracks.
+/// j): neighbouring chunks *share* their border column/row of samples. A chunk is the set of
+/// triangles whose centroid lies in its rectangle. A TIN meshed with the terrain's chunks
+/// ([`crate::terrain::tin::TinOptions::chunk_cells`]) follows every chunk line, so each chunk
+/// fills its rectangle exactly at every level; other meshes (a triangle limit, a mesh made
+/// elsewhere) may reach past it, and both sides of a shared triangle edge reference the same
+/// samples, so the chunks of one mesh meet without cracks either way.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ChunkGrid {
     pub pitch: usize,

@@ -202,7 +202,7 @@ pub fn mesh_samples(
                 max_error_m,
                 max_triangles: settings.max_triangles,
                 max_vertices: settings.max_vertices,
-                band_cells: settings.band_cells,
+                chunk_cells: settings.chunk_cells,
             };
             let r = tin_stored(hf, &opts, storage)?;
             Ok((r.mesh, r.hit_triangle_limit))
@@ -269,8 +269,9 @@ pub struct MeshSettings {
     pub max_error_m: f64,
     pub max_triangles: Option<usize>,
     pub max_vertices: usize,
-    /// Rows of cells in each band the map is meshed in ([`TinOptions::band_cells`]; 0: one band).
-    pub band_cells: u32,
+    /// Cells a side of the terrain's chunks the map is cut along ([`TinOptions::chunk_cells`]; 0:
+    /// not chunked).
+    pub chunk_cells: u32,
 }
 
 /// A terrain meshed, measured as stored and built into its textured scene.
@@ -388,7 +389,7 @@ impl TerrainJob {
             max_error_m: self.max_error_m,
             max_triangles: self.max_triangles,
             max_vertices: self.max_vertices,
-            band_cells: crate::terrain::regions::band_cells_for_chunk(self.build.chunk_samples),
+            chunk_cells: crate::terrain::regions::chunk_cells(self.build.chunk_samples),
         }
     }
 }

@@ -9,7 +9,10 @@
 //! triangle rounds over the bound), the sample joins the seam and both regions are meshed again,
 //! until no region adds one: the result is watertight by construction, not by luck.
 //!
-//! A chunked map is first cut into bands of whole chunks ([`band_cells_for_chunk`]): each band is
+//! A chunked map is cut along every chunk line (and each chunk further, as a map of its size), so
+//! at any bound each chunk's triangles lie in its square: chunks of different levels side by side
+//! meet along one straight line, never leaving a hole ([`cuts_between`]). It is first cut into
+//! bands of whole chunks ([`band_cells_for_chunk`]): each band is
 //! meshed from its own rows alone ([`mesh_band`]), its edges inside the map fixed as seams that
 //! never take a sample, so a band can be built apart (by a shard, from a window of the map) and
 //! the bands joined into the same mesh.
@@ -43,11 +46,33 @@ fn cuts(samples: usize) -> Vec<u32> {
     (0..=n).map(|k| (k * cells / n) as u32).collect()
 }
 
-/// The cut lines of a map along x and along y ([`cuts`]): by its size alone, never by the thread
-/// count. (Moving each cut to the nearby line whose seam keeps the fewest samples was tried: the
-/// triangle count moved by ±0.4 % either way, as it does for any other placement.)
-fn layout(hf: &Heightfield) -> (Vec<u32>, Vec<u32>) {
-    (cuts(hf.width), cuts(hf.height))
+/// The sample lines between `a` and `b` (both included, `a < b`) a map is cut at along one axis
+/// with chunks of `chunk` cells (0: not chunked): every chunk line between them (the multiples of
+/// `chunk`), and each stretch between two of those cut further as [`cuts`] cuts a map of its size.
+/// By the map's size and chunks alone, never by the thread count. (Moving each cut to the nearby
+/// line whose seam keeps the fewest samples was tried: the triangle count moved by ±0.4 % either
+/// way, as it does for any other placement.)
+fn cuts_between(a: u32, b: u32, chunk: u32) -> Vec<u32> {
+    let mut ends = vec![a];
+    if chunk > 0 {
+        let mut line = (a / chunk).saturating_add(1).saturating_mul(chunk);
+        while line < b {
+            ends.push(line);
+            line = line.saturating_add(chunk);
+        }
+    }
+    ends.push(b);
+    let mut out = vec![a];
+    for w in ends.windows(2) {
+        out.extend(cuts((w[1] - w[0]) as usize + 1).into_iter().skip(1).map(|t| t + w[0]));
+    }
+    out
+}
+
+/// The cut lines of a map along x and along y ([`cuts_between`]).
+fn layout(hf: &Heightfield, chunk: u32) -> (Vec<u32>, Vec<u32>) {
+    let last = |n: usize| n.saturating_sub(1) as u32;
+    (cuts_between(0, last(hf.width), chunk), cuts_between(0, last(hf.height), chunk))
 }
 
 /// Where a seam lies: along column `at` (rows `from..=to`) or along row `at` (columns `from..=to`).
@@ -109,13 +134,15 @@ fn simplify_seam(hf: &Heightfield, storage: &Storage, seam: Seam, max_error_m: f
 
 /// Meshes `hf` region by region in parallel (one region when the map is small) and joins the
 /// regions; returns the mesh and its largest error (as [`mesh_region`] measures it). With
-/// `opts.band_cells` the map is meshed band by band ([`band_lines`], [`mesh_band`]).
+/// `opts.chunk_cells` the map is cut along its chunk lines and meshed band by band
+/// ([`band_lines`], [`mesh_band`]).
 pub(crate) fn mesh_by_regions(
     hf: &Heightfield,
     opts: &TinOptions,
     storage: &Storage,
 ) -> Result<(SampleMesh, f64), TerrainError> {
-    let lines = band_lines(hf.height, opts.band_cells, storage.xz_exact());
+    let band_cells = band_cells_for_chunk(Some(opts.chunk_cells as usize).filter(|&c| c > 0));
+    let lines = band_lines(hf.height, band_cells, storage.xz_exact());
     if lines.len() > 2 {
         let bands: Vec<Result<(SampleMesh, f64), TerrainError>> = lines
             .par_windows(2)
@@ -124,7 +151,7 @@ pub(crate) fn mesh_by_regions(
         let bands = bands.into_iter().collect::<Result<Vec<_>, _>>()?;
         return Ok(join_bands(bands, &lines));
     }
-    let (xs, ys) = layout(hf);
+    let (xs, ys) = layout(hf, opts.chunk_cells);
     mesh_rects(hf, opts, storage, &xs, &ys, [false, false], true).map(|(mesh, error, _)| (mesh, error))
 }
 
@@ -137,8 +164,14 @@ fn mesh_by_regions_with(
     storage: &Storage,
     simplify_seams: bool,
 ) -> Result<(SampleMesh, f64, usize), TerrainError> {
-    let (xs, ys) = layout(hf);
+    let (xs, ys) = layout(hf, opts.chunk_cells);
     mesh_rects(hf, opts, storage, &xs, &ys, [false, false], simplify_seams)
+}
+
+/// A terrain's chunk size in cells as [`TinOptions::chunk_cells`] takes it (0: not chunked; a
+/// chunk wider than any map u32 can index cuts nothing).
+pub fn chunk_cells(chunk: Option<usize>) -> u32 {
+    chunk.map_or(0, |c| c.min(u32::MAX as usize) as u32)
 }
 
 /// Rows of cells in a band of a map cut into chunks of `chunk` cells: the fewest whole chunks
@@ -166,11 +199,12 @@ pub fn band_lines(height: usize, band_cells: u32, xz_exact: bool) -> Vec<u32> {
 }
 
 /// The rows `rows[0]..=rows[1]` of `hf` meshed on their own, as a band of the map: cut into
-/// regions like a map of that many rows (the columns as the whole map's), the band's bottom and
+/// regions as the whole map is ([`cuts_between`]: the chunk lines of `opts.chunk_cells` counted
+/// from row 0 of `hf`, so a window's first row must be a chunk line of the map), the band's bottom and
 /// top edges, where `fixed` says a neighbouring band lies beyond them, fixed as seams simplified
 /// in one dimension from their own samples alone, which the neighbouring band computes alike.
-/// `hf` may be the band's rows alone (a window of the map: `rows` is then `[0, hf.height − 1]`). Returns the band's mesh (samples in `hf`'s coordinates) and
-/// its largest error.
+/// `hf` may be the band's rows alone (a window of the map: `rows` is then `[0, hf.height − 1]`).
+/// Returns the band's mesh (samples in `hf`'s coordinates) and its largest error.
 ///
 /// The band depends on its rows alone: no sample is ever inserted on a fixed edge. With x and z
 /// stored exactly ([`band_lines`] asks for it), a sample on a hull edge is measured by the
@@ -185,8 +219,8 @@ pub fn mesh_band(
     rows: [u32; 2],
     fixed: [bool; 2],
 ) -> Result<(SampleMesh, f64), TerrainError> {
-    let (xs, _) = layout(hf);
-    let ys: Vec<u32> = cuts((rows[1] - rows[0]) as usize + 1).into_iter().map(|j| j + rows[0]).collect();
+    let (xs, _) = layout(hf, opts.chunk_cells);
+    let ys = cuts_between(rows[0], rows[1], opts.chunk_cells);
     mesh_rects(hf, opts, storage, &xs, &ys, fixed, true).map(|(mesh, error, _)| (mesh, error))
 }
 
@@ -368,6 +402,59 @@ mod tests {
         assert_eq!(cuts(512), vec![0, 255, 511]);
         assert_eq!(cuts(1025), vec![0, 341, 682, 1024]);
         assert_eq!(cuts(2049), vec![0, 341, 682, 1024, 1365, 1706, 2048]);
+        // a chunked map: every chunk line, each chunk cut as a map of its size
+        assert_eq!(cuts_between(0, 1024, 0), cuts(1025));
+        assert_eq!(cuts_between(0, 1024, 512), vec![0, 256, 512, 768, 1024]);
+        assert_eq!(cuts_between(0, 300, 128), vec![0, 128, 256, 300], "the last chunk is shorter");
+        assert_eq!(cuts_between(0, 1024, 256), vec![0, 256, 512, 768, 1024]);
+        assert_eq!(cuts_between(384, 768, 128), vec![384, 512, 640, 768], "a band's rows");
+        assert_eq!(cuts_between(0, 129, 128), vec![0, 128, 129], "a chunk one cell wide");
+    }
+
+    /// With chunks, every chunk line is a seam at every bound: each chunk's triangles (the
+    /// triangles whose centroid lies in its square) lie in its square and fill it, so neighbours
+    /// shown at different levels meet along one straight line (a crack the skirts hide, never a
+    /// hole seen from above). Chunks of every width, the last ones shorter; a map whose positions
+    /// f32 cannot hold exactly (meshed as one band) as well.
+    #[test]
+    fn a_chunked_maps_chunks_fill_their_squares_exactly_at_every_bound() {
+        use crate::terrain::chunks::ChunkGrid;
+        let rough = crate::synth::fractal(301, 700, 1.0, 200.0, 0.6, 3);
+        let inexact = crate::synth::fractal(260, 230, 0.3, 40.0, 0.6, 5);
+        assert!(!Storage::f32(&inexact).xz_exact());
+        for (hf, pitch) in [(&rough, 128u32), (&rough, 192), (&rough, 64), (&rough, 512), (&inexact, 100)] {
+            for bound in [0.2, 1.5, 12.0] {
+                let opts = TinOptions {
+                    max_error_m: bound,
+                    chunk_cells: pitch,
+                    max_vertices: usize::MAX,
+                    ..Default::default()
+                };
+                let r = tin(hf, &opts).unwrap();
+                check_mesh(hf, &r.mesh);
+                let grid = ChunkGrid::new(hf.width, hf.height, pitch as usize);
+                let parts = grid.partition(&r.mesh.vertices, &r.mesh.triangles);
+                for (k, triangles) in parts.iter().enumerate() {
+                    let (lo, hi) = grid.sample_rect(k % grid.nx, k / grid.nx);
+                    let mut twice_area = 0i64;
+                    for &t in triangles {
+                        let c = r.mesh.triangles[t].map(|v| r.mesh.vertices[v as usize].map(|x| x as i64));
+                        for p in c {
+                            let inside = (0..2).all(|a| lo[a] as i64 <= p[a] && p[a] <= hi[a] as i64);
+                            assert!(
+                                inside,
+                                "pitch {pitch} at {bound}: chunk {k}'s corner {p:?} outside {lo:?}..{hi:?}"
+                            );
+                        }
+                        let cross =
+                            (c[1][0] - c[0][0]) * (c[2][1] - c[0][1]) - (c[1][1] - c[0][1]) * (c[2][0] - c[0][0]);
+                        twice_area += cross.abs();
+                    }
+                    let square = 2 * ((hi[0] - lo[0]) * (hi[1] - lo[1])) as i64;
+                    assert_eq!(twice_area, square, "pitch {pitch} at {bound}: chunk {k} does not fill its square");
+                }
+            }
+        }
     }
 
     #[test]
@@ -405,7 +492,7 @@ mod tests {
             let two =
                 rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap().install(|| tin(&hf, &opts)).unwrap();
             assert_eq!(one, two, "{w}×{h}: the mesh depends on the thread count");
-            assert!(layout(&hf).0.len() > 2, "{w}×{h} is cut into regions");
+            assert!(layout(&hf, 0).0.len() > 2, "{w}×{h} is cut into regions");
             check_mesh(&hf, &one.mesh);
             let stats = measure(&hf, &one.mesh);
             assert_eq!(stats.max_error_m, one.max_error_m, "{w}×{h}: the reported error is the analyzer's");
@@ -454,7 +541,8 @@ mod tests {
 
     /// Every band of `hf` meshed from a window of its rows alone, shifted into the map and joined.
     fn from_windows(hf: &Heightfield, opts: &TinOptions) -> (SampleMesh, f64) {
-        let lines = band_lines(hf.height, opts.band_cells, Storage::f32(hf).xz_exact());
+        let band_cells = band_cells_for_chunk(Some(opts.chunk_cells as usize));
+        let lines = band_lines(hf.height, band_cells, Storage::f32(hf).xz_exact());
         let last = lines[lines.len() - 1];
         let bands = lines
             .windows(2)
@@ -490,16 +578,18 @@ mod tests {
 
     #[test]
     fn a_band_meshed_from_its_own_rows_is_the_maps_band_and_the_bands_join_without_a_crack() {
-        // bands of 384 and 320 rows, rough and smooth maps, f32 heights and decimetre heights
-        // (Terrain-RGB-like, measured against their exact values as stored)
-        for (w, h, band, bound, relief) in
-            [(700, 1300, 384, 0.5f64, 300.0), (900, 1100, 320, 2.0, 600.0), (500, 1025, 512, 0.0, 40.0)]
+        // bands of 384, 320 and 512 rows (chunks of 128, 64 and 512), rough and smooth maps, f32
+        // heights and decimetre heights (Terrain-RGB-like, measured against their exact values as
+        // stored)
+        for (w, h, chunk, bound, relief) in
+            [(700, 1300, 128u32, 0.5f64, 300.0), (900, 1100, 64, 2.0, 600.0), (500, 1025, 512, 0.0, 40.0)]
         {
+            let band = band_cells_for_chunk(Some(chunk as usize));
             let rough = crate::synth::fractal(w, h, 1.0, relief, 0.6, 7 + w as u64);
             let tenths: Vec<f64> = rough.heights.iter().map(|&z| (z as f64 * 10.0).round() / 10.0 + 0.05).collect();
             // (a bound of 0 is finer than f32 holds decimetres: the tenths map is meshed within 0.1 m)
             for (hf, bound) in [(rough.clone(), bound), (Heightfield::from_f64(w, h, &tenths, 1.0), bound.max(0.1))] {
-                let opts = TinOptions { max_error_m: bound, band_cells: band, ..TinOptions::default() };
+                let opts = TinOptions { max_error_m: bound, chunk_cells: chunk, ..TinOptions::default() };
                 let whole = tin(&hf, &opts).unwrap();
                 assert!(band_lines(h, band, Storage::f32(&hf).xz_exact()).len() > 2, "{w}×{h} is cut into bands");
                 check_mesh(&hf, &whole.mesh);

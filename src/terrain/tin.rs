@@ -37,14 +37,18 @@ pub struct TinOptions {
     /// stop with an error when the mesh reaches it with the error still over the bound
     /// ([`crate::terrain::budget`]).
     pub max_vertices: usize,
-    /// Mesh the map in bands of this many rows of cells, each from its own rows alone (0: the map
-    /// as one band); see [`super::regions::mesh_band`]. Ignored with a triangle limit.
-    pub band_cells: u32,
+    /// Cells a side of the terrain's chunks (0: not chunked). The map is then cut along every
+    /// chunk line, so that at any bound each chunk's triangles lie in its square and neighbouring
+    /// chunks meet along straight lines (shown at different levels, they leave cracks the skirts
+    /// hide, never holes), and meshed in bands of whole chunks, each from its own rows alone
+    /// ([`super::regions::band_cells_for_chunk`], [`super::regions::mesh_band`]). Ignored with a
+    /// triangle limit.
+    pub chunk_cells: u32,
 }
 
 impl Default for TinOptions {
     fn default() -> Self {
-        TinOptions { max_error_m: 1.0, max_triangles: None, max_vertices: DEFAULT_MAX_VERTICES, band_cells: 0 }
+        TinOptions { max_error_m: 1.0, max_triangles: None, max_vertices: DEFAULT_MAX_VERTICES, chunk_cells: 0 }
     }
 }
 
