@@ -673,10 +673,17 @@ def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int, str
             extent = (terrain["width"] - 1) * terrain["cell_size_m"]
             if abs((want[1][0] - want[0][0]) - extent) > 1e-4 * max(extent, 1):
                 raise CheckFailed(f"terrain spans {want[1][0] - want[0][0]} m in x, expected {extent} m")
-        skirt = (manifest.get("settings", {}).get("terrain") or {}).get("skirt_m") or 0.0
+        t_settings = manifest.get("settings", {}).get("terrain") or {}
+        skirt_asked = t_settings.get("skirt_m") or 0.0
+        # with a chain and chunks, a level's skirts hang its bound plus the coarsest level's (the
+        # largest step to a neighbour at any level), at least the preset's
+        coarsest = max([t_settings.get("max_error_m") or 0.0] + list(t_settings.get("lods") or []))
         last_distance = -math.inf
         for lod in terrain.get("lods", []):
             n = lod["level"]
+            skirt = skirt_asked
+            if skirt_asked and t_settings.get("chunk"):
+                skirt = max(skirt_asked, lod["max_error_requested_m"] + coarsest)
             if not lod["max_error_m"] <= lod["max_error_requested_m"] + 1e-9:
                 raise CheckFailed(f"LOD{n}: measured max error {lod['max_error_m']} > requested "
                                   f"{lod['max_error_requested_m']}")

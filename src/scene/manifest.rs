@@ -346,8 +346,8 @@ pub fn write_manifest_and_report(
             lod_scene_bytes: v.lod_scene_file.as_ref().map(|_| v.lod_scene_bytes),
             tiles: v.tiles.as_ref().map(|t| TilesManifest {
                 index: t.index_file.to_string_lossy().replace('\\', "/"),
-                tile_m: t.index.tile_m,
-                tiles: t.index.tiles.len(),
+                tile_m: t.tile_m,
+                tiles: t.tile_files.len(),
                 bytes: t.bytes,
             }),
             views: &v.views,
@@ -840,12 +840,12 @@ fn view_section(v: &crate::scene::view_stage::ViewStageReport) -> String {
         v.scene_bytes as f64 / 1e6
     );
     if let Some(t) = &v.tiles {
-        let largest = t.index.tiles.iter().map(|t| t.bytes).max().unwrap_or(0);
+        let largest = t.largest_bytes;
         s += &format!(
             "`{}` indexes the scene in {} tiles of {} m (`{}/`, {:.1} MB, the largest {:.1} MB): each a GLB of its own holding the terrain chunks centred in its square and the instances of the placement tiles in it, chained as in scene_lod.glb{}, with the species' levels it uses and its part of the terrain's textures.\n\n",
             t.index_file.display(),
-            t.index.tiles.len(),
-            t.index.tile_m,
+            t.tile_files.len(),
+            t.tile_m,
             crate::scene::view_tiles::TILES_DIR,
             t.bytes as f64 / 1e6,
             largest as f64 / 1e6,

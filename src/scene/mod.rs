@@ -110,6 +110,24 @@ pub struct TerrainSettings {
     pub lods: Vec<f64>,
 }
 
+impl TerrainSettings {
+    /// How deep the skirts hang on the chunks of a mesh of bound `max_error_m`: the preset's
+    /// `skirt`, or deeper when a neighbouring chunk may be shown at another level of the chain
+    /// and lie further below. Both chunks' edges along their shared line are within their bounds
+    /// of the samples on it (the line is a seam of every level, its vertices samples), and two
+    /// polylines through the same sample positions differ most at a vertex of one of them, so the
+    /// step is at most the sum of the two bounds: each skirt reaches its own bound plus the
+    /// chain's coarsest. Unchanged without a chain or chunks (no neighbour at another level);
+    /// `None` without `skirt`.
+    pub fn skirt_at(&self, max_error_m: f64) -> Option<f64> {
+        if self.lods.is_empty() || self.chunk.is_none() {
+            return self.skirt_m;
+        }
+        let coarsest = self.lods.iter().copied().fold(self.max_error_m, f64::max);
+        self.skirt_m.map(|depth| depth.max(max_error_m + coarsest))
+    }
+}
+
 /// A whole preset, resolved: every path absolute or relative to the working directory, every
 /// default filled in.
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -102,7 +102,7 @@ pub fn rows_plan(
     k.add(crate::scene::scatter_stage::scatter_key(preset, mesh_key)?.as_bytes());
     k.add(&placed.iter().map(|&p| p as u8).collect::<Vec<u8>>());
     k.add(&t.chunk.unwrap_or(0).to_le_bytes());
-    k.add(&t.skirt_m.unwrap_or(-1.0).to_le_bytes());
+    k.add(&t.skirt_at(t.max_error_m).unwrap_or(-1.0).to_le_bytes());
     k.add(&t.max_error_m.to_le_bytes());
     Ok(Some(RowsPlan { groups, placed, extent, key: k.finish() }))
 }
@@ -222,9 +222,15 @@ pub fn band_surfaces(
             piece.levels.swap_remove(0).mesh
         }
     };
-    let chunks =
-        crate::terrain::build::band_chunk_surfaces(window, a as usize, bands.height(), &mesh, pitch, t.skirt_m)
-            .map_err(|e| fail(format!("the terrain's chunks of rows {a}-{b}: {e}")))?;
+    let chunks = crate::terrain::build::band_chunk_surfaces(
+        window,
+        a as usize,
+        bands.height(),
+        &mesh,
+        pitch,
+        t.skirt_at(t.max_error_m),
+    )
+    .map_err(|e| fail(format!("the terrain's chunks of rows {a}-{b}: {e}")))?;
     Ok(chunks.into_iter().map(|(_, p)| p).collect())
 }
 

@@ -116,7 +116,9 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// by bands of texel rows in parallel (the same texels; their mean errors summed band by band).
 /// 12: a banded terrain's bands bake their rows of its normal maps (the same texels); the maps'
 /// figures summed per texel row, rows in order. 13: a chunked map is cut along every chunk line,
-/// so each level's chunks fill their squares exactly (no hole between chunks of different levels).
+/// so each level's chunks fill their squares exactly (no hole between chunks of different levels);
+/// with a LoD chain, each level's skirts hang at least its bound plus the coarsest level's
+/// ([`crate::scene::TerrainSettings::skirt_at`]: deep enough to close the step to any level).
 pub const TERRAIN_ALGORITHM_VERSION: u32 = 13;
 
 /// The stage in a scene build.
@@ -411,9 +413,10 @@ pub fn band_piece(
     drop(window);
     if let (Some(texel_rows), Some(pitch)) = (plan.normal_rows(), t.chunk) {
         let map = crate::heightfield::MapRows::new(&margin, read[0] as usize, plan.height()).ok_or_else(outside)?;
-        for level in &mut piece.levels {
+        for (level, &bound) in piece.levels.iter_mut().zip(&plan.bounds) {
             // (the scene's chunks: options the map cannot take are the input's fault, as there)
-            let normals = bake_band_normals(&map, &level.mesh, pitch, t.skirt_m, plan.map_px(), texel_rows[k].clone())
+            let skirt = t.skirt_at(bound);
+            let normals = bake_band_normals(&map, &level.mesh, pitch, skirt, plan.map_px(), texel_rows[k].clone())
                 .map_err(|e| {
                     let e = crate::terrain::job::JobError::from(e);
                     StageError::of(Stage::Terrain.name(), &e, format!("band {k} (rows {}-{}): {e}", rows[0], rows[1]))
@@ -714,9 +717,9 @@ pub fn run_terrain_memo(
             .map(|l| (l.mesh.clone(), l.hit_triangle_limit, l.stats))
     });
     let snow = snow_rule(preset);
-    let build_opts = |name: String| BuildOptions {
+    let build_opts = |name: String, max_error_m: f64| BuildOptions {
         chunk_samples: t.chunk,
-        skirt_depth_m: t.skirt_m,
+        skirt_depth_m: t.skirt_at(max_error_m),
         base_depth_m: t.base_m,
         name,
         snow: snow.clone(),
@@ -738,7 +741,7 @@ pub fn run_terrain_memo(
         &hf,
         &settings,
         &Storage::f32(&hf),
-        &build_opts("terrain".into()),
+        &build_opts("terrain".into(), t.max_error_m),
         &source_label(t),
         ready,
         Some(&cover),
@@ -805,7 +808,8 @@ pub fn run_terrain_memo(
             (files?, figures.normal_map.clone())
         } else {
             let (lod_scene, normal_map) = textured(
-                build_scene(&hf, &level.mesh, &build_opts(stem.clone())).map_err(|e| input(e.to_string()))?,
+                build_scene(&hf, &level.mesh, &build_opts(stem.clone(), level.max_error_requested_m))
+                    .map_err(|e| input(e.to_string()))?,
                 &stem,
                 normal_rows(level.max_error_requested_m)?,
             )?;

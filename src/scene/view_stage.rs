@@ -46,8 +46,9 @@ fn fail(message: String) -> StageError {
 /// resolves 4 × 4 samples per pixel. 12: the terrain meshed in regions (terrain 9). 13: compact
 /// scene files store the plants' wind as normalized bytes of its ranges (plants 20). 14: the
 /// chunked terrain meshed in bands (terrain 10). 15: scene tiles (`[scene] tile`, alpine writes
-/// them). 16: a tile takes whole placement tiles; its box from each species' reach.
-pub const VIEW_ALGORITHM_VERSION: u32 = 16;
+/// them). 16: a tile takes whole placement tiles; its box from each species' reach. 17: the
+/// report (and the cache entry's) holds the tiles' summary, not their index again (the same files).
+pub const VIEW_ALGORITHM_VERSION: u32 = 17;
 
 /// What one view draws.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

@@ -84,10 +84,17 @@ pub struct SceneTileIndex {
 /// What the view stage reports of the tiles.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct SceneTilesReport {
+    /// `scene_tiles.json`: the index of the tiles (what the report does not repeat: a world of
+    /// 65,536 tiles would carry 40 MB of it twice).
     pub index_file: PathBuf,
-    pub index: SceneTileIndex,
-    /// Bytes of every tile together.
+    /// The tiles' side (m) and grid.
+    pub tile_m: f64,
+    pub grid: [u32; 2],
+    /// Every tile's file (scene-relative), in the index's order.
+    pub tile_files: Vec<PathBuf>,
+    /// Bytes of every tile together, and of the largest.
     pub bytes: u64,
+    pub largest_bytes: u64,
     /// The farthest any vertex of a tile lies from the mesh read (`[scene] compact`; 0 for f32).
     #[serde(default)]
     pub quantization_m: f64,
@@ -96,9 +103,7 @@ pub struct SceneTilesReport {
 
 impl SceneTilesReport {
     pub fn files(&self) -> Vec<PathBuf> {
-        std::iter::once(self.index_file.clone())
-            .chain(self.index.tiles.iter().map(|t| PathBuf::from(&t.file)))
-            .collect()
+        std::iter::once(self.index_file.clone()).chain(self.tile_files.iter().cloned()).collect()
     }
 }
 
@@ -245,7 +250,16 @@ pub(super) fn write_tiles(
     let index_file = PathBuf::from(INDEX_FILE);
     export::write_atomic(&job.dir.join(&index_file), &text)
         .map_err(|e| fail(format!("{}: {e}", job.dir.join(&index_file).display())))?;
-    Ok(SceneTilesReport { index_file, index, bytes: total, quantization_m, seconds: t0.elapsed().as_secs_f64() })
+    Ok(SceneTilesReport {
+        index_file,
+        tile_m: s,
+        grid,
+        tile_files: index.tiles.iter().map(|t| PathBuf::from(&t.file)).collect(),
+        bytes: total,
+        largest_bytes: index.tiles.iter().map(|t| t.bytes).max().unwrap_or(0),
+        quantization_m,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
 }
 
 /// Writes tile `[i, j]` of `chunks` (its chunks) and `species` (each picking its rows); the tile

@@ -25,6 +25,7 @@ mod sharding;
 mod snow;
 mod snow_build;
 mod terrain_cases;
+mod terrain_chunks;
 mod tree_lod;
 mod tree_species;
 mod validator_parity;

@@ -420,14 +420,16 @@ fn species_under_a_snow_cover_are_placed_in_the_merge_and_the_rest_by_rows() {
 
 /// A skirt too shallow for the map's heights in f32 is the preset's fault in a band's unit (which
 /// builds the band's chunks for its normal maps) as in the terrain stage: exit code 2, the skirt
-/// named, in a whole build and in a shard alike.
+/// named, in a whole build and in a shard alike. (Without a chain: a chain's levels hang their
+/// skirts at least their bounds deep.)
 #[test]
 fn a_band_unit_refuses_a_skirt_the_map_cannot_hold_as_one_build_does() {
     let dir = tempfile::tempdir().unwrap();
     let cwd = dir.path();
     write(cwd, "rock.obj", ROCK_OBJ);
     let source = "procedural = { kind = \"ridged\", size = 1025, seed = 4, relief = 600.0 }";
-    write(cwd, "world.toml", &banded_preset(source, 1.0).replace("skirt = 2.0", "skirt = 0.000001"));
+    let preset = banded_preset(source, 1.0).replace("skirt = 2.0", "skirt = 0.000001");
+    write(cwd, "world.toml", &preset.replace("lods = [0.5, 2.0]\n", ""));
     for args in
         [&["build", "world.toml", "--out", "single"][..], &["build", "world.toml", "--shard", "0/2", "--out", "s0"]]
     {
