@@ -37,6 +37,34 @@ pub fn sha256_hex_of_file(path: &Path, limit: u64, what: &'static str) -> Result
     Ok(hash)
 }
 
+/// The sha256 of every file of the cache entry folder `entry`, by its path inside the entry
+/// (`/`-separated): what a shard records of each entry it built and a merge checks the entry it
+/// is given against (a shard folder copied between machines, damaged on the way, is refused
+/// instead of merged into a wrong scene). The files are hashed in parallel, read in pieces.
+pub fn entry_digests(entry: &Path) -> io::Result<BTreeMap<String, String>> {
+    use rayon::prelude::*;
+    let mut files = Vec::new();
+    let mut stack = vec![entry.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for item in fs::read_dir(&dir)? {
+            let item = item?;
+            if item.file_type()?.is_dir() {
+                stack.push(item.path());
+            } else {
+                files.push(item.path());
+            }
+        }
+    }
+    files
+        .par_iter()
+        .map(|path| {
+            let rel = path.strip_prefix(entry).unwrap_or(path).to_string_lossy().replace('\\', "/");
+            let (_, hash) = sha256_hex_of_reader(fs::File::open(path)?)?;
+            Ok((rel, hash))
+        })
+        .collect()
+}
+
 /// `src` hard-linked at `dst`, or copied there where a link is not possible (another file
 /// system); the bytes at `dst`. A file already named `dst` is unlinked first, never written
 /// through (it may be a link to `src` or into another entry: a copy onto it would truncate both).

@@ -17,13 +17,14 @@
 //! Not split yet (issue 18): the terrain's chunks, textures and files by band, the placements of
 //! species under a snow cover, the scene files by tile (docs/sharding.md, "Limits").
 
+use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::scene::cache::{process_alive, temp_owner, Cache};
+use crate::scene::cache::{entry_digests, process_alive, temp_owner, Cache};
 use crate::scene::error::SceneBuildError;
 use crate::scene::pipeline::{CacheUse, StageJob, StageRunner};
 use crate::scene::placement_rows;
@@ -78,6 +79,11 @@ pub struct ShardRecord {
     pub units: Vec<Unit>,
     /// Indices into `units` this shard built.
     pub built: Vec<usize>,
+    /// The sha256 of every file of every cache entry this shard built, by entry name, then path
+    /// inside the entry ([`crate::scene::cache::entry_digests`]): the merge checks each entry it
+    /// is given against them.
+    #[serde(default)]
+    pub digests: BTreeMap<String, BTreeMap<String, String>>,
     /// The shard process's peak resident memory, MiB (timing, not results: it varies run to run;
     /// absent where the platform does not tell).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -302,6 +308,14 @@ pub fn build_shard(
             }
         }
     }
+    let mut digests = BTreeMap::new();
+    for &k in &mine {
+        for entry in &all[k].entries {
+            let dir = cache.root.join(entry);
+            let files = entry_digests(&dir).map_err(|e| SceneBuildError::Io { path: dir, message: e.to_string() })?;
+            digests.insert(entry.clone(), files);
+        }
+    }
     let record = ShardRecord {
         built_by: this_binary(),
         scene: name.clone(),
@@ -309,6 +323,7 @@ pub fn build_shard(
         of: shard.count,
         units: all,
         built: mine,
+        digests,
         peak_memory_mib: crate::memory::peak_rss_bytes().map(crate::memory::mib),
     };
     if let Some(mib) = record.peak_memory_mib {
@@ -416,6 +431,40 @@ pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usi
             return Err(usage(format!(
                 "{}: shard {shard}/{count} did not build {} from these inputs (was it built from another version of the preset or its files, or from the preset given by another path?); build the shard again",
                 path.display(),
+                unit.name
+            )));
+        }
+    }
+    // every entry as its shard wrote it: the same files, the same bytes (a folder copied between
+    // machines may lose or damage one)
+    let given: Vec<(&Unit, usize, &String)> =
+        expected.iter().flat_map(|(unit, shard)| unit.entries.iter().map(move |e| (unit, *shard, e))).collect();
+    for &(unit, shard, entry) in &given {
+        let at = records.iter().position(|(_, r)| r.shard == shard).expect("present");
+        let (path, record) = &records[at];
+        let src = Cache::new(&shard_dirs[at]).root.join(entry);
+        let again = format!(
+            "copy the shard's folder again, or build it again (verdant build … --shard {shard}/{count} --force)"
+        );
+        let Some(want) = record.digests.get(entry) else {
+            return Err(usage(format!(
+                "{}: the record of shard {shard}/{count} has no digest of {entry} ({}): build the shard again with this binary",
+                path.display(),
+                unit.name
+            )));
+        };
+        let got = entry_digests(&src).map_err(|e| {
+            usage(format!("{}: shard {shard}/{count}'s entry of {}: {e}; {again}", src.display(), unit.name))
+        })?;
+        if let Some(file) = want.keys().chain(got.keys()).find(|f| want.get(*f) != got.get(*f)) {
+            let what = match (want.get(file), got.get(file)) {
+                (Some(_), None) => "is missing".to_string(),
+                (None, Some(_)) => "was not written by the shard".to_string(),
+                _ => "differs from what the shard wrote".to_string(),
+            };
+            return Err(usage(format!(
+                "{}: {file} of shard {shard}/{count}'s {} {what}; {again}",
+                src.display(),
                 unit.name
             )));
         }

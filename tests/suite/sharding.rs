@@ -123,7 +123,40 @@ fn a_merge_refuses_missing_duplicate_foreign_and_stale_shards() {
     other["built_by"] = "verdant 0.0.1 riscv64-linux".into();
     fs::write(&record, serde_json::to_string(&other).unwrap()).unwrap();
     refused(&two, &["built by verdant 0.0.1 riscv64-linux", "one binary"]);
+    // a record without the digests of its entries (an older binary's)
+    let mut bare: serde_json::Value = serde_json::from_str(&original).unwrap();
+    bare.as_object_mut().unwrap().remove("digests");
+    fs::write(&record, serde_json::to_string(&bare).unwrap()).unwrap();
+    refused(&two, &["has no digest of", "build the shard again"]);
     fs::write(&record, original).unwrap();
+    // a shard folder damaged on its way to the merge: one byte of an entry's file changed, a file
+    // lost; the merge names the file, the shard and the unit, and how to mend it
+    let digests: serde_json::Value = read_json(&record)["digests"].clone();
+    let (entry, files) = digests.as_object().unwrap().iter().next().unwrap();
+    assert!(!files.as_object().unwrap().is_empty());
+    let (file, want) = files
+        .as_object()
+        .unwrap()
+        .iter()
+        .max_by_key(|(f, _)| fs::metadata(cwd.join("two/1/.cache").join(entry).join(f)).map(|m| m.len()).unwrap_or(0))
+        .unwrap();
+    let path = cwd.join("two/1/.cache").join(entry).join(file);
+    let digest = verdant::scene::cache::sha256_hex(&fs::read(&path).unwrap());
+    assert_eq!(want.as_str().unwrap(), digest, "the recorded digest is the file's");
+    let bytes = fs::read(&path).unwrap();
+    let mut flipped = bytes.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 0x10;
+    fs::remove_file(&path).unwrap(); // (a hard link: never written through)
+    fs::write(&path, &flipped).unwrap();
+    refused(
+        &two,
+        &[file.as_str(), "differs from what the shard wrote", "--shard 1/2", "copy the shard's folder again"],
+    );
+    fs::remove_file(&path).unwrap();
+    refused(&two, &[file.as_str(), "is missing", "--shard 1/2"]);
+    fs::write(&path, &bytes).unwrap();
+    ok(&merge(cwd, &two, "merged_ok"));
     // the preset edited after the shards were built: the grass unit no longer matches, nor the
     // terrain (its soil layer reads the species' densities), which shard 0 is named for first
     write(cwd, "world.toml", &preset(0.3));
