@@ -359,10 +359,14 @@ impl Cache {
         let tmp = self.temp_for(&Self::entry_name(stage, key));
         let mut hashes = FileHashes::new();
         let result = (|| {
+            use rayon::prelude::*;
             fs::create_dir_all(&tmp)?;
+            let mut linked: Vec<(String, PathBuf, PathBuf, u64)> = Vec::with_capacity(files.len());
+            let mut seen = std::collections::HashSet::with_capacity(files.len());
             for rel in files {
                 // a file named twice is stored once (a copy onto its own link would empty it)
-                if hashes.contains_key(&rel_key(rel)) {
+                let key = rel_key(rel);
+                if !seen.insert(key.clone()) {
                     continue;
                 }
                 let (src, dst) = (scene_dir.join(rel), tmp.join(rel));
@@ -374,11 +378,22 @@ impl Cache {
                 // outputs are not read into memory and written again (scene.glb reaches hundreds
                 // of MB); a copy where links are not possible (another file system)
                 let len = link_or_copy(&src, &dst)?;
-                let (hashed, hash) = sha256_hex_of_reader(fs::File::open(&dst)?)?;
-                if hashed != len {
-                    return Err(io::Error::other(format!("{} changed while it was stored", src.display())));
-                }
-                hashes.insert(rel_key(rel), (len, hash));
+                linked.push((key, src, dst, len));
+            }
+            // hashed in parallel (a world's view stage stores about 1 GB of scene files)
+            let hashed: Vec<io::Result<(String, (u64, String))>> = linked
+                .par_iter()
+                .map(|(key, src, dst, len)| {
+                    let (read, hash) = sha256_hex_of_reader(fs::File::open(dst)?)?;
+                    if read != *len {
+                        return Err(io::Error::other(format!("{} changed while it was stored", src.display())));
+                    }
+                    Ok((key.clone(), (*len, hash)))
+                })
+                .collect();
+            for h in hashed {
+                let (key, value) = h?;
+                hashes.insert(key, value);
             }
             let table = serde_json::to_string(&hashes).map_err(io::Error::other)?;
             fs::write(tmp.join("files.json"), table)?;
