@@ -684,6 +684,9 @@ def check_scene(scene_dir: Path, thumb: Path | None) -> tuple[str, int, int, str
             skirt = skirt_asked
             if skirt_asked and t_settings.get("chunk"):
                 skirt = max(skirt_asked, lod["max_error_requested_m"] + coarsest)
+            if abs((lod.get("skirt_m") or 0.0) - skirt) > 1e-9:
+                raise CheckFailed(f"LOD{n}: the manifest's skirt_m {lod.get('skirt_m')} is not {skirt} "
+                                  f"(the preset's skirt {skirt_asked}, or the level's bound plus the coarsest)")
             if not lod["max_error_m"] <= lod["max_error_requested_m"] + 1e-9:
                 raise CheckFailed(f"LOD{n}: measured max error {lod['max_error_m']} > requested "
                                   f"{lod['max_error_requested_m']}")

@@ -493,30 +493,35 @@ fn report_md(preset: &Preset, runs: &[StageRun], bytes: &Sizes, warnings: &[Stri
                 }
                 s += "\n\nShading error: the angle between the map's normal and the one an engine lights with, \
                       mean / largest over the normal map's texels, with the level's own normal map and with its \
-                      vertex normals only.\n\n| level | max error requested (m) | measured max (m) | RMS (m) | triangles | switch distance (m) | shading error with normal map (°) | without (°) |\n|---|---|---|---|---|---|---|---|\n";
+                      vertex normals only. Skirts: how deep each level's chunk skirts hang (at least the preset's \
+                      `skirt`; with a chain, the level's error plus the coarsest level's, the largest step to \
+                      a neighbouring chunk at any level).\n\n| level | max error requested (m) | measured max (m) | RMS (m) | triangles | switch distance (m) | skirts (m) | shading error with normal map (°) | without (°) |\n|---|---|---|---|---|---|---|---|---|\n";
                 let shading = |n: &crate::terrain::normal_map::NormalMapReport| {
                     format!(
                         "{:.2} / {:.2} | {:.1} / {:.1}",
                         n.mean_error_deg, n.max_error_deg, n.mean_error_without_deg, n.max_error_without_deg
                     )
                 };
+                let skirt = |d: Option<f64>| d.map_or("—".into(), |d| format!("{d:.2}"));
                 s += &format!(
-                    "| main | {} | {:.4} | {:.4} | {} | — | {} |\n",
+                    "| main | {} | {:.4} | {:.4} | {} | — | {} | {} |\n",
                     t.figures.max_error_requested.map_or("grid".into(), |e| e.to_string()),
                     t.figures.max_error,
                     t.figures.rms_error,
                     t.figures.triangles,
+                    skirt(t.skirt_m),
                     shading(&t.figures.normal_map)
                 );
                 for l in &t.lods {
                     s += &format!(
-                        "| LOD{} | {} | {:.4} | {:.4} | {} | {:.1} | {} |\n",
+                        "| LOD{} | {} | {:.4} | {:.4} | {} | {:.1} | {} | {} |\n",
                         l.level,
                         l.max_error_requested_m,
                         l.max_error_m,
                         l.rms_error_m,
                         l.triangles,
                         l.switch_distance_m,
+                        skirt(l.skirt_m),
                         shading(&l.normal_map)
                     );
                 }

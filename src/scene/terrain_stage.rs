@@ -41,6 +41,10 @@ pub struct LodInfo {
     pub switch_distance_m: f64,
     /// The level's own normal map (baked against its mesh) and the shading error it removes.
     pub normal_map: crate::terrain::normal_map::NormalMapReport,
+    /// How deep its chunks' skirts hang ([`crate::scene::TerrainSettings::skirt_at`]); none
+    /// without skirts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skirt_m: Option<f64>,
 }
 
 /// What the terrain stage measured. Deterministic fields only; timings live in `seconds`.
@@ -56,6 +60,9 @@ pub struct TerrainStageReport {
     pub bounds: Option<Bounds>,
     pub files: Vec<PathBuf>,
     pub chunks: Vec<ChunkInfo>,
+    /// How deep the main mesh's skirts hang; none without skirts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skirt_m: Option<f64>,
     pub lods: Vec<LodInfo>,
     /// Seconds of the run that computed these results (a cached build reports the original run).
     pub seconds: StageSeconds,
@@ -824,6 +831,7 @@ pub fn run_terrain_memo(
             triangles: level.mesh.triangles.len(),
             switch_distance_m: level.switch_distance_m,
             normal_map,
+            skirt_m: t.skirt_at(level.max_error_requested_m),
         });
     }
     let lods_s = chain_s + t1.elapsed().as_secs_f64();
@@ -848,6 +856,7 @@ pub fn run_terrain_memo(
         bounds: summary.bounds,
         files,
         chunks,
+        skirt_m: t.skirt_at(t.max_error_m),
         lods,
         seconds: StageSeconds {
             decode: decode_s,
