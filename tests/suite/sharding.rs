@@ -357,23 +357,34 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
             assert_same_tree(&cwd.join("single/world"), &cwd.join(&out).join("world"));
             if n == 2 && source == procedural {
                 // the merge takes the placements from the units: one unit's first rock turned
-                // (in copies of the shards) turns it in the merged table
-                let mut tampered = 0;
+                // (in copies of the shards) turns it in the merged table, once its shard's record
+                // says it wrote those bytes (until then the merge refuses the entry)
+                let mut tampered = Vec::new();
                 for (k, s) in shards.iter().enumerate() {
                     let copy = cwd.join(format!("tampered/{k}"));
                     copy_dir(&cwd.join(s), &copy);
                     for e in fs::read_dir(copy.join(".cache")).unwrap() {
                         let e = e.unwrap().path();
-                        if e.file_name().unwrap().to_string_lossy().starts_with("placements-rows-") && tampered == 0 {
+                        let name = e.file_name().unwrap().to_string_lossy().to_string();
+                        if name.starts_with("placements-rows-") && tampered.is_empty() {
                             let mut blob = fs::read(e.join("blob.bin")).unwrap();
                             blob[52..56].copy_from_slice(&123.0f32.to_le_bytes());
-                            fs::write(e.join("blob.bin"), blob).unwrap();
-                            tampered += 1;
+                            fs::remove_file(e.join("blob.bin")).unwrap(); // (a hard link)
+                            fs::write(e.join("blob.bin"), &blob).unwrap();
+                            tampered.push((copy.join("world.shard.json"), name, blob));
                         }
                     }
                 }
-                assert_eq!(tampered, 1);
+                assert_eq!(tampered.len(), 1);
                 let copies: Vec<PathBuf> = (0..n).map(|k| PathBuf::from(format!("tampered/{k}"))).collect();
+                let refused = merge(cwd, &copies, "tampered_merge");
+                assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+                assert!(text(&refused).contains("blob.bin"), "{}", text(&refused));
+                assert!(text(&refused).contains("differs from what the shard wrote"), "{}", text(&refused));
+                let (record, entry, blob) = &tampered[0];
+                let mut r: serde_json::Value = serde_json::from_str(&fs::read_to_string(record).unwrap()).unwrap();
+                r["digests"][entry]["blob.bin"] = verdant::scene::cache::sha256_hex(blob).into();
+                fs::write(record, serde_json::to_string(&r).unwrap()).unwrap();
                 ok(&merge(cwd, &copies, "tampered_merge"));
                 let table = |out: &str| fs::read_to_string(cwd.join(out).join("world/placements/rock.csv")).unwrap();
                 assert_ne!(table("tampered_merge"), table("single"), "the merge placed the rows itself");
