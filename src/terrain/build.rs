@@ -140,17 +140,27 @@ pub fn build_scene(hf: &Heightfield, mesh: &SampleMesh, opts: &BuildOptions) -> 
                 let node = scene.nodes.len() - 1;
                 scene.nodes[parent].children.push(node);
             };
-            for cj in 0..grid.ny {
-                for ci in 0..grid.nx {
-                    let part = &parts[cj * grid.nx + ci];
-                    if part.is_empty() {
-                        continue;
-                    }
-                    let prim = surface(hf, mesh, &triangles, part, opts.skirt_depth_m, &mut slots)?;
-                    let (lo, hi) = grid.sample_rect(ci, cj);
-                    let extras = json!({ "chunk": [ci, cj], "sample_min": lo, "sample_max": hi });
-                    child(&mut scene, finish(format!("{}_chunk_{ci}_{cj}", opts.name), vec![prim])?, Some(extras));
-                }
+            // the chunks' surfaces in parallel (each task its own vertex slots), then put in
+            // chunk order; the first failing chunk in that order is the error, as one by one
+            use rayon::prelude::*;
+            let order: Vec<(usize, usize)> = (0..grid.ny)
+                .flat_map(|cj| (0..grid.nx).map(move |ci| (ci, cj)))
+                .filter(|&(ci, cj)| !parts[cj * grid.nx + ci].is_empty())
+                .collect();
+            let n = mesh.vertices.len();
+            let prims: Vec<Result<Primitive, BuildError>> = order
+                .par_iter()
+                .map_init(
+                    || vec![u32::MAX; n],
+                    |slots, &(ci, cj)| {
+                        surface(hf, mesh, &triangles, &parts[cj * grid.nx + ci], opts.skirt_depth_m, slots)
+                    },
+                )
+                .collect();
+            for (&(ci, cj), prim) in order.iter().zip(prims) {
+                let (lo, hi) = grid.sample_rect(ci, cj);
+                let extras = json!({ "chunk": [ci, cj], "sample_min": lo, "sample_max": hi });
+                child(&mut scene, finish(format!("{}_chunk_{ci}_{cj}", opts.name), vec![prim?])?, Some(extras));
             }
             if let Some(base) = base {
                 child(&mut scene, finish(format!("{}_base", opts.name), vec![base])?, None);
