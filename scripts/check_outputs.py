@@ -572,7 +572,8 @@ def self_test() -> int:
             right = ok == expect_ok
             wrong += not right
             print(f"{'ok  ' if right else 'BAD '} self-test {name}: {detail}")
-        for name, right, detail in snow_self_test() + placement_self_test(d / "placements"):
+        for name, right, detail in (snow_self_test() + placement_self_test(d / "placements")
+                                    + chunk_self_test(d / "chunks")):
             cases.append((name,))
             wrong += not right
             print(f"{'ok  ' if right else 'BAD '} self-test {name}: {detail}")
@@ -1137,6 +1138,46 @@ def snow_self_test() -> list[tuple[str, bool, str]]:
     for name, xyz, expect_ok in cases:
         problems = particles_outside_volume(emitter, far, xyz)
         out.append((name, (not problems) == expect_ok, "; ".join(problems) or "passed"))
+    return out
+
+
+def chunk_self_test(d: Path) -> list[tuple[str, bool, str]]:
+    """The chunk-square check on a made-up chunk of 2 × 2 cells: two top faces filling its square
+    pass; a vertex past the square and a missing face (a hole) fail."""
+    import struct
+
+    def write(path: Path, positions: list, triangles: list) -> Path:
+        pos = np.asarray(positions, dtype="<f4").tobytes()
+        idx = np.asarray(triangles, dtype="<u4").ravel().tobytes()
+        doc = {"asset": {"version": "2.0"}, "buffers": [{"byteLength": len(pos) + len(idx)}],
+               "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": len(pos)},
+                               {"buffer": 0, "byteOffset": len(pos), "byteLength": len(idx)}],
+               "accessors": [{"bufferView": 0, "componentType": 5126, "count": len(positions), "type": "VEC3"},
+                             {"bufferView": 1, "componentType": 5125, "count": 3 * len(triangles), "type": "SCALAR"}],
+               "meshes": [{"name": "t_chunk_0_0", "primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+               "nodes": [{"name": "t_chunk_0_0", "mesh": 0, "extras": {"sample_min": [0, 0], "sample_max": [2, 2]}}]}
+        text = json.dumps(doc).encode()
+        text += b" " * (-len(text) % 4)
+        binary = pos + idx
+        path.write_bytes(struct.pack("<III", 0x46546C67, 2, 28 + len(text) + len(binary))
+                         + struct.pack("<II", len(text), 0x4E4F534A) + text
+                         + struct.pack("<II", len(binary), 0x004E4942) + binary)
+        return path
+
+    d.mkdir(parents=True, exist_ok=True)
+    corners = [[0, 1, 0], [0, 1, 2], [2, 1, 0], [2, 1, 2]]  # (x, y, z); cell 1 m
+    faces = [[0, 1, 2], [2, 1, 3]]  # counter-clockwise seen from +Y
+    cases = [("chunk fills its square", write(d / "good.glb", corners, faces), True),
+             ("chunk vertex past its square", write(d / "past.glb", corners[:3] + [[2.5, 1, 2]], faces), False),
+             ("chunk with a hole", write(d / "hole.glb", corners, faces[:1]), False)]
+    out = []
+    for name, path, expect_ok in cases:
+        try:
+            detail = f"passed ({check_chunk_squares(path, 1.0)} chunk)"
+            ok = True
+        except CheckFailed as e:
+            ok, detail = False, f"failed: {e}"
+        out.append((name, ok == expect_ok, detail))
     return out
 
 
