@@ -673,6 +673,9 @@ if [ -f "$OUT/world_tile_1_2.glb" ]; then lod_files+=("$OUT/world_tile_1_2.glb")
     node scripts/engines/check_babylon.mjs --engine three --lit-against "$dir/terrain/terrain_LOD0.glb" "${levels[@]}" \
       > "$OUT/check_three_terrain_lit_$(basename "$dir").log" 2>&1 || true
   done
+  if ((${#lit_dirs[@]})); then
+    node scripts/engines/terrain_seams.mjs "${lit_dirs[@]}" > "$OUT/check_three_terrain_seams.log" 2>&1 || true
+  fi
 ) &
 scene_engines_pid=$!
 
@@ -867,6 +870,11 @@ for dir in "${lit_dirs[@]}"; do
   engine_log "$OUT/check_three_terrain_lit_$(basename "$dir").log" "${#levels[@]}" "$(basename "$dir"): terrain levels not lit like LoD0"
 done
 if ((${#lit_dirs[@]} == 0)); then fail "no scene with terrain levels to light"; fi
+
+section "5f4. three.js shows every scene's terrain chunks at mixed levels without holes (chunk (i, j) at level (i + j + s) mod the levels, every s: no sky through the ground from above, at most 4 px at 35° where each level alone draws ground)"
+if ((${#lit_dirs[@]})); then
+  engine_log "$OUT/check_three_terrain_seams.log" "${#lit_dirs[@]}" "terrain chunks at mixed levels"
+fi
 
 section "5g. the Godot 4 import script (scripts/engines/godot/verdant_scene.gd) parses and passes gdtoolkit's lint and format check"
 # no Godot on the registries these machines reach: the script is checked statically only
