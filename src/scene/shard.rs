@@ -437,23 +437,30 @@ pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usi
     }
     // every entry as its shard wrote it: the same files, the same bytes (a folder copied between
     // machines may lose or damage one)
-    let given: Vec<(&Unit, usize, &String)> =
-        expected.iter().flat_map(|(unit, shard)| unit.entries.iter().map(move |e| (unit, *shard, e))).collect();
-    for &(unit, shard, entry) in &given {
-        let at = records.iter().position(|(_, r)| r.shard == shard).expect("present");
-        let (path, record) = &records[at];
-        let src = Cache::new(&shard_dirs[at]).root.join(entry);
+    // (each entry of each unit: the unit, its shard's place among the folders given, the entry's
+    // name and folder there) checked first, all of them, then brought in
+    let given: Vec<(&Unit, usize, &String, PathBuf)> = expected
+        .iter()
+        .flat_map(|(unit, shard)| {
+            let at = records.iter().position(|(_, r)| r.shard == *shard).expect("every shard is present");
+            let root = Cache::new(&shard_dirs[at]).root;
+            unit.entries.iter().map(move |e| (unit, at, e, root.join(e)))
+        })
+        .collect();
+    for (unit, at, entry, src) in &given {
+        let (path, record) = &records[*at];
+        let shard = record.shard;
         let again = format!(
             "copy the shard's folder again, or build it again (verdant build … --shard {shard}/{count} --force)"
         );
-        let Some(want) = record.digests.get(entry) else {
+        let Some(want) = record.digests.get(*entry) else {
             return Err(usage(format!(
                 "{}: the record of shard {shard}/{count} has no digest of {entry} ({}): build the shard again with this binary",
                 path.display(),
                 unit.name
             )));
         };
-        let got = entry_digests(&src).map_err(|e| {
+        let got = entry_digests(src).map_err(|e| {
             usage(format!("{}: shard {shard}/{count}'s entry of {}: {e}; {again}", src.display(), unit.name))
         })?;
         if let Some(file) = want.keys().chain(got.keys()).find(|f| want.get(*f) != got.get(*f)) {
@@ -471,14 +478,9 @@ pub fn gather(preset: &Preset, shard_dirs: &[PathBuf], out: &Path) -> Result<usi
     }
     let cache = Cache::new(out);
     let mut brought = 0;
-    for (unit, shard) in &expected {
-        let dir = &shard_dirs[records.iter().position(|(_, r)| r.shard == *shard).expect("present")];
-        for entry in &unit.entries {
-            let src = Cache::new(dir).root.join(entry);
-            let fresh =
-                cache.import(&src).map_err(|e| SceneBuildError::Io { path: src.clone(), message: e.to_string() })?;
-            brought += usize::from(fresh);
-        }
+    for (_, _, _, src) in &given {
+        let fresh = cache.import(src).map_err(|e| SceneBuildError::Io { path: src.clone(), message: e.to_string() })?;
+        brought += usize::from(fresh);
     }
     Ok(brought)
 }
