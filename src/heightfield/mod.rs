@@ -196,19 +196,10 @@ impl Heightfield {
         MapRows::whole(self).normal_at(i, j)
     }
 
-    /// The four samples around continuous sample coordinates (s, t) (clamped to the map) and the
-    /// fractions between them: ((i0, j0), (i1, j1), (fs, ft)).
-    fn bilinear_cell(&self, s: f64, t: f64) -> ((usize, usize), (usize, usize), (f64, f64)) {
-        MapRows::whole(self).bilinear_cell(s, t)
-    }
-
     /// The height bilinearly interpolated at continuous sample coordinates (s, t) (x = s·cell,
     /// z = t·cell), clamped to the map.
     pub fn height_bilinear(&self, s: f64, t: f64) -> f64 {
-        let ((i0, j0), (i1, j1), (fs, ft)) = self.bilinear_cell(s, t);
-        let h = |i, j| self.at(i, j) as f64;
-        let lerp = |a: f64, b: f64, f: f64| a + (b - a) * f;
-        lerp(lerp(h(i0, j0), h(i1, j0), fs), lerp(h(i0, j1), h(i1, j1), fs), ft)
+        MapRows::whole(self).height_bilinear(s, t)
     }
 
     /// The unit normal at continuous sample coordinates (s, t): the four surrounding samples'

@@ -84,6 +84,14 @@ impl<'a> MapRows<'a> {
         ((i0, j0), (i1, j1), ((s - i0 as f64).clamp(0.0, 1.0), (t - j0 as f64).clamp(0.0, 1.0)))
     }
 
+    /// [`Heightfield::height_bilinear`] of the map: reads the sample rows around t.
+    pub fn height_bilinear(&self, s: f64, t: f64) -> f64 {
+        let ((i0, j0), (i1, j1), (fs, ft)) = self.bilinear_cell(s, t);
+        let h = |i, j| self.at(i, j) as f64;
+        let lerp = |a: f64, b: f64, f: f64| a + (b - a) * f;
+        lerp(lerp(h(i0, j0), h(i1, j0), fs), lerp(h(i0, j1), h(i1, j1), fs), ft)
+    }
+
     /// [`Heightfield::normal_bilinear`] of the map: reads the normals of the sample rows around t
     /// (and their neighbours).
     pub fn normal_bilinear(&self, s: f64, t: f64) -> [f64; 3] {

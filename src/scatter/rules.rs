@@ -391,21 +391,25 @@ pub fn weight_map(rules: &Rules, w: u32, h: u32) -> Vec<f32> {
 }
 
 /// [`weight_map`] at the texels `texels` located on the rules' surface (one location for every
-/// species of a terrain, [`SurfaceIndex::locate_texels`]); located again if they were located over
-/// another extent.
+/// species of a terrain, [`SurfaceIndex::locate_texels`]; of its texel rows `texels.first ..` when
+/// located by rows); located again if they were located over another extent.
 pub fn weight_map_located(rules: &Rules, texels: &TexelTriangles) -> Vec<f32> {
     use rayon::prelude::*;
     let [x0, z0, x1, z1] = rules.tiling.extent;
     let [w, h] = texels.size;
-    if texels.extent != rules.tiling.extent || texels.tri.len() != w as usize * h as usize {
-        return weight_map(rules, w, h);
+    let rows = texels.tri.len() / (w.max(1) as usize);
+    if texels.extent != rules.tiling.extent || texels.tri.len() != w as usize * rows || texels.first + rows > h as usize
+    {
+        let again = rules.surface.locate_texel_rows(rules.tiling.extent, w, h, texels.first..texels.first + rows);
+        return weight_map_located(rules, &again);
     }
+    let first = texels.first;
     texels
         .tri
         .par_chunks(w.max(1) as usize)
         .enumerate()
         .flat_map_iter(|(j, row)| {
-            let z = texel_centre(z0, z1, j as u32, h);
+            let z = texel_centre(z0, z1, (first + j) as u32, h);
             row.iter().enumerate().map(move |(i, &t)| {
                 let x = texel_centre(x0, x1, i as u32, w);
                 rules.weight_on(x, z, || rules.surface.height_on(t, x, z)).clamp(0.0, 1.0) as f32

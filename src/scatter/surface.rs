@@ -262,13 +262,22 @@ impl SurfaceIndex {
     /// and they are tried in order), and a texel no triangle contains exactly is located as one
     /// query (a point on an edge within rounding, or off the mesh). The same answers, bit for bit.
     pub fn locate_texels(&self, extent: [f64; 4], w: u32, h: u32) -> TexelTriangles {
+        self.locate_texel_rows(extent, w, h, 0..h as usize)
+    }
+
+    /// [`Self::locate_texels`] of texel rows `rows` of the grid alone (`first` their first row):
+    /// the same answers in those rows. An index of some of a terrain's triangles (a band's chunks)
+    /// answers the rows only its own triangles cover as the whole terrain's index does.
+    pub fn locate_texel_rows(&self, extent: [f64; 4], w: u32, h: u32, rows: std::ops::Range<usize>) -> TexelTriangles {
         use rayon::prelude::*;
         const ROWS: usize = 64;
         let (wu, hu) = (w as usize, h as usize);
-        let mut tri = vec![u32::MAX; wu * hu];
+        let rows = rows.start.min(hu)..rows.end.min(hu);
+        let (first, count) = (rows.start, rows.len());
+        let mut tri = vec![u32::MAX; wu * count];
         let [x0, z0, x1, z1] = extent;
         let spans = [x1 - x0, z1 - z0];
-        if wu > 0 && hu > 0 && spans.iter().all(|s| s.is_finite() && *s > 0.0) {
+        if wu > 0 && count > 0 && spans.iter().all(|s| s.is_finite() && *s > 0.0) {
             // texel index range whose centres may lie in [lo, hi]: widened by 10⁻⁶ of a texel,
             // far beyond the rounding of a centre or of this formula (10⁻¹⁵ of the extent)
             let range = |lo: f64, hi: f64, o: f64, span: f64, n: usize| -> Option<(usize, usize)> {
@@ -279,8 +288,9 @@ impl SurfaceIndex {
                 }
                 Some((a.max(0.0) as usize, b.min((n - 1) as f64) as usize))
             };
-            // each block of ROWS texel rows gets the triangles that may reach it, in order
-            let blocks = hu.div_ceil(ROWS);
+            // each block of ROWS texel rows (of those located) gets the triangles that may reach
+            // it, in order
+            let blocks = count.div_ceil(ROWS);
             let mut lists: Vec<Vec<u32>> = vec![Vec::new(); blocks];
             // (u32: texel indices of a grid of u32 sides; 20 bytes a triangle)
             let spans_of: Vec<Option<[u32; 4]>> = self
@@ -295,13 +305,17 @@ impl SurfaceIndex {
                 .collect();
             for (k, s) in spans_of.iter().enumerate() {
                 if let Some([_, _, j0, j1]) = s.map(|s| s.map(|v| v as usize)) {
+                    if j1 < first || j0 >= first + count {
+                        continue;
+                    }
+                    let (j0, j1) = (j0.max(first) - first, j1.min(first + count - 1) - first);
                     for list in &mut lists[j0 / ROWS..=j1 / ROWS] {
                         list.push(k as u32);
                     }
                 }
             }
-            tri.par_chunks_mut(ROWS * wu).zip(lists.par_iter()).enumerate().for_each(|(b, (rows, list))| {
-                let first = b * ROWS;
+            tri.par_chunks_mut((ROWS * wu).max(1)).zip(lists.par_iter()).enumerate().for_each(|(b, (rows, list))| {
+                let first = first + b * ROWS;
                 let count = rows.len() / wu;
                 for &k in list {
                     let Some([i0, i1, j0, j1]) = spans_of[k as usize].map(|s| s.map(|v| v as usize)) else { continue };
@@ -324,14 +338,14 @@ impl SurfaceIndex {
         }
         // what no triangle holds exactly: one query each (few: centres on edges, off the mesh)
         tri.par_chunks_mut(wu.max(1)).enumerate().for_each(|(j, row)| {
-            let z = texel_centre(z0, z1, j as u32, h);
+            let z = texel_centre(z0, z1, (first + j) as u32, h);
             for (i, slot) in row.iter_mut().enumerate() {
                 if *slot == u32::MAX {
                     *slot = self.locate(texel_centre(x0, x1, i as u32, w), z).map_or(u32::MAX, |t| t as u32);
                 }
             }
         });
-        TexelTriangles { extent, size: [w, h], tri }
+        TexelTriangles { extent, size: [w, h], first, tri }
     }
 
     /// Height and unit normal at (x, z) on the triangle `texels` gave its texel, as
@@ -399,6 +413,8 @@ pub fn texel_centre(lo: f64, hi: f64, i: u32, n: u32) -> f64 {
 pub struct TexelTriangles {
     pub extent: [f64; 4],
     pub size: [u32; 2],
+    /// The first texel row located (0 for the whole grid); `tri` holds rows `first ..`.
+    pub first: usize,
     pub tri: Vec<u32>,
 }
 
@@ -676,6 +692,15 @@ mod tests {
                     );
                     prop_assert_eq!(Some(t).filter(|&t| t != u32::MAX).map(|t| t as usize), s.locate(x, z));
                 }
+            }
+            // any run of rows located alone: those rows of the whole grid (runs across the
+            // blocks of 64 rows the rasterizer works in, and past the grid's end: clamped)
+            for (a, b) in [(0, h), (1, 2), (h / 3, h - h / 4), (h - 1, h + 5), (h, h)] {
+                let (a, b) = (a.min(h) as usize, b as usize);
+                let rows = s.locate_texel_rows(extent, w, h, a..b);
+                let end = b.min(h as usize);
+                prop_assert_eq!(rows.first, a);
+                prop_assert_eq!(&rows.tri[..], &texels.tri[a * w as usize..end * w as usize]);
             }
         }
     }

@@ -94,20 +94,34 @@ pub fn plant_height_m(species: &SpeciesSettings) -> f64 {
 /// terrain's layer map); `None` without species, or when a species' maps or rules are at fault
 /// (the scatter stage, which reads the same, names the error).
 pub fn cover(preset: &Preset, terrain: &Scene, size: [u32; 2]) -> Option<VegetationCover> {
+    let surface = surface_of(terrain);
+    let extent = surface.bounds();
+    cover_rows(preset, &surface, extent, size, 0..size[1] as usize)
+}
+
+/// [`cover`]'s texel rows `rows` alone (`first_row` their first), from `surface`: the terrain's
+/// surface, or the part of it that alone covers those texel centres (a band's chunks, whose faces
+/// end on its lines), over the terrain's `extent` (its surface's bounds, [`terrain_extent`]). The
+/// same weights as those rows of the whole cover, bit for bit.
+pub fn cover_rows(
+    preset: &Preset,
+    surface: &SurfaceIndex,
+    extent: [f64; 4],
+    size: [u32; 2],
+    rows: std::ops::Range<usize>,
+) -> Option<VegetationCover> {
     if preset.species.is_empty() {
         return None;
     }
-    let surface = surface_of(terrain);
-    let extent = surface.bounds();
     let tiling = crate::scatter::Tiling::new(extent, preset.scatter.tile_m).ok()?;
     // which triangle holds each texel centre: one location for every species
-    let texels = surface.locate_texels(extent, size[0], size[1]);
+    let texels = surface.locate_texel_rows(extent, size[0], size[1], rows.clone());
     let vegetation = vegetation_map(preset, "terrain").ok()?;
     let mut species = Vec::with_capacity(preset.species.len());
     for s in &preset.species {
         let (density, mask) = rule_maps(s, vegetation.as_ref(), "terrain").ok()?;
         let rules = crate::scatter::rules::Rules::without_exclusions(
-            &surface,
+            surface,
             tiling,
             &s.rules,
             density.as_ref(),
@@ -127,5 +141,13 @@ pub fn cover(preset: &Preset, terrain: &Scene, size: [u32; 2]) -> Option<Vegetat
             weights: crate::scatter::rules::weight_map_located(&rules, &texels),
         });
     }
-    Some(VegetationCover { extent, size, species })
+    Some(VegetationCover { extent, size, species, first_row: texels.first })
+}
+
+/// The extent a terrain's surface index has ([`crate::scatter::SurfaceIndex::bounds`]) for a map
+/// of `width` × `height` samples `cell_m` apart: x from 0 to (width − 1)·cell, z likewise, as the
+/// vertices store them (f32).
+pub fn terrain_extent(width: usize, height: usize, cell_m: f64) -> [f64; 4] {
+    let at = |i: usize| (i.saturating_sub(1) as f64 * cell_m) as f32 as f64;
+    [0.0, 0.0, at(width), at(height)]
 }

@@ -30,7 +30,7 @@ use crate::scene::pipeline::{CacheUse, StageJob, StageRunner};
 use crate::scene::placement_rows;
 use crate::scene::plants_stage::{self, SpeciesMemo, SPECIES_MEMO_STAGE};
 use crate::scene::terrain_stage::{
-    band_key, band_piece, mesh_key, planned_bands, BandPlan, BandRows, MeshMemo, TerrainJob, BAND_STAGE,
+    band_layers, band_piece, mesh_key, planned_bands, BandPlan, BandRows, MeshMemo, TerrainJob,
 };
 use crate::scene::Preset;
 
@@ -142,7 +142,7 @@ fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>, Sl
                 let key = std::rc::Rc::new(mesh_key(preset, t)?);
                 for k in 0..plan.band_count() {
                     let rows = plan.rows(k);
-                    let entries = vec![Cache::entry_name(BAND_STAGE, &band_key(&key, rows))];
+                    let entries = crate::scene::terrain_stage::band_entries(preset, t, &key, &plan, k);
                     let name = format!("terrain band {k} (rows {}-{})", rows[0], rows[1]);
                     let slot = Slot::Band { k, of: plan.band_count() };
                     units.push((Unit { name, entries }, Work::Band(t, k, plan.clone(), key.clone()), slot));
@@ -256,7 +256,7 @@ pub fn build_shard(
                         // the band's rows read once for its meshes and its chunks' surfaces
                         let read = plan.read_rows(*b);
                         let margin = source.rows(read)?;
-                        band_piece(key, t, &mut |_| Ok(margin.clone()), plan, *b, Some((&cache, force)))?;
+                        let piece = band_piece(key, t, &mut |_| Ok(margin.clone()), plan, *b, Some((&cache, force)))?;
                         let [a, z] = plan.rows(*b);
                         let window = margin.rows((a - read[0]) as usize, (z - read[0]) as usize).ok_or_else(|| {
                             crate::scene::error::StageError::Failed {
@@ -265,9 +265,15 @@ pub fn build_shard(
                             }
                         })?;
                         let made = placement_rows::band_surfaces(t, key, plan, *b, &window, Some(&cache))?;
+                        // its rows of the layers, from the same surfaces
+                        let mut rows_of = |_| Ok(margin.clone());
+                        let c = Some((&cache, force));
+                        band_layers(preset, t, key, plan, *b, &piece, &mut rows_of, Some(&made), c)?;
                         surfaces.insert(*b, std::rc::Rc::new(made));
                     } else {
-                        band_piece(key, t, &mut |rows| source.rows(rows), plan, *b, Some((&cache, force)))?;
+                        let mut rows_of = |rows| source.rows(rows);
+                        let piece = band_piece(key, t, &mut rows_of, plan, *b, Some((&cache, force)))?;
+                        band_layers(preset, t, key, plan, *b, &piece, &mut rows_of, None, Some((&cache, force)))?;
                     }
                 }
                 Work::Placements(t, g, bands, rows, key) => {

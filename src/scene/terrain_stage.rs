@@ -126,7 +126,11 @@ pub fn terrain_heights(t: &TerrainSettings) -> Result<(Heightfield, usize, Optio
 /// so each level's chunks fill their squares exactly (no hole between chunks of different levels);
 /// with a LoD chain, each level's skirts hang at least its bound plus the coarsest level's
 /// ([`crate::scene::TerrainSettings::skirt_at`]: deep enough to close the step to any level).
-pub const TERRAIN_ALGORITHM_VERSION: u32 = 13;
+/// 14: a banded terrain's bands bake their rows of its layers (cover, weight maps, base colour:
+/// scene/band_layers.rs); a layer texel reads its own texel of the cover (was: the cover
+/// interpolated at its centre, which rounding could pull 10⁻¹⁶ towards a neighbour); the coverage
+/// summed per texel row, rows in order (the same maps, the coverage's last digits).
+pub const TERRAIN_ALGORITHM_VERSION: u32 = 14;
 
 /// The stage in a scene build.
 pub struct TerrainJob<'a> {
@@ -462,6 +466,87 @@ pub fn kept_band(
     (piece.rows == rows && piece.levels.len() == plan.bounds.len() && normals_fit).then_some(piece)
 }
 
+/// Whether a terrain planned in bands bakes its layers by band (as its normal maps: a chunked map
+/// whose texel centres all lie off the band lines, [`BandPlan::normal_rows`]).
+pub fn layers_by_band(t: &TerrainSettings, plan: &BandPlan) -> bool {
+    t.chunk.is_some() && plan.normal_rows().is_some()
+}
+
+/// Cache key of band `k`'s layer rows ([`crate::scene::band_layers::layers_key`]).
+pub fn band_layers_key(preset: &Preset, mesh_key: &str, plan: &BandPlan, k: usize) -> String {
+    crate::scene::band_layers::layers_key(preset, &band_key(mesh_key, plan.rows(k)))
+}
+
+/// The cache entries band `k`'s unit makes: its meshes', and its layer rows' when the plan bakes
+/// them by band.
+pub fn band_entries(preset: &Preset, t: &TerrainSettings, mesh_key: &str, plan: &BandPlan, k: usize) -> Vec<String> {
+    use crate::scene::cache::Cache;
+    let mut entries = vec![Cache::entry_name(BAND_STAGE, &band_key(mesh_key, plan.rows(k)))];
+    if layers_by_band(t, plan) {
+        let key = band_layers_key(preset, mesh_key, plan, k);
+        entries.push(Cache::entry_name(crate::scene::band_layers::BAND_LAYERS_STAGE, &key));
+    }
+    entries
+}
+
+/// Band `k`'s rows of the terrain's layers (`None` when the plan does not bake them by band):
+/// from `cache` when it holds them (unless `force`), else baked from `piece` (the band's meshes)
+/// and the map's rows (`rows_of`, asked for [`BandPlan::read_rows`]) and stored there. `surface`
+/// is the band's chunk surfaces at the main level when the caller has them.
+#[allow(clippy::too_many_arguments)]
+pub fn band_layers(
+    preset: &Preset,
+    t: &TerrainSettings,
+    mesh_key: &str,
+    plan: &BandPlan,
+    k: usize,
+    piece: &crate::terrain::bands::BandPiece,
+    rows_of: &mut dyn FnMut([u32; 2]) -> Result<Heightfield, StageError>,
+    surface: Option<&[crate::mesh::Primitive]>,
+    cache: Option<(&crate::scene::cache::Cache, bool)>,
+) -> Result<Option<crate::scene::band_layers::BandLayers>, StageError> {
+    use crate::scene::band_layers;
+    let (Some(texel_rows), Some(pitch), true) = (plan.normal_rows(), t.chunk, layers_by_band(t, plan)) else {
+        return Ok(None);
+    };
+    let f = fail(Stage::Terrain);
+    let texel_rows = texel_rows[k].clone();
+    let key = band_layers_key(preset, mesh_key, plan, k);
+    if let Some((c, false)) = cache {
+        if let Some(kept) = band_layers::kept(c, &key, plan.map_px(), &texel_rows) {
+            return Ok(Some(kept));
+        }
+    }
+    let read = plan.read_rows(k);
+    let margin = rows_of(read)?;
+    let rows = plan.rows(k);
+    let field = crate::heightfield::MapRows::new(&margin, read[0] as usize, plan.height())
+        .ok_or_else(|| f(format!("rows {}-{} are not within the map", read[0], read[1])))?;
+    let built;
+    let surface = match surface {
+        Some(s) => s,
+        None => {
+            let main = plan.bounds.iter().position(|&b| b == t.max_error_m).unwrap_or(0);
+            let chunks = crate::terrain::build::band_chunk_surfaces(
+                &margin,
+                read[0] as usize,
+                plan.height(),
+                &piece.levels[main].mesh,
+                pitch,
+                t.skirt_at(t.max_error_m),
+            )
+            .map_err(|e| f(format!("the terrain's chunks of rows {}-{}: {e}", rows[0], rows[1])))?;
+            built = chunks.into_iter().map(|(_, p)| p).collect::<Vec<_>>();
+            &built[..]
+        }
+    };
+    let baked = band_layers::bake(preset, &field, plan.cell_m, surface, plan.map_px(), texel_rows);
+    if let Some((c, _)) = cache {
+        band_layers::store(c, &key, &baked)?;
+    }
+    Ok(Some(baked))
+}
+
 /// Each bound's normal map rows, every band's in order (when the bands baked them).
 type BandedNormals = Option<Vec<Vec<crate::terrain::bands::BandNormals>>>;
 
@@ -478,6 +563,7 @@ fn banded_meshes(
         Vec<crate::lod::LodLevel>,
         (crate::terrain::sample_mesh::SampleMesh, bool, crate::terrain::error::ErrorStats),
         BandedNormals,
+        Option<crate::terrain::layers::TerrainLayers>,
     ),
     StageError,
 > {
@@ -515,6 +601,18 @@ fn banded_meshes(
     let mut pieces = (0..plan.band_count())
         .map(|k| band_piece(&key, t, &mut rows_of, plan, k, cache))
         .collect::<Result<Vec<_>, _>>()?;
+    // each band's rows of the layers, joined (when the plan bakes them by band)
+    let layers = if layers_by_band(t, plan) {
+        let mut parts = Vec::with_capacity(pieces.len());
+        for (k, piece) in pieces.iter().enumerate() {
+            parts.extend(band_layers(preset, t, &key, plan, k, piece, &mut rows_of, None, cache)?);
+        }
+        let joined = crate::scene::band_layers::join(preset, parts, plan.map_px())
+            .map_err(|e| fail(Stage::Terrain)(format!("the bands' layer rows do not join: {e}")))?;
+        Some(joined)
+    } else {
+        None
+    };
     // each bound's normal map rows, taken from the pieces (every band's, or none)
     let normals: BandedNormals = plan.normal_rows().map(|_| {
         (0..plan.bounds.len()).map(|k| pieces.iter_mut().filter_map(|p| p.levels[k].normals.take()).collect()).collect()
@@ -539,7 +637,7 @@ fn banded_meshes(
     let main = (levels[main_level].mesh.clone(), false, levels[main_level].stats);
     levels.truncate(t.lods.len());
     crate::lod::assign_switch_distances(&mut levels, &preset.lod);
-    Ok((levels, main, normals))
+    Ok((levels, main, normals, layers))
 }
 
 /// Key of the terrain's meshes: what meshing reads (not the formats, snow or species).
@@ -568,9 +666,7 @@ impl TerrainJob<'_> {
         let (t, preset) = (self.terrain, self.preset);
         match planned_bands(t) {
             Ok(Some(plan)) => match mesh_key(preset, t) {
-                Ok(key) => (0..plan.band_count())
-                    .map(|k| Cache::entry_name(BAND_STAGE, &band_key(&key, plan.rows(k))))
-                    .collect(),
+                Ok(key) => (0..plan.band_count()).flat_map(|k| band_entries(preset, t, &key, &plan, k)).collect(),
                 Err(_) => Vec::new(),
             },
             Ok(None) => {
@@ -695,16 +791,17 @@ pub fn run_terrain_memo(
     // The LoD chain meshes its levels in parallel; when one of them is the main mesh's bound,
     // the main mesh is taken from the chain instead of being computed twice.
     let t1 = Instant::now();
-    let (mut chain, remembered_main, band_normals) = match (remembered, &plan) {
+    let (mut chain, remembered_main, band_normals, band_layers) = match (remembered, &plan) {
         (_, Some(plan)) => {
-            let (chain, main, normals) = banded_meshes(preset, t, &hf, plan, band_memo)?;
-            (chain, Some(main), normals)
+            let (chain, main, normals, layers) = banded_meshes(preset, t, &hf, plan, band_memo)?;
+            (chain, Some(main), normals, layers)
         }
-        (Some(m), None) => (m.chain, Some(m.main), None),
-        (None, None) if t.lods.is_empty() => (Vec::new(), None, None),
+        (Some(m), None) => (m.chain, Some(m.main), None, None),
+        (None, None) if t.lods.is_empty() => (Vec::new(), None, None, None),
         (None, None) => (
             terrain_lod_chain_in_bands(&hf, &t.lods, t.max_triangles, t.max_vertices, chunk_cells, &preset.lod)
                 .map_err(|e| input(e.to_string()))?,
+            None,
             None,
             None,
         ),
@@ -752,6 +849,7 @@ pub fn run_terrain_memo(
         &source_label(t),
         ready,
         Some(&cover),
+        band_layers,
         normal_rows(t.max_error_m)?,
     )
     .map_err(|e| StageError::of(Stage::Terrain.name(), &e, e.to_string()))?;

@@ -296,7 +296,8 @@ pub struct Meshed {
 /// as `storage` stores it, refuses a TIN over its bound as written (the analyzer has the last
 /// word), builds the scene (`build`: chunks, skirts, base, name), textures it with the layers and bakes
 /// its normal map against it. `cover` gives what grows on the built scene, when anything does
-/// (the soil layer and `_SURFACE`: [`bake_layers_with`]).
+/// (the soil layer and `_SURFACE`: [`bake_layers_with`]), unless the layers come `baked` (a
+/// terrain meshed in bands: each band baked its rows).
 pub fn mesh_and_build(
     hf: &Heightfield,
     settings: &MeshSettings,
@@ -305,6 +306,7 @@ pub fn mesh_and_build(
     label: &str,
     ready: Option<(SampleMesh, bool, ErrorStats)>,
     cover: Option<&dyn Fn(&Scene) -> Option<VegetationCover>>,
+    baked: Option<TerrainLayers>,
     normal_rows: Option<crate::terrain::normal_map::TexelRows>,
 ) -> Result<Meshed, JobError> {
     let (mut t_mesh, mut t_analyze) = (0.0, 0.0);
@@ -333,8 +335,11 @@ pub fn mesh_and_build(
     }
     let t = Instant::now();
     let mut scene = build_scene(hf, &mesh, build)?;
-    let cover = cover.and_then(|f| f(&scene)).map(std::sync::Arc::new);
-    let layers = bake_layers_with(hf, &build.snow, cover);
+    // (layers baked already when the terrain's bands baked their rows)
+    let layers = match baked {
+        Some(layers) => layers,
+        None => bake_layers_with(hf, &build.snow, cover.and_then(|f| f(&scene)).map(std::sync::Arc::new)),
+    };
     layers.texture(&mut scene, hf, &build.name).map_err(JobError::Texture)?;
     // (the normal map's rows baked already when the terrain's bands baked them)
     let normal_map = match normal_rows {
@@ -415,7 +420,7 @@ pub fn run_reporting(
 
     let (grid, storage) = storage_for(job, hf)?;
     let settings = job.mesh_settings();
-    let meshed = mesh_and_build(hf, &settings, &storage, &job.build, &job.source.label(), None, None, None)?;
+    let meshed = mesh_and_build(hf, &settings, &storage, &job.build, &job.source.label(), None, None, None, None)?;
     let figures = meshed.figures(hf, &settings, decoded.voids_filled);
     let ([t_mesh, t_analyze, t_build], scene) = (meshed.seconds, meshed.scene);
 

@@ -17,7 +17,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::bake::raster::png::{encode_rgba8_png, rgba8};
-use crate::heightfield::Heightfield;
+use crate::heightfield::{Heightfield, MapRows};
 use crate::mesh::{Scene, Texture};
 use crate::snow::CoverSettings;
 use crate::terrain::vegetation::VegetationCover;
@@ -180,16 +180,17 @@ pub struct TerrainLayers {
     albedo_png: std::sync::OnceLock<Result<Vec<u8>, String>>,
 }
 
-/// The layer weights of the surface at continuous sample coordinates (s, t): bilinear height and
-/// normal (see [`Heightfield::normal_bilinear`]), the slope from that normal, the snow from `snow`,
-/// the soil share of the gentle ground from `cover` (none without one).
-fn weights_at(hf: &Heightfield, snow: &SnowRule, cover: Option<&VegetationCover>, s: f64, t: f64) -> [f64; 5] {
-    let height = hf.height_bilinear(s, t);
-    let normal = hf.normal_bilinear(s, t);
+/// The layer weights of the surface at continuous sample coordinates (s, t) of the map `field`:
+/// bilinear height and normal (see [`Heightfield::normal_bilinear`]), the slope from that normal,
+/// the snow from `snow`, the soil share of the gentle ground from `soil` (given the position).
+fn weights_at(field: &MapRows, snow: &SnowRule, s: f64, t: f64, soil: impl Fn([f64; 3]) -> f64) -> [f64; 5] {
+    let height = field.height_bilinear(s, t);
+    let normal = field.normal_bilinear(s, t);
     let slope_deg = normal[1].clamp(-1.0, 1.0).acos().to_degrees();
-    let position = [s * hf.cell_size_m, height, t * hf.cell_size_m];
+    let cell = field.hf.cell_size_m;
+    let position = [s * cell, height, t * cell];
     let [grass, scree, rock, snow] = weights_with_snow(slope_deg, snow.weight(position, normal));
-    let soil = cover.map_or(0.0, |c| grass * c.soil_share(position[0], position[2]).clamp(0.0, 1.0));
+    let soil = grass * soil(position).clamp(0.0, 1.0);
     [grass - soil, scree, rock, snow, soil]
 }
 
@@ -199,12 +200,14 @@ fn vertex_weights(scene: &mut Scene, hf: &Heightfield, snow: &SnowRule, cover: O
     use crate::mesh::CustomAttribute;
     use rayon::prelude::*;
     let cell = hf.cell_size_m;
+    let field = MapRows::whole(hf);
     for p in scene.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()) {
         let per_vertex: Vec<([f32; 4], [f32; 4], [f32; 4])> = p
             .positions
             .par_iter()
             .map(|q| {
-                let w = weights_at(hf, snow, cover, q[0] as f64 / cell, q[2] as f64 / cell);
+                let soil = |p: [f64; 3]| cover.map_or(0.0, |c| c.soil_share(p[0], p[2]));
+                let w = weights_at(&field, snow, q[0] as f64 / cell, q[2] as f64 / cell, soil);
                 let bytes = unit_byte_weights(w).map(|k| k as f32 / 255.0);
                 let texture = (0..w.len()).fold(0, |best, k| if w[k] > w[best] { k } else { best });
                 let surface = cover.map_or([0.0; 4], |c| {
@@ -255,68 +258,160 @@ pub fn bake_layers(hf: &Heightfield, snow: &SnowRule) -> TerrainLayers {
 
 /// [`bake_layers`] with what grows on the terrain: the soil layer (a second weight map) and
 /// `_SURFACE` on every vertex the layers texture. The cover's texels should be the map's (same
-/// size over the terrain's extent) so the soil follows the density maps texel for texel.
+/// size over the terrain's extent) so the soil follows the density maps texel for texel: a texel
+/// then reads the cover's texel alone ([`VegetationCover::soil_share_texel`]).
 pub fn bake_layers_with(
     hf: &Heightfield,
     snow: &SnowRule,
     cover: Option<std::sync::Arc<VegetationCover>>,
 ) -> TerrainLayers {
+    let map = [map_px(hf.width), map_px(hf.height)];
+    let rows = bake_layer_rows(&MapRows::whole(hf), map, snow, cover.as_deref(), 0..map[1] as usize);
+    TerrainLayers::from_rows(vec![rows], map, snow, cover).expect("the whole map's rows join")
+}
+
+/// Texel rows `first .. first + sums.len()` of the layer maps, `width` texels wide, as
+/// [`bake_layer_rows`] bakes them: what a band of a terrain meshed in bands bakes of them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LayerRows {
+    pub first: usize,
+    pub width: usize,
+    /// RGBA8 weights per texel of each weight map (one, or two with a vegetation cover).
+    pub weights: Vec<Vec<[u8; 4]>>,
+    /// The base colour as sRGB-encoded 8-bit RGBA.
+    pub albedo_rgba8: Vec<u8>,
+    /// Each texel row's sum of every layer's weights (texels in order): the coverage's terms.
+    pub sums: Vec<[f64; 5]>,
+}
+
+/// Texel rows `rows` of the layer maps (`map_px` over the whole map) of the map `field` (which
+/// must hold every sample row those texels read: the rows around each texel centre and their
+/// neighbours). With a `cover` of the map's texel grid each texel reads the cover's texel, which
+/// must then be among its rows. The same bytes and row sums as those rows of a whole bake, bit for
+/// bit, whatever rows `field` holds.
+pub fn bake_layer_rows(
+    field: &MapRows,
+    map_px: [u32; 2],
+    snow: &SnowRule,
+    cover: Option<&VegetationCover>,
+    rows: std::ops::Range<usize>,
+) -> LayerRows {
     use rayon::prelude::*;
-    let (w, h) = (map_px(hf.width), map_px(hf.height));
+    let [w, h] = map_px;
     let layers = if cover.is_some() { LAYER_NAMES.len() } else { LAYERS_PER_MAP };
-    let texels = w as usize * h as usize;
-    let mut sums = [0.0f64; 5];
+    let texels = w as usize * rows.len();
     let mut weights = vec![Vec::with_capacity(texels); layers.div_ceil(LAYERS_PER_MAP)];
     let mut albedo = Vec::with_capacity(4 * texels);
-    // A band of rows at a time (weighed in parallel, then folded in texel order, as one pass over
-    // the whole map would): the f64 weights of every texel are never all held (40 bytes a texel,
-    // 168 MB at 2048², and as much again while collected).
-    let rows = (BAKE_BAND_TEXELS / w).max(1);
+    let mut sums = Vec::with_capacity(rows.len());
+    // (texel grids alike: a texel reads its own texel of the cover)
+    let same_grid = cover.is_some_and(|c| c.size == map_px);
+    let (width, height) = (field.hf.width, field.map_height);
+    // A band of rows at a time (weighed in parallel, then folded in texel order): the f64 weights
+    // of every texel are never all held (40 bytes a texel, 168 MB at 2048², and as much again
+    // while collected).
+    let step = (BAKE_BAND_TEXELS / w.max(1)).max(1) as usize;
     let mut band: Vec<[f64; 5]> = Vec::new();
     let mut pixels: Vec<[f32; 4]> = Vec::new();
-    for y0 in (0..h).step_by(rows as usize) {
+    for y0 in rows.clone().step_by(step) {
         band.clear();
-        band.par_extend((y0..(y0 + rows).min(h)).into_par_iter().flat_map_iter(|y| {
-            let t = (y as f64 + 0.5) / h as f64 * (hf.height - 1) as f64;
-            let cover = cover.as_deref();
-            (0..w).map(move |x| weights_at(hf, snow, cover, (x as f64 + 0.5) / w as f64 * (hf.width - 1) as f64, t))
+        band.par_extend((y0..(y0 + step).min(rows.end)).into_par_iter().flat_map_iter(|y| {
+            let t = (y as f64 + 0.5) / h as f64 * (height - 1) as f64;
+            (0..w).map(move |x| {
+                let s = (x as f64 + 0.5) / w as f64 * (width - 1) as f64;
+                let soil = |p: [f64; 3]| match cover {
+                    Some(c) if same_grid => c.soil_share_texel(x as usize, y),
+                    Some(c) => c.soil_share(p[0], p[2]),
+                    None => 0.0,
+                };
+                weights_at(field, snow, s, t, soil)
+            })
         }));
         pixels.clear();
-        for wts in &band {
-            let mut colour = [0.0f32, 0.0, 0.0, 1.0];
-            for (k, &wk) in wts.iter().enumerate() {
-                sums[k] += wk;
-                for c in 0..3 {
-                    colour[c] += wk as f32 * LAYER_ALBEDO[k][c];
+        for row in band.chunks(w as usize) {
+            let mut sum = [0.0f64; 5];
+            for wts in row {
+                let mut colour = [0.0f32, 0.0, 0.0, 1.0];
+                for (k, &wk) in wts.iter().enumerate() {
+                    sum[k] += wk;
+                    for c in 0..3 {
+                        colour[c] += wk as f32 * LAYER_ALBEDO[k][c];
+                    }
                 }
+                let bytes = wts.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8);
+                for (m, map) in weights.iter_mut().enumerate() {
+                    map.push(std::array::from_fn(|c| bytes.get(LAYERS_PER_MAP * m + c).copied().unwrap_or(0)));
+                }
+                pixels.push(colour);
             }
-            let bytes = wts.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8);
-            for (m, map) in weights.iter_mut().enumerate() {
-                map.push(std::array::from_fn(|c| bytes.get(LAYERS_PER_MAP * m + c).copied().unwrap_or(0)));
-            }
-            pixels.push(colour);
+            sums.push(sum);
         }
         // the base colour as the PNG holds it (sRGB 8-bit), not as linear f32 (4 times the bytes)
         albedo.extend(rgba8(&pixels));
     }
-    let n = texels.max(1) as f64;
-    TerrainLayers {
-        weights,
-        albedo_rgba8: albedo,
-        report: LayerReport {
-            map_px: [w, h],
-            layers: LAYER_NAMES[..layers].iter().map(|s| s.to_string()).collect(),
-            coverage: sums[..layers].iter().map(|s| s / n).collect(),
-            snowline_m: SNOWLINE_M,
-            snow: snow.label().into(),
-        },
-        snow: snow.clone(),
-        cover,
-        albedo_png: std::sync::OnceLock::new(),
-    }
+    LayerRows { first: rows.start, width: w as usize, weights, albedo_rgba8: albedo, sums }
 }
 
 impl TerrainLayers {
+    /// The layers of a map from its texel rows (every row of `map_px`, in order: a whole bake's,
+    /// or each band's). The coverage is each row's sums added in row order, over the texel count:
+    /// the same figures whichever pieces the rows came in.
+    pub fn from_rows(
+        parts: Vec<LayerRows>,
+        map_px: [u32; 2],
+        snow: &SnowRule,
+        cover: Option<std::sync::Arc<VegetationCover>>,
+    ) -> Result<TerrainLayers, String> {
+        let [w, h] = map_px.map(|v| v as usize);
+        let layers = if cover.is_some() { LAYER_NAMES.len() } else { LAYERS_PER_MAP };
+        let maps = layers.div_ceil(LAYERS_PER_MAP);
+        let mut weights: Vec<Vec<[u8; 4]>> = vec![Vec::with_capacity(w * h); maps];
+        let mut albedo = Vec::with_capacity(4 * w * h);
+        let mut sums = [0.0f64; 5];
+        let mut next = 0;
+        for part in parts {
+            let n = part.sums.len();
+            if part.first != next || part.width != w || part.weights.len() != maps {
+                return Err(format!(
+                    "layer rows from {} ({} wide, {} maps) where row {next} ({w} wide, {maps} maps) was due",
+                    part.first,
+                    part.width,
+                    part.weights.len()
+                ));
+            }
+            if part.albedo_rgba8.len() != 4 * w * n || part.weights.iter().any(|m| m.len() != w * n) {
+                return Err(format!("layer rows from {} do not hold {n} rows of {w} texels", part.first));
+            }
+            for (map, rows) in weights.iter_mut().zip(part.weights) {
+                map.extend(rows);
+            }
+            albedo.extend(part.albedo_rgba8);
+            for row in &part.sums {
+                for k in 0..5 {
+                    sums[k] += row[k];
+                }
+            }
+            next += n;
+        }
+        if next != h {
+            return Err(format!("layer rows end at row {next} of {h}"));
+        }
+        let n = (w * h).max(1) as f64;
+        Ok(TerrainLayers {
+            weights,
+            albedo_rgba8: albedo,
+            report: LayerReport {
+                map_px,
+                layers: LAYER_NAMES[..layers].iter().map(|s| s.to_string()).collect(),
+                coverage: sums[..layers].iter().map(|s| s / n).collect(),
+                snowline_m: SNOWLINE_M,
+                snow: snow.label().into(),
+            },
+            snow: snow.clone(),
+            cover,
+            albedo_png: std::sync::OnceLock::new(),
+        })
+    }
+
     /// The first weight map as PNG bytes (RGBA8, stored as is: weights, not colours).
     pub fn weights_png(&self) -> Result<Vec<u8>, String> {
         self.weight_pngs().map(|mut v| v.swap_remove(0))
@@ -430,7 +525,12 @@ mod tests {
         let weights = (0..size[0] * size[1]).map(|k| if k % size[0] >= size[0] / 2 { 1.0 } else { 0.0 }).collect();
         let grass =
             SpeciesCover { ground: Ground::Grass, max_density: 4.0, height_m: 0.3, footprint_m2: 0.05, weights };
-        let cover = VegetationCover { extent: [0.0, 0.0, (w - 1) as f64, (h - 1) as f64], size, species: vec![grass] };
+        let cover = VegetationCover {
+            extent: [0.0, 0.0, (w - 1) as f64, (h - 1) as f64],
+            size,
+            species: vec![grass],
+            first_row: 0,
+        };
         let layers = bake_layers_with(&hf, &SnowRule::Snowline, Some(std::sync::Arc::new(cover)));
         assert_eq!(layers.report.layers, LAYER_NAMES);
         assert_eq!(layers.weights.len(), 2, "two weight maps");

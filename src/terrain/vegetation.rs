@@ -25,7 +25,8 @@ pub struct SpeciesCover {
     pub height_m: f64,
     /// Ground one plant covers seen from above, m².
     pub footprint_m2: f64,
-    /// Density over `max_density` at each texel centre, row-major, `size[0]` × `size[1]`; texel
+    /// Density over `max_density` at each texel centre, row-major, `size[0]` wide, of the
+    /// cover's texel rows ([`VegetationCover::first_row`] on; every row of a whole cover); texel
     /// (x, y) at ((x + ½)/w, (y + ½)/h) of the extent, row 0 at its minimum z.
     pub weights: Vec<f32>,
 }
@@ -39,6 +40,11 @@ pub struct VegetationCover {
     pub size: [u32; 2],
     /// In preset order (`_SURFACE`'s TYPE is the 1-based index in this list).
     pub species: Vec<SpeciesCover>,
+    /// The first texel row the species' weights hold: 0 for a whole cover; a band of a terrain
+    /// meshed in bands holds its own rows ([`crate::scene::ground_cover::cover_rows`]), which
+    /// answer [`VegetationCover::soil_share_texel`] alone. Only a whole cover answers points
+    /// ([`VegetationCover::at`]: a point reads the texels around it).
+    pub first_row: usize,
 }
 
 /// The vegetation at one point.
@@ -63,10 +69,11 @@ impl VegetationCover {
         self.species.iter().any(|s| s.ground == Ground::Grass)
     }
 
-    /// A species' weight at world (x, z): bilinear between texel centres, clamped at the borders.
+    /// A species' weight at world (x, z): bilinear between texel centres, clamped at the borders
+    /// (0 from a cover of some rows).
     fn weight(&self, s: &SpeciesCover, x: f64, z: f64) -> f64 {
         let [w, h] = self.size.map(|v| v as usize);
-        if w == 0 || h == 0 || s.weights.len() != w * h {
+        if w == 0 || h == 0 || s.weights.len() != w * h || self.first_row != 0 {
             return 0.0;
         }
         let [x0, z0, x1, z1] = self.extent;
@@ -84,10 +91,22 @@ impl VegetationCover {
 
     /// The vegetation at world (x, z).
     pub fn at(&self, x: f64, z: f64) -> CoverAt {
+        self.at_with(|s| self.weight(s, x, z))
+    }
+
+    /// The vegetation at texel (i, j)'s centre: its own weights (0 outside the rows held).
+    pub fn at_texel(&self, i: usize, j: usize) -> CoverAt {
+        let w = self.size[0] as usize;
+        let at = j.checked_sub(self.first_row).filter(|_| i < w).map(|r| r * w + i);
+        self.at_with(|s| at.and_then(|k| s.weights.get(k)).map_or(0.0, |&v| (v as f64).clamp(0.0, 1.0)))
+    }
+
+    /// The vegetation where each species' weight is `weight(species)`.
+    fn at_with(&self, weight: impl Fn(&SpeciesCover) -> f64) -> CoverAt {
         let mut c = CoverAt { grass: 0.0, canopy: 0.0, dominant: 0, density: 0.0, height_m: 0.0 };
         let mut best = 0.0;
         for (k, s) in self.species.iter().enumerate() {
-            let w = self.weight(s, x, z);
+            let w = weight(s);
             match s.ground {
                 Ground::Grass => c.grass += w,
                 Ground::Canopy => c.canopy += w,
@@ -110,7 +129,16 @@ impl VegetationCover {
     /// in a scene with grass or flowers, the ground they leave bare (1 − their summed density
     /// weight); in a scene without, the forest floor under trees and meshes (their summed weight).
     pub fn soil_share(&self, x: f64, z: f64) -> f64 {
-        let c = self.at(x, z);
+        self.soil_share_of(self.at(x, z))
+    }
+
+    /// [`VegetationCover::soil_share`] at texel (i, j)'s centre, from that texel's weights alone
+    /// (what the layer maps' texel there is baked with).
+    pub fn soil_share_texel(&self, i: usize, j: usize) -> f64 {
+        self.soil_share_of(self.at_texel(i, j))
+    }
+
+    fn soil_share_of(&self, c: CoverAt) -> f64 {
         if self.has_grass() {
             1.0 - c.grass
         } else {
@@ -134,8 +162,15 @@ mod tests {
             extent: [0.0, 0.0, 4.0, 2.0],
             size: [2, 1],
             species: vec![species(Ground::Grass, 10.0, 0.05, vec![0.0, 1.0])],
+            first_row: 0,
         };
         assert_eq!(cover.at(1.0, 1.0).grass, 0.0);
+        // a texel reads its own weight; a cover of some rows answers its rows by texel alone
+        assert_eq!((cover.at_texel(0, 0).grass, cover.at_texel(1, 0).grass), (0.0, 1.0));
+        assert_eq!(cover.at_texel(2, 0).grass, 0.0, "outside the grid");
+        let rows = VegetationCover { size: [2, 3], first_row: 2, ..cover.clone() };
+        assert_eq!((rows.at_texel(1, 2).grass, rows.at_texel(1, 1).grass), (1.0, 0.0));
+        assert_eq!(rows.at(3.0, 1.0).grass, 0.0, "a point reads a whole cover only");
         assert_eq!(cover.at(3.0, 1.0).grass, 1.0);
         assert!((cover.at(2.0, 1.0).grass - 0.5).abs() < 1e-12);
         // clamped outside the centres
@@ -151,17 +186,21 @@ mod tests {
         // grass at full density covers 10 × 0.05 = 0.5; trees at 0.02 × 50 = 1.0 where full
         let grass = species(Ground::Grass, 10.0, 0.05, vec![1.0]);
         let trees = species(Ground::Canopy, 0.02, 50.0, vec![1.0]);
-        let both = VegetationCover { extent, size: [1, 1], species: vec![grass.clone(), trees.clone()] };
+        let both = VegetationCover { extent, size: [1, 1], species: vec![grass.clone(), trees.clone()], first_row: 0 };
         let at = both.at(0.5, 0.5);
         assert_eq!((at.dominant, at.density, at.height_m), (2, 0.02, 1.02));
         assert_eq!((at.grass, at.canopy), (1.0, 1.0));
         assert_eq!(both.soil_share(0.5, 0.5), 0.0, "grass grows here: no soil");
         // a forest without grass: soil under the trees
-        let forest = VegetationCover { extent, size: [1, 1], species: vec![trees.clone()] };
+        let forest = VegetationCover { extent, size: [1, 1], species: vec![trees.clone()], first_row: 0 };
         assert_eq!(forest.soil_share(0.5, 0.5), 1.0);
         // nothing grows: no type, no density
-        let bare =
-            VegetationCover { extent, size: [1, 1], species: vec![species(Ground::Canopy, 0.02, 50.0, vec![0.0])] };
+        let bare = VegetationCover {
+            extent,
+            size: [1, 1],
+            species: vec![species(Ground::Canopy, 0.02, 50.0, vec![0.0])],
+            first_row: 0,
+        };
         let at = bare.at(0.5, 0.5);
         assert_eq!((at.dominant, at.density, at.height_m), (0, 0.0, 0.0));
         assert_eq!(bare.soil_share(0.5, 0.5), 0.0);
