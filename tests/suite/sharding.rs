@@ -305,14 +305,15 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
         fs::write(cwd.join("map.r16"), raw_bytes).unwrap();
         write(cwd, "world.toml", &banded_preset(source, max_error));
         ok(&verdant_in(cwd, &["-q", "build", "world.toml", "--out", "single"]));
-        let bands_in = |out: &Path| {
+        let entries_in = |out: &Path, prefix: &str| {
             fs::read_dir(out.join(".cache"))
-                .map(|d| {
-                    d.filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().starts_with("terrain-band-")).count()
-                })
+                .map(|d| d.filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().starts_with(prefix)).count())
                 .unwrap_or(0)
         };
-        assert_eq!(bands_in(&cwd.join("single")), 3, "a single build keeps its three bands as pieces");
+        let single = cwd.join("single");
+        let layers = entries_in(&single, "terrain-band-layers-");
+        assert_eq!(entries_in(&single, "terrain-band-") - layers, 3, "a single build keeps its three bands as pieces");
+        assert_eq!(layers, 3, "and each band's rows of the layers");
         for &n in splits {
             let mut shards = run_shards(cwd, &format!("shards{n}"), n);
             let mut built = Vec::new();
