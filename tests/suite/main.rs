@@ -24,6 +24,7 @@ mod scene_view;
 mod sharding;
 mod snow;
 mod snow_build;
+mod terrain_band_layers;
 mod terrain_cases;
 mod terrain_chunks;
 mod tree_lod;
