@@ -10,7 +10,7 @@
 #                                                  and presets/worlds/highlands.toml (8193² at 1 m, ~1.3 M)
 #
 # VERDANT_BIN=path/to/verdant uses that binary instead of building target/release/verdant. Needs GNU
-# parallel (apt `parallel`; scripts/check.sh installs it) and /usr/bin/time.
+# parallel and /usr/bin/time (apt `parallel`, `time`): installed from apt when missing.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 if [ -n "${VERDANT_BIN:-}" ]; then
@@ -19,8 +19,17 @@ else
   cargo build --release --quiet
   BIN="$PWD/target/release/verdant"
 fi
-command -v parallel > /dev/null || { echo "bench_shards.sh: GNU parallel is needed (apt install parallel)" >&2; exit 2; }
-[ -x /usr/bin/time ] || { echo "bench_shards.sh: /usr/bin/time is needed (apt install time)" >&2; exit 2; }
+missing=()
+command -v parallel > /dev/null || missing+=(parallel)
+[ -x /usr/bin/time ] || missing+=(time)
+if ((${#missing[@]})); then
+  echo "bench_shards.sh: installing ${missing[*]} from apt" >&2
+  SUDO=()
+  if [ "$(id -u)" -ne 0 ]; then SUDO=(sudo); fi
+  { "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -q &&
+    "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"; } >&2 ||
+    { echo "bench_shards.sh: cannot install ${missing[*]} (apt install ${missing[*]})" >&2; exit 2; }
+fi
 TMP="$(mktemp -d "${TMPDIR:-/tmp}/verdant-shards.XXXXXX")"
 trap 'rm -rf "$TMP"' EXIT
 if (($#)); then presets=("$@"); else presets=(presets/alpine.toml presets/worlds/highlands.toml); fi
