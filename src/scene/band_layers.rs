@@ -216,7 +216,7 @@ pub fn from_bytes(bytes: &[u8], map_px: [u32; 2]) -> Option<BandLayers> {
         return None;
     }
     let cover =
-        (species > 0).then(|| VegetationCover { extent, size: map_px, species: cover_species, first_row: first });
+        (species > 0).then_some(VegetationCover { extent, size: map_px, species: cover_species, first_row: first });
     Some(BandLayers { cover, rows: LayerRows { first, width: w, weights, albedo_rgba8, sums } })
 }
 

@@ -16,7 +16,7 @@ use crate::scene::pipeline::{Stage, StageJob};
 use crate::scene::preset::procedural_heightfield;
 use crate::scene::{Preset, TerrainSettings, TerrainSource};
 use crate::terrain::build::{build_scene, BuildOptions};
-use crate::terrain::job::{mesh_and_build, MeshMode, MeshSettings, Meshed, TerrainFigures};
+use crate::terrain::job::{mesh_and_build, LayersFrom, MeshMode, MeshSettings, Meshed, TerrainFigures};
 use crate::terrain::layers::SnowRule;
 use crate::terrain::normal_map::{bake_normal_map, put_normal_map, NormalMapReport};
 use crate::terrain::regions::chunk_cells;
@@ -552,21 +552,24 @@ type BandedNormals = Option<Vec<Vec<crate::terrain::bands::BandNormals>>>;
 
 /// The terrain's LoD chain (switch distances assigned) and main mesh from its bands' pieces, and
 /// their normal map rows.
+/// What a terrain meshed in bands is made of, from its bands' pieces.
+struct Banded {
+    /// The LoD chain (switch distances assigned).
+    chain: Vec<crate::lod::LodLevel>,
+    /// The main mesh, whether it hit a triangle limit (never: bands have none), its figures.
+    main: (crate::terrain::sample_mesh::SampleMesh, bool, crate::terrain::error::ErrorStats),
+    normals: BandedNormals,
+    /// The material layers joined from the bands' rows (when the plan bakes them by band).
+    layers: Option<crate::terrain::layers::TerrainLayers>,
+}
+
 fn banded_meshes(
     preset: &Preset,
     t: &TerrainSettings,
     hf: &Heightfield,
     plan: &BandPlan,
     memo: Option<MeshMemo<'_>>,
-) -> Result<
-    (
-        Vec<crate::lod::LodLevel>,
-        (crate::terrain::sample_mesh::SampleMesh, bool, crate::terrain::error::ErrorStats),
-        BandedNormals,
-        Option<crate::terrain::layers::TerrainLayers>,
-    ),
-    StageError,
-> {
+) -> Result<Banded, StageError> {
     use crate::terrain::tin::{check_tin_input, TinOptions};
     let input = bad_input(Stage::Terrain);
     if !t.lods.is_empty() {
@@ -637,7 +640,7 @@ fn banded_meshes(
     let main = (levels[main_level].mesh.clone(), false, levels[main_level].stats);
     levels.truncate(t.lods.len());
     crate::lod::assign_switch_distances(&mut levels, &preset.lod);
-    Ok((levels, main, normals, layers))
+    Ok(Banded { chain: levels, main, normals, layers })
 }
 
 /// Key of the terrain's meshes: what meshing reads (not the formats, snow or species).
@@ -793,8 +796,8 @@ pub fn run_terrain_memo(
     let t1 = Instant::now();
     let (mut chain, remembered_main, band_normals, band_layers) = match (remembered, &plan) {
         (_, Some(plan)) => {
-            let (chain, main, normals, layers) = banded_meshes(preset, t, &hf, plan, band_memo)?;
-            (chain, Some(main), normals, layers)
+            let b = banded_meshes(preset, t, &hf, plan, band_memo)?;
+            (b.chain, Some(b.main), b.normals, b.layers)
         }
         (Some(m), None) => (m.chain, Some(m.main), None, None),
         (None, None) if t.lods.is_empty() => (Vec::new(), None, None, None),
@@ -811,7 +814,7 @@ pub fn run_terrain_memo(
         let (Some(plan), Some(normals)) = (&plan, &band_normals) else { return Ok(None) };
         let Some(k) = plan.bounds.iter().position(|&b| b == bound) else { return Ok(None) };
         let refs: Vec<&crate::terrain::bands::BandNormals> = normals[k].iter().collect();
-        crate::terrain::bands::join_normals(&refs, plan.map_px()).map(Some).map_err(|e| f(e))
+        crate::terrain::bands::join_normals(&refs, plan.map_px()).map(Some).map_err(&f)
     };
     let chain_s = t1.elapsed().as_secs_f64();
     let ready = remembered_main.or_else(|| {
@@ -848,8 +851,10 @@ pub fn run_terrain_memo(
         &build_opts("terrain".into(), t.max_error_m),
         &source_label(t),
         ready,
-        Some(&cover),
-        band_layers,
+        match band_layers {
+            Some(layers) => LayersFrom::Baked(Box::new(layers)),
+            None => LayersFrom::Bake(Some(&cover)),
+        },
         normal_rows(t.max_error_m)?,
     )
     .map_err(|e| StageError::of(Stage::Terrain.name(), &e, e.to_string()))?;

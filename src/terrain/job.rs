@@ -291,13 +291,23 @@ pub struct Meshed {
     pub seconds: [f64; 3],
 }
 
+/// What grows on a built terrain scene, when anything does (the soil layer and `_SURFACE`).
+pub type CoverOf<'a> = dyn Fn(&Scene) -> Option<VegetationCover> + 'a;
+
+/// Where [`mesh_and_build`] takes the terrain's material layers from.
+pub enum LayersFrom<'a> {
+    /// Baked over the whole map, with what the function gives grows on the built scene
+    /// ([`bake_layers_with`]).
+    Bake(Option<&'a CoverOf<'a>>),
+    /// Baked already (a terrain meshed in bands: each band baked its rows).
+    Baked(Box<TerrainLayers>),
+}
+
 /// The one path from samples to a textured terrain scene: meshes `hf` as `settings` ask (or takes
 /// `ready`, a mesh already made at the same settings with its stats, e.g. a LoD level), measures it
 /// as `storage` stores it, refuses a TIN over its bound as written (the analyzer has the last
 /// word), builds the scene (`build`: chunks, skirts, base, name), textures it with the layers and bakes
-/// its normal map against it. `cover` gives what grows on the built scene, when anything does
-/// (the soil layer and `_SURFACE`: [`bake_layers_with`]), unless the layers come `baked` (a
-/// terrain meshed in bands: each band baked its rows).
+/// its normal map against it. `layers` says where the material layers come from.
 pub fn mesh_and_build(
     hf: &Heightfield,
     settings: &MeshSettings,
@@ -305,8 +315,7 @@ pub fn mesh_and_build(
     build: &BuildOptions,
     label: &str,
     ready: Option<(SampleMesh, bool, ErrorStats)>,
-    cover: Option<&dyn Fn(&Scene) -> Option<VegetationCover>>,
-    baked: Option<TerrainLayers>,
+    layers: LayersFrom<'_>,
     normal_rows: Option<crate::terrain::normal_map::TexelRows>,
 ) -> Result<Meshed, JobError> {
     let (mut t_mesh, mut t_analyze) = (0.0, 0.0);
@@ -335,10 +344,11 @@ pub fn mesh_and_build(
     }
     let t = Instant::now();
     let mut scene = build_scene(hf, &mesh, build)?;
-    // (layers baked already when the terrain's bands baked their rows)
-    let layers = match baked {
-        Some(layers) => layers,
-        None => bake_layers_with(hf, &build.snow, cover.and_then(|f| f(&scene)).map(std::sync::Arc::new)),
+    let layers = match layers {
+        LayersFrom::Baked(layers) => *layers,
+        LayersFrom::Bake(cover) => {
+            bake_layers_with(hf, &build.snow, cover.and_then(|f| f(&scene)).map(std::sync::Arc::new))
+        }
     };
     layers.texture(&mut scene, hf, &build.name).map_err(JobError::Texture)?;
     // (the normal map's rows baked already when the terrain's bands baked them)
@@ -420,7 +430,8 @@ pub fn run_reporting(
 
     let (grid, storage) = storage_for(job, hf)?;
     let settings = job.mesh_settings();
-    let meshed = mesh_and_build(hf, &settings, &storage, &job.build, &job.source.label(), None, None, None, None)?;
+    let meshed =
+        mesh_and_build(hf, &settings, &storage, &job.build, &job.source.label(), None, LayersFrom::Bake(None), None)?;
     let figures = meshed.figures(hf, &settings, decoded.voids_filled);
     let ([t_mesh, t_analyze, t_build], scene) = (meshed.seconds, meshed.scene);
 
