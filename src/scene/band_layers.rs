@@ -154,7 +154,10 @@ pub fn from_bytes(bytes: &[u8], map_px: [u32; 2]) -> Option<BandLayers> {
     };
     let mut u32_ = || take(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
     let [first, w, n, maps, species] = [u32_()?, u32_()?, u32_()?, u32_()?, u32_()?].map(|v| v as usize);
-    if w != map_px[0] as usize || first + n > map_px[1] as usize || maps == 0 || maps > 2 {
+    // (a species' figures take 28 bytes: a count past what the bytes hold is damage, not memory
+    // to reserve)
+    if w != map_px[0] as usize || first + n > map_px[1] as usize || maps == 0 || maps > 2 || species > bytes.len() / 28
+    {
         return None;
     }
     let mut take = |len: usize| -> Option<&[u8]> {
@@ -353,5 +356,19 @@ mod tests {
         assert_eq!(from_bytes(&[bytes.clone(), vec![0]].concat(), [4, 8]), None, "a byte too many");
         assert_eq!(from_bytes(&bytes, [8, 8]), None, "another map's width");
         assert_eq!(from_bytes(&bytes, [4, 3]), None, "rows past the map");
+        // a species count no entry could hold is refused before anything is reserved for it
+        let mut huge = bytes.clone();
+        huge[16..20].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert_eq!(from_bytes(&huge, [4, 8]), None);
+        // every cut and every flipped byte of the header reads back as nothing or as rows, never
+        // a panic
+        for cut in 0..bytes.len() {
+            assert_eq!(from_bytes(&bytes[..cut], [4, 8]), None, "cut at {cut}");
+        }
+        for k in 0..20 {
+            let mut b = bytes.clone();
+            b[k] ^= 0x5a;
+            let _ = from_bytes(&b, [4, 8]);
+        }
     }
 }
