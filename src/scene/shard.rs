@@ -271,7 +271,16 @@ pub fn build_shard(
                         band_layers(preset, t, key, plan, *b, &piece, &mut rows_of, Some(&made), c)?;
                         surfaces.insert(*b, std::rc::Rc::new(made));
                     } else {
-                        let mut rows_of = |rows| source.rows(rows);
+                        // the band's rows read once, if at all, for its meshes and its layers
+                        let mut held: Option<([u32; 2], crate::heightfield::Heightfield)> = None;
+                        let mut rows_of = |rows: [u32; 2]| match &held {
+                            Some((r, hf)) if *r == rows => Ok(hf.clone()),
+                            _ => {
+                                let hf = source.rows(rows)?;
+                                held = Some((rows, hf.clone()));
+                                Ok(hf)
+                            }
+                        };
                         let piece = band_piece(key, t, &mut rows_of, plan, *b, Some((&cache, force)))?;
                         band_layers(preset, t, key, plan, *b, &piece, &mut rows_of, None, Some((&cache, force)))?;
                     }
