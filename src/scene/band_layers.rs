@@ -32,16 +32,30 @@ pub struct BandLayers {
     pub rows: LayerRows,
 }
 
+/// What a terrain's layers read besides its meshes and map (the snow rule, what grows and the maps
+/// its rules read), with its digest: hashed once for all the bands (the maps may be large).
+pub struct Grows<'a> {
+    pub preset: &'a Preset,
+    pub key: String,
+}
+
+impl<'a> Grows<'a> {
+    pub fn of(preset: &'a Preset) -> Grows<'a> {
+        let mut k = KeyBuilder::new(BAND_LAYERS_STAGE, crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION);
+        k.add(format!("{:?}", crate::scene::terrain_stage::snow_rule(preset)).as_bytes());
+        if !preset.species.is_empty() {
+            crate::scene::ground_cover::add_key(&mut k, preset);
+        }
+        Grows { preset, key: k.finish() }
+    }
+}
+
 /// Cache key of a band's layer rows: its meshes' entry (`band_key`: the band's rows and what
-/// meshing reads) and what the layers read besides (the snow rule, what grows and the maps its
-/// rules read).
-pub fn layers_key(preset: &Preset, band_key: &str) -> String {
+/// meshing reads) and what the layers read besides ([`Grows`]).
+pub fn layers_key(grows: &Grows, band_key: &str) -> String {
     let mut k = KeyBuilder::new(BAND_LAYERS_STAGE, crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION);
     k.add(band_key.as_bytes());
-    k.add(format!("{:?}", crate::scene::terrain_stage::snow_rule(preset)).as_bytes());
-    if !preset.species.is_empty() {
-        crate::scene::ground_cover::add_key(&mut k, preset);
-    }
+    k.add(grows.key.as_bytes());
     k.finish()
 }
 
@@ -92,6 +106,12 @@ pub fn join(preset: &Preset, parts: Vec<BandLayers>, map_px: [u32; 2]) -> Result
             }
         }
         rows.push(part.rows);
+    }
+    if let Some(c) = &cover {
+        let texels = map_px[0] as usize * map_px[1] as usize;
+        if let Some(s) = c.species.iter().find(|s| s.weights.len() != texels) {
+            return Err(format!("the bands' cover holds {} texels of {texels}", s.weights.len()));
+        }
     }
     let snow = crate::scene::terrain_stage::snow_rule(preset);
     TerrainLayers::from_rows(rows, map_px, &snow, cover.map(std::sync::Arc::new))
@@ -169,6 +189,9 @@ pub fn from_bytes(bytes: &[u8], map_px: [u32; 2]) -> Option<BandLayers> {
     let mut figures = Vec::with_capacity(species);
     for _ in 0..species {
         let ground = u32::from_le_bytes(take(4)?.try_into().ok()?);
+        if ground > 1 {
+            return None;
+        }
         let [d, h, f] = [f64_(take(8)?), f64_(take(8)?), f64_(take(8)?)];
         figures.push((ground, d, h, f));
     }
@@ -191,6 +214,13 @@ pub fn from_bytes(bytes: &[u8], map_px: [u32; 2]) -> Option<BandLayers> {
         let data = take(len)?;
         if n == 0 {
             return data.is_empty().then(Vec::new);
+        }
+        // (the size from the header first: a damaged one reserves nothing)
+        let size = image::ImageReader::with_format(std::io::Cursor::new(data), image::ImageFormat::Png)
+            .into_dimensions()
+            .ok()?;
+        if size != (w as u32, n as u32) {
+            return None;
         }
         let img = image::load_from_memory_with_format(data, image::ImageFormat::Png).ok()?.into_rgba8();
         (img.width() as usize == w && img.height() as usize == n).then(|| img.into_raw())
@@ -215,7 +245,8 @@ pub fn from_bytes(bytes: &[u8], map_px: [u32; 2]) -> Option<BandLayers> {
             weights: raw.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
         });
     }
-    if at != bytes.len() {
+    // (one weight map, two with a cover's soil layer)
+    if at != bytes.len() || maps != 1 + usize::from(species > 0) {
         return None;
     }
     let cover =
@@ -224,11 +255,19 @@ pub fn from_bytes(bytes: &[u8], map_px: [u32; 2]) -> Option<BandLayers> {
 }
 
 /// Band `k`'s layer rows as `cache` holds them under `key` ([`layers_key`]), for texel rows
-/// `texel_rows` of a `map_px` map (`None` when it does not hold them, or not whole).
-pub fn kept(cache: &Cache, key: &str, map_px: [u32; 2], texel_rows: &Range<usize>) -> Option<BandLayers> {
+/// `texel_rows` of a `map_px` map over `extent`, with a cover of `species` species or none
+/// (`None` when it does not hold them, or not whole: then they are baked again).
+pub fn kept(
+    cache: &Cache,
+    key: &str,
+    map_px: [u32; 2],
+    texel_rows: &Range<usize>,
+    (extent, species): ([f64; 4], usize),
+) -> Option<BandLayers> {
     let (_, entry) = cache.lookup(BAND_LAYERS_STAGE, key)?;
     let b = from_bytes(&Cache::read_blob(&entry).ok()?, map_px)?;
-    (b.rows.first == texel_rows.start && b.rows.sums.len() == texel_rows.len()).then_some(b)
+    let cover_fits = b.cover.as_ref().is_none_or(|c| c.extent == extent && c.species.len() == species);
+    (b.rows.first == texel_rows.start && b.rows.sums.len() == texel_rows.len() && cover_fits).then_some(b)
 }
 
 /// Stores band layer rows under `key` (a store that fails only costs baking them again).
@@ -268,9 +307,10 @@ mod tests {
         let mut rows_of = |r: [u32; 2]| Ok(hf.rows(r[0] as usize, r[1] as usize).unwrap());
         let pieces: Vec<_> = (0..3).map(|k| band_piece(&key, t, &mut rows_of, &plan, k, None).unwrap()).collect();
         let mut parts = Vec::new();
+        let grows = Grows::of(preset);
         for (k, piece) in pieces.iter().enumerate() {
             let part =
-                crate::scene::terrain_stage::band_layers(preset, t, &key, &plan, k, piece, &mut rows_of, None, None)
+                crate::scene::terrain_stage::band_layers(&grows, t, &key, &plan, k, piece, &mut rows_of, None, None)
                     .unwrap()
                     .unwrap();
             // (each band's entry reads back as written)
@@ -356,6 +396,30 @@ mod tests {
         assert_eq!(from_bytes(&[bytes.clone(), vec![0]].concat(), [4, 8]), None, "a byte too many");
         assert_eq!(from_bytes(&bytes, [8, 8]), None, "another map's width");
         assert_eq!(from_bytes(&bytes, [4, 3]), None, "rows past the map");
+        // a cover's entry: a ground other than grass (0) or canopy (1) is damage
+        let covered = BandLayers {
+            cover: Some(VegetationCover {
+                extent: [0.0, 0.0, 6.0, 14.0],
+                size: [4, 8],
+                species: vec![SpeciesCover {
+                    ground: crate::terrain::vegetation::Ground::Canopy,
+                    max_density: 0.1,
+                    height_m: 9.0,
+                    footprint_m2: 3.0,
+                    weights: vec![0.25; 8],
+                }],
+                first_row: 2,
+            }),
+            rows: LayerRows { weights: vec![vec![[1, 2, 3, 4]; 8]; 2], ..b.rows.clone() },
+        };
+        let bytes_c = to_bytes(&covered).unwrap();
+        assert_eq!(from_bytes(&bytes_c, [4, 8]), Some(covered.clone()));
+        let mut bad = bytes_c.clone();
+        bad[20] = 2;
+        assert_eq!(from_bytes(&bad, [4, 8]), None, "ground 2");
+        // one weight map with a cover (its soil map lost) is damage too
+        let one_map = BandLayers { rows: b.rows.clone(), ..covered };
+        assert_eq!(from_bytes(&to_bytes(&one_map).unwrap(), [4, 8]), None);
         // a species count no entry could hold is refused before anything is reserved for it
         let mut huge = bytes.clone();
         huge[16..20].copy_from_slice(&u32::MAX.to_le_bytes());

@@ -100,8 +100,14 @@ pub fn units(preset: &Preset, out: &Path) -> Result<Vec<Unit>, SceneBuildError> 
 /// What a unit is to build.
 enum Work<'a> {
     Terrain(&'a crate::scene::TerrainSettings),
-    /// The terrain, the band, the plan, the terrain's mesh key.
-    Band(&'a crate::scene::TerrainSettings, usize, std::rc::Rc<BandPlan>, std::rc::Rc<String>),
+    /// The terrain, the band, the plan, the terrain's mesh key, what its layers read besides.
+    Band(
+        &'a crate::scene::TerrainSettings,
+        usize,
+        std::rc::Rc<BandPlan>,
+        std::rc::Rc<String>,
+        std::rc::Rc<crate::scene::band_layers::Grows<'a>>,
+    ),
     Species(&'a crate::scene::SpeciesSettings),
     /// The terrain, the placement unit, the band plan, the rows plan, the terrain's mesh key.
     Placements(
@@ -140,12 +146,17 @@ fn planned<'a>(preset: &'a Preset, out: &Path) -> Result<Vec<(Unit, Work<'a>, Sl
             Some(plan) => {
                 let plan = std::rc::Rc::new(plan);
                 let key = std::rc::Rc::new(mesh_key(preset, t)?);
+                let grows = std::rc::Rc::new(crate::scene::band_layers::Grows::of(preset));
                 for k in 0..plan.band_count() {
                     let rows = plan.rows(k);
-                    let entries = crate::scene::terrain_stage::band_entries(preset, t, &key, &plan, k);
+                    let entries = crate::scene::terrain_stage::band_entries(&grows, t, &key, &plan, k);
                     let name = format!("terrain band {k} (rows {}-{})", rows[0], rows[1]);
                     let slot = Slot::Band { k, of: plan.band_count() };
-                    units.push((Unit { name, entries }, Work::Band(t, k, plan.clone(), key.clone()), slot));
+                    units.push((
+                        Unit { name, entries },
+                        Work::Band(t, k, plan.clone(), key.clone(), grows.clone()),
+                        slot,
+                    ));
                 }
                 // the placements of the tile rows starting in each band, in that band's shard
                 if let Some(rows) = placement_rows::rows_plan(preset, t, &plan, &key)? {
@@ -182,7 +193,7 @@ fn wanted_rows(preset: &Preset, planned: &[(Unit, Work<'_>, Slot)], mine: &[usiz
     let mut bands: Vec<[u32; 2]> = Vec::new();
     for &k in mine {
         match &planned[k].1 {
-            Work::Band(_, b, plan, _) => bands.push(plan.read_rows(*b)),
+            Work::Band(_, b, plan, _, _) => bands.push(plan.read_rows(*b)),
             Work::Placements(_, g, plan, rows, _) => {
                 if let Ok((_, _, reached)) = placement_rows::reach(preset, plan, rows, *g) {
                     bands.extend(reached.into_iter().map(|b| plan.rows(b)));
@@ -247,7 +258,7 @@ pub fn build_shard(
                     let memo = Some(MeshMemo { cache: &cache, force });
                     runner.run(&TerrainJob { preset, terrain: t, memo })?;
                 }
-                Work::Band(t, b, plan, key) => {
+                Work::Band(t, b, plan, key, grows) => {
                     let source = band_rows.get_or_insert_with(|| {
                         // the rows of every band of this shard, read together
                         BandRows::new(t, wanted_rows(preset, &planned, &mine))
@@ -268,7 +279,7 @@ pub fn build_shard(
                         // its rows of the layers, from the same surfaces
                         let mut rows_of = |_| Ok(margin.clone());
                         let c = Some((&cache, force));
-                        band_layers(preset, t, key, plan, *b, &piece, &mut rows_of, Some(&made), c)?;
+                        band_layers(grows, t, key, plan, *b, &piece, &mut rows_of, Some(&made), c)?;
                         surfaces.insert(*b, std::rc::Rc::new(made));
                     } else {
                         // the band's rows read once, if at all, for its meshes and its layers
@@ -282,7 +293,7 @@ pub fn build_shard(
                             }
                         };
                         let piece = band_piece(key, t, &mut rows_of, plan, *b, Some((&cache, force)))?;
-                        band_layers(preset, t, key, plan, *b, &piece, &mut rows_of, None, Some((&cache, force)))?;
+                        band_layers(grows, t, key, plan, *b, &piece, &mut rows_of, None, Some((&cache, force)))?;
                     }
                 }
                 Work::Placements(t, g, bands, rows, key) => {

@@ -10,6 +10,7 @@ use crate::export;
 use crate::heightfield::{self, Heightfield};
 use crate::lod::terrain_lod_chain_in_bands;
 use crate::mesh::{Bounds, Scene};
+use crate::scene::band_layers::Grows;
 use crate::scene::cache::{sha256_hex, KeyBuilder};
 use crate::scene::error::{SceneBuildError, StageError};
 use crate::scene::pipeline::{Stage, StageJob};
@@ -473,17 +474,17 @@ pub fn layers_by_band(t: &TerrainSettings, plan: &BandPlan) -> bool {
 }
 
 /// Cache key of band `k`'s layer rows ([`crate::scene::band_layers::layers_key`]).
-pub fn band_layers_key(preset: &Preset, mesh_key: &str, plan: &BandPlan, k: usize) -> String {
-    crate::scene::band_layers::layers_key(preset, &band_key(mesh_key, plan.rows(k)))
+pub fn band_layers_key(grows: &Grows, mesh_key: &str, plan: &BandPlan, k: usize) -> String {
+    crate::scene::band_layers::layers_key(grows, &band_key(mesh_key, plan.rows(k)))
 }
 
 /// The cache entries band `k`'s unit makes: its meshes', and its layer rows' when the plan bakes
 /// them by band.
-pub fn band_entries(preset: &Preset, t: &TerrainSettings, mesh_key: &str, plan: &BandPlan, k: usize) -> Vec<String> {
+pub fn band_entries(grows: &Grows, t: &TerrainSettings, mesh_key: &str, plan: &BandPlan, k: usize) -> Vec<String> {
     use crate::scene::cache::Cache;
     let mut entries = vec![Cache::entry_name(BAND_STAGE, &band_key(mesh_key, plan.rows(k)))];
     if layers_by_band(t, plan) {
-        let key = band_layers_key(preset, mesh_key, plan, k);
+        let key = band_layers_key(grows, mesh_key, plan, k);
         entries.push(Cache::entry_name(crate::scene::band_layers::BAND_LAYERS_STAGE, &key));
     }
     entries
@@ -495,7 +496,7 @@ pub fn band_entries(preset: &Preset, t: &TerrainSettings, mesh_key: &str, plan: 
 /// is the band's chunk surfaces at the main level when the caller has them.
 #[allow(clippy::too_many_arguments)]
 pub fn band_layers(
-    preset: &Preset,
+    grows: &Grows,
     t: &TerrainSettings,
     mesh_key: &str,
     plan: &BandPlan,
@@ -511,9 +512,11 @@ pub fn band_layers(
     };
     let f = fail(Stage::Terrain);
     let texel_rows = texel_rows[k].clone();
-    let key = band_layers_key(preset, mesh_key, plan, k);
+    let key = band_layers_key(grows, mesh_key, plan, k);
     if let Some((c, false)) = cache {
-        if let Some(kept) = band_layers::kept(c, &key, plan.map_px(), &texel_rows) {
+        let extent = crate::scene::ground_cover::terrain_extent(plan.width, plan.height(), plan.cell_m);
+        let fits = (extent, grows.preset.species.len());
+        if let Some(kept) = band_layers::kept(c, &key, plan.map_px(), &texel_rows, fits) {
             return Ok(Some(kept));
         }
     }
@@ -540,7 +543,7 @@ pub fn band_layers(
             &built[..]
         }
     };
-    let baked = band_layers::bake(preset, &field, plan.cell_m, surface, plan.map_px(), texel_rows);
+    let baked = band_layers::bake(grows.preset, &field, plan.cell_m, surface, plan.map_px(), texel_rows);
     if let Some((c, _)) = cache {
         band_layers::store(c, &key, &baked)?;
     }
@@ -606,9 +609,10 @@ fn banded_meshes(
         .collect::<Result<Vec<_>, _>>()?;
     // each band's rows of the layers, joined (when the plan bakes them by band)
     let layers = if layers_by_band(t, plan) {
+        let grows = Grows::of(preset);
         let mut parts = Vec::with_capacity(pieces.len());
         for (k, piece) in pieces.iter().enumerate() {
-            parts.extend(band_layers(preset, t, &key, plan, k, piece, &mut rows_of, None, cache)?);
+            parts.extend(band_layers(&grows, t, &key, plan, k, piece, &mut rows_of, None, cache)?);
         }
         let joined = crate::scene::band_layers::join(preset, parts, plan.map_px())
             .map_err(|e| fail(Stage::Terrain)(format!("the bands' layer rows do not join: {e}")))?;
@@ -669,7 +673,10 @@ impl TerrainJob<'_> {
         let (t, preset) = (self.terrain, self.preset);
         match planned_bands(t) {
             Ok(Some(plan)) => match mesh_key(preset, t) {
-                Ok(key) => (0..plan.band_count()).flat_map(|k| band_entries(preset, t, &key, &plan, k)).collect(),
+                Ok(key) => {
+                    let grows = Grows::of(preset);
+                    (0..plan.band_count()).flat_map(|k| band_entries(&grows, t, &key, &plan, k)).collect()
+                }
                 Err(_) => Vec::new(),
             },
             Ok(None) => {
