@@ -137,6 +137,8 @@ pub fn read_back(dir: &Path, rel: &Path) -> Result<Scene, SceneBuildError> {
 /// its first mesh file on first use (also a check that what was cached reads back).
 pub struct TerrainHandoff {
     cell: OnceCell<Scene>,
+    /// What grows on the in-memory scene (when the stage ran, and its scene is the one handed on).
+    cover: Option<std::sync::Arc<crate::terrain::vegetation::VegetationCover>>,
     dir: PathBuf,
     /// The terrain's first mesh file, relative to `dir`.
     pub main: PathBuf,
@@ -149,16 +151,30 @@ impl TerrainHandoff {
     /// its first OBJ. An OBJ does not read back as the scene that was written (its reader rebuilds
     /// the vertices), so with an OBJ main file the in-memory `scene` is not used: later stages read
     /// the file whether the terrain stage ran or was served from the cache, and make the same bytes.
-    pub fn new(dir: &Path, files: &[PathBuf], key: String, scene: Option<Scene>) -> TerrainHandoff {
+    pub fn new(
+        dir: &Path,
+        files: &[PathBuf],
+        key: String,
+        ran: Option<crate::scene::terrain_stage::Terrained>,
+    ) -> TerrainHandoff {
         let ext = |p: &&PathBuf| p.extension().and_then(|e| e.to_str()).map(str::to_owned);
         let gltf = files.iter().find(|p| matches!(ext(p).as_deref(), Some("glb" | "gltf")));
         let main =
             gltf.or_else(|| files.iter().find(|p| ext(p).as_deref() == Some("obj"))).cloned().unwrap_or_default();
         let cell = OnceCell::new();
-        if let (Some(scene), true) = (scene, gltf.is_some()) {
-            let _ = cell.set(scene);
+        let mut cover = None;
+        if let (Some(ran), true) = (ran, gltf.is_some()) {
+            let _ = cell.set(ran.scene);
+            cover = ran.cover;
         }
-        TerrainHandoff { cell, dir: dir.to_path_buf(), main, key }
+        TerrainHandoff { cell, cover, dir: dir.to_path_buf(), main, key }
+    }
+
+    /// The ground cover the terrain's layers were baked with, on the texels of its layer map over
+    /// the scene's surface; `None` when the terrain stage was served from the cache (or nothing
+    /// grows): the scatter stage then computes the same weights itself.
+    pub fn cover(&self) -> Option<&crate::terrain::vegetation::VegetationCover> {
+        self.cover.as_deref()
     }
 
     pub fn scene(&self) -> Result<&Scene, SceneBuildError> {

@@ -147,16 +147,16 @@ const SPECIES_PER_DENSITY_MAP: usize = 4;
 /// The `index`-th species' density weights as the bytes its channel holds (255 = its effective
 /// max density) and what they say: its file and channel, and the count the bytes predict.
 #[allow(clippy::too_many_arguments)]
-fn species_density(
+fn species_density<'t>(
     surface: &SurfaceIndex,
-    texels: &TexelTriangles,
+    texels: impl FnOnce() -> &'t TexelTriangles,
+    (extent, size): ([f64; 4], [u32; 2]),
     preset: &Preset,
     species: &SpeciesSettings,
     (density, mask): (Option<&DensityMap>, Option<&DensityMap>),
-    thinning: Option<SnowThinning<'_>>,
+    (thinning, grown): (Option<SnowThinning<'_>>, Option<&[f32]>),
     index: usize,
 ) -> Result<(Vec<u8>, DensityWeight), StageError> {
-    let extent = texels.extent;
     let tiling = crate::scatter::Tiling::new(extent, preset.scatter.tile_m).map_err(|e| bad_input(e.to_string()))?;
     let mut rules = crate::scatter::rules::Rules::without_exclusions(
         surface,
@@ -168,10 +168,12 @@ fn species_density(
     )
     .map_err(|e| bad_input(e.to_string()))?;
     rules.snow = thinning;
-    let bytes: Vec<u8> = crate::scatter::rules::weight_map_located(&rules, texels)
-        .into_iter()
-        .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-        .collect();
+    let to_byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    let bytes: Vec<u8> = match grown {
+        Some(weights) => weights.iter().map(|&v| to_byte(v)).collect(),
+        None => crate::scatter::rules::weight_map_located(&rules, texels()).into_iter().map(to_byte).collect(),
+    };
+    debug_assert_eq!(bytes.len(), size[0] as usize * size[1] as usize);
     let texel_m2 = (extent[2] - extent[0]) * (extent[3] - extent[1]) / bytes.len().max(1) as f64;
     let sum: f64 = bytes.iter().map(|&b| b as f64 / 255.0).sum();
     let weight = DensityWeight {
@@ -246,7 +248,22 @@ pub fn run_scatter_joined(
     terrain: &Scene,
     scene_dir: &Path,
     snow_mask: Option<&crate::snow::CoverMask>,
+    joined: Option<Joined>,
+) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
+    run_scatter_covered(preset, terrain, scene_dir, snow_mask, joined, None)
+}
+
+/// [`run_scatter_joined`], taking the density maps of the species snow does not thin from
+/// `grown`, the ground cover the terrain stage baked its layers with on this very scene (the same
+/// rules on the same surface and texels: the same weights, bit for bit), when it has the density
+/// maps' texels; computed here otherwise.
+pub fn run_scatter_covered(
+    preset: &Preset,
+    terrain: &Scene,
+    scene_dir: &Path,
+    snow_mask: Option<&crate::snow::CoverMask>,
     mut joined: Option<Joined>,
+    grown: Option<&crate::terrain::vegetation::VegetationCover>,
 ) -> Result<(ScatterStageReport, Vec<Placed>), StageError> {
     let t0 = Instant::now();
     let surface = crate::scene::ground_cover::surface_of(terrain);
@@ -254,6 +271,15 @@ pub fn run_scatter_joined(
     let mut placed: Vec<Placed> = Vec::new();
     let mut reports = Vec::new();
     let map_size = layer_map_size(terrain, extent);
+    // the terrain's cover, when it covers the density maps' texels with every species
+    let texels_n = map_size[0] as usize * map_size[1] as usize;
+    let grown = grown.filter(|c| {
+        c.size == map_size
+            && c.extent == extent
+            && c.first_row == 0
+            && c.species.len() == preset.species.len()
+            && c.species.iter().all(|s| s.weights.len() == texels_n)
+    });
     // which triangle holds each texel centre of the density maps: one location for every species
     let texels = std::cell::OnceCell::new();
     let mut weights: Vec<(String, Vec<u8>)> = Vec::new();
@@ -310,15 +336,17 @@ pub fn run_scatter_joined(
             )
             .map_err(|e| bad_input(e.to_string()))?,
         };
-        // its density over the terrain, on the weight map's texels (exclusions aside)
-        let texels = texels.get_or_init(|| surface.locate_texels(extent, map_size[0], map_size[1]));
+        // its density over the terrain, on the weight map's texels (exclusions aside): the
+        // terrain's cover when it holds them (not thinned by snow), else weighed here
+        let grown_weights = grown.filter(|_| thinning.is_none()).map(|c| &c.species[index].weights[..]);
         let (bytes, density_weight) = species_density(
             &surface,
-            texels,
+            || texels.get_or_init(|| surface.locate_texels(extent, map_size[0], map_size[1])),
+            (extent, map_size),
             preset,
             species,
             (density.as_ref(), mask.as_ref()),
-            thinning,
+            (thinning, grown_weights),
             weights.len(),
         )?;
         weights.push((species.rules.name.clone(), bytes));
@@ -448,6 +476,7 @@ impl StageJob for ScatterJob<'_> {
     fn run(&self, dir: &Path) -> Result<(ScatterStageReport, Vec<Placed>), SceneBuildError> {
         let cover = self.cover.map(|(m, _)| m);
         let joined = self.joined.map(|f| f()).transpose()?.flatten();
-        Ok(run_scatter_joined(self.preset, self.terrain.scene()?, dir, cover, joined)?)
+        let grown = self.terrain.cover();
+        Ok(run_scatter_covered(self.preset, self.terrain.scene()?, dir, cover, joined, grown)?)
     }
 }

@@ -690,7 +690,7 @@ impl TerrainJob<'_> {
 impl StageJob for TerrainJob<'_> {
     type Report = TerrainStageReport;
     /// The main scene (what the snow, scatter and preview stages read).
-    type Artifact = Scene;
+    type Artifact = Terrained;
     const STAGE: Stage = Stage::Terrain;
 
     fn key(&self) -> Result<String, SceneBuildError> {
@@ -701,8 +701,9 @@ impl StageJob for TerrainJob<'_> {
         terrain_files(report)
     }
 
-    fn run(&self, dir: &Path) -> Result<(TerrainStageReport, Scene), SceneBuildError> {
-        Ok(run_terrain_memo(self.preset, self.terrain, dir, self.memo)?)
+    fn run(&self, dir: &Path) -> Result<(TerrainStageReport, Terrained), SceneBuildError> {
+        let (report, scene, cover) = run_terrain_covered(self.preset, self.terrain, dir, self.memo)?;
+        Ok((report, Terrained { scene, cover }))
     }
 }
 
@@ -768,6 +769,14 @@ pub fn run_terrain(
     run_terrain_memo(preset, t, scene_dir, None)
 }
 
+/// What a terrain stage that ran hands on: the main scene, and what grows on it (the ground cover
+/// its layers were baked with: every species' density on the layer map's texels, which the scatter
+/// stage's density maps hold for the species snow does not thin).
+pub struct Terrained {
+    pub scene: Scene,
+    pub cover: Option<std::sync::Arc<crate::terrain::vegetation::VegetationCover>>,
+}
+
 /// [`run_terrain`], taking the meshes from `memo` when it holds them (and storing them when not).
 pub fn run_terrain_memo(
     preset: &Preset,
@@ -775,6 +784,17 @@ pub fn run_terrain_memo(
     scene_dir: &Path,
     memo: Option<MeshMemo<'_>>,
 ) -> Result<(TerrainStageReport, Scene), StageError> {
+    run_terrain_covered(preset, t, scene_dir, memo).map(|(report, scene, _)| (report, scene))
+}
+
+/// [`run_terrain_memo`], also handing on the ground cover its layers were baked with.
+pub fn run_terrain_covered(
+    preset: &Preset,
+    t: &TerrainSettings,
+    scene_dir: &Path,
+    memo: Option<MeshMemo<'_>>,
+) -> Result<(TerrainStageReport, Scene, Option<std::sync::Arc<crate::terrain::vegetation::VegetationCover>>), StageError>
+{
     let f = fail(Stage::Terrain);
     // the settings or the map at fault: a chain the map cannot have, chunks or skirts it cannot take
     let input = bad_input(Stage::Terrain);
@@ -978,7 +998,7 @@ pub fn run_terrain_memo(
             total: t0.elapsed().as_secs_f64(),
         },
     };
-    Ok((report, scene))
+    Ok((report, scene, layers.cover.clone()))
 }
 
 /// Renames a terrain scene built under the name `from` as building it under `to` names it: the

@@ -95,3 +95,48 @@ fn a_species_edit_rebakes_each_bands_layers_from_its_kept_meshes() {
     assert_eq!(terrain_files(&d.join("fresh/bl")), expected);
     assert_eq!(&fs::read(&blob).unwrap(), bytes, "the damaged entry was replaced");
 }
+
+/// The cache's stage entry `<stage>-<32 hex>`.
+fn stage_entry(out: &Path, stage: &str) -> std::path::PathBuf {
+    fs::read_dir(out.join(".cache"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| {
+            let n = p.file_name().unwrap().to_string_lossy().to_string();
+            n.strip_prefix(stage)
+                .and_then(|k| k.strip_prefix('-'))
+                .is_some_and(|k| k.len() == 32 && k.bytes().all(|b| b.is_ascii_hexdigit()))
+        })
+        .unwrap_or_else(|| panic!("no {stage} entry"))
+}
+
+#[test]
+fn the_density_maps_from_the_terrains_cover_equal_those_weighed_by_the_scatter_stage() {
+    // a fresh terrain stage hands its ground cover on, and the scatter stage writes the density
+    // maps of the species snow does not thin from it; with the terrain served from the cache the
+    // scatter stage weighs them itself: the same bytes, banded map or not
+    for (name, text) in [
+        ("banded", preset(30.0)),
+        ("whole", preset(30.0).replace("size = 1025", "size = 257").replace("chunk = 128\n", "")),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        write(d, "p.toml", &text);
+        ok(&verdant_in(d, &["-q", "build", "p.toml", "--out", "o"]));
+        let scene = d.join("o/bl");
+        let density = scene.join("placements/density_0.png");
+        let first = fs::read(&density).unwrap();
+        assert!(!timing_cached(&scene, "terrain"));
+        // the scatter stage again, the terrain from the cache
+        fs::remove_dir_all(stage_entry(&d.join("o"), "scatter")).unwrap();
+        fs::remove_file(&density).unwrap();
+        ok(&verdant_in(d, &["-q", "build", "p.toml", "--out", "o"]));
+        assert!(timing_cached(&scene, "terrain") && !timing_cached(&scene, "scatter"), "{name}");
+        assert_eq!(fs::read(&density).unwrap(), first, "{name}: the density maps differ");
+        // (and not a map of nothing: the grass grows on part of the terrain only)
+        let img = image::load_from_memory(&first).unwrap().into_rgba8();
+        let grass: Vec<u8> = img.pixels().map(|p| p[0]).collect();
+        assert!(grass.iter().any(|&v| v == 255) && grass.iter().any(|&v| v < 255), "{name}");
+    }
+}
