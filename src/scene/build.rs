@@ -318,6 +318,8 @@ fn build_into(
         // positions as stored (f32), so a preview drawn after a cached scatter is the same; taken
         // before the view stage, which then does not hold the instances beside its own (76 MB of
         // 1.2 M grass instances on presets/worlds/highlands.toml)
+        // (the terrain's cover is read: not held through the view and preview stages)
+        terrain.release_cover();
         let layers = ran.artifact.map(|placed| placed.iter().map(preview_layer).collect());
         if wants(Stage::View) {
             let plants_key = plants.as_ref().map_or("", |(_, k)| k.as_str());

@@ -137,8 +137,9 @@ pub fn read_back(dir: &Path, rel: &Path) -> Result<Scene, SceneBuildError> {
 /// its first mesh file on first use (also a check that what was cached reads back).
 pub struct TerrainHandoff {
     cell: OnceCell<Scene>,
-    /// What grows on the in-memory scene (when the stage ran, and its scene is the one handed on).
-    cover: Option<std::sync::Arc<crate::terrain::vegetation::VegetationCover>>,
+    /// What grows on the in-memory scene (when the stage ran, and its scene is the one handed on),
+    /// until the scatter stage has read it ([`TerrainHandoff::release_cover`]).
+    cover: std::cell::RefCell<Option<std::sync::Arc<crate::terrain::vegetation::VegetationCover>>>,
     dir: PathBuf,
     /// The terrain's first mesh file, relative to `dir`.
     pub main: PathBuf,
@@ -167,14 +168,20 @@ impl TerrainHandoff {
             let _ = cell.set(ran.scene);
             cover = ran.cover;
         }
-        TerrainHandoff { cell, cover, dir: dir.to_path_buf(), main, key }
+        TerrainHandoff { cell, cover: std::cell::RefCell::new(cover), dir: dir.to_path_buf(), main, key }
     }
 
     /// The ground cover the terrain's layers were baked with, on the texels of its layer map over
     /// the scene's surface; `None` when the terrain stage was served from the cache (or nothing
-    /// grows): the scatter stage then computes the same weights itself.
-    pub fn cover(&self) -> Option<&crate::terrain::vegetation::VegetationCover> {
-        self.cover.as_deref()
+    /// grows), or once released: the scatter stage then computes the same weights itself.
+    pub fn cover(&self) -> Option<std::sync::Arc<crate::terrain::vegetation::VegetationCover>> {
+        self.cover.borrow().clone()
+    }
+
+    /// Lets the cover go (every species' weights over the layer map: 33 MB on the world preset),
+    /// so the stages after the scatter stage do not hold it.
+    pub fn release_cover(&self) {
+        self.cover.borrow_mut().take();
     }
 
     pub fn scene(&self) -> Result<&Scene, SceneBuildError> {

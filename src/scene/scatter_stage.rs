@@ -477,6 +477,6 @@ impl StageJob for ScatterJob<'_> {
         let cover = self.cover.map(|(m, _)| m);
         let joined = self.joined.map(|f| f()).transpose()?.flatten();
         let grown = self.terrain.cover();
-        Ok(run_scatter_covered(self.preset, self.terrain.scene()?, dir, cover, joined, grown)?)
+        Ok(run_scatter_covered(self.preset, self.terrain.scene()?, dir, cover, joined, grown.as_deref())?)
     }
 }
