@@ -76,7 +76,7 @@ impl<'a> MapRows<'a> {
 
     /// The four samples around continuous sample coordinates (s, t) (clamped to the map) and the
     /// fractions between them: ((i0, j0), (i1, j1), (fs, ft)).
-    pub(super) fn bilinear_cell(&self, s: f64, t: f64) -> ((usize, usize), (usize, usize), (f64, f64)) {
+    pub fn bilinear_cell(&self, s: f64, t: f64) -> ((usize, usize), (usize, usize), (f64, f64)) {
         let (w, h) = (self.hf.width, self.map_height);
         let (i0, j0) = (s.floor().max(0.0) as usize, t.floor().max(0.0) as usize);
         let (i0, j0) = (i0.min(w - 1), j0.min(h - 1));

@@ -72,12 +72,25 @@ pub fn bake(
     texel_rows: Range<usize>,
 ) -> BandLayers {
     let extent = crate::scene::ground_cover::terrain_extent(field.hf.width, field.map_height, cell_m);
-    let parts: Vec<(&[[f32; 3]], &[u32])> = surface.iter().map(|p| (&p.positions[..], &p.indices[..])).collect();
-    let index = SurfaceIndex::from_parts(&parts);
-    let cover = crate::scene::ground_cover::cover_rows(preset, &index, extent, map_px, texel_rows.clone());
+    let cover = locate_cover(preset, surface, extent, map_px, texel_rows.clone());
     let snow = crate::scene::terrain_stage::snow_rule(preset);
     let rows = bake_layer_rows(field, map_px, &snow, cover.as_ref(), texel_rows);
     BandLayers { cover, rows }
+}
+
+/// The ground cover's texel rows `texel_rows` (of a `map_px` grid over `extent`, the terrain's)
+/// located on `surface`: chunks whose faces alone cover those texel centres (a band's, at the
+/// main level). `None` when nothing grows.
+pub fn locate_cover(
+    preset: &Preset,
+    surface: &[Primitive],
+    extent: [f64; 4],
+    map_px: [u32; 2],
+    texel_rows: Range<usize>,
+) -> Option<VegetationCover> {
+    let parts: Vec<(&[[f32; 3]], &[u32])> = surface.iter().map(|p| (&p.positions[..], &p.indices[..])).collect();
+    let index = SurfaceIndex::from_parts(&parts);
+    crate::scene::ground_cover::cover_rows(preset, &index, extent, map_px, texel_rows)
 }
 
 /// The terrain's layers from every band's rows (in order): the whole cover (every species' rows

@@ -4,6 +4,7 @@
 //! The types here are the resolved settings every stage reads; they are written into the manifest
 //! as they are, so a build can be reproduced from its manifest alone.
 
+pub mod band_chunks;
 pub mod band_layers;
 pub mod build;
 pub mod cache;

@@ -193,7 +193,18 @@ fn wanted_rows(preset: &Preset, planned: &[(Unit, Work<'_>, Slot)], mine: &[usiz
     let mut bands: Vec<[u32; 2]> = Vec::new();
     for &k in mine {
         match &planned[k].1 {
-            Work::Band(_, b, plan, _, _) => bands.push(plan.read_rows(*b)),
+            Work::Band(t, b, plan, _, _) => {
+                if crate::scene::terrain_stage::chunks_by_band(t, plan) {
+                    bands.push(plan.chunk_rows(*b));
+                    // (the cover's rows beyond its lines may lie on bands of other shards)
+                    if !preset.species.is_empty() {
+                        let neighbours = crate::scene::band_chunks::cover_bands(plan, *b);
+                        bands.extend(neighbours.into_iter().filter(|n| n != b).map(|n| plan.rows(n)));
+                    }
+                } else {
+                    bands.push(plan.read_rows(*b));
+                }
+            }
             Work::Placements(_, g, plan, rows, _) => {
                 if let Ok((_, _, reached)) = placement_rows::reach(preset, plan, rows, *g) {
                     bands.extend(reached.into_iter().map(|b| plan.rows(b)));
@@ -205,6 +216,25 @@ fn wanted_rows(preset: &Preset, planned: &[(Unit, Work<'_>, Slot)], mine: &[usiz
     bands.sort_unstable();
     bands.dedup();
     bands
+}
+
+/// Band `k`'s chunk surfaces at the main level ([`placement_rows::band_surfaces`]) from
+/// `surfaces` when made already, else made from `source`'s rows and kept there.
+fn surfaces_for(
+    k: usize,
+    surfaces: &mut std::collections::HashMap<usize, std::rc::Rc<Vec<crate::mesh::Primitive>>>,
+    source: &mut BandRows,
+    t: &crate::scene::TerrainSettings,
+    key: &str,
+    bands: &BandPlan,
+) -> Result<std::rc::Rc<Vec<crate::mesh::Primitive>>, crate::scene::error::StageError> {
+    if let Some(made) = surfaces.get(&k) {
+        return Ok(made.clone());
+    }
+    let window = source.rows(bands.rows(k))?;
+    let made = std::rc::Rc::new(placement_rows::band_surfaces(t, key, bands, k, &window, None)?);
+    surfaces.insert(k, made.clone());
+    Ok(made)
 }
 
 /// What [`ShardRecord::built_by`] says of this binary.
@@ -299,21 +329,32 @@ pub fn build_shard(
                 Work::Placements(t, g, bands, rows, key) => {
                     let source =
                         band_rows.get_or_insert_with(|| BandRows::new(t, wanted_rows(preset, &planned, &mine)));
-                    let mut surfaces_of = |k: usize| {
-                        if let Some(made) = surfaces.get(&k) {
-                            return Ok(made.clone());
-                        }
-                        let window = source.rows(bands.rows(k))?;
-                        let made = std::rc::Rc::new(placement_rows::band_surfaces(t, key, bands, k, &window, None)?);
-                        surfaces.insert(k, made.clone());
-                        Ok(made)
-                    };
+                    let mut surfaces_of = |k: usize| surfaces_for(k, &mut surfaces, source, t, key, bands);
                     placement_rows::rows_unit(preset, bands, rows, *g, &mut surfaces_of, &cache, force)?;
                 }
                 Work::Species(s) => {
                     plants_stage::species_unit(preset, s, &tmp, Some(SpeciesMemo { cache: &cache, force }))?;
                 }
             }
+        }
+        // then each band's chunks with their vertex attributes, which read the cover's rows beyond
+        // its lines: its neighbours' layers, built above when they are this shard's
+        for &k in &mine {
+            let Work::Band(t, b, plan, key, grows) = &planned[k].1 else { continue };
+            if !crate::scene::terrain_stage::chunks_by_band(t, plan) {
+                continue;
+            }
+            let source = band_rows.get_or_insert_with(|| BandRows::new(t, wanted_rows(preset, &planned, &mine)));
+            say(&format!("shard {}/{}: the chunks of terrain band {b}", shard.index, shard.count));
+            let extent = crate::scene::ground_cover::terrain_extent(plan.width, plan.height(), plan.cell_m);
+            let source = std::cell::RefCell::new(source);
+            let mut rows_of = |rows: [u32; 2]| source.borrow_mut().rows(rows);
+            // (an edge row of a band this shard did not build: located on its surface)
+            let mut edge = |n: usize, rows: std::ops::Range<usize>| {
+                let made = surfaces_for(n, &mut surfaces, &mut source.borrow_mut(), t, key, plan)?;
+                Ok(crate::scene::band_layers::locate_cover(preset, &made, extent, plan.map_px(), rows))
+            };
+            crate::scene::band_chunks::make(grows, t, key, plan, *b, (&cache, force), &mut rows_of, &mut edge)?;
         }
         Ok(())
     })();

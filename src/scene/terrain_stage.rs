@@ -250,6 +250,14 @@ impl BandPlan {
         [a.saturating_sub(1), (b + 1).min(self.height() as u32 - 1)]
     }
 
+    /// The rows band `k`'s chunks with their vertex attributes read ([`crate::scene::band_chunks`]):
+    /// [`BandPlan::read_rows`] and one more below (a vertex on the band's last row weighs its layers
+    /// by the bilinear normal there, which reads the normals of the row below it).
+    pub fn chunk_rows(&self, k: usize) -> [u32; 2] {
+        let [a, b] = self.rows(k);
+        [a.saturating_sub(1), (b + 2).min(self.height() as u32 - 1)]
+    }
+
     /// The size of the terrain's texture maps (base colour, layer weights, normal maps).
     pub fn map_px(&self) -> [u32; 2] {
         [crate::terrain::layers::map_px(self.width), crate::terrain::layers::map_px(self.height())]
@@ -473,6 +481,13 @@ pub fn layers_by_band(t: &TerrainSettings, plan: &BandPlan) -> bool {
     t.chunk.is_some() && plan.normal_rows().is_some()
 }
 
+/// Whether a terrain planned in bands has its chunks built by band (with their vertex
+/// attributes, [`crate::scene::band_chunks`]; a shard's band unit keeps them): when it bakes its
+/// layers by band and has no base (the base closes the whole map).
+pub fn chunks_by_band(t: &TerrainSettings, plan: &BandPlan) -> bool {
+    layers_by_band(t, plan) && t.base_m.is_none()
+}
+
 /// Cache key of band `k`'s layer rows ([`crate::scene::band_layers::layers_key`]).
 pub fn band_layers_key(grows: &Grows, mesh_key: &str, plan: &BandPlan, k: usize) -> String {
     crate::scene::band_layers::layers_key(grows, &band_key(mesh_key, plan.rows(k)))
@@ -486,6 +501,10 @@ pub fn band_entries(grows: &Grows, t: &TerrainSettings, mesh_key: &str, plan: &B
     if layers_by_band(t, plan) {
         let key = band_layers_key(grows, mesh_key, plan, k);
         entries.push(Cache::entry_name(crate::scene::band_layers::BAND_LAYERS_STAGE, &key));
+    }
+    if chunks_by_band(t, plan) {
+        let key = crate::scene::band_chunks::chunks_key_of(grows, mesh_key, plan, k);
+        entries.push(Cache::entry_name(crate::scene::band_chunks::BAND_CHUNKS_STAGE, &key));
     }
     entries
 }
@@ -564,6 +583,9 @@ struct Banded {
     normals: BandedNormals,
     /// The material layers joined from the bands' rows (when the plan bakes them by band).
     layers: Option<crate::terrain::layers::TerrainLayers>,
+    /// Every band's chunks in the cache (a sharded build's: their entries' keys, in band order),
+    /// when it holds them all.
+    chunks: Option<Vec<String>>,
 }
 
 fn banded_meshes(
@@ -608,8 +630,18 @@ fn banded_meshes(
         .map(|k| band_piece(&key, t, &mut rows_of, plan, k, cache))
         .collect::<Result<Vec<_>, _>>()?;
     // each band's rows of the layers, joined (when the plan bakes them by band)
+    let grows = Grows::of(preset);
+    let chunks = match cache {
+        Some((c, false)) if chunks_by_band(t, plan) => {
+            let keys: Vec<String> = (0..plan.band_count())
+                .map(|k| crate::scene::band_chunks::chunks_key_of(&grows, &key, plan, k))
+                .collect();
+            let stage = crate::scene::band_chunks::BAND_CHUNKS_STAGE;
+            keys.iter().all(|k| c.lookup(stage, k).is_some()).then_some(keys)
+        }
+        _ => None,
+    };
     let layers = if layers_by_band(t, plan) {
-        let grows = Grows::of(preset);
         let mut parts = Vec::with_capacity(pieces.len());
         for (k, piece) in pieces.iter().enumerate() {
             parts.extend(band_layers(&grows, t, &key, plan, k, piece, &mut rows_of, None, cache)?);
@@ -644,7 +676,7 @@ fn banded_meshes(
     let main = (levels[main_level].mesh.clone(), false, levels[main_level].stats);
     levels.truncate(t.lods.len());
     crate::lod::assign_switch_distances(&mut levels, &preset.lod);
-    Ok(Banded { chain: levels, main, normals, layers })
+    Ok(Banded { chain: levels, main, normals, layers, chunks })
 }
 
 /// Key of the terrain's meshes: what meshing reads (not the formats, snow or species).
@@ -821,20 +853,35 @@ pub fn run_terrain_covered(
     // The LoD chain meshes its levels in parallel; when one of them is the main mesh's bound,
     // the main mesh is taken from the chain instead of being computed twice.
     let t1 = Instant::now();
-    let (mut chain, remembered_main, band_normals, band_layers) = match (remembered, &plan) {
+    let (mut chain, remembered_main, band_normals, band_layers, band_chunks) = match (remembered, &plan) {
         (_, Some(plan)) => {
             let b = banded_meshes(preset, t, &hf, plan, band_memo)?;
-            (b.chain, Some(b.main), b.normals, b.layers)
+            (b.chain, Some(b.main), b.normals, b.layers, b.chunks)
         }
-        (Some(m), None) => (m.chain, Some(m.main), None, None),
-        (None, None) if t.lods.is_empty() => (Vec::new(), None, None, None),
+        (Some(m), None) => (m.chain, Some(m.main), None, None, None),
+        (None, None) if t.lods.is_empty() => (Vec::new(), None, None, None, None),
         (None, None) => (
             terrain_lod_chain_in_bands(&hf, &t.lods, t.max_triangles, t.max_vertices, chunk_cells, &preset.lod)
                 .map_err(|e| input(e.to_string()))?,
             None,
             None,
             None,
+            None,
         ),
+    };
+    // bound k's scene named `name` from the bands' chunks when the cache holds them (`None` when
+    // one does not read back: the scene is then built from the map)
+    let assembled = |bound: f64, name: &str| -> Option<Scene> {
+        let (Some(plan), Some(keys), Some(cache), Some(pitch)) = (&plan, &band_chunks, band_memo, t.chunk) else {
+            return None;
+        };
+        let level = plan.bounds.iter().position(|&b| b == bound)?;
+        let mut chunks = Vec::new();
+        for key in keys {
+            let blob = crate::scene::band_chunks::kept_blob(cache.cache, key)?;
+            chunks.extend(crate::scene::band_chunks::level_of(&blob, level)?);
+        }
+        crate::terrain::build::assemble_chunks(name, plan.width, plan.height(), pitch, chunks).ok()
     };
     // bound k's normal map, put together from the bands' rows
     let normal_rows = |bound: f64| -> Result<Option<crate::terrain::normal_map::TexelRows>, StageError> {
@@ -878,9 +925,10 @@ pub fn run_terrain_covered(
         &build_opts("terrain".into(), t.max_error_m),
         &source_label(t),
         ready,
-        match band_layers {
-            Some(layers) => LayersFrom::Baked(Box::new(layers)),
-            None => LayersFrom::Bake(Some(&cover)),
+        match (band_layers, assembled(t.max_error_m, "terrain")) {
+            (Some(layers), Some(scene)) => LayersFrom::Assembled(Box::new(layers), Box::new(scene)),
+            (Some(layers), None) => LayersFrom::Baked(Box::new(layers)),
+            (None, _) => LayersFrom::Bake(Some(&cover)),
         },
         normal_rows(t.max_error_m)?,
     )
@@ -909,13 +957,25 @@ pub fn run_terrain_covered(
     // (a shared level's meshing and measuring time is counted under `lods`)
     let [mesh_s, analyze_s, build_s] = meshed.seconds;
     let Meshed { mut scene, layers, .. } = meshed;
-    let textured = |mut scene: Scene,
+    // a level's scene: from the bands' chunks (weighed already), else built from the map
+    let textured = |bound: f64,
                     name: &str,
-                    rows: Option<crate::terrain::normal_map::TexelRows>|
+                    mesh: &crate::terrain::sample_mesh::SampleMesh|
      -> Result<(Scene, NormalMapReport), StageError> {
-        layers
-            .texture(&mut scene, &hf, "terrain")
-            .map_err(|e| f(format!("cannot encode the terrain's base colour: {e}")))?;
+        let rows = normal_rows(bound)?;
+        let colour = |e| f(format!("cannot encode the terrain's base colour: {e}"));
+        let mut scene = match assembled(bound, name) {
+            Some(mut scene) => {
+                layers.put_base_color(&mut scene, "terrain").map_err(colour)?;
+                scene
+            }
+            None => {
+                let mut scene =
+                    build_scene(&hf, mesh, &build_opts(name.to_string(), bound)).map_err(|e| input(e.to_string()))?;
+                layers.texture(&mut scene, &hf, "terrain").map_err(colour)?;
+                scene
+            }
+        };
         let normal = match rows {
             Some(rows) => put_normal_map(&mut scene, name, layers.report.map_px, rows),
             None => bake_normal_map(&hf, &mut scene, name, layers.report.map_px),
@@ -944,12 +1004,7 @@ pub fn run_terrain_covered(
             rename_terrain(&mut scene, &stem, "terrain");
             (files?, figures.normal_map.clone())
         } else {
-            let (lod_scene, normal_map) = textured(
-                build_scene(&hf, &level.mesh, &build_opts(stem.clone(), level.max_error_requested_m))
-                    .map_err(|e| input(e.to_string()))?,
-                &stem,
-                normal_rows(level.max_error_requested_m)?,
-            )?;
+            let (lod_scene, normal_map) = textured(level.max_error_requested_m, &stem, &level.mesh)?;
             (write_formats(preset, &lod_scene, scene_dir, &stem)?, normal_map)
         };
         lods.push(LodInfo {

@@ -207,37 +207,37 @@ pub fn join_normals(parts: &[&BandNormals], map_px: [u32; 2]) -> Result<TexelRow
 }
 
 /// Little-endian words, as a piece is kept in the cache.
-struct Writer(Vec<u8>);
+pub(crate) struct Writer(pub Vec<u8>);
 
 impl Writer {
-    fn u64(&mut self, v: u64) {
+    pub fn u64(&mut self, v: u64) {
         self.0.extend(v.to_le_bytes());
     }
-    fn f64(&mut self, v: f64) {
+    pub fn f64(&mut self, v: f64) {
         self.u64(v.to_bits());
     }
-    fn u32s(&mut self, v: impl ExactSizeIterator<Item = u32>) {
+    pub fn u32s(&mut self, v: impl ExactSizeIterator<Item = u32>) {
         self.u64(v.len() as u64);
         for x in v {
             self.0.extend(x.to_le_bytes());
         }
     }
-    fn u64s(&mut self, v: &[u64]) {
+    pub fn u64s(&mut self, v: &[u64]) {
         self.u64(v.len() as u64);
         for &x in v {
             self.u64(x);
         }
     }
-    fn bytes(&mut self, v: &[u8]) {
+    pub fn bytes(&mut self, v: &[u8]) {
         self.u64(v.len() as u64);
         self.0.extend_from_slice(v);
     }
 }
 
-struct Reader<'a>(&'a [u8]);
+pub(crate) struct Reader<'a>(pub &'a [u8]);
 
 impl Reader<'_> {
-    fn take(&mut self, n: usize) -> Option<&[u8]> {
+    pub fn take(&mut self, n: usize) -> Option<&[u8]> {
         if self.0.len() < n {
             return None;
         }
@@ -245,26 +245,26 @@ impl Reader<'_> {
         self.0 = rest;
         Some(head)
     }
-    fn u64(&mut self) -> Option<u64> {
+    pub fn u64(&mut self) -> Option<u64> {
         Some(u64::from_le_bytes(self.take(8)?.try_into().ok()?))
     }
-    fn f64(&mut self) -> Option<f64> {
+    pub fn f64(&mut self) -> Option<f64> {
         self.u64().map(f64::from_bits)
     }
-    fn len(&mut self, unit: usize) -> Option<usize> {
+    pub fn len(&mut self, unit: usize) -> Option<usize> {
         let n = usize::try_from(self.u64()?).ok()?;
         // never more than the bytes left can hold
         (n.checked_mul(unit)? <= self.0.len()).then_some(n)
     }
-    fn u32s(&mut self) -> Option<Vec<u32>> {
+    pub fn u32s(&mut self) -> Option<Vec<u32>> {
         let n = self.len(4)?;
         Some(self.take(4 * n)?.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
     }
-    fn u64s(&mut self) -> Option<Vec<u64>> {
+    pub fn u64s(&mut self) -> Option<Vec<u64>> {
         let n = self.len(8)?;
         (0..n).map(|_| self.u64()).collect()
     }
-    fn bytes(&mut self) -> Option<Vec<u8>> {
+    pub fn bytes(&mut self) -> Option<Vec<u8>> {
         let n = self.len(1)?;
         Some(self.take(n)?.to_vec())
     }

@@ -130,16 +130,7 @@ pub fn build_scene(hf: &Heightfield, mesh: &SampleMesh, opts: &BuildOptions) -> 
         Some(pitch) => {
             let grid = ChunkGrid::new(hf.width, hf.height, pitch);
             let parts = grid.partition(&mesh.vertices, &triangles);
-            scene.nodes.push(Node { name: opts.name.clone(), ..Node::default() });
-            let parent = scene.nodes.len() - 1;
-            scene.roots.push(parent);
-            let child = |scene: &mut Scene, mesh: Mesh, extras| {
-                let name = mesh.name.clone();
-                scene.meshes.push(mesh);
-                scene.nodes.push(Node { name, mesh: Some(scene.meshes.len() - 1), extras, ..Node::default() });
-                let node = scene.nodes.len() - 1;
-                scene.nodes[parent].children.push(node);
-            };
+            let parent = chunk_root(&mut scene, &opts.name);
             // the chunks' surfaces in parallel (each task its own vertex slots), then put in
             // chunk order; the first failing chunk in that order is the error, as one by one
             use rayon::prelude::*;
@@ -158,14 +149,74 @@ pub fn build_scene(hf: &Heightfield, mesh: &SampleMesh, opts: &BuildOptions) -> 
                 )
                 .collect();
             for (&(ci, cj), prim) in order.iter().zip(prims) {
-                let (lo, hi) = grid.sample_rect(ci, cj);
-                let extras = json!({ "chunk": [ci, cj], "sample_min": lo, "sample_max": hi });
-                child(&mut scene, finish(format!("{}_chunk_{ci}_{cj}", opts.name), vec![prim?])?, Some(extras));
+                let mesh = finish(String::new(), vec![prim?])?;
+                add_chunk(&mut scene, parent, &grid, &opts.name, [ci, cj], mesh.primitives);
             }
             if let Some(base) = base {
-                child(&mut scene, finish(format!("{}_base", opts.name), vec![base])?, None);
+                add_child(&mut scene, parent, finish(format!("{}_base", opts.name), vec![base])?, None);
             }
         }
+    }
+    Ok(scene)
+}
+
+/// The root node `name` of a chunked terrain scene (no mesh; the chunks are its children).
+fn chunk_root(scene: &mut Scene, name: &str) -> usize {
+    scene.nodes.push(Node { name: name.to_string(), ..Node::default() });
+    let parent = scene.nodes.len() - 1;
+    scene.roots.push(parent);
+    parent
+}
+
+/// Adds `mesh` to `scene` as a child node of `parent`, of the mesh's name.
+fn add_child(scene: &mut Scene, parent: usize, mesh: Mesh, extras: Option<serde_json::Value>) {
+    let name = mesh.name.clone();
+    scene.meshes.push(mesh);
+    scene.nodes.push(Node { name, mesh: Some(scene.meshes.len() - 1), extras, ..Node::default() });
+    let node = scene.nodes.len() - 1;
+    scene.nodes[parent].children.push(node);
+}
+
+/// Adds chunk `[ci, cj]` of `grid` (its primitives built and ordered already) as a child of
+/// `parent`: its mesh and node `{name}_chunk_<ci>_<cj>`, the node's extras its sample rectangle.
+fn add_chunk(
+    scene: &mut Scene,
+    parent: usize,
+    grid: &ChunkGrid,
+    name: &str,
+    [ci, cj]: [usize; 2],
+    prims: Vec<Primitive>,
+) {
+    let (lo, hi) = grid.sample_rect(ci, cj);
+    let extras = json!({ "chunk": [ci, cj], "sample_min": lo, "sample_max": hi });
+    let mesh = Mesh { name: format!("{name}_chunk_{ci}_{cj}"), primitives: prims, extras: None };
+    add_child(scene, parent, mesh, Some(extras));
+}
+
+/// A chunked terrain scene named `name` (no base) of a `width` × `height` map in chunks of
+/// `pitch` samples, from its chunks' surface primitives as [`band_chunks`] builds them (in chunk
+/// order, row-major: every band's in band order), with whatever attributes they were given: the
+/// scene [`build_scene`] builds of the whole map, node for node. Errors on chunks out of order
+/// or outside the grid.
+pub fn assemble_chunks(
+    name: &str,
+    width: usize,
+    height: usize,
+    pitch: usize,
+    chunks: impl IntoIterator<Item = ([usize; 2], Primitive)>,
+) -> Result<Scene, BuildError> {
+    check_options(&BuildOptions { chunk_samples: Some(pitch), name: name.to_string(), ..BuildOptions::default() })?;
+    let grid = ChunkGrid::new(width, height, pitch);
+    let mut scene = Scene { name: name.to_string(), materials: vec![terrain_material()], ..Scene::default() };
+    let parent = chunk_root(&mut scene, name);
+    let mut last: Option<usize> = None;
+    for ([ci, cj], prim) in chunks {
+        let at = cj * grid.nx + ci;
+        if ci >= grid.nx || cj >= grid.ny || last.is_some_and(|l| l >= at) {
+            return Err(BuildError::BandMismatch(format!("chunk ({ci}, {cj}) out of order or outside the grid")));
+        }
+        last = Some(at);
+        add_chunk(&mut scene, parent, &grid, name, [ci, cj], vec![prim]);
     }
     Ok(scene)
 }

@@ -301,6 +301,10 @@ pub enum LayersFrom<'a> {
     Bake(Option<&'a CoverOf<'a>>),
     /// Baked already (a terrain meshed in bands: each band baked its rows).
     Baked(Box<TerrainLayers>),
+    /// Baked already, and the scene built with their vertex attributes (a terrain meshed in bands
+    /// whose chunks the bands built: [`crate::terrain::build::assemble_chunks`]); only the base
+    /// colour and normal map are put on it.
+    Assembled(Box<TerrainLayers>, Box<Scene>),
 }
 
 /// The one path from samples to a textured terrain scene: meshes `hf` as `settings` ask (or takes
@@ -343,14 +347,24 @@ pub fn mesh_and_build(
         });
     }
     let t = Instant::now();
-    let mut scene = build_scene(hf, &mesh, build)?;
-    let layers = match layers {
-        LayersFrom::Baked(layers) => *layers,
+    let (mut scene, layers) = match layers {
+        LayersFrom::Assembled(layers, scene) => {
+            let mut scene = *scene;
+            layers.put_base_color(&mut scene, &build.name).map_err(JobError::Texture)?;
+            (scene, *layers)
+        }
+        LayersFrom::Baked(layers) => {
+            let mut scene = build_scene(hf, &mesh, build)?;
+            layers.texture(&mut scene, hf, &build.name).map_err(JobError::Texture)?;
+            (scene, *layers)
+        }
         LayersFrom::Bake(cover) => {
-            bake_layers_with(hf, &build.snow, cover.and_then(|f| f(&scene)).map(std::sync::Arc::new))
+            let mut scene = build_scene(hf, &mesh, build)?;
+            let layers = bake_layers_with(hf, &build.snow, cover.and_then(|f| f(&scene)).map(std::sync::Arc::new));
+            layers.texture(&mut scene, hf, &build.name).map_err(JobError::Texture)?;
+            (scene, layers)
         }
     };
-    layers.texture(&mut scene, hf, &build.name).map_err(JobError::Texture)?;
     // (the normal map's rows baked already when the terrain's bands baked them)
     let normal_map = match normal_rows {
         Some(rows) => put_normal_map(&mut scene, &build.name, layers.report.map_px, rows),

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::bake::raster::png::{encode_rgba8_png, rgba8};
 use crate::heightfield::{Heightfield, MapRows};
-use crate::mesh::{Scene, Texture};
+use crate::mesh::{Primitive, Scene, Texture};
 use crate::snow::CoverSettings;
 use crate::terrain::vegetation::VegetationCover;
 
@@ -197,41 +197,57 @@ fn weights_at(field: &MapRows, snow: &SnowRule, s: f64, t: f64, soil: impl Fn([f
 /// Sets [`LAYER_WEIGHTS_ATTRIBUTE`] on every primitive of `scene` and, with a vegetation cover,
 /// [`LAYER_WEIGHTS_1_ATTRIBUTE`] and [`SURFACE_ATTRIBUTE`] (see [`TerrainLayers::texture`]).
 fn vertex_weights(scene: &mut Scene, hf: &Heightfield, snow: &SnowRule, cover: Option<&VegetationCover>) {
-    use crate::mesh::CustomAttribute;
-    use rayon::prelude::*;
-    let cell = hf.cell_size_m;
     let field = MapRows::whole(hf);
     for p in scene.meshes.iter_mut().flat_map(|m| m.primitives.iter_mut()) {
-        let per_vertex: Vec<([f32; 4], [f32; 4], [f32; 4])> = p
-            .positions
-            .par_iter()
-            .map(|q| {
-                let soil = |p: [f64; 3]| cover.map_or(0.0, |c| c.soil_share(p[0], p[2]));
-                let w = weights_at(&field, snow, q[0] as f64 / cell, q[2] as f64 / cell, soil);
-                let bytes = unit_byte_weights(w).map(|k| k as f32 / 255.0);
-                let texture = (0..w.len()).fold(0, |best, k| if w[k] > w[best] { k } else { best });
-                let surface = cover.map_or([0.0; 4], |c| {
-                    let at = c.at(q[0] as f64, q[2] as f64);
-                    [texture as f32, at.dominant as f32, at.density as f32, at.height_m as f32]
-                });
-                ([bytes[0], bytes[1], bytes[2], bytes[3]], [bytes[4], 0.0, 0.0, 0.0], surface)
-            })
-            .collect();
-        let names = [LAYER_WEIGHTS_ATTRIBUTE, LAYER_WEIGHTS_1_ATTRIBUTE, SURFACE_ATTRIBUTE];
-        p.custom.retain(|c| !names.contains(&c.name.as_str()));
-        let values = per_vertex.iter().map(|v| v.0).collect();
-        p.custom.push(CustomAttribute { name: LAYER_WEIGHTS_ATTRIBUTE.into(), values, unit_bytes: true, range: None });
-        if cover.is_some() {
-            let values = per_vertex.iter().map(|v| v.1).collect();
-            p.custom.push(CustomAttribute {
-                name: LAYER_WEIGHTS_1_ATTRIBUTE.into(),
-                values,
-                unit_bytes: true,
-                range: None,
+        weigh_vertices(p, &field, snow, cover);
+    }
+}
+
+/// The sample rows [`weigh_vertices`] reads for a vertex at row coordinate `t` (z / cell) of
+/// `field`'s map: those its bilinear normal reads (the rows around `t`, each with its neighbours).
+pub fn weighing_reach(field: &MapRows, t: f64) -> std::ops::RangeInclusive<usize> {
+    let ((_, j0), (_, j1), _) = field.bilinear_cell(0.0, t);
+    *field.normal_reach(j0).start()..=*field.normal_reach(j1).end()
+}
+
+/// Sets [`LAYER_WEIGHTS_ATTRIBUTE`] on primitive `p` of a terrain on `field`'s map and, with a
+/// vegetation cover, [`LAYER_WEIGHTS_1_ATTRIBUTE`] and [`SURFACE_ATTRIBUTE`]: each vertex weighed
+/// from the surface under it (x, z → sample x / cell, z / cell). `field` must hold the rows
+/// [`weighing_reach`] gives for the vertices' rows, and `cover` the texel rows around them (a
+/// cover of some rows weighs 0 where it holds none: see [`VegetationCover::holds_point`]).
+pub fn weigh_vertices(p: &mut Primitive, field: &MapRows, snow: &SnowRule, cover: Option<&VegetationCover>) {
+    use crate::mesh::CustomAttribute;
+    use rayon::prelude::*;
+    let cell = field.hf.cell_size_m;
+    let per_vertex: Vec<([f32; 4], [f32; 4], [f32; 4])> = p
+        .positions
+        .par_iter()
+        .map(|q| {
+            let soil = |p: [f64; 3]| cover.map_or(0.0, |c| c.soil_share(p[0], p[2]));
+            let w = weights_at(field, snow, q[0] as f64 / cell, q[2] as f64 / cell, soil);
+            let bytes = unit_byte_weights(w).map(|k| k as f32 / 255.0);
+            let texture = (0..w.len()).fold(0, |best, k| if w[k] > w[best] { k } else { best });
+            let surface = cover.map_or([0.0; 4], |c| {
+                let at = c.at(q[0] as f64, q[2] as f64);
+                [texture as f32, at.dominant as f32, at.density as f32, at.height_m as f32]
             });
-            let values = per_vertex.iter().map(|v| v.2).collect();
-            p.custom.push(CustomAttribute { name: SURFACE_ATTRIBUTE.into(), values, unit_bytes: false, range: None });
-        }
+            ([bytes[0], bytes[1], bytes[2], bytes[3]], [bytes[4], 0.0, 0.0, 0.0], surface)
+        })
+        .collect();
+    let names = [LAYER_WEIGHTS_ATTRIBUTE, LAYER_WEIGHTS_1_ATTRIBUTE, SURFACE_ATTRIBUTE];
+    p.custom.retain(|c| !names.contains(&c.name.as_str()));
+    let values = per_vertex.iter().map(|v| v.0).collect();
+    p.custom.push(CustomAttribute { name: LAYER_WEIGHTS_ATTRIBUTE.into(), values, unit_bytes: true, range: None });
+    if cover.is_some() {
+        let values = per_vertex.iter().map(|v| v.1).collect();
+        p.custom.push(CustomAttribute {
+            name: LAYER_WEIGHTS_1_ATTRIBUTE.into(),
+            values,
+            unit_bytes: true,
+            range: None,
+        });
+        let values = per_vertex.iter().map(|v| v.2).collect();
+        p.custom.push(CustomAttribute { name: SURFACE_ATTRIBUTE.into(), values, unit_bytes: false, range: None });
     }
 }
 
@@ -431,6 +447,12 @@ impl TerrainLayers {
     /// vertices take their border's).
     pub fn texture(&self, scene: &mut Scene, hf: &Heightfield, name: &str) -> Result<(), String> {
         vertex_weights(scene, hf, &self.snow, self.cover.as_deref());
+        self.put_base_color(scene, name)
+    }
+
+    /// The base colour on every terrain material of `scene` ([`TerrainLayers::texture`] without
+    /// the vertex attributes: for a scene whose chunks were weighed already).
+    pub fn put_base_color(&self, scene: &mut Scene, name: &str) -> Result<(), String> {
         let [w, h] = self.report.map_px;
         let png = self.albedo_png.get_or_init(|| encode_rgba8_png(&self.albedo_rgba8, w, h)).clone()?;
         let texture = Texture { name: format!("{name}_base_color"), png };

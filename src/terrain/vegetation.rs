@@ -69,21 +69,93 @@ impl VegetationCover {
         self.species.iter().any(|s| s.ground == Ground::Grass)
     }
 
-    /// A species' weight at world (x, z): bilinear between texel centres, clamped at the borders
-    /// (0 from a cover of some rows).
-    fn weight(&self, s: &SpeciesCover, x: f64, z: f64) -> f64 {
-        let [w, h] = self.size.map(|v| v as usize);
-        if w == 0 || h == 0 || s.weights.len() != w * h || self.first_row != 0 {
-            return 0.0;
+    /// The texel rows the cover holds.
+    pub fn rows(&self) -> std::ops::Range<usize> {
+        let w = (self.size[0] as usize).max(1);
+        let held = self.species.first().map_or(0, |s| s.weights.len() / w);
+        self.first_row..self.first_row + held
+    }
+
+    /// The texel rows `rows` of this cover (`None` when it does not hold them all).
+    pub fn take_rows(&self, rows: std::ops::Range<usize>) -> Option<VegetationCover> {
+        let held = self.rows();
+        if rows.start < held.start || rows.end > held.end || rows.start > rows.end {
+            return None;
         }
+        let w = self.size[0] as usize;
+        let at = (rows.start - held.start) * w..(rows.end - held.start) * w;
+        let species = self
+            .species
+            .iter()
+            .map(|s| SpeciesCover { weights: s.weights[at.clone()].to_vec(), ..s.clone() })
+            .collect();
+        Some(VegetationCover { species, first_row: rows.start, ..self.clone_empty() })
+    }
+
+    /// Consecutive rows of one cover, put together in order (`None` when they are not: another
+    /// grid, extent or species, or a row missing or twice).
+    pub fn stack(parts: &[VegetationCover]) -> Option<VegetationCover> {
+        let first = parts.first()?;
+        let mut out = VegetationCover { first_row: first.first_row, ..first.clone_empty() };
+        let mut next = first.first_row;
+        for p in parts {
+            let fits = p.extent == out.extent && p.size == out.size && p.species.len() == out.species.len();
+            let figures_fit = p.species.iter().zip(&out.species).all(|(a, b)| {
+                (a.ground, a.max_density, a.height_m, a.footprint_m2)
+                    == (b.ground, b.max_density, b.height_m, b.footprint_m2)
+            });
+            if !fits || !figures_fit || p.first_row != next {
+                return None;
+            }
+            for (o, s) in out.species.iter_mut().zip(&p.species) {
+                o.weights.extend_from_slice(&s.weights);
+            }
+            next = p.rows().end;
+        }
+        Some(out)
+    }
+
+    /// This cover's grid and species without their weights.
+    fn clone_empty(&self) -> VegetationCover {
+        VegetationCover {
+            extent: self.extent,
+            size: self.size,
+            species: self.species.iter().map(|s| SpeciesCover { weights: Vec::new(), ..s.clone() }).collect(),
+            first_row: self.first_row,
+        }
+    }
+
+    /// Where world (x, z) falls between texel centres: the texel columns and rows around it and
+    /// the fractions between them (clamped at the borders).
+    fn texel_cell(&self, x: f64, z: f64) -> ([usize; 2], [usize; 2], [f64; 2]) {
+        let [w, h] = self.size.map(|v| (v as usize).max(1));
         let [x0, z0, x1, z1] = self.extent;
         let fx = ((x - x0) / (x1 - x0) * w as f64 - 0.5).clamp(0.0, (w - 1) as f64);
         let fz = ((z - z0) / (z1 - z0) * h as f64 - 0.5).clamp(0.0, (h - 1) as f64);
         let (fx, fz) = (if fx.is_finite() { fx } else { 0.0 }, if fz.is_finite() { fz } else { 0.0 });
         let (i, j) = (fx.floor() as usize, fz.floor() as usize);
-        let (i1, j1) = ((i + 1).min(w - 1), (j + 1).min(h - 1));
-        let (a, b) = (fx - i as f64, fz - j as f64);
-        let v = |i: usize, j: usize| s.weights[j * w + i] as f64;
+        ([i, (i + 1).min(w - 1)], [j, (j + 1).min(h - 1)], [fx - i as f64, fz - j as f64])
+    }
+
+    /// Whether the cover holds the texel rows [`VegetationCover::at`] reads at world (x, z) (a
+    /// whole cover always does; a cover of some rows, those around its rows' centres).
+    pub fn holds_point(&self, x: f64, z: f64) -> bool {
+        let (_, [j, j1], _) = self.texel_cell(x, z);
+        let rows = self.rows();
+        rows.contains(&j) && rows.contains(&j1)
+    }
+
+    /// A species' weight at world (x, z): bilinear between texel centres, clamped at the borders
+    /// (0 where the cover does not hold the rows around it: see [`VegetationCover::holds_point`]).
+    fn weight(&self, s: &SpeciesCover, x: f64, z: f64) -> f64 {
+        let [w, h] = self.size.map(|v| v as usize);
+        let rows = self.rows();
+        if w == 0 || h == 0 || s.weights.len() != w * rows.len() || !self.holds_point(x, z) {
+            return 0.0;
+        }
+        let ([i, i1], [j, j1], [a, b]) = self.texel_cell(x, z);
+        let first = self.first_row;
+        let v = |i: usize, j: usize| s.weights[(j - first) * w + i] as f64;
         let top = v(i, j) * (1.0 - a) + v(i1, j) * a;
         let bottom = v(i, j1) * (1.0 - a) + v(i1, j1) * a;
         (top * (1.0 - b) + bottom * b).clamp(0.0, 1.0)
@@ -170,7 +242,12 @@ mod tests {
         assert_eq!(cover.at_texel(2, 0).grass, 0.0, "outside the grid");
         let rows = VegetationCover { size: [2, 3], first_row: 2, ..cover.clone() };
         assert_eq!((rows.at_texel(1, 2).grass, rows.at_texel(1, 1).grass), (1.0, 0.0));
-        assert_eq!(rows.at(3.0, 1.0).grass, 0.0, "a point reads a whole cover only");
+        // a point reads a cover of some rows where it holds the rows around it, else 0
+        assert!(!rows.holds_point(3.0, 1.0));
+        assert_eq!(rows.at(3.0, 1.0).grass, 0.0, "row 1 is not held");
+        assert!(rows.holds_point(3.0, 2.0));
+        assert_eq!(rows.at(3.0, 2.0).grass, 1.0, "row 2 (clamped) is");
+        assert_eq!(rows.rows(), 2..3);
         assert_eq!(cover.at(3.0, 1.0).grass, 1.0);
         assert!((cover.at(2.0, 1.0).grass - 0.5).abs() < 1e-12);
         // clamped outside the centres

@@ -314,6 +314,7 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
         let layers = entries_in(&single, "terrain-band-layers-");
         assert_eq!(entries_in(&single, "terrain-band-") - layers, 3, "a single build keeps its three bands as pieces");
         assert_eq!(layers, 3, "and each band's rows of the layers");
+        assert_eq!(entries_in(&single, "terrain-band-chunks-"), 0, "its chunks are built from the map");
         for &n in splits {
             let mut shards = run_shards(cwd, &format!("shards{n}"), n);
             let mut built = Vec::new();
@@ -349,6 +350,9 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
                     .filter(|e| e.starts_with("terrain"))
                     .collect::<Vec<_>>();
                 assert!(terrain_entries.iter().all(|e| e.starts_with("terrain-band-")), "{terrain_entries:?}");
+                // (each of its bands: the meshes, the layers' rows and the chunks)
+                let chunks = terrain_entries.iter().filter(|e| e.starts_with("terrain-band-chunks-")).count();
+                assert_eq!(3 * chunks, terrain_entries.len(), "{terrain_entries:?}");
             }
             built.sort();
             assert_eq!(built.len(), 8, "every unit built once: {built:?}");
@@ -357,9 +361,10 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
             ok(&merge(cwd, &shards, &out));
             assert_same_tree(&cwd.join("single/world"), &cwd.join(&out).join("world"));
             if n == 2 && source == procedural {
-                // the merge takes the placements from the units: one unit's first rock turned
-                // (in copies of the shards) turns it in the merged table, once its shard's record
-                // says it wrote those bytes (until then the merge refuses the entry)
+                // the merge takes the placements and the terrain's chunks from the units: one
+                // unit's first rock turned and a band's first chunk vertex moved (in copies of
+                // the shards) turn them in the merged table and terrain, once their shards'
+                // records say they wrote those bytes (until then the merge refuses the entries)
                 let mut tampered = Vec::new();
                 for (k, s) in shards.iter().enumerate() {
                     let copy = cwd.join(format!("tampered/{k}"));
@@ -367,26 +372,39 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
                     for e in fs::read_dir(copy.join(".cache")).unwrap() {
                         let e = e.unwrap().path();
                         let name = e.file_name().unwrap().to_string_lossy().to_string();
-                        if name.starts_with("placements-rows-") && tampered.is_empty() {
-                            let mut blob = fs::read(e.join("blob.bin")).unwrap();
-                            blob[52..56].copy_from_slice(&123.0f32.to_le_bytes());
-                            fs::remove_file(e.join("blob.bin")).unwrap(); // (a hard link)
-                            fs::write(e.join("blob.bin"), &blob).unwrap();
-                            tampered.push((copy.join("world.shard.json"), name, blob));
+                        // (a placement's x; a chunk's first position's y: magic, levels, the
+                        // level's length, its chunk count, ci, cj, material, mode, positions' count)
+                        let at = match name {
+                            _ if name.starts_with("placements-rows-") => 52,
+                            _ if name.starts_with("terrain-band-chunks-") => 76,
+                            _ => continue,
+                        };
+                        if tampered.iter().any(|(_, n, _): &(PathBuf, String, Vec<u8>)| n[..8] == name[..8]) {
+                            continue;
                         }
+                        let mut blob = fs::read(e.join("blob.bin")).unwrap();
+                        blob[at..at + 4].copy_from_slice(&123.0f32.to_le_bytes());
+                        fs::remove_file(e.join("blob.bin")).unwrap(); // (a hard link)
+                        fs::write(e.join("blob.bin"), &blob).unwrap();
+                        tampered.push((copy.join("world.shard.json"), name, blob));
                     }
                 }
-                assert_eq!(tampered.len(), 1);
+                assert_eq!(tampered.len(), 2);
                 let copies: Vec<PathBuf> = (0..n).map(|k| PathBuf::from(format!("tampered/{k}"))).collect();
                 let refused = merge(cwd, &copies, "tampered_merge");
                 assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
                 assert!(text(&refused).contains("blob.bin"), "{}", text(&refused));
                 assert!(text(&refused).contains("differs from what the shard wrote"), "{}", text(&refused));
-                let (record, entry, blob) = &tampered[0];
-                let mut r: serde_json::Value = serde_json::from_str(&fs::read_to_string(record).unwrap()).unwrap();
-                r["digests"][entry]["blob.bin"] = verdant::scene::cache::sha256_hex(blob).into();
-                fs::write(record, serde_json::to_string(&r).unwrap()).unwrap();
+                for (record, entry, blob) in &tampered {
+                    let mut r: serde_json::Value = serde_json::from_str(&fs::read_to_string(record).unwrap()).unwrap();
+                    r["digests"][entry]["blob.bin"] = verdant::scene::cache::sha256_hex(blob).into();
+                    fs::write(record, serde_json::to_string(&r).unwrap()).unwrap();
+                }
                 ok(&merge(cwd, &copies, "tampered_merge"));
+                let terrain = |out: &str| fs::read(cwd.join(out).join("world/terrain/terrain.glb")).unwrap();
+                assert_ne!(terrain("tampered_merge"), terrain("single"), "the merge built the chunks itself");
+                let height = 123.0f32.to_le_bytes();
+                assert!(terrain("tampered_merge").windows(4).any(|w| w == height), "the moved vertex is not there");
                 let table = |out: &str| fs::read_to_string(cwd.join(out).join("world/placements/rock.csv")).unwrap();
                 assert_ne!(table("tampered_merge"), table("single"), "the merge placed the rows itself");
                 let turned =

@@ -1,0 +1,542 @@
+//! A band's chunks of the terrain scene at every LoD level, as the scene's files hold them: each
+//! chunk's surface with its skirt, vertex normals, UVs and the material layers' vertex attributes
+//! (`_LAYER_WEIGHTS`, and with a ground cover `_LAYER_WEIGHTS_1` and `_SURFACE`), built from the
+//! band's rows of the map and its meshes (docs/sharding.md). A shard keeps them in an entry of
+//! their own; the merge assembles each level's terrain scene from every band's chunks
+//! ([`crate::terrain::build::assemble_chunks`]) instead of building them from the whole map: the
+//! same scene, node for node and bit for bit.
+//!
+//! What a band's chunks read beyond its own rows: the normals on its lines read the row beyond
+//! each inner edge, and a vertex on its last row weighs its layers by the bilinear normal there,
+//! which reads one row further ([`BandPlan::chunk_rows`]); a vertex on or near a band line reads
+//! the ground cover bilinearly between the texel rows on both sides of the line, so a band needs
+//! the first cover row beyond each inner edge, which lies on the neighbouring band's surface: its
+//! layers entry holds it, or it is located on that band's chunks ([`EdgeCover`]).
+
+use std::ops::Range;
+
+use crate::heightfield::MapRows;
+use crate::mesh::{CustomAttribute, Primitive, PrimitiveMode};
+use crate::scene::cache::{Cache, KeyBuilder};
+use crate::scene::error::StageError;
+use crate::scene::terrain_stage::BandPlan;
+use crate::scene::TerrainSettings;
+use crate::terrain::bands::{BandPiece, Reader, Writer};
+use crate::terrain::layers::{weigh_vertices, weighing_reach, SnowRule};
+use crate::terrain::vegetation::VegetationCover;
+
+/// The cache stage name of a band's chunks.
+pub const BAND_CHUNKS_STAGE: &str = "terrain-band-chunks";
+
+/// One level's chunks of a band: each chunk's (ci, cj) and its surface primitive, in chunk order.
+pub type LevelChunks = Vec<([usize; 2], Primitive)>;
+
+/// Cache key of band `k`'s chunks: its layers entry's key (its meshes, the snow rule and what
+/// grows) and its neighbours' (whose edge rows of the cover its vertices near the lines read).
+pub fn chunks_key(layers_keys: &[String]) -> String {
+    let mut k = KeyBuilder::new(BAND_CHUNKS_STAGE, crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION);
+    for key in layers_keys {
+        k.add(key.as_bytes());
+    }
+    k.finish()
+}
+
+/// The texel rows of the ground cover band `k`'s chunks read: its own texel rows (`texel_rows`,
+/// those of its layers) and the row beyond each inner edge.
+pub fn cover_reach(plan: &BandPlan, k: usize, texel_rows: &Range<usize>) -> Range<usize> {
+    let [below, above] = plan.fixed(k);
+    texel_rows.start - usize::from(below && texel_rows.start > 0)
+        ..texel_rows.end + usize::from(above && texel_rows.end < plan.map_px()[1] as usize)
+}
+
+/// Builds a band's chunks at every bound of `bounds` (its piece's levels, in order): each
+/// level's chunks as the scene builds them ([`crate::terrain::build::band_chunks`], shaded) from
+/// `field` (the rows [`BandPlan::chunk_rows`] gives), their vertices weighed
+/// ([`weigh_vertices`]) by `snow` and `cover` (the rows [`cover_reach`] gives). Errors when a
+/// vertex would read a row of the map or of the cover that is not held.
+pub fn build(
+    field: &MapRows,
+    piece: &BandPiece,
+    bounds: &[f64],
+    t: &TerrainSettings,
+    snow: &SnowRule,
+    cover: Option<&VegetationCover>,
+) -> Result<Vec<LevelChunks>, String> {
+    let pitch = t.chunk.ok_or("a band's chunks need a chunked terrain")?;
+    if piece.levels.len() != bounds.len() {
+        return Err(format!("a band of {} levels for {} bounds", piece.levels.len(), bounds.len()));
+    }
+    let held = field.held();
+    let cell = field.hf.cell_size_m;
+    let mut levels = Vec::with_capacity(bounds.len());
+    for (level, &bound) in piece.levels.iter().zip(bounds) {
+        let mut chunks = crate::terrain::build::band_chunks(field, &level.mesh, pitch, t.skirt_at(bound), true)
+            .map_err(|e| e.to_string())?;
+        for (at, p) in &mut chunks {
+            for q in &p.positions {
+                let reach = weighing_reach(field, q[2] as f64 / cell);
+                let covered = cover.is_none_or(|c| c.holds_point(q[0] as f64, q[2] as f64));
+                if !held.contains(reach.start()) || !held.contains(reach.end()) || !covered {
+                    return Err(format!(
+                        "a vertex of chunk {at:?} at z = {} m reads rows the band's unit does not hold",
+                        q[2]
+                    ));
+                }
+            }
+            weigh_vertices(p, field, snow, cover);
+        }
+        levels.push(chunks);
+    }
+    Ok(levels)
+}
+
+const MAGIC: u64 = u64::from_le_bytes(*b"vchunk01");
+
+/// How a custom attribute's values are kept: as f32 bits, or (for unit bytes that are exactly
+/// k / 255) as the bytes k.
+const AS_F32: u64 = 0;
+const AS_BYTES: u64 = 1;
+
+fn f32_bits<const N: usize>(w: &mut Writer, v: &[[f32; N]]) {
+    w.u32s(v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>().into_iter());
+}
+
+fn read_f32s<const N: usize>(r: &mut Reader, vertices: Option<usize>) -> Option<Vec<[f32; N]>> {
+    let bits = r.u32s()?;
+    if bits.len() % N != 0 || vertices.is_some_and(|n| bits.len() != 0 && bits.len() != n * N) {
+        return None;
+    }
+    Some(bits.chunks_exact(N).map(|c| std::array::from_fn(|k| f32::from_bits(c[k]))).collect())
+}
+
+/// One level's chunks as bytes (every number exactly).
+fn level_bytes(chunks: &LevelChunks) -> Vec<u8> {
+    let mut w = Writer(Vec::new());
+    w.u64(chunks.len() as u64);
+    for ([ci, cj], p) in chunks {
+        w.u64(*ci as u64);
+        w.u64(*cj as u64);
+        w.u64(p.material.map_or(0, |m| m as u64 + 1));
+        w.u64(match p.mode {
+            PrimitiveMode::Triangles => 0,
+            PrimitiveMode::Points => 1,
+        });
+        f32_bits(&mut w, &p.positions);
+        f32_bits(&mut w, &p.normals);
+        f32_bits(&mut w, &p.uvs);
+        f32_bits(&mut w, &p.tangents);
+        f32_bits(&mut w, &p.colors);
+        w.u32s(p.indices.iter().copied());
+        w.u64(p.custom.len() as u64);
+        for c in &p.custom {
+            w.bytes(c.name.as_bytes());
+            w.u64(u64::from(c.unit_bytes));
+            match c.range {
+                None => w.u64(0),
+                Some(r) => {
+                    w.u64(1);
+                    f32_bits(&mut w, &[r]);
+                }
+            }
+            let bytes: Option<Vec<u8>> = c.unit_bytes.then_some(()).and_then(|()| {
+                c.values
+                    .iter()
+                    .flatten()
+                    .map(|&v| {
+                        let b = (v * 255.0).round().clamp(0.0, 255.0) as u8;
+                        ((b as f32 / 255.0).to_bits() == v.to_bits()).then_some(b)
+                    })
+                    .collect()
+            });
+            match bytes {
+                Some(b) => {
+                    w.u64(AS_BYTES);
+                    w.bytes(&b);
+                }
+                None => {
+                    w.u64(AS_F32);
+                    f32_bits(&mut w, &c.values);
+                }
+            }
+        }
+    }
+    w.0
+}
+
+fn level_from_bytes(bytes: &[u8]) -> Option<LevelChunks> {
+    let mut r = Reader(bytes);
+    let n = r.len(8)?;
+    let mut chunks = Vec::with_capacity(n);
+    for _ in 0..n {
+        let at = [usize::try_from(r.u64()?).ok()?, usize::try_from(r.u64()?).ok()?];
+        let material = match r.u64()? {
+            0 => None,
+            m => Some(usize::try_from(m - 1).ok()?),
+        };
+        let mode = match r.u64()? {
+            0 => PrimitiveMode::Triangles,
+            1 => PrimitiveMode::Points,
+            _ => return None,
+        };
+        let positions: Vec<[f32; 3]> = read_f32s(&mut r, None)?;
+        let count = Some(positions.len());
+        let normals = read_f32s(&mut r, count)?;
+        let uvs = read_f32s(&mut r, count)?;
+        let tangents = read_f32s(&mut r, count)?;
+        let colors = read_f32s(&mut r, count)?;
+        let indices = r.u32s()?;
+        if indices.iter().any(|&i| i as usize >= positions.len()) {
+            return None;
+        }
+        let attributes = r.len(8)?;
+        let mut custom = Vec::with_capacity(attributes);
+        for _ in 0..attributes {
+            let name = String::from_utf8(r.bytes()?).ok()?;
+            let unit_bytes = match r.u64()? {
+                0 => false,
+                1 => true,
+                _ => return None,
+            };
+            let range = match r.u64()? {
+                0 => None,
+                1 => Some(read_f32s::<4>(&mut r, None)?.first().copied()?),
+                _ => return None,
+            };
+            let values: Vec<[f32; 4]> = match r.u64()? {
+                AS_F32 => read_f32s(&mut r, count)?,
+                AS_BYTES => {
+                    let b = r.bytes()?;
+                    if b.len() != 4 * positions.len() {
+                        return None;
+                    }
+                    b.chunks_exact(4).map(|c| std::array::from_fn(|k| c[k] as f32 / 255.0)).collect()
+                }
+                _ => return None,
+            };
+            if values.len() != positions.len() {
+                return None;
+            }
+            custom.push(CustomAttribute { name, values, unit_bytes, range });
+        }
+        let prim = Primitive { positions, normals, uvs, tangents, colors, custom, indices, material, mode };
+        chunks.push((at, prim));
+    }
+    r.0.is_empty().then_some(chunks)
+}
+
+/// A band's chunks at every level as an entry's blob: each level's bytes apart (read one level at
+/// a time: [`level_of`]).
+pub fn to_bytes(levels: &[LevelChunks]) -> Vec<u8> {
+    let mut w = Writer(Vec::new());
+    w.u64(MAGIC);
+    w.u64(levels.len() as u64);
+    for l in levels {
+        w.bytes(&level_bytes(l));
+    }
+    w.0
+}
+
+/// Level `level` of [`to_bytes`]'s blob (`None` when the bytes are not such a blob or lack it).
+pub fn level_of(bytes: &[u8], level: usize) -> Option<LevelChunks> {
+    let mut r = Reader(bytes);
+    if r.u64()? != MAGIC {
+        return None;
+    }
+    let count = r.len(8)?;
+    if level >= count {
+        return None;
+    }
+    for _ in 0..level {
+        let n = r.len(1)?;
+        r.take(n)?;
+    }
+    level_from_bytes(&r.bytes()?)
+}
+
+/// Every level of [`to_bytes`]'s blob, or `None`.
+pub fn from_bytes(bytes: &[u8]) -> Option<Vec<LevelChunks>> {
+    let mut r = Reader(bytes);
+    if r.u64()? != MAGIC {
+        return None;
+    }
+    let count = r.len(8)?;
+    let levels = (0..count).map(|_| level_from_bytes(&r.bytes()?)).collect::<Option<Vec<_>>>()?;
+    r.0.is_empty().then_some(levels)
+}
+
+/// Whether `cache` holds band chunks under `key` that read back (every level of `levels`).
+pub fn holds(cache: &Cache, key: &str, levels: usize) -> bool {
+    kept_blob(cache, key).is_some_and(|b| from_bytes(&b).is_some_and(|l| l.len() == levels))
+}
+
+/// The blob `cache` holds under `key`, if any.
+pub fn kept_blob(cache: &Cache, key: &str) -> Option<Vec<u8>> {
+    let (_, entry) = cache.lookup(BAND_CHUNKS_STAGE, key)?;
+    Cache::read_blob(&entry).ok()
+}
+
+/// Stores a band's chunks under `key`.
+pub fn store(cache: &Cache, key: &str, rows: [u32; 2], levels: &[LevelChunks]) -> Result<(), StageError> {
+    let json = format!("{{\"rows\":[{},{}]}}", rows[0], rows[1]);
+    cache
+        .store_blob(BAND_CHUNKS_STAGE, key, &json, &to_bytes(levels))
+        .map(|_| ())
+        .map_err(|e| StageError::Failed { stage: "terrain", message: format!("cannot keep a band's chunks: {e}") })
+}
+
+/// Where a band's chunks take the ground cover's first texel row beyond an inner edge from when
+/// the cache holds no layers of the band beyond: band `n`'s rows `rows` located on its surface
+/// (its chunks at the main level). `Ok(None)` when nothing grows.
+pub type EdgeCover<'a> = dyn FnMut(usize, Range<usize>) -> Result<Option<VegetationCover>, StageError> + 'a;
+
+/// Band `k`'s chunks ([`build`]) in `cache`: kept there (unless `force`), else built from the map's
+/// rows (`rows_of`, asked for [`BandPlan::chunk_rows`]), the band's piece and layers as `cache`
+/// holds them (its unit stored them), and the cover's edge rows of its neighbours (their layers in
+/// `cache`, else `edge`), and stored. `mesh_key` is the terrain's.
+#[allow(clippy::too_many_arguments)]
+pub fn make(
+    grows: &crate::scene::band_layers::Grows,
+    t: &TerrainSettings,
+    mesh_key: &str,
+    plan: &BandPlan,
+    k: usize,
+    (cache, force): (&Cache, bool),
+    rows_of: &mut dyn FnMut([u32; 2]) -> Result<crate::heightfield::Heightfield, StageError>,
+    edge: &mut EdgeCover,
+) -> Result<(), StageError> {
+    use crate::scene::band_layers;
+    use crate::scene::terrain_stage::{band_layers_key, kept_band};
+    let fail = |message: String| StageError::Failed { stage: "terrain", message };
+    let [a, b] = plan.rows(k);
+    let Some(texel_rows) = plan.normal_rows() else {
+        return Err(fail("a band's chunks need the layers baked by band".into()));
+    };
+    let key = chunks_key_of(grows, mesh_key, plan, k);
+    if !force && holds(cache, &key, plan.bounds.len()) {
+        return Ok(());
+    }
+    let piece = kept_band(mesh_key, plan, k, cache)
+        .ok_or_else(|| fail(format!("band {k} (rows {a}-{b}): its meshes are not in the cache")))?;
+    let extent = crate::scene::ground_cover::terrain_extent(plan.width, plan.height(), plan.cell_m);
+    let fits = (extent, grows.preset.species.len());
+    let layers_of = |n: usize| {
+        band_layers::kept(cache, &band_layers_key(grows, mesh_key, plan, n), plan.map_px(), &texel_rows[n], fits)
+    };
+    let own = layers_of(k).ok_or_else(|| fail(format!("band {k} (rows {a}-{b}): its layers are not in the cache")))?;
+    let cover = match own.cover {
+        None => None,
+        Some(own) => {
+            let reach = cover_reach(plan, k, &texel_rows[k]);
+            let mut parts = Vec::with_capacity(3);
+            let mut beyond = |n: usize, rows: Range<usize>| -> Result<VegetationCover, StageError> {
+                let kept = layers_of(n).and_then(|l| l.cover).and_then(|c| c.take_rows(rows.clone()));
+                match kept {
+                    Some(c) => Ok(c),
+                    None => edge(n, rows.clone())?.and_then(|c| c.take_rows(rows.clone())).ok_or_else(|| {
+                        fail(format!("band {n}'s cover rows {}-{} could not be located", rows.start, rows.end))
+                    }),
+                }
+            };
+            let bands = cover_bands(plan, k);
+            if reach.start < texel_rows[k].start {
+                parts.push(beyond(bands[0], reach.start..texel_rows[k].start)?);
+            }
+            parts.push(own);
+            if reach.end > texel_rows[k].end {
+                parts.push(beyond(bands[bands.len() - 1], texel_rows[k].end..reach.end)?);
+            }
+            Some(VegetationCover::stack(&parts).ok_or_else(|| fail(format!("band {k}'s cover rows do not join")))?)
+        }
+    };
+    let read = plan.chunk_rows(k);
+    let margin = rows_of(read)?;
+    let field = MapRows::new(&margin, read[0] as usize, plan.height())
+        .ok_or_else(|| fail(format!("rows {}-{} are not within the map", read[0], read[1])))?;
+    let snow = crate::scene::terrain_stage::snow_rule(grows.preset);
+    let levels = build(&field, &piece, &plan.bounds, t, &snow, cover.as_ref())
+        .map_err(|e| fail(format!("band {k} (rows {a}-{b}): {e}")))?;
+    store(cache, &key, [a, b], &levels)
+}
+
+/// The bands whose layers hold the cover rows band `k`'s chunks read, in order: the band holding
+/// the row before its texel rows (its neighbour, or past a band holding none), `k`, and the band
+/// holding the row after them.
+pub fn cover_bands(plan: &BandPlan, k: usize) -> Vec<usize> {
+    let Some(texel_rows) = plan.normal_rows() else { return vec![k] };
+    let reach = cover_reach(plan, k, &texel_rows[k]);
+    let owner = |row: usize| texel_rows.iter().position(|r| r.contains(&row)).unwrap_or(k);
+    let mut bands = Vec::with_capacity(3);
+    if reach.start < texel_rows[k].start {
+        bands.push(owner(reach.start));
+    }
+    bands.push(k);
+    if reach.end > texel_rows[k].end {
+        bands.push(owner(texel_rows[k].end));
+    }
+    bands
+}
+
+/// [`chunks_key`] of band `k` of `plan`.
+pub fn chunks_key_of(grows: &crate::scene::band_layers::Grows, mesh_key: &str, plan: &BandPlan, k: usize) -> String {
+    let keys: Vec<String> = cover_bands(plan, k)
+        .into_iter()
+        .map(|b| crate::scene::terrain_stage::band_layers_key(grows, mesh_key, plan, b))
+        .collect();
+    chunks_key(&keys)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::band_layers::Grows;
+    use crate::scene::terrain_stage::{band_layers, band_piece, band_plan, mesh_key, snow_rule, terrain_heights};
+    use crate::scene::Preset;
+
+    /// A map of three bands (rows 0-384, 384-768, 768-1024; chunks of 128, skirts, two levels),
+    /// and `extra` added.
+    fn preset(extra: &str) -> Preset {
+        let text = format!(
+            "[scene]\nname = \"bands\"\nseed = 5\n\n[terrain]\n\
+             procedural = {{ kind = \"ridged\", size = 1025, seed = 3, relief = 160.0 }}\n\
+             cell_size = 2.0\nmax_error = 0.5\nchunk = 128\nskirt = 1.0\nlods = [0.5, 2.0]\n\n\
+             [scatter]\ntile = 128.0\n\n{extra}"
+        );
+        crate::scene::preset::parse_preset(&text, std::path::Path::new("bands.toml")).unwrap()
+    }
+
+    /// Each band's chunks made in a cache of its own (its piece and layers alone there, so every
+    /// cover row beyond its lines is located on the neighbour's surface) or in one cache holding
+    /// every band's layers (read from them), assembled level by level: the scene built from the
+    /// whole map and the level's joined mesh, textured by the joined layers, bit for bit.
+    fn bands_assemble_to_the_whole_scene(preset: &Preset) {
+        let t = preset.terrain.as_ref().unwrap();
+        let (hf, _, _) = terrain_heights(t).unwrap();
+        let plan = band_plan(t, hf.width, hf.height).unwrap();
+        assert_eq!(plan.band_count(), 3);
+        assert!(crate::scene::terrain_stage::chunks_by_band(t, &plan));
+        let key = mesh_key(preset, t).unwrap();
+        let grows = Grows::of(preset);
+        let mut rows_of = |r: [u32; 2]| Ok(hf.rows(r[0] as usize, r[1] as usize).unwrap());
+        let shared = tempfile::tempdir().unwrap();
+        let shared = Cache::new(shared.path());
+        let mut pieces = Vec::new();
+        let mut parts = Vec::new();
+        for k in 0..3 {
+            let c = Some((&shared, false));
+            let piece = band_piece(&key, t, &mut rows_of, &plan, k, c).unwrap();
+            parts.push(band_layers(&grows, t, &key, &plan, k, &piece, &mut rows_of, None, c).unwrap().unwrap());
+            pieces.push(piece);
+        }
+        let layers = crate::scene::band_layers::join(preset, parts, plan.map_px()).unwrap();
+        let extent = crate::scene::ground_cover::terrain_extent(hf.width, hf.height, hf.cell_size_m);
+        let grows_anything = !preset.species.is_empty();
+
+        // every band's chunks, each in a cache of its own and in the shared one
+        let mut alone = Vec::new();
+        let mut located = 0;
+        for k in 0..3 {
+            let dir = tempfile::tempdir().unwrap();
+            let own = Cache::new(dir.path());
+            band_piece(&key, t, &mut rows_of, &plan, k, Some((&own, false))).unwrap();
+            band_layers(&grows, t, &key, &plan, k, &pieces[k], &mut rows_of, None, Some((&own, false))).unwrap();
+            let mut edge = |n: usize, rows: Range<usize>| {
+                located += 1;
+                let window = hf.rows(plan.rows(n)[0] as usize, plan.rows(n)[1] as usize).unwrap();
+                let surface = crate::scene::placement_rows::band_surfaces(t, &key, &plan, n, &window, None)?;
+                Ok(crate::scene::band_layers::locate_cover(preset, &surface, extent, plan.map_px(), rows))
+            };
+            make(&grows, t, &key, &plan, k, (&own, false), &mut rows_of, &mut edge).unwrap();
+            let mut never = |_: usize, _: Range<usize>| -> Result<Option<VegetationCover>, StageError> {
+                panic!("the shared cache holds every band's layers")
+            };
+            make(&grows, t, &key, &plan, k, (&shared, false), &mut rows_of, &mut never).unwrap();
+            let chunk_key = chunks_key_of(&grows, &key, &plan, k);
+            let blob = kept_blob(&own, &chunk_key).unwrap();
+            assert_eq!(Some(&blob), kept_blob(&shared, &chunk_key).as_ref(), "band {k}: located = read");
+            alone.push(blob);
+        }
+        // the middle band locates a row on each side, the others one
+        assert_eq!(located, if grows_anything { 4 } else { 0 });
+
+        let storage = crate::terrain::stored::Storage::f32(&hf);
+        for (level, &bound) in plan.bounds.iter().enumerate() {
+            let opts = crate::terrain::tin::TinOptions {
+                max_error_m: bound,
+                max_triangles: None,
+                max_vertices: t.max_vertices,
+                chunk_cells: 0,
+            };
+            let (joined, _) = crate::terrain::bands::assemble(&hf, &storage, &pieces, level, &opts).unwrap();
+            let build = crate::terrain::build::BuildOptions {
+                chunk_samples: t.chunk,
+                skirt_depth_m: t.skirt_at(bound),
+                base_depth_m: None,
+                name: "terrain".into(),
+                snow: snow_rule(preset),
+            };
+            let mut whole = crate::terrain::build::build_scene(&hf, &joined.mesh, &build).unwrap();
+            layers.texture(&mut whole, &hf, "terrain").unwrap();
+            let chunks = alone.iter().flat_map(|b| level_of(b, level).unwrap());
+            let mut banded =
+                crate::terrain::build::assemble_chunks("terrain", hf.width, hf.height, 128, chunks).unwrap();
+            layers.put_base_color(&mut banded, "terrain").unwrap();
+            assert_eq!(banded.meshes.len(), whole.meshes.len());
+            for (a, b) in banded.meshes.iter().zip(&whole.meshes) {
+                assert!(a == b, "level {level}: chunk {} differs", b.name);
+            }
+            assert!(banded == whole, "level {level}: the scenes differ");
+            let surface = whole.meshes[0].primitives[0].custom.iter().map(|c| c.name.as_str()).collect::<Vec<_>>();
+            assert_eq!(surface.len(), if grows_anything { 3 } else { 1 }, "{surface:?}");
+        }
+    }
+
+    #[test]
+    fn band_chunks_assemble_to_the_whole_scene_bit_for_bit() {
+        bands_assemble_to_the_whole_scene(&preset(""));
+        let species = "[[species]]\nname = \"pine\"\nkind = \"tree\"\nlsystem = \"builtin:conifer\"\n\
+                       placement = \"poisson\"\nmax_density = 0.002\nmin_spacing = 10.0\nslope = [0.0, 30.0]\n\n\
+                       [[species]]\nname = \"grass\"\nkind = \"grass\"\nplacement = \"jittered\"\n\
+                       max_density = 0.02\nslope = [0.0, 25.0]\naltitude = [0.0, 120.0]\n\n\
+                       [snow]\nsnow_line = 110.0\nsnow_line_noise = 10.0\nnoise_scale = 80.0\ntransition = 10.0\n";
+        bands_assemble_to_the_whole_scene(&preset(species));
+    }
+
+    #[test]
+    fn a_damaged_entry_does_not_read_back() {
+        let prim = Primitive {
+            positions: vec![[0.0, 1.0, 2.0], [1.0, 1.5, 2.0], [0.0, 1.0, 3.0]],
+            normals: vec![[0.0, 1.0, 0.0]; 3],
+            uvs: vec![[0.0, 0.5]; 3],
+            indices: vec![0, 2, 1],
+            material: Some(0),
+            custom: vec![
+                CustomAttribute {
+                    name: "_W".into(),
+                    values: vec![[1.0, 0.0, 17.0 / 255.0, 238.0 / 255.0]; 3],
+                    unit_bytes: true,
+                    range: None,
+                },
+                CustomAttribute {
+                    name: "_S".into(),
+                    values: vec![[0.3, 2.0, 1e-7, 9.5]; 3],
+                    unit_bytes: false,
+                    range: None,
+                },
+            ],
+            ..Primitive::default()
+        };
+        let levels = vec![vec![([1, 2], prim.clone())], vec![([0, 0], prim.clone()), ([3, 0], prim)]];
+        let bytes = to_bytes(&levels);
+        assert_eq!(from_bytes(&bytes).as_ref(), Some(&levels));
+        assert_eq!(level_of(&bytes, 1).as_ref(), Some(&levels[1]));
+        assert_eq!(level_of(&bytes, 2), None);
+        for cut in 0..bytes.len() {
+            assert_eq!(from_bytes(&bytes[..cut]), None, "cut at {cut}");
+        }
+        for at in (0..bytes.len()).step_by(7) {
+            let mut flipped = bytes.clone();
+            flipped[at] ^= 0x5a;
+            let _ = from_bytes(&flipped);
+        }
+    }
+}
