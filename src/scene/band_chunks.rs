@@ -51,9 +51,7 @@ pub fn cover_reach(plan: &BandPlan, k: usize, texel_rows: &Range<usize>) -> Rang
 
 /// Builds a band's chunks at every bound of `bounds` (its piece's levels, in order): each
 /// level's chunks as the scene builds them ([`crate::terrain::build::band_chunks`], shaded) from
-/// `field` (the rows [`BandPlan::chunk_rows`] gives), their vertices weighed
-/// ([`weigh_vertices`]) by `snow` and `cover` (the rows [`cover_reach`] gives). Errors when a
-/// vertex would read a row of the map or of the cover that is not held.
+/// `field` (the rows [`BandPlan::chunk_rows`] gives), then [`weigh`]ed.
 pub fn build(
     field: &MapRows,
     piece: &BandPiece,
@@ -66,13 +64,30 @@ pub fn build(
     if piece.levels.len() != bounds.len() {
         return Err(format!("a band of {} levels for {} bounds", piece.levels.len(), bounds.len()));
     }
-    let held = field.held();
-    let cell = field.hf.cell_size_m;
     let mut levels = Vec::with_capacity(bounds.len());
     for (level, &bound) in piece.levels.iter().zip(bounds) {
-        let mut chunks = crate::terrain::build::band_chunks(field, &level.mesh, pitch, t.skirt_at(bound), true)
-            .map_err(|e| e.to_string())?;
-        for (at, p) in &mut chunks {
+        levels.push(
+            crate::terrain::build::band_chunks(field, &level.mesh, pitch, t.skirt_at(bound), true)
+                .map_err(|e| e.to_string())?,
+        );
+    }
+    weigh(levels, field, snow, cover)
+}
+
+/// A band's shaded chunks at every level with their vertices weighed ([`weigh_vertices`]) by
+/// `snow` and `cover` (the rows [`cover_reach`] gives) on `field` (the rows
+/// [`BandPlan::chunk_rows`] gives). Errors when a vertex would read a row of the map or of the
+/// cover that is not held.
+pub fn weigh(
+    mut levels: Vec<LevelChunks>,
+    field: &MapRows,
+    snow: &SnowRule,
+    cover: Option<&VegetationCover>,
+) -> Result<Vec<LevelChunks>, String> {
+    let held = field.held();
+    let cell = field.hf.cell_size_m;
+    for chunks in &mut levels {
+        for (at, p) in chunks.iter_mut() {
             for q in &p.positions {
                 let reach = weighing_reach(field, q[2] as f64 / cell);
                 let covered = cover.is_none_or(|c| c.holds_point(q[0] as f64, q[2] as f64));
@@ -85,7 +100,6 @@ pub fn build(
             }
             weigh_vertices(p, field, snow, cover);
         }
-        levels.push(chunks);
     }
     Ok(levels)
 }
@@ -103,7 +117,7 @@ fn f32_bits<const N: usize>(w: &mut Writer, v: &[[f32; N]]) {
 
 fn read_f32s<const N: usize>(r: &mut Reader, vertices: Option<usize>) -> Option<Vec<[f32; N]>> {
     let bits = r.u32s()?;
-    if bits.len() % N != 0 || vertices.is_some_and(|n| bits.len() != 0 && bits.len() != n * N) {
+    if bits.len() % N != 0 || vertices.is_some_and(|n| !bits.is_empty() && bits.len() != n * N) {
         return None;
     }
     Some(bits.chunks_exact(N).map(|c| std::array::from_fn(|k| f32::from_bits(c[k]))).collect())
@@ -292,7 +306,9 @@ pub type EdgeCover<'a> = dyn FnMut(usize, Range<usize>) -> Result<Option<Vegetat
 /// Band `k`'s chunks ([`build`]) in `cache`: kept there (unless `force`), else built from the map's
 /// rows (`rows_of`, asked for [`BandPlan::chunk_rows`]), the band's piece and layers as `cache`
 /// holds them (its unit stored them), and the cover's edge rows of its neighbours (their layers in
-/// `cache`, else `edge`), and stored. `mesh_key` is the terrain's.
+/// `cache`, else `edge`), and stored. `built`: the band's shaded chunks at every level when its
+/// unit has them at hand ([`crate::scene::terrain_stage::band_piece_chunked`]), weighed instead of
+/// built again. `mesh_key` is the terrain's.
 #[allow(clippy::too_many_arguments)]
 pub fn make(
     grows: &crate::scene::band_layers::Grows,
@@ -301,6 +317,7 @@ pub fn make(
     plan: &BandPlan,
     k: usize,
     (cache, force): (&Cache, bool),
+    built: Option<Vec<LevelChunks>>,
     rows_of: &mut dyn FnMut([u32; 2]) -> Result<crate::heightfield::Heightfield, StageError>,
     edge: &mut EdgeCover,
 ) -> Result<(), StageError> {
@@ -315,8 +332,6 @@ pub fn make(
     if !force && holds(cache, &key, plan.bounds.len()) {
         return Ok(());
     }
-    let piece = kept_band(mesh_key, plan, k, cache)
-        .ok_or_else(|| fail(format!("band {k} (rows {a}-{b}): its meshes are not in the cache")))?;
     let extent = crate::scene::ground_cover::terrain_extent(plan.width, plan.height(), plan.cell_m);
     let fits = (extent, grows.preset.species.len());
     let layers_of = |n: usize| {
@@ -353,8 +368,15 @@ pub fn make(
     let field = MapRows::new(&margin, read[0] as usize, plan.height())
         .ok_or_else(|| fail(format!("rows {}-{} are not within the map", read[0], read[1])))?;
     let snow = crate::scene::terrain_stage::snow_rule(grows.preset);
-    let levels = build(&field, &piece, &plan.bounds, t, &snow, cover.as_ref())
-        .map_err(|e| fail(format!("band {k} (rows {a}-{b}): {e}")))?;
+    let levels = match built {
+        Some(levels) if levels.len() == plan.bounds.len() => weigh(levels, &field, &snow, cover.as_ref()),
+        _ => {
+            let piece = kept_band(mesh_key, plan, k, cache)
+                .ok_or_else(|| fail(format!("band {k} (rows {a}-{b}): its meshes are not in the cache")))?;
+            build(&field, &piece, &plan.bounds, t, &snow, cover.as_ref())
+        }
+    }
+    .map_err(|e| fail(format!("band {k} (rows {a}-{b}): {e}")))?;
     store(cache, &key, [a, b], &levels)
 }
 
@@ -389,7 +411,9 @@ pub fn chunks_key_of(grows: &crate::scene::band_layers::Grows, mesh_key: &str, p
 mod tests {
     use super::*;
     use crate::scene::band_layers::Grows;
-    use crate::scene::terrain_stage::{band_layers, band_piece, band_plan, mesh_key, snow_rule, terrain_heights};
+    use crate::scene::terrain_stage::{
+        band_layers, band_piece, band_piece_chunked, band_plan, mesh_key, snow_rule, terrain_heights,
+    };
     use crate::scene::Preset;
 
     /// A map of three bands (rows 0-384, 384-768, 768-1024; chunks of 128, skirts, two levels),
@@ -405,8 +429,9 @@ mod tests {
     }
 
     /// Each band's chunks made in a cache of its own (its piece and layers alone there, so every
-    /// cover row beyond its lines is located on the neighbour's surface) or in one cache holding
-    /// every band's layers (read from them), assembled level by level: the scene built from the
+    /// cover row beyond its lines is located on the neighbour's surface; built from its kept
+    /// piece) or in one cache holding every band's layers (read from them; the chunks its normal
+    /// maps were baked from weighed), assembled level by level: the scene built from the
     /// whole map and the level's joined mesh, textured by the joined layers, bit for bit.
     fn bands_assemble_to_the_whole_scene(preset: &Preset) {
         let t = preset.terrain.as_ref().unwrap();
@@ -421,12 +446,15 @@ mod tests {
         let shared = Cache::new(shared.path());
         let mut pieces = Vec::new();
         let mut parts = Vec::new();
+        let mut built = Vec::new();
         for k in 0..3 {
             let c = Some((&shared, false));
-            let piece = band_piece(&key, t, &mut rows_of, &plan, k, c).unwrap();
+            let (piece, chunks) = band_piece_chunked(&key, t, &mut rows_of, &plan, k, c, true).unwrap();
             parts.push(band_layers(&grows, t, &key, &plan, k, &piece, &mut rows_of, None, c).unwrap().unwrap());
             pieces.push(piece);
+            built.push(chunks.expect("the chunks its normal maps were baked from"));
         }
+        let mut built = built.into_iter();
         let layers = crate::scene::band_layers::join(preset, parts, plan.map_px()).unwrap();
         let extent = crate::scene::ground_cover::terrain_extent(hf.width, hf.height, hf.cell_size_m);
         let grows_anything = !preset.species.is_empty();
@@ -445,11 +473,11 @@ mod tests {
                 let surface = crate::scene::placement_rows::band_surfaces(t, &key, &plan, n, &window, None)?;
                 Ok(crate::scene::band_layers::locate_cover(preset, &surface, extent, plan.map_px(), rows))
             };
-            make(&grows, t, &key, &plan, k, (&own, false), &mut rows_of, &mut edge).unwrap();
+            make(&grows, t, &key, &plan, k, (&own, false), None, &mut rows_of, &mut edge).unwrap();
             let mut never = |_: usize, _: Range<usize>| -> Result<Option<VegetationCover>, StageError> {
                 panic!("the shared cache holds every band's layers")
             };
-            make(&grows, t, &key, &plan, k, (&shared, false), &mut rows_of, &mut never).unwrap();
+            make(&grows, t, &key, &plan, k, (&shared, false), built.next(), &mut rows_of, &mut never).unwrap();
             let chunk_key = chunks_key_of(&grows, &key, &plan, k);
             let blob = kept_blob(&own, &chunk_key).unwrap();
             assert_eq!(Some(&blob), kept_blob(&shared, &chunk_key).as_ref(), "band {k}: located = read");

@@ -30,7 +30,7 @@ use crate::scene::pipeline::{CacheUse, StageJob, StageRunner};
 use crate::scene::placement_rows;
 use crate::scene::plants_stage::{self, SpeciesMemo, SPECIES_MEMO_STAGE};
 use crate::scene::terrain_stage::{
-    band_layers, band_piece, mesh_key, planned_bands, BandPlan, BandRows, MeshMemo, TerrainJob,
+    band_layers, band_piece_chunked, mesh_key, planned_bands, BandPlan, BandRows, MeshMemo, TerrainJob,
 };
 use crate::scene::Preset;
 
@@ -218,6 +218,49 @@ fn wanted_rows(preset: &Preset, planned: &[(Unit, Work<'_>, Slot)], mine: &[usiz
     bands
 }
 
+/// A band of this shard whose chunks with their vertex attributes are still to be made: they read
+/// the ground cover's row beyond each of its lines, which the next band's layers hold.
+struct Pending<'a> {
+    t: &'a crate::scene::TerrainSettings,
+    b: usize,
+    plan: &'a BandPlan,
+    key: &'a str,
+    grows: &'a crate::scene::band_layers::Grows<'a>,
+    /// Its chunks at every level as its unit built them for the normal maps (`None` when its
+    /// meshes came from the cache: they are built again).
+    chunks: Option<Vec<crate::scene::band_chunks::LevelChunks>>,
+    /// Its rows ([`BandPlan::chunk_rows`]) when its unit read them.
+    margin: Option<crate::heightfield::Heightfield>,
+}
+
+impl Pending<'_> {
+    /// Makes the band's chunks entry ([`crate::scene::band_chunks::make`]): the cover's rows
+    /// beyond its lines from its neighbours' layers in `cache`, or located on the surfaces of
+    /// bands another shard builds (kept in `surfaces`).
+    fn finish(
+        self,
+        preset: &Preset,
+        cache: &Cache,
+        force: bool,
+        source: &mut BandRows,
+        surfaces: &mut std::collections::HashMap<usize, std::rc::Rc<Vec<crate::mesh::Primitive>>>,
+    ) -> Result<(), crate::scene::error::StageError> {
+        let Pending { t, b, plan, key, grows, chunks, mut margin } = self;
+        let extent = crate::scene::ground_cover::terrain_extent(plan.width, plan.height(), plan.cell_m);
+        let source = std::cell::RefCell::new(source);
+        // (the rows held handed over, not copied: they are read once)
+        let mut rows_of = |rows: [u32; 2]| match margin.take() {
+            Some(hf) if rows == plan.chunk_rows(b) => Ok(hf),
+            _ => source.borrow_mut().rows(rows),
+        };
+        let mut edge = |n: usize, rows: std::ops::Range<usize>| {
+            let made = surfaces_for(n, surfaces, &mut source.borrow_mut(), t, key, plan)?;
+            Ok(crate::scene::band_layers::locate_cover(preset, &made, extent, plan.map_px(), rows))
+        };
+        crate::scene::band_chunks::make(grows, t, key, plan, b, (cache, force), chunks, &mut rows_of, &mut edge)
+    }
+}
+
 /// Band `k`'s chunk surfaces at the main level ([`placement_rows::band_surfaces`]) from
 /// `surfaces` when made already, else made from `source`'s rows and kept there.
 fn surfaces_for(
@@ -280,8 +323,15 @@ pub fn build_shard(
         let mut surfaces: std::collections::HashMap<usize, std::rc::Rc<Vec<crate::mesh::Primitive>>> =
             std::collections::HashMap::new();
         let places = mine.iter().any(|&k| matches!(planned[k].1, Work::Placements(..)));
+        // a band whose chunks wait for the next band's layers (the cover's rows beyond its line)
+        let mut pending: Option<Pending> = None;
         for &k in &mine {
             let (unit, work, _) = &planned[k];
+            if !matches!(work, Work::Band(..)) {
+                if let (Some(p), Some(source)) = (pending.take(), band_rows.as_mut()) {
+                    p.finish(preset, &cache, force, source, &mut surfaces)?;
+                }
+            }
             say(&format!("shard {}/{}: {}", shard.index, shard.count, unit.name));
             match work {
                 Work::Terrain(t) => {
@@ -293,11 +343,15 @@ pub fn build_shard(
                         // the rows of every band of this shard, read together
                         BandRows::new(t, wanted_rows(preset, &planned, &mine))
                     });
-                    if places {
+                    // (with its chunks kept, the rows they read: one more below)
+                    let chunked = crate::scene::terrain_stage::chunks_by_band(t, plan);
+                    let read = if chunked { plan.chunk_rows(*b) } else { plan.read_rows(*b) };
+                    let c = Some((&cache, force));
+                    let (chunks, margin) = if places {
                         // the band's rows read once for its meshes and its chunks' surfaces
-                        let read = plan.read_rows(*b);
                         let margin = source.rows(read)?;
-                        let piece = band_piece(key, t, &mut |_| Ok(margin.clone()), plan, *b, Some((&cache, force)))?;
+                        let (piece, chunks) =
+                            band_piece_chunked(key, t, &mut |_| Ok(margin.clone()), plan, *b, c, chunked)?;
                         let [a, z] = plan.rows(*b);
                         let window = margin.rows((a - read[0]) as usize, (z - read[0]) as usize).ok_or_else(|| {
                             crate::scene::error::StageError::Failed {
@@ -308,22 +362,31 @@ pub fn build_shard(
                         let made = placement_rows::band_surfaces(t, key, plan, *b, &window, Some(&cache))?;
                         // its rows of the layers, from the same surfaces
                         let mut rows_of = |_| Ok(margin.clone());
-                        let c = Some((&cache, force));
                         band_layers(grows, t, key, plan, *b, &piece, &mut rows_of, Some(&made), c)?;
                         surfaces.insert(*b, std::rc::Rc::new(made));
+                        (chunks, Some(margin))
                     } else {
                         // the band's rows read once, if at all, for its meshes and its layers
-                        let mut held: Option<([u32; 2], crate::heightfield::Heightfield)> = None;
-                        let mut rows_of = |rows: [u32; 2]| match &held {
-                            Some((r, hf)) if *r == rows => Ok(hf.clone()),
-                            _ => {
-                                let hf = source.rows(rows)?;
-                                held = Some((rows, hf.clone()));
+                        let mut held: Option<crate::heightfield::Heightfield> = None;
+                        let mut rows_of = |_: [u32; 2]| match &held {
+                            Some(hf) => Ok(hf.clone()),
+                            None => {
+                                let hf = source.rows(read)?;
+                                held = Some(hf.clone());
                                 Ok(hf)
                             }
                         };
-                        let piece = band_piece(key, t, &mut rows_of, plan, *b, Some((&cache, force)))?;
-                        band_layers(grows, t, key, plan, *b, &piece, &mut rows_of, None, Some((&cache, force)))?;
+                        let (piece, chunks) = band_piece_chunked(key, t, &mut rows_of, plan, *b, c, chunked)?;
+                        band_layers(grows, t, key, plan, *b, &piece, &mut rows_of, None, c)?;
+                        (chunks, held)
+                    };
+                    // the band before's chunks, now that this band's layers hold the cover rows
+                    // beyond its line; this band's when the next band is built (or none is)
+                    if let Some(p) = pending.take() {
+                        p.finish(preset, &cache, force, source, &mut surfaces)?;
+                    }
+                    if chunked {
+                        pending = Some(Pending { t, b: *b, plan, key, grows, chunks, margin });
                     }
                 }
                 Work::Placements(t, g, bands, rows, key) => {
@@ -337,24 +400,8 @@ pub fn build_shard(
                 }
             }
         }
-        // then each band's chunks with their vertex attributes, which read the cover's rows beyond
-        // its lines: its neighbours' layers, built above when they are this shard's
-        for &k in &mine {
-            let Work::Band(t, b, plan, key, grows) = &planned[k].1 else { continue };
-            if !crate::scene::terrain_stage::chunks_by_band(t, plan) {
-                continue;
-            }
-            let source = band_rows.get_or_insert_with(|| BandRows::new(t, wanted_rows(preset, &planned, &mine)));
-            say(&format!("shard {}/{}: the chunks of terrain band {b}", shard.index, shard.count));
-            let extent = crate::scene::ground_cover::terrain_extent(plan.width, plan.height(), plan.cell_m);
-            let source = std::cell::RefCell::new(source);
-            let mut rows_of = |rows: [u32; 2]| source.borrow_mut().rows(rows);
-            // (an edge row of a band this shard did not build: located on its surface)
-            let mut edge = |n: usize, rows: std::ops::Range<usize>| {
-                let made = surfaces_for(n, &mut surfaces, &mut source.borrow_mut(), t, key, plan)?;
-                Ok(crate::scene::band_layers::locate_cover(preset, &made, extent, plan.map_px(), rows))
-            };
-            crate::scene::band_chunks::make(grows, t, key, plan, *b, (&cache, force), &mut rows_of, &mut edge)?;
+        if let (Some(p), Some(source)) = (pending.take(), band_rows.as_mut()) {
+            p.finish(preset, &cache, force, source, &mut surfaces)?;
         }
         Ok(())
     })();

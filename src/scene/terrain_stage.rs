@@ -410,13 +410,28 @@ pub fn band_piece(
     k: usize,
     cache: Option<(&crate::scene::cache::Cache, bool)>,
 ) -> Result<crate::terrain::bands::BandPiece, StageError> {
-    use crate::terrain::bands::{bake_band_normals, build_band_window};
+    band_piece_chunked(mesh_key, t, rows_of, plan, k, cache, false).map(|(piece, _)| piece)
+}
+
+/// [`band_piece`], and with `keep` the band's chunks at every level it built for its normal maps
+/// (shaded, without the layers' attributes: what [`crate::scene::band_chunks::make`] weighs;
+/// `None` when the piece came from the cache or the plan bakes no normal maps by band).
+pub fn band_piece_chunked(
+    mesh_key: &str,
+    t: &TerrainSettings,
+    rows_of: &mut dyn FnMut([u32; 2]) -> Result<Heightfield, StageError>,
+    plan: &BandPlan,
+    k: usize,
+    cache: Option<(&crate::scene::cache::Cache, bool)>,
+    keep: bool,
+) -> Result<(crate::terrain::bands::BandPiece, Option<Vec<crate::scene::band_chunks::LevelChunks>>), StageError> {
+    use crate::terrain::bands::{bake_band_normals_of, build_band_window};
     let f = fail(Stage::Terrain);
     let rows = plan.rows(k);
     let key = cache.map(|_| band_key(mesh_key, rows));
     if let Some((c, false)) = cache {
         if let Some(piece) = kept_band(mesh_key, plan, k, c) {
-            return Ok(piece);
+            return Ok((piece, None));
         }
     }
     let read = plan.read_rows(k);
@@ -431,25 +446,32 @@ pub fn band_piece(
         build_band_window(&window, rows[0], &plan.bounds, t.max_vertices, chunk_cells(t.chunk), plan.fixed(k))
             .map_err(terrain_error)?;
     drop(window);
+    let mut kept = None;
     if let (Some(texel_rows), Some(pitch)) = (plan.normal_rows(), t.chunk) {
         let map = crate::heightfield::MapRows::new(&margin, read[0] as usize, plan.height()).ok_or_else(outside)?;
+        let mut levels = Vec::new();
         for (level, &bound) in piece.levels.iter_mut().zip(&plan.bounds) {
             // (the scene's chunks: options the map cannot take are the input's fault, as there)
-            let skirt = t.skirt_at(bound);
-            let normals = bake_band_normals(&map, &level.mesh, pitch, skirt, plan.map_px(), texel_rows[k].clone())
-                .map_err(|e| {
-                    let e = crate::terrain::job::JobError::from(e);
-                    StageError::of(Stage::Terrain.name(), &e, format!("band {k} (rows {}-{}): {e}", rows[0], rows[1]))
-                })?;
+            let in_band = |e: crate::terrain::build::BuildError| {
+                let e = crate::terrain::job::JobError::from(e);
+                StageError::of(Stage::Terrain.name(), &e, format!("band {k} (rows {}-{}): {e}", rows[0], rows[1]))
+            };
+            let chunks = crate::terrain::build::band_chunks(&map, &level.mesh, pitch, t.skirt_at(bound), true)
+                .map_err(in_band)?;
+            let normals = bake_band_normals_of(&chunks, &map, plan.map_px(), texel_rows[k].clone()).map_err(in_band)?;
             level.normals = Some(normals);
+            if keep {
+                levels.push(chunks);
+            }
         }
+        kept = keep.then_some(levels);
     }
     if let (Some((c, _)), Some(key)) = (cache, &key) {
         // (a store that fails only costs meshing the band again, or a shard that says so)
         let json = format!("{{\"rows\":[{},{}]}}", rows[0], rows[1]);
         let _ = c.store_blob(BAND_STAGE, key, &json, &piece.to_bytes());
     }
-    Ok(piece)
+    Ok((piece, kept))
 }
 
 /// Band `k` of `plan` as `cache` holds it (`None` when it does not, or not whole).

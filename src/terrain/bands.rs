@@ -164,7 +164,17 @@ pub fn bake_band_normals(
     texel_rows: std::ops::Range<usize>,
 ) -> Result<BandNormals, BuildError> {
     let chunks = band_chunks(rows, mesh, pitch, skirt_depth_m, true)?;
-    // (a band's texels are read by the rows beyond its edges at most: the chunks' check above)
+    bake_band_normals_of(&chunks, rows, map_px, texel_rows)
+}
+
+/// [`bake_band_normals`] of the band's chunks built already (shaded, from `rows`).
+pub fn bake_band_normals_of(
+    chunks: &[([usize; 2], crate::mesh::Primitive)],
+    rows: &MapRows,
+    map_px: [u32; 2],
+    texel_rows: std::ops::Range<usize>,
+) -> Result<BandNormals, BuildError> {
+    // (a band's texels are read by the rows beyond its edges at most: the chunks' check)
     let baked = bake_rows(chunks.iter().map(|(_, p)| p), rows, map_px, texel_rows);
     // (a band may hold no texel centre: a short last band under a map's coarse texels)
     let png = if baked.figures.is_empty() {
