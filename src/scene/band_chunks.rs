@@ -283,15 +283,30 @@ pub fn holds(cache: &Cache, key: &str, levels: usize) -> bool {
     kept_blob(cache, key).is_some_and(|b| from_bytes(&b).is_some_and(|l| l.len() == levels))
 }
 
+/// Whether the band whose chunks `cache` holds under `key` has heights exactly their f32 values
+/// (`false` when it does not hold them, or does not say).
+pub fn heights_exact(cache: &Cache, key: &str) -> bool {
+    let Some((json, _)) = cache.lookup(BAND_CHUNKS_STAGE, key) else { return false };
+    serde_json::from_str::<serde_json::Value>(&json).ok().and_then(|v| v["heights_exact"].as_bool()) == Some(true)
+}
+
 /// The blob `cache` holds under `key`, if any.
 pub fn kept_blob(cache: &Cache, key: &str) -> Option<Vec<u8>> {
     let (_, entry) = cache.lookup(BAND_CHUNKS_STAGE, key)?;
     Cache::read_blob(&entry).ok()
 }
 
-/// Stores a band's chunks under `key`.
-pub fn store(cache: &Cache, key: &str, rows: [u32; 2], levels: &[LevelChunks]) -> Result<(), StageError> {
-    let json = format!("{{\"rows\":[{},{}]}}", rows[0], rows[1]);
+/// Stores a band's chunks under `key`, with whether the map's heights in the band's rows are
+/// exactly their f32 values (`heights_exact`: [`crate::heightfield::Heightfield::rounding_m`] 0,
+/// so the terrain's error as stored is its f64 error there: [`heights_exact`]).
+pub fn store(
+    cache: &Cache,
+    key: &str,
+    rows: [u32; 2],
+    heights_exact: bool,
+    levels: &[LevelChunks],
+) -> Result<(), StageError> {
+    let json = format!("{{\"rows\":[{},{}],\"heights_exact\":{heights_exact}}}", rows[0], rows[1]);
     cache
         .store_blob(BAND_CHUNKS_STAGE, key, &json, &to_bytes(levels))
         .map(|_| ())
@@ -365,6 +380,7 @@ pub fn make(
     };
     let read = plan.chunk_rows(k);
     let margin = rows_of(read)?;
+    let margin_exact = margin.rounding_m() == 0.0;
     let field = MapRows::new(&margin, read[0] as usize, plan.height())
         .ok_or_else(|| fail(format!("rows {}-{} are not within the map", read[0], read[1])))?;
     let snow = crate::scene::terrain_stage::snow_rule(grows.preset);
@@ -377,7 +393,7 @@ pub fn make(
         }
     }
     .map_err(|e| fail(format!("band {k} (rows {a}-{b}): {e}")))?;
-    store(cache, &key, [a, b], &levels)
+    store(cache, &key, [a, b], margin_exact, &levels)
 }
 
 /// The bands whose layers hold the cover rows band `k`'s chunks read, in order: the band holding
@@ -527,6 +543,50 @@ mod tests {
                        max_density = 0.02\nslope = [0.0, 25.0]\naltitude = [0.0, 120.0]\n\n\
                        [snow]\nsnow_line = 110.0\nsnow_line_noise = 10.0\nnoise_scale = 80.0\ntransition = 10.0\n";
         bands_assemble_to_the_whole_scene(&preset(species));
+    }
+
+    /// A shard's cache holds what the terrain stage joins without reading the map when its
+    /// heights are their f32 values (a procedural map's), and not when they are rounded (a 16-bit
+    /// PNG's metres) or a band's chunks are missing.
+    #[test]
+    fn a_merge_joins_the_terrain_without_the_map_only_where_its_heights_are_exact() {
+        use crate::scene::terrain_stage::joined_without_map;
+        let dir = tempfile::tempdir().unwrap();
+        let procedural = preset("");
+        let png_map = dir.path().join("map.png");
+        image::ImageBuffer::from_fn(301, 1025, |i, j| image::Luma([(i * 97 + j * 31) as u16 % 4000 + 20000]))
+            .save(&png_map)
+            .unwrap();
+        let source = format!("heightmap = \"{}\"\nheight_scale = 300.0", png_map.display());
+        let png_text = format!(
+            "[scene]\nname = \"bands\"\nseed = 5\n\n[terrain]\n{source}\ncell_size = 2.0\nmax_error = 0.5\n\
+             chunk = 128\nskirt = 1.0\nlods = [0.5, 2.0]\n"
+        );
+        let png_preset = crate::scene::preset::parse_preset(&png_text, std::path::Path::new("png.toml")).unwrap();
+        for (p, exact) in [(&procedural, true), (&png_preset, false)] {
+            let out = dir.path().join(if exact { "procedural" } else { "png" });
+            crate::scene::shard::build_shard(
+                p,
+                &out,
+                crate::scene::shard::Shard { index: 0, count: 1 },
+                false,
+                &|_| {},
+            )
+            .unwrap();
+            let cache = Cache::new(&out);
+            let t = p.terrain.as_ref().unwrap();
+            assert_eq!(joined_without_map(p, t, &cache).unwrap().is_some(), exact);
+            if exact {
+                // a band's chunks gone: the map is read
+                let gone = std::fs::read_dir(&cache.root)
+                    .unwrap()
+                    .map(|e| e.unwrap().path())
+                    .find(|e| e.file_name().unwrap().to_string_lossy().starts_with("terrain-band-chunks-"))
+                    .unwrap();
+                std::fs::remove_dir_all(gone).unwrap();
+                assert!(joined_without_map(p, t, &cache).unwrap().is_none());
+            }
+        }
     }
 
     #[test]

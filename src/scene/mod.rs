@@ -113,6 +113,15 @@ pub struct TerrainSettings {
 }
 
 impl TerrainSettings {
+    /// The distance between the map's samples in metres (the heightmap's `cell_size`, or the
+    /// procedural terrain's).
+    pub fn cell_size_m(&self) -> f64 {
+        match &self.source {
+            TerrainSource::Heightmap { decode, .. } => decode.cell_size_m,
+            TerrainSource::Fbm { cell_size_m, .. } => *cell_size_m,
+        }
+    }
+
     /// How deep the skirts hang on the chunks of a mesh of bound `max_error_m`: the preset's
     /// `skirt`, or deeper when a neighbouring chunk may be shown at another level of the chain
     /// and lie further below. Both chunks' edges along their shared line are within their bounds

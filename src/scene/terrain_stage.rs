@@ -277,10 +277,7 @@ pub fn band_plan(t: &TerrainSettings, width: usize, height: usize) -> Option<Ban
     if t.mode != MeshMode::Tin || t.max_triangles.is_some() {
         return None;
     }
-    let cell = match &t.source {
-        TerrainSource::Heightmap { decode, .. } => decode.cell_size_m,
-        TerrainSource::Fbm { cell_size_m, .. } => *cell_size_m,
-    };
+    let cell = t.cell_size_m();
     let exact = Storage::f32_xz_exact(width, height, cell);
     let lines =
         crate::terrain::regions::band_lines(height, crate::terrain::regions::band_cells_for_chunk(t.chunk), exact);
@@ -610,10 +607,12 @@ struct Banded {
     chunks: Option<Vec<String>>,
 }
 
+/// `hf`: the map, or `None` when every band's entries are in `memo`'s cache and its heights are
+/// their f32 values ([`joined_without_map`]; an entry that does not read back then fails).
 fn banded_meshes(
     preset: &Preset,
     t: &TerrainSettings,
-    hf: &Heightfield,
+    hf: Option<&Heightfield>,
     plan: &BandPlan,
     memo: Option<MeshMemo<'_>>,
 ) -> Result<Banded, StageError> {
@@ -622,7 +621,7 @@ fn banded_meshes(
     if !t.lods.is_empty() {
         crate::lod::check_chain(&t.lods, &preset.lod).map_err(|e| input(e.to_string()))?;
     }
-    let storage = Storage::f32(hf);
+    let storage = hf.map(|hf| (hf, Storage::f32(hf)));
     let opts = |max_error_m: f64| TinOptions {
         max_error_m,
         max_triangles: None,
@@ -638,13 +637,16 @@ fn banded_meshes(
             StageError::of(Stage::Terrain.name(), &e, e.to_string())
         }
     };
+    // (a map not read was checked by the bands' units, each on its rows)
     for (k, &bound) in plan.bounds.iter().enumerate() {
-        check_tin_input(hf, &opts(bound)).map_err(|e| level_error(k, e))?;
+        if let Some(hf) = hf {
+            check_tin_input(hf, &opts(bound)).map_err(|e| level_error(k, e))?;
+        }
     }
     let start = Instant::now();
     let cache = memo.map(|m| (m.cache, m.force));
     let mut rows_of = |rows: [u32; 2]| {
-        hf.rows(rows[0] as usize, rows[1] as usize)
+        hf.and_then(|hf| hf.rows(rows[0] as usize, rows[1] as usize))
             .ok_or_else(|| fail(Stage::Terrain)(format!("rows {}-{} are not within the map", rows[0], rows[1])))
     };
     let key = mesh_key(preset, t)?;
@@ -682,8 +684,9 @@ fn banded_meshes(
     let mut levels = Vec::with_capacity(plan.bounds.len());
     for (k, &bound) in plan.bounds.iter().enumerate() {
         let start = Instant::now();
-        let (r, stats) =
-            crate::terrain::bands::assemble(hf, &storage, &pieces, k, &opts(bound)).map_err(|e| level_error(k, e))?;
+        let stored = storage.as_ref().map(|(hf, s)| (*hf, s));
+        let (r, stats) = crate::terrain::bands::assemble_stored(plan.width, stored, &pieces, k, &opts(bound))
+            .map_err(|e| level_error(k, e))?;
         levels.push(crate::lod::LodLevel {
             level: k,
             max_error_requested_m: bound,
@@ -699,6 +702,50 @@ fn banded_meshes(
     levels.truncate(t.lods.len());
     crate::lod::assign_switch_distances(&mut levels, &preset.lod);
     Ok(Banded { chain: levels, main, normals, layers, chunks })
+}
+
+/// The band plan of a terrain the cache holds every band's entries of (pieces, layers, chunks)
+/// with heights exactly their f32 values, so the terrain stage joins it without reading the map
+/// (a merge's): `None` when it does not (the map is then decoded), or for an `.hgt` (voids).
+pub(crate) fn joined_without_map(
+    preset: &Preset,
+    t: &TerrainSettings,
+    cache: &crate::scene::cache::Cache,
+) -> Result<Option<BandPlan>, StageError> {
+    use crate::scene::band_chunks;
+    if let TerrainSource::Heightmap { path, decode } = &t.source {
+        let hgt = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("hgt"));
+        if hgt || decode.encoding == heightfield::Encoding::Hgt {
+            return Ok(None);
+        }
+    }
+    let Some(plan) = planned_bands(t)? else { return Ok(None) };
+    if !chunks_by_band(t, &plan) {
+        return Ok(None);
+    }
+    let key = mesh_key(preset, t)?;
+    let grows = Grows::of(preset);
+    let all = (0..plan.band_count()).all(|k| {
+        let chunks = band_chunks::chunks_key_of(&grows, &key, &plan, k);
+        band_chunks::heights_exact(cache, &chunks)
+            && cache.lookup(BAND_STAGE, &band_key(&key, plan.rows(k))).is_some()
+            && cache
+                .lookup(crate::scene::band_layers::BAND_LAYERS_STAGE, &band_layers_key(&grows, &key, &plan, k))
+                .is_some()
+    });
+    Ok(all.then_some(plan))
+}
+
+/// The heightmap's sha256 (hashed in pieces, not held), `None` for a procedural terrain.
+fn heightmap_sha256(t: &TerrainSettings) -> Result<Option<String>, StageError> {
+    match &t.source {
+        TerrainSource::Heightmap { path, .. } => {
+            crate::scene::cache::sha256_hex_of_file(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+                .map(Some)
+                .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))
+        }
+        _ => Ok(None),
+    }
 }
 
 /// Key of the terrain's meshes: what meshing reads (not the formats, snow or species).
@@ -853,11 +900,44 @@ pub fn run_terrain_covered(
     // the settings or the map at fault: a chain the map cannot have, chunks or skirts it cannot take
     let input = bad_input(Stage::Terrain);
     let t0 = Instant::now();
-    let (hf, voids_filled, input_sha256) = terrain_heights(t)?;
+    // The map, decoded when something reads it: a terrain sharded by bands whose every unit is in
+    // the cache (a merge's), on a map whose heights are their f32 values, is joined from the
+    // bands' pieces, layers and chunks without it.
+    let held: std::cell::OnceCell<Heightfield> = std::cell::OnceCell::new();
+    let map = || -> Result<&Heightfield, StageError> {
+        if let Some(hf) = held.get() {
+            return Ok(hf);
+        }
+        let (hf, _, _) = terrain_heights(t)?;
+        Ok(held.get_or_init(|| hf))
+    };
+    let kept_plan = match memo {
+        Some(m) if !m.force => joined_without_map(preset, t, m.cache)?,
+        _ => None,
+    };
+    let (voids_filled, input_sha256) = match &kept_plan {
+        // (a map of such bands fills no voids: an `.hgt` is always decoded)
+        Some(_) => (0, heightmap_sha256(t)?),
+        None => {
+            let (hf, voids_filled, input_sha256) = terrain_heights(t)?;
+            let _ = held.set(hf);
+            (voids_filled, input_sha256)
+        }
+    };
     let decode_s = t0.elapsed().as_secs_f64();
 
     // a chunked map's bands, each kept in the cache as a piece of its own (a shard's unit)
-    let plan = band_plan(t, hf.width, hf.height);
+    let plan = match kept_plan {
+        Some(plan) => Some(plan),
+        None => {
+            let hf = map()?;
+            band_plan(t, hf.width, hf.height)
+        }
+    };
+    let size = match &plan {
+        Some(plan) => [plan.width, plan.height()],
+        None => [map()?.width, map()?.height],
+    };
     // the meshes as an earlier build of the same terrain made them (an entry that does not read
     // back is meshed again and replaced)
     let (band_memo, memo) = if plan.is_some() { (memo, None) } else { (None, memo) };
@@ -877,13 +957,20 @@ pub fn run_terrain_covered(
     let t1 = Instant::now();
     let (mut chain, remembered_main, band_normals, band_layers, band_chunks) = match (remembered, &plan) {
         (_, Some(plan)) => {
-            let b = banded_meshes(preset, t, &hf, plan, band_memo)?;
+            // (without the map while every entry reads back; with it where one does not)
+            let b = match held.get() {
+                Some(hf) => banded_meshes(preset, t, Some(hf), plan, band_memo)?,
+                None => match banded_meshes(preset, t, None, plan, band_memo) {
+                    Ok(b) => b,
+                    Err(_) => banded_meshes(preset, t, Some(map()?), plan, band_memo)?,
+                },
+            };
             (b.chain, Some(b.main), b.normals, b.layers, b.chunks)
         }
         (Some(m), None) => (m.chain, Some(m.main), None, None, None),
         (None, None) if t.lods.is_empty() => (Vec::new(), None, None, None, None),
         (None, None) => (
-            terrain_lod_chain_in_bands(&hf, &t.lods, t.max_triangles, t.max_vertices, chunk_cells, &preset.lod)
+            terrain_lod_chain_in_bands(map()?, &t.lods, t.max_triangles, t.max_vertices, chunk_cells, &preset.lod)
                 .map_err(|e| input(e.to_string()))?,
             None,
             None,
@@ -938,23 +1025,35 @@ pub fn run_terrain_covered(
     // the same path as `verdant terrain`: mesh (or the shared level), measure as stored, build
     // what grows on it: the soil layer and every vertex's `_SURFACE`, from the species' rules on
     // this surface (the densities the scatter stage's density maps hold)
-    let map_px = [crate::terrain::layers::map_px(hf.width), crate::terrain::layers::map_px(hf.height)];
+    let map_px = size.map(crate::terrain::layers::map_px);
     let cover = |scene: &Scene| crate::scene::ground_cover::cover(preset, scene, map_px);
-    let meshed = mesh_and_build(
-        &hf,
-        &settings,
-        &Storage::f32(&hf),
-        &build_opts("terrain".into(), t.max_error_m),
-        &source_label(t),
-        ready,
-        match (band_layers, assembled(t.max_error_m, "terrain")) {
-            (Some(layers), Some(scene)) => LayersFrom::Assembled(Box::new(layers), Box::new(scene)),
-            (Some(layers), None) => LayersFrom::Baked(Box::new(layers)),
-            (None, _) => LayersFrom::Bake(Some(&cover)),
-        },
-        normal_rows(t.max_error_m)?,
-    )
-    .map_err(|e| StageError::of(Stage::Terrain.name(), &e, e.to_string()))?;
+    let job_error = |e: crate::terrain::job::JobError| StageError::of(Stage::Terrain.name(), &e, e.to_string());
+    let meshed = match (band_layers, assembled(t.max_error_m, "terrain"), normal_rows(t.max_error_m)?, ready) {
+        // (the map not read: heights exact in f32, so the error as stored is the f64 error)
+        (Some(layers), Some(scene), Some(rows), Some(ready)) if held.get().is_none() => {
+            let label = source_label(t);
+            crate::terrain::job::finish_assembled(&settings, &label, "terrain", ready, layers, scene, rows)
+                .map_err(job_error)?
+        }
+        (layers, scene, rows, ready) => {
+            let hf = map()?;
+            mesh_and_build(
+                hf,
+                &settings,
+                &Storage::f32(hf),
+                &build_opts("terrain".into(), t.max_error_m),
+                &source_label(t),
+                ready,
+                match (layers, scene) {
+                    (Some(layers), Some(scene)) => LayersFrom::Assembled(Box::new(layers), Box::new(scene)),
+                    (Some(layers), None) => LayersFrom::Baked(Box::new(layers)),
+                    (None, _) => LayersFrom::Bake(Some(&cover)),
+                },
+                rows,
+            )
+            .map_err(job_error)?
+        }
+    };
     if let (Some(m), Some(key), false) = (memo, &memo_key, from_memo) {
         // kept for the next build of this terrain (a store that fails only costs a re-mesh then)
         let mut meshes =
@@ -968,7 +1067,7 @@ pub fn run_terrain_covered(
             .ok_or_else(|| f("the terrain's meshes did not read back from their own arrays".into()))?
             .chain;
     }
-    let figures = meshed.figures(&hf, &settings, voids_filled);
+    let figures = meshed.figures_of(size, t.cell_size_m(), &settings, voids_filled);
     // The chain level the main mesh is (the same mesh, built with the same options but its name):
     // its files are the main scene's under the level's names, written from the main scene itself
     // rather than built, textured and baked a second time beside it.
@@ -992,15 +1091,16 @@ pub fn run_terrain_covered(
                 scene
             }
             None => {
+                let hf = map()?;
                 let mut scene =
-                    build_scene(&hf, mesh, &build_opts(name.to_string(), bound)).map_err(|e| input(e.to_string()))?;
-                layers.texture(&mut scene, &hf, "terrain").map_err(colour)?;
+                    build_scene(hf, mesh, &build_opts(name.to_string(), bound)).map_err(|e| input(e.to_string()))?;
+                layers.texture(&mut scene, hf, "terrain").map_err(colour)?;
                 scene
             }
         };
         let normal = match rows {
             Some(rows) => put_normal_map(&mut scene, name, layers.report.map_px, rows),
-            None => bake_normal_map(&hf, &mut scene, name, layers.report.map_px),
+            None => bake_normal_map(map()?, &mut scene, name, layers.report.map_px),
         }
         .map_err(|e| f(format!("cannot bake the normal map of {name}: {e}")))?;
         Ok((scene, normal))

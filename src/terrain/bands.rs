@@ -15,7 +15,7 @@ use crate::terrain::normal_map::{bake_rows, RowFigures, TexelRows};
 use crate::terrain::regions::{join_bands, mesh_band};
 use crate::terrain::sample_mesh::SampleMesh;
 use crate::terrain::stored::Storage;
-use crate::terrain::tin::{finish_tin, TinOptions, TinResult};
+use crate::terrain::tin::{finish_tin_stored, TinOptions, TinResult};
 
 /// One bound's mesh of a band (samples in the map's coordinates), the largest error its mesher
 /// found, and what the analyzer measured in the band's rows.
@@ -107,13 +107,25 @@ pub fn assemble(
     k: usize,
     opts: &TinOptions,
 ) -> Result<(TinResult, ErrorStats), TerrainError> {
+    assemble_stored(hf.width, Some((hf, storage)), pieces, k, opts)
+}
+
+/// [`assemble`] of a map `width` samples wide, `stored` the map and its storage, or `None` when
+/// its storage is exact ([`Storage::is_exact`]: the map is then not read).
+pub fn assemble_stored(
+    width: usize,
+    stored: Option<(&Heightfield, &Storage)>,
+    pieces: &[BandPiece],
+    k: usize,
+    opts: &TinOptions,
+) -> Result<(TinResult, ErrorStats), TerrainError> {
     let mut lines: Vec<u32> = pieces.iter().map(|p| p.rows[0]).collect();
     lines.extend(pieces.last().map(|p| p.rows[1]));
     let bands = pieces.iter().map(|p| (p.levels[k].mesh.clone(), p.levels[k].mesher_error_m)).collect();
     let (mesh, max_error_m) = join_bands(bands, &lines);
     let measures: Vec<RowsMeasure> = pieces.iter().map(|p| p.levels[k].measure.clone()).collect();
-    let stats = combine_rows(&measures, hf.width);
-    Ok((finish_tin(hf, opts, storage, mesh, max_error_m, false)?, stats))
+    let stats = combine_rows(&measures, width);
+    Ok((finish_tin_stored(stored, opts, mesh, max_error_m, false)?, stats))
 }
 
 /// How far (in v, the map's UV) a texel centre must lie from a band line to be a band's own.

@@ -336,16 +336,7 @@ pub fn mesh_and_build(
             (mesh, hit, stats)
         }
     };
-    if settings.mode == MeshMode::Tin && !hit_limit && stats.max_error_m > settings.max_error_m {
-        let [i, j] = stats.worst_sample;
-        return Err(JobError::BoundBroken {
-            source_label: label.to_string(),
-            measured_m: stats.max_error_m,
-            bound_m: settings.max_error_m,
-            i,
-            j,
-        });
-    }
+    check_bound(settings, label, hit_limit, &stats)?;
     let t = Instant::now();
     let (mut scene, layers) = match layers {
         LayersFrom::Assembled(layers, scene) => {
@@ -385,13 +376,68 @@ pub fn mesh_and_build(
     })
 }
 
+/// A TIN over its bound as written (and not held back by a triangle limit) is refused.
+fn check_bound(settings: &MeshSettings, label: &str, hit_limit: bool, stats: &ErrorStats) -> Result<(), JobError> {
+    if settings.mode == MeshMode::Tin && !hit_limit && stats.max_error_m > settings.max_error_m {
+        let [i, j] = stats.worst_sample;
+        return Err(JobError::BoundBroken {
+            source_label: label.to_string(),
+            measured_m: stats.max_error_m,
+            bound_m: settings.max_error_m,
+            i,
+            j,
+        });
+    }
+    Ok(())
+}
+
+/// [`mesh_and_build`] of a mesh made already (`ready`) whose scene was assembled with its vertex
+/// attributes (a terrain meshed in bands whose chunks the bands built) on a map whose storage is
+/// exact ([`Storage::is_exact`]: the error as stored is the f64 error): the base colour and the
+/// normal map (its rows joined from the bands') put on it, the map never read.
+pub fn finish_assembled(
+    settings: &MeshSettings,
+    label: &str,
+    name: &str,
+    (mesh, hit_limit, stats): (SampleMesh, bool, ErrorStats),
+    layers: TerrainLayers,
+    mut scene: Scene,
+    normal_rows: crate::terrain::normal_map::TexelRows,
+) -> Result<Meshed, JobError> {
+    check_bound(settings, label, hit_limit, &stats)?;
+    let t = Instant::now();
+    layers.put_base_color(&mut scene, name).map_err(JobError::Texture)?;
+    let normal_map = put_normal_map(&mut scene, name, layers.report.map_px, normal_rows).map_err(JobError::Texture)?;
+    Ok(Meshed {
+        mesh,
+        hit_triangle_limit: hit_limit,
+        stats,
+        max_error_f64_m: stats.max_error_m,
+        scene,
+        layers,
+        normal_map,
+        seconds: [0.0, 0.0, t.elapsed().as_secs_f64()],
+    })
+}
+
 impl Meshed {
     /// The figures of this mesh of `hf` (`voids_filled` from the decoding).
     pub fn figures(&self, hf: &Heightfield, settings: &MeshSettings, voids_filled: usize) -> TerrainFigures {
+        self.figures_of([hf.width, hf.height], hf.cell_size_m, settings, voids_filled)
+    }
+
+    /// [`Meshed::figures`] of a map of `size` samples `cell_size_m` apart.
+    pub fn figures_of(
+        &self,
+        [width, height]: [usize; 2],
+        cell_size_m: f64,
+        settings: &MeshSettings,
+        voids_filled: usize,
+    ) -> TerrainFigures {
         TerrainFigures {
-            width: hf.width,
-            height: hf.height,
-            cell_size_m: hf.cell_size_m,
+            width,
+            height,
+            cell_size_m,
             voids_filled,
             mode: settings.mode,
             max_error_requested: (settings.mode == MeshMode::Tin).then_some(settings.max_error_m),
@@ -403,7 +449,7 @@ impl Meshed {
             rms_error: self.stats.rms_error_m,
             vertices: self.mesh.vertices.len(),
             triangles: self.mesh.triangles.len(),
-            full_grid_triangles: 2 * hf.width.saturating_sub(1) * hf.height.saturating_sub(1),
+            full_grid_triangles: 2 * width.saturating_sub(1) * height.saturating_sub(1),
             layers: self.layers.report.clone(),
             normal_map: self.normal_map.clone(),
         }

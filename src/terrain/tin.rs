@@ -985,13 +985,27 @@ pub(crate) fn finish_tin(
     max_error_m: f64,
     hit_triangle_limit: bool,
 ) -> Result<TinResult, TerrainError> {
+    finish_tin_stored(Some((hf, storage)), opts, mesh, max_error_m, hit_triangle_limit)
+}
+
+/// [`finish_tin`] where `stored` is the map and its storage, or `None` for a map whose storage is
+/// exact ([`Storage::is_exact`]: then the map is not read).
+pub(crate) fn finish_tin_stored(
+    stored: Option<(&Heightfield, &Storage)>,
+    opts: &TinOptions,
+    mesh: SampleMesh,
+    max_error_m: f64,
+    hit_triangle_limit: bool,
+) -> Result<TinResult, TerrainError> {
     let over_budget =
         |over| TerrainError::OverBudget { limit: opts.max_vertices, over, max_error_m: opts.max_error_m, grid: false };
     if mesh.vertices.len() > opts.max_vertices {
         return Err(over_budget(OverBudget::Exceeded));
     }
-    let as_stored = !storage.is_exact();
-    if !as_stored || max_error_m <= opts.max_error_m || hit_triangle_limit {
+    let Some((hf, storage)) = stored.filter(|(_, s)| !s.is_exact()) else {
+        return Ok(TinResult { mesh, max_error_m, hit_triangle_limit });
+    };
+    if max_error_m <= opts.max_error_m || hit_triangle_limit {
         return Ok(TinResult { mesh, max_error_m, hit_triangle_limit });
     }
     // Every face's samples other than its corners are within the bound as stored; what is left
