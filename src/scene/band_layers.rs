@@ -15,7 +15,6 @@ use std::ops::Range;
 
 use crate::heightfield::MapRows;
 use crate::mesh::Primitive;
-use crate::scatter::SurfaceIndex;
 use crate::scene::cache::{Cache, KeyBuilder};
 use crate::scene::error::StageError;
 use crate::scene::Preset;
@@ -88,8 +87,7 @@ pub fn locate_cover(
     map_px: [u32; 2],
     texel_rows: Range<usize>,
 ) -> Option<VegetationCover> {
-    let parts: Vec<(&[[f32; 3]], &[u32])> = surface.iter().map(|p| (&p.positions[..], &p.indices[..])).collect();
-    let index = SurfaceIndex::from_parts(&parts);
+    let index = crate::scene::ground_cover::surface_of_parts(surface.iter());
     crate::scene::ground_cover::cover_rows(preset, &index, extent, map_px, texel_rows)
 }
 

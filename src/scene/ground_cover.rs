@@ -20,8 +20,12 @@ use crate::terrain::vegetation::{Ground, SpeciesCover, VegetationCover};
 /// primitive of every mesh (skirts and base are vertical or face down; the surface index skips
 /// those triangles).
 pub fn surface_of(terrain: &Scene) -> SurfaceIndex {
-    let parts: Vec<(&[[f32; 3]], &[u32])> =
-        terrain.meshes.iter().flat_map(|m| m.primitives.iter().map(|p| (&p.positions[..], &p.indices[..]))).collect();
+    surface_of_parts(terrain.meshes.iter().flat_map(|m| m.primitives.iter()))
+}
+
+/// The terrain surface of some of a terrain's primitives (e.g. a band's chunks): [`surface_of`].
+pub fn surface_of_parts<'a>(primitives: impl Iterator<Item = &'a crate::mesh::Primitive>) -> SurfaceIndex {
+    let parts: Vec<(&[[f32; 3]], &[u32])> = primitives.map(|p| (&p.positions[..], &p.indices[..])).collect();
     SurfaceIndex::from_parts(&parts)
 }
 

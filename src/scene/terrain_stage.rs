@@ -867,7 +867,7 @@ pub fn run_terrain(
     t: &TerrainSettings,
     scene_dir: &Path,
 ) -> Result<(TerrainStageReport, Scene), StageError> {
-    run_terrain_memo(preset, t, scene_dir, None)
+    run_terrain_covered(preset, t, scene_dir, None).map(|(report, scene, _)| (report, scene))
 }
 
 /// What a terrain stage that ran hands on: the main scene, and what grows on it (the ground cover
@@ -878,17 +878,8 @@ pub struct Terrained {
     pub cover: Option<std::sync::Arc<crate::terrain::vegetation::VegetationCover>>,
 }
 
-/// [`run_terrain`], taking the meshes from `memo` when it holds them (and storing them when not).
-pub fn run_terrain_memo(
-    preset: &Preset,
-    t: &TerrainSettings,
-    scene_dir: &Path,
-    memo: Option<MeshMemo<'_>>,
-) -> Result<(TerrainStageReport, Scene), StageError> {
-    run_terrain_covered(preset, t, scene_dir, memo).map(|(report, scene, _)| (report, scene))
-}
-
-/// [`run_terrain_memo`], also handing on the ground cover its layers were baked with.
+/// [`run_terrain`], taking the meshes from `memo` when it holds them (and storing them when not),
+/// also handing on the ground cover its layers were baked with.
 pub fn run_terrain_covered(
     preset: &Preset,
     t: &TerrainSettings,
