@@ -426,23 +426,12 @@ pub fn chunks_key_of(grows: &crate::scene::band_layers::Grows, mesh_key: &str, p
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::band_layers::tests::{preset, PINES_AND_GRASS_UNDER_SNOW};
     use crate::scene::band_layers::Grows;
     use crate::scene::terrain_stage::{
         band_layers, band_piece, band_piece_chunked, band_plan, mesh_key, snow_rule, terrain_heights,
     };
     use crate::scene::Preset;
-
-    /// A map of three bands (rows 0-384, 384-768, 768-1024; chunks of 128, skirts, two levels),
-    /// and `extra` added.
-    fn preset(extra: &str) -> Preset {
-        let text = format!(
-            "[scene]\nname = \"bands\"\nseed = 5\n\n[terrain]\n\
-             procedural = {{ kind = \"ridged\", size = 1025, seed = 3, relief = 160.0 }}\n\
-             cell_size = 2.0\nmax_error = 0.5\nchunk = 128\nskirt = 1.0\nlods = [0.5, 2.0]\n\n\
-             [scatter]\ntile = 128.0\n\n{extra}"
-        );
-        crate::scene::preset::parse_preset(&text, std::path::Path::new("bands.toml")).unwrap()
-    }
 
     /// Each band's chunks made in a cache of its own (its piece and layers alone there, so every
     /// cover row beyond its lines is located on the neighbour's surface; built from its kept
@@ -537,12 +526,7 @@ mod tests {
     #[test]
     fn band_chunks_assemble_to_the_whole_scene_bit_for_bit() {
         bands_assemble_to_the_whole_scene(&preset(""));
-        let species = "[[species]]\nname = \"pine\"\nkind = \"tree\"\nlsystem = \"builtin:conifer\"\n\
-                       placement = \"poisson\"\nmax_density = 0.002\nmin_spacing = 10.0\nslope = [0.0, 30.0]\n\n\
-                       [[species]]\nname = \"grass\"\nkind = \"grass\"\nplacement = \"jittered\"\n\
-                       max_density = 0.02\nslope = [0.0, 25.0]\naltitude = [0.0, 120.0]\n\n\
-                       [snow]\nsnow_line = 110.0\nsnow_line_noise = 10.0\nnoise_scale = 80.0\ntransition = 10.0\n";
-        bands_assemble_to_the_whole_scene(&preset(species));
+        bands_assemble_to_the_whole_scene(&preset(PINES_AND_GRASS_UNDER_SNOW));
     }
 
     /// A shard's cache holds what the terrain stage joins without reading the map when its

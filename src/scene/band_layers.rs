@@ -290,13 +290,22 @@ pub fn store(cache: &Cache, key: &str, b: &BandLayers) -> Result<(), StageError>
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::scene::terrain_stage::{band_piece, band_plan, layers_by_band, mesh_key, snow_rule, terrain_heights};
     use crate::terrain::layers::bake_layers_with;
 
-    /// A map of three bands (rows 0-384, 384-768, 768-1024; chunks of 128), and `extra` added.
-    fn preset(extra: &str) -> Preset {
+    /// Pines and grass on their slopes (soil between), under a `[snow]` cover.
+    pub(crate) const PINES_AND_GRASS_UNDER_SNOW: &str =
+        "[[species]]\nname = \"pine\"\nkind = \"tree\"\nlsystem = \"builtin:conifer\"\n\
+         placement = \"poisson\"\nmax_density = 0.002\nmin_spacing = 10.0\nslope = [0.0, 30.0]\n\n\
+         [[species]]\nname = \"grass\"\nkind = \"grass\"\nplacement = \"jittered\"\n\
+         max_density = 0.02\nslope = [0.0, 25.0]\naltitude = [0.0, 120.0]\n\n\
+         [snow]\nsnow_line = 110.0\nsnow_line_noise = 10.0\nnoise_scale = 80.0\ntransition = 10.0\n";
+
+    /// A map of three bands (rows 0-384, 384-768, 768-1024; chunks of 128, skirts, two levels),
+    /// and `extra` added.
+    pub(crate) fn preset(extra: &str) -> Preset {
         let text = format!(
             "[scene]\nname = \"bands\"\nseed = 5\n\n[terrain]\n\
              procedural = {{ kind = \"ridged\", size = 1025, seed = 3, relief = 160.0 }}\n\
@@ -381,12 +390,7 @@ mod tests {
         // bare ground: the four layers by slope and the snowline
         bands_join_to_the_whole_bake(&preset(""));
         // grass and trees on their slopes (soil between), under a `[snow]` cover
-        let species = "[[species]]\nname = \"pine\"\nkind = \"tree\"\nlsystem = \"builtin:conifer\"\n\
-                       placement = \"poisson\"\nmax_density = 0.002\nmin_spacing = 10.0\nslope = [0.0, 30.0]\n\n\
-                       [[species]]\nname = \"grass\"\nkind = \"grass\"\nplacement = \"jittered\"\n\
-                       max_density = 0.02\nslope = [0.0, 25.0]\naltitude = [0.0, 120.0]\n\n\
-                       [snow]\nsnow_line = 110.0\nsnow_line_noise = 10.0\nnoise_scale = 80.0\ntransition = 10.0\n";
-        bands_join_to_the_whole_bake(&preset(species));
+        bands_join_to_the_whole_bake(&preset(PINES_AND_GRASS_UNDER_SNOW));
     }
 
     #[test]
