@@ -322,7 +322,7 @@ pub type EdgeCover<'a> = dyn FnMut(usize, Range<usize>) -> Result<Option<Vegetat
 /// rows (`rows_of`, asked for [`BandPlan::chunk_rows`]), the band's piece and layers as `cache`
 /// holds them (its unit stored them), and the cover's edge rows of its neighbours (their layers in
 /// `cache`, else `edge`), and stored. `built`: the band's shaded chunks at every level when its
-/// unit has them at hand ([`crate::scene::terrain_stage::band_piece_chunked`]), weighed instead of
+/// unit has them at hand ([`crate::scene::terrain_stage::band_piece`]), weighed instead of
 /// built again. `mesh_key` is the terrain's.
 #[allow(clippy::too_many_arguments)]
 pub fn make(
@@ -428,9 +428,7 @@ mod tests {
     use super::*;
     use crate::scene::band_layers::tests::{preset, PINES_AND_GRASS_UNDER_SNOW};
     use crate::scene::band_layers::Grows;
-    use crate::scene::terrain_stage::{
-        band_layers, band_piece, band_piece_chunked, band_plan, mesh_key, snow_rule, terrain_heights,
-    };
+    use crate::scene::terrain_stage::{band_layers, band_piece, band_plan, mesh_key, snow_rule, terrain_heights};
     use crate::scene::Preset;
 
     /// Each band's chunks made in a cache of its own (its piece and layers alone there, so every
@@ -454,7 +452,7 @@ mod tests {
         let mut built = Vec::new();
         for k in 0..3 {
             let c = Some((&shared, false));
-            let (piece, chunks) = band_piece_chunked(&key, t, &mut rows_of, &plan, k, c, true).unwrap();
+            let (piece, chunks) = band_piece(&key, t, &mut rows_of, &plan, k, c, true).unwrap();
             parts.push(band_layers(&grows, t, &key, &plan, k, &piece, &mut rows_of, None, c).unwrap().unwrap());
             pieces.push(piece);
             built.push(chunks.expect("the chunks its normal maps were baked from"));
@@ -470,7 +468,7 @@ mod tests {
         for k in 0..3 {
             let dir = tempfile::tempdir().unwrap();
             let own = Cache::new(dir.path());
-            band_piece(&key, t, &mut rows_of, &plan, k, Some((&own, false))).unwrap();
+            band_piece(&key, t, &mut rows_of, &plan, k, Some((&own, false)), false).unwrap();
             band_layers(&grows, t, &key, &plan, k, &pieces[k], &mut rows_of, None, Some((&own, false))).unwrap();
             let mut edge = |n: usize, rows: Range<usize>| {
                 located += 1;
@@ -559,7 +557,7 @@ mod tests {
             .unwrap();
             let cache = Cache::new(&out);
             let t = p.terrain.as_ref().unwrap();
-            assert_eq!(joined_without_map(p, t, &cache).unwrap().is_some(), exact);
+            assert_eq!(joined_without_map(p, t, &mut || mesh_key(p, t), &cache).unwrap().is_some(), exact);
             if exact {
                 // a band's chunks gone: the map is read
                 let gone = std::fs::read_dir(&cache.root)
@@ -568,7 +566,7 @@ mod tests {
                     .find(|e| e.file_name().unwrap().to_string_lossy().starts_with("terrain-band-chunks-"))
                     .unwrap();
                 std::fs::remove_dir_all(gone).unwrap();
-                assert!(joined_without_map(p, t, &cache).unwrap().is_none());
+                assert!(joined_without_map(p, t, &mut || mesh_key(p, t), &cache).unwrap().is_none());
             }
         }
     }

@@ -325,7 +325,8 @@ pub(crate) mod tests {
         assert!(layers_by_band(t, &plan));
         let key = mesh_key(preset, t).unwrap();
         let mut rows_of = |r: [u32; 2]| Ok(hf.rows(r[0] as usize, r[1] as usize).unwrap());
-        let pieces: Vec<_> = (0..3).map(|k| band_piece(&key, t, &mut rows_of, &plan, k, None).unwrap()).collect();
+        let pieces: Vec<_> =
+            (0..3).map(|k| band_piece(&key, t, &mut rows_of, &plan, k, None, false).unwrap().0).collect();
         let mut parts = Vec::new();
         let grows = Grows::of(preset);
         for (k, piece) in pieces.iter().enumerate() {

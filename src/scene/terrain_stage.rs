@@ -398,22 +398,11 @@ impl<'a> BandRows<'a> {
 /// Band `k` of `plan`: from `cache` when it holds it (unless `force`), else meshed and measured
 /// from its rows, its chunks' rows of every level's normal map baked (when the plan bakes them
 /// by band), and stored there. `rows` gives the map's rows ([`BandRows`], or the rows of a map at
-/// hand); it is asked for [`BandPlan::read_rows`]. `mesh_key` is the terrain's [`mesh_key`].
+/// hand); it is asked for [`BandPlan::read_rows`]. `mesh_key` is the terrain's [`mesh_key`]. With
+/// `keep`, also the band's chunks at every level it built for its normal maps (shaded, without the
+/// layers' attributes: what [`crate::scene::band_chunks::make`] weighs; `None` when the piece came
+/// from the cache or the plan bakes no normal maps by band).
 pub fn band_piece(
-    mesh_key: &str,
-    t: &TerrainSettings,
-    rows_of: &mut dyn FnMut([u32; 2]) -> Result<Heightfield, StageError>,
-    plan: &BandPlan,
-    k: usize,
-    cache: Option<(&crate::scene::cache::Cache, bool)>,
-) -> Result<crate::terrain::bands::BandPiece, StageError> {
-    band_piece_chunked(mesh_key, t, rows_of, plan, k, cache, false).map(|(piece, _)| piece)
-}
-
-/// [`band_piece`], and with `keep` the band's chunks at every level it built for its normal maps
-/// (shaded, without the layers' attributes: what [`crate::scene::band_chunks::make`] weighs;
-/// `None` when the piece came from the cache or the plan bakes no normal maps by band).
-pub fn band_piece_chunked(
     mesh_key: &str,
     t: &TerrainSettings,
     rows_of: &mut dyn FnMut([u32; 2]) -> Result<Heightfield, StageError>,
@@ -612,6 +601,7 @@ struct Banded {
 fn banded_meshes(
     preset: &Preset,
     t: &TerrainSettings,
+    key: &str,
     hf: Option<&Heightfield>,
     plan: &BandPlan,
     memo: Option<MeshMemo<'_>>,
@@ -649,16 +639,15 @@ fn banded_meshes(
         hf.and_then(|hf| hf.rows(rows[0] as usize, rows[1] as usize))
             .ok_or_else(|| fail(Stage::Terrain)(format!("rows {}-{} are not within the map", rows[0], rows[1])))
     };
-    let key = mesh_key(preset, t)?;
     let mut pieces = (0..plan.band_count())
-        .map(|k| band_piece(&key, t, &mut rows_of, plan, k, cache))
+        .map(|k| band_piece(key, t, &mut rows_of, plan, k, cache, false).map(|(piece, _)| piece))
         .collect::<Result<Vec<_>, _>>()?;
     // each band's rows of the layers, joined (when the plan bakes them by band)
     let grows = Grows::of(preset);
     let chunks = match cache {
         Some((c, false)) if chunks_by_band(t, plan) => {
             let keys: Vec<String> = (0..plan.band_count())
-                .map(|k| crate::scene::band_chunks::chunks_key_of(&grows, &key, plan, k))
+                .map(|k| crate::scene::band_chunks::chunks_key_of(&grows, key, plan, k))
                 .collect();
             let stage = crate::scene::band_chunks::BAND_CHUNKS_STAGE;
             keys.iter().all(|k| c.lookup(stage, k).is_some()).then_some(keys)
@@ -668,7 +657,7 @@ fn banded_meshes(
     let layers = if layers_by_band(t, plan) {
         let mut parts = Vec::with_capacity(pieces.len());
         for (k, piece) in pieces.iter().enumerate() {
-            parts.extend(band_layers(&grows, t, &key, plan, k, piece, &mut rows_of, None, cache)?);
+            parts.extend(band_layers(&grows, t, key, plan, k, piece, &mut rows_of, None, cache)?);
         }
         let joined = crate::scene::band_layers::join(preset, parts, plan.map_px())
             .map_err(|e| fail(Stage::Terrain)(format!("the bands' layer rows do not join: {e}")))?;
@@ -707,9 +696,11 @@ fn banded_meshes(
 /// The band plan of a terrain the cache holds every band's entries of (pieces, layers, chunks)
 /// with heights exactly their f32 values, so the terrain stage joins it without reading the map
 /// (a merge's): `None` when it does not (the map is then decoded), or for an `.hgt` (voids).
+/// `key` is the terrain's [`mesh_key`], asked for only when the terrain could be joined so.
 pub(crate) fn joined_without_map(
     preset: &Preset,
     t: &TerrainSettings,
+    key: &mut dyn FnMut() -> Result<String, StageError>,
     cache: &crate::scene::cache::Cache,
 ) -> Result<Option<BandPlan>, StageError> {
     use crate::scene::band_chunks;
@@ -723,7 +714,7 @@ pub(crate) fn joined_without_map(
     if !chunks_by_band(t, &plan) {
         return Ok(None);
     }
-    let key = mesh_key(preset, t)?;
+    let key = key()?;
     let grows = Grows::of(preset);
     let all = (0..plan.band_count()).all(|k| {
         let chunks = band_chunks::chunks_key_of(&grows, &key, &plan, k);
@@ -750,17 +741,20 @@ fn heightmap_sha256(t: &TerrainSettings) -> Result<Option<String>, StageError> {
 
 /// Key of the terrain's meshes: what meshing reads (not the formats, snow or species).
 pub fn mesh_key(preset: &Preset, t: &TerrainSettings) -> Result<String, StageError> {
+    Ok(mesh_key_hashed(preset, t, heightmap_sha256(t)?.as_deref()))
+}
+
+/// [`mesh_key`] of a terrain whose heightmap's sha256 is `heightmap_sha256` (`None`: procedural).
+fn mesh_key_hashed(preset: &Preset, t: &TerrainSettings, heightmap_sha256: Option<&str>) -> String {
     let mut k = KeyBuilder::new(MESH_MEMO_STAGE, TERRAIN_ALGORITHM_VERSION);
     k.add(serde_json::to_string(t).unwrap_or_default().as_bytes());
     if !t.lods.is_empty() {
         k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
     }
-    if let TerrainSource::Heightmap { path, .. } = &t.source {
-        let hash = crate::scene::cache::sha256_hex_of_file(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
-            .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))?;
+    if let Some(hash) = heightmap_sha256 {
         k.add(hash.as_bytes());
     }
-    Ok(k.finish())
+    k.finish()
 }
 
 impl TerrainJob<'_> {
@@ -902,19 +896,32 @@ pub fn run_terrain_covered(
         let (hf, _, _) = terrain_heights(t)?;
         Ok(held.get_or_init(|| hf))
     };
+    // the heightmap hashed once, in pieces (before it is decoded, when the cache may make that
+    // needless), or as decoded
+    let mut hashed: Option<Option<String>> = None;
     let kept_plan = match memo {
-        Some(m) if !m.force => joined_without_map(preset, t, m.cache)?,
+        Some(m) if !m.force => {
+            let mut key = || -> Result<String, StageError> {
+                let sha = heightmap_sha256(t)?;
+                let key = mesh_key_hashed(preset, t, sha.as_deref());
+                hashed = Some(sha);
+                Ok(key)
+            };
+            joined_without_map(preset, t, &mut key, m.cache)?
+        }
         _ => None,
     };
-    let (voids_filled, input_sha256) = match &kept_plan {
+    let (voids_filled, input_sha256) = match (&kept_plan, hashed.take()) {
         // (a map of such bands fills no voids: an `.hgt` is always decoded)
-        Some(_) => (0, heightmap_sha256(t)?),
-        None => {
+        (Some(_), Some(sha)) => (0, sha),
+        (Some(_), None) => (0, heightmap_sha256(t)?),
+        (None, _) => {
             let (hf, voids_filled, input_sha256) = terrain_heights(t)?;
             let _ = held.set(hf);
             (voids_filled, input_sha256)
         }
     };
+    let key = mesh_key_hashed(preset, t, input_sha256.as_deref());
     let decode_s = t0.elapsed().as_secs_f64();
 
     // a chunked map's bands, each kept in the cache as a piece of its own (a shard's unit)
@@ -932,7 +939,7 @@ pub fn run_terrain_covered(
     // the meshes as an earlier build of the same terrain made them (an entry that does not read
     // back is meshed again and replaced)
     let (band_memo, memo) = if plan.is_some() { (memo, None) } else { (None, memo) };
-    let memo_key = memo.map(|_| mesh_key(preset, t)).transpose()?;
+    let memo_key = memo.map(|_| key.clone());
     let remembered: Option<Meshes> = match (memo, &memo_key) {
         (Some(m), Some(key)) if !m.force => m.cache.lookup(MESH_MEMO_STAGE, key).and_then(|(json, entry)| {
             let meshes: Meshes = serde_json::from_str(&json).ok()?;
@@ -950,10 +957,10 @@ pub fn run_terrain_covered(
         (_, Some(plan)) => {
             // (without the map while every entry reads back; with it where one does not)
             let b = match held.get() {
-                Some(hf) => banded_meshes(preset, t, Some(hf), plan, band_memo)?,
-                None => match banded_meshes(preset, t, None, plan, band_memo) {
+                Some(hf) => banded_meshes(preset, t, &key, Some(hf), plan, band_memo)?,
+                None => match banded_meshes(preset, t, &key, None, plan, band_memo) {
                     Ok(b) => b,
-                    Err(_) => banded_meshes(preset, t, Some(map()?), plan, band_memo)?,
+                    Err(_) => banded_meshes(preset, t, &key, Some(map()?), plan, band_memo)?,
                 },
             };
             (b.chain, Some(b.main), b.normals, b.layers, b.chunks)
