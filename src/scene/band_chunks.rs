@@ -527,38 +527,70 @@ mod tests {
         bands_assemble_to_the_whole_scene(&preset(PINES_AND_GRASS_UNDER_SNOW));
     }
 
-    /// A shard's cache holds what the terrain stage joins without reading the map when its
-    /// heights are their f32 values (a procedural map's), and not when they are rounded (a 16-bit
-    /// PNG's metres) or a band's chunks are missing.
+    /// A shard's cache holds what the terrain stage joins without reading the map when every
+    /// band's entries say the main mesh's f64 error: its heights are their f32 values (a
+    /// procedural map's), or its unit measured it (a 16-bit PNG's metres, which f32 rounds); then
+    /// the terrain stage's figures and files are a whole build's from the decoded map (which, with
+    /// a cache, takes the f64 error from its bands' figures too). Not when a
+    /// band's chunks are missing, nor on a map whose bands are some exact and some rounded (one
+    /// flat at 0 m).
     #[test]
-    fn a_merge_joins_the_terrain_without_the_map_only_where_its_heights_are_exact() {
-        use crate::scene::terrain_stage::joined_without_map;
+    fn a_merge_joins_the_terrain_without_the_map_where_every_band_says_its_f64_error() {
+        use crate::scene::terrain_stage::{joined_without_map, run_terrain_covered, MeshMemo};
         let dir = tempfile::tempdir().unwrap();
         let procedural = preset("");
-        let png_map = dir.path().join("map.png");
-        image::ImageBuffer::from_fn(301, 1025, |i, j| image::Luma([(i * 97 + j * 31) as u16 % 4000 + 20000]))
-            .save(&png_map)
+        let png_preset = |name: &str, flat_rows: u32| {
+            let map = dir.path().join(format!("{name}.png"));
+            image::ImageBuffer::from_fn(301, 1025, |i, j| {
+                image::Luma([if j < flat_rows { 0 } else { (i * 97 + j * 31) as u16 % 4000 + 20000 }])
+            })
+            .save(&map)
             .unwrap();
-        let source = format!("heightmap = \"{}\"\nheight_scale = 300.0", png_map.display());
-        let png_text = format!(
-            "[scene]\nname = \"bands\"\nseed = 5\n\n[terrain]\n{source}\ncell_size = 2.0\nmax_error = 0.5\n\
-             chunk = 128\nskirt = 1.0\nlods = [0.5, 2.0]\n"
-        );
-        let png_preset = crate::scene::preset::parse_preset(&png_text, std::path::Path::new("png.toml")).unwrap();
-        for (p, exact) in [(&procedural, true), (&png_preset, false)] {
-            let out = dir.path().join(if exact { "procedural" } else { "png" });
-            crate::scene::shard::build_shard(
-                p,
-                &out,
-                crate::scene::shard::Shard { index: 0, count: 1 },
-                false,
-                &|_| {},
-            )
-            .unwrap();
+            let text = format!(
+                "[scene]\nname = \"bands\"\nseed = 5\n\n[terrain]\nheightmap = \"{}\"\nheight_scale = 300.0\n\
+                 cell_size = 2.0\nmax_error = 0.5\nchunk = 128\nskirt = 1.0\nlods = [0.5, 2.0]\n",
+                map.display()
+            );
+            crate::scene::preset::parse_preset(&text, std::path::Path::new("png.toml")).unwrap()
+        };
+        let (rounded, mixed) = (png_preset("rounded", 0), png_preset("mixed", 390));
+        for (name, p, joined, f64_given) in [
+            ("procedural", &procedural, true, false),
+            ("rounded", &rounded, true, true),
+            ("mixed", &mixed, false, false),
+        ] {
+            let out = dir.path().join(name);
+            let shard = crate::scene::shard::Shard { index: 0, count: 1 };
+            crate::scene::shard::build_shard(p, &out, shard, false, &|_| {}).unwrap();
             let cache = Cache::new(&out);
             let t = p.terrain.as_ref().unwrap();
-            assert_eq!(joined_without_map(p, t, &mut || mesh_key(p, t), &cache).unwrap().is_some(), exact);
-            if exact {
+            let got = joined_without_map(p, t, &mut || mesh_key(p, t), &cache).unwrap();
+            assert_eq!(got.is_some(), joined, "{name}");
+            let Some((plan, f64_m)) = got else { continue };
+            assert_eq!(f64_m.is_some(), f64_given, "{name}");
+            // joined without the map: the whole build's figures and files
+            let key = mesh_key(p, t).unwrap();
+            let memo = MeshMemo { cache: &cache, force: false };
+            let b = crate::scene::terrain_stage::banded_meshes(p, t, &key, None, &plan, Some(memo), f64_given);
+            assert!(b.is_ok(), "{name}: the bands' entries join without the map");
+            let (joined_dir, whole_dir) = (out.join("joined"), out.join("whole"));
+            let (from_bands, ..) = run_terrain_covered(p, t, &joined_dir, Some(memo)).unwrap();
+            let (whole, ..) = run_terrain_covered(p, t, &whole_dir, None).unwrap();
+            assert_eq!(from_bands.figures.max_error_f64, whole.figures.max_error_f64, "{name}");
+            if f64_given {
+                assert!(whole.figures.max_error_f64 != whole.figures.max_error, "{name}: the map rounds");
+            }
+            assert_eq!(from_bands.figures, whole.figures, "{name}");
+            // a whole build with a cache takes the f64 error from its bands' figures too
+            let fresh = Cache::new(&out.join("fresh"));
+            let memo = Some(MeshMemo { cache: &fresh, force: false });
+            let (cached, ..) = run_terrain_covered(p, t, &out.join("cached"), memo).unwrap();
+            assert_eq!(cached.figures, whole.figures, "{name}");
+            for f in &whole.files {
+                let same = std::fs::read(joined_dir.join(f)).unwrap() == std::fs::read(whole_dir.join(f)).unwrap();
+                assert!(same, "{name}: {} differs", f.display());
+            }
+            if !f64_given {
                 // a band's chunks gone: the map is read
                 let gone = std::fs::read_dir(&cache.root)
                     .unwrap()

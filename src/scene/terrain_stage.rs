@@ -431,6 +431,15 @@ pub fn band_piece(
     let mut piece =
         build_band_window(&window, rows[0], &plan.bounds, t.max_vertices, chunk_cells(t.chunk), plan.fixed(k))
             .map_err(terrain_error)?;
+    // the main mesh's f64 error in the band's rows, where f32 rounds the heights (a join of the
+    // bands' takes the largest without the map: `joined_without_map`)
+    let exact_max_m = main_level(t, plan).filter(|_| window.rounding_m() != 0.0).map(|m| {
+        let mut local = piece.levels[m].mesh.clone();
+        for v in &mut local.vertices {
+            v[1] -= rows[0];
+        }
+        crate::terrain::error::exact_max_in_rows(&window, &local, [0, rows[1] - rows[0]])
+    });
     drop(window);
     let mut kept = None;
     if let (Some(texel_rows), Some(pitch)) = (plan.normal_rows(), t.chunk) {
@@ -454,7 +463,16 @@ pub fn band_piece(
     }
     if let (Some((c, _)), Some(key)) = (cache, &key) {
         // (a store that fails only costs meshing the band again, or a shard that says so)
-        let json = format!("{{\"rows\":[{},{}]}}", rows[0], rows[1]);
+        let json = match exact_max_m {
+            // (the bits, which JSON's decimal need not give back exactly)
+            Some(e) => format!(
+                "{{\"rows\":[{},{}],\"max_error_f64_m\":{e},\"max_error_f64_bits\":{}}}",
+                rows[0],
+                rows[1],
+                e.to_bits()
+            ),
+            None => format!("{{\"rows\":[{},{}]}}", rows[0], rows[1]),
+        };
         let _ = c.store_blob(BAND_STAGE, key, &json, &piece.to_bytes());
     }
     Ok((piece, kept))
@@ -583,7 +601,7 @@ type BandedNormals = Option<Vec<Vec<crate::terrain::bands::BandNormals>>>;
 /// The terrain's LoD chain (switch distances assigned) and main mesh from its bands' pieces, and
 /// their normal map rows.
 /// What a terrain meshed in bands is made of, from its bands' pieces.
-struct Banded {
+pub(crate) struct Banded {
     /// The LoD chain (switch distances assigned).
     chain: Vec<crate::lod::LodLevel>,
     /// The main mesh, whether it hit a triangle limit (never: bands have none), its figures.
@@ -596,15 +614,17 @@ struct Banded {
     chunks: Option<Vec<String>>,
 }
 
-/// `hf`: the map, or `None` when every band's entries are in `memo`'s cache and its heights are
-/// their f32 values ([`joined_without_map`]; an entry that does not read back then fails).
-fn banded_meshes(
+/// `hf`: the map, or `None` when every band's entries are in `memo`'s cache and say the main
+/// mesh's f64 error ([`joined_without_map`]; an entry that does not read back then fails, and so
+/// does a level over its bound as stored on a map f32 `rounds`).
+pub(crate) fn banded_meshes(
     preset: &Preset,
     t: &TerrainSettings,
     key: &str,
     hf: Option<&Heightfield>,
     plan: &BandPlan,
     memo: Option<MeshMemo<'_>>,
+    rounds: bool,
 ) -> Result<Banded, StageError> {
     use crate::terrain::tin::{check_tin_input, TinOptions};
     let input = bad_input(Stage::Terrain);
@@ -676,6 +696,11 @@ fn banded_meshes(
         let stored = storage.as_ref().map(|(hf, s)| (*hf, s));
         let (r, stats) = crate::terrain::bands::assemble_stored(plan.width, stored, &pieces, k, &opts(bound))
             .map_err(|e| level_error(k, e))?;
+        // (over its bound as stored, a level of a map f32 rounds is refused naming its worst
+        // sample, which the map is read for)
+        if rounds && hf.is_none() && r.max_error_m > bound {
+            return Err(fail(Stage::Terrain)(format!("level {k} is over its bound as stored")));
+        }
         levels.push(crate::lod::LodLevel {
             level: k,
             max_error_requested_m: bound,
@@ -693,16 +718,32 @@ fn banded_meshes(
     Ok(Banded { chain: levels, main, normals, layers, chunks })
 }
 
-/// The band plan of a terrain the cache holds every band's entries of (pieces, layers, chunks)
-/// with heights exactly their f32 values, so the terrain stage joins it without reading the map
-/// (a merge's): `None` when it does not (the map is then decoded), or for an `.hgt` (voids).
+/// The main mesh's level among `plan`'s bounds.
+fn main_level(t: &TerrainSettings, plan: &BandPlan) -> Option<usize> {
+    plan.bounds.iter().position(|&b| b == t.max_error_m)
+}
+
+/// The main mesh's f64 error in band `k`'s rows as its unit measured it, where f32 rounds the
+/// map's heights there (`None` when the entry does not say).
+fn band_exact_max(cache: &crate::scene::cache::Cache, key: &str, plan: &BandPlan, k: usize) -> Option<f64> {
+    let (json, _) = cache.lookup(BAND_STAGE, &band_key(key, plan.rows(k)))?;
+    let v: serde_json::Value = serde_json::from_str(&json).ok()?;
+    v["max_error_f64_bits"].as_u64().map(f64::from_bits)
+}
+
+/// A terrain the cache holds every band's entries of (pieces, layers, chunks), each saying the
+/// main mesh's f64 error in its rows (its heights exactly their f32 values, so the error as
+/// stored is that error; or the error its unit measured on the map's exact heights), so the
+/// terrain stage joins it without reading the map (a merge's): its band plan, and the main mesh's
+/// f64 error when the map's heights round (the largest of the bands'). `None` when it does not
+/// (the map is then decoded), or for an `.hgt` (voids).
 /// `key` is the terrain's [`mesh_key`], asked for only when the terrain could be joined so.
 pub(crate) fn joined_without_map(
     preset: &Preset,
     t: &TerrainSettings,
     key: &mut dyn FnMut() -> Result<String, StageError>,
     cache: &crate::scene::cache::Cache,
-) -> Result<Option<BandPlan>, StageError> {
+) -> Result<Option<(BandPlan, Option<f64>)>, StageError> {
     use crate::scene::band_chunks;
     if let TerrainSource::Heightmap { path, decode } = &t.source {
         let hgt = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("hgt"));
@@ -716,15 +757,33 @@ pub(crate) fn joined_without_map(
     }
     let key = key()?;
     let grows = Grows::of(preset);
-    let all = (0..plan.band_count()).all(|k| {
+    // (every band's heights exact, or every band's measured: a mix, such as a band of a 16-bit
+    // map all at sea level, would need each exact band's own error as stored, so it is decoded)
+    let (mut all, mut rounded, mut exact) = (true, None::<f64>, 0);
+    for k in 0..plan.band_count() {
         let chunks = band_chunks::chunks_key_of(&grows, &key, &plan, k);
-        band_chunks::heights_exact(cache, &chunks)
+        all = all
             && cache.lookup(BAND_STAGE, &band_key(&key, plan.rows(k))).is_some()
             && cache
                 .lookup(crate::scene::band_layers::BAND_LAYERS_STAGE, &band_layers_key(&grows, &key, &plan, k))
                 .is_some()
-    });
-    Ok(all.then_some(plan))
+            && cache.lookup(band_chunks::BAND_CHUNKS_STAGE, &chunks).is_some();
+        if !all {
+            break;
+        }
+        if band_chunks::heights_exact(cache, &chunks) {
+            exact += 1;
+        } else {
+            match band_exact_max(cache, &key, &plan, k) {
+                Some(e) => rounded = Some(rounded.map_or(e, |r| r.max(e))),
+                None => return Ok(None),
+            }
+        }
+    }
+    if exact > 0 && rounded.is_some() {
+        return Ok(None);
+    }
+    Ok(all.then_some((plan, rounded)))
 }
 
 /// The heightmap's sha256 (hashed in pieces, not held), `None` for a procedural terrain.
@@ -925,8 +984,10 @@ pub fn run_terrain_covered(
     let decode_s = t0.elapsed().as_secs_f64();
 
     // a chunked map's bands, each kept in the cache as a piece of its own (a shard's unit)
+    // (the main mesh's f64 error, from the bands' units, on a map f32 rounds)
+    let kept_f64 = kept_plan.as_ref().and_then(|(_, f64_m)| *f64_m);
     let plan = match kept_plan {
-        Some(plan) => Some(plan),
+        Some((plan, _)) => Some(plan),
         None => {
             let hf = map()?;
             band_plan(t, hf.width, hf.height)
@@ -957,10 +1018,10 @@ pub fn run_terrain_covered(
         (_, Some(plan)) => {
             // (without the map while every entry reads back; with it where one does not)
             let b = match held.get() {
-                Some(hf) => banded_meshes(preset, t, &key, Some(hf), plan, band_memo)?,
-                None => match banded_meshes(preset, t, &key, None, plan, band_memo) {
+                Some(hf) => banded_meshes(preset, t, &key, Some(hf), plan, band_memo, false)?,
+                None => match banded_meshes(preset, t, &key, None, plan, band_memo, kept_f64.is_some()) {
                     Ok(b) => b,
-                    Err(_) => banded_meshes(preset, t, &key, Some(map()?), plan, band_memo)?,
+                    Err(_) => banded_meshes(preset, t, &key, Some(map()?), plan, band_memo, false)?,
                 },
             };
             (b.chain, Some(b.main), b.normals, b.layers, b.chunks)
@@ -1027,14 +1088,27 @@ pub fn run_terrain_covered(
     let cover = |scene: &Scene| crate::scene::ground_cover::cover(preset, scene, map_px);
     let job_error = |e: crate::terrain::job::JobError| StageError::of(Stage::Terrain.name(), &e, e.to_string());
     let meshed = match (band_layers, assembled(t.max_error_m, "terrain"), normal_rows(t.max_error_m)?, ready) {
-        // (the map not read: heights exact in f32, so the error as stored is the f64 error)
+        // (the map not read: heights exact in f32, so the error as stored is the f64 error, or
+        // the bands measured it)
         (Some(layers), Some(scene), Some(rows), Some(ready)) if held.get().is_none() => {
             let label = source_label(t);
-            crate::terrain::job::finish_assembled(&settings, &label, "terrain", ready, layers, scene, rows)
+            let f64_m = kept_f64.unwrap_or(ready.2.max_error_m);
+            crate::terrain::job::finish_assembled(&settings, &label, "terrain", ready, f64_m, layers, scene, rows)
                 .map_err(job_error)?
         }
         (layers, scene, rows, ready) => {
             let hf = map()?;
+            // (a banded terrain's f64 error from its units' figures when they measured it)
+            let bands_f64 = kept_f64.or_else(|| match (&plan, band_memo) {
+                (Some(plan), Some(m)) if !Storage::f32(hf).is_exact() => {
+                    let key = &key;
+                    (0..plan.band_count())
+                        .map(|k| band_exact_max(m.cache, key, plan, k))
+                        .try_fold(0.0, |a, e| Some(e?.max(a)))
+                }
+                _ => None,
+            });
+            let ready = ready.map(|(mesh, hit, stats)| (mesh, hit, stats, plan.as_ref().and(bands_f64)));
             mesh_and_build(
                 hf,
                 &settings,

@@ -439,6 +439,54 @@ mod tests {
         }
     }
 
+    /// Each band's f64 error in its rows from its window alone ([`exact_max_in_rows`]), the
+    /// largest of them, is the f64 error of the joined mesh over the whole map, bit for bit: on
+    /// decimetre heights (which f32 rounds), and with the worst sample on a band line (a ridge of
+    /// 0.3 m bumps along row 384, which the seam keeps within the bound without a vertex there).
+    #[test]
+    fn the_bands_f64_errors_from_their_rows_give_the_whole_maps() {
+        use crate::terrain::error::{exact_max_in_rows, measure_exact};
+        let rough = crate::synth::fractal(500, 1000, 1.0, 200.0, 0.6, 8);
+        let tenths: Vec<f64> = rough.heights.iter().map(|&z| (z as f64 * 10.0).round() / 10.0).collect();
+        let ridge: Vec<f64> = (0..500 * 1000)
+            .map(|k| {
+                let (i, j) = (k % 500, k / 500);
+                ((i as f64 * 0.01 + j as f64 * 0.02) * 10.0).round() / 10.0
+                    + if j == 384 && i % 2 == 1 { 0.3 } else { 0.0 }
+            })
+            .collect();
+        for (name, heights) in [("tenths", &tenths), ("ridge on a band line", &ridge)] {
+            let hf = Heightfield::from_f64(500, 1000, heights, 1.0);
+            let storage = Storage::f32(&hf);
+            assert!(!storage.is_exact(), "{name}: f32 rounds the heights");
+            let bounds = [0.5, 3.0];
+            let bands = [([0, 384], [false, true]), ([384, 768], [true, true]), ([768, 999], [true, false])];
+            let pieces: Vec<(BandPiece, f64)> = bands
+                .iter()
+                .map(|&(rows, fixed)| {
+                    let window = hf.rows(rows[0] as usize, rows[1] as usize).unwrap();
+                    let piece = build_band_window(&window, rows[0], &bounds, usize::MAX, 128, fixed).unwrap();
+                    let mut local = piece.levels[0].mesh.clone();
+                    for v in &mut local.vertices {
+                        v[1] -= rows[0];
+                    }
+                    let e = exact_max_in_rows(&window, &local, [0, rows[1] - rows[0]]);
+                    (piece, e)
+                })
+                .collect();
+            let opts =
+                TinOptions { max_error_m: 0.5, chunk_cells: 128, max_vertices: usize::MAX, ..Default::default() };
+            let just: Vec<BandPiece> = pieces.iter().map(|(p, _)| p.clone()).collect();
+            let (joined, _) = assemble(&hf, &storage, &just, 0, &opts).unwrap();
+            let whole = measure_exact(&hf, &joined.mesh);
+            let largest = pieces.iter().map(|(_, e)| *e).fold(0.0, f64::max);
+            assert_eq!(largest.to_bits(), whole.max_error_m.to_bits(), "{name}");
+            if name.starts_with("ridge") {
+                assert_eq!(whole.worst_sample[1], 384, "{name}: the worst sample is on the band line");
+            }
+        }
+    }
+
     #[test]
     fn a_band_built_from_its_rows_alone_is_the_band_built_from_the_whole_map() {
         let rough = crate::synth::fractal(500, 1000, 1.0, 200.0, 0.6, 8);

@@ -299,7 +299,21 @@ pub struct RowsMeasure {
 
 /// Measures `mesh` (as written: f32 positions) in rows `rows` of `hf` ([`RowsMeasure`]).
 pub fn measure_rows(hf: &Heightfield, mesh: &SampleMesh, rows: [u32; 2]) -> RowsMeasure {
-    let storage = Storage::f32(hf);
+    measure_rows_on(hf, mesh, rows, Surface::Stored(&Storage::f32(hf)))
+}
+
+/// The largest error in rows `rows` of `hf` (edge rows included) of `mesh` with its vertices
+/// exactly at their samples ([`measure_exact`]'s figure there, from the triangles of those rows
+/// alone): over a map's bands in turn, each band's mesh in its rows, the largest of them is
+/// [`measure_exact`]'s `max_error_m` of the joined mesh, bit for bit (each sample takes the
+/// largest error among the triangles covering it, whichever band they belong to).
+pub fn exact_max_in_rows(hf: &Heightfield, mesh: &SampleMesh, rows: [u32; 2]) -> f64 {
+    let m = measure_rows_on(hf, mesh, rows, Surface::Exact);
+    let edges = m.edges.iter().flatten().filter(|&&s| s > 0).map(|&s| f64::from_bits(s - 1));
+    m.inner.iter().map(|r| r.2).chain(edges).fold(0.0, f64::max)
+}
+
+fn measure_rows_on(hf: &Heightfield, mesh: &SampleMesh, rows: [u32; 2], surface: Surface<'_>) -> RowsMeasure {
     let (w, h) = (hf.width, hf.height);
     let (j_lo, j_hi) = (rows[0] as usize, (rows[1] as usize).min(h.saturating_sub(1)));
     let slots: Vec<AtomicU64> = (0..(j_hi + 1 - j_lo) * w).map(|_| AtomicU64::new(0)).collect();
@@ -309,7 +323,7 @@ pub fn measure_rows(hf: &Heightfield, mesh: &SampleMesh, rows: [u32; 2]) -> Rows
             if corners[2][1] < j_lo as i64 || corners[0][1] > j_hi as i64 {
                 continue;
             }
-            scan_triangle(hf, corners, Surface::Stored(&storage), &slots, j_lo as i64, j_hi as i64);
+            scan_triangle(hf, corners, surface, &slots, j_lo as i64, j_hi as i64);
         }
     });
     let row = |j: usize| -> Vec<u64> {

@@ -308,7 +308,8 @@ pub enum LayersFrom<'a> {
 }
 
 /// The one path from samples to a textured terrain scene: meshes `hf` as `settings` ask (or takes
-/// `ready`, a mesh already made at the same settings with its stats, e.g. a LoD level), measures it
+/// `ready`, a mesh already made at the same settings with its stats, e.g. a LoD level, and its f64
+/// error when that is known, e.g. from a banded terrain's units), measures it
 /// as `storage` stores it, refuses a TIN over its bound as written (the analyzer has the last
 /// word), builds the scene (`build`: chunks, skirts, base, name), textures it with the layers and bakes
 /// its normal map against it. `layers` says where the material layers come from.
@@ -318,12 +319,12 @@ pub fn mesh_and_build(
     storage: &Storage,
     build: &BuildOptions,
     label: &str,
-    ready: Option<(SampleMesh, bool, ErrorStats)>,
+    ready: Option<(SampleMesh, bool, ErrorStats, Option<f64>)>,
     layers: LayersFrom<'_>,
     normal_rows: Option<crate::terrain::normal_map::TexelRows>,
 ) -> Result<Meshed, JobError> {
     let (mut t_mesh, mut t_analyze) = (0.0, 0.0);
-    let (mesh, hit_limit, stats) = match ready {
+    let (mesh, hit_limit, stats, known_f64_m) = match ready {
         Some(ready) => ready,
         None => {
             let t = Instant::now();
@@ -333,7 +334,7 @@ pub fn mesh_and_build(
             let t = Instant::now();
             let stats = measure_stored(hf, &mesh, storage);
             t_analyze = t.elapsed().as_secs_f64();
-            (mesh, hit, stats)
+            (mesh, hit, stats, None)
         }
     };
     check_bound(settings, label, hit_limit, &stats)?;
@@ -363,7 +364,7 @@ pub fn mesh_and_build(
     }
     .map_err(JobError::Texture)?;
     let t_build = t.elapsed().as_secs_f64();
-    let max_error_f64_m = exact_max_error(hf, &mesh, &stats, storage);
+    let max_error_f64_m = known_f64_m.unwrap_or_else(|| exact_max_error(hf, &mesh, &stats, storage));
     Ok(Meshed {
         mesh,
         hit_triangle_limit: hit_limit,
@@ -392,14 +393,16 @@ fn check_bound(settings: &MeshSettings, label: &str, hit_limit: bool, stats: &Er
 }
 
 /// [`mesh_and_build`] of a mesh made already (`ready`) whose scene was assembled with its vertex
-/// attributes (a terrain meshed in bands whose chunks the bands built) on a map whose storage is
-/// exact ([`Storage::is_exact`]: the error as stored is the f64 error): the base colour and the
-/// normal map (its rows joined from the bands') put on it, the map never read.
+/// attributes (a terrain meshed in bands whose chunks the bands built), its f64 error known (the
+/// error as stored on a map whose storage is exact, [`Storage::is_exact`]; else the bands'
+/// units measured it): the base colour and the normal map (its rows joined from the bands') put
+/// on it, the map never read.
 pub fn finish_assembled(
     settings: &MeshSettings,
     label: &str,
     name: &str,
     (mesh, hit_limit, stats): (SampleMesh, bool, ErrorStats),
+    max_error_f64_m: f64,
     layers: TerrainLayers,
     mut scene: Scene,
     normal_rows: crate::terrain::normal_map::TexelRows,
@@ -412,7 +415,7 @@ pub fn finish_assembled(
         mesh,
         hit_triangle_limit: hit_limit,
         stats,
-        max_error_f64_m: stats.max_error_m,
+        max_error_f64_m,
         scene,
         layers,
         normal_map,
