@@ -452,7 +452,8 @@ mod tests {
         let mut built = Vec::new();
         for k in 0..3 {
             let c = Some((&shared, false));
-            let (piece, chunks) = band_piece(&key, t, &mut rows_of, &plan, k, c, true).unwrap();
+            let made = band_piece(&key, t, &mut rows_of, &plan, k, c, true).unwrap();
+            let (piece, chunks) = (made.piece, made.chunks);
             parts.push(band_layers(&grows, t, &key, &plan, k, &piece, &mut rows_of, None, c).unwrap().unwrap());
             pieces.push(piece);
             built.push(chunks.expect("the chunks its normal maps were baked from"));
@@ -530,8 +531,8 @@ mod tests {
     /// A shard's cache holds what the terrain stage joins without reading the map when every
     /// band's entries say the main mesh's f64 error: its heights are their f32 values (a
     /// procedural map's), or its unit measured it (a 16-bit PNG's metres, which f32 rounds); then
-    /// the terrain stage's figures and files are a whole build's from the decoded map (which, with
-    /// a cache, takes the f64 error from its bands' figures too). Not when a
+    /// the terrain stage's figures and files are a whole build's from the decoded map (which takes
+    /// the f64 error from its bands' figures too: the analyzer's over the whole map). Not when a
     /// band's chunks are missing, nor on a map whose bands are some exact and some rounded (one
     /// flat at 0 m).
     #[test]
@@ -581,7 +582,20 @@ mod tests {
                 assert!(whole.figures.max_error_f64 != whole.figures.max_error, "{name}: the map rounds");
             }
             assert_eq!(from_bands.figures, whole.figures, "{name}");
-            // a whole build with a cache takes the f64 error from its bands' figures too
+            // (every build takes it from its bands' figures: the analyzer's of the main mesh over
+            // the whole decoded map, the same map meshed whole)
+            let hf = crate::scene::terrain_stage::terrain_heights(t).unwrap().0;
+            let opts = crate::terrain::tin::TinOptions {
+                max_error_m: t.max_error_m,
+                chunk_cells: 128,
+                max_vertices: usize::MAX,
+                ..Default::default()
+            };
+            let main = crate::terrain::tin::tin(&hf, &opts).unwrap().mesh;
+            let analyzer = crate::terrain::error::measure_exact(&hf, &main).max_error_m;
+            assert_eq!(whole.figures.max_error_f64.to_bits(), analyzer.to_bits(), "{name}");
+            assert_eq!(whole.figures.vertices, main.vertices.len(), "{name}: the same mesh");
+            // and with a cache
             let fresh = Cache::new(&out.join("fresh"));
             let memo = Some(MeshMemo { cache: &fresh, force: false });
             let (cached, ..) = run_terrain_covered(p, t, &out.join("cached"), memo).unwrap();

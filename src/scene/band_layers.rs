@@ -326,7 +326,7 @@ pub(crate) mod tests {
         let key = mesh_key(preset, t).unwrap();
         let mut rows_of = |r: [u32; 2]| Ok(hf.rows(r[0] as usize, r[1] as usize).unwrap());
         let pieces: Vec<_> =
-            (0..3).map(|k| band_piece(&key, t, &mut rows_of, &plan, k, None, false).unwrap().0).collect();
+            (0..3).map(|k| band_piece(&key, t, &mut rows_of, &plan, k, None, false).unwrap().piece).collect();
         let mut parts = Vec::new();
         let grows = Grows::of(preset);
         for (k, piece) in pieces.iter().enumerate() {

@@ -30,7 +30,7 @@ use crate::scene::pipeline::{CacheUse, StageJob, StageRunner};
 use crate::scene::placement_rows;
 use crate::scene::plants_stage::{self, SpeciesMemo, SPECIES_MEMO_STAGE};
 use crate::scene::terrain_stage::{
-    band_layers, band_piece, mesh_key, planned_bands, BandPlan, BandRows, MeshMemo, TerrainJob,
+    band_layers, band_piece, mesh_key, planned_bands, BandPlan, BandRows, MadeBand, MeshMemo, TerrainJob,
 };
 use crate::scene::Preset;
 
@@ -350,7 +350,8 @@ pub fn build_shard(
                     let (chunks, margin) = if places {
                         // the band's rows read once for its meshes and its chunks' surfaces
                         let margin = source.rows(read)?;
-                        let (piece, chunks) = band_piece(key, t, &mut |_| Ok(margin.clone()), plan, *b, c, chunked)?;
+                        let MadeBand { piece, chunks, .. } =
+                            band_piece(key, t, &mut |_| Ok(margin.clone()), plan, *b, c, chunked)?;
                         let [a, z] = plan.rows(*b);
                         let window = margin.rows((a - read[0]) as usize, (z - read[0]) as usize).ok_or_else(|| {
                             crate::scene::error::StageError::Failed {
@@ -375,7 +376,7 @@ pub fn build_shard(
                                 Ok(hf)
                             }
                         };
-                        let (piece, chunks) = band_piece(key, t, &mut rows_of, plan, *b, c, chunked)?;
+                        let MadeBand { piece, chunks, .. } = band_piece(key, t, &mut rows_of, plan, *b, c, chunked)?;
                         band_layers(grows, t, key, plan, *b, &piece, &mut rows_of, None, c)?;
                         (chunks, held)
                     };

@@ -410,14 +410,15 @@ pub fn band_piece(
     k: usize,
     cache: Option<(&crate::scene::cache::Cache, bool)>,
     keep: bool,
-) -> Result<(crate::terrain::bands::BandPiece, Option<Vec<crate::scene::band_chunks::LevelChunks>>), StageError> {
+) -> Result<MadeBand, StageError> {
     use crate::terrain::bands::{bake_band_normals_of, build_band_window};
     let f = fail(Stage::Terrain);
     let rows = plan.rows(k);
     let key = cache.map(|_| band_key(mesh_key, rows));
     if let Some((c, false)) = cache {
         if let Some(piece) = kept_band(mesh_key, plan, k, c) {
-            return Ok((piece, None));
+            let exact_max_m = band_exact_max(c, mesh_key, plan, k);
+            return Ok(MadeBand { piece, chunks: None, exact_max_m });
         }
     }
     let read = plan.read_rows(k);
@@ -475,7 +476,18 @@ pub fn band_piece(
         };
         let _ = c.store_blob(BAND_STAGE, key, &json, &piece.to_bytes());
     }
-    Ok((piece, kept))
+    Ok(MadeBand { piece, chunks: kept, exact_max_m })
+}
+
+/// What [`band_piece`] gives of a band.
+pub struct MadeBand {
+    pub piece: crate::terrain::bands::BandPiece,
+    /// With `keep`, the band's chunks at every level built for its normal maps.
+    pub chunks: Option<Vec<crate::scene::band_chunks::LevelChunks>>,
+    /// The main mesh's f64 error in the band's rows where f32 rounds the map's heights there
+    /// (measured, or as its entry says when it came from the cache; `None` where the heights are
+    /// exact, the error as stored being the f64 error, or an older entry does not say).
+    pub exact_max_m: Option<f64>,
 }
 
 /// Band `k` of `plan` as `cache` holds it (`None` when it does not, or not whole).
@@ -606,6 +618,8 @@ pub(crate) struct Banded {
     chain: Vec<crate::lod::LodLevel>,
     /// The main mesh, whether it hit a triangle limit (never: bands have none), its figures.
     main: (crate::terrain::sample_mesh::SampleMesh, bool, crate::terrain::error::ErrorStats),
+    /// The main mesh's f64 error from the bands' units, when each measured it (a map f32 rounds).
+    main_f64_m: Option<f64>,
     normals: BandedNormals,
     /// The material layers joined from the bands' rows (when the plan bakes them by band).
     layers: Option<crate::terrain::layers::TerrainLayers>,
@@ -659,9 +673,12 @@ pub(crate) fn banded_meshes(
         hf.and_then(|hf| hf.rows(rows[0] as usize, rows[1] as usize))
             .ok_or_else(|| fail(Stage::Terrain)(format!("rows {}-{} are not within the map", rows[0], rows[1])))
     };
-    let mut pieces = (0..plan.band_count())
-        .map(|k| band_piece(key, t, &mut rows_of, plan, k, cache, false).map(|(piece, _)| piece))
+    let made = (0..plan.band_count())
+        .map(|k| band_piece(key, t, &mut rows_of, plan, k, cache, false))
         .collect::<Result<Vec<_>, _>>()?;
+    // the main mesh's f64 error when every band measured it (the map rounds in each)
+    let main_f64_m = made.iter().try_fold(0.0, |a: f64, b| Some(b.exact_max_m?.max(a)));
+    let mut pieces: Vec<_> = made.into_iter().map(|b| b.piece).collect();
     // each band's rows of the layers, joined (when the plan bakes them by band)
     let grows = Grows::of(preset);
     let chunks = match cache {
@@ -715,7 +732,7 @@ pub(crate) fn banded_meshes(
     let main = (levels[main_level].mesh.clone(), false, levels[main_level].stats);
     levels.truncate(t.lods.len());
     crate::lod::assign_switch_distances(&mut levels, &preset.lod);
-    Ok(Banded { chain: levels, main, normals, layers, chunks })
+    Ok(Banded { chain: levels, main, main_f64_m, normals, layers, chunks })
 }
 
 /// The main mesh's level among `plan`'s bounds.
@@ -945,8 +962,8 @@ pub fn run_terrain_covered(
     let input = bad_input(Stage::Terrain);
     let t0 = Instant::now();
     // The map, decoded when something reads it: a terrain sharded by bands whose every unit is in
-    // the cache (a merge's), on a map whose heights are their f32 values, is joined from the
-    // bands' pieces, layers and chunks without it.
+    // the cache (a merge's), each saying the main mesh's f64 error in its rows (heights exact in
+    // f32, or measured by the unit), is joined from the bands' pieces, layers and chunks without it.
     let held: std::cell::OnceCell<Heightfield> = std::cell::OnceCell::new();
     let map = || -> Result<&Heightfield, StageError> {
         if let Some(hf) = held.get() {
@@ -955,8 +972,8 @@ pub fn run_terrain_covered(
         let (hf, _, _) = terrain_heights(t)?;
         Ok(held.get_or_init(|| hf))
     };
-    // the heightmap hashed once, in pieces (before it is decoded, when the cache may make that
-    // needless), or as decoded
+    // the heightmap hashed in pieces when the cache may make decoding it needless (and hashed
+    // again as decoded when it does not), else only as decoded
     let mut hashed: Option<Option<String>> = None;
     let kept_plan = match memo {
         Some(m) if !m.force => {
@@ -1014,6 +1031,8 @@ pub fn run_terrain_covered(
     // The LoD chain meshes its levels in parallel; when one of them is the main mesh's bound,
     // the main mesh is taken from the chain instead of being computed twice.
     let t1 = Instant::now();
+    // the main mesh's f64 error from a banded terrain's units, when each measured it
+    let mut bands_f64_m = None;
     let (mut chain, remembered_main, band_normals, band_layers, band_chunks) = match (remembered, &plan) {
         (_, Some(plan)) => {
             // (without the map while every entry reads back; with it where one does not)
@@ -1024,6 +1043,7 @@ pub fn run_terrain_covered(
                     Err(_) => banded_meshes(preset, t, &key, Some(map()?), plan, band_memo, false)?,
                 },
             };
+            bands_f64_m = b.main_f64_m;
             (b.chain, Some(b.main), b.normals, b.layers, b.chunks)
         }
         (Some(m), None) => (m.chain, Some(m.main), None, None, None),
@@ -1092,23 +1112,14 @@ pub fn run_terrain_covered(
         // the bands measured it)
         (Some(layers), Some(scene), Some(rows), Some(ready)) if held.get().is_none() => {
             let label = source_label(t);
-            let f64_m = kept_f64.unwrap_or(ready.2.max_error_m);
+            let f64_m = bands_f64_m.or(kept_f64).unwrap_or(ready.2.max_error_m);
             crate::terrain::job::finish_assembled(&settings, &label, "terrain", ready, f64_m, layers, scene, rows)
                 .map_err(job_error)?
         }
         (layers, scene, rows, ready) => {
             let hf = map()?;
             // (a banded terrain's f64 error from its units' figures when they measured it)
-            let bands_f64 = kept_f64.or_else(|| match (&plan, band_memo) {
-                (Some(plan), Some(m)) if !Storage::f32(hf).is_exact() => {
-                    let key = &key;
-                    (0..plan.band_count())
-                        .map(|k| band_exact_max(m.cache, key, plan, k))
-                        .try_fold(0.0, |a, e| Some(e?.max(a)))
-                }
-                _ => None,
-            });
-            let ready = ready.map(|(mesh, hit, stats)| (mesh, hit, stats, plan.as_ref().and(bands_f64)));
+            let ready = ready.map(|(mesh, hit, stats)| (mesh, hit, stats, bands_f64_m));
             mesh_and_build(
                 hf,
                 &settings,

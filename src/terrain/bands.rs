@@ -110,8 +110,10 @@ pub fn assemble(
     assemble_stored(hf.width, Some((hf, storage)), pieces, k, opts)
 }
 
-/// [`assemble`] of a map `width` samples wide, `stored` the map and its storage, or `None` when
-/// its storage is exact ([`Storage::is_exact`]: the map is then not read).
+/// [`assemble`] of a map `width` samples wide, `stored` the map and its storage, or `None` to join
+/// without the map: exact for a map whose storage is exact ([`Storage::is_exact`]); on a map f32
+/// rounds, a joined mesh over its bound as stored is then not refused here (the caller checks
+/// the result's `max_error_m` and reads the map to name the worst sample).
 pub fn assemble_stored(
     width: usize,
     stored: Option<(&Heightfield, &Storage)>,
