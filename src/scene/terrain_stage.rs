@@ -432,9 +432,13 @@ pub fn band_piece(
     let mut piece =
         build_band_window(&window, rows[0], &plan.bounds, t.max_vertices, chunk_cells(t.chunk), plan.fixed(k))
             .map_err(terrain_error)?;
-    // the main mesh's f64 error in the band's rows, where f32 rounds the heights (a join of the
-    // bands' takes the largest without the map: `joined_without_map`)
-    let exact_max_m = main_level(t, plan).filter(|_| window.rounding_m() != 0.0).map(|m| {
+    // the main mesh's f64 error in the band's rows (the largest of the bands' is the whole
+    // mesh's, which the join takes without the map: `joined_without_map`): measured against the
+    // exact heights where f32 rounds them, else the error as stored its analyzer found
+    let exact_max_m = main_level(t, plan).map(|m| {
+        if window.rounding_m() == 0.0 {
+            return crate::terrain::error::largest_in_rows(&piece.levels[m].measure);
+        }
         let mut local = piece.levels[m].mesh.clone();
         for v in &mut local.vertices {
             v[1] -= rows[0];
@@ -484,9 +488,9 @@ pub struct MadeBand {
     pub piece: crate::terrain::bands::BandPiece,
     /// With `keep`, the band's chunks at every level built for its normal maps.
     pub chunks: Option<Vec<crate::scene::band_chunks::LevelChunks>>,
-    /// The main mesh's f64 error in the band's rows where f32 rounds the map's heights there
-    /// (measured, or as its entry says when it came from the cache; `None` where the heights are
-    /// exact, the error as stored being the f64 error, or an older entry does not say).
+    /// The main mesh's f64 error in the band's rows (measured against the exact heights where f32
+    /// rounds them, else its error as stored; as its entry says when it came from the cache, `None`
+    /// when an earlier unit's entry does not say).
     pub exact_max_m: Option<f64>,
 }
 
@@ -618,7 +622,7 @@ pub(crate) struct Banded {
     chain: Vec<crate::lod::LodLevel>,
     /// The main mesh, whether it hit a triangle limit (never: bands have none), its figures.
     main: (crate::terrain::sample_mesh::SampleMesh, bool, crate::terrain::error::ErrorStats),
-    /// The main mesh's f64 error from the bands' units, when each measured it (a map f32 rounds).
+    /// The main mesh's f64 error from the bands' units, when each says it.
     main_f64_m: Option<f64>,
     normals: BandedNormals,
     /// The material layers joined from the bands' rows (when the plan bakes them by band).
@@ -676,7 +680,7 @@ pub(crate) fn banded_meshes(
     let made = (0..plan.band_count())
         .map(|k| band_piece(key, t, &mut rows_of, plan, k, cache, false))
         .collect::<Result<Vec<_>, _>>()?;
-    // the main mesh's f64 error when every band measured it (the map rounds in each)
+    // the main mesh's f64 error when every band says it
     let main_f64_m = made.iter().try_fold(0.0, |a: f64, b| Some(b.exact_max_m?.max(a)));
     let mut pieces: Vec<_> = made.into_iter().map(|b| b.piece).collect();
     // each band's rows of the layers, joined (when the plan bakes them by band)
@@ -740,8 +744,8 @@ fn main_level(t: &TerrainSettings, plan: &BandPlan) -> Option<usize> {
     plan.bounds.iter().position(|&b| b == t.max_error_m)
 }
 
-/// The main mesh's f64 error in band `k`'s rows as its unit measured it, where f32 rounds the
-/// map's heights there (`None` when the entry does not say).
+/// The main mesh's f64 error in band `k`'s rows as its unit measured it (`None` when the entry
+/// does not say: one stored before units said it).
 fn band_exact_max(cache: &crate::scene::cache::Cache, key: &str, plan: &BandPlan, k: usize) -> Option<f64> {
     let (json, _) = cache.lookup(BAND_STAGE, &band_key(key, plan.rows(k)))?;
     let v: serde_json::Value = serde_json::from_str(&json).ok()?;
@@ -749,18 +753,19 @@ fn band_exact_max(cache: &crate::scene::cache::Cache, key: &str, plan: &BandPlan
 }
 
 /// A terrain the cache holds every band's entries of (pieces, layers, chunks), each saying the
-/// main mesh's f64 error in its rows (its heights exactly their f32 values, so the error as
-/// stored is that error; or the error its unit measured on the map's exact heights), so the
-/// terrain stage joins it without reading the map (a merge's): its band plan, and the main mesh's
-/// f64 error when the map's heights round (the largest of the bands'). `None` when it does not
-/// (the map is then decoded), or for an `.hgt` (voids).
+/// main mesh's f64 error in its rows (measured by its unit against the map's exact heights, or the
+/// error as stored where those are their f32 values), so the terrain stage joins it without
+/// reading the map (a merge's): its band plan, the main mesh's f64 error (the largest of the
+/// bands'), and whether f32 rounds the map's heights in any band. `None` when it does not (the
+/// map is then decoded), or for an `.hgt` (voids). (Entries of an earlier unit that do not say
+/// the error join when every band's heights are exact: the error as stored is the f64 error.)
 /// `key` is the terrain's [`mesh_key`], asked for only when the terrain could be joined so.
 pub(crate) fn joined_without_map(
     preset: &Preset,
     t: &TerrainSettings,
     key: &mut dyn FnMut() -> Result<String, StageError>,
     cache: &crate::scene::cache::Cache,
-) -> Result<Option<(BandPlan, Option<f64>)>, StageError> {
+) -> Result<Option<(BandPlan, Option<f64>, bool)>, StageError> {
     use crate::scene::band_chunks;
     if let TerrainSource::Heightmap { path, decode } = &t.source {
         let hgt = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("hgt"));
@@ -774,33 +779,34 @@ pub(crate) fn joined_without_map(
     }
     let key = key()?;
     let grows = Grows::of(preset);
-    // (every band's heights exact, or every band's measured: a mix, such as a band of a 16-bit
-    // map all at sea level, would need each exact band's own error as stored, so it is decoded)
-    let (mut all, mut rounded, mut exact) = (true, None::<f64>, 0);
+    let (mut largest, mut said, mut rounds) = (0.0f64, 0, false);
     for k in 0..plan.band_count() {
         let chunks = band_chunks::chunks_key_of(&grows, &key, &plan, k);
-        all = all
-            && cache.lookup(BAND_STAGE, &band_key(&key, plan.rows(k))).is_some()
+        let all = cache.lookup(BAND_STAGE, &band_key(&key, plan.rows(k))).is_some()
             && cache
                 .lookup(crate::scene::band_layers::BAND_LAYERS_STAGE, &band_layers_key(&grows, &key, &plan, k))
                 .is_some()
             && cache.lookup(band_chunks::BAND_CHUNKS_STAGE, &chunks).is_some();
         if !all {
-            break;
+            return Ok(None);
         }
-        if band_chunks::heights_exact(cache, &chunks) {
-            exact += 1;
-        } else {
-            match band_exact_max(cache, &key, &plan, k) {
-                Some(e) => rounded = Some(rounded.map_or(e, |r| r.max(e))),
-                None => return Ok(None),
+        let exact = band_chunks::heights_exact(cache, &chunks);
+        rounds |= !exact;
+        match band_exact_max(cache, &key, &plan, k) {
+            Some(e) => {
+                largest = largest.max(e);
+                said += 1;
             }
+            // (an earlier unit's entry: only exact heights say the error as stored)
+            None if exact => {}
+            None => return Ok(None),
         }
     }
-    if exact > 0 && rounded.is_some() {
-        return Ok(None);
+    match said {
+        0 => Ok(Some((plan, None, false))),
+        n if n == plan.band_count() => Ok(Some((plan, Some(largest), rounds))),
+        _ => Ok(None),
     }
-    Ok(all.then_some((plan, rounded)))
 }
 
 /// The heightmap's sha256 (hashed in pieces, not held), `None` for a procedural terrain.
@@ -1002,9 +1008,9 @@ pub fn run_terrain_covered(
 
     // a chunked map's bands, each kept in the cache as a piece of its own (a shard's unit)
     // (the main mesh's f64 error, from the bands' units, on a map f32 rounds)
-    let kept_f64 = kept_plan.as_ref().and_then(|(_, f64_m)| *f64_m);
+    let (kept_f64, kept_rounds) = kept_plan.as_ref().map_or((None, false), |(_, f64_m, rounds)| (*f64_m, *rounds));
     let plan = match kept_plan {
-        Some((plan, _)) => Some(plan),
+        Some((plan, ..)) => Some(plan),
         None => {
             let hf = map()?;
             band_plan(t, hf.width, hf.height)
@@ -1038,7 +1044,7 @@ pub fn run_terrain_covered(
             // (without the map while every entry reads back; with it where one does not)
             let b = match held.get() {
                 Some(hf) => banded_meshes(preset, t, &key, Some(hf), plan, band_memo, false)?,
-                None => match banded_meshes(preset, t, &key, None, plan, band_memo, kept_f64.is_some()) {
+                None => match banded_meshes(preset, t, &key, None, plan, band_memo, kept_rounds) {
                     Ok(b) => b,
                     Err(_) => banded_meshes(preset, t, &key, Some(map()?), plan, band_memo, false)?,
                 },

@@ -308,7 +308,13 @@ pub fn measure_rows(hf: &Heightfield, mesh: &SampleMesh, rows: [u32; 2]) -> Rows
 /// [`measure_exact`]'s `max_error_m` of the joined mesh, bit for bit (each sample takes the
 /// largest error among the triangles covering it, whichever band they belong to).
 pub fn exact_max_in_rows(hf: &Heightfield, mesh: &SampleMesh, rows: [u32; 2]) -> f64 {
-    let m = measure_rows_on(hf, mesh, rows, Surface::Exact);
+    largest_in_rows(&measure_rows_on(hf, mesh, rows, Surface::Exact))
+}
+
+/// The largest error a [`RowsMeasure`] holds, edge rows included (0 when it covers nothing): of a
+/// band whose heights are exactly their f32 values, its f64 error in its rows, as
+/// [`exact_max_in_rows`] would measure it (the same planes through the same heights).
+pub fn largest_in_rows(m: &RowsMeasure) -> f64 {
     let edges = m.edges.iter().flatten().filter(|&&s| s > 0).map(|&s| f64::from_bits(s - 1));
     m.inner.iter().map(|r| r.2).chain(edges).fold(0.0, f64::max)
 }
