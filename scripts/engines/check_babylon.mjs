@@ -96,6 +96,9 @@ const port = server.address().port;
 // the default-scene mesh nodes a viewer must show, and whether the file is an MSFT_lod chain
 function expected(file) {
   const data = fs.readFileSync(file);
+  if (data.length < 20 || data.readUInt32LE(0) !== 0x46546c67 || 20 + data.readUInt32LE(12) > data.length) {
+    throw new Error(`not a whole GLB (${data.length} bytes; a GLB starts with "glTF" and its JSON chunk)`);
+  }
   const json = JSON.parse(data.subarray(20, 20 + data.readUInt32LE(12)).toString('utf8'));
   const scene = json.scenes[json.scene ?? 0];
   const stack = [...scene.nodes];
@@ -162,7 +165,15 @@ for (const file of files) {
     console.log(`${good ? 'ok  ' : 'FAIL'}  ${file}: ${what}`);
     continue;
   }
-  const want = expected(file);
+  let want;
+  try {
+    want = expected(file);
+  } catch (e) {
+    // (named, not a stack trace: the file is what is wrong)
+    failed += 1;
+    console.log(`FAIL  ${file}: cannot be read: ${e.message}`);
+    continue;
+  }
   const page = await browser.newPage();
   const pageErrors = [];
   page.on('console', (m) => {
