@@ -31,12 +31,15 @@ pub const BAND_CHUNKS_STAGE: &str = "terrain-band-chunks";
 /// One level's chunks of a band: each chunk's (ci, cj) and its surface primitive, in chunk order.
 pub type LevelChunks = Vec<([usize; 2], Primitive)>;
 
-/// Cache key of band `k`'s chunks: its layers entry's key (its meshes, the snow rule and what
-/// grows) and its neighbours' (whose edge rows of the cover its vertices near the lines read).
-pub fn chunks_key(layers_keys: &[String]) -> String {
+/// Cache key of a band's chunks: its own layers entry's key (its meshes, the snow rule and what
+/// grows), then the keys of the bands whose cover rows its vertices read ([`cover_bands`]: its
+/// neighbours and itself). The own key comes first on its own: of a map of two bands, each reads
+/// both bands' covers, so the list of those alone would name both bands' chunks alike.
+pub fn chunks_key(own_layers_key: &str, cover_layers_keys: &[String]) -> String {
     let mut k = KeyBuilder::new(BAND_CHUNKS_STAGE, crate::scene::terrain_stage::TERRAIN_ALGORITHM_VERSION);
-    for key in layers_keys {
-        k.add(key.as_bytes());
+    k.add(b"own=").add(own_layers_key.as_bytes()).add(b"|cover=");
+    for key in cover_layers_keys {
+        k.add(key.as_bytes()).add(b"|");
     }
     k.finish()
 }
@@ -416,11 +419,9 @@ pub fn cover_bands(plan: &BandPlan, k: usize) -> Vec<usize> {
 
 /// [`chunks_key`] of band `k` of `plan`.
 pub fn chunks_key_of(grows: &crate::scene::band_layers::Grows, mesh_key: &str, plan: &BandPlan, k: usize) -> String {
-    let keys: Vec<String> = cover_bands(plan, k)
-        .into_iter()
-        .map(|b| crate::scene::terrain_stage::band_layers_key(grows, mesh_key, plan, b))
-        .collect();
-    chunks_key(&keys)
+    let key_of = |b: usize| crate::scene::terrain_stage::band_layers_key(grows, mesh_key, plan, b);
+    let keys: Vec<String> = cover_bands(plan, k).into_iter().map(key_of).collect();
+    chunks_key(&key_of(k), &keys)
 }
 
 #[cfg(test)]
@@ -622,6 +623,40 @@ mod tests {
                     .unwrap();
                 std::fs::remove_dir_all(gone).unwrap();
                 assert!(joined_without_map(p, t, &mut || mesh_key(p, t), &cache).unwrap().is_none());
+            }
+        }
+    }
+
+    /// Each band's chunks entry holds that band's chunks, on maps of two bands (where each band
+    /// reads both bands' covers, so the cover keys alone named both entries alike and the second
+    /// band's chunks were the first's: the merge then fell back to the map) and of three.
+    #[test]
+    fn every_band_keeps_its_own_chunks_under_a_name_of_its_own() {
+        use crate::scene::terrain_stage::{band_plan, mesh_key};
+        let dir = tempfile::tempdir().unwrap();
+        let two = crate::scene::band_layers::tests::preset_of_size(641, "");
+        for (name, p, bands) in [("two bands", &two, 2), ("three bands", &preset(""), 3)] {
+            let t = p.terrain.as_ref().unwrap();
+            let (hf, _, _) = crate::scene::terrain_stage::terrain_heights(t).unwrap();
+            let plan = band_plan(t, hf.width, hf.height).unwrap();
+            assert_eq!(plan.band_count(), bands, "{name}");
+            let out = dir.path().join(name);
+            let shard = crate::scene::shard::Shard { index: 0, count: 1 };
+            crate::scene::shard::build_shard(p, &out, shard, false, &|_| {}).unwrap();
+            let (cache, key, grows) = (Cache::new(&out), mesh_key(p, t).unwrap(), Grows::of(p));
+            let keys: Vec<String> = (0..bands).map(|k| chunks_key_of(&grows, &key, &plan, k)).collect();
+            for k in 0..bands {
+                assert!(!keys[..k].contains(&keys[k]), "{name}: band {k}'s chunks named as an earlier band's");
+                let blob = kept_blob(&cache, &keys[k]).unwrap_or_else(|| panic!("{name}: band {k} kept no chunks"));
+                let [a, b] = plan.rows(k);
+                for level in 0..t.lods.len() {
+                    let chunks = level_of(&blob, level).unwrap();
+                    assert!(!chunks.is_empty(), "{name}: band {k} level {level}");
+                    for ([_, cj], _) in &chunks {
+                        let row = (*cj * 128) as u32;
+                        assert!(row >= a && row < b, "{name}: band {k} (rows {a}-{b}) holds chunk row {cj}");
+                    }
+                }
             }
         }
     }

@@ -306,9 +306,14 @@ pub(crate) mod tests {
     /// A map of three bands (rows 0-384, 384-768, 768-1024; chunks of 128, skirts, two levels),
     /// and `extra` added.
     pub(crate) fn preset(extra: &str) -> Preset {
+        preset_of_size(1025, extra)
+    }
+
+    /// [`preset`] on a map of `size` × `size` samples (641: two bands, rows 0-384 and 384-640).
+    pub(crate) fn preset_of_size(size: usize, extra: &str) -> Preset {
         let text = format!(
             "[scene]\nname = \"bands\"\nseed = 5\n\n[terrain]\n\
-             procedural = {{ kind = \"ridged\", size = 1025, seed = 3, relief = 160.0 }}\n\
+             procedural = {{ kind = \"ridged\", size = {size}, seed = 3, relief = 160.0 }}\n\
              cell_size = 2.0\nmax_error = 0.5\nchunk = 128\nskirt = 1.0\nlods = [0.5, 2.0]\n\n\
              [scatter]\ntile = 128.0\n\n{extra}"
         );

@@ -1006,9 +1006,10 @@ pub fn run_terrain_covered(
     let key = mesh_key_hashed(preset, t, input_sha256.as_deref());
     let decode_s = t0.elapsed().as_secs_f64();
 
+    // whether f32 rounds the heights of some band joined without the map (a level over its bound
+    // as stored then needs the map, for the whole build's message)
+    let kept_rounds = kept_plan.as_ref().is_some_and(|(_, _, rounds)| *rounds);
     // a chunked map's bands, each kept in the cache as a piece of its own (a shard's unit)
-    // (the main mesh's f64 error, from the bands' units, on a map f32 rounds)
-    let (kept_f64, kept_rounds) = kept_plan.as_ref().map_or((None, false), |(_, f64_m, rounds)| (*f64_m, *rounds));
     let plan = match kept_plan {
         Some((plan, ..)) => Some(plan),
         None => {
@@ -1118,7 +1119,8 @@ pub fn run_terrain_covered(
         // the bands measured it)
         (Some(layers), Some(scene), Some(rows), Some(ready)) if held.get().is_none() => {
             let label = source_label(t);
-            let f64_m = bands_f64_m.or(kept_f64).unwrap_or(ready.2.max_error_m);
+            // (bands of an earlier unit that do not say it join only where the heights are exact)
+            let f64_m = bands_f64_m.unwrap_or(ready.2.max_error_m);
             crate::terrain::job::finish_assembled(&settings, &label, "terrain", ready, f64_m, layers, scene, rows)
                 .map_err(job_error)?
         }
