@@ -294,6 +294,15 @@ struct BuildArgs {
     /// --skip do not apply. See docs/sharding.md (GNU parallel, Slurm, Kubernetes).
     #[arg(long, value_name = "I/N")]
     shard: Option<Shard>,
+    /// With --shard I/N, after every shard of the first round: the second round, which makes the
+    /// scene tiles of shard I's share (`[scene] tile`) from the first round's folders (--shards, all
+    /// N); `verdant merge` then puts them in place instead of writing them. Give the same --out as
+    /// the shard's first round.
+    #[arg(long, requires = "shard", requires = "shards")]
+    tiles: bool,
+    /// The first round's shard folders (all N), for --tiles.
+    #[arg(long, value_name = "DIR", num_args = 1.., requires = "tiles")]
+    shards: Vec<PathBuf>,
 }
 
 #[derive(Args)]
@@ -680,6 +689,7 @@ fn build(a: BuildArgs, quiet: bool) -> i32 {
         compare_full_detail: a.compare_full_detail,
         shard: a.shard,
         merging: false,
+        tiles_from: if a.tiles { a.shards.clone() } else { Vec::new() },
     };
     let progress = scene_build::ProgressView::new(quiet);
     let outcomes =

@@ -42,6 +42,9 @@ pub struct BuildSettings {
     /// A merge's build: the scatter stage takes the placements the shards made by rows from the
     /// cache ([`crate::scene::placement_rows`]; set by [`merge_batch`]).
     pub merging: bool,
+    /// A shard's second round (`--tiles --shards DIR...`): every first-round shard folder; the shard
+    /// then makes the scene tiles of its share ([`crate::scene::tile_units`]). Empty: the first.
+    pub tiles_from: Vec<PathBuf>,
 }
 
 impl Default for BuildSettings {
@@ -53,6 +56,7 @@ impl Default for BuildSettings {
             compare_full_detail: false,
             shard: None,
             merging: false,
+            tiles_from: Vec::new(),
         }
     }
 }
@@ -123,6 +127,22 @@ pub fn build_preset(
     let t0 = Instant::now();
     let name = &preset.scene.name;
     let out = &settings.out_dir;
+    if let (Some(part), false) = (settings.shard, settings.tiles_from.is_empty()) {
+        let say = |m: &str| progress(name, m);
+        let record = shard::build_tile_shard(preset, out, part, &settings.tiles_from, settings.force, &say)?;
+        return Ok(SceneOutcome {
+            preset: preset_label(preset),
+            scene: name.clone(),
+            error: None,
+            blame: None,
+            dir: Some(out.clone()),
+            files: record.tiles.len(),
+            triangles: 0,
+            cached_stages: Vec::new(),
+            seconds: t0.elapsed().as_secs_f64(),
+            warnings: crate::scene::preset::lsystem_warnings(preset),
+        });
+    }
     if let Some(part) = settings.shard {
         let record = shard::build_shard(preset, out, part, settings.force, &|m: &str| progress(name, m))?;
         return Ok(SceneOutcome {
@@ -303,6 +323,13 @@ fn build_into(
     // report and key (the preview renders scene.glb from the first view)
     let mut placed: (Option<Vec<PreviewLayer>>, Vec<(String, PathBuf)>, Option<String>) = (None, Vec::new(), None);
     let mut drawn: Option<(ViewStageReport, String)> = None;
+    // a merge's scene tiles, made by the shards' second round (`--tiles`): put in place by the view
+    // stage where the cache holds them, the others written there
+    let tile_plan = match settings.merging && !settings.force {
+        true => crate::scene::tile_units::plan(preset).ok().and_then(Result::ok),
+        false => None,
+    };
+    let kept_tile = |ij: [u32; 2], grid: [u32; 2]| tile_plan.as_ref().and_then(|p| p.kept(&cache, dir, ij, grid));
     if let (true, Some(terrain), false) = (wants(Stage::Scatter), &terrain, preset.species.is_empty()) {
         // a merge's placements, made by rows in the shards
         let joined = || crate::scene::placement_rows::joined_for(preset, &cache);
@@ -330,6 +357,7 @@ fn build_into(
                 tables: &tables,
                 compare_full_detail: settings.compare_full_detail,
                 upstream: [&terrain.key, plants_key, &ran.key],
+                kept_tiles: tile_plan.as_ref().map(|_| &kept_tile as crate::scene::view_tiles::KeptTile),
             };
             let view = runner.run(&job)?;
             drawn = Some((view.report.clone(), view.key));
@@ -495,9 +523,13 @@ pub fn merge_batch(
         let gathered = loaded.and_then(|p| {
             scene = p.scene.name.clone();
             let brought = shard::gather(&p, shard_dirs, &settings.out_dir)?;
+            let tiles = shard::gather_tiles(&p, shard_dirs, &settings.out_dir, shard_dirs.len())?;
             progress(
                 &p.scene.name,
-                &format!("merge: {brought} cache entries brought from {} shards", shard_dirs.len()),
+                &format!(
+                    "merge: {brought} cache entries brought from {} shards, {tiles} scene tiles made by them",
+                    shard_dirs.len()
+                ),
             );
             Ok(p)
         });

@@ -21,6 +21,7 @@ pub mod scatter_stage;
 pub mod shard;
 pub mod snow_stage;
 pub mod terrain_stage;
+pub mod tile_units;
 mod view_lod;
 pub mod view_render;
 pub mod view_stage;

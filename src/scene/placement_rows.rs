@@ -392,7 +392,8 @@ pub fn rows_unit(
     Ok(placements)
 }
 
-fn kept_unit(preset: &Preset, plan: &RowsPlan, cache: &Cache, key: &str) -> Option<Vec<Option<RowsPlacement>>> {
+/// Unit `key`'s placements as `cache` holds them (`None` when it does not, or not whole).
+pub fn kept_unit(preset: &Preset, plan: &RowsPlan, cache: &Cache, key: &str) -> Option<Vec<Option<RowsPlacement>>> {
     let (json, entry) = cache.lookup(ROWS_STAGE, key)?;
     from_bytes(preset, plan, &json, &Cache::read_blob(&entry).ok()?)
 }

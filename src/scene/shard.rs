@@ -456,6 +456,214 @@ pub fn build_shard(
     Ok(record)
 }
 
+/// What a shard's second round built (`<scene>.tiles.json` in its folder): the scene tiles of its
+/// share ([`crate::scene::tile_units`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TileRecord {
+    pub built_by: String,
+    pub scene: String,
+    pub shard: usize,
+    pub of: usize,
+    /// The tiles' grid (none when the preset's tiles are not units: `left` says why).
+    pub grid: [u32; 2],
+    /// Each tile this shard made (its index in the grid, row-major) and its entry.
+    pub tiles: Vec<(usize, String)>,
+    /// Tiles of this shard's share left to the merge, and why.
+    pub left: Vec<(usize, String)>,
+    /// Why no tile is a unit (the merge writes every tile), when none is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub no_units: Option<String>,
+    /// The sha256 of every file of every entry made, as in [`ShardRecord::digests`].
+    pub digests: BTreeMap<String, BTreeMap<String, String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_memory_mib: Option<f64>,
+}
+
+/// The second round's record in a shard folder.
+pub fn tile_record_path(shard_dir: &Path, scene: &str) -> PathBuf {
+    shard_dir.join(format!("{scene}.tiles.json"))
+}
+
+/// The second round of shard `shard` (`--tiles`, after every shard of the first): brings the
+/// first round's entries of `shard_dirs` (all N folders, checked as the merge checks them) into
+/// `out`'s cache, then makes the scene tiles of its share (tile t to shard t mod N) as cache
+/// entries, and records them in `out/<scene>.tiles.json`.
+pub fn build_tile_shard(
+    preset: &Preset,
+    out: &Path,
+    shard: Shard,
+    shard_dirs: &[PathBuf],
+    force: bool,
+    say: &dyn Fn(&str),
+) -> Result<TileRecord, SceneBuildError> {
+    let name = &preset.scene.name;
+    let io = |path: &Path| {
+        let path = path.to_owned();
+        move |e: std::io::Error| SceneBuildError::Io { path: path.clone(), message: e.to_string() }
+    };
+    fs::create_dir_all(out).map_err(io(out))?;
+    gather(preset, shard_dirs, out)?;
+    let first = shard_dirs
+        .iter()
+        .filter_map(|d| fs::read_to_string(record_path(d, name)).ok())
+        .filter_map(|t| serde_json::from_str::<ShardRecord>(&t).ok())
+        .map(|r| r.of)
+        .next()
+        .unwrap_or(shard.count);
+    if first != shard.count {
+        return Err(SceneBuildError::Usage(format!(
+            "--shard {}/{}: the shards given were cut {first} ways (give the second round the same N)",
+            shard.index, shard.count
+        )));
+    }
+    let cache = Cache::new(out);
+    let mut record = TileRecord {
+        built_by: this_binary(),
+        scene: name.clone(),
+        shard: shard.index,
+        of: shard.count,
+        grid: [0, 0],
+        tiles: Vec::new(),
+        left: Vec::new(),
+        no_units: None,
+        digests: BTreeMap::new(),
+        peak_memory_mib: None,
+    };
+    match crate::scene::tile_units::plan(preset)? {
+        Err(why) => {
+            say(&format!("shard {}/{}: no tile units ({why}); the merge writes the tiles", shard.index, shard.count));
+            record.no_units = Some(why);
+        }
+        Ok(plan) => {
+            record.grid = plan.grid;
+            remove_stale_shard_folders(out, name);
+            let tmp = out.join(format!(".{name}.shard-{}", std::process::id()));
+            let _ = fs::remove_dir_all(&tmp);
+            fs::create_dir_all(&tmp).map_err(io(&tmp))?;
+            let result = (|| -> Result<(), SceneBuildError> {
+                let mine: Vec<usize> = (0..plan.count()).filter(|t| t % shard.count == shard.index).collect();
+                if mine.is_empty() {
+                    return Ok(());
+                }
+                let inputs = crate::scene::tile_units::TileInputs::new(&plan, &cache, &tmp)?;
+                for t in mine {
+                    let entry = plan.entry_of(t);
+                    let [nx, _] = plan.grid;
+                    say(&format!(
+                        "shard {}/{}: scene tile {} {}",
+                        shard.index,
+                        shard.count,
+                        t % nx as usize,
+                        t / nx as usize
+                    ));
+                    if !force && cache.root.join(&entry).join("stage.json").is_file() {
+                        record.tiles.push((t, entry));
+                        continue;
+                    }
+                    match crate::scene::tile_units::build_tile(&plan, &inputs, t, &cache, &tmp)? {
+                        Err(why) => {
+                            say(&format!("  left to the merge: {why}"));
+                            record.left.push((t, why));
+                        }
+                        Ok(made) => {
+                            let files: Vec<PathBuf> = made.iter().map(|(tile, _)| PathBuf::from(&tile.file)).collect();
+                            let kept = crate::scene::tile_units::KeptTileEntry {
+                                quantization_m: made.as_ref().map_or(0.0, |(_, q)| *q),
+                                tile: made.map(|(tile, _)| tile),
+                            };
+                            let json = serde_json::to_string_pretty(&kept).unwrap_or_default();
+                            cache
+                                .store(crate::scene::tile_units::TILE_STAGE, &plan.key_of(t), &tmp, &files, &json)
+                                .map_err(io(&cache.root.join(&entry)))?;
+                            for f in &files {
+                                let _ = fs::remove_file(tmp.join(f));
+                            }
+                            record.tiles.push((t, entry));
+                        }
+                    }
+                }
+                Ok(())
+            })();
+            let _ = fs::remove_dir_all(&tmp);
+            result?;
+        }
+    }
+    for (_, entry) in &record.tiles {
+        let dir = cache.root.join(entry);
+        let files = entry_digests(&dir).map_err(|e| SceneBuildError::Io { path: dir, message: e.to_string() })?;
+        record.digests.insert(entry.clone(), files);
+    }
+    record.peak_memory_mib = crate::memory::peak_rss_bytes().map(crate::memory::mib);
+    if let Some(mib) = record.peak_memory_mib {
+        say(&format!(
+            "shard {}/{}: {} scene tiles ({} left to the merge), peak memory {mib:.0} MiB",
+            shard.index,
+            shard.count,
+            record.tiles.len(),
+            record.left.len()
+        ));
+    }
+    let path = tile_record_path(out, name);
+    let text = serde_json::to_string_pretty(&record).unwrap_or_default();
+    crate::export::write_atomic(&path, text.as_bytes())
+        .map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })?;
+    Ok(record)
+}
+
+/// Brings the scene tiles the shards' second round made (`<scene>.tiles.json` in their folders,
+/// where present) into `out`'s cache, each entry checked against its record's digests; the merge's
+/// view stage then puts them in place ([`crate::scene::tile_units`]). Returns the tiles brought.
+/// A folder without a second round's record gives none (the merge writes those tiles).
+pub fn gather_tiles(
+    preset: &Preset,
+    shard_dirs: &[PathBuf],
+    out: &Path,
+    count: usize,
+) -> Result<usize, SceneBuildError> {
+    let name = &preset.scene.name;
+    let usage = |m: String| SceneBuildError::Usage(m);
+    let cache = Cache::new(out);
+    let mut brought = 0;
+    for dir in shard_dirs {
+        let path = tile_record_path(dir, name);
+        let Ok(text) = fs::read_to_string(&path) else { continue };
+        let r: TileRecord =
+            serde_json::from_str(&text).map_err(|e| usage(format!("{}: not a tile record: {e}", path.display())))?;
+        if r.built_by != this_binary() || r.of != count {
+            return Err(usage(format!(
+                "{}: the second round of shard {}/{} by {} does not belong to these {count} shards of {} (build it again: verdant build … --shard I/{count} --tiles --shards …)",
+                path.display(),
+                r.shard,
+                r.of,
+                r.built_by,
+                this_binary()
+            )));
+        }
+        let root = Cache::new(dir).root;
+        for (t, entry) in &r.tiles {
+            let src = root.join(entry);
+            let again = format!("copy the shard's folder again, or build its second round again (verdant build … --shard {}/{count} --tiles --shards … --force)", r.shard);
+            let want = r
+                .digests
+                .get(entry)
+                .ok_or_else(|| usage(format!("{}: no digest of {entry} (scene tile {t})", path.display())))?;
+            let got =
+                entry_digests(&src).map_err(|e| usage(format!("{}: scene tile {t}: {e}; {again}", src.display())))?;
+            if *want != got {
+                return Err(usage(format!(
+                    "{}: scene tile {t} of shard {}/{count} differs from what the shard wrote; {again}",
+                    src.display(),
+                    r.shard
+                )));
+            }
+            let fresh =
+                cache.import(&src).map_err(|e| SceneBuildError::Io { path: src.clone(), message: e.to_string() })?;
+            brought += usize::from(fresh || cache.root.join(entry).join("stage.json").is_file());
+        }
+    }
+    Ok(brought)
+}
+
 /// Removes the `.NAME.shard-PID` folders of shards of scene `name` that were killed (their process
 /// is gone); folders of running processes are left alone.
 fn remove_stale_shard_folders(out: &Path, name: &str) {

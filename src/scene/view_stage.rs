@@ -420,6 +420,7 @@ pub fn run_view(
     tables: &[(String, PathBuf)],
     scene_dir: &Path,
     compare_full_detail: bool,
+    kept_tiles: Option<crate::scene::view_tiles::KeptTile<'_>>,
 ) -> Result<ViewStageReport, StageError> {
     let t0 = Instant::now();
     let mut asm = Assembler::new(scene_dir);
@@ -746,6 +747,7 @@ pub fn run_view(
                 store: &store,
                 tile_m,
                 scene_name: &preset.scene.name,
+                kept: kept_tiles,
             };
             Some(crate::scene::view_tiles::write_tiles(&job, &mut lod.files)?)
         }
@@ -854,6 +856,8 @@ pub struct ViewJob<'a> {
     pub compare_full_detail: bool,
     /// The keys of the terrain, plants and scatter stages (what scene.glb is drawn from).
     pub upstream: [&'a str; 3],
+    /// Scene tiles built already (a merge's: the shards' tile units, [`crate::scene::tile_units`]).
+    pub kept_tiles: Option<crate::scene::view_tiles::KeptTile<'a>>,
 }
 
 impl StageJob for ViewJob<'_> {
@@ -872,7 +876,15 @@ impl StageJob for ViewJob<'_> {
     }
 
     fn run(&self, dir: &Path) -> Result<(ViewStageReport, ()), SceneBuildError> {
-        let report = run_view(self.preset, &self.terrain, self.plants, self.tables, dir, self.compare_full_detail)?;
+        let report = run_view(
+            self.preset,
+            &self.terrain,
+            self.plants,
+            self.tables,
+            dir,
+            self.compare_full_detail,
+            self.kept_tiles,
+        )?;
         Ok((report, ()))
     }
 }

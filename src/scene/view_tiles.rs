@@ -117,12 +117,22 @@ pub fn tile_of(x: f64, z: f64, tile_m: f64, grid: [u32; 2]) -> [u32; 2] {
     [one(x, grid[0]), one(z, grid[1])]
 }
 
-/// A decoded texture, for cropping it tile after tile.
-struct Decoded<'a> {
+/// A decoded texture, for cropping it tile after tile: the whole texture, or a window of its rows
+/// (a tile unit's, [`crate::scene::tile_units`]: the rows its tile reaches, from the bands').
+pub(super) struct Decoded<'a> {
     /// The PNG as the terrain's file holds it (what a tile's copy of the texture is matched by).
-    png: &'a [u8],
-    image: image::DynamicImage,
+    pub png: &'a [u8],
+    /// Rows `first_row ..` of the texture, at its whole width.
+    pub image: image::DynamicImage,
+    pub first_row: u32,
+    /// The whole texture's width and height.
+    pub size: (u32, u32),
 }
+
+/// What a build kept of a scene tile (a tile unit's entry, [`crate::scene::tile_units`]), given
+/// the tile (i, j) and the grid: `Some(Some(..))` its record and how far its vertices moved, with
+/// its file put in the scene folder; `Some(None)` a tile with nothing in it; `None` not kept.
+pub type KeptTile<'a> = &'a dyn Fn([u32; 2], [u32; 2]) -> Option<Option<(SceneTile, f64)>>;
 
 /// The inputs of [`write_tiles`].
 pub(super) struct TileJob<'a> {
@@ -135,6 +145,63 @@ pub(super) struct TileJob<'a> {
     pub store: &'a WriteOptions,
     pub tile_m: f64,
     pub scene_name: &'a str,
+    /// Tiles a build kept (a merge's, from the shards' tile units): put in place, not written.
+    pub kept: Option<KeptTile<'a>>,
+}
+
+/// The tile grid over a terrain reaching `max_x`, `max_z` (m).
+pub fn grid_of(max_x: f64, max_z: f64, s: f64) -> Result<[u32; 2], StageError> {
+    let cells = |v: f64| ((v / s).ceil() as u64).max(1);
+    let (nx, nz) = (cells(max_x), cells(max_z));
+    if nx.saturating_mul(nz) > MAX_TILES {
+        return Err(fail(format!(
+            "the preset's `[scene] tile = {s}` cuts the terrain ({max_x:.0} m × {max_z:.0} m) into {nx} × {nz} \
+             tiles, over the {MAX_TILES} a scene writes: set a larger `tile`"
+        )));
+    }
+    Ok([nx as u32, nz as u32])
+}
+
+/// The tile (its index in the grid, row-major) a placement row goes to: where its placement
+/// tile's centre lies, so each chain (placement tile × variant) is in one scene tile whole, with
+/// scene_lod.glb's bounding sphere and coverages (rows of no placement tile: their own position).
+pub fn tile_of_row(
+    r: &crate::export::table::PlacementRow,
+    placement_tiles: Option<crate::scatter::Tiling>,
+    tile_m: f64,
+    grid: [u32; 2],
+) -> usize {
+    let at = |x: f64, z: f64| {
+        let [i, j] = tile_of(x, z, tile_m, grid);
+        j as usize * grid[0] as usize + i as usize
+    };
+    match placement_tiles {
+        Some(p) if r.tile < p.tiles_x.saturating_mul(p.tiles_z) => {
+            let [x0, z0, x1, z1] = p.rect(r.tile % p.tiles_x, r.tile / p.tiles_x);
+            at(0.5 * (x0 + x1), 0.5 * (z0 + z1))
+        }
+        _ => at(r.position[0] as f32 as f64, r.position[2] as f32 as f64),
+    }
+}
+
+/// The tile a chunk goes to: where the centre of its box (`mesh_bounds`) lies.
+pub fn tile_of_chunk((lo, hi): &([f64; 3], [f64; 3]), tile_m: f64, grid: [u32; 2]) -> usize {
+    let [i, j] = tile_of(0.5 * (lo[0] + hi[0]), 0.5 * (lo[2] + hi[2]), tile_m, grid);
+    j as usize * grid[0] as usize + i as usize
+}
+
+/// Each species' reach: the farthest vertex of any of its levels from the mesh's origin (every
+/// level file read in `files`).
+pub(super) fn species_reach(files: &BTreeMap<PathBuf, Arc<Scene>>, species: &[LodSpecies<'_>]) -> Vec<f64> {
+    species
+        .iter()
+        .map(|sp| {
+            let levels = sp.chain.variants.iter().flatten();
+            let meshes = levels.filter_map(|l| files.get(&l.file)?.meshes.iter().find(|m| m.name == l.mesh));
+            let points = meshes.flat_map(|m| m.primitives.iter().flat_map(|p| &p.positions));
+            points.map(|p| p.iter().map(|&v| (v as f64) * (v as f64)).sum::<f64>().sqrt()).fold(0.0, f64::max)
+        })
+        .collect()
 }
 
 /// Writes every tile and the index into `job.dir`, reading the files through `files` (the view
@@ -149,36 +216,17 @@ pub(super) fn write_tiles(
     let chunk_box: Vec<Option<([f64; 3], [f64; 3])>> = job.terrain.main.meshes.iter().map(mesh_bounds).collect();
     let (max_x, max_z) =
         chunk_box.iter().flatten().fold((0.0f64, 0.0f64), |(x, z), (_, hi)| (x.max(hi[0]), z.max(hi[2])));
-    let cells = |v: f64| ((v / s).ceil() as u64).max(1);
-    let (nx, nz) = (cells(max_x), cells(max_z));
-    if nx.saturating_mul(nz) > MAX_TILES {
-        return Err(fail(format!(
-            "the preset's `[scene] tile = {s}` cuts the terrain ({max_x:.0} m × {max_z:.0} m) into {nx} × {nz} \
-             tiles, over the {MAX_TILES} a scene writes: set a larger `tile`"
-        )));
-    }
-    let grid = [nx as u32, nz as u32];
-    let count = (nx * nz) as usize;
-    let at = |x: f64, z: f64| {
-        let [i, j] = tile_of(x, z, s, grid);
-        j as usize * nx as usize + i as usize
-    };
+    let grid = grid_of(max_x, max_z, s)?;
+    let nx = grid[0] as u64;
+    let count = grid[0] as usize * grid[1] as usize;
     // chunks and rows of each tile, ascending
     let mut chunks: Vec<Vec<usize>> = vec![Vec::new(); count];
     for (c, b) in chunk_box.iter().enumerate() {
-        if let Some((lo, hi)) = b {
-            chunks[at(0.5 * (lo[0] + hi[0]), 0.5 * (lo[2] + hi[2]))].push(c);
+        if let Some(b) = b {
+            chunks[tile_of_chunk(b, s, grid)].push(c);
         }
     }
-    // a row goes where its placement tile's centre lies, so each chain (placement tile × variant)
-    // is in one scene tile whole, with scene_lod.glb's bounding sphere and coverages
-    let by_placement_tile = |r: &crate::export::table::PlacementRow| match job.placement_tiles {
-        Some(p) if r.tile < p.tiles_x.saturating_mul(p.tiles_z) => {
-            let [x0, z0, x1, z1] = p.rect(r.tile % p.tiles_x, r.tile / p.tiles_x);
-            at(0.5 * (x0 + x1), 0.5 * (z0 + z1))
-        }
-        _ => at(r.position[0] as f32 as f64, r.position[2] as f32 as f64),
-    };
+    let by_placement_tile = |r: &crate::export::table::PlacementRow| tile_of_row(r, job.placement_tiles, s, grid);
     let rows: Vec<Vec<Vec<u32>>> = job
         .species
         .iter()
@@ -193,9 +241,30 @@ pub(super) fn write_tiles(
 
     std::fs::create_dir_all(job.dir.join(TILES_DIR))
         .map_err(|e| fail(format!("{}: {e}", job.dir.join(TILES_DIR).display())))?;
-    // every file a tile reads, read here once
+    // the tiles the build kept (a merge's, made by the shards), put in place; the others written
+    let occupied = |t: usize| !chunks[t].is_empty() || rows.iter().any(|per| !per[t].is_empty());
+    let mut kept: BTreeMap<usize, Option<(SceneTile, f64)>> = BTreeMap::new();
+    if let Some(k) = job.kept {
+        for t in 0..count {
+            if let Some(tile) = k([(t % nx as usize) as u32, (t / nx as usize) as u32], grid) {
+                if tile.is_some() != occupied(t) {
+                    return Err(fail(format!(
+                        "the kept scene tile {t} is {} where the scene has {} (rebuild with --force)",
+                        if tile.is_some() { "written" } else { "empty" },
+                        if occupied(t) { "something in it" } else { "nothing" }
+                    )));
+                }
+                kept.insert(t, tile);
+            }
+        }
+    }
+    let to_write = (0..count).filter(|&t| occupied(t) && !kept.contains_key(&t)).count();
+    // every file a tile reads, read here once (when any tile is to be written)
     let mut asm = Assembler::with_files(job.dir, std::mem::take(files));
     let read: Result<(), StageError> = (|| {
+        if to_write == 0 {
+            return Ok(());
+        }
         asm.shared(job.terrain.main_file)?;
         for (f, _) in job.terrain.levels {
             asm.shared(f)?;
@@ -207,25 +276,23 @@ pub(super) fn write_tiles(
     })();
     *files = std::mem::take(&mut asm.files);
     read?;
-    // each species' reach: the farthest vertex of any of its levels from the mesh's origin
-    let reach: Vec<f64> = job
-        .species
-        .iter()
-        .map(|sp| {
-            let levels = sp.chain.variants.iter().flatten();
-            let meshes = levels.filter_map(|l| files.get(&l.file)?.meshes.iter().find(|m| m.name == l.mesh));
-            let points = meshes.flat_map(|m| m.primitives.iter().flat_map(|p| &p.positions));
-            points.map(|p| p.iter().map(|&v| (v as f64) * (v as f64)).sum::<f64>().sqrt()).fold(0.0, f64::max)
-        })
-        .collect();
-    let decoded = decode_terrain_textures(files, job.terrain)?;
+    let reach = species_reach(files, job.species);
+    let decoded = if to_write == 0 { Vec::new() } else { decode_terrain_textures(files, job.terrain)? };
     // one tile after another: two at once took a world's view stage from 0.85 to 1.0 GB (each
     // holds its meshes and its GLB's bytes) to save 0.7 s of 1.8; the textures are cropped and
     // encoded in parallel
     let mut tiles = Vec::new();
     let (mut total, mut quantization_m) = (0u64, 0.0f64);
     for t in 0..count {
-        if chunks[t].is_empty() && rows.iter().all(|per| per[t].is_empty()) {
+        if let Some(k) = kept.remove(&t) {
+            if let Some((tile, q)) = k {
+                total += tile.bytes;
+                quantization_m = quantization_m.max(q);
+                tiles.push(tile);
+            }
+            continue;
+        }
+        if !occupied(t) {
             continue;
         }
         let (i, j) = ((t % nx as usize) as u32, (t / nx as usize) as u32);
@@ -264,7 +331,7 @@ pub(super) fn write_tiles(
 
 /// Writes tile `[i, j]` of `chunks` (its chunks) and `species` (each picking its rows); the tile
 /// and the farthest its vertices moved in storage.
-fn write_tile(
+pub(super) fn write_tile(
     job: &TileJob<'_>,
     files: &BTreeMap<PathBuf, Arc<Scene>>,
     decoded: &[Decoded<'_>],
@@ -355,7 +422,8 @@ fn decode_terrain_textures<'f>(
         .map(|(name, png)| {
             let image = image::load_from_memory_with_format(png, image::ImageFormat::Png)
                 .map_err(|e| fail(format!("the terrain's texture `{name}`: {e} (rebuild with --force)")))?;
-            Ok(Decoded { png, image })
+            let size = (image.width(), image.height());
+            Ok(Decoded { png, image, first_row: 0, size })
         })
         .collect()
 }
@@ -377,7 +445,7 @@ pub fn texel_rect(u: [f64; 2], v: [f64; 2], w: u32, h: u32) -> [u32; 4] {
 /// texels their coordinates reach and maps the coordinates onto the crop; the rectangle kept, or
 /// `None` when the textures stay whole (no coordinates, textures of different sizes, a texture
 /// another mesh also uses, or a rectangle that is the whole texture).
-fn crop_terrain_textures(
+pub(super) fn crop_terrain_textures(
     scene: &mut Scene,
     terrain: &[usize],
     decoded: &[Decoded<'_>],
@@ -417,22 +485,34 @@ fn crop_terrain_textures(
             None => return Ok(None),
         };
     }
-    let sizes: BTreeSet<(u32, u32)> =
-        of.values().map(|&k| (decoded[k].image.width(), decoded[k].image.height())).collect();
+    let sizes: BTreeSet<(u32, u32)> = of.values().map(|&k| decoded[k].size).collect();
     let [(w, h)] = sizes.into_iter().collect::<Vec<_>>()[..] else { return Ok(None) };
     let rect = texel_rect(u, v, w, h);
     if rect == [0, 0, w, h] {
         return Ok(None);
     }
     let [x0, y0, cw, ch] = rect;
+    // (a window of rows must hold the rectangle's)
+    for &k in of.values() {
+        let d = &decoded[k];
+        if y0 < d.first_row || y0 + ch > d.first_row + d.image.height() {
+            return Err(fail(format!(
+                "texel rows {y0}-{} of the terrain's textures are not among the rows read ({}-{})",
+                y0 + ch,
+                d.first_row,
+                d.first_row + d.image.height()
+            )));
+        }
+    }
     let crops: Vec<(usize, Result<Vec<u8>, String>)> = {
         use rayon::prelude::*;
-        let work: Vec<(usize, &image::DynamicImage)> = of.iter().map(|(&t, &k)| (t, &decoded[k].image)).collect();
+        let work: Vec<(usize, &Decoded)> = of.iter().map(|(&t, &k)| (t, &decoded[k])).collect();
         work.into_par_iter()
-            .map(|(t, image)| {
+            .map(|(t, d)| {
                 let mut bytes = Vec::new();
-                let r = image
-                    .crop_imm(x0, y0, cw, ch)
+                let r = d
+                    .image
+                    .crop_imm(x0, y0 - d.first_row, cw, ch)
                     .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
                     .map(|_| bytes)
                     .map_err(|e| e.to_string());

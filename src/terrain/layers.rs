@@ -455,6 +455,16 @@ impl TerrainLayers {
     pub fn put_base_color(&self, scene: &mut Scene, name: &str) -> Result<(), String> {
         let [w, h] = self.report.map_px;
         let png = self.albedo_png.get_or_init(|| encode_rgba8_png(&self.albedo_rgba8, w, h)).clone()?;
+        put_base_color_png(scene, name, png);
+        Ok(())
+    }
+}
+
+/// `png` as the base colour of every terrain material of `scene` (materials named `terrain`):
+/// the texture `{name}_base_color`, replacing one of that name, and a white factor so the
+/// texture's colour is what shows ([`TerrainLayers::put_base_color`] of a map encoded already).
+pub fn put_base_color_png(scene: &mut Scene, name: &str, png: Vec<u8>) {
+    {
         let texture = Texture { name: format!("{name}_base_color"), png };
         let t = match scene.textures.iter().position(|t| t.name == texture.name) {
             Some(t) => {
@@ -470,7 +480,6 @@ impl TerrainLayers {
             m.base_color_texture = Some(t);
             m.base_color = [1.0, 1.0, 1.0, 1.0];
         }
-        Ok(())
     }
 }
 

@@ -296,6 +296,23 @@ pub fn put_normal_map(
     attach(scene, name, map_px, &terrain, rows)
 }
 
+/// `png` as the normal texture (named `{name}_normal`) of every `terrain` material of `scene`,
+/// with TANGENT on their primitives: what [`put_normal_map`] puts, of a map encoded already (a
+/// scene tile unit's stand-in for the whole map, [`crate::scene::tile_units`]).
+pub fn put_normal_texture(scene: &mut Scene, name: &str, png: Vec<u8>) -> Result<(), String> {
+    let terrain = add_tangents(scene, name)?;
+    attach_png(scene, name, &terrain, png);
+    Ok(())
+}
+
+fn attach_png(scene: &mut Scene, name: &str, terrain: &[bool], png: Vec<u8>) {
+    scene.textures.push(Texture { name: format!("{name}_normal"), png });
+    let index = scene.textures.len() - 1;
+    for (m, _) in scene.materials.iter_mut().zip(terrain).filter(|(_, &t)| t) {
+        m.normal_texture = Some(index);
+    }
+}
+
 /// The map of `rows` as the normal texture of the `terrain` materials, and its figures.
 fn attach(
     scene: &mut Scene,
@@ -328,11 +345,7 @@ fn attach(
         count += r.texels;
     }
     let png = crate::bake::raster::png::encode_rgba8_png(rows.texels.as_flattened(), w, h)?;
-    scene.textures.push(Texture { name: format!("{name}_normal"), png });
-    let index = scene.textures.len() - 1;
-    for (m, _) in scene.materials.iter_mut().zip(terrain).filter(|(_, &t)| t) {
-        m.normal_texture = Some(index);
-    }
+    attach_png(scene, name, terrain, png);
     let mean = |s: f64| if count > 0 { s / count as f64 } else { 0.0 };
     Ok(NormalMapReport {
         map_px,

@@ -1,0 +1,507 @@
+//! Scene tiles as units of a sharded build (`[scene] tile`): the second round of shards
+//! (`verdant build PRESET --shard i/N --tiles --shards DIR...`, after every shard of the first) writes
+//! each tile of its share from the first round's cache entries alone, and the merge puts those
+//! tiles in place instead of writing them ([`crate::scene::view_tiles::KeptTile`]): the same bytes
+//! as the tiles one build writes.
+//!
+//! What a tile reads, and where a unit finds it:
+//! - its terrain chunks at every level: the band chunks entries (each chunk's surface with its
+//!   vertex attributes, [`crate::scene::band_chunks`]) of the bands its chunks lie in, assembled
+//!   as the terrain stage assembles each level's scene ([`crate::terrain::build::assemble_chunks`]),
+//!   with the terrain's material, tangents and textures put on them as there;
+//! - the texel rows of the terrain's textures its chunks reach: the base colour from the bands'
+//!   layers entries, each level's normal map from the bands' pieces. The tile keeps only that
+//!   rectangle of each texture ([`crate::scene::view_tiles`]), so the whole textures are never
+//!   made: each level scene carries a stand-in naming its texture, and the tile's crop reads the
+//!   rows (two whole textures equal in the rows read could be one texture in the scene's files,
+//!   which the stand-ins would not show: such a tile is left to the merge);
+//! - each level's switch distance: from every band piece's measure of that level (the largest
+//!   error over the bands is the joined mesh's, [`crate::lod::assign_switch_distances`]);
+//! - its instances: the placement units' rows of the placement tiles in it, with the variant the
+//!   scatter stage assigns each row ([`crate::scatter::assign_variants`]), in table order;
+//! - the species' levels: the species entries, restored into the unit's folder.
+//!
+//! A tile unit's key holds every entry name of the first round (each the hash of what its unit
+//! read), the `[lod]` policy, the tile's side and index, the scene's name and each species' cull
+//! distance: the merge looks a tile up by the same key, so a tile built from other inputs is never
+//! put in place (it writes that tile itself).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+use crate::export::table::{PlacementRow, ToPlacementRow};
+use crate::mesh::{Mesh, Scene};
+use crate::scatter::Tiling;
+use crate::scene::band_layers::Grows;
+use crate::scene::cache::{Cache, KeyBuilder};
+use crate::scene::error::{SceneBuildError, StageError};
+use crate::scene::placement_rows::{self, RowsPlan};
+use crate::scene::plants_stage::{self, PlantReport, SpeciesMemo};
+use crate::scene::terrain_stage::{self, BandPlan};
+use crate::scene::view::cull_distance;
+use crate::scene::view_lod::{LodSpecies, LodTerrain};
+use crate::scene::view_stage::{mesh_bounds, VIEW_ALGORITHM_VERSION};
+use crate::scene::view_tiles::{self, Decoded, SceneTile, TileJob};
+use crate::scene::{Format, Preset, TerrainSettings};
+
+/// The cache stage name of a scene tile's entry.
+pub const TILE_STAGE: &str = "scene-tile";
+
+/// The main terrain file and each level's, as the terrain stage names them (scene-relative).
+const MAIN_FILE: &str = "terrain/terrain.glb";
+
+fn level_file(k: usize) -> PathBuf {
+    PathBuf::from(format!("terrain/terrain_LOD{k}.glb"))
+}
+
+fn fail(message: String) -> StageError {
+    StageError::Failed { stage: "view", message }
+}
+
+/// What a tile unit's entry says (`stage.json`): its record (`None`: nothing lies in the tile) and
+/// how far its vertices moved in storage.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct KeptTileEntry {
+    pub tile: Option<SceneTile>,
+    pub quantization_m: f64,
+}
+
+/// The tile units of a preset: what every unit reads, worked out once.
+pub struct TilePlan<'a> {
+    preset: &'a Preset,
+    t: &'a TerrainSettings,
+    bands: BandPlan,
+    mesh_key: String,
+    grows: Grows<'a>,
+    rows: Option<RowsPlan>,
+    /// The tiles' side (m) and grid.
+    pub tile_m: f64,
+    pub grid: [u32; 2],
+    placement_tiles: Option<Tiling>,
+    /// What every unit's key holds but its tile.
+    key: String,
+}
+
+/// The tile units of `preset`, or why its tiles are written by the merge (`Ok(Err(why))`).
+pub fn plan(preset: &Preset) -> Result<Result<TilePlan<'_>, String>, SceneBuildError> {
+    let Some(tile_m) = preset.scene.tile_m else { return Ok(Err("the preset has no `[scene] tile`".into())) };
+    if preset.scene.compact != crate::export::quantize::Compact::None {
+        return Ok(Err("`[scene] compact` stores the terrain on one grid over every band".into()));
+    }
+    let first_mesh = preset.scene.formats.iter().find(|f| matches!(f, Format::Glb | Format::Gltf | Format::Obj));
+    if first_mesh != Some(&Format::Glb) {
+        return Ok(Err("the terrain's first mesh format is not glb (the view stage reads that file)".into()));
+    }
+    let Some(t) = &preset.terrain else { return Ok(Err("the preset has no terrain".into())) };
+    let Some(bands) = terrain_stage::planned_bands(t)? else {
+        return Ok(Err("the terrain is meshed whole, not in bands".into()));
+    };
+    if !terrain_stage::chunks_by_band(t, &bands) || t.lods.is_empty() || t.chunk.is_none() {
+        return Ok(Err("the terrain's bands do not keep their chunks at every level (a base, or no lods)".into()));
+    }
+    let mesh_key = terrain_stage::mesh_key(preset, t)?;
+    let rows = placement_rows::rows_plan(preset, t, &bands, &mesh_key)?;
+    for (k, s) in preset.species.iter().enumerate() {
+        let by_rows = rows.as_ref().is_some_and(|r| r.placed.get(k) == Some(&true));
+        if plants_stage::makes(s) && !by_rows {
+            return Ok(Err(format!(
+                "species `{}` is placed in the merge (under `[snow] thin_plants`, or excluded by such a species)",
+                s.rules.name
+            )));
+        }
+    }
+    let far = |n: usize| ((n - 1) as f64 * bands.cell_m) as f32 as f64;
+    let grid = view_tiles::grid_of(far(bands.width), far(bands.height()), tile_m)?;
+    let extent = crate::scene::ground_cover::terrain_extent(bands.width, bands.height(), bands.cell_m);
+    let placement_tiles = Tiling::new(extent, preset.scatter.tile_m).ok();
+    let mut k = KeyBuilder::new(TILE_STAGE, VIEW_ALGORITHM_VERSION);
+    for unit in crate::scene::shard::units(preset, Path::new("."))? {
+        for e in &unit.entries {
+            k.add(e.as_bytes()).add(b"|");
+        }
+    }
+    k.add(serde_json::to_string(&preset.lod).unwrap_or_default().as_bytes());
+    k.add(preset.scene.name.as_bytes()).add(b"|").add(&tile_m.to_le_bytes());
+    k.add(&preset.scatter.tile_m.to_le_bytes());
+    for s in &preset.species {
+        k.add(s.rules.name.as_bytes()).add(serde_json::to_string(&s.cull_distance_m).unwrap_or_default().as_bytes());
+    }
+    let grows = Grows::of(preset);
+    Ok(Ok(TilePlan { preset, t, bands, mesh_key, grows, rows, tile_m, grid, placement_tiles, key: k.finish() }))
+}
+
+impl TilePlan<'_> {
+    /// Tiles in the grid (row-major: tile t is (t mod nx, t div nx)).
+    pub fn count(&self) -> usize {
+        self.grid[0] as usize * self.grid[1] as usize
+    }
+
+    /// Cache key of tile `t`'s unit.
+    pub fn key_of(&self, t: usize) -> String {
+        let mut k = KeyBuilder::new(TILE_STAGE, VIEW_ALGORITHM_VERSION);
+        k.add(self.key.as_bytes());
+        k.add(&self.grid[0].to_le_bytes()).add(&self.grid[1].to_le_bytes()).add(&(t as u64).to_le_bytes());
+        k.finish()
+    }
+
+    /// The entry name of tile `t`'s unit.
+    pub fn entry_of(&self, t: usize) -> String {
+        Cache::entry_name(TILE_STAGE, &self.key_of(t))
+    }
+
+    /// The tile (i, j) the kept entry of which `cache` holds, put into `scene_dir`: what the
+    /// merge's view stage asks ([`view_tiles::KeptTile`]); `None` when it holds none (or another
+    /// grid is asked for).
+    pub fn kept(
+        &self,
+        cache: &Cache,
+        scene_dir: &Path,
+        [i, j]: [u32; 2],
+        grid: [u32; 2],
+    ) -> Option<Option<(SceneTile, f64)>> {
+        if grid != self.grid {
+            return None;
+        }
+        let t = j as usize * grid[0] as usize + i as usize;
+        let (json, entry) = cache.lookup(TILE_STAGE, &self.key_of(t))?;
+        let kept: KeptTileEntry = serde_json::from_str(&json).ok()?;
+        match kept.tile {
+            None => Some(None),
+            Some(tile) => {
+                (tile.index == [i, j]).then_some(())?;
+                Cache::restore(&entry, scene_dir, &[PathBuf::from(&tile.file)]).ok()?;
+                Some(Some((tile, kept.quantization_m)))
+            }
+        }
+    }
+
+    /// The bands whose rows hold a chunk that may go to tile row `j` (with one chunk's margin on
+    /// each side, the chunks then placed by their boxes as the view stage places them).
+    fn bands_of_row(&self, j: u32) -> Vec<usize> {
+        let pitch = self.t.chunk.unwrap_or(1) as f64 * self.bands.cell_m;
+        let lo = j as f64 * self.tile_m - pitch;
+        let hi = if j + 1 == self.grid[1] { f64::INFINITY } else { (j + 1) as f64 * self.tile_m + pitch };
+        let lo = if j == 0 { f64::NEG_INFINITY } else { lo };
+        (0..self.bands.band_count())
+            .filter(|&k| {
+                let [a, b] = self.bands.rows(k);
+                (b as f64 * self.bands.cell_m) >= lo && (a as f64 * self.bands.cell_m) <= hi
+            })
+            .collect()
+    }
+}
+
+/// What every tile of a shard reads alike: each level's switch distance, the species' chains and
+/// level files (restored into the shard's folder), and each species' reach.
+pub struct TileInputs {
+    /// Each level's file and switch distance (level 0 first).
+    levels: Vec<(PathBuf, f64)>,
+    /// The species the tiles instance (preset order, those with meshes): index in the preset, report.
+    species: Vec<(usize, PlantReport)>,
+    /// The species' level files, read.
+    files: BTreeMap<PathBuf, Arc<Scene>>,
+}
+
+impl TileInputs {
+    /// From `cache` (every band piece and species entry of the first round), the species restored
+    /// into `dir`.
+    pub fn new(plan: &TilePlan<'_>, cache: &Cache, dir: &Path) -> Result<TileInputs, StageError> {
+        // each level's largest error over the bands (one piece held at a time), then its switch
+        let mut largest = vec![0.0f64; plan.t.lods.len()];
+        for k in 0..plan.bands.band_count() {
+            let piece = terrain_stage::kept_band(&plan.mesh_key, &plan.bands, k, cache)
+                .ok_or_else(|| fail(format!("band {k}'s meshes are not in the cache (build every shard first)")))?;
+            for (l, m) in largest.iter_mut().enumerate() {
+                let level = piece.levels.get(l).ok_or_else(|| fail(format!("band {k} has no level {l}")))?;
+                *m = m.max(crate::terrain::error::largest_in_rows(&level.measure));
+            }
+        }
+        let mut levels = Vec::with_capacity(largest.len());
+        let mut previous = 0.0f64;
+        for (l, &e) in largest.iter().enumerate() {
+            let d = if l == 0 { 0.0 } else { plan.preset.lod.switch_distance(e).max(previous) };
+            previous = d;
+            levels.push((level_file(l), d));
+        }
+        let mut species = Vec::new();
+        let mut files = BTreeMap::new();
+        for (k, s) in plan.preset.species.iter().enumerate().filter(|(_, s)| plants_stage::makes(s)) {
+            let key = plants_stage::species_key(plan.preset, s)?;
+            if cache.lookup(plants_stage::SPECIES_MEMO_STAGE, &key).is_none() {
+                return Err(fail(format!("species `{}` is not in the cache (build every shard first)", s.rules.name)));
+            }
+            let memo = Some(SpeciesMemo { cache, force: false });
+            let Some(report) = plants_stage::species_unit(plan.preset, s, dir, memo)? else { continue };
+            if report.chain.variants.is_empty() {
+                continue;
+            }
+            for l in report.chain.variants.iter().flatten() {
+                if !files.contains_key(&l.file) {
+                    let path = dir.join(&l.file);
+                    let scene = crate::validate::read_scene_dequantized(&path)
+                        .map_err(|e| fail(format!("{}: {e}", path.display())))?;
+                    files.insert(l.file.clone(), Arc::new(scene));
+                }
+            }
+            species.push((k, report));
+        }
+        Ok(TileInputs { levels, species, files })
+    }
+}
+
+/// A texture as the tile units stand it in for (never a PNG: its bytes name it).
+fn stand_in(what: &str) -> Vec<u8> {
+    format!("verdant scene tile unit: {what}").into_bytes()
+}
+
+fn refs(parts: &[(usize, Vec<u8>)]) -> Vec<(usize, &[u8])> {
+    parts.iter().map(|(f, b)| (*f, &b[..])).collect()
+}
+
+/// Rows `rows` of a `width`-texel RGBA8 texture from the bands' rows (`parts`: each its first
+/// row and its texels, in order), as an image.
+fn window(parts: &[(usize, &[u8])], width: u32, rows: [u32; 2]) -> Result<image::DynamicImage, StageError> {
+    let row_bytes = width as usize * 4;
+    let mut bytes = Vec::with_capacity(row_bytes * (rows[1] - rows[0]) as usize);
+    for y in rows[0] as usize..rows[1] as usize {
+        let (first, texels) = parts
+            .iter()
+            .find(|(first, texels)| y >= *first && y < first + texels.len() / row_bytes)
+            .ok_or_else(|| fail(format!("texel row {y} of the terrain's textures is in no band read")))?;
+        bytes.extend_from_slice(&texels[(y - first) * row_bytes..(y - first + 1) * row_bytes]);
+    }
+    let image = image::RgbaImage::from_raw(width, rows[1] - rows[0], bytes)
+        .ok_or_else(|| fail("a window of the terrain's textures does not hold its texels".into()))?;
+    Ok(image::DynamicImage::ImageRgba8(image))
+}
+
+/// Tile `t` of `plan`, written into `dir` (`dir/tiles/tile_<i>_<j>.glb`) from `cache`: its
+/// record and how far its vertices moved (`Ok(Ok(None))`: nothing lies in it), or why the merge
+/// is to write it (`Ok(Err(why))`).
+pub fn build_tile(
+    plan: &TilePlan<'_>,
+    inputs: &TileInputs,
+    t: usize,
+    cache: &Cache,
+    dir: &Path,
+) -> Result<Result<Option<(SceneTile, f64)>, String>, StageError> {
+    let (preset, tt, bands) = (plan.preset, plan.t, &plan.bands);
+    let [nx, _] = plan.grid;
+    let (i, j) = ((t % nx as usize) as u32, (t / nx as usize) as u32);
+    let pitch = tt.chunk.unwrap_or(1);
+    let grid = crate::terrain::chunks::ChunkGrid::new(bands.width, bands.height(), pitch);
+    let main_level = bands
+        .bounds
+        .iter()
+        .position(|&b| b == tt.max_error_m)
+        .ok_or_else(|| fail("the terrain's bands have no main level".into()))?;
+    // the chunks of the bands around the tile's row, at the main level and every level
+    let near = plan.bands_of_row(j);
+    let mut blobs = Vec::with_capacity(near.len());
+    for &k in &near {
+        let key = crate::scene::band_chunks::chunks_key_of(&plan.grows, &plan.mesh_key, bands, k);
+        let blob = crate::scene::band_chunks::kept_blob(cache, &key)
+            .ok_or_else(|| fail(format!("band {k}'s chunks are not in the cache (build every shard first)")))?;
+        blobs.push(blob);
+    }
+    // a level's scene of those chunks, each at its index in the whole scene's (the others empty)
+    let level_scene = |level: usize, name: &str| -> Result<Scene, StageError> {
+        let mut chunks = Vec::new();
+        for (blob, k) in blobs.iter().zip(&near) {
+            chunks.extend(
+                crate::scene::band_chunks::level_of(blob, level)
+                    .ok_or_else(|| fail(format!("band {k}'s chunks entry does not read back (level {level})")))?,
+            );
+        }
+        let at: Vec<usize> = chunks.iter().map(|([ci, cj], _)| cj * grid.nx + ci).collect();
+        let mut scene = crate::terrain::build::assemble_chunks(name, bands.width, bands.height(), pitch, chunks)
+            .map_err(|e| fail(format!("the bands' chunks: {e}")))?;
+        let mut meshes = vec![Mesh::default(); grid.len()];
+        if scene.meshes.len() != at.len() {
+            return Err(fail("the bands' chunks are not one mesh each".into()));
+        }
+        for (m, &c) in std::mem::take(&mut scene.meshes).into_iter().zip(&at) {
+            meshes[c] = m;
+        }
+        scene.meshes = meshes;
+        Ok(scene)
+    };
+    let main = level_scene(main_level, "terrain")?;
+    // the chunks whose boxes' centres lie in the tile, as the view stage places them
+    let picked: Vec<usize> = (0..main.meshes.len())
+        .filter(|&c| {
+            mesh_bounds(&main.meshes[c]).is_some_and(|b| view_tiles::tile_of_chunk(&b, plan.tile_m, plan.grid) == t)
+        })
+        .collect();
+
+    // its rows of every species: the placement tiles in it, in table order
+    let mut rows: Vec<Vec<PlacementRow>> = vec![Vec::new(); inputs.species.len()];
+    if let (Some(rp), Some(tiling)) = (&plan.rows, plan.placement_tiles) {
+        for &g in rp.groups.iter().filter(|g| g[0] < g[1]) {
+            // (a group of tile rows reaching the tile's row)
+            let reaches = (g[0]..g[1]).any(|r| {
+                let [_, z0, _, z1] = tiling.rect(0, r);
+                view_tiles::tile_of(0.0, 0.5 * (z0 + z1), plan.tile_m, plan.grid)[1] == j
+            });
+            if !reaches {
+                continue;
+            }
+            let key = placement_rows::rows_key(rp, g);
+            let unit = placement_rows::kept_unit(preset, rp, cache, &key).ok_or_else(|| {
+                fail(format!(
+                    "the placements of tile rows {}-{} are not in the cache (build every shard first)",
+                    g[0], g[1]
+                ))
+            })?;
+            for (slot, (k, _)) in inputs.species.iter().enumerate() {
+                let Some(Some(p)) = unit.get(*k) else { continue };
+                let mut mine: Vec<crate::scatter::Instance> = p
+                    .instances
+                    .iter()
+                    .filter(|inst| {
+                        view_tiles::tile_of_row(&inst.placement_row(), Some(tiling), plan.tile_m, plan.grid) == t
+                    })
+                    .cloned()
+                    .collect();
+                crate::scatter::assign_variants(&mut mine, preset.species[*k].look.table_variants());
+                rows[slot].extend(mine.iter().map(|inst| inst.placement_row()));
+            }
+        }
+    }
+    if picked.is_empty() && rows.iter().all(Vec::is_empty) {
+        return Ok(Ok(None));
+    }
+
+    // each level's scene as its file holds it, the textures stood in for
+    let mut files = inputs.files.clone();
+    for (l, (file, _)) in inputs.levels.iter().enumerate() {
+        let stem = format!("terrain_LOD{l}");
+        let mut scene = level_scene(l, &stem)?;
+        crate::terrain::layers::put_base_color_png(&mut scene, "terrain", stand_in("base colour"));
+        crate::terrain::normal_map::put_normal_texture(&mut scene, &stem, stand_in(&format!("normal map {l}")))
+            .map_err(fail)?;
+        files.insert(file.clone(), Arc::new(scene));
+    }
+    // the texel rows the tile's chunks reach at any level, from the bands' rows
+    let map_px = bands.map_px();
+    let (mut u, mut v) = ([f64::INFINITY, f64::NEG_INFINITY], [f64::INFINITY, f64::NEG_INFINITY]);
+    for (file, _) in &inputs.levels {
+        for p in picked.iter().flat_map(|&c| &files[file].meshes[c].primitives) {
+            for uv in &p.uvs {
+                u = [u[0].min(uv[0] as f64), u[1].max(uv[0] as f64)];
+                v = [v[0].min(uv[1] as f64), v[1].max(uv[1] as f64)];
+            }
+        }
+    }
+    let (mut stand_ins, mut first_row) = (Vec::new(), 0);
+    if !picked.is_empty() {
+        if !v[0].is_finite() {
+            return Ok(Err("its chunks have no texture coordinates".into()));
+        }
+        let [_, y0, _, ch] = view_tiles::texel_rect(u, v, map_px[0], map_px[1]);
+        let texel_rows = bands.normal_rows().ok_or_else(|| fail("the terrain's bands bake no texel rows".into()))?;
+        let reached: Vec<usize> = (0..bands.band_count())
+            .filter(|&k| texel_rows[k].start < (y0 + ch) as usize && texel_rows[k].end > y0 as usize)
+            .collect();
+        let mut albedo = Vec::new();
+        let mut normals: Vec<Vec<(usize, Vec<u8>)>> = vec![Vec::new(); inputs.levels.len()];
+        for &k in &reached {
+            let key = terrain_stage::band_layers_key(&plan.grows, &plan.mesh_key, bands, k);
+            let (_, entry) = cache
+                .lookup(crate::scene::band_layers::BAND_LAYERS_STAGE, &key)
+                .ok_or_else(|| fail(format!("band {k}'s layers are not in the cache (build every shard first)")))?;
+            let layers = Cache::read_blob(&entry)
+                .ok()
+                .and_then(|b| crate::scene::band_layers::from_bytes(&b, map_px))
+                .ok_or_else(|| fail(format!("band {k}'s layers entry does not read back")))?;
+            albedo.push((layers.rows.first, layers.rows.albedo_rgba8));
+            let piece = terrain_stage::kept_band(&plan.mesh_key, bands, k, cache)
+                .ok_or_else(|| fail(format!("band {k}'s meshes are not in the cache")))?;
+            for (l, out) in normals.iter_mut().enumerate() {
+                let n = piece
+                    .levels
+                    .get(l)
+                    .and_then(|p| p.normals.as_ref())
+                    .ok_or_else(|| fail(format!("band {k} has no normal rows at level {l}")))?;
+                if n.figures.is_empty() {
+                    continue;
+                }
+                let strip = image::load_from_memory_with_format(&n.png, image::ImageFormat::Png)
+                    .map_err(|e| fail(format!("band {k}'s normal rows at level {l}: {e}")))?
+                    .into_rgba8()
+                    .into_raw();
+                out.push((n.first, strip));
+            }
+        }
+        let rows_read = [y0, y0 + ch];
+        let mut images = vec![(stand_in("base colour"), window(&refs(&albedo), map_px[0], rows_read)?)];
+        for (l, n) in normals.iter().enumerate() {
+            images.push((stand_in(&format!("normal map {l}")), window(&refs(n), map_px[0], rows_read)?));
+        }
+        // two textures alike in these rows may be one texture in the scene's files
+        for a in 0..images.len() {
+            for b in a + 1..images.len() {
+                if images[a].1 == images[b].1 {
+                    return Ok(Err(
+                        "two of the terrain's textures are alike in its rows (they may be one texture)".into()
+                    ));
+                }
+            }
+        }
+        first_row = y0;
+        stand_ins = images;
+    }
+    let (pngs, images): (Vec<Vec<u8>>, Vec<image::DynamicImage>) = stand_ins.into_iter().unzip();
+    let decoded: Vec<Decoded<'_>> = pngs
+        .iter()
+        .zip(images)
+        .map(|(png, image)| Decoded { png, image, first_row, size: (map_px[0], map_px[1]) })
+        .collect();
+
+    let lod_species: Vec<LodSpecies<'_>> = inputs
+        .species
+        .iter()
+        .zip(&rows)
+        .map(|((k, report), rows)| {
+            let chain = &report.chain;
+            let last = chain.variants.iter().filter_map(|v| v.last()).map(|l| l.switch_distance_m).fold(0.0, f64::max);
+            let cull = cull_distance(preset.species[*k].cull_distance_m, chain.height_m, last, &preset.lod);
+            LodSpecies { name: &preset.species[*k].rules.name, chain, rows, picked: None, cull }
+        })
+        .collect();
+    let all: Vec<Vec<u32>> = rows.iter().map(|r| (0..r.len() as u32).collect()).collect();
+    let species: Vec<LodSpecies<'_>> =
+        lod_species.iter().zip(&all).map(|(sp, all)| LodSpecies { picked: Some(all), ..*sp }).collect();
+    let reach = view_tiles::species_reach(&files, &lod_species);
+    let terrain = LodTerrain {
+        main: &main,
+        levels: &inputs.levels,
+        chunked: true,
+        main_file: Path::new(MAIN_FILE),
+        picked: None,
+        take: false,
+    };
+    let store = preset.scene.compact.write_options();
+    let job = TileJob {
+        dir,
+        placement_tiles: plan.placement_tiles,
+        terrain: &terrain,
+        species: &lod_species,
+        policy: &preset.lod,
+        store: &store,
+        tile_m: plan.tile_m,
+        scene_name: &preset.scene.name,
+        kept: None,
+    };
+    std::fs::create_dir_all(dir.join(view_tiles::TILES_DIR)).map_err(|e| fail(format!("{}: {e}", dir.display())))?;
+    let (tile, moved) = view_tiles::write_tile(&job, &files, &decoded, [i, j], &picked, &species, &reach)?;
+    if !picked.is_empty() && tile.texture_texels.is_none() {
+        // (the stand-ins were kept whole: the tile needs the whole textures)
+        let _ = std::fs::remove_file(dir.join(&tile.file));
+        return Ok(Err("it keeps the terrain's textures whole".into()));
+    }
+    Ok(Ok(Some((tile, moved))))
+}
