@@ -54,6 +54,29 @@ fn run_shards(cwd: &Path, base: &str, n: usize) -> Vec<PathBuf> {
     (0..n).map(|i| PathBuf::from(format!("{base}/{i}"))).collect()
 }
 
+/// Runs the second round (`--tiles`) of the N shards `shards` of `world.toml` as N processes at once.
+fn run_tile_round(cwd: &Path, shards: &[PathBuf]) {
+    let n = shards.len();
+    let children: Vec<_> = (0..n)
+        .map(|i| {
+            let mut args: Vec<String> = vec!["-q".into(), "build".into(), "world.toml".into(), "--shard".into()];
+            args.push(format!("{i}/{n}"));
+            args.extend(["--tiles".into(), "--out".into(), format!("{}", shards[i].display()), "--shards".into()]);
+            args.extend(shards.iter().map(|p| p.display().to_string()));
+            Command::new(env!("CARGO_BIN_EXE_verdant"))
+                .current_dir(cwd)
+                .args(&args)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("run verdant")
+        })
+        .collect();
+    for c in children {
+        ok(&c.wait_with_output().unwrap());
+    }
+}
+
 fn merge(cwd: &Path, shards: &[PathBuf], out: &str) -> std::process::Output {
     let mut args: Vec<String> = vec!["-q".into(), "merge".into(), "world.toml".into(), "--shards".into()];
     args.extend(shards.iter().map(|p| p.display().to_string()));
@@ -360,6 +383,50 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
             let out = format!("merged{n}");
             ok(&merge(cwd, &shards, &out));
             assert_same_tree(&cwd.join("single/world"), &cwd.join(&out).join("world"));
+            // the second round: the shards make the scene tiles (tiles of 512 m), the merge puts
+            // them in place: the same bytes again
+            shards.sort();
+            run_tile_round(cwd, &shards);
+            let grid = read_json(&cwd.join("single/world/scene_tiles.json"))["grid"].clone();
+            let count = grid[0].as_u64().unwrap() * grid[1].as_u64().unwrap();
+            assert!(count >= 2, "{grid}");
+            let mut made = Vec::new();
+            for s in &shards {
+                let record = read_json(&cwd.join(s).join("world.tiles.json"));
+                assert_eq!(record["grid"], grid, "{record}");
+                assert_eq!(record["left"], serde_json::json!([]), "{record}");
+                made.extend(record["tiles"].as_array().unwrap().iter().map(|t| t[0].as_u64().unwrap()));
+            }
+            made.sort();
+            assert_eq!(made, (0..count).collect::<Vec<_>>(), "every tile made once");
+            let tiled = format!("tiled{n}");
+            let merged = merge(cwd, &shards, &tiled);
+            ok(&merged);
+            assert_same_tree(&cwd.join("single/world"), &cwd.join(&tiled).join("world"));
+            if n == 2 {
+                // the merge takes the tiles from the units: a tile entry's record changed (in a copy
+                // of the shards, its digest recorded) is what the merged index says
+                let copies: Vec<PathBuf> = (0..n).map(|k| PathBuf::from(format!("retiled/{k}"))).collect();
+                for (s, c) in shards.iter().zip(&copies) {
+                    copy_dir(&cwd.join(s), &cwd.join(c));
+                }
+                let record_file = cwd.join(&copies[0]).join("world.tiles.json");
+                let mut record: serde_json::Value =
+                    serde_json::from_str(&fs::read_to_string(&record_file).unwrap()).unwrap();
+                let entry = record["tiles"][0][1].as_str().unwrap().to_string();
+                let stage = cwd.join(&copies[0]).join(".cache").join(&entry).join("stage.json");
+                let changed = fs::read_to_string(&stage).unwrap().replacen("\"bytes\": ", "\"bytes\": 7", 1);
+                fs::remove_file(&stage).unwrap(); // (a hard link)
+                fs::write(&stage, &changed).unwrap();
+                let refused = merge(cwd, &copies, "retiled_merge");
+                assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+                assert!(text(&refused).contains("differs from what the shard wrote"), "{}", text(&refused));
+                record["digests"][&entry]["stage.json"] = verdant::scene::cache::sha256_hex(changed.as_bytes()).into();
+                fs::write(&record_file, serde_json::to_string(&record).unwrap()).unwrap();
+                ok(&merge(cwd, &copies, "retiled_merge"));
+                let index = fs::read_to_string(cwd.join("retiled_merge/world/scene_tiles.json")).unwrap();
+                assert!(index.contains("\"bytes\": 7"), "{index}");
+            }
             if n == 2 && source == procedural {
                 // the merge takes the placements and the terrain's chunks from the units: one
                 // unit's first rock turned and a band's first chunk vertex moved (in copies of
