@@ -1,16 +1,16 @@
 #!/usr/bin/env bash
-# Runs k8s-indexed-job.yaml: the shards' Indexed Job, waits for it to complete, then the merge Job
-# (kubectl against a cluster of Kubernetes 1.29 or later: backoffLimitPerIndex).
+# Runs k8s-indexed-job.yaml: the shards' Indexed Job, waits for it to complete, then the second
+# round's (the scene tiles), then the merge Job (kubectl against a cluster of Kubernetes 1.29 or
+# later: backoffLimitPerIndex).
 #   scripts/shard/k8s-run.sh [NAMESPACE]
 set -euo pipefail
 ns=()
 if [ -n "${1:-}" ]; then ns=(--namespace "$1"); fi
 here="$(dirname "$0")"
-# the two Jobs are the two documents of one file: apply the first, wait for it, apply the second
+# the three Jobs are the three documents of one file: apply each, wait for it, apply the next
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
-sed '/^---$/,$d' "$here/k8s-indexed-job.yaml" > "$tmp/shards.yaml"
-sed '1,/^---$/d' "$here/k8s-indexed-job.yaml" > "$tmp/merge.yaml"
+awk -v dir="$tmp" '/^---$/ { n++; next } { print > (dir "/job" n ".yaml") }' n=0 "$here/k8s-indexed-job.yaml"
 # run JOB FILE: replaces a finished Job of that name (apply would leave it as it was) and waits until
 # it is Complete (exit 0) or Failed (exit 1)
 run() {
@@ -26,5 +26,6 @@ run() {
     sleep 10
   done
 }
-run verdant-shards "$tmp/shards.yaml"
-run verdant-merge "$tmp/merge.yaml"
+run verdant-shards "$tmp/job0.yaml"
+run verdant-tiles "$tmp/job1.yaml"
+run verdant-merge "$tmp/job2.yaml"

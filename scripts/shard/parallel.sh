@@ -7,9 +7,11 @@
 #   scripts/shard/parallel.sh N OUT [PRESET...]
 #   VERDANT=target/release/verdant scripts/shard/parallel.sh 4 out presets/alpine.toml
 #
-# Each shard is `verdant build PRESET... --shard i/N --out OUT/.shards/i`; the merge is
-# `verdant merge PRESET... --shards OUT/.shards/* --out OUT`. Any shard failing stops the run
-# (--halt now,fail=1) before the merge.
+# Each shard is `verdant build PRESET... --shard i/N --out OUT/.shards/i`, then (once every shard is
+# done) its second round, the scene tiles of its share (`[scene] tile`; nothing to do without):
+# `verdant build PRESET... --shard i/N --tiles --shards OUT/.shards/* --out OUT/.shards/i`; the merge
+# is `verdant merge PRESET... --shards OUT/.shards/* --out OUT`. Any shard failing stops the run
+# (--halt now,fail=1) before the next round.
 set -euo pipefail
 if [ $# -lt 2 ]; then
   echo "usage: $0 N OUT [PRESET...]" >&2
@@ -26,4 +28,6 @@ fi
 seq 0 $((n - 1)) | parallel --will-cite -q --halt now,fail=1 ${remote[@]+"${remote[@]}"} \
   "$verdant" -q build "$@" --shard "{}/$n" --out "$shards/{}"
 mapfile -t dirs < <(seq -f "$shards/%g" 0 $((n - 1)))
+seq 0 $((n - 1)) | parallel --will-cite -q --halt now,fail=1 ${remote[@]+"${remote[@]}"} \
+  "$verdant" -q build "$@" --shard "{}/$n" --tiles --out "$shards/{}" --shards "${dirs[@]}"
 "$verdant" merge "$@" --shards "${dirs[@]}" --out "$out"

@@ -221,9 +221,17 @@ fn editing_one_species_rebuilds_that_species_alone() {
 fn the_slurm_and_kubernetes_recipes_build_the_shards_and_merge_as_their_schedulers_would_run_them() {
     let dir = setup();
     let cwd = dir.path();
+    // (a map of two bands, in scene tiles of 512 m: the second round makes them)
+    let source = "procedural = { kind = \"ridged\", size = 641, seed = 4, relief = 120.0 }";
+    write(cwd, "world.toml", &banded_preset(source, 0.5));
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let bin_dir = Path::new(env!("CARGO_BIN_EXE_verdant")).parent().unwrap().to_path_buf();
-    let path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap_or_default());
+    // a stand-in `sbatch` that logs what it is asked to submit and answers a job id
+    let fake = cwd.join("fake-bin");
+    fs::create_dir_all(&fake).unwrap();
+    write(&fake, "sbatch", "#!/bin/sh\necho \"$@\" >> \"$SBATCH_LOG\"\necho 1234\n");
+    Command::new("chmod").arg("+x").arg(fake.join("sbatch")).status().unwrap();
+    let path = format!("{}:{}:{}", bin_dir.display(), fake.display(), std::env::var("PATH").unwrap_or_default());
     ok(&verdant_in(cwd, &["-q", "build", "world.toml", "--out", "single"]));
     let run = |script: &str, env: &[(&str, String)]| {
         let o = Command::new("bash")
@@ -235,8 +243,11 @@ fn the_slurm_and_kubernetes_recipes_build_the_shards_and_merge_as_their_schedule
             .unwrap();
         ok(&o);
     };
-    // Slurm: `sbatch --array=3-5` (a 3-task array not starting at 0), the merge job by hand
+    // Slurm: `sbatch --array=3-5` (a 3-task array not starting at 0): the first task submits the
+    // second round and the merge (logged by the stand-in); then the second round's tasks and the
+    // merge job as Slurm would run them
     let out = cwd.join("slurm").display().to_string();
+    let log = cwd.join("sbatch.log");
     for task in 3..=5 {
         run(
             "slurm.sbatch",
@@ -245,12 +256,38 @@ fn the_slurm_and_kubernetes_recipes_build_the_shards_and_merge_as_their_schedule
                 ("SLURM_ARRAY_TASK_MIN", "3".into()),
                 ("SLURM_ARRAY_TASK_COUNT", "3".into()),
                 ("SLURM_ARRAY_JOB_ID", "77".into()),
+                ("SLURM_SUBMIT_DIR", root.display().to_string()),
+                ("SBATCH_LOG", log.display().to_string()),
+                ("PRESET", "world.toml".into()),
+                ("OUT", out.clone()),
+            ],
+        );
+    }
+    let submitted = fs::read_to_string(&log).unwrap();
+    let lines: Vec<&str> = submitted.lines().collect();
+    assert_eq!(lines.len(), 2, "the second round and the merge, submitted once: {submitted}");
+    assert!(lines[0].contains("--array=0-2") && lines[0].contains("--dependency=afterok:77"), "{submitted}");
+    assert!(lines[0].contains("ROUND=tiles") && lines[0].ends_with("scripts/shard/slurm.sbatch"), "{submitted}");
+    assert!(lines[1].contains("--dependency=afterok:1234") && lines[1].ends_with("slurm_merge.sbatch"), "{submitted}");
+    for task in 0..3 {
+        run(
+            "slurm.sbatch",
+            &[
+                ("SLURM_ARRAY_TASK_ID", task.to_string()),
+                ("SLURM_ARRAY_TASK_COUNT", "3".into()),
+                ("SLURM_ARRAY_JOB_ID", "1234".into()),
+                ("SHARDS", "3".into()),
+                ("ROUND", "tiles".into()),
                 ("NO_MERGE", "1".into()),
                 ("PRESET", "world.toml".into()),
                 ("OUT", out.clone()),
             ],
         );
     }
+    let made: usize = (0..3)
+        .map(|i| read_json(&cwd.join(format!("slurm/.shards/{i}/world.tiles.json")))["tiles"].as_array().unwrap().len())
+        .sum();
+    assert_eq!(made, 4, "the second round made the 2 × 2 scene tiles");
     run("slurm_merge.sbatch", &[("PRESET", "world.toml".into()), ("OUT", out.clone()), ("SHARDS", "3".into())]);
     assert_same_tree(&cwd.join("single/world"), &cwd.join("slurm/world"));
     // Kubernetes: each pod's and the merge's container command from k8s-indexed-job.yaml, with the
@@ -258,7 +295,7 @@ fn the_slurm_and_kubernetes_recipes_build_the_shards_and_merge_as_their_schedule
     let yaml = fs::read_to_string(root.join("scripts/shard/k8s-indexed-job.yaml")).unwrap();
     let lines: Vec<String> =
         yaml.lines().filter(|l| l.trim().starts_with("- exec verdant")).map(|l| l.trim()[2..].to_string()).collect();
-    assert_eq!(lines.len(), 2, "the YAML holds a shard and a merge command");
+    assert_eq!(lines.len(), 3, "the YAML holds a shard, a second round's and a merge command");
     let shards = yaml.lines().find_map(|l| l.trim().strip_prefix("completions: ")).unwrap().parse::<usize>().unwrap();
     let sh = |command: &str, index: Option<usize>| {
         let mut c = Command::new("sh");
@@ -275,7 +312,16 @@ fn the_slurm_and_kubernetes_recipes_build_the_shards_and_merge_as_their_schedule
     for i in (0..shards).rev() {
         sh(&lines[0], Some(i));
     }
-    sh(&lines[1], None);
+    for i in 0..shards {
+        sh(&lines[1], Some(i));
+    }
+    sh(&lines[2], None);
+    let made: usize = (0..shards)
+        .map(|i| {
+            read_json(&cwd.join(format!("k8s/out/.shards/{i}/world.tiles.json")))["tiles"].as_array().unwrap().len()
+        })
+        .sum();
+    assert_eq!(made, 4, "the second round made the 2 × 2 scene tiles");
     assert_same_tree(&cwd.join("single/world"), &cwd.join("k8s/out/world"));
 }
 
@@ -546,6 +592,65 @@ fn species_under_a_snow_cover_are_placed_in_the_merge_and_the_rest_by_rows() {
     assert_same_tree(&cwd.join("single/world"), &cwd.join("merged/world"));
     let snow = read_json(&cwd.join("single/world/placements/grass.json"));
     assert!(snow["rules"]["snow"].as_u64().unwrap() > 0, "the snow thins the grass: {snow}");
+    // the grass's rows are not units, so no tile is: the second round says why, the merge writes them
+    shards.sort();
+    run_tile_round(cwd, &shards);
+    for s in &shards {
+        let record = read_json(&cwd.join(s).join("world.tiles.json"));
+        assert!(record["no_units"].as_str().unwrap().contains("`grass` is placed in the merge"), "{record}");
+        assert_eq!(record["tiles"], serde_json::json!([]), "{record}");
+    }
+    ok(&merge(cwd, &shards, "tiled"));
+    assert_same_tree(&cwd.join("single/world"), &cwd.join("tiled/world"));
+}
+
+/// Scene tiles the second round cannot make are written by the merge, the same bytes: on a flat
+/// map every level's normal map is the same texture, which the units' stand-ins cannot show (each
+/// tile left, saying why); with `[scene] compact` the terrain is stored on one grid over every band
+/// (no tile is a unit).
+#[test]
+fn scene_tiles_the_second_round_cannot_make_are_written_by_the_merge() {
+    for case in ["flat", "compact"] {
+        let dir = tempfile::tempdir().unwrap();
+        let cwd = dir.path();
+        write(cwd, "rock.obj", ROCK_OBJ);
+        let source = match case {
+            "flat" => {
+                image::ImageBuffer::from_fn(641, 641, |_, _| image::Luma([30000u16]))
+                    .save(cwd.join("map.png"))
+                    .unwrap();
+                "heightmap = \"map.png\"\nheight_scale = 300.0".to_string()
+            }
+            _ => "procedural = { kind = \"ridged\", size = 641, seed = 4, relief = 120.0 }".to_string(),
+        };
+        let mut preset = banded_preset(&source, 0.5);
+        if case == "compact" {
+            preset = preset.replace("tile = 512.0\n", "tile = 512.0\ncompact = \"quantize\"\n");
+        }
+        write(cwd, "world.toml", &preset);
+        ok(&verdant_in(cwd, &["-q", "build", "world.toml", "--out", "single"]));
+        let shards = run_shards(cwd, "shards", 2);
+        run_tile_round(cwd, &shards);
+        let mut left = 0;
+        for s in &shards {
+            let record = read_json(&cwd.join(s).join("world.tiles.json"));
+            assert_eq!(record["tiles"], serde_json::json!([]), "{case}: {record}");
+            match case {
+                "flat" => {
+                    for l in record["left"].as_array().unwrap() {
+                        assert!(l[1].as_str().unwrap().contains("alike"), "{case}: {record}");
+                        left += 1;
+                    }
+                }
+                _ => assert!(record["no_units"].as_str().unwrap().contains("compact"), "{case}: {record}"),
+            }
+        }
+        if case == "flat" {
+            assert_eq!(left, 4, "every tile of the 2 × 2 left to the merge");
+        }
+        ok(&merge(cwd, &shards, "merged"));
+        assert_same_tree(&cwd.join("single/world"), &cwd.join("merged/world"));
+    }
 }
 
 /// A skirt too shallow for the map's heights in f32 is the preset's fault in a band's unit (which
