@@ -386,6 +386,15 @@ for i in 0 1 2; do
     fail "highlands shard $i/3 (see $OUT/world_shard_$i.log)"; world_ok=0
   fi
 done
+# the second round, one shard after another: each shard's share of the 16 scene tiles
+if [ "$world_ok" = 1 ]; then
+  for i in 0 1 2; do
+    if ! "$BIN" -q --threads 2 build presets/worlds/highlands.toml --shard "$i/3" --tiles --out "$WORLD_OUT/shards/$i" \
+        --shards "$WORLD_OUT"/shards/{0,1,2} > "$OUT/world_tiles_$i.log" 2>&1; then
+      fail "highlands shard $i/3's scene tiles (see $OUT/world_tiles_$i.log)"; world_ok=0
+    fi
+  done
+fi
 if [ "$world_ok" = 1 ]; then
   if "$BIN" -q --threads 2 merge presets/worlds/highlands.toml --shards "$WORLD_OUT"/shards/{2,0,1} --out "$WORLD_OUT/merged" > "$OUT/world_merge.log" 2>&1; then
     if "$PY" - "$WORLD_OUT" "$WORLD_PEAK_MIB" <<'PYEOF'
@@ -400,6 +409,11 @@ for i in range(3):
     rows.append(f"shard {i}/3 ({units}): peak {peak} MiB")
     if peak is None or peak > bound:
         bad.append(f"shard {i}: peak {peak}")
+    tiles = json.loads((out / "shards" / str(i) / "highlands.tiles.json").read_text())
+    peak = tiles.get("peak_memory_mib")
+    rows.append(f"shard {i}/3, second round ({len(tiles['tiles'])} scene tiles, {len(tiles['left'])} left): peak {peak} MiB")
+    if peak is None or peak > bound:
+        bad.append(f"shard {i}'s second round: peak {peak}")
 timing = json.loads((out / "merged" / "highlands" / "report.json").read_text())["timing"]
 peak = timing.get("process_peak_memory_mib")
 stages = ", ".join(f"{k} {v['peak_memory_mib']:.0f}" for k, v in timing.items() if isinstance(v, dict) and "peak_memory_mib" in v)
@@ -417,6 +431,32 @@ PYEOF
     # tables' rows each in one tile; one tile kept for the engines (5f2)
     if "$BIN" validate --quiet "$hl"/tiles/*.glb; then pass; else fail "verdant validate highlands' tiles"; fi
     if "$PY" scripts/check_outputs.py --tiles "$hl"; then pass; else fail "check_outputs.py --tiles highlands"; fi
+    # every tile is the one a shard's second round made (its bytes as the shard's record says), none
+    # written by the merge
+    if "$PY" - "$WORLD_OUT" <<'PYEOF'
+import hashlib, json, sys
+from pathlib import Path
+out = Path(sys.argv[1])
+made = {}
+for i in range(3):
+    rec = json.loads((out / "shards" / str(i) / "highlands.tiles.json").read_text())
+    if rec["left"] or rec.get("no_units"):
+        sys.exit(f"shard {i} left tiles to the merge: {rec['left']} {rec.get('no_units')}")
+    for t, entry in rec["tiles"]:
+        for f, digest in rec["digests"][entry].items():
+            if f.startswith("tiles/"):
+                made[f] = digest
+index = json.loads((out / "merged" / "highlands" / "scene_tiles.json").read_text())
+files = [t["file"] for t in index["tiles"]]
+if sorted(files) != sorted(made):
+    sys.exit(f"the index lists {sorted(files)}, the shards made {sorted(made)}")
+for f in files:
+    got = hashlib.sha256((out / "merged" / "highlands" / f).read_bytes()).hexdigest()
+    if got != made[f]:
+        sys.exit(f"{f} is not the shards' tile")
+print(f"{len(files)} scene tiles, each the one a shard made")
+PYEOF
+    then pass; else fail "highlands: the merged tiles are not the shards'"; fi
     # the check itself must fail on a tampered index: a count one off; two tiles' files swapped (each
     # tile's instances then outside the square listed)
     for tamper in count swap; do
