@@ -690,6 +690,7 @@ fn build(a: BuildArgs, quiet: bool) -> i32 {
         shard: a.shard,
         merging: false,
         tiles_from: if a.tiles { a.shards.clone() } else { Vec::new() },
+        tile_scenes: Vec::new(),
     };
     let progress = scene_build::ProgressView::new(quiet);
     let outcomes =

@@ -27,5 +27,6 @@ run() {
   done
 }
 run verdant-shards "$tmp/job0.yaml"
-run verdant-tiles "$tmp/job1.yaml"
+# (the second round is optional: where it fails, the merge writes those tiles itself)
+run verdant-tiles "$tmp/job1.yaml" || echo "k8s-run.sh: the second round (scene tiles) failed; the merge writes the tiles" >&2
 run verdant-merge "$tmp/job2.yaml"

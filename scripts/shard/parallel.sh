@@ -10,8 +10,9 @@
 # Each shard is `verdant build PRESET... --shard i/N --out OUT/.shards/i`, then (once every shard is
 # done) its second round, the scene tiles of its share (`[scene] tile`; nothing to do without):
 # `verdant build PRESET... --shard i/N --tiles --shards OUT/.shards/* --out OUT/.shards/i`; the merge
-# is `verdant merge PRESET... --shards OUT/.shards/* --out OUT`. Any shard failing stops the run
-# (--halt now,fail=1) before the next round.
+# is `verdant merge PRESET... --shards OUT/.shards/* --out OUT`. A shard failing stops the run
+# (--halt now,fail=1) before the second round; the second round failing only leaves its tiles to the
+# merge.
 set -euo pipefail
 if [ $# -lt 2 ]; then
   echo "usage: $0 N OUT [PRESET...]" >&2
@@ -28,6 +29,8 @@ fi
 seq 0 $((n - 1)) | parallel --will-cite -q --halt now,fail=1 ${remote[@]+"${remote[@]}"} \
   "$verdant" -q build "$@" --shard "{}/$n" --out "$shards/{}"
 mapfile -t dirs < <(seq -f "$shards/%g" 0 $((n - 1)))
+# (the second round is optional: where it fails, the merge writes those tiles itself)
 seq 0 $((n - 1)) | parallel --will-cite -q --halt now,fail=1 ${remote[@]+"${remote[@]}"} \
-  "$verdant" -q build "$@" --shard "{}/$n" --tiles --out "$shards/{}" --shards "${dirs[@]}"
+  "$verdant" -q build "$@" --shard "{}/$n" --tiles --out "$shards/{}" --shards "${dirs[@]}" ||
+  echo "parallel.sh: the second round (scene tiles) failed; the merge writes the tiles" >&2
 "$verdant" merge "$@" --shards "${dirs[@]}" --out "$out"

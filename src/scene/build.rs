@@ -45,6 +45,8 @@ pub struct BuildSettings {
     /// A shard's second round (`--tiles --shards DIR...`): every first-round shard folder; the shard
     /// then makes the scene tiles of its share ([`crate::scene::tile_units`]). Empty: the first.
     pub tiles_from: Vec<PathBuf>,
+    /// A merge's scenes whose shards made scene tiles (their view stage puts them in place).
+    pub tile_scenes: Vec<String>,
 }
 
 impl Default for BuildSettings {
@@ -57,6 +59,7 @@ impl Default for BuildSettings {
             shard: None,
             merging: false,
             tiles_from: Vec::new(),
+            tile_scenes: Vec::new(),
         }
     }
 }
@@ -325,7 +328,7 @@ fn build_into(
     let mut drawn: Option<(ViewStageReport, String)> = None;
     // a merge's scene tiles, made by the shards' second round (`--tiles`): put in place by the view
     // stage where the cache holds them, the others written there
-    let tile_plan = match settings.merging && !settings.force {
+    let tile_plan = match settings.merging && !settings.force && settings.tile_scenes.contains(name) {
         true => crate::scene::tile_units::plan(preset).ok().and_then(Result::ok),
         false => None,
     };
@@ -514,6 +517,7 @@ pub fn merge_batch(
 ) -> Vec<SceneOutcome> {
     let mut ready: Vec<(usize, PresetSource)> = Vec::new();
     let mut failed: Vec<(usize, SceneOutcome)> = Vec::new();
+    let mut tile_scenes: Vec<String> = Vec::new();
     for (k, source) in sources.iter().enumerate() {
         let loaded = match source {
             PresetSource::File(p) => load_preset(p).map_err(SceneBuildError::from),
@@ -523,7 +527,11 @@ pub fn merge_batch(
         let gathered = loaded.and_then(|p| {
             scene = p.scene.name.clone();
             let brought = shard::gather(&p, shard_dirs, &settings.out_dir)?;
-            let tiles = shard::gather_tiles(&p, shard_dirs, &settings.out_dir, shard_dirs.len())?;
+            let say = |m: &str| progress(&p.scene.name, m);
+            let tiles = shard::gather_tiles(&p, shard_dirs, &settings.out_dir, shard_dirs.len(), &say)?;
+            if tiles > 0 {
+                tile_scenes.push(p.scene.name.clone());
+            }
             progress(
                 &p.scene.name,
                 &format!(
@@ -544,7 +552,7 @@ pub fn merge_batch(
             }
         }
     }
-    let settings = BuildSettings { shard: None, force: false, merging: true, ..settings.clone() };
+    let settings = BuildSettings { shard: None, force: false, merging: true, tile_scenes, ..settings.clone() };
     let sources: Vec<PresetSource> = ready.iter().map(|(_, s)| s.clone()).collect();
     let built = build_batch(&sources, &settings, jobs, progress);
     let mut all: Vec<(usize, SceneOutcome)> = ready.into_iter().map(|(k, _)| k).zip(built).collect();

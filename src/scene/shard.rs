@@ -310,6 +310,8 @@ pub fn build_shard(
     let planned = planned(preset, out)?;
     let mine: Vec<usize> = (0..planned.len()).filter(|&k| planned[k].2.shard(shard.count) == shard.index).collect();
     remove_stale_shard_folders(out, name);
+    // (a second round's record of an earlier first round no longer belongs to this folder)
+    let _ = fs::remove_file(tile_record_path(out, name));
     let tmp = out.join(format!(".{name}.shard-{}", std::process::id()));
     let _ = fs::remove_dir_all(&tmp);
     fs::create_dir_all(&tmp).map_err(io(&tmp))?;
@@ -464,7 +466,7 @@ pub struct TileRecord {
     pub scene: String,
     pub shard: usize,
     pub of: usize,
-    /// The tiles' grid (none when the preset's tiles are not units: `left` says why).
+    /// The tiles' grid ([0, 0] when the preset's tiles are not units: `no_units` says why).
     pub grid: [u32; 2],
     /// Each tile this shard made (its index in the grid, row-major) and its entry.
     pub tiles: Vec<(usize, String)>,
@@ -501,21 +503,20 @@ pub fn build_tile_shard(
         let path = path.to_owned();
         move |e: std::io::Error| SceneBuildError::Io { path: path.clone(), message: e.to_string() }
     };
-    fs::create_dir_all(out).map_err(io(out))?;
-    gather(preset, shard_dirs, out)?;
-    let first = shard_dirs
-        .iter()
-        .filter_map(|d| fs::read_to_string(record_path(d, name)).ok())
-        .filter_map(|t| serde_json::from_str::<ShardRecord>(&t).ok())
-        .map(|r| r.of)
-        .next()
-        .unwrap_or(shard.count);
-    if first != shard.count {
+    // (in the shard's own folder of the first round, where the merge looks for its record)
+    let own =
+        fs::read_to_string(record_path(out, name)).ok().and_then(|t| serde_json::from_str::<ShardRecord>(&t).ok());
+    if own.as_ref().map(|r| (r.shard, r.of)) != Some((shard.index, shard.count)) {
         return Err(SceneBuildError::Usage(format!(
-            "--shard {}/{}: the shards given were cut {first} ways (give the second round the same N)",
-            shard.index, shard.count
+            "{}: not the folder of shard {}/{} of scene `{name}`: give the second round (--tiles) the --out of the shard's first round",
+            out.display(),
+            shard.index,
+            shard.count
         )));
     }
+    // (its record of an earlier run is replaced at the end, or gone if this round fails)
+    let _ = fs::remove_file(tile_record_path(out, name));
+    gather(preset, shard_dirs, out)?;
     let cache = Cache::new(out);
     let mut record = TileRecord {
         built_by: this_binary(),
@@ -541,26 +542,32 @@ pub fn build_tile_shard(
             let _ = fs::remove_dir_all(&tmp);
             fs::create_dir_all(&tmp).map_err(io(&tmp))?;
             let result = (|| -> Result<(), SceneBuildError> {
-                let mine: Vec<usize> = (0..plan.count()).filter(|t| t % shard.count == shard.index).collect();
-                if mine.is_empty() {
+                // (runs of neighbouring tiles, row-major: a shard's tiles share rows, and what a row's
+                // tiles read alike is made once)
+                let mine: Vec<usize> =
+                    (0..plan.count()).filter(|t| t * shard.count / plan.count() == shard.index).collect();
+                let todo: Vec<usize> = mine
+                    .iter()
+                    .copied()
+                    .filter(|&t| force || !cache.root.join(plan.entry_of(t)).join("stage.json").is_file())
+                    .collect();
+                record.tiles.extend(mine.iter().filter(|t| !todo.contains(t)).map(|&t| (t, plan.entry_of(t))));
+                if todo.is_empty() {
                     return Ok(());
                 }
                 let inputs = crate::scene::tile_units::TileInputs::new(&plan, &cache, &tmp)?;
-                for t in mine {
+                let [nx, _] = plan.grid;
+                let mut row: Option<crate::scene::tile_units::TileRow> = None;
+                for t in todo {
                     let entry = plan.entry_of(t);
-                    let [nx, _] = plan.grid;
-                    say(&format!(
-                        "shard {}/{}: scene tile {} {}",
-                        shard.index,
-                        shard.count,
-                        t % nx as usize,
-                        t / nx as usize
-                    ));
-                    if !force && cache.root.join(&entry).join("stage.json").is_file() {
-                        record.tiles.push((t, entry));
-                        continue;
+                    let j = (t / nx as usize) as u32;
+                    say(&format!("shard {}/{}: scene tile {} {j}", shard.index, shard.count, t % nx as usize));
+                    if row.as_ref().is_none_or(|r| r.j() != j) {
+                        drop(row.take()); // (the row before freed first)
+                        row = Some(crate::scene::tile_units::tile_row(&plan, &inputs, j, &cache)?);
                     }
-                    match crate::scene::tile_units::build_tile(&plan, &inputs, t, &cache, &tmp)? {
+                    let row = row.as_ref().expect("made above");
+                    match crate::scene::tile_units::build_tile(&plan, &inputs, row, t, &tmp)? {
                         Err(why) => {
                             say(&format!("  left to the merge: {why}"));
                             record.left.push((t, why));
@@ -588,6 +595,7 @@ pub fn build_tile_shard(
             result?;
         }
     }
+    record.tiles.sort();
     for (_, entry) in &record.tiles {
         let dir = cache.root.join(entry);
         let files = entry_digests(&dir).map_err(|e| SceneBuildError::Io { path: dir, message: e.to_string() })?;
@@ -613,48 +621,51 @@ pub fn build_tile_shard(
 /// Brings the scene tiles the shards' second round made (`<scene>.tiles.json` in their folders,
 /// where present) into `out`'s cache, each entry checked against its record's digests; the merge's
 /// view stage then puts them in place ([`crate::scene::tile_units`]). Returns the tiles brought.
-/// A folder without a second round's record gives none (the merge writes those tiles).
+/// The second round is optional, so what does not check out is passed over, said through `say`,
+/// and its tiles are written by the merge: a record of another binary or split (a stale one), an
+/// entry missing or not as the shard wrote it.
 pub fn gather_tiles(
     preset: &Preset,
     shard_dirs: &[PathBuf],
     out: &Path,
     count: usize,
+    say: &dyn Fn(&str),
 ) -> Result<usize, SceneBuildError> {
     let name = &preset.scene.name;
-    let usage = |m: String| SceneBuildError::Usage(m);
     let cache = Cache::new(out);
     let mut brought = 0;
     for dir in shard_dirs {
         let path = tile_record_path(dir, name);
         let Ok(text) = fs::read_to_string(&path) else { continue };
-        let r: TileRecord =
-            serde_json::from_str(&text).map_err(|e| usage(format!("{}: not a tile record: {e}", path.display())))?;
+        let r: TileRecord = match serde_json::from_str(&text) {
+            Ok(r) => r,
+            Err(e) => {
+                say(&format!("{}: not a tile record ({e}): its tiles are written by the merge", path.display()));
+                continue;
+            }
+        };
         if r.built_by != this_binary() || r.of != count {
-            return Err(usage(format!(
-                "{}: the second round of shard {}/{} by {} does not belong to these {count} shards of {} (build it again: verdant build … --shard I/{count} --tiles --shards …)",
+            say(&format!(
+                "{}: a second round of shard {}/{} by {}, not of these {count} shards by {}: its tiles are written by the merge",
                 path.display(),
                 r.shard,
                 r.of,
                 r.built_by,
                 this_binary()
-            )));
+            ));
+            continue;
         }
         let root = Cache::new(dir).root;
         for (t, entry) in &r.tiles {
             let src = root.join(entry);
-            let again = format!("copy the shard's folder again, or build its second round again (verdant build … --shard {}/{count} --tiles --shards … --force)", r.shard);
-            let want = r
-                .digests
-                .get(entry)
-                .ok_or_else(|| usage(format!("{}: no digest of {entry} (scene tile {t})", path.display())))?;
-            let got =
-                entry_digests(&src).map_err(|e| usage(format!("{}: scene tile {t}: {e}; {again}", src.display())))?;
-            if *want != got {
-                return Err(usage(format!(
-                    "{}: scene tile {t} of shard {}/{count} differs from what the shard wrote; {again}",
+            let got = entry_digests(&src).ok();
+            if got.is_none() || r.digests.get(entry) != got.as_ref() {
+                say(&format!(
+                    "{}: scene tile {t} of shard {}/{count} is missing or differs from what the shard wrote: the merge writes it",
                     src.display(),
                     r.shard
-                )));
+                ));
+                continue;
             }
             let fresh =
                 cache.import(&src).map_err(|e| SceneBuildError::Io { path: src.clone(), message: e.to_string() })?;

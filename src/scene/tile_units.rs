@@ -22,9 +22,9 @@
 //! - the species' levels: the species entries, restored into the unit's folder.
 //!
 //! A tile unit's key holds every entry name of the first round (each the hash of what its unit
-//! read), the `[lod]` policy, the tile's side and index, the scene's name and each species' cull
-//! distance: the merge looks a tile up by the same key, so a tile built from other inputs is never
-//! put in place (it writes that tile itself).
+//! read), the `[lod]` policy, the tile's side, the grid and the tile's index, the placement tiles'
+//! side, the scene's name and each species' cull distance: the merge looks a tile up by the same
+//! key, so a tile built from other inputs is never put in place (it writes that tile itself).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -278,19 +278,35 @@ fn window(parts: &[(usize, &[u8])], width: u32, rows: [u32; 2]) -> Result<image:
     Ok(image::DynamicImage::ImageRgba8(image))
 }
 
-/// Tile `t` of `plan`, written into `dir` (`dir/tiles/tile_<i>_<j>.glb`) from `cache`: its
-/// record and how far its vertices moved (`Ok(Ok(None))`: nothing lies in it), or why the merge
-/// is to write it (`Ok(Err(why))`).
-pub fn build_tile(
-    plan: &TilePlan<'_>,
-    inputs: &TileInputs,
-    t: usize,
-    cache: &Cache,
-    dir: &Path,
-) -> Result<Result<Option<(SceneTile, f64)>, String>, StageError> {
+/// What every tile of one row of the grid reads alike, made once for the row: the main level's and
+/// each level's scene of the chunks around the row (each chunk at its index in the whole scene's,
+/// the others empty; the textures stood in for), the texel rows of the textures the row's chunks
+/// reach, and the row's placement rows of every species.
+pub struct TileRow {
+    j: u32,
+    main: Scene,
+    /// The level files' scenes, with the species' files read.
+    files: BTreeMap<PathBuf, Arc<Scene>>,
+    /// The stand-ins and the texel rows they stand for (`first_row ..`), when the row has chunks.
+    textures: Vec<(Vec<u8>, image::DynamicImage)>,
+    first_row: u32,
+    /// Why the row's tiles are left to the merge, when they are.
+    left: Option<String>,
+    /// Per species (as [`TileInputs::species`]): the row's placement rows, in table order.
+    rows: Vec<Vec<PlacementRow>>,
+}
+
+impl TileRow {
+    /// The row of the grid.
+    pub fn j(&self) -> u32 {
+        self.j
+    }
+}
+
+/// Tile row `j` of `plan` from `cache` ([`TileRow`]).
+pub fn tile_row(plan: &TilePlan<'_>, inputs: &TileInputs, j: u32, cache: &Cache) -> Result<TileRow, StageError> {
     let (preset, tt, bands) = (plan.preset, plan.t, &plan.bands);
     let [nx, _] = plan.grid;
-    let (i, j) = ((t % nx as usize) as u32, (t / nx as usize) as u32);
     let pitch = tt.chunk.unwrap_or(1);
     let grid = crate::terrain::chunks::ChunkGrid::new(bands.width, bands.height(), pitch);
     let main_level = bands
@@ -298,7 +314,7 @@ pub fn build_tile(
         .iter()
         .position(|&b| b == tt.max_error_m)
         .ok_or_else(|| fail("the terrain's bands have no main level".into()))?;
-    // the chunks of the bands around the tile's row, at the main level and every level
+    // the chunks of the bands around the row, at the main level and every level
     let near = plan.bands_of_row(j);
     let mut blobs = Vec::with_capacity(near.len());
     for &k in &near {
@@ -319,10 +335,10 @@ pub fn build_tile(
         let at: Vec<usize> = chunks.iter().map(|([ci, cj], _)| cj * grid.nx + ci).collect();
         let mut scene = crate::terrain::build::assemble_chunks(name, bands.width, bands.height(), pitch, chunks)
             .map_err(|e| fail(format!("the bands' chunks: {e}")))?;
-        let mut meshes = vec![Mesh::default(); grid.len()];
         if scene.meshes.len() != at.len() {
             return Err(fail("the bands' chunks are not one mesh each".into()));
         }
+        let mut meshes = vec![Mesh::default(); grid.len()];
         for (m, &c) in std::mem::take(&mut scene.meshes).into_iter().zip(&at) {
             meshes[c] = m;
         }
@@ -330,50 +346,12 @@ pub fn build_tile(
         Ok(scene)
     };
     let main = level_scene(main_level, "terrain")?;
-    // the chunks whose boxes' centres lie in the tile, as the view stage places them
-    let picked: Vec<usize> = (0..main.meshes.len())
-        .filter(|&c| {
-            mesh_bounds(&main.meshes[c]).is_some_and(|b| view_tiles::tile_of_chunk(&b, plan.tile_m, plan.grid) == t)
-        })
-        .collect();
-
-    // its rows of every species: the placement tiles in it, in table order
-    let mut rows: Vec<Vec<PlacementRow>> = vec![Vec::new(); inputs.species.len()];
-    if let (Some(rp), Some(tiling)) = (&plan.rows, plan.placement_tiles) {
-        for &g in rp.groups.iter().filter(|g| g[0] < g[1]) {
-            // (a group of tile rows reaching the tile's row)
-            let reaches = (g[0]..g[1]).any(|r| {
-                let [_, z0, _, z1] = tiling.rect(0, r);
-                view_tiles::tile_of(0.0, 0.5 * (z0 + z1), plan.tile_m, plan.grid)[1] == j
-            });
-            if !reaches {
-                continue;
-            }
-            let key = placement_rows::rows_key(rp, g);
-            let unit = placement_rows::kept_unit(preset, rp, cache, &key).ok_or_else(|| {
-                fail(format!(
-                    "the placements of tile rows {}-{} are not in the cache (build every shard first)",
-                    g[0], g[1]
-                ))
-            })?;
-            for (slot, (k, _)) in inputs.species.iter().enumerate() {
-                let Some(Some(p)) = unit.get(*k) else { continue };
-                let mut mine: Vec<crate::scatter::Instance> = p
-                    .instances
-                    .iter()
-                    .filter(|inst| {
-                        view_tiles::tile_of_row(&inst.placement_row(), Some(tiling), plan.tile_m, plan.grid) == t
-                    })
-                    .cloned()
-                    .collect();
-                crate::scatter::assign_variants(&mut mine, preset.species[*k].look.table_variants());
-                rows[slot].extend(mine.iter().map(|inst| inst.placement_row()));
-            }
-        }
-    }
-    if picked.is_empty() && rows.iter().all(Vec::is_empty) {
-        return Ok(Ok(None));
-    }
+    // the row's chunks: those whose boxes' centres lie in it, as the view stage places them
+    let in_row = |c: usize| {
+        mesh_bounds(&main.meshes[c])
+            .is_some_and(|b| view_tiles::tile_of_chunk(&b, plan.tile_m, plan.grid) / nx as usize == j as usize)
+    };
+    let row_chunks: Vec<usize> = (0..main.meshes.len()).filter(|&c| in_row(c)).collect();
 
     // each level's scene as its file holds it, the textures stood in for
     let mut files = inputs.files.clone();
@@ -385,30 +363,30 @@ pub fn build_tile(
             .map_err(fail)?;
         files.insert(file.clone(), Arc::new(scene));
     }
-    // the texel rows the tile's chunks reach at any level, from the bands' rows
+    drop(blobs);
+
+    // the texel rows the row's chunks reach at any level, from the bands' rows
     let map_px = bands.map_px();
     let (mut u, mut v) = ([f64::INFINITY, f64::NEG_INFINITY], [f64::INFINITY, f64::NEG_INFINITY]);
     for (file, _) in &inputs.levels {
-        for p in picked.iter().flat_map(|&c| &files[file].meshes[c].primitives) {
+        for p in row_chunks.iter().flat_map(|&c| &files[file].meshes[c].primitives) {
             for uv in &p.uvs {
                 u = [u[0].min(uv[0] as f64), u[1].max(uv[0] as f64)];
                 v = [v[0].min(uv[1] as f64), v[1].max(uv[1] as f64)];
             }
         }
     }
-    let (mut stand_ins, mut first_row) = (Vec::new(), 0);
-    if !picked.is_empty() {
-        if !v[0].is_finite() {
-            return Ok(Err("its chunks have no texture coordinates".into()));
-        }
+    let (mut textures, mut first_row, mut left) = (Vec::new(), 0, None);
+    if !row_chunks.is_empty() && !v[0].is_finite() {
+        left = Some("its chunks have no texture coordinates".to_string());
+    } else if !row_chunks.is_empty() {
         let [_, y0, _, ch] = view_tiles::texel_rect(u, v, map_px[0], map_px[1]);
         let texel_rows = bands.normal_rows().ok_or_else(|| fail("the terrain's bands bake no texel rows".into()))?;
-        let reached: Vec<usize> = (0..bands.band_count())
-            .filter(|&k| texel_rows[k].start < (y0 + ch) as usize && texel_rows[k].end > y0 as usize)
-            .collect();
+        let reached = (0..bands.band_count())
+            .filter(|&k| texel_rows[k].start < (y0 + ch) as usize && texel_rows[k].end > y0 as usize);
         let mut albedo = Vec::new();
         let mut normals: Vec<Vec<(usize, Vec<u8>)>> = vec![Vec::new(); inputs.levels.len()];
-        for &k in &reached {
+        for k in reached {
             let key = terrain_stage::band_layers_key(&plan.grows, &plan.mesh_key, bands, k);
             let (_, entry) = cache
                 .lookup(crate::scene::band_layers::BAND_LAYERS_STAGE, &key)
@@ -437,34 +415,104 @@ pub fn build_tile(
             }
         }
         let rows_read = [y0, y0 + ch];
-        let mut images = vec![(stand_in("base colour"), window(&refs(&albedo), map_px[0], rows_read)?)];
+        textures.push((stand_in("base colour"), window(&refs(&albedo), map_px[0], rows_read)?));
         for (l, n) in normals.iter().enumerate() {
-            images.push((stand_in(&format!("normal map {l}")), window(&refs(n), map_px[0], rows_read)?));
+            textures.push((stand_in(&format!("normal map {l}")), window(&refs(n), map_px[0], rows_read)?));
         }
-        // two textures alike in these rows may be one texture in the scene's files
-        for a in 0..images.len() {
-            for b in a + 1..images.len() {
-                if images[a].1 == images[b].1 {
-                    return Ok(Err(
-                        "two of the terrain's textures are alike in its rows (they may be one texture)".into()
-                    ));
+        first_row = y0;
+        // two whole textures that differ differ in some row; two alike in every row read may be
+        // one texture in the scene's files, which the stand-ins would not show
+        for a in 0..textures.len() {
+            for b in a + 1..textures.len() {
+                if textures[a].1 == textures[b].1 {
+                    left = Some("two of the terrain's textures are alike in its rows (they may be one texture)".into());
                 }
             }
         }
-        first_row = y0;
-        stand_ins = images;
     }
-    let (pngs, images): (Vec<Vec<u8>>, Vec<image::DynamicImage>) = stand_ins.into_iter().unzip();
-    let decoded: Vec<Decoded<'_>> = pngs
-        .iter()
-        .zip(images)
-        .map(|(png, image)| Decoded { png, image, first_row, size: (map_px[0], map_px[1]) })
-        .collect();
 
+    // the row's rows of every species: its placement tiles', in table order
+    let mut rows: Vec<Vec<PlacementRow>> = vec![Vec::new(); inputs.species.len()];
+    if let (Some(rp), Some(tiling)) = (&plan.rows, plan.placement_tiles) {
+        for &g in rp.groups.iter().filter(|g| g[0] < g[1]) {
+            // (a group of tile rows reaching the row)
+            let reaches = (g[0]..g[1]).any(|r| {
+                let [_, z0, _, z1] = tiling.rect(0, r);
+                view_tiles::tile_of(0.0, 0.5 * (z0 + z1), plan.tile_m, plan.grid)[1] == j
+            });
+            if !reaches {
+                continue;
+            }
+            let key = placement_rows::rows_key(rp, g);
+            let unit = placement_rows::kept_unit(preset, rp, cache, &key).ok_or_else(|| {
+                fail(format!(
+                    "the placements of tile rows {}-{} are not in the cache (build every shard first)",
+                    g[0], g[1]
+                ))
+            })?;
+            for (slot, (k, _)) in inputs.species.iter().enumerate() {
+                let Some(Some(p)) = unit.get(*k) else { continue };
+                let in_row = |inst: &&crate::scatter::Instance| {
+                    let t = view_tiles::tile_of_row(&inst.placement_row(), Some(tiling), plan.tile_m, plan.grid);
+                    t / nx as usize == j as usize
+                };
+                let mut mine: Vec<crate::scatter::Instance> = p.instances.iter().filter(in_row).cloned().collect();
+                crate::scatter::assign_variants(&mut mine, preset.species[*k].look.table_variants());
+                rows[slot].extend(mine.iter().map(|inst| inst.placement_row()));
+            }
+        }
+    }
+    Ok(TileRow { j, main, files, textures, first_row, left, rows })
+}
+
+/// Tile `t` of `plan` (of row `row`), written into `dir` (`dir/tiles/tile_<i>_<j>.glb`): its record
+/// and how far its vertices moved (`Ok(Ok(None))`: nothing lies in it), or why the merge is to
+/// write it (`Ok(Err(why))`).
+pub fn build_tile(
+    plan: &TilePlan<'_>,
+    inputs: &TileInputs,
+    row: &TileRow,
+    t: usize,
+    dir: &Path,
+) -> Result<Result<Option<(SceneTile, f64)>, String>, StageError> {
+    let preset = plan.preset;
+    let [nx, _] = plan.grid;
+    let (i, j) = ((t % nx as usize) as u32, (t / nx as usize) as u32);
+    if j != row.j {
+        return Err(fail(format!("tile {t} is not of row {}", row.j)));
+    }
+    let picked: Vec<usize> = (0..row.main.meshes.len())
+        .filter(|&c| {
+            mesh_bounds(&row.main.meshes[c]).is_some_and(|b| view_tiles::tile_of_chunk(&b, plan.tile_m, plan.grid) == t)
+        })
+        .collect();
+    let placement = |r: &PlacementRow| view_tiles::tile_of_row(r, plan.placement_tiles, plan.tile_m, plan.grid);
+    let picked_rows: Vec<Vec<u32>> = row
+        .rows
+        .iter()
+        .map(|rows| (0..rows.len() as u32).filter(|&n| placement(&rows[n as usize]) == t).collect())
+        .collect();
+    if picked.is_empty() && picked_rows.iter().all(Vec::is_empty) {
+        return Ok(Ok(None));
+    }
+    if let (Some(why), false) = (&row.left, picked.is_empty()) {
+        return Ok(Err(why.clone()));
+    }
+    let map_px = plan.bands.map_px();
+    let decoded: Vec<Decoded<'_>> = row
+        .textures
+        .iter()
+        .map(|(png, image)| Decoded {
+            png,
+            image: std::borrow::Cow::Borrowed(image),
+            first_row: row.first_row,
+            size: (map_px[0], map_px[1]),
+        })
+        .collect();
     let lod_species: Vec<LodSpecies<'_>> = inputs
         .species
         .iter()
-        .zip(&rows)
+        .zip(&row.rows)
         .map(|((k, report), rows)| {
             let chain = &report.chain;
             let last = chain.variants.iter().filter_map(|v| v.last()).map(|l| l.switch_distance_m).fold(0.0, f64::max);
@@ -472,12 +520,11 @@ pub fn build_tile(
             LodSpecies { name: &preset.species[*k].rules.name, chain, rows, picked: None, cull }
         })
         .collect();
-    let all: Vec<Vec<u32>> = rows.iter().map(|r| (0..r.len() as u32).collect()).collect();
     let species: Vec<LodSpecies<'_>> =
-        lod_species.iter().zip(&all).map(|(sp, all)| LodSpecies { picked: Some(all), ..*sp }).collect();
-    let reach = view_tiles::species_reach(&files, &lod_species);
+        lod_species.iter().zip(&picked_rows).map(|(sp, p)| LodSpecies { picked: Some(p), ..*sp }).collect();
+    let reach = view_tiles::species_reach(&row.files, &lod_species);
     let terrain = LodTerrain {
-        main: &main,
+        main: &row.main,
         levels: &inputs.levels,
         chunked: true,
         main_file: Path::new(MAIN_FILE),
@@ -497,11 +544,30 @@ pub fn build_tile(
         kept: None,
     };
     std::fs::create_dir_all(dir.join(view_tiles::TILES_DIR)).map_err(|e| fail(format!("{}: {e}", dir.display())))?;
-    let (tile, moved) = view_tiles::write_tile(&job, &files, &decoded, [i, j], &picked, &species, &reach)?;
+    let (tile, moved) = view_tiles::write_tile(&job, &row.files, &decoded, [i, j], &picked, &species, &reach)?;
     if !picked.is_empty() && tile.texture_texels.is_none() {
         // (the stand-ins were kept whole: the tile needs the whole textures)
         let _ = std::fs::remove_file(dir.join(&tile.file));
         return Ok(Err("it keeps the terrain's textures whole".into()));
     }
     Ok(Ok(Some((tile, moved))))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_window_takes_each_row_from_the_band_holding_it_and_refuses_rows_of_none() {
+        // a texture 2 texels wide: one band's rows 0-1, the next band's rows 2-4
+        let a: Vec<u8> = (0..16).collect();
+        let b: Vec<u8> = (100..124).collect();
+        let parts = [(0usize, &a[..]), (2, &b[..])];
+        let w = window(&parts, 2, [1, 4]).unwrap().into_rgba8();
+        assert_eq!((w.width(), w.height()), (2, 3));
+        assert_eq!(&w.as_raw()[..8], &a[8..16], "row 1 from the first band");
+        assert_eq!(&w.as_raw()[8..], &b[..16], "rows 2-3 from the second");
+        let e = window(&parts, 2, [3, 6]).unwrap_err().to_string();
+        assert!(e.contains("texel row 5"), "{e}");
+    }
 }

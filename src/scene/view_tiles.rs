@@ -122,8 +122,8 @@ pub fn tile_of(x: f64, z: f64, tile_m: f64, grid: [u32; 2]) -> [u32; 2] {
 pub(super) struct Decoded<'a> {
     /// The PNG as the terrain's file holds it (what a tile's copy of the texture is matched by).
     pub png: &'a [u8],
-    /// Rows `first_row ..` of the texture, at its whole width.
-    pub image: image::DynamicImage,
+    /// Rows `first_row ..` of the texture, at its whole width (borrowed where many tiles crop it).
+    pub image: std::borrow::Cow<'a, image::DynamicImage>,
     pub first_row: u32,
     /// The whole texture's width and height.
     pub size: (u32, u32),
@@ -241,20 +241,30 @@ pub(super) fn write_tiles(
 
     std::fs::create_dir_all(job.dir.join(TILES_DIR))
         .map_err(|e| fail(format!("{}: {e}", job.dir.join(TILES_DIR).display())))?;
-    // the tiles the build kept (a merge's, made by the shards), put in place; the others written
+    // the tiles the build kept (a merge's, made by the shards), put in place; the others written,
+    // and so is a kept tile whose chunks or instances are not the scene's (never expected: its key
+    // holds everything it was made from; it is written anew rather than trusted)
     let occupied = |t: usize| !chunks[t].is_empty() || rows.iter().any(|per| !per[t].is_empty());
+    let matches = |t: usize, tile: &Option<(SceneTile, f64)>| match tile {
+        None => !occupied(t),
+        Some((tile, _)) => {
+            let counts: BTreeMap<String, usize> = job
+                .species
+                .iter()
+                .zip(&rows)
+                .filter(|(_, per)| !per[t].is_empty())
+                .map(|(sp, per)| (sp.name.to_string(), per[t].len()))
+                .collect();
+            occupied(t) && tile.terrain_chunks == chunks[t].len() && tile.instances == counts
+        }
+    };
     let mut kept: BTreeMap<usize, Option<(SceneTile, f64)>> = BTreeMap::new();
     if let Some(k) = job.kept {
         for t in 0..count {
             if let Some(tile) = k([(t % nx as usize) as u32, (t / nx as usize) as u32], grid) {
-                if tile.is_some() != occupied(t) {
-                    return Err(fail(format!(
-                        "the kept scene tile {t} is {} where the scene has {} (rebuild with --force)",
-                        if tile.is_some() { "written" } else { "empty" },
-                        if occupied(t) { "something in it" } else { "nothing" }
-                    )));
+                if matches(t, &tile) {
+                    kept.insert(t, tile);
                 }
-                kept.insert(t, tile);
             }
         }
     }
@@ -423,7 +433,7 @@ fn decode_terrain_textures<'f>(
             let image = image::load_from_memory_with_format(png, image::ImageFormat::Png)
                 .map_err(|e| fail(format!("the terrain's texture `{name}`: {e} (rebuild with --force)")))?;
             let size = (image.width(), image.height());
-            Ok(Decoded { png, image, first_row: 0, size })
+            Ok(Decoded { png, image: std::borrow::Cow::Owned(image), first_row: 0, size })
         })
         .collect()
 }

@@ -54,6 +54,22 @@ fn run_shards(cwd: &Path, base: &str, n: usize) -> Vec<PathBuf> {
     (0..n).map(|i| PathBuf::from(format!("{base}/{i}"))).collect()
 }
 
+/// Runs `world.toml`'s N shards into the folders `dirs` (N = their count) one after another; their
+/// output, for messages.
+fn run_shards_into(cwd: &Path, dirs: &[PathBuf]) -> String {
+    let n = dirs.len();
+    let mut said = String::new();
+    for (i, d) in dirs.iter().enumerate() {
+        let o = verdant_in(
+            cwd,
+            &["-q", "build", "world.toml", "--shard", &format!("{i}/{n}"), "--out", &d.display().to_string()],
+        );
+        ok(&o);
+        said.push_str(&text(&o));
+    }
+    said
+}
+
 /// Runs the second round (`--tiles`) of the N shards `shards` of `world.toml` as N processes at once.
 fn run_tile_round(cwd: &Path, shards: &[PathBuf]) {
     let n = shards.len();
@@ -136,6 +152,18 @@ fn a_merge_refuses_missing_duplicate_foreign_and_stale_shards() {
         assert!(!cwd.join("merged/world").exists(), "a refused merge builds nothing");
     };
     refused(&two[..1], &["shard 1/2 is missing", "--shard 1/2"]);
+    // the second round refuses the same way, and wants the shard's own folder of the first
+    let second = |out: &str, shards: &[PathBuf]| {
+        let mut args = vec!["-q", "build", "world.toml", "--shard", "0/2", "--tiles", "--out", out, "--shards"];
+        let given: Vec<String> = shards.iter().map(|p| p.display().to_string()).collect();
+        args.extend(given.iter().map(String::as_str));
+        let o = verdant_in(cwd, &args);
+        assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+        text(&o)
+    };
+    assert!(second("two/0", &two[..1]).contains("shard 1/2 is missing"));
+    assert!(second("two/1", &two).contains("give the second round (--tiles) the --out of the shard's first round"));
+    assert!(second("elsewhere", &two).contains("not the folder of shard 0/2"));
     refused(&[two[0].clone(), two[0].clone(), two[1].clone()], &["given twice"]);
     refused(&[two[0].clone(), three[1].clone()], &["another split", "same N"]);
     refused(&[PathBuf::from("nowhere")], &["nowhere", "not a shard folder"]);
@@ -268,7 +296,7 @@ fn the_slurm_and_kubernetes_recipes_build_the_shards_and_merge_as_their_schedule
     assert_eq!(lines.len(), 2, "the second round and the merge, submitted once: {submitted}");
     assert!(lines[0].contains("--array=0-2") && lines[0].contains("--dependency=afterok:77"), "{submitted}");
     assert!(lines[0].contains("ROUND=tiles") && lines[0].ends_with("scripts/shard/slurm.sbatch"), "{submitted}");
-    assert!(lines[1].contains("--dependency=afterok:1234") && lines[1].ends_with("slurm_merge.sbatch"), "{submitted}");
+    assert!(lines[1].contains("--dependency=afterany:1234") && lines[1].ends_with("slurm_merge.sbatch"), "{submitted}");
     for task in 0..3 {
         run(
             "slurm.sbatch",
@@ -464,14 +492,30 @@ fn a_chunked_terrain_is_sharded_band_by_band_and_merges_to_one_builds_bytes() {
                 let changed = fs::read_to_string(&stage).unwrap().replacen("\"bytes\": ", "\"bytes\": 7", 1);
                 fs::remove_file(&stage).unwrap(); // (a hard link)
                 fs::write(&stage, &changed).unwrap();
-                let refused = merge(cwd, &copies, "retiled_merge");
-                assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
-                assert!(text(&refused).contains("differs from what the shard wrote"), "{}", text(&refused));
+                // (not as the shard wrote it: passed over, said, and the tile written by the merge)
+                let mut args: Vec<String> = vec!["merge".into(), "world.toml".into(), "--shards".into()];
+                args.extend(copies.iter().map(|p| p.display().to_string()));
+                args.extend(["--out".into(), "retiled_merge".into()]);
+                let passed = verdant_in(cwd, &args.iter().map(String::as_str).collect::<Vec<_>>());
+                ok(&passed);
+                assert!(
+                    text(&passed).contains("differs from what the shard wrote: the merge writes it"),
+                    "{}",
+                    text(&passed)
+                );
+                assert_same_tree(&cwd.join("single/world"), &cwd.join("retiled_merge/world"));
                 record["digests"][&entry]["stage.json"] = verdant::scene::cache::sha256_hex(changed.as_bytes()).into();
                 fs::write(&record_file, serde_json::to_string(&record).unwrap()).unwrap();
-                ok(&merge(cwd, &copies, "retiled_merge"));
-                let index = fs::read_to_string(cwd.join("retiled_merge/world/scene_tiles.json")).unwrap();
+                ok(&merge(cwd, &copies, "retiled_merge2"));
+                let index = fs::read_to_string(cwd.join("retiled_merge2/world/scene_tiles.json")).unwrap();
                 assert!(index.contains("\"bytes\": 7"), "{index}");
+                // a stale second round (of a first round split 2 ways, the first round then cut
+                // 3 ways into the same folders) does not stop a merge: its record is gone
+                let three: Vec<PathBuf> = (0..3).map(|k| PathBuf::from(format!("retiled/{k}"))).collect();
+                let again = run_shards_into(cwd, &three);
+                assert!(!cwd.join(&three[0]).join("world.tiles.json").exists(), "{again}");
+                ok(&merge(cwd, &three, "retiled_merge3"));
+                assert_same_tree(&cwd.join("single/world"), &cwd.join("retiled_merge3/world"));
             }
             if n == 2 && source == procedural {
                 // the merge takes the placements and the terrain's chunks from the units: one
