@@ -130,36 +130,30 @@ pub fn build_preset(
     let t0 = Instant::now();
     let name = &preset.scene.name;
     let out = &settings.out_dir;
-    if let (Some(part), false) = (settings.shard, settings.tiles_from.is_empty()) {
-        let say = |m: &str| progress(name, m);
-        let record = shard::build_tile_shard(preset, out, part, &settings.tiles_from, settings.force, &say)?;
-        return Ok(SceneOutcome {
-            preset: preset_label(preset),
-            scene: name.clone(),
-            error: None,
-            blame: None,
-            dir: Some(out.clone()),
-            files: record.tiles.len(),
-            triangles: 0,
-            cached_stages: Vec::new(),
-            seconds: t0.elapsed().as_secs_f64(),
-            warnings: crate::scene::preset::lsystem_warnings(preset),
-        });
-    }
-    if let Some(part) = settings.shard {
-        let record = shard::build_shard(preset, out, part, settings.force, &|m: &str| progress(name, m))?;
-        return Ok(SceneOutcome {
-            preset: preset_label(preset),
-            scene: name.clone(),
-            error: None,
-            blame: None,
-            dir: Some(out.clone()),
-            files: record.built.len(),
-            triangles: 0,
-            cached_stages: Vec::new(),
-            seconds: t0.elapsed().as_secs_f64(),
-            warnings: crate::scene::preset::lsystem_warnings(preset),
-        });
+    // a shard's round: its cache entries and record are its output, not a scene folder
+    let shard_outcome = |files: usize| SceneOutcome {
+        preset: preset_label(preset),
+        scene: name.clone(),
+        error: None,
+        blame: None,
+        dir: Some(out.clone()),
+        files,
+        triangles: 0,
+        cached_stages: Vec::new(),
+        seconds: t0.elapsed().as_secs_f64(),
+        warnings: crate::scene::preset::lsystem_warnings(preset),
+    };
+    let say = |m: &str| progress(name, m);
+    match (settings.shard, settings.tiles_from.is_empty()) {
+        (Some(part), false) => {
+            let record = shard::build_tile_shard(preset, out, part, &settings.tiles_from, settings.force, &say)?;
+            return Ok(shard_outcome(record.tiles.len()));
+        }
+        (Some(part), true) => {
+            let record = shard::build_shard(preset, out, part, settings.force, &say)?;
+            return Ok(shard_outcome(record.built.len()));
+        }
+        (None, _) => {}
     }
     for stage in [Stage::Snow, Stage::Scatter, Stage::Preview] {
         let applies = stage != Stage::Snow || preset.snow.is_some();

@@ -424,14 +424,7 @@ pub fn build_shard(
             }
         }
     }
-    let mut digests = BTreeMap::new();
-    for &k in &mine {
-        for entry in &all[k].entries {
-            let dir = cache.root.join(entry);
-            let files = entry_digests(&dir).map_err(|e| SceneBuildError::Io { path: dir, message: e.to_string() })?;
-            digests.insert(entry.clone(), files);
-        }
-    }
+    let digests = digests_of(&cache, mine.iter().flat_map(|&k| &all[k].entries))?;
     let record = ShardRecord {
         built_by: this_binary(),
         scene: name.clone(),
@@ -451,11 +444,29 @@ pub fn build_shard(
             record.units.len()
         ));
     }
-    let path = record_path(out, name);
-    let text = serde_json::to_string_pretty(&record).unwrap_or_default();
-    crate::export::write_atomic(&path, text.as_bytes())
-        .map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })?;
+    write_record(&record_path(out, name), &record)?;
     Ok(record)
+}
+
+/// The digests of `entries` of `cache` ([`entry_digests`]), by entry name.
+fn digests_of<'e>(
+    cache: &Cache,
+    entries: impl IntoIterator<Item = &'e String>,
+) -> Result<BTreeMap<String, BTreeMap<String, String>>, SceneBuildError> {
+    let mut digests = BTreeMap::new();
+    for entry in entries {
+        let dir = cache.root.join(entry);
+        let files = entry_digests(&dir).map_err(|e| SceneBuildError::Io { path: dir, message: e.to_string() })?;
+        digests.insert(entry.clone(), files);
+    }
+    Ok(digests)
+}
+
+/// Writes a shard's record (atomically: a merge never reads half of one).
+fn write_record(path: &Path, record: &impl Serialize) -> Result<(), SceneBuildError> {
+    let text = serde_json::to_string_pretty(record).unwrap_or_default();
+    crate::export::write_atomic(path, text.as_bytes())
+        .map_err(|e| SceneBuildError::Io { path: path.to_path_buf(), message: e.to_string() })
 }
 
 /// What a shard's second round built (`<scene>.tiles.json` in its folder): the scene tiles of its
@@ -596,11 +607,7 @@ pub fn build_tile_shard(
         }
     }
     record.tiles.sort();
-    for (_, entry) in &record.tiles {
-        let dir = cache.root.join(entry);
-        let files = entry_digests(&dir).map_err(|e| SceneBuildError::Io { path: dir, message: e.to_string() })?;
-        record.digests.insert(entry.clone(), files);
-    }
+    record.digests = digests_of(&cache, record.tiles.iter().map(|(_, e)| e))?;
     record.peak_memory_mib = crate::memory::peak_rss_bytes().map(crate::memory::mib);
     if let Some(mib) = record.peak_memory_mib {
         say(&format!(
@@ -611,10 +618,7 @@ pub fn build_tile_shard(
             record.left.len()
         ));
     }
-    let path = tile_record_path(out, name);
-    let text = serde_json::to_string_pretty(&record).unwrap_or_default();
-    crate::export::write_atomic(&path, text.as_bytes())
-        .map_err(|e| SceneBuildError::Io { path: path.clone(), message: e.to_string() })?;
+    write_record(&tile_record_path(out, name), &record)?;
     Ok(record)
 }
 

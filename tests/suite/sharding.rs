@@ -35,13 +35,14 @@ fn setup() -> tempfile::TempDir {
     dir
 }
 
-/// Runs the N shards of `world.toml` as N processes at once, into `<base>/<i>`.
-fn run_shards(cwd: &Path, base: &str, n: usize) -> Vec<PathBuf> {
-    let children: Vec<_> = (0..n)
-        .map(|i| {
+/// Runs `verdant` once per argument list, all at once (in `cwd`); each must succeed.
+fn run_at_once(cwd: &Path, runs: &[Vec<String>]) {
+    let children: Vec<_> = runs
+        .iter()
+        .map(|args| {
             Command::new(env!("CARGO_BIN_EXE_verdant"))
                 .current_dir(cwd)
-                .args(["-q", "build", "world.toml", "--shard", &format!("{i}/{n}"), "--out", &format!("{base}/{i}")])
+                .args(args)
                 .stdout(Stdio::piped())
                 .stderr(Stdio::piped())
                 .spawn()
@@ -51,6 +52,15 @@ fn run_shards(cwd: &Path, base: &str, n: usize) -> Vec<PathBuf> {
     for c in children {
         ok(&c.wait_with_output().unwrap());
     }
+}
+
+/// Runs the N shards of `world.toml` as N processes at once, into `<base>/<i>`.
+fn run_shards(cwd: &Path, base: &str, n: usize) -> Vec<PathBuf> {
+    let args = |i: usize| -> Vec<String> {
+        let shard = format!("{i}/{n}");
+        ["-q", "build", "world.toml", "--shard", &shard, "--out", &format!("{base}/{i}")].map(String::from).to_vec()
+    };
+    run_at_once(cwd, &(0..n).map(args).collect::<Vec<_>>());
     (0..n).map(|i| PathBuf::from(format!("{base}/{i}"))).collect()
 }
 
@@ -73,24 +83,14 @@ fn run_shards_into(cwd: &Path, dirs: &[PathBuf]) -> String {
 /// Runs the second round (`--tiles`) of the N shards `shards` of `world.toml` as N processes at once.
 fn run_tile_round(cwd: &Path, shards: &[PathBuf]) {
     let n = shards.len();
-    let children: Vec<_> = (0..n)
-        .map(|i| {
-            let mut args: Vec<String> = vec!["-q".into(), "build".into(), "world.toml".into(), "--shard".into()];
-            args.push(format!("{i}/{n}"));
-            args.extend(["--tiles".into(), "--out".into(), format!("{}", shards[i].display()), "--shards".into()]);
-            args.extend(shards.iter().map(|p| p.display().to_string()));
-            Command::new(env!("CARGO_BIN_EXE_verdant"))
-                .current_dir(cwd)
-                .args(&args)
-                .stdout(Stdio::piped())
-                .stderr(Stdio::piped())
-                .spawn()
-                .expect("run verdant")
-        })
-        .collect();
-    for c in children {
-        ok(&c.wait_with_output().unwrap());
-    }
+    let args = |i: usize| -> Vec<String> {
+        let mut args: Vec<String> = ["-q", "build", "world.toml", "--shard"].map(String::from).to_vec();
+        args.push(format!("{i}/{n}"));
+        args.extend(["--tiles".into(), "--out".into(), shards[i].display().to_string(), "--shards".into()]);
+        args.extend(shards.iter().map(|p| p.display().to_string()));
+        args
+    };
+    run_at_once(cwd, &(0..n).map(args).collect::<Vec<_>>());
 }
 
 fn merge(cwd: &Path, shards: &[PathBuf], out: &str) -> std::process::Output {
