@@ -19,7 +19,9 @@
 //!   error over the bands is the joined mesh's, [`crate::lod::assign_switch_distances`]);
 //! - its instances: the placement units' rows of the placement tiles in it, with the variant the
 //!   scatter stage assigns each row ([`crate::scatter::assign_variants`]), in table order;
-//! - the species' levels: the species entries, restored into the unit's folder.
+//! - the species' levels: the species entries, restored into the unit's folder;
+//! - with `[scene] compact`, the grid the terrain is stored on: over the box of every band's chunks
+//!   at every level, as [`crate::scene::view_store`] puts it over the terrain's files.
 //!
 //! A tile unit's key holds every entry name of the first round (each the hash of what its unit
 //! read), the `[lod]` policy, the tile's side, the grid and the tile's index, the placement tiles'
@@ -88,9 +90,6 @@ pub struct TilePlan<'a> {
 /// The tile units of `preset`, or why its tiles are written by the merge (`Ok(Err(why))`).
 pub fn plan(preset: &Preset) -> Result<Result<TilePlan<'_>, String>, SceneBuildError> {
     let Some(tile_m) = preset.scene.tile_m else { return Ok(Err("the preset has no `[scene] tile`".into())) };
-    if preset.scene.compact != crate::export::quantize::Compact::None {
-        return Ok(Err("`[scene] compact` stores the terrain on one grid over every band".into()));
-    }
     let first_mesh = preset.scene.formats.iter().find(|f| matches!(f, Format::Glb | Format::Gltf | Format::Obj));
     if first_mesh != Some(&Format::Glb) {
         return Ok(Err("the terrain's first mesh format is not glb (the view stage reads that file)".into()));
@@ -203,6 +202,9 @@ pub struct TileInputs {
     species: Vec<(usize, PlantReport)>,
     /// The species' level files, read.
     files: BTreeMap<PathBuf, Arc<Scene>>,
+    /// `[scene] compact`: the grid every terrain mesh is stored on, over every band's chunks at
+    /// every level (what [`crate::scene::view_store`] puts over the terrain's files).
+    terrain_grid: Option<crate::export::quantize::MeshGrid>,
 }
 
 impl TileInputs {
@@ -248,7 +250,32 @@ impl TileInputs {
             }
             species.push((k, report));
         }
-        Ok(TileInputs { levels, species, files })
+        // `[scene] compact`: the terrain's grid, over the box of every band's chunks at every level
+        // (the main mesh's among them), one band's entry held at a time
+        let mut terrain_grid = None;
+        if plan.preset.scene.compact != crate::export::quantize::Compact::None {
+            let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+            for k in 0..plan.bands.band_count() {
+                let key = crate::scene::band_chunks::chunks_key_of(&plan.grows, &plan.mesh_key, &plan.bands, k);
+                let blob = crate::scene::band_chunks::kept_blob(cache, &key)
+                    .ok_or_else(|| fail(format!("band {k}'s chunks are not in the cache (build every shard first)")))?;
+                for level in 0..plan.bands.bounds.len() {
+                    let chunks = crate::scene::band_chunks::level_of(&blob, level)
+                        .ok_or_else(|| fail(format!("band {k}'s chunks entry does not read back (level {level})")))?;
+                    for p in chunks.iter().flat_map(|(_, prim)| &prim.positions) {
+                        for a in 0..3 {
+                            lo[a] = lo[a].min(p[a]);
+                            hi[a] = hi[a].max(p[a]);
+                        }
+                    }
+                }
+            }
+            if lo[0].is_finite() {
+                let grid = crate::export::quantize::uniform_grid(lo, hi);
+                terrain_grid = Some(crate::export::quantize::MeshGrid { grid, uniform: true });
+            }
+        }
+        Ok(TileInputs { levels, species, files, terrain_grid })
     }
 }
 
@@ -531,7 +558,14 @@ pub fn build_tile(
         picked: None,
         take: false,
     };
-    let store = preset.scene.compact.write_options();
+    // (`[scene] compact`: the tile's terrain meshes on the terrain's grid)
+    let mut store = preset.scene.compact.write_options();
+    if let Some(grid) = inputs.terrain_grid {
+        for (file, _) in &inputs.levels {
+            let names = picked.iter().map(|&c| &row.files[file].meshes[c].name).filter(|n| !n.is_empty());
+            store.mesh_grids.extend(names.map(|n| (n.clone(), grid)));
+        }
+    }
     let job = TileJob {
         dir,
         placement_tiles: plan.placement_tiles,

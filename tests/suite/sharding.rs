@@ -648,13 +648,15 @@ fn species_under_a_snow_cover_are_placed_in_the_merge_and_the_rest_by_rows() {
     assert_same_tree(&cwd.join("single/world"), &cwd.join("tiled/world"));
 }
 
-/// Scene tiles the second round cannot make are written by the merge, the same bytes: on a flat
-/// map every level's normal map is the same texture, which the units' stand-ins cannot show (each
-/// tile left, saying why); with `[scene] compact` the terrain is stored on one grid over every band
-/// (no tile is a unit).
+/// On a flat map every level's normal map is the same texture, which the units' stand-ins cannot
+/// show: each tile is left to the merge, saying why, and the merge writes it (the same bytes). With
+/// `[scene] compact` (quantized, and compressed) the tiles store the terrain on one grid over every
+/// band's chunks at every level, which the second round finds from the bands' entries: the shards
+/// make every tile and the merge puts them in place (linked), the same bytes as one build.
 #[test]
-fn scene_tiles_the_second_round_cannot_make_are_written_by_the_merge() {
-    for case in ["flat", "compact"] {
+fn a_flat_maps_tiles_are_left_to_the_merge_and_compact_scenes_tiles_are_made_by_the_shards() {
+    use std::os::unix::fs::MetadataExt;
+    for case in ["flat", "quantize", "compress"] {
         let dir = tempfile::tempdir().unwrap();
         let cwd = dir.path();
         write(cwd, "rock.obj", ROCK_OBJ);
@@ -668,32 +670,37 @@ fn scene_tiles_the_second_round_cannot_make_are_written_by_the_merge() {
             _ => "procedural = { kind = \"ridged\", size = 641, seed = 4, relief = 120.0 }".to_string(),
         };
         let mut preset = banded_preset(&source, 0.5);
-        if case == "compact" {
-            preset = preset.replace("tile = 512.0\n", "tile = 512.0\ncompact = \"quantize\"\n");
+        if case != "flat" {
+            preset = preset.replace("tile = 512.0\n", &format!("tile = 512.0\ncompact = \"{case}\"\n"));
         }
         write(cwd, "world.toml", &preset);
         ok(&verdant_in(cwd, &["-q", "build", "world.toml", "--out", "single"]));
         let shards = run_shards(cwd, "shards", 2);
         run_tile_round(cwd, &shards);
-        let mut left = 0;
+        let (mut made, mut left) = (Vec::new(), 0);
         for s in &shards {
             let record = read_json(&cwd.join(s).join("world.tiles.json"));
-            assert_eq!(record["tiles"], serde_json::json!([]), "{case}: {record}");
-            match case {
-                "flat" => {
-                    for l in record["left"].as_array().unwrap() {
-                        assert!(l[1].as_str().unwrap().contains("alike"), "{case}: {record}");
-                        left += 1;
-                    }
-                }
-                _ => assert!(record["no_units"].as_str().unwrap().contains("compact"), "{case}: {record}"),
+            assert_eq!(record["no_units"], serde_json::Value::Null, "{case}: {record}");
+            for t in record["tiles"].as_array().unwrap() {
+                made.push(cwd.join(s).join(".cache").join(t[1].as_str().unwrap()));
+            }
+            for l in record["left"].as_array().unwrap() {
+                assert!(l[1].as_str().unwrap().contains("alike"), "{case}: {record}");
+                left += 1;
             }
         }
-        if case == "flat" {
-            assert_eq!(left, 4, "every tile of the 2 × 2 left to the merge");
-        }
+        assert_eq!((made.len(), left), if case == "flat" { (0, 4) } else { (4, 0) }, "{case}: the 2 × 2 tiles");
         ok(&merge(cwd, &shards, "merged"));
         assert_same_tree(&cwd.join("single/world"), &cwd.join("merged/world"));
+        // (each merged tile is the file a shard made, linked: the same inode)
+        let index = read_json(&cwd.join("merged/world/scene_tiles.json"));
+        let inode = |p: &Path| fs::metadata(p).unwrap().ino();
+        for t in index["tiles"].as_array().unwrap() {
+            let file = t["file"].as_str().unwrap();
+            let merged = inode(&cwd.join("merged/world").join(file));
+            let from_shard = made.iter().any(|entry| entry.join(file).is_file() && inode(&entry.join(file)) == merged);
+            assert_eq!(from_shard, case != "flat", "{case}: {file}");
+        }
     }
 }
 
