@@ -288,10 +288,12 @@ struct BuildArgs {
     /// single samples too). Skipped above 5 G full-detail triangles (said in the report).
     #[arg(long)]
     compare_full_detail: bool,
-    /// Build only shard I of N (I/N, 0 ≤ I < N) into --out's cache: the scene's independent units
-    /// (the terrain stage, each plant species), unit k going to shard k mod N. `verdant merge` then
-    /// joins the N shard folders into the scene a single build makes, byte for byte. --only and
-    /// --skip do not apply. See docs/sharding.md (GNU parallel, Slurm, Kubernetes).
+    /// Build only shard I of N (I/N, 0 ≤ I < N) into --out's cache: its share of the scene's units
+    /// (a chunked terrain's bands with the placements of their tile rows, in runs of neighbours;
+    /// the terrain stage of an unchunked one and each plant species, unit k to shard k mod N).
+    /// With --tiles, the second round: the shard's scene tiles. `verdant merge` then joins the N
+    /// shard folders into the scene a single build makes, byte for byte. --only and --skip do not
+    /// apply. See docs/sharding.md (GNU parallel, Slurm, Kubernetes).
     #[arg(long, value_name = "I/N")]
     shard: Option<Shard>,
     /// With --shard I/N, after every shard of the first round: the second round, which makes the
