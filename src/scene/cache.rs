@@ -37,6 +37,63 @@ pub fn sha256_hex_of_file(path: &Path, limit: u64, what: &'static str) -> Result
     Ok(hash)
 }
 
+/// [`sha256_hex_of_file`] of an input a build reads again and again (the heightmap: every stage
+/// and unit whose key holds it asks, seven times in a merge), hashed once per process while the
+/// file stays as it was: a hash is remembered by the file's device, inode, size and modification
+/// time, and only for a file last modified over [`SETTLED`] before it was hashed (a file written
+/// within the file system's clock tick could change again under the same time, as in Git's "racy
+/// clean" case: such a file is hashed every time it is asked for).
+pub fn sha256_hex_of_input(path: &Path, limit: u64, what: &'static str) -> Result<String, crate::input::ReadError> {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    static KNOWN: OnceLock<Mutex<HashMap<(PathBuf, FileStamp), String>>> = OnceLock::new();
+    let known = KNOWN.get_or_init(Default::default);
+    let stamp = FileStamp::of(path);
+    if let Some(stamp) = stamp {
+        if let Some(hash) = known.lock().unwrap_or_else(|e| e.into_inner()).get(&(path.to_path_buf(), stamp)) {
+            return Ok(hash.clone());
+        }
+    }
+    let started = std::time::SystemTime::now();
+    let hash = sha256_hex_of_file(path, limit, what)?;
+    // (kept only when the file was the same before and after it was read, and settled before)
+    if let Some(stamp) = stamp.filter(|s| Some(*s) == FileStamp::of(path) && s.settled_before(started)) {
+        known.lock().unwrap_or_else(|e| e.into_inner()).insert((path.to_path_buf(), stamp), hash.clone());
+    }
+    Ok(hash)
+}
+
+/// How long before it is hashed a file must have been last modified for its hash to be
+/// remembered ([`sha256_hex_of_input`]): well over any file system's time stamp granularity.
+const SETTLED: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// What tells one version of a file from another without reading it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+struct FileStamp {
+    device: u64,
+    inode: u64,
+    len: u64,
+    modified: std::time::SystemTime,
+}
+
+impl FileStamp {
+    fn of(path: &Path) -> Option<FileStamp> {
+        let meta = fs::metadata(path).ok()?;
+        #[cfg(unix)]
+        let (device, inode) = {
+            use std::os::unix::fs::MetadataExt;
+            (meta.dev(), meta.ino())
+        };
+        #[cfg(not(unix))]
+        let (device, inode) = (0, 0);
+        Some(FileStamp { device, inode, len: meta.len(), modified: meta.modified().ok()? })
+    }
+
+    fn settled_before(&self, time: std::time::SystemTime) -> bool {
+        time.duration_since(self.modified).is_ok_and(|age| age > SETTLED)
+    }
+}
+
 /// The sha256 of every file of the cache entry folder `entry`, by its path inside the entry
 /// (`/`-separated): what a shard records of each entry it built and a merge checks the entry it
 /// is given against (a shard folder copied between machines, damaged on the way, is refused
@@ -467,6 +524,36 @@ mod tests {
         let versioned = |v: u32| KeyBuilder::new("terrain", v).finish();
         assert_ne!(versioned(1), versioned(2), "a bumped algorithm version gives new keys");
         assert_eq!(sha256_hex(b"abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+    }
+
+    #[test]
+    fn an_inputs_hash_is_remembered_only_while_the_file_stays_as_it_was_and_settled() {
+        use std::time::{Duration, SystemTime};
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("map.png");
+        let put = |bytes: &[u8], modified: SystemTime| {
+            fs::write(&path, bytes).unwrap();
+            fs::File::options().write(true).open(&path).unwrap().set_modified(modified).unwrap();
+        };
+        let hash = || sha256_hex_of_input(&path, 1 << 20, "a heightmap").unwrap();
+        // a file just written: hashed every time, even rewritten under the same size and time
+        let now = SystemTime::now();
+        put(b"aaaa", now);
+        assert_eq!(hash(), sha256_hex(b"aaaa"));
+        put(b"bbbb", now);
+        assert_eq!(hash(), sha256_hex(b"bbbb"), "a file of this clock tick is never taken from memory");
+        // a settled file: a new time is a new version
+        let hour_ago = now - Duration::from_secs(3600);
+        put(b"cccc", hour_ago);
+        assert_eq!(hash(), sha256_hex(b"cccc"));
+        put(b"dddd", hour_ago - Duration::from_secs(1));
+        assert_eq!(hash(), sha256_hex(b"dddd"));
+        // ... and the same device, inode, size and time the same version: read once
+        put(b"eeee", hour_ago - Duration::from_secs(1));
+        assert_eq!(hash(), sha256_hex(b"dddd"), "a settled file's hash is remembered by its stamp");
+        // errors are the file's
+        let missing = sha256_hex_of_input(&dir.path().join("none.png"), 1 << 20, "a heightmap").unwrap_err();
+        assert!(missing.to_string().contains("none.png"), "{missing}");
     }
 
     #[test]

@@ -813,7 +813,7 @@ pub(crate) fn joined_without_map(
 fn heightmap_sha256(t: &TerrainSettings) -> Result<Option<String>, StageError> {
     match &t.source {
         TerrainSource::Heightmap { path, .. } => {
-            crate::scene::cache::sha256_hex_of_file(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
+            crate::scene::cache::sha256_hex_of_input(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
                 .map(Some)
                 .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))
         }
@@ -900,9 +900,7 @@ pub fn terrain_key(preset: &Preset, t: &TerrainSettings) -> Result<String, Stage
         // the soil layer and `_SURFACE` follow what grows (scene/ground_cover.rs)
         crate::scene::ground_cover::add_key(&mut k, preset);
     }
-    if let TerrainSource::Heightmap { path, .. } = &t.source {
-        let hash = crate::scene::cache::sha256_hex_of_file(path, crate::input::MAX_HEIGHTMAP_BYTES, "a heightmap")
-            .map_err(|e| bad_input(Stage::Terrain)(e.to_string()))?;
+    if let Some(hash) = heightmap_sha256(t)? {
         k.add(hash.as_bytes());
     }
     Ok(k.finish())
